@@ -1,0 +1,84 @@
+"""build_kdtree: checks the input, then runs the parallel top levels, the subtree builds and the merge."""
+from concurrent.futures import ThreadPoolExecutor
+from time import perf_counter
+
+import numpy as np
+
+from .geometry import triangle_boxes
+from .inputs import as_triangles
+from .kdtree import KdTree, empty_arrays
+from .merge import merge_tree
+from .options import make_options
+from .subtree import build_subtree
+from .threads import thread_count
+from .top_levels import build_top_levels
+
+
+def build_kdtree(triangles, **options):
+    """Build a kd-tree over an (N, 3, 3) array of triangle vertex positions.
+
+    Keyword options are those of `BuildOptions` (builder, bins, leaf_size, max_depth, traversal_cost,
+    intersection_cost, empty_bonus, cost_ratio, clip, skip, top, threads, ...), each validated.
+    Raises ValueError naming the first bad triangle or setting.
+    """
+    opts = make_options(options)
+    tris = as_triangles(triangles)
+    start = perf_counter()
+    timings = {}
+    with thread_count(opts.threads) as threads:
+        prims, boxes, bounds, dropped = _initial_references(tris)
+        timings["prepare"] = _ms_since(start)
+        if len(prims) == 0:
+            arrays = empty_arrays()
+        else:
+            arrays = _build_arrays(tris, prims, boxes, bounds, opts, threads, timings)
+    return KdTree(tris, bounds, *arrays, options=opts, build_ms=_ms_since(start), dropped=dropped,
+                  timings=timings)
+
+
+def _initial_references(tris):
+    """One reference per triangle with area: its index and box; and the box around them all."""
+    boxes, keep = triangle_boxes(tris)
+    prims = np.flatnonzero(keep).astype(np.int32)
+    dropped = np.flatnonzero(~keep).astype(np.int32)
+    if len(dropped):
+        boxes = np.ascontiguousarray(boxes[keep])
+    if len(prims) == 0:
+        return prims, boxes, np.zeros(6, np.float32), dropped
+    bounds = np.concatenate([boxes[:, :3].min(axis=0), boxes[:, 3:].max(axis=0)]).astype(np.float32)
+    return prims, boxes, bounds, dropped
+
+
+def _build_arrays(tris, prims, boxes, bounds, opts, threads, timings):
+    params = opts.params(len(prims))
+    t = perf_counter()
+    top_nodes, tasks = build_top_levels(tris, prims, boxes, bounds, params, opts.top, threads)
+    del prims, boxes
+    timings["top"] = _ms_since(t)
+    t = perf_counter()
+    subtrees = _build_subtrees(tris, tasks, params, threads)
+    timings["subtrees"] = _ms_since(t)
+    t = perf_counter()
+    arrays = merge_tree(top_nodes, subtrees)
+    timings["merge"] = _ms_since(t)
+    return arrays
+
+
+def _build_subtrees(tris, tasks, params, threads):
+    """Build every task's subtree, largest first, on `threads` threads (the kernel releases the GIL)."""
+    def build(task):
+        return build_subtree(tris, task.prims, task.boxes, len(task.prims), task.box, task.depth, params)
+
+    if threads == 1 or len(tasks) == 1:
+        return [build(task) for task in tasks]
+    order = sorted(range(len(tasks)), key=lambda i: -tasks[i].size)
+    results = [None] * len(tasks)
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        futures = {i: pool.submit(build, tasks[i]) for i in order}
+        for i, future in futures.items():
+            results[i] = future.result()
+    return results
+
+
+def _ms_since(start):
+    return (perf_counter() - start) * 1000.0

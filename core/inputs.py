@@ -1,0 +1,69 @@
+"""Checks and conversions for everything that enters the library, done once before any kernel runs.
+
+Kernels assume finite float32 triangles and finite float64 rays in C order; these functions make that
+true or raise a ValueError that names the first bad index.
+"""
+import numpy as np
+
+
+def as_triangles(triangles):
+    """Triangles as a C-contiguous (N, 3, 3) float32 array of finite vertex positions."""
+    arr = np.asarray(triangles)
+    if arr.ndim != 3 or arr.shape[1:] != (3, 3):
+        raise ValueError(f"triangles must have shape (N, 3, 3) (N triangles, 3 vertices, xyz), got {arr.shape}")
+    if not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)):
+        raise ValueError(f"triangles must be float32 or float64, got dtype {arr.dtype}")
+    arr = np.ascontiguousarray(arr, dtype=np.float32)
+    if len(arr) and not np.isfinite(arr).all():
+        bad = int(np.flatnonzero(~np.isfinite(arr).reshape(len(arr), 9).all(axis=1))[0])
+        raise ValueError(f"triangle {bad} has a non-finite vertex coordinate (NaN or inf): {arr[bad].tolist()}")
+    return arr
+
+
+def as_rays(origins, directions):
+    """Origins and directions as C-contiguous (R, 3) float64 arrays; directions must be finite and non-zero."""
+    o = _as_points("origins", origins)
+    d = _as_points("directions", directions)
+    if o.shape != d.shape:
+        raise ValueError(f"origins and directions must have the same shape (R, 3), got {o.shape} and {d.shape}")
+    zero = ~(d != 0.0).any(axis=1)
+    if zero.any():
+        raise ValueError(f"ray {int(np.flatnonzero(zero)[0])} has a zero direction vector")
+    return o, d
+
+
+def as_ray_limits(tmin, tmax, count):
+    """tmin and tmax (scalars or (R,) arrays) as (R,) float64 arrays with 0 <= tmin <= tmax."""
+    lo = _as_limit("tmin", tmin, count)
+    hi = _as_limit("tmax", tmax, count)
+    if np.isnan(lo).any() or np.isnan(hi).any():
+        which, arr = ("tmin", lo) if np.isnan(lo).any() else ("tmax", hi)
+        raise ValueError(f"{which} of ray {int(np.flatnonzero(np.isnan(arr))[0])} is NaN")
+    if (lo < 0).any():
+        raise ValueError(f"tmin must be >= 0; ray {int(np.flatnonzero(lo < 0)[0])} has tmin < 0")
+    if np.isinf(lo).any():
+        raise ValueError(f"tmin must be finite; ray {int(np.flatnonzero(np.isinf(lo))[0])} has tmin = inf")
+    return lo, hi
+
+
+def _as_points(name, values):
+    arr = np.asarray(values)
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        raise ValueError(f"{name} must have shape (R, 3), got {arr.shape}")
+    if not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)):
+        raise ValueError(f"{name} must be a float array, got dtype {arr.dtype}")
+    arr = np.ascontiguousarray(arr, dtype=np.float64)
+    finite = np.isfinite(arr).all(axis=1)
+    if not finite.all():
+        bad = int(np.flatnonzero(~finite)[0])
+        raise ValueError(f"{name[:-1]} of ray {bad} is not finite (NaN or inf): {arr[bad].tolist()}")
+    return arr
+
+
+def _as_limit(name, value, count):
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.ndim == 0:
+        return np.full(count, float(arr))
+    if arr.shape != (count,):
+        raise ValueError(f"{name} must be a scalar or have shape ({count},), got {arr.shape}")
+    return np.ascontiguousarray(arr)

@@ -1,0 +1,76 @@
+"""The built tree: flat contiguous arrays (see layout.py), its triangles, and its statistics."""
+import numpy as np
+
+from .layout import LEAF
+from .tree_stats import leaf_size_histogram, walk_stats
+
+
+class KdTree:
+    """A kd-tree over a triangle soup. Plain arrays only, so it pickles and kernels take it directly.
+
+    Attributes: `triangles` (N, 3, 3) float32; `bounds` (6,) float32 box of the triangles in the tree;
+    `axis`, `split`, `child`, `count` (per node, layout.py) and `leaf_prims` (triangle indices);
+    `options` (the BuildOptions used); `build_ms`; `dropped` (indices of zero-area triangles, which can
+    never be hit and are left out).
+    """
+
+    def __init__(self, triangles, bounds, axis, split, child, count, leaf_prims, options, build_ms,
+                 dropped, timings=None):
+        self.triangles = triangles
+        self.bounds = bounds
+        self.axis, self.split, self.child, self.count = axis, split, child, count
+        self.leaf_prims = leaf_prims
+        self.options = options
+        self.build_ms = build_ms
+        self.dropped = dropped
+        self.timings = dict(timings or {})
+        self._stats = None
+
+    @property
+    def arrays(self):
+        """The tuple the traversal kernels take."""
+        return (self.axis, self.split, self.child, self.count, self.leaf_prims, self.triangles, self.bounds)
+
+    @property
+    def node_count(self):
+        return len(self.axis)
+
+    def stats(self):
+        """Triangles, nodes, leaves, empty leaves, depth, references, SAH cost, build time and more."""
+        if self._stats is None:
+            self._stats = self._compute_stats()
+        return dict(self._stats)
+
+    def _compute_stats(self):
+        o = self.options
+        sah, leaves, empty, depth, refs, _, _ = walk_stats(self.axis, self.split, self.child, self.count,
+                                                           self.bounds, o.traversal_cost, o.intersection_cost)
+        n = len(self.triangles)
+        nbytes = sum(a.nbytes for a in (self.axis, self.split, self.child, self.count, self.leaf_prims))
+        return {
+            "triangles": n,
+            "degenerate_dropped": len(self.dropped),
+            "nodes": self.node_count,
+            "leaves": int(leaves),
+            "empty_leaves": int(empty),
+            "max_depth": int(depth),
+            "references": int(refs),
+            "references_per_triangle": refs / max(n - len(self.dropped), 1),
+            "sah_cost": float(sah),
+            "build_ms": self.build_ms,
+            "tree_bytes": int(nbytes),
+            "leaf_sizes": leaf_size_histogram(self.axis, self.count),
+            "builder": o.builder,
+            **{f"{k}_ms": v for k, v in self.timings.items()},
+        }
+
+    def __repr__(self):
+        s = self.stats()
+        return (f"KdTree({s['triangles']} triangles, {s['nodes']} nodes, depth {s['max_depth']}, "
+                f"SAH {s['sah_cost']:.2f}, built in {s['build_ms']:.1f} ms by {s['builder']!r})")
+
+
+def empty_arrays():
+    """Node arrays of a tree with nothing in it: one empty leaf."""
+    return (np.array([LEAF], np.int8), np.zeros(1, np.float32), np.zeros(1, np.int32),
+            np.zeros(1, np.int32), np.zeros(0, np.int32))

@@ -1,0 +1,149 @@
+"""Build settings: one object, every field with a documented default, validated once at the boundary.
+
+`BuildOptions` is what users pass (as keywords to `build_kdtree`); `BuildParams` is the plain tuple of
+numbers the Numba kernels see.
+"""
+from dataclasses import dataclass, asdict
+from math import log2
+from typing import NamedTuple, Optional
+
+BUILDERS = ("binned", "exact", "median")
+TOP_STRATEGIES = ("sah", "clustering")
+
+# The traversal stack has one slot per level, so the depth is capped where the stack ends.
+DEPTH_LIMIT = 60
+
+
+@dataclass(frozen=True)
+class BuildOptions:
+    """Settings of the kd-tree builder.
+
+    builder: "binned" (min-max binned SAH, seed 000 §3.3-3.4, exact sweep in small nodes), "exact"
+        (O(N log N) event sweep everywhere, seed 004 §3.1: the quality reference) or "median" (spatial
+        median of the longest axis, with the SAH deciding only when to stop: the cheap baseline).
+    bins: min-max bins per axis for "binned" (seed 000 found 32 sufficient).
+    exact_below: "binned" switches to the exact sweep in nodes with at most this many references.
+        Seed 000 switches at `bins`; the benchmark measured 64 as the better trade (see README).
+    leaf_size: nodes with at most this many references become leaves without trying a split.
+    max_depth: None means 1.2*log2(N) + 2 (seed 003 §3.5), capped at 60.
+    traversal_cost, intersection_cost: SAH constants (cost of one traversal step and of one
+        ray/triangle test).
+    empty_bonus: fraction of the intersection cost forgiven when one child is empty, in [0, 1).
+    cost_ratio: a node stays a leaf when the best split costs more than cost_ratio times the leaf
+        (seed 003 §3.5 uses 0.9 to favour time to image).
+    clip: tighten the boxes of straddling triangles by clipping the triangle to each child ("perfect
+        splits", seed 002 and Havran); off uses the triangle box cut by the plane.
+    skip: adaptive primitive skipping while binning large nodes (every log10(n)-th reference,
+        seed 000 §3.3).
+    top: how the parallel top levels are split: "sah" (data-parallel binned SAH at every top node) or
+        "clustering" (seed 000 §4.1: equal-count sub-domains from one high-resolution binning).
+    threads: worker threads; None uses every core Numba sees.
+    lazy: build only the top levels now and the rest when rays reach them (seed 003).
+    """
+
+    builder: str = "binned"
+    bins: int = 32
+    exact_below: int = 64
+    leaf_size: int = 2
+    max_depth: Optional[int] = None
+    traversal_cost: float = 1.0
+    intersection_cost: float = 1.5
+    empty_bonus: float = 0.5
+    cost_ratio: float = 1.0
+    clip: bool = True
+    skip: bool = False
+    top: str = "sah"
+    threads: Optional[int] = None
+    lazy: bool = False
+
+    def __post_init__(self):
+        _check_choice("builder", self.builder, BUILDERS)
+        _check_choice("top", self.top, TOP_STRATEGIES)
+        _check_int("bins", self.bins, 2, 4096)
+        _check_int("exact_below", self.exact_below, 0, 1 << 30)
+        _check_int("leaf_size", self.leaf_size, 1, 1 << 20)
+        if self.max_depth is not None:
+            _check_int("max_depth", self.max_depth, 0, DEPTH_LIMIT)
+        if self.threads is not None:
+            _check_int("threads", self.threads, 1, 1024)
+        _check_float("traversal_cost", self.traversal_cost, 0.0, None)
+        _check_float("intersection_cost", self.intersection_cost, 0.0, None, low_open=True)
+        _check_float("empty_bonus", self.empty_bonus, 0.0, 1.0, high_open=True)
+        _check_float("cost_ratio", self.cost_ratio, 0.0, None, low_open=True)
+        for name in ("clip", "skip", "lazy"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"build option {name!r} must be True or False, got {getattr(self, name)!r}")
+
+    def depth_for(self, n_triangles):
+        """The maximum depth used for a tree over `n_triangles`."""
+        if self.max_depth is not None:
+            return self.max_depth
+        return min(DEPTH_LIMIT, int(1.2 * log2(max(n_triangles, 1)) + 2))
+
+    def params(self, n_triangles):
+        """The numbers the Numba kernels need, as a `BuildParams` tuple."""
+        return BuildParams(
+            builder=BUILDERS.index(self.builder),
+            bins=self.bins,
+            exact_below=self.exact_below,
+            leaf_size=self.leaf_size,
+            max_depth=self.depth_for(n_triangles),
+            traversal_cost=float(self.traversal_cost),
+            intersection_cost=float(self.intersection_cost),
+            empty_bonus=float(self.empty_bonus),
+            cost_ratio=float(self.cost_ratio),
+            clip=self.clip,
+            skip=self.skip,
+        )
+
+    def as_dict(self):
+        return asdict(self)
+
+
+class BuildParams(NamedTuple):
+    """BuildOptions resolved to plain numbers for the kernels (builder is an index into BUILDERS)."""
+
+    builder: int
+    bins: int
+    exact_below: int
+    leaf_size: int
+    max_depth: int
+    traversal_cost: float
+    intersection_cost: float
+    empty_bonus: float
+    cost_ratio: float
+    clip: bool
+    skip: bool
+
+
+BINNED, EXACT, MEDIAN = 0, 1, 2
+
+
+def make_options(options):
+    """BuildOptions from a dict of keywords, naming any unknown one."""
+    known = BuildOptions.__dataclass_fields__
+    unknown = sorted(set(options) - set(known))
+    if unknown:
+        raise TypeError(f"unknown build option(s) {unknown}; known: {sorted(known)}")
+    return BuildOptions(**options)
+
+
+def _check_choice(name, value, choices):
+    if value not in choices:
+        raise ValueError(f"build option {name!r} must be one of {choices}, got {value!r}")
+
+
+def _check_int(name, value, low, high):
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ValueError(f"build option {name!r} must be an integer, got {value!r}")
+    if not low <= value <= high:
+        raise ValueError(f"build option {name!r} must be in [{low}, {high}], got {value}")
+
+
+def _check_float(name, value, low, high, low_open=False, high_open=False):
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or value != value:
+        raise ValueError(f"build option {name!r} must be a number, got {value!r}")
+    if low is not None and (value < low or (low_open and value == low)):
+        raise ValueError(f"build option {name!r} must be {'>' if low_open else '>='} {low}, got {value}")
+    if high is not None and (value > high or (high_open and value == high)):
+        raise ValueError(f"build option {name!r} must be {'<' if high_open else '<='} {high}, got {value}")

@@ -1,0 +1,98 @@
+"""Distributing a node's references to its children.
+
+Rules, exact in float32 (no epsilon): a reference goes left when its box ends at or before the plane,
+right when it begins at or after it, and to both when it straddles. A reference lying in the plane
+(zero extent exactly at the split) goes to the side the split chose (seed 004 §4.1's problem, solved by
+the exact sweep). A ray hitting such a triangle crosses the plane there, so both children's ray
+intervals contain the hit and either side finds it. Straddlers are clipped to each child ("perfect
+splits", see clipping.py); a side where the clipped triangle is empty does not get it.
+"""
+import numpy as np
+from numba import njit
+
+from .clipping import clip_triangle, new_clip_scratch
+
+LEFT, RIGHT, BOTH = 1, 2, 3
+
+
+@njit(cache=True)
+def new_split_scratch():
+    """Per-thread buffers for split_reference: two polygons and one clip region."""
+    poly_a, poly_b = new_clip_scratch()
+    return poly_a, poly_b, np.empty(6, np.float32)
+
+
+@njit(cache=True, inline="always")
+def side_of(box, axis, pos, planar_left):
+    """LEFT, RIGHT or BOTH for a reference box and a split plane."""
+    lo = box[axis]
+    hi = box[axis + 3]
+    if lo == hi and lo == pos:
+        return LEFT if planar_left else RIGHT
+    if hi <= pos:
+        return LEFT
+    if lo >= pos:
+        return RIGHT
+    return BOTH
+
+
+@njit(cache=True)
+def split_reference(tri, box, axis, pos, clip, scratch, out_left, out_right):
+    """Boxes of a straddling reference's parts on each side; returns the sides that are not empty."""
+    out_left[:] = box
+    out_left[axis + 3] = pos
+    out_right[:] = box
+    out_right[axis] = pos
+    if not clip:
+        return BOTH
+    poly_a, poly_b, region = scratch
+    region[:] = out_left
+    in_left = clip_triangle(tri, region, poly_a, poly_b, out_left)
+    region[:] = box
+    region[axis] = pos
+    in_right = clip_triangle(tri, region, poly_a, poly_b, out_right)
+    if not (in_left or in_right):
+        # Only rounding can empty both sides of a straddler; keep it on both, unclipped.
+        out_left[:] = box
+        out_left[axis + 3] = pos
+        out_right[:] = box
+        out_right[axis] = pos
+        return BOTH
+    return (LEFT if in_left else 0) | (RIGHT if in_right else 0)
+
+
+@njit(cache=True)
+def partition_in_place(tris, prims, boxes, start, end, axis, pos, planar_left, clip, scratch):
+    """Split references [start, end) into right ones at [start, start+nr) and left ones right after.
+
+    Right references are compacted in place (each reference makes at most one right one, so writes
+    never pass reads); left ones go to [end, end+nl) and are then moved down. The caller guarantees room
+    for 2 * (end - start) references from `start`. Returns (n_right, n_left).
+    The left child ends up on top of the pool, so building it first lets it grow freely (seed 000 §3.5).
+    """
+    box_l = np.empty(6, np.float32)
+    box_r = np.empty(6, np.float32)
+    w_right = start
+    w_left = end
+    for i in range(start, end):
+        prim = prims[i]
+        side = side_of(boxes[i], axis, pos, planar_left)
+        if side == BOTH:
+            side = split_reference(tris[prim], boxes[i], axis, pos, clip, scratch, box_l, box_r)
+        else:
+            box_l[:] = boxes[i]
+            box_r[:] = boxes[i]
+        if side & LEFT:
+            prims[w_left] = prim
+            boxes[w_left] = box_l
+            w_left += 1
+        if side & RIGHT:
+            prims[w_right] = prim
+            boxes[w_right] = box_r
+            w_right += 1
+    n_right = w_right - start
+    n_left = w_left - end
+    for k in range(n_left):
+        prims[w_right + k] = prims[end + k]
+        boxes[w_right + k] = boxes[end + k]
+    return n_right, n_left

@@ -1,0 +1,42 @@
+"""Closest-hit and any-hit queries over a KdTree: input checks, then one parallel kernel."""
+from typing import NamedTuple
+
+import numpy as np
+
+from .inputs import as_ray_limits, as_rays
+from .threads import thread_count
+from .traversal import trace_rays
+
+
+class Hits(NamedTuple):
+    """Per-ray results: `t` (float32, inf on a miss), `prim` (int32 triangle index, -1 on a miss),
+    `u`, `v` (float32 barycentric weights of the triangle's vertices 1 and 2)."""
+
+    t: np.ndarray
+    prim: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+
+
+def intersect(tree, origins, directions, tmin=0.0, tmax=np.inf, threads=None):
+    """Closest hit of each ray in the open interval (tmin, tmax); tmin, tmax scalars or (R,) arrays."""
+    t, prim, u, v = _trace(tree, origins, directions, tmin, tmax, False, threads)
+    return Hits(t.astype(np.float32), prim, u.astype(np.float32), v.astype(np.float32))
+
+
+def occluded(tree, origins, directions, tmin=0.0, tmax=np.inf, threads=None):
+    """(R,) bool: does each ray hit anything in (tmin, tmax)? Stops at the first hit found."""
+    return _trace(tree, origins, directions, tmin, tmax, True, threads)[1] >= 0
+
+
+def _trace(tree, origins, directions, tmin, tmax, any_hit, threads):
+    o, d = as_rays(origins, directions)
+    lo, hi = as_ray_limits(tmin, tmax, len(o))
+    n = len(o)
+    t = np.empty(n)
+    prim = np.empty(n, np.int32)
+    u = np.empty(n)
+    v = np.empty(n)
+    with thread_count(threads):
+        trace_rays(tree.arrays, o, d, lo, hi, any_hit, t, prim, u, v)
+    return t, prim, u, v

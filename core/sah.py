@@ -1,0 +1,33 @@
+"""The surface area heuristic: cost of a split, and whether a split beats a leaf.
+
+Cost of splitting a node with box B at `pos` on `axis` into children L and R (seed 001 eq. 5; pbrt):
+    C = Ct + Ci * (1 - bonus) * (A(L) * nL + A(R) * nR) / A(B)
+where bonus is `empty_bonus` when one child is empty and 0 otherwise. A leaf costs Ci * n. A node is
+split only when the best C < cost_ratio * Ci * n (seed 003 §3.5 uses cost_ratio 0.9).
+"""
+import numpy as np
+from numba import njit
+
+from .geometry import half_area_cut
+
+
+@njit(cache=True, inline="always")
+def split_cost(box, inv_area, axis, pos, n_left, n_right, params):
+    """SAH cost of splitting `box` at `pos` on `axis` with n_left / n_right references."""
+    area_left = half_area_cut(box, axis, box[axis], pos)
+    area_right = half_area_cut(box, axis, pos, box[axis + 3])
+    bonus = params.empty_bonus if (n_left == 0 or n_right == 0) else 0.0
+    weighted = (area_left * n_left + area_right * n_right) * inv_area
+    return params.traversal_cost + params.intersection_cost * (1.0 - bonus) * weighted
+
+
+@njit(cache=True, inline="always")
+def beats_leaf(cost, n, params):
+    """True when a split of this cost is worth more than keeping `n` references in a leaf."""
+    return cost < params.cost_ratio * params.intersection_cost * n
+
+
+@njit(cache=True, inline="always")
+def valid_position(box, axis, pos):
+    """A split plane must lie strictly inside the node, or a child would be the node again."""
+    return box[axis] < pos < box[axis + 3]

@@ -1,0 +1,90 @@
+"""Sequential construction of one subtree, iteratively and depth first, from pooled memory.
+
+This is the work each thread does after the parallel top levels (seed 000 §4: "each thread builds a
+sub-tree"). Nodes are processed from an explicit stack, left child first; a node's references live in
+one reference pool (partition.py keeps the left child on top), so the pool's live part is the pending
+right siblings plus the current node and never needs per-node allocation.
+"""
+import numpy as np
+from numba import njit
+
+from .layout import LEAF
+from .options import EXACT
+from .partition import new_split_scratch, partition_in_place
+from .pools import ensure_floats, ensure_ints, ensure_nodes, ensure_refs
+from .split_choice import NO_SPLIT, choose_split
+
+
+@njit(cache=True, nogil=True)
+def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, params):
+    """Build the subtree over the first `n_refs` references of (prims, boxes) inside `root_box`.
+
+    Returns the node arrays (axis, split, child, count; see layout.py) with local indices, node 0 being
+    the subtree's root, and the leaf triangle indices.
+    """
+    stack_size = params.max_depth - root_depth + 2
+    stack_node = np.empty(stack_size, np.int32)
+    stack_range = np.empty((stack_size, 2), np.int64)
+    stack_depth = np.empty(stack_size, np.int32)
+    stack_box = np.empty((stack_size, 6), np.float32)
+    box = np.empty(6, np.float32)
+    min_bins = np.zeros((3, params.bins), np.int64)
+    max_bins = np.zeros((3, params.bins), np.int64)
+    scratch = np.empty(3 * min(n_refs, max(params.exact_below, 16)) + 16, np.float32)
+    split_scratch = new_split_scratch()
+
+    prims, boxes = ensure_refs(prims, boxes, n_refs, 2 * n_refs + 64)
+    axis, split, child, count = ensure_nodes(np.empty(0, np.int8), np.empty(0, np.float32),
+                                             np.empty(0, np.int32), np.empty(0, np.int32), 0,
+                                             max(16, n_refs // 2))
+    leaf_prims = np.empty(max(16, n_refs + n_refs // 2), np.int32)
+    n_nodes, n_leaf_prims = 1, 0
+
+    stack_node[0], stack_range[0, 0], stack_range[0, 1], stack_depth[0] = 0, 0, n_refs, root_depth
+    stack_box[0] = root_box
+    sp = 1
+    while sp > 0:
+        sp -= 1
+        node, start, end, depth = stack_node[sp], stack_range[sp, 0], stack_range[sp, 1], stack_depth[sp]
+        box[:] = stack_box[sp]
+        n = end - start
+        prims, boxes = ensure_refs(prims, boxes, end, start + 2 * n + 1)
+        if params.builder == EXACT or n <= params.exact_below:
+            scratch = ensure_floats(scratch, 3 * n)
+        split_axis, pos, planar_left = choose_split(boxes, start, end, box, depth, params, min_bins,
+                                                    max_bins, scratch)
+        if split_axis == NO_SPLIT:
+            leaf_prims = ensure_ints(leaf_prims, n_leaf_prims, n_leaf_prims + n)
+            leaf_prims[n_leaf_prims:n_leaf_prims + n] = prims[start:end]
+            axis[node], split[node], child[node], count[node] = LEAF, 0.0, n_leaf_prims, n
+            n_leaf_prims += n
+            continue
+        n_right, n_left = partition_in_place(tris, prims, boxes, start, end, split_axis, pos,
+                                             planar_left, params.clip, split_scratch)
+        axis, split, child, count = ensure_nodes(axis, split, child, count, n_nodes, n_nodes + 2)
+        left = n_nodes
+        n_nodes += 2
+        axis[node], split[node], child[node], count[node] = split_axis, pos, left, 0
+        # Right child first on the stack so the left one (on top of the pool) is built first.
+        sp = _push(stack_node, stack_range, stack_depth, stack_box, sp, left + 1, start, start + n_right,
+                   depth + 1, box, split_axis, pos, False)
+        sp = _push(stack_node, stack_range, stack_depth, stack_box, sp, left, start + n_right,
+                   start + n_right + n_left, depth + 1, box, split_axis, pos, True)
+    return (axis[:n_nodes].copy(), split[:n_nodes].copy(), child[:n_nodes].copy(),
+            count[:n_nodes].copy(), leaf_prims[:n_leaf_prims].copy())
+
+
+@njit(cache=True, inline="always")
+def _push(stack_node, stack_range, stack_depth, stack_box, sp, node, start, end, depth, box, axis, pos,
+          is_left):
+    """Push a child whose box is the parent's cut at `pos`; returns the new stack size."""
+    stack_node[sp] = node
+    stack_range[sp, 0] = start
+    stack_range[sp, 1] = end
+    stack_depth[sp] = depth
+    stack_box[sp] = box
+    if is_left:
+        stack_box[sp, axis + 3] = pos
+    else:
+        stack_box[sp, axis] = pos
+    return sp + 1
