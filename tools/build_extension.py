@@ -1,0 +1,368 @@
+#!/usr/bin/env python3
+"""Build the KD Preview extension zips, one per platform, with numba and llvmlite bundled.
+
+Steps:
+  1. download the numba and llvmlite wheels that ``blender_manifest.toml`` lists
+     (only for the chosen platforms) into a cache folder, skipping files already there;
+  2. copy the repository (minus what the manifest's ``[build] paths_exclude_pattern`` leaves out)
+     into a staging folder and put the wheels under its ``wheels/``, so no large file lands in the repo;
+  3. validate the manifest strictly with Blender's own ``blender_ext.py validate`` (shipped in the
+     ``bpy`` module) plus our own checks (every wheel exists, each platform has numba AND llvmlite);
+  4. build the per-platform zips with ``blender_ext.py build --split-platforms``, exactly what
+     ``blender --command extension build --split-platforms`` runs;
+  5. open every zip and fail unless it holds its platform's numba and llvmlite wheels.
+
+Usage: python tools/build_extension.py [--platforms linux-x64,windows-x64] [--out dist]
+Needs only the standard library, pip, and the ``bpy`` module installed (for blender_ext.py).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tomllib
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+MANIFEST = "blender_manifest.toml"
+REQUIRED_DISTS = ("numba", "llvmlite")
+FORBIDDEN_DISTS = ("numpy",)  # Blender ships its own numpy; bundling one breaks bpy.
+REQUIRED_ZIP_FILES = ("__init__.py", MANIFEST)
+OS_PREFIXES = (("manylinux", "linux"), ("musllinux", "linux"), ("linux", "linux"),
+               ("macosx", "macos"), ("win", "windows"))
+ARCHES = {"x86_64": "x64", "amd64": "x64", "aarch64": "arm64", "arm64": "arm64"}
+# What blender_ext.py leaves out when the manifest has no `paths_exclude_pattern`.
+DEFAULT_EXCLUDES = ["__pycache__/", ".*", "/*.zip", "*.blend[1-9]"]
+
+
+class BuildError(Exception):
+    """A build step failed; the message says why."""
+
+
+@dataclass(frozen=True)
+class Wheel:
+    """One wheel listed in the manifest, parsed from its file name."""
+
+    path: str  # As written in the manifest, e.g. "./wheels/numba-....whl".
+    dist: str
+    version: str
+    python_tag: str
+    abi_tag: str
+    platform_tag: str  # May be compound: "manylinux_2_27_x86_64.manylinux_2_28_x86_64".
+
+    @property
+    def filename(self) -> str:
+        """The wheel's file name."""
+        return os.path.basename(self.path)
+
+    @property
+    def platforms(self) -> set[str]:
+        """The Blender platforms ("linux-x64", ...) this wheel installs on."""
+        result: set[str] = set()
+        for tag in self.platform_tag.split("."):
+            result |= blender_platforms_from_tag(tag)
+        return result
+
+    @property
+    def python_version(self) -> str:
+        """The "3.11"-style Python version of a "cp311" tag."""
+        digits = self.python_tag.lstrip("cpy")
+        return "{}.{}".format(digits[0], digits[1:])
+
+
+def blender_platforms_from_tag(tag: str) -> set[str]:
+    """Map one wheel platform tag ("win_amd64", "macosx_12_0_arm64") to Blender platforms."""
+    if tag == "any":
+        return {"any"}
+    os_name = next((blender for prefix, blender in OS_PREFIXES if tag.startswith(prefix)), None)
+    if os_name is None:
+        return set()
+    if tag.endswith("universal2"):
+        return {"macos-x64", "macos-arm64"}
+    arch = next((ARCHES[a] for a in ARCHES if tag.endswith("_" + a)), None)
+    return {"{}-{}".format(os_name, arch)} if arch else set()
+
+
+def parse_wheel(path: str) -> Wheel:
+    """Parse a manifest wheel path; raise BuildError if the name does not follow the wheel spec."""
+    parts = os.path.basename(path)[:-len(".whl")].split("-")
+    if not path.endswith(".whl") or len(parts) not in (5, 6):
+        raise BuildError("not a wheel file name: {!r}".format(path))
+    return Wheel(path, parts[0].lower().replace("_", "-"), parts[1], parts[-3], parts[-2], parts[-1])
+
+
+def load_manifest(path: Path) -> dict:
+    """Read a blender_manifest.toml."""
+    with open(path, "rb") as fh:
+        return tomllib.load(fh)
+
+
+# -----------------------------------------------------------------------------
+# Locating Blender's extension CLI inside the bpy module.
+
+def find_blender_ext() -> Path:
+    """Return the path of blender_ext.py inside the installed bpy module (without importing bpy)."""
+    spec = importlib.util.find_spec("bpy")
+    if spec is None or not spec.submodule_search_locations:
+        raise BuildError("the 'bpy' module is not installed in {} (pip install bpy)".format(sys.executable))
+    for location in spec.submodule_search_locations:
+        found = sorted(Path(location).glob("*/scripts/addons_core/bl_pkg/cli/blender_ext.py"))
+        if found:
+            return found[-1]
+    raise BuildError("blender_ext.py not found inside the bpy module")
+
+
+def find_valid_tags(blender_ext: Path) -> Path:
+    """Return Blender's own tag list, which `blender --command extension` validates tags against."""
+    scripts = blender_ext.parents[3]
+    return scripts / "modules" / "_bpy_internal" / "extensions" / "tags.py"
+
+
+def load_path_matcher(blender_ext: Path, patterns: list[str]):
+    """Return blender_ext's gitignore-style PathPatternMatch for these patterns."""
+    spec = importlib.util.spec_from_file_location("_kdp_blender_ext", blender_ext)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.PathPatternMatch(patterns)
+
+
+def run_blender_ext(blender_ext: Path, args: list[str]) -> str:
+    """Run blender_ext.py with args; return its output or raise BuildError with it."""
+    cmd = [sys.executable, str(blender_ext), *args]
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    output = (proc.stdout + proc.stderr).strip()
+    if proc.returncode != 0:
+        raise BuildError("blender_ext.py {} failed (exit {}):\n{}".format(args[0], proc.returncode, output))
+    return output
+
+
+# -----------------------------------------------------------------------------
+# Step 1: download the wheels.
+
+def wheels_for_platforms(wheels: list[Wheel], platforms: list[str]) -> list[Wheel]:
+    """Return the wheels that install on at least one of the platforms."""
+    return [w for w in wheels if w.platforms & (set(platforms) | {"any"})]
+
+
+def pip_download(wheel: Wheel, cache: Path) -> None:
+    """Download exactly this wheel into cache with pip, for its own platform tags."""
+    cmd = [sys.executable, "-m", "pip", "download", "--no-deps", "--only-binary=:all:",
+           "--disable-pip-version-check", "--quiet", "--dest", str(cache),
+           "--python-version", wheel.python_version, "--implementation", "cp", "--abi", wheel.abi_tag]
+    for tag in wheel.platform_tag.split("."):
+        cmd += ["--platform", tag]
+    cmd.append("{}=={}".format(wheel.dist, wheel.version))
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise BuildError("pip could not download {}:\n{}".format(wheel.filename, proc.stderr.strip()))
+
+
+def fetch_wheels(wheels: list[Wheel], cache: Path) -> None:
+    """Make sure every wheel is in the cache, downloading the missing ones."""
+    cache.mkdir(parents=True, exist_ok=True)
+    for wheel in wheels:
+        if (cache / wheel.filename).is_file():
+            print("cached:     {}".format(wheel.filename))
+            continue
+        print("downloading {} ...".format(wheel.filename), flush=True)
+        pip_download(wheel, cache)
+        if not (cache / wheel.filename).is_file():
+            raise BuildError("pip saved a different file than the manifest lists ({}): fix the manifest's "
+                             "wheel names, see {}".format(wheel.filename, cache))
+
+
+# -----------------------------------------------------------------------------
+# Step 2: stage a copy of the repo with the wheels.
+
+def copy_tree(source: Path, stage: Path, matcher, skip: set[Path]) -> None:
+    """Copy source into stage, skipping what the build would exclude anyway and the `skip` folders."""
+    for dirpath, dirnames, filenames in os.walk(source):
+        rel_dir = os.path.relpath(dirpath, source).replace(os.sep, "/")
+        prefix = "" if rel_dir == "." else rel_dir + "/"
+        dirnames[:] = [d for d in dirnames if not matcher.test_path(prefix + d + "/")
+                       and Path(dirpath, d).resolve() not in skip]
+        for name in filenames:
+            if not matcher.test_path(prefix + name):
+                target = stage / prefix / name
+                target.parent.mkdir(parents=True, exist_ok=True)
+                shutil.copy2(os.path.join(dirpath, name), target)
+
+
+def subset_manifest_text(text: str, platforms: list[str], wheels: list[Wheel]) -> str:
+    """Rewrite the top-level `platforms` and `wheels` arrays to list only the chosen ones."""
+    def replace(key: str, values: list[str], text: str) -> str:
+        body = ", ".join('"{}"'.format(v) for v in values)
+        new, count = re.subn(r"(?ms)^{}\s*=\s*\[.*?\]".format(key), "{} = [{}]".format(key, body), text, count=1)
+        if count != 1:
+            raise BuildError("could not find the `{} = [...]` array in the manifest".format(key))
+        return new
+    text = replace("platforms", platforms, text)
+    return replace("wheels", [w.path for w in wheels], text)
+
+
+def stage_source(source: Path, stage: Path, cache: Path, platforms: list[str],
+                 wheels: list[Wheel], matcher, skip: set[Path]) -> None:
+    """Fill stage with the repo files, the chosen wheels and a manifest limited to the chosen platforms."""
+    if stage.exists():
+        shutil.rmtree(stage)
+    stage.mkdir(parents=True)
+    copy_tree(source, stage, matcher, skip | {stage})
+    for wheel in wheels:
+        target = stage / wheel.path
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(cache / wheel.filename, target)
+    text = (source / MANIFEST).read_text(encoding="utf-8")
+    (stage / MANIFEST).write_text(subset_manifest_text(text, platforms, wheels), encoding="utf-8")
+    staged = load_manifest(stage / MANIFEST)
+    if staged.get("platforms") != platforms or staged.get("wheels") != [w.path for w in wheels]:
+        raise BuildError("the staged manifest's platforms/wheels came out wrong: {} {}".format(
+            staged.get("platforms"), staged.get("wheels")))
+
+
+# -----------------------------------------------------------------------------
+# Step 3: validate.
+
+def check_manifest(manifest: dict, platforms: list[str]) -> list[Wheel]:
+    """Our own manifest checks; return the parsed wheels. Raise BuildError listing every problem."""
+    errors = []
+    declared = manifest.get("platforms") or []
+    wheels = [parse_wheel(p) for p in manifest.get("wheels") or []]
+    errors += ["platform {} is not in the manifest's platforms {}".format(p, declared)
+               for p in platforms if p not in declared]
+    errors += ["{} must not be bundled (Blender ships its own)".format(w.filename)
+               for w in wheels if w.dist in FORBIDDEN_DISTS]
+    errors += ["{} installs on no known platform".format(w.filename) for w in wheels if not w.platforms]
+    for platform in declared:
+        errors += platform_wheel_errors(platform, [w.path for w in wheels])
+    if errors:
+        raise BuildError("manifest check failed:\n  " + "\n  ".join(errors))
+    return wheels
+
+
+def platform_wheel_errors(platform: str, filenames: list[str]) -> list[str]:
+    """Errors for a platform unless exactly one wheel of each required distribution installs on it."""
+    errors = []
+    wheels = [parse_wheel(f) for f in filenames]
+    for dist in REQUIRED_DISTS:
+        found = [w.filename for w in wheels if w.dist == dist and platform in w.platforms]
+        if len(found) != 1:
+            errors.append("platform {} needs exactly one {} wheel, found {}".format(platform, dist, found or "none"))
+    return errors
+
+
+def check_staged_files(stage: Path, wheels: list[Wheel]) -> None:
+    """The staged add-on needs its root __init__.py and every wheel its manifest lists."""
+    missing = [w.path for w in wheels if not (stage / w.path).is_file()]
+    errors = ["wheels listed in the manifest are missing: {}".format(missing)] if missing else []
+    if not (stage / "__init__.py").is_file():
+        errors.append("the add-on's root __init__.py is missing (Blender requires one next to {})".format(MANIFEST))
+    if errors:
+        raise BuildError("staged files check failed:\n  " + "\n  ".join(errors))
+
+
+# -----------------------------------------------------------------------------
+# Steps 4 and 5: build, then check each zip.
+
+def zip_name(manifest: dict, platform: str) -> str:
+    """The file name `build --split-platforms` gives a platform's zip."""
+    return "{}-{}-{}.zip".format(manifest["id"], manifest["version"], platform.replace("-", "_"))
+
+
+def check_zip(path: Path, platform: str) -> None:
+    """Fail unless the zip holds the add-on files and exactly its platform's numba and llvmlite wheels."""
+    if not path.is_file():
+        raise BuildError("expected zip was not built: {}".format(path))
+    with zipfile.ZipFile(path) as zf:
+        names = zf.namelist()
+    missing = [f for f in REQUIRED_ZIP_FILES if f not in names]
+    wheel_names = [os.path.basename(n) for n in names if n.endswith(".whl")]
+    foreign = [w for w in wheel_names if platform not in parse_wheel(w).platforms | {"any"}]
+    errors = ["missing {}".format(f) for f in missing] + platform_wheel_errors(platform, wheel_names)
+    errors += ["holds a wheel for another platform: {}".format(w) for w in foreign]
+    if errors:
+        raise BuildError("{} is broken:\n  {}".format(path.name, "\n  ".join(errors)))
+
+
+def stage_and_validate(args: argparse.Namespace, blender_ext: Path, tags: Path) -> tuple[dict, list[str], Path]:
+    """Steps 1 to 3: check the manifest, fetch the wheels, stage; return (manifest, platforms, stage)."""
+    source, cache = Path(args.source).resolve(), Path(args.cache).resolve()
+    if not (source / MANIFEST).is_file():
+        raise BuildError("no {} in {}".format(MANIFEST, source))
+    manifest = load_manifest(source / MANIFEST)
+    platforms = parse_platforms(args.platforms, manifest)
+    wheels = wheels_for_platforms(check_manifest(manifest, platforms), platforms)
+    fetch_wheels(wheels, cache)
+    patterns = manifest.get("build", {}).get("paths_exclude_pattern") or DEFAULT_EXCLUDES
+    matcher = load_path_matcher(blender_ext, patterns)
+    stage = Path(args.stage).resolve() / manifest["id"]
+    stage_source(source, stage, cache, platforms, wheels, matcher, skip={cache, Path(args.out).resolve()})
+    check_staged_files(stage, wheels)
+    print(run_blender_ext(blender_ext, ["validate", "--valid-tags", str(tags), str(stage)]))
+    return manifest, platforms, stage
+
+
+def build_zips(manifest: dict, platforms: list[str], stage: Path, out: Path,
+               blender_ext: Path, tags: Path) -> list[Path]:
+    """Steps 4 and 5: build one zip per platform into out, then check and validate each one."""
+    out.mkdir(parents=True, exist_ok=True)  # blender_ext.py does not create it.
+    run_blender_ext(blender_ext, ["build", "--source-dir", str(stage), "--output-dir", str(out),
+                                  "--split-platforms", "--valid-tags", str(tags)])
+    zips = [out / zip_name(manifest, p) for p in platforms]
+    for path, platform in zip(zips, platforms):
+        check_zip(path, platform)
+        run_blender_ext(blender_ext, ["validate", "--valid-tags", str(tags), str(path)])
+    return zips
+
+
+def build(args: argparse.Namespace) -> list[Path]:
+    """Run all the steps; return the built zips."""
+    blender_ext = find_blender_ext()
+    tags = find_valid_tags(blender_ext)
+    manifest, platforms, stage = stage_and_validate(args, blender_ext, tags)
+    return build_zips(manifest, platforms, stage, Path(args.out).resolve(), blender_ext, tags)
+
+
+def parse_platforms(text: str | None, manifest: dict) -> list[str]:
+    """The platforms to build: the --platforms list, or all the manifest declares."""
+    chosen = [p.strip() for p in (text or "").split(",") if p.strip()] or list(manifest.get("platforms") or [])
+    chosen = list(dict.fromkeys(chosen))  # Drop repeats, keep the order.
+    if not chosen:
+        raise BuildError("no platforms to build: the manifest declares none and --platforms is empty")
+    return chosen
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    """Command-line options."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--platforms", help="comma-separated subset, e.g. linux-x64 (default: all in the manifest)")
+    parser.add_argument("--out", default=str(REPO_ROOT / "dist"), help="output folder (default: dist/)")
+    parser.add_argument("--cache", default=str(REPO_ROOT / "build" / "wheels_cache"),
+                        help="wheel download cache (default: build/wheels_cache/)")
+    parser.add_argument("--stage", default=str(REPO_ROOT / "build" / "stage"),
+                        help="staging folder, wiped each run (default: build/stage/)")
+    parser.add_argument("--source", default=str(REPO_ROOT), help="extension source folder (default: repo root)")
+    return parser.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Build, print what was built, and return the exit code."""
+    args = parse_args(argv)
+    try:
+        zips = build(args)
+    except BuildError as ex:
+        print("build_extension: ERROR: {}".format(ex), file=sys.stderr)
+        return 1
+    for path in zips:
+        print("built {} ({:.1f} MiB)".format(path, path.stat().st_size / 2**20))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
