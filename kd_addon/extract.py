@@ -1,0 +1,436 @@
+"""Scene extraction: evaluated depsgraph -> per-mesh triangle records + instance list.
+
+Everything Cycles would render as triangles is read from
+``depsgraph.object_instances``: meshes after modifiers, armatures, shape keys
+and geometry nodes, and the tessellated meshes of curves, text, surfaces and
+metaballs. Each distinct evaluated mesh becomes one :class:`MeshGeometry`
+(object space, read once), each placement of it one :class:`Instance` with a
+float64 world matrix, so later stages can build one kd-tree per mesh and a
+top-level tree over the instances.
+
+How bpy 5.0 hands over non-mesh objects
+    A curve, text, surface or metaball object appears twice in
+    ``object_instances``: once with its own type (``CURVE``, ``FONT``, ...) and
+    once as a ``MESH`` instance of itself (``is_instance`` True, ``parent`` is
+    the object) carrying the evaluated mesh component. Cycles renders only the
+    second, and so do we: only entries whose evaluated data is a Mesh are read,
+    and ``to_mesh()`` is never needed (calling it on the ``CURVE`` entry as
+    well would count the geometry twice). Hair curves, point clouds, volumes
+    and grease pencil are not triangles and are skipped quietly, as are empties,
+    lights, cameras and meshes without faces.
+
+Render visibility (the viewport depsgraph also holds render-hidden objects)
+    * A scene object is kept when its *original* has ``hide_render`` False and
+      it is reachable from the view layer's collection tree through collections
+      that are neither excluded nor ``hide_render``.
+    * An instance is kept when its instancer (``DepsgraphObjectInstance.parent``,
+      the top-level instancer) passes the rule above. For collection instances
+      the instanced object must also be render-visible inside the instanced
+      collection (own ``hide_render``, nested collection ``hide_render`` and
+      nested collection instances), as Blender does when it instances a
+      collection for a final render. Geometry-nodes and particle instances
+      ignore the source object's ``hide_render`` (hiding the source is the usual
+      workflow and Cycles still renders the copies).
+    * An object that instances things (particles, vertex/face/collection
+      instancing) is left out itself when ``show_instancer_for_render`` is off.
+      Not handled: that flag on a geometry-nodes object whose output holds
+      instances (the realized part is always kept).
+    * Ray visibility: an object with ``visible_camera`` False *and*
+      ``visible_shadow`` False is left out: it can neither be seen nor occlude.
+      Otherwise it is kept as an occluder, since an AO preview has no separate
+      camera and shadow rays. For instances the flags are combined with the
+      instancer's (logical AND, as Cycles does).
+    * Holdouts (``is_holdout`` and holdout collections) are ignored: a holdout
+      is rendered as an ordinary occluder in the preview.
+    * Limitation (the preview follows the viewport here): objects the viewport
+      does not show -- eye icon (``hide_set``), ``hide_viewport``, collections
+      disabled in viewports -- are not yielded by the viewport depsgraph, so
+      they are missing even though a final render would include them.
+    * The viewport depsgraph evaluates *viewport* settings: Subdivision
+      "Levels Viewport", metaball ``resolution``, geometry-nodes "Is Viewport",
+      modifiers enabled in the viewport. The preview shows that geometry.
+
+Geometry whose evaluated positions contain NaN or inf is left out with a
+warning naming the object. Geometry keys are ``Mesh.as_pointer()`` values of
+evaluated meshes: unique and stable *within one extraction* only.
+
+This module imports bpy and numpy only (never ``core``).
+"""
+
+from __future__ import annotations
+
+import time
+import zlib
+from dataclasses import dataclass, field
+
+import bpy
+import numpy as np
+
+# --------------------------------------------------------------------------
+# Records
+# --------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class MeshGeometry:
+    """One evaluated mesh in object space, shared by all its instances."""
+
+    key: int
+    name: str
+    vertices: np.ndarray  # (V, 3) float32, C-contiguous
+    triangles: np.ndarray  # (T, 3) int32 indices into vertices
+
+    @property
+    def triangle_count(self) -> int:
+        return int(self.triangles.shape[0])
+
+
+@dataclass(frozen=True)
+class Instance:
+    """One placement of a geometry in the world.
+
+    ``is_instance`` mirrors ``DepsgraphObjectInstance.is_instance``; note that
+    the mesh of a curve, text, surface or metaball arrives as an instance of
+    its own object (``instancer == name``). ``instancer`` is the top-level
+    instancer (for nested collection instances, the outermost empty).
+    """
+
+    geometry_key: int
+    matrix_world: np.ndarray  # (4, 4) float64
+    name: str  # original object's name
+    instancer: str | None  # top-level instancer's name, None for scene objects
+    is_instance: bool  # DepsgraphObjectInstance.is_instance
+
+
+@dataclass
+class ExtractedScene:
+    """The render-visible triangles of one evaluated depsgraph."""
+
+    geometries: dict[int, MeshGeometry] = field(default_factory=dict)
+    instances: list[Instance] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    extract_ms: float = 0.0
+    frame: int = 0
+
+    @property
+    def object_names(self) -> list[str]:
+        """Original object name for each entry of ``instances``."""
+        return [inst.name for inst in self.instances]
+
+    @property
+    def object_count(self) -> int:
+        """Number of placed meshes (entries of ``instances``)."""
+        return len(self.instances)
+
+    @property
+    def triangle_count(self) -> int:
+        """Total world-space triangles, instances counted separately."""
+        return int(self._instance_triangle_counts().sum())
+
+    def _instance_triangle_counts(self) -> np.ndarray:
+        return np.array(
+            [self.geometries[i.geometry_key].triangle_count for i in self.instances],
+            dtype=np.int64,
+        )
+
+    def triangle_object_ids(self) -> np.ndarray:
+        """int32 (N,): index into ``instances`` of each world triangle."""
+        counts = self._instance_triangle_counts()
+        return np.repeat(np.arange(len(self.instances), dtype=np.int32), counts)
+
+    def world_triangles(self) -> np.ndarray:
+        """float32 (N, 3, 3) world-space triangles, in ``instances`` order.
+
+        Vectorized per geometry: all instances of one mesh are transformed in
+        one matmul and gathered with np.take, so the Python loop runs over
+        distinct meshes (and over the instances of a mesh only when there are
+        few of them), never over triangles.
+        """
+        counts = self._instance_triangle_counts()
+        starts = np.concatenate(([0], np.cumsum(counts)[:-1])).astype(np.int64)
+        out = np.empty((int(counts.sum()), 3, 3), dtype=np.float32)
+        for key, idx in self._instances_by_geometry().items():
+            geom = self.geometries[key]
+            mats = np.stack([self.instances[i].matrix_world for i in idx])
+            world = _transform_points(mats, geom.vertices)  # (K, V, 3)
+            _scatter_triangles(out, starts[idx], world, geom.triangles)
+        return out
+
+    def _instances_by_geometry(self) -> dict[int, np.ndarray]:
+        groups: dict[int, list[int]] = {}
+        for i, inst in enumerate(self.instances):
+            groups.setdefault(inst.geometry_key, []).append(i)
+        return {k: np.array(v, dtype=np.int64) for k, v in groups.items()}
+
+
+def _transform_points(mats: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Apply K affine 4x4 matrices to (V,3) points -> float32 (K,V,3).
+
+    The product runs in float64 so large translations keep their precision
+    until the final cast.
+    """
+    rot_t = mats[:, :3, :3].transpose(0, 2, 1)
+    world = np.matmul(points.astype(np.float64)[None], rot_t)
+    world += mats[:, None, :3, 3]
+    return world.astype(np.float32)
+
+
+def _scatter_triangles(out, starts, world, triangles) -> None:
+    """Gather (K,V,3) vertices by (T,3) indices into out[start_k : start_k+T].
+
+    np.take(..., out=...) is ~3x faster than world[k][triangles]; few
+    instances are written slice by slice, many small ones in one gather and
+    one (slice or fancy-index) assignment.
+    """
+    n_inst, n_tris = world.shape[0], triangles.shape[0]
+    if n_inst <= 16:
+        for k in range(n_inst):
+            s = int(starts[k])
+            np.take(world[k], triangles, axis=0, out=out[s : s + n_tris])
+        return
+    gathered = np.take(world, triangles, axis=1).reshape(-1, 3, 3)
+    s0 = int(starts[0])
+    if np.array_equal(starts, s0 + n_tris * np.arange(n_inst)):
+        out[s0 : s0 + n_inst * n_tris] = gathered
+    else:
+        out[(starts[:, None] + np.arange(n_tris)).ravel()] = gathered
+
+
+def geometry_fingerprint(geom: MeshGeometry) -> int:
+    """Cheap content hash (crc32 of vertex and index bytes) for change detection.
+
+    Measured: zlib.crc32 over 1M float32 vertices (12 MB) takes ~2.8 ms;
+    hash(tobytes()) ~3.3 ms (and copies), blake2b ~13 ms.
+    """
+    crc = zlib.crc32(np.int64(geom.vertices.shape[0]).tobytes())
+    crc = zlib.crc32(geom.vertices, crc)
+    return zlib.crc32(geom.triangles, crc)
+
+
+# --------------------------------------------------------------------------
+# Reading one mesh
+# --------------------------------------------------------------------------
+
+
+def read_mesh(mesh: bpy.types.Mesh) -> tuple[np.ndarray, np.ndarray]:
+    """Object-space (vertices float32 (V,3), triangles int32 (T,3)) of a Mesh.
+
+    Uses only bulk foreach_get paths that are plain memcpys. Measured with
+    bpy 5.0.1 on a 1M-triangle grid (500k vertices):
+      positions: attributes["position"] "vector" into float32   0.2-0.5 ms
+                 (vertices.foreach_get("co") 20 ms; float64 buffer 38 ms)
+      corners:   loop_triangles "loops" into *uint32*            0.7 ms
+                 (the same into int32: 86-140 ms, the property is unsigned
+                  so any other dtype drops to a per-item path)
+                 loop_triangles "vertices" (uint32 32 ms, int32 190 ms)
+      .corner_vert "value" into int32                            0.3 ms
+      gather corner_vert[loops]                                  4-5 ms
+    """
+    mesh.calc_loop_triangles()  # cached in 5.0: a no-op when already built
+    n_tris = len(mesh.loop_triangles)
+    n_verts = len(mesh.vertices)
+    verts = np.empty(n_verts * 3, dtype=np.float32)
+    if n_verts:
+        mesh.attributes["position"].data.foreach_get("vector", verts)
+    if n_tris == 0:
+        return verts.reshape(-1, 3), np.empty((0, 3), dtype=np.int32)
+    corners = np.empty(n_tris * 3, dtype=np.uint32)
+    mesh.loop_triangles.foreach_get("loops", corners)
+    corner_vert = np.empty(len(mesh.loops), dtype=np.int32)
+    attr = mesh.attributes.get(".corner_vert")  # internal name; guard renames
+    if attr is not None:
+        attr.data.foreach_get("value", corner_vert)
+    else:  # ~100 ms per 1M corners, but stays correct
+        mesh.loops.foreach_get("vertex_index", corner_vert)
+    tris = np.take(corner_vert, corners.view(np.int32)).reshape(-1, 3)
+    return verts.reshape(-1, 3), tris
+
+
+# --------------------------------------------------------------------------
+# Render visibility
+# --------------------------------------------------------------------------
+
+
+class _Visibility:
+    """Render-visibility decisions, memoized per original object pointer."""
+
+    def __init__(self, view_layer: bpy.types.ViewLayer):
+        self.scene_objects = _layer_render_objects(view_layer.layer_collection)
+        self._collection_memo: dict[int, frozenset[int]] = {}
+
+    def scene_object(self, orig: bpy.types.Object) -> bool:
+        """A non-instanced object: own flag plus collection path."""
+        return (not orig.hide_render) and orig.as_pointer() in self.scene_objects
+
+    def in_instanced_collection(self, instancer: bpy.types.Object, orig) -> bool:
+        """Whether a collection-instancer would instance `orig` in a render."""
+        if instancer.instance_type != "COLLECTION" or instancer.instance_collection is None:
+            return True
+        objs = self._collection_objects(instancer.instance_collection, set())
+        return orig.as_pointer() in objs
+
+    def _collection_objects(self, coll: bpy.types.Collection, stack: set) -> frozenset[int]:
+        """Render-visible objects a collection instance yields, nested ones too."""
+        ptr = coll.as_pointer()
+        if ptr in self._collection_memo:
+            return self._collection_memo[ptr]
+        if coll.hide_render or ptr in stack:
+            return frozenset()
+        stack.add(ptr)
+        out: set[int] = set()
+        for ob in coll.objects:
+            if ob.hide_render:
+                continue
+            out.add(ob.as_pointer())
+            if ob.instance_type == "COLLECTION" and ob.instance_collection is not None:
+                out |= self._collection_objects(ob.instance_collection, stack)
+        for child in coll.children:
+            out |= self._collection_objects(child, stack)
+        stack.discard(ptr)
+        self._collection_memo[ptr] = frozenset(out)
+        return self._collection_memo[ptr]
+
+
+def _layer_render_objects(layer_coll: bpy.types.LayerCollection) -> set[int]:
+    """Original-object pointers reachable through render-enabled collections."""
+    out: set[int] = set()
+    todo = [layer_coll]
+    while todo:
+        lc = todo.pop()
+        if lc.exclude or lc.collection.hide_render:
+            continue
+        out.update(ob.as_pointer() for ob in lc.collection.objects)
+        todo.extend(lc.children)
+    return out
+
+
+def _ray_visible(*objs) -> bool:
+    """False only when camera and shadow rays are both off (ANDed over objs)."""
+    camera = all(ob.visible_camera for ob in objs)
+    shadow = all(ob.visible_shadow for ob in objs)
+    return camera or shadow
+
+
+def _instancer_hides_self(orig: bpy.types.Object, evaluated: bpy.types.Object) -> bool:
+    """Particle / vertex / face / collection instancers may hide themselves."""
+    if orig.show_instancer_for_render:
+        return False
+    return evaluated.is_instancer or len(orig.particle_systems) > 0
+
+
+def _entry_visible(vis: _Visibility, parent, ob: bpy.types.Object) -> bool:
+    """Render-visibility of one object_instances entry (parent None: not an instance)."""
+    orig = ob.original
+    if parent is None:
+        return (
+            vis.scene_object(orig)
+            and _ray_visible(orig)
+            and not _instancer_hides_self(orig, ob)
+        )
+    parent = parent.original
+    if not vis.scene_object(parent):
+        return False
+    if parent != orig and not vis.in_instanced_collection(parent, orig):
+        return False
+    return _ray_visible(orig, parent)
+
+
+# --------------------------------------------------------------------------
+# Extraction
+# --------------------------------------------------------------------------
+
+
+class _GeometryReader:
+    """Reads each evaluated mesh once; remembers rejects so they warn once."""
+
+    def __init__(self):
+        self.geometries: dict[int, MeshGeometry] = {}
+        self.rejected: set[int] = set()
+        self.warnings: list[str] = []
+
+    def get(self, mesh: bpy.types.Mesh, object_name: str) -> int | None:
+        """Geometry key for `mesh`, or None when it has no usable triangles."""
+        key = mesh.as_pointer()
+        if key in self.geometries:
+            return key
+        if key in self.rejected:
+            return None
+        verts, tris = read_mesh(mesh)
+        if len(tris) and not np.isfinite(verts).all():  # 0.5 ms per 1M verts
+            self.warnings.append(
+                f"object '{object_name}' has non-finite vertex coordinates; left out"
+            )
+            tris = tris[:0]
+        if len(tris) == 0:
+            self.rejected.add(key)
+            return None
+        self.geometries[key] = MeshGeometry(key, mesh.name, verts, tris)
+        return key
+
+
+def extract_scene(depsgraph: bpy.types.Depsgraph | None = None) -> ExtractedScene:
+    """Extract every render-visible triangle mesh of an evaluated depsgraph.
+
+    With no argument, uses ``bpy.context.evaluated_depsgraph_get()``. Call
+    ``scene.frame_set(f)`` first to extract another frame.
+    """
+    t0 = time.perf_counter()
+    if depsgraph is None:
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+    walker = _EntryReader(_Visibility(depsgraph.view_layer))
+    instances = [r for r in map(walker.read, depsgraph.object_instances) if r is not None]
+    return ExtractedScene(
+        geometries=walker.geometries.geometries,
+        instances=instances,
+        warnings=walker.geometries.warnings,
+        extract_ms=(time.perf_counter() - t0) * 1e3,
+        frame=depsgraph.scene.frame_current,
+    )
+
+
+class _EntryReader:
+    """Turns object_instances entries into Instance records.
+
+    Per-entry cost dominates scenes with many instances (bpy 5.0.1, 100k
+    geometry-nodes instances: the bare iteration is ~60 ms, every RNA
+    attribute access ~1 us), so the visibility verdict and the names are
+    memoized per (instancer, original object) pair and each entry touches
+    only the few attributes that can differ between instances.
+    """
+
+    def __init__(self, vis: _Visibility):
+        self.vis = vis
+        self.geometries = _GeometryReader()
+        self._verdicts: dict[tuple[int, int], tuple[str, str | None] | None] = {}
+
+    def read(self, inst) -> Instance | None:
+        """Record for one entry, or None to skip it. Copies everything out at
+        once: ``inst.object`` is a temporary the iterator reuses."""
+        ob = inst.object
+        mesh = ob.data
+        if not isinstance(mesh, bpy.types.Mesh):
+            return None
+        parent = inst.parent if inst.is_instance else None
+        names = self._verdict(ob, parent)
+        if names is None:
+            return None
+        key = self.geometries.get(mesh, names[0])
+        if key is None:
+            return None
+        return Instance(
+            geometry_key=key,
+            matrix_world=np.array(inst.matrix_world, dtype=np.float64),
+            name=names[0],
+            instancer=names[1],
+            is_instance=parent is not None,
+        )
+
+    def _verdict(self, ob, parent) -> tuple[str, str | None] | None:
+        """(object name, instancer name) when visible, else None; memoized."""
+        orig = ob.original
+        memo_key = (orig.as_pointer(), parent.as_pointer() if parent else 0)
+        if memo_key not in self._verdicts:
+            visible = _entry_visible(self.vis, parent, ob)
+            instancer = parent.original.name if parent is not None else None
+            self._verdicts[memo_key] = (orig.name, instancer) if visible else None
+        return self._verdicts[memo_key]

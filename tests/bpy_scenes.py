@@ -1,0 +1,193 @@
+"""Small bpy scene builders for tests (no operators where bpy.data will do).
+
+Every builder works on the current scene; call :func:`reset` first to start
+from an empty factory scene. Geometry is built from explicit coordinates so
+tests can state the expected triangles independently of Blender.
+"""
+
+from __future__ import annotations
+
+import math
+
+import bpy
+
+# A 2x2x2 cube centered on the origin: 8 vertices, 6 quads -> 12 triangles.
+CUBE_VERTS = [(x, y, z) for x in (-1.0, 1.0) for y in (-1.0, 1.0) for z in (-1.0, 1.0)]
+CUBE_FACES = [
+    (0, 1, 3, 2), (4, 6, 7, 5),  # -x, +x
+    (0, 4, 5, 1), (2, 3, 7, 6),  # -y, +y
+    (0, 2, 6, 4), (1, 5, 7, 3),  # -z, +z
+]
+
+
+def reset() -> bpy.types.Scene:
+    """Empty factory scene (no objects), frame 1."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    scene.frame_set(1)
+    return scene
+
+
+def link(obj: bpy.types.Object, collection: bpy.types.Collection | None = None):
+    """Link obj into collection (default: the scene's master collection)."""
+    (collection or bpy.context.scene.collection).objects.link(obj)
+    return obj
+
+
+def add_mesh(name, verts, faces, *, location=(0, 0, 0), collection=None, edges=()):
+    """Mesh object from explicit vertices/faces."""
+    mesh = bpy.data.meshes.new(name)
+    mesh.from_pydata([tuple(v) for v in verts], list(edges), [tuple(f) for f in faces])
+    mesh.update()
+    obj = bpy.data.objects.new(name, mesh)
+    obj.location = location
+    return link(obj, collection)
+
+
+def add_cube(name="Cube", *, offset=(0, 0, 0), scale=1.0, location=(0, 0, 0), collection=None):
+    """Axis-aligned cube: CUBE_VERTS * scale + offset in object space."""
+    verts = [tuple(scale * c + o for c, o in zip(v, offset)) for v in CUBE_VERTS]
+    return add_mesh(name, verts, CUBE_FACES, location=location, collection=collection)
+
+
+def add_empty(name="Empty", *, location=(0, 0, 0), collection=None):
+    """Plain empty (no geometry)."""
+    obj = bpy.data.objects.new(name, None)
+    obj.location = location
+    return link(obj, collection)
+
+
+def new_collection(name, *, parent=None, exclude=False):
+    """Collection linked under parent (default scene root); optionally excluded
+    from the view layer so only its instances are rendered."""
+    coll = bpy.data.collections.new(name)
+    (parent or bpy.context.scene.collection).children.link(coll)
+    if exclude:
+        layer = bpy.context.view_layer.layer_collection.children[coll.name]
+        layer.exclude = True
+    return coll
+
+
+def add_collection_instance(name, collection, *, location=(0, 0, 0)):
+    """Empty that instances `collection` at `location`."""
+    obj = add_empty(name, location=location)
+    obj.instance_type = "COLLECTION"
+    obj.instance_collection = collection
+    return obj
+
+
+def add_armature_rig(name="Rig", *, angle_at_frame=((1, 0.0), (10, math.pi / 2))):
+    """Armature with one bone along +Y at the origin, plus a 2x2 quad plane
+    at x in [1,2], y in [0,1] fully weighted to it. The bone's Z rotation is
+    keyed at the given (frame, angle) pairs, so a vertex p maps to Rz(angle) p.
+    Returns (armature object, mesh object)."""
+    arm = bpy.data.armatures.new(name)
+    rig = link(bpy.data.objects.new(name, arm))
+    bpy.context.view_layer.objects.active = rig
+    bpy.ops.object.mode_set(mode="EDIT")
+    bone = arm.edit_bones.new("Bone")
+    bone.head, bone.tail, bone.roll = (0, 0, 0), (0, 1, 0), 0.0
+    bpy.ops.object.mode_set(mode="OBJECT")
+    skin = add_mesh(f"{name}Skin", [(1, 0, 0), (2, 0, 0), (2, 1, 0), (1, 1, 0)], [(0, 1, 2, 3)])
+    group = skin.vertex_groups.new(name="Bone")
+    group.add([0, 1, 2, 3], 1.0, "REPLACE")
+    mod = skin.modifiers.new("Armature", "ARMATURE")
+    mod.object = rig
+    pose_bone = rig.pose.bones["Bone"]
+    pose_bone.rotation_mode = "XYZ"
+    for frame, angle in angle_at_frame:
+        pose_bone.rotation_euler = (0.0, 0.0, angle)
+        pose_bone.keyframe_insert("rotation_euler", frame=frame)
+    return rig, skin
+
+
+def add_shape_key_plane(name="Keyed", *, lift=2.0, value_at_frame=((1, 0.0), (10, 1.0))):
+    """Unit quad at z=0 with a shape key that lifts every vertex by `lift`;
+    the key's value is keyframed at the given (frame, value) pairs."""
+    obj = add_mesh(name, [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)], [(0, 1, 2, 3)])
+    obj.shape_key_add(name="Basis")
+    key = obj.shape_key_add(name="Lift")
+    for point in key.data:
+        point.co.z += lift
+    for frame, value in value_at_frame:
+        key.value = value
+        key.keyframe_insert("value", frame=frame)
+    return obj
+
+
+def gn_line_instances_group(count, offset, cube_size):
+    """Geometry-nodes tree: Mesh Line(count, offset) -> Instance on Points
+    with a Mesh Cube(cube_size). The input geometry is dropped."""
+    group = bpy.data.node_groups.new("LineInstances", "GeometryNodeTree")
+    group.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    group.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    nodes, links = group.nodes, group.links
+    nodes.new("NodeGroupInput")
+    out = nodes.new("NodeGroupOutput")
+    line = nodes.new("GeometryNodeMeshLine")
+    line.inputs["Count"].default_value = count
+    line.inputs["Offset"].default_value = offset
+    cube = nodes.new("GeometryNodeMeshCube")
+    cube.inputs["Size"].default_value = (cube_size,) * 3
+    on_points = nodes.new("GeometryNodeInstanceOnPoints")
+    links.new(line.outputs["Mesh"], on_points.inputs["Points"])
+    links.new(cube.outputs["Mesh"], on_points.inputs["Instance"])
+    links.new(on_points.outputs["Instances"], out.inputs[0])
+    return group
+
+
+def add_gn_instancer(name="GNHost", *, count=4, offset=(2, 0, 0), cube_size=1.0, location=(0, 0, 0)):
+    """Empty-mesh object whose geometry-nodes modifier emits `count` cube
+    instances (12 triangles each) at i * offset, i = 0..count-1."""
+    obj = add_mesh(name, [], [], location=location)
+    mod = obj.modifiers.new("GN", "NODES")
+    mod.node_group = gn_line_instances_group(count, offset, cube_size)
+    return obj
+
+
+def add_bevel_curve(name="Tube", *, length=4.0, radius=0.5, location=(0, 0, 0)):
+    """Straight poly curve from x=0 to x=length beveled into an open tube of
+    the given radius around the x axis."""
+    curve = bpy.data.curves.new(name, "CURVE")
+    curve.dimensions = "3D"
+    curve.bevel_depth = radius
+    curve.bevel_resolution = 2
+    spline = curve.splines.new("POLY")
+    spline.points.add(1)
+    spline.points[0].co = (0, 0, 0, 1)
+    spline.points[1].co = (length, 0, 0, 1)
+    obj = bpy.data.objects.new(name, curve)
+    obj.location = location
+    return link(obj)
+
+
+def add_text(name="Label", body="Hi", *, extrude=0.1, location=(0, 0, 0)):
+    """Extruded text object with the built-in font (size 1)."""
+    curve = bpy.data.curves.new(name, "FONT")
+    curve.body = body
+    curve.extrude = extrude
+    obj = bpy.data.objects.new(name, curve)
+    obj.location = location
+    return link(obj)
+
+
+def add_metaball(name="Blob", *, radius=1.0, resolution=0.1, location=(0, 0, 0)):
+    """Single metaball sphere element (viewport resolution as given: the
+    viewport depsgraph tessellates with `resolution`, not render_resolution)."""
+    meta = bpy.data.metaballs.new(name)
+    meta.resolution = resolution
+    element = meta.elements.new()
+    element.radius = radius
+    obj = bpy.data.objects.new(name, meta)
+    obj.location = location
+    return link(obj)
+
+
+def add_light(name="Lamp"):
+    """Point light (never triangles)."""
+    return link(bpy.data.objects.new(name, bpy.data.lights.new(name, "POINT")))
+
+
+def add_camera(name="Cam"):
+    """Camera (never triangles)."""
+    return link(bpy.data.objects.new(name, bpy.data.cameras.new(name)))
