@@ -4,7 +4,7 @@ from time import perf_counter
 
 import numpy as np
 
-from .geometry import triangle_boxes
+from .geometry import triangle_boxes, union_of_boxes
 from .inputs import as_triangles
 from .kdtree import KdTree, empty_arrays
 from .merge import merge_tree
@@ -45,7 +45,7 @@ def _initial_references(tris):
         boxes = np.ascontiguousarray(boxes[keep])
     if len(prims) == 0:
         return prims, boxes, np.zeros(6, np.float32), dropped
-    bounds = np.concatenate([boxes[:, :3].min(axis=0), boxes[:, 3:].max(axis=0)]).astype(np.float32)
+    bounds = union_of_boxes(boxes)
     return prims, boxes, bounds, dropped
 
 

@@ -23,10 +23,10 @@ def new_split_scratch():
 
 
 @njit(cache=True, inline="always")
-def side_of(box, axis, pos, planar_left):
-    """LEFT, RIGHT or BOTH for a reference box and a split plane."""
-    lo = box[axis]
-    hi = box[axis + 3]
+def side_of(boxes, i, axis, pos, planar_left):
+    """LEFT, RIGHT or BOTH for reference i's box and a split plane."""
+    lo = boxes[i, axis]
+    hi = boxes[i, axis + 3]
     if lo == hi and lo == pos:
         return LEFT if planar_left else RIGHT
     if hi <= pos:
@@ -76,23 +76,33 @@ def partition_in_place(tris, prims, boxes, start, end, axis, pos, planar_left, c
     w_left = end
     for i in range(start, end):
         prim = prims[i]
-        side = side_of(boxes[i], axis, pos, planar_left)
-        if side == BOTH:
-            side = split_reference(tris[prim], boxes[i], axis, pos, clip, scratch, box_l, box_r)
-        else:
-            box_l[:] = boxes[i]
-            box_r[:] = boxes[i]
-        if side & LEFT:
-            prims[w_left] = prim
-            boxes[w_left] = box_l
+        side = side_of(boxes, i, axis, pos, planar_left)
+        if side == LEFT:
+            _copy_ref(prims, boxes, i, w_left)
             w_left += 1
-        if side & RIGHT:
-            prims[w_right] = prim
-            boxes[w_right] = box_r
+        elif side == RIGHT:
+            _copy_ref(prims, boxes, i, w_right)
             w_right += 1
+        else:
+            side = split_reference(tris[prim], boxes[i], axis, pos, clip, scratch, box_l, box_r)
+            if side & LEFT:
+                prims[w_left] = prim
+                boxes[w_left] = box_l
+                w_left += 1
+            if side & RIGHT:
+                prims[w_right] = prim
+                boxes[w_right] = box_r
+                w_right += 1
     n_right = w_right - start
     n_left = w_left - end
     for k in range(n_left):
-        prims[w_right + k] = prims[end + k]
-        boxes[w_right + k] = boxes[end + k]
+        _copy_ref(prims, boxes, end + k, w_right + k)
     return n_right, n_left
+
+
+@njit(cache=True, inline="always")
+def _copy_ref(prims, boxes, src, dst):
+    if src != dst:
+        prims[dst] = prims[src]
+        for k in range(6):
+            boxes[dst, k] = boxes[src, k]

@@ -52,10 +52,28 @@ def _axis_events(boxes, start, end, axis, scratch):
             starts[n_spans] = lo
             ends[n_spans] = hi
             n_spans += 1
-    starts[:n_spans].sort()
-    ends[:n_spans].sort()
-    planars[:n_planar].sort()
+    _sort(starts, n_spans)
+    _sort(ends, n_spans)
+    _sort(planars, n_planar)
     return starts, ends, planars, n_spans, n_planar
+
+
+INSERTION_SORT_MAX = 48
+
+
+@njit(cache=True, inline="always")
+def _sort(values, n):
+    """Sort values[:n] in place; insertion sort for the short lists of small nodes (less overhead)."""
+    if n > INSERTION_SORT_MAX:
+        values[:n].sort()
+        return
+    for i in range(1, n):
+        v = values[i]
+        j = i - 1
+        while j >= 0 and values[j] > v:
+            values[j + 1] = values[j]
+            j -= 1
+        values[j + 1] = v
 
 
 @njit(cache=True)

@@ -150,7 +150,7 @@ def partition_parallel(tris, prims, boxes, axis, pos, planar_left, clip, nchunks
         box_l = np.empty(6, np.float32)
         box_r = np.empty(6, np.float32)
         for i in range(c * n // nchunks, (c + 1) * n // nchunks):
-            side = side_of(boxes[i], axis, pos, planar_left)
+            side = side_of(boxes, i, axis, pos, planar_left)
             if side == BOTH:
                 side = split_reference(tris[prims[i]], boxes[i], axis, pos, clip, scratch, box_l, box_r)
             sides[i] = side

@@ -47,10 +47,12 @@ def clip_to_box(box, o, d, inv, tmin, tmax):
 
 
 @njit(cache=True)
-def trace_ray(tree, o, d, tmin, tmax, any_hit, stack_node, stack_t):
-    """(t, prim, u, v) of the closest hit in (tmin, tmax), or of any hit if `any_hit`; prim -1 on a miss."""
+def trace_ray(tree, o, d, tmin, tmax, any_hit, stack_node, stack_t, inv):
+    """(t, prim, u, v) of the closest hit in (tmin, tmax), or of any hit if `any_hit`; prim -1 on a miss.
+
+    `stack_node`, `stack_t` and `inv` (3 floats) are the caller's scratch, reused across rays.
+    """
     axis, split, child, count, leaf_prims, tris, root_box = tree
-    inv = np.empty(3)
     for k in range(3):
         inv[k] = 1.0 / d[k] if d[k] != 0.0 else 0.0
     t0, t1 = clip_to_box(root_box, o, d, inv, tmin, tmax)
@@ -73,7 +75,7 @@ def trace_ray(tree, o, d, tmin, tmax, any_hit, stack_node, stack_t):
                 best_t, best_prim, best_u, best_v = t, prim, u, v
                 if any_hit:
                     return best_t, best_prim, best_u, best_v
-        if best_prim >= 0 and best_t <= t1 + _slack(t1):
+        if best_prim >= 0 and best_t <= t1:  # no slack: stopping late is safe, early is not
             break
         if sp == 0:
             break
@@ -121,9 +123,10 @@ def trace_rays(tree, origins, directions, tmin, tmax, any_hit, out_t, out_prim, 
     for b in prange(n_blocks):
         stack_node = np.empty(STACK_SIZE, np.int32)
         stack_t = np.empty((STACK_SIZE, 2))
+        inv = np.empty(3)
         for r in range(b * RAYS_PER_TASK, min(n, (b + 1) * RAYS_PER_TASK)):
             t, prim, u, v = trace_ray(tree, origins[r], directions[r], tmin[r], tmax[r], any_hit,
-                                      stack_node, stack_t)
+                                      stack_node, stack_t, inv)
             out_t[r] = t
             out_prim[r] = prim
             out_u[r] = u

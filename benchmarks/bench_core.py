@@ -1,0 +1,199 @@
+"""Core benchmark: build time, tree statistics and ray throughput per builder, against Embree and BVHTree.
+
+Usage: python benchmarks/bench_core.py [--scenes suzanne-251k,...] [--runs 5] [--sweep] [--no-refs]
+
+Prints one table per scene. Build times are medians of --runs builds after a warm-up build that absorbs
+the JIT compile (reported on its own line); throughputs are medians of --runs traces. Embree (embreex,
+single-threaded: see reference_tracers.py) and Blender's BVHTree (Python loop over ray_cast, measured on a
+subset) trace the same rays in the same run; ratios are ours divided by theirs. Peak build memory is
+measured in a child process per builder (ru_maxrss growth over the loaded scene).
+"""
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+sys.path.insert(0, str(HERE.parent))
+
+import core  # noqa: E402
+from scenes import load_scene  # noqa: E402
+from workload import ao_workload, camera_workload  # noqa: E402
+
+BUILDERS = {
+    "binned": {},
+    "exact": {"builder": "exact"},
+    "median": {"builder": "median"},
+}
+SWEEP = {
+    "binned clip=False": {"clip": False},
+    "binned top=clustering": {"top": "clustering"},
+    "binned skip=True": {"skip": True},
+    "binned exact_below=32": {"exact_below": 32},
+    "binned exact_below=256": {"exact_below": 256},
+    "binned leaf_size=8": {"leaf_size": 8},
+    "binned empty_bonus=0.2": {"empty_bonus": 0.2},
+    "binned cost_ratio=0.9": {"cost_ratio": 0.9},
+    "binned max_depth=30": {"max_depth": 30},
+    "binned Ci=4": {"intersection_cost": 4.0},
+    "binned threads=1": {"threads": 1},
+}
+
+
+def median_time(fn, runs):
+    times = []
+    result = None
+    for _ in range(runs):
+        t = time.perf_counter()
+        result = fn()
+        times.append(time.perf_counter() - t)
+    return float(np.median(times)), result
+
+
+def peak_build_bytes_per_triangle(scene_name, options):
+    """Peak RSS growth of one build, per triangle, measured in a fresh process after a warm-up."""
+    code = (
+        "import sys, resource, json, numpy as np; sys.path[:0] = [%r, %r]\n"
+        "import core; from scenes import load_scene\n"
+        "tris = load_scene(%r).triangles; core.build_kdtree(tris[:30000], **%r)\n"
+        "base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss\n"
+        "tree = core.build_kdtree(tris, **%r)\n"
+        "peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss\n"
+        "print(json.dumps((peak - base) * 1024 / len(tris)))\n"
+        % (str(HERE), str(HERE.parent), scene_name, options, options))
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    return float(out.stdout.strip().splitlines()[-1])
+
+
+def bench_builder(scene, label, options, cam, ao, runs, memory):
+    build_s, tree = median_time(lambda: core.build_kdtree(scene.triangles, **options), runs)
+    stats = tree.stats()
+    cam_s, _ = median_time(lambda: core.intersect(tree, *cam), runs)
+    ao_s, _ = median_time(lambda: core.occluded(tree, *ao, tmax=1.0), runs)
+    row = {
+        "builder": label,
+        "build_ms": build_s * 1e3,
+        "Mtris/s": len(scene.triangles) / build_s / 1e6,
+        "sah": stats["sah_cost"],
+        "nodes": stats["nodes"],
+        "leaves": stats["leaves"],
+        "depth": stats["max_depth"],
+        "refs/tri": stats["references_per_triangle"],
+        "cam Mrays/s": len(cam[0]) / cam_s / 1e6,
+        "ao Mrays/s": len(ao[0]) / ao_s / 1e6,
+        "image_s": build_s + cam_s + ao_s,
+    }
+    if memory:
+        row["peak B/tri"] = peak_build_bytes_per_triangle(scene.name, options)
+    return row
+
+
+def bench_references(scene, cam, ao, runs, bvh_subset=20000):
+    from reference_tracers import EmbreeTracer
+    embree = EmbreeTracer(scene.triangles)
+    cam_s, _ = median_time(lambda: embree.closest(*cam), max(1, runs // 2))
+    ao_s, _ = median_time(lambda: embree.occluded(*ao, 1.0), max(1, runs // 2))
+    refs = {"embree": {"build_ms": embree.commit_seconds * 1e3, "cam Mrays/s": len(cam[0]) / cam_s / 1e6,
+                       "ao Mrays/s": len(ao[0]) / ao_s / 1e6}}
+    refs["bvhtree"] = _bvhtree_in_child(scene.name, bvh_subset)
+    return refs
+
+
+def _bvhtree_in_child(scene_name, subset):
+    """BVHTree throughput, in a child process: importing bpy would switch Numba's threading layer here."""
+    code = (
+        "import sys, time, json, numpy as np; sys.path[:0] = [%r]\n"
+        "import bpy\n"
+        "from scenes import load_scene; from workload import camera_workload, ao_workload\n"
+        "from reference_tracers import BlenderBVHTracer\n"
+        "sc = load_scene(%r); o, d = camera_workload(sc); n = %d\n"
+        "idx = np.random.default_rng(1).choice(len(o), n, replace=False)\n"
+        "tr = BlenderBVHTracer(sc.triangles)\n"
+        "t = time.perf_counter(); tt, pp = tr.closest(o[idx], d[idx]); cam = n / (time.perf_counter() - t) / 1e6\n"
+        "ao_o, ao_d = ao_workload(sc.triangles, o[idx], d[idx], tt, pp)\n"
+        "t = time.perf_counter(); tr.occluded(ao_o, ao_d, 1.0); ao = len(ao_o) / (time.perf_counter() - t) / 1e6\n"
+        "print(json.dumps({'build_ms': tr.build_seconds * 1e3, 'cam Mrays/s': cam, 'ao Mrays/s': ao}))\n"
+        % (str(HERE), scene_name, subset))
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    if out.returncode != 0:
+        return {"error": out.stderr.strip().splitlines()[-1] if out.stderr else "failed"}
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def print_table(rows, refs):
+    cols = list(rows[0].keys())
+    print(" | ".join(f"{c:>12}" for c in cols))
+    for r in rows:
+        print(" | ".join(f"{v:>12.3f}" if isinstance(v, float) else f"{v!s:>12}" for v in r.values()))
+    for name, ref in refs.items():
+        print(f"{name}: " + ", ".join(f"{k} {v:.3f}" if isinstance(v, float) else f"{k} {v}" for k, v in ref.items()))
+        if "cam Mrays/s" not in ref:
+            continue
+        for r in rows[:len(BUILDERS)]:
+            print(f"   {r['builder']:>10} / {name}: camera {r['cam Mrays/s'] / ref['cam Mrays/s']:.2f}x, "
+                  f"AO {r['ao Mrays/s'] / ref['ao Mrays/s']:.2f}x")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenes", default="suzanne-251k,suzanne-1m,soup-1m")
+    ap.add_argument("--runs", type=int, default=5)
+    ap.add_argument("--sweep", action="store_true", help="also measure the binned builder's settings")
+    ap.add_argument("--no-refs", action="store_true", help="skip Embree and BVHTree")
+    ap.add_argument("--no-memory", action="store_true", help="skip the peak-memory child processes")
+    ap.add_argument("--config", action="append", default=[],
+                    help="extra binned configuration, e.g. 'empty_bonus=0.2,max_depth=30' (repeatable)")
+    ap.add_argument("--only-configs", action="store_true", help="measure only the --config rows")
+    ap.add_argument("--json", help="write all rows to this file")
+    args = ap.parse_args()
+
+    t = time.perf_counter()
+    core.build_kdtree(load_scene("soup-100k").triangles[:20000])
+    tiny = core.build_kdtree(np.eye(3, dtype=np.float32)[None])
+    core.intersect(tiny, np.zeros((1, 3)), np.ones((1, 3)))
+    core.occluded(tiny, np.zeros((1, 3)), np.ones((1, 3)))
+    print(f"JIT compile / cache load and warm-up: {time.perf_counter() - t:.2f} s (not in any figure below)")
+
+    everything = {}
+    for name in args.scenes.split(","):
+        scene = load_scene(name)
+        cam = camera_workload(scene)
+        probe = core.intersect(core.build_kdtree(scene.triangles), *cam)
+        ao = ao_workload(scene.triangles, *cam, probe.t.astype(np.float64), probe.prim)
+        print(f"\n== {name}: {len(scene.triangles):,} triangles, {len(cam[0]):,} camera rays, "
+              f"{len(ao[0]):,} AO rays; threads {core_threads()}")
+        configs = {} if args.only_configs else dict(BUILDERS)
+        if args.sweep:
+            configs.update(SWEEP)
+        configs.update({c: parse_config(c) for c in args.config})
+        rows = [bench_builder(scene, label, opts, cam, ao, args.runs, not args.no_memory and label in BUILDERS)
+                for label, opts in configs.items()]
+        refs = {} if args.no_refs else bench_references(scene, cam, ao, args.runs)
+        print_table(rows, refs)
+        everything[name] = {"rows": rows, "refs": refs}
+    if args.json:
+        Path(args.json).write_text(json.dumps(everything, indent=1))
+
+
+def parse_config(text):
+    """'a=1,b=x' -> {'a': 1, 'b': 'x'} with numbers, booleans and None parsed."""
+    out = {}
+    for item in filter(None, text.split(",")):
+        key, value = item.split("=")
+        out[key.strip()] = json.loads(value) if value not in ("True", "False", "None") else eval(value)
+    return out
+
+
+def core_threads():
+    import numba
+    return numba.get_num_threads()
+
+
+if __name__ == "__main__":
+    main()

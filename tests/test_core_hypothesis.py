@@ -1,0 +1,48 @@
+"""Property test: generated triangle soups and rays against brute force, for every builder.
+
+Coordinates are drawn from a coarse grid part of the time so that coincident events, planar triangles,
+shared edges and rays along split planes come up often. The CI profile runs a fast subset; set
+HYPOTHESIS_PROFILE=long for many thousands of cases.
+"""
+import os
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings, strategies as st
+
+import core
+from tests.core_helpers import BUILDERS, assert_same_as_brute
+
+settings.register_profile("ci", max_examples=25, deadline=None,
+                          suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+settings.register_profile("long", max_examples=5000, deadline=None,
+                          suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
+
+grid = st.integers(-4, 4).map(lambda i: i / 2.0)
+free = st.floats(-2.0, 2.0, allow_nan=False, width=32)
+coordinate = st.one_of(grid, free)
+
+
+@st.composite
+def scenes(draw):
+    n = draw(st.integers(1, 60))
+    flat = draw(st.lists(coordinate, min_size=9 * n, max_size=9 * n))
+    tris = np.array(flat, np.float64).reshape(n, 3, 3)
+    copies = draw(st.integers(0, 3))  # stacked duplicates
+    if copies:
+        tris = np.concatenate([tris] + [tris[:1]] * copies)
+    m = draw(st.integers(1, 40))
+    origins = np.array(draw(st.lists(coordinate, min_size=3 * m, max_size=3 * m))).reshape(m, 3)
+    directions = np.array(draw(st.lists(st.one_of(st.sampled_from([0.0, -0.0, 1.0, -1.0]), free),
+                                        min_size=3 * m, max_size=3 * m))).reshape(m, 3)
+    directions[~(directions != 0).any(axis=1)] = [0.0, 0.0, 1.0]
+    return tris, origins, directions
+
+
+@pytest.mark.parametrize("options", BUILDERS)
+@given(scene=scenes(), leaf_size=st.sampled_from([1, 2, 8]))
+def test_generated_scenes_match_brute_force(options, scene, leaf_size):
+    tris, origins, directions = scene
+    tree = core.build_kdtree(tris, leaf_size=leaf_size, **options)
+    assert_same_as_brute(tree, tris, origins, directions)

@@ -1,0 +1,136 @@
+"""Closest-hit and any-hit queries against brute force, for every builder, on ordinary and hard scenes."""
+import numpy as np
+import pytest
+
+import core
+from tests.core_helpers import BUILDERS, assert_same_as_brute, assert_same_as_moller_trumbore, random_rays
+from tests.meshes import degenerate_mix, icosphere, lattice, mesh_triangles, random_soup, subdivided_cube
+
+
+@pytest.fixture(scope="module")
+def rng():
+    return np.random.default_rng(1234)
+
+
+@pytest.mark.parametrize("options", BUILDERS)
+def test_random_soup_matches_moller_trumbore(options, rng):
+    tris = random_soup(rng, 3000)
+    tree = core.build_kdtree(tris, **options)
+    assert_same_as_moller_trumbore(tree, tris, *random_rays(rng, 3000))
+
+
+@pytest.mark.parametrize("options", BUILDERS)
+def test_large_soup_uses_parallel_top_and_matches(options):
+    """Big enough for the parallel top levels (> 16384 references) to run."""
+    rng = np.random.default_rng(7)
+    tris = random_soup(rng, 40000, size=0.02)
+    tree = core.build_kdtree(tris, **options)
+    assert_same_as_brute(tree, tris, *random_rays(rng, 2000))
+
+
+@pytest.mark.parametrize("options", BUILDERS)
+def test_closed_meshes_match_brute(options, rng):
+    sphere = mesh_triangles(*icosphere(4))
+    cube = subdivided_cube(8) * 0.5 + 1.5
+    tris = np.concatenate([sphere, cube])
+    tree = core.build_kdtree(tris, **options)
+    o, d = random_rays(rng, 3000, extent=3.0)
+    assert_same_as_moller_trumbore(tree, tris, o, d)
+
+
+@pytest.mark.parametrize("options", BUILDERS)
+def test_lattice_with_axis_parallel_and_lattice_rays(options, rng):
+    """Every triangle lies in an axis plane at an integer coordinate; rays run along lattice lines,
+    start on lattice planes, and have exact zero and negative-zero direction components."""
+    tris = lattice(4)
+    tree = core.build_kdtree(tris, **options)
+    n = 3000
+    o = rng.integers(-1, 6, (n, 3)).astype(float) + rng.choice([0.0, 0.5, 0.25], (n, 3))
+    d = np.zeros((n, 3))
+    axis = rng.integers(0, 3, n)
+    d[np.arange(n), axis] = rng.choice([-1.0, 1.0], n)
+    d[(d == 0) & (rng.random((n, 3)) < 0.5)] = -0.0
+    mixed = rng.random(n) < 0.4
+    d[mixed] = rng.integers(-2, 3, (mixed.sum(), 3)).astype(float)
+    d[mixed & ~(d != 0).any(axis=1)] = [1.0, 1.0, 1.0]
+    assert_same_as_brute(tree, tris, o, d)
+
+
+@pytest.mark.parametrize("options", BUILDERS)
+def test_degenerate_triangles(options, rng):
+    """Needles, slivers, zero-area triangles and stacked coplanar duplicates."""
+    tris = degenerate_mix(rng)
+    tree = core.build_kdtree(tris, **options)
+    o, d = random_rays(rng, 3000)
+    hits = assert_same_as_brute(tree, tris, o, d)
+    t32 = tris.astype(np.float32).astype(np.float64)
+    area = np.linalg.norm(np.cross(t32[:, 1] - t32[:, 0], t32[:, 2] - t32[:, 0]), axis=1)
+    assert not np.isin(hits.prim[hits.prim >= 0], np.flatnonzero(area == 0)).any()
+    assert tree.stats()["degenerate_dropped"] == (area == 0).sum() >= 50
+
+
+@pytest.mark.parametrize("offset", [1e5, 1e7])
+@pytest.mark.parametrize("scale", [1e-6, 1.0, 1e6])
+def test_far_from_origin_and_extreme_scales(offset, scale, rng):
+    base = random_soup(rng, 2000)
+    tris = (base * scale * max(1.0, offset * 1e-4) + offset).astype(np.float32)
+    tree = core.build_kdtree(tris)
+    o, d = random_rays(rng, 2000)
+    o = o * scale * max(1.0, offset * 1e-4) + offset
+    assert_same_as_brute(tree, tris, o, d)
+
+
+@pytest.mark.parametrize("options", BUILDERS)
+def test_rays_starting_on_triangles_and_split_planes(options, rng):
+    tris = random_soup(rng, 2000)
+    tree = core.build_kdtree(tris, **options)
+    n = 2000
+    w = rng.dirichlet([1, 1, 1], n)
+    on_tri = np.einsum("nk,nkj->nj", w, tris[rng.integers(0, len(tris), n)].astype(np.float32).astype(float))
+    inner = np.flatnonzero(tree.axis < 3)
+    pick = rng.choice(inner, n)
+    on_plane = rng.uniform(-1, 1, (n, 3))
+    on_plane[np.arange(n), tree.axis[pick]] = tree.split[pick]
+    o = np.concatenate([on_tri, on_plane])
+    d = rng.normal(size=(2 * n, 3))
+    flat = rng.random(2 * n) < 0.3  # some rays lie in their plane: zero component on the split axis
+    d[np.flatnonzero(flat[n:]) + n, tree.axis[pick[flat[n:]]]] = 0.0
+    assert_same_as_brute(tree, tris, o, d)
+
+
+def test_tmin_tmax_per_ray(rng):
+    tris = random_soup(rng, 2000)
+    tree = core.build_kdtree(tris)
+    o, d = random_rays(rng, 2000)
+    tmin = rng.uniform(0, 0.5, 2000)
+    tmax = tmin + rng.uniform(0, 2, 2000)
+    assert_same_as_brute(tree, tris, o, d, tmin, tmax)
+    assert_same_as_moller_trumbore(tree, tris, o, d, tmin, tmax)
+
+
+def test_barycentrics_reconstruct_hit_point(rng):
+    tris = random_soup(rng, 1000).astype(np.float32)
+    tree = core.build_kdtree(tris)
+    o, d = random_rays(rng, 2000)
+    h = core.intersect(tree, o, d)
+    hit = h.prim >= 0
+    tri = tris[h.prim[hit]].astype(float)
+    u, v = h.u[hit, None], h.v[hit, None]
+    p_bary = (1 - u - v) * tri[:, 0] + u * tri[:, 1] + v * tri[:, 2]
+    p_ray = o[hit] + h.t[hit, None] * d[hit]
+    np.testing.assert_allclose(p_bary, p_ray, atol=1e-5)
+    assert (h.u[hit] >= 0).all() and (h.v[hit] >= 0).all() and (h.u[hit] + h.v[hit] <= 1 + 1e-6).all()
+
+
+def test_empty_tree_misses_everything():
+    tree = core.build_kdtree(np.zeros((0, 3, 3), np.float32))
+    h = core.intersect(tree, np.zeros((4, 3)), np.ones((4, 3)))
+    assert (h.prim == -1).all() and np.isinf(h.t).all()
+    assert not core.occluded(tree, np.zeros((4, 3)), np.ones((4, 3))).any()
+    assert tree.stats()["triangles"] == 0
+
+
+def test_only_degenerate_triangles_give_empty_tree():
+    tris = np.zeros((5, 3, 3), np.float32)
+    tree = core.build_kdtree(tris)
+    assert not core.occluded(tree, np.full((3, 3), -1.0), np.ones((3, 3))).any()

@@ -1,0 +1,151 @@
+"""Tree invariants, statistics recomputed independently, options, pickling."""
+import pickle
+
+import numpy as np
+import pytest
+
+import core
+from core.layout import LEAF
+from tests.core_helpers import BUILDERS
+from tests.meshes import degenerate_mix, lattice, random_soup
+
+
+def node_boxes(tree):
+    """Box of every node, by walking down from the root (independent of the builder's bookkeeping)."""
+    boxes = {0: tree.bounds.astype(np.float64)}
+    depth = {0: 0}
+    order = [0]
+    for node in order:
+        if tree.axis[node] == LEAF:
+            continue
+        a, c, s = tree.axis[node], tree.child[node], tree.split[node]
+        left, right = boxes[node].copy(), boxes[node].copy()
+        left[a + 3], right[a] = s, s
+        boxes[c], boxes[c + 1] = left, right
+        depth[c] = depth[c + 1] = depth[node] + 1
+        order += [c, c + 1]
+    return boxes, depth
+
+
+def half_area(b):
+    e = b[3:] - b[:3]
+    return e[0] * e[1] + e[1] * e[2] + e[2] * e[0]
+
+
+@pytest.mark.parametrize("options", BUILDERS)
+def test_structure_and_sah_cost(options):
+    rng = np.random.default_rng(3)
+    tris = np.concatenate([random_soup(rng, 1500), lattice(3), degenerate_mix(rng)])
+    tree = core.build_kdtree(tris, **options)
+    boxes, depth = node_boxes(tree)
+    assert len(boxes) == tree.node_count  # every node reached exactly once
+    leaves = [i for i in boxes if tree.axis[i] == LEAF]
+    inner = [i for i in boxes if tree.axis[i] != LEAF]
+    for i in inner:
+        b = boxes[i]
+        assert b[tree.axis[i]] < tree.split[i] < b[tree.axis[i] + 3]  # planes strictly inside
+    for i in leaves:
+        assert 0 <= tree.child[i] and tree.child[i] + tree.count[i] <= len(tree.leaf_prims)
+    o = tree.options
+    root = half_area(boxes[0])
+    sah = (o.traversal_cost * sum(half_area(boxes[i]) for i in inner)
+           + o.intersection_cost * sum(half_area(boxes[i]) * tree.count[i] for i in leaves)) / root
+    s = tree.stats()
+    assert s["sah_cost"] == pytest.approx(sah, rel=1e-9)
+    assert s["nodes"] == tree.node_count and s["leaves"] == len(leaves)
+    assert s["empty_leaves"] == sum(tree.count[i] == 0 for i in leaves)
+    assert s["max_depth"] == max(depth.values()) <= o.depth_for(len(tris))
+    assert s["references"] == len(tree.leaf_prims) == sum(tree.count[i] for i in leaves)
+    t32 = tris.astype(np.float32).astype(np.float64)  # what the tree holds
+    area = np.linalg.norm(np.cross(t32[:, 1] - t32[:, 0], t32[:, 2] - t32[:, 0]), axis=1)
+    kept = set(np.flatnonzero(area > 0))
+    assert set(tree.leaf_prims.tolist()) == kept  # every triangle with area, nothing else
+    for i in leaves:
+        prims = tree.leaf_prims[tree.child[i]:tree.child[i] + tree.count[i]]
+        assert len(set(prims.tolist())) == len(prims)  # no triangle twice in one leaf
+
+
+def leaves_containing(tree, point):
+    """All leaves whose closed box contains the point (a point on a plane is in both children)."""
+    found, stack = [], [0]
+    while stack:
+        node = stack.pop()
+        if tree.axis[node] == LEAF:
+            found.append(node)
+            continue
+        a, s, c = tree.axis[node], tree.split[node], tree.child[node]
+        if point[a] <= s:
+            stack.append(c)
+        if point[a] >= s:
+            stack.append(c + 1)
+    return found
+
+
+@pytest.mark.parametrize("options", BUILDERS)
+def test_every_point_of_every_triangle_is_in_a_leaf_holding_it(options):
+    """The builder never loses a part of a triangle: sampled points (vertices, edge points, interior)
+    lie in at least one leaf that lists the triangle. Catches clipping and planar-triangle mistakes."""
+    rng = np.random.default_rng(4)
+    tris = np.concatenate([random_soup(rng, 800), lattice(3)]).astype(np.float32)
+    tree = core.build_kdtree(tris, **options)
+    weights = np.concatenate([np.eye(3), [[0.5, 0.5, 0], [0, 0.5, 0.5], [0.5, 0, 0.5]],
+                              rng.dirichlet([1, 1, 1], 4)])
+    for prim in range(len(tris)):
+        for p in weights @ tris[prim].astype(np.float64):
+            holders = [tree.leaf_prims[tree.child[l]:tree.child[l] + tree.count[l]]
+                       for l in leaves_containing(tree, p)]
+            assert any(prim in h for h in holders), f"triangle {prim} lost at {p}"
+
+
+def test_builders_quality_order():
+    """The exact sweep is the quality reference; binned stays close to it and beats the median."""
+    rng = np.random.default_rng(9)
+    from tests.meshes import icosphere, mesh_triangles
+    tris = np.concatenate([mesh_triangles(*icosphere(5)), random_soup(rng, 5000, 0.03)])
+    sah = {b: core.build_kdtree(tris, builder=b).stats()["sah_cost"] for b in ("binned", "exact", "median")}
+    assert sah["exact"] <= sah["binned"] * 1.02
+    assert sah["binned"] <= sah["exact"] * 1.10
+    assert sah["binned"] < sah["median"]
+
+
+def test_stats_fields_and_pickle():
+    rng = np.random.default_rng(2)
+    tris = random_soup(rng, 500)
+    tree = core.build_kdtree(tris)
+    s = tree.stats()
+    for key in ("triangles", "nodes", "leaves", "empty_leaves", "max_depth", "references", "sah_cost",
+                "build_ms"):
+        assert key in s
+    assert s["triangles"] == 500 and s["build_ms"] > 0
+    clone = pickle.loads(pickle.dumps(tree))
+    o, d = rng.normal(size=(100, 3)), rng.normal(size=(100, 3))
+    a, b = core.intersect(tree, o, d), core.intersect(clone, o, d)
+    np.testing.assert_array_equal(a.prim, b.prim)
+    np.testing.assert_array_equal(a.t, b.t)
+
+
+def test_default_max_depth_follows_seed_003():
+    assert core.BuildOptions().depth_for(1_000_000) == int(1.2 * np.log2(1_000_000) + 2)
+    assert core.BuildOptions(max_depth=7).depth_for(10**6) == 7
+
+
+@pytest.mark.parametrize("bad, message", [
+    ({"builder": "fast"}, "builder"),
+    ({"bins": 1}, "bins"),
+    ({"leaf_size": 0}, "leaf_size"),
+    ({"max_depth": 61}, "max_depth"),
+    ({"empty_bonus": 1.0}, "empty_bonus"),
+    ({"intersection_cost": 0}, "intersection_cost"),
+    ({"traversal_cost": -1}, "traversal_cost"),
+    ({"threads": 0}, "threads"),
+    ({"clip": "yes"}, "clip"),
+    ({"top": "random"}, "top"),
+])
+def test_bad_options_are_named(bad, message):
+    with pytest.raises(ValueError, match=message):
+        core.build_kdtree(np.zeros((1, 3, 3)), **bad)
+
+
+def test_unknown_option_is_named():
+    with pytest.raises(TypeError, match="colour"):
+        core.build_kdtree(np.zeros((1, 3, 3)), colour="red")

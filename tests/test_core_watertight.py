@@ -1,0 +1,81 @@
+"""Watertightness: rays from inside closed meshes never escape, and never hit twice.
+
+Rays are aimed exactly at vertices, along edges and at random; a ray through an edge or vertex shared
+by several triangles must be owned by exactly one of them (the tie rule in triangle_test.py).
+"""
+import numpy as np
+import pytest
+
+import core
+from tests.core_helpers import BUILDERS
+from tests.meshes import icosphere, mesh_triangles, subdivided_cube
+from tests.oracles import brute_watertight
+
+
+def jittered_icosphere(rng):
+    verts, faces = icosphere(5)  # 20,480 triangles
+    verts = verts * (1.0 + rng.uniform(-2e-3, 2e-3, (len(verts), 1)))
+    verts += rng.uniform(-1e-3, 1e-3, verts.shape)
+    return verts.astype(np.float32).astype(np.float64), faces
+
+
+def targets_on_mesh(rng, verts, faces, n):
+    """Exact vertices, points along edges (midpoints and random), and random surface points."""
+    edges = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    k = n // 4
+    e = edges[rng.integers(0, len(edges), 2 * k)]
+    f = rng.uniform(0, 1, (2 * k, 1))
+    f[:k] = 0.5
+    along = verts[e[:, 0]] * (1 - f) + verts[e[:, 1]] * f
+    w = rng.dirichlet([1, 1, 1], n - 3 * k)
+    surface = np.einsum("nk,nkj->nj", w, verts[faces[rng.integers(0, len(faces), n - 3 * k)]])
+    return np.concatenate([verts[rng.integers(0, len(verts), k)], along, surface])
+
+
+@pytest.mark.parametrize("options", BUILDERS)
+def test_icosphere_no_ray_escapes(options):
+    rng = np.random.default_rng(5)
+    verts, faces = jittered_icosphere(rng)
+    tris = mesh_triangles(verts, faces)
+    tree = core.build_kdtree(tris, **options)
+    targets = targets_on_mesh(rng, verts, faces, 100_000)
+    origins = np.where(rng.random((len(targets), 1)) < 0.5, 0.0, rng.uniform(-0.5, 0.5, targets.shape))
+    hits = core.intersect(tree, origins, targets - origins)
+    escaped = np.flatnonzero(hits.prim < 0)
+    assert len(escaped) == 0, f"{len(escaped)} of {len(targets)} rays escaped, e.g. {targets[escaped[:3]]}"
+    assert core.occluded(tree, origins, targets - origins).all()
+
+
+def test_icosphere_every_ray_from_centre_hits_exactly_once():
+    """From the centre the jittered sphere is star-shaped, so each ray crosses the surface once."""
+    rng = np.random.default_rng(6)
+    verts, faces = jittered_icosphere(rng)
+    tris = mesh_triangles(verts, faces)
+    targets = targets_on_mesh(rng, verts, faces, 20_000)
+    origins = np.zeros_like(targets)
+    _, _, count = brute_watertight(tris, origins, targets)
+    assert (count == 1).all(), f"hit counts {np.bincount(count)}"
+
+
+@pytest.mark.parametrize("options", BUILDERS)
+def test_subdivided_cube_exact_vertices_and_edges(options):
+    """Grid coordinates k/8 are exact, so rays really pass exactly through vertices and along edges,
+    including axis-parallel rays with zero (and negative-zero) direction components."""
+    tris = subdivided_cube(16)
+    tree = core.build_kdtree(tris, **options)
+    g = np.arange(-8, 9) / 8.0
+    rng = np.random.default_rng(8)
+    n = 30_000
+    face_axis = rng.integers(0, 3, n)
+    side = rng.choice([-1.0, 1.0], n)
+    targets = rng.choice(g, (n, 3))
+    on_edge = rng.random(n) < 0.5
+    targets[on_edge, 0] = rng.uniform(-1, 1, on_edge.sum())  # along a grid line, not only at vertices
+    targets[np.arange(n), face_axis] = side
+    origins = rng.choice(np.arange(-4, 5) / 8.0, (n, 3))
+    directions = targets - origins
+    directions[(directions == 0) & (rng.random((n, 3)) < 0.5)] = -0.0
+    hits = core.intersect(tree, origins, directions)
+    assert (hits.prim >= 0).all(), f"{(hits.prim < 0).sum()} rays escaped the cube"
+    _, _, count = brute_watertight(tris, origins[:5000], directions[:5000])
+    assert (count == 1).all(), f"hit counts {np.bincount(count)}"
