@@ -5,10 +5,18 @@ Public API:
     intersect(tree, origins, directions, tmin=0.0, tmax=inf) -> Hits(t, prim, u, v)
     occluded(tree, origins, directions, tmin=0.0, tmax=inf) -> (R,) bool
     KdTree.stats() -> dict
+    Camera(matrix_world, fov) / Camera(matrix_world, ortho_scale=s)
+    Light.point / Light.sun / Light.spot / Light.area
+    render_preview(tree, camera, width, height, *, mode="ao", samples=16, ...) -> (H, W, 4) float32
+    PreviewRender(tree, camera, width, height, ...)   progressive: step(), image(), done
 """
 from .build import build_kdtree
+from .camera import Camera
+from .lights import Light
+from .render import PreviewRender, render_preview
 from .kdtree import KdTree
 from .options import BuildOptions
 from .queries import Hits, intersect, occluded
 
-__all__ = ["build_kdtree", "intersect", "occluded", "KdTree", "Hits", "BuildOptions"]
+__all__ = ["build_kdtree", "intersect", "occluded", "KdTree", "Hits", "BuildOptions", "Camera", "Light",
+           "render_preview", "PreviewRender"]

@@ -1,0 +1,137 @@
+"""Lights mirroring Blender's point, sun, spot and area lights, packed into rows for the kernels.
+
+Soft shadows come from sampling the light's extent: a point or spot light's radius (a disk facing the
+shaded point), a sun's angular diameter (a cone of directions), an area light's shape.
+"""
+import numpy as np
+
+POINT, SUN, SPOT, AREA = 0, 1, 2, 3
+AREA_SHAPES = {"SQUARE": 0, "RECTANGLE": 1, "DISK": 2, "ELLIPSE": 3}
+
+# Packed row: kind, position(3), direction(3), radius, cos_half_angle, spot_cos, spot_smooth,
+# axis_u(3), axis_v(3), shape, color(3)
+ROW = 24
+
+
+class Light:
+    """One light. Use the constructors `point`, `sun`, `spot`, `area`."""
+
+    def __init__(self, kind, color, power, **params):
+        color = np.asarray(color, np.float64).reshape(3)
+        if not np.isfinite(color).all() or (color < 0).any():
+            raise ValueError(f"light color must be 3 finite non-negative numbers, got {color.tolist()}")
+        if not (np.isfinite(power) and power >= 0):
+            raise ValueError(f"light power must be finite and >= 0, got {power}")
+        self.kind, self.color, self.power, self.params = kind, color, float(power), params
+
+    @classmethod
+    def point(cls, position, radius=0.0, power=1000.0, color=(1.0, 1.0, 1.0)):
+        return cls(POINT, color, power, position=_vector("point light position", position),
+                   radius=_non_negative("point light radius", radius))
+
+    @classmethod
+    def sun(cls, direction, angle=0.0, strength=1.0, color=(1.0, 1.0, 1.0)):
+        """`direction` is the direction the light travels (Blender: matrix_world @ (0, 0, -1))."""
+        angle = _non_negative("sun angle", angle)
+        if angle >= np.pi:
+            raise ValueError(f"sun angle must be < pi, got {angle}")
+        return cls(SUN, color, strength, direction=_unit("sun direction", direction), angle=angle)
+
+    @classmethod
+    def spot(cls, position, direction, spot_size, spot_blend=0.15, radius=0.0, power=1000.0,
+             color=(1.0, 1.0, 1.0)):
+        if not 0.0 < spot_size <= np.pi:
+            raise ValueError(f"spot_size must be in (0, pi], got {spot_size}")
+        if not 0.0 <= spot_blend <= 1.0:
+            raise ValueError(f"spot_blend must be in [0, 1], got {spot_blend}")
+        return cls(SPOT, color, power, position=_vector("spot position", position),
+                   direction=_unit("spot direction", direction), spot_size=float(spot_size),
+                   spot_blend=float(spot_blend), radius=_non_negative("spot radius", radius))
+
+    @classmethod
+    def area(cls, matrix_world, shape="SQUARE", size=1.0, size_y=None, power=1000.0, color=(1.0, 1.0, 1.0)):
+        """An area light in its object's XY plane, emitting along its -Z (as in Blender)."""
+        m = np.asarray(matrix_world, np.float64)
+        if m.shape != (4, 4) or not np.isfinite(m).all():
+            raise ValueError("area light matrix_world must be a finite 4x4 matrix")
+        if shape not in AREA_SHAPES:
+            raise ValueError(f"area light shape must be one of {sorted(AREA_SHAPES)}, got {shape!r}")
+        size = _positive("area light size", size)
+        size_y = size if size_y is None or shape in ("SQUARE", "DISK") else _positive("area light size_y", size_y)
+        return cls(AREA, color, power, matrix_world=m, shape=shape, size=size, size_y=size_y)
+
+    def translated(self, offset):
+        """The same light in a frame whose origin is at `offset`."""
+        offset = np.asarray(offset, np.float64)
+        params = dict(self.params)
+        if "position" in params:
+            params["position"] = params["position"] - offset
+        if "matrix_world" in params:
+            params["matrix_world"] = params["matrix_world"].copy()
+            params["matrix_world"][:3, 3] -= offset
+        return Light(self.kind, self.color, self.power, **params)
+
+    def packed(self):
+        """The light as one float64 row for the kernels (see ROW)."""
+        row = np.zeros(ROW)
+        p = self.params
+        row[0] = self.kind
+        row[21:24] = self.color
+        if self.kind in (POINT, SPOT):
+            row[1:4], row[7] = p["position"], p["radius"]
+        if self.kind == SUN:
+            row[4:7], row[8] = p["direction"], np.cos(p["angle"] / 2.0)
+        if self.kind == SPOT:
+            row[4:7] = p["direction"]
+            row[9] = np.cos(p["spot_size"] / 2.0)
+            row[10] = (1.0 - row[9]) * p["spot_blend"]  # Cycles' spot_smooth
+        if self.kind == AREA:
+            m = p["matrix_world"]
+            row[1:4] = m[:3, 3]
+            row[4:7] = -m[:3, 2] / np.linalg.norm(m[:3, 2])  # emits along -Z
+            row[11:14] = m[:3, 0] * p["size"] / 2.0
+            row[14:17] = m[:3, 1] * p["size_y"] / 2.0
+            row[20] = AREA_SHAPES[p["shape"]]
+        return row
+
+    def __repr__(self):
+        names = {POINT: "point", SUN: "sun", SPOT: "spot", AREA: "area"}
+        return f"Light.{names[self.kind]}(power={self.power}, color={self.color.tolist()})"
+
+
+def pack_lights(lights):
+    """All lights as an (L, ROW) float64 array."""
+    lights = list(lights)
+    for i, light in enumerate(lights):
+        if not isinstance(light, Light):
+            raise ValueError(f"lights[{i}] is not a core.Light: {light!r}")
+    if not lights:
+        return np.zeros((0, ROW))
+    return np.stack([light.packed() for light in lights])
+
+
+def _vector(name, v):
+    v = np.asarray(v, np.float64).reshape(-1)
+    if v.shape != (3,) or not np.isfinite(v).all():
+        raise ValueError(f"{name} must be 3 finite numbers, got {np.asarray(v).tolist()}")
+    return v
+
+
+def _unit(name, v):
+    v = _vector(name, v)
+    n = np.linalg.norm(v)
+    if n == 0:
+        raise ValueError(f"{name} must not be the zero vector")
+    return v / n
+
+
+def _non_negative(name, x):
+    if not (np.isfinite(x) and x >= 0):
+        raise ValueError(f"{name} must be finite and >= 0, got {x}")
+    return float(x)
+
+
+def _positive(name, x):
+    if not (np.isfinite(x) and x > 0):
+        raise ValueError(f"{name} must be finite and > 0, got {x}")
+    return float(x)

@@ -1,0 +1,174 @@
+"""Preview images: ambient occlusion, shadows, or both, accumulated progressively.
+
+Value of a pixel whose camera ray hits (geometric normal N turned to face the camera):
+- "ao": the fraction of the cosine-weighted hemisphere around N that is unoccluded within
+  `ao_distance`: AO = (1/pi) * integral of V(w) * cos(theta) dw, estimated with cosine-weighted rays.
+- "shadow": S = (1/L) * sum over the L lights of colour_l * V_l * max(0, N.L_l) * mask_l, with L_l
+  sampled over the light's extent (radius, sun angle, area shape) and mask_l the spot cone (Cycles'
+  smoothstep blend) or the area light's front side. No distance falloff and no power: every light gets
+  the same weight, so S is in [0, 1] and shows where each light reaches, whatever its units.
+- "ao+shadow": AO * (ambient + (1 - ambient) * S), ambient 0.25 by default: shadows from the lights
+  over an occlusion-darkened ambient term.
+Background pixels are 0 with alpha 0; hit pixels have alpha 1. Row 0 is the top row.
+
+Sampling is deterministic for a seed. With an error target, a pixel stops once it has at least
+`min_samples` samples and the standard error of its mean (from the sample variance) is below the target.
+Convergence is checked only at multiples of CHECK_EVERY samples, so the image does not depend on how the
+caller batches its steps.
+"""
+from time import perf_counter
+
+import numpy as np
+
+from .camera import Camera
+from .kdtree import KdTree
+from .lights import pack_lights
+from .queries import _trace
+from .render_kernels import MODES, add_samples, surface_frames
+from .sampling import SAMPLERS, SOBOL_DIM1
+from .threads import thread_count
+
+CHECK_EVERY = 4
+
+
+class PreviewRender:
+    """A progressive preview: call `step()` until `done`, read `image()` at any time.
+
+    Settings: mode ("ao", "shadow", "ao+shadow"), samples (per pixel), ao_distance, lights (core.Light),
+    seed, sampler ("sobol" or "random"), error_target (None: off), min_samples, ambient, threads.
+    """
+
+    def __init__(self, tree, camera, width, height, *, mode="ao", samples=16, ao_distance=1.0, lights=(),
+                 seed=0, sampler="sobol", error_target=None, min_samples=8, ambient=0.25, threads=None):
+        _check_settings(tree, camera, width, height, mode, samples, ao_distance, seed, sampler, error_target,
+                        min_samples, ambient, threads)
+        self.tree, self.camera, self.width, self.height = tree, camera, int(width), int(height)
+        self.mode, self.target_samples, self.ao_distance = mode, int(samples), float(ao_distance)
+        self.lights = pack_lights(lights)
+        if mode != "ao" and len(self.lights) == 0:
+            raise ValueError(f"mode {mode!r} needs at least one light")
+        self.seed, self.sampler = int(seed) & 0xFFFFFFFF, SAMPLERS.index(sampler)
+        self.error_target, self.min_samples, self.ambient = error_target, int(min_samples), float(ambient)
+        self.threads = threads
+        self.samples_done = 0
+        self.trace_ms = 0.0
+        self.rays_saved = 0
+        self._trace_camera()
+
+    def _trace_camera(self):
+        start = perf_counter()
+        origins, directions, tmin, tmax = self.camera.rays(self.width, self.height)
+        t, prim, _, _ = _trace(self.tree, origins, directions, tmin, tmax, False, self.threads)
+        hit = np.flatnonzero(prim >= 0).astype(np.int64)
+        self.pixels = hit
+        self.points = np.empty((len(hit), 3))
+        self.normals = np.empty((len(hit), 3))
+        with thread_count(self.threads):
+            surface_frames(self.tree.triangles, origins, directions, t, prim, hit, self.points, self.normals)
+        self.sums = np.zeros((len(hit), 3))
+        self.sq_sums = np.zeros(len(hit))
+        self.counts = np.zeros(len(hit), np.int64)
+        self.ray_counts = np.zeros(len(hit), np.int64)
+        self.active = np.arange(len(hit), dtype=np.int64)
+        self.camera_rays = len(origins)
+        self.trace_ms += (perf_counter() - start) * 1e3
+
+    @property
+    def done(self):
+        return self.samples_done >= self.target_samples or len(self.active) == 0
+
+    @property
+    def rays_traced(self):
+        return self.camera_rays + int(self.ray_counts.sum())
+
+    @property
+    def hit_pixels(self):
+        return len(self.pixels)
+
+    def step(self, samples=1):
+        """Add up to `samples` samples to every pixel still sampling; returns how many were added."""
+        samples = min(int(samples), self.target_samples - self.samples_done)
+        added = 0
+        while added < samples and len(self.active):
+            batch = min(samples - added, CHECK_EVERY - self.samples_done % CHECK_EVERY)
+            start = perf_counter()
+            with thread_count(self.threads):
+                add_samples(self.tree.arrays, self.points, self.normals, self.pixels, self.active,
+                            self.samples_done, batch, MODES[self.mode], self.ao_distance, self.ambient,
+                            self.lights, self.sampler, self.seed, SOBOL_DIM1, self.sums, self.sq_sums,
+                            self.counts, self.ray_counts)
+            self.trace_ms += (perf_counter() - start) * 1e3
+            self.samples_done += batch
+            added += batch
+            if self.samples_done % CHECK_EVERY == 0:
+                self._retire_converged()
+        return added
+
+    def _retire_converged(self):
+        """Stop sampling pixels whose standard error is below the target (after min_samples)."""
+        if self.error_target is None or self.samples_done < self.min_samples:
+            return
+        n = self.counts[self.active].astype(np.float64)
+        mean = self.sums[self.active].mean(axis=1) / n
+        var = np.maximum(self.sq_sums[self.active] / n - mean * mean, 0.0) * n / np.maximum(n - 1, 1)
+        converged = np.sqrt(var / n) < self.error_target
+        if converged.any():
+            rays_per_sample = self.ray_counts[self.active[converged]] / n[converged]
+            remaining = self.target_samples - self.samples_done
+            self.rays_saved += int(np.rint(rays_per_sample * remaining).sum())
+            self.active = self.active[~converged]
+
+    def image(self):
+        """The current estimate as an (H, W, 4) float32 image (row 0 at the top)."""
+        img = np.zeros((self.height * self.width, 4), np.float32)
+        n = np.maximum(self.counts, 1)[:, None]
+        img[self.pixels, :3] = np.where(self.counts[:, None] > 0, self.sums / n, 0.0)
+        img[self.pixels, 3] = 1.0
+        return img.reshape(self.height, self.width, 4)
+
+    def sample_counts(self):
+        """Samples taken per pixel as an (H, W) int array (0 for background)."""
+        out = np.zeros(self.height * self.width, np.int64)
+        out[self.pixels] = self.counts
+        return out.reshape(self.height, self.width)
+
+    def stats(self):
+        return {"samples": self.samples_done, "hit_pixels": self.hit_pixels, "rays": self.rays_traced,
+                "rays_saved": self.rays_saved, "trace_ms": self.trace_ms,
+                "converged_pixels": self.hit_pixels - len(self.active) if self.error_target else 0}
+
+
+def render_preview(tree, camera, width, height, **settings):
+    """Render the whole preview at once: the (H, W, 4) float32 image (see PreviewRender for settings)."""
+    render = PreviewRender(tree, camera, width, height, **settings)
+    render.step(render.target_samples)
+    return render.image()
+
+
+def _check_settings(tree, camera, width, height, mode, samples, ao_distance, seed, sampler, error_target,
+                    min_samples, ambient, threads):
+    if not isinstance(tree, KdTree):
+        raise ValueError(f"tree must be a core.KdTree, got {type(tree).__name__}")
+    if not isinstance(camera, Camera):
+        raise ValueError(f"camera must be a core.Camera, got {type(camera).__name__}")
+    for name, v in (("width", width), ("height", height)):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 1 <= v <= 1 << 15:
+            raise ValueError(f"{name} must be an integer in [1, 32768], got {v!r}")
+    if mode not in MODES:
+        raise ValueError(f"mode must be one of {sorted(MODES)}, got {mode!r}")
+    if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or samples < 1:
+        raise ValueError(f"samples must be an integer >= 1, got {samples!r}")
+    if not (np.isfinite(ao_distance) and ao_distance >= 0):
+        raise ValueError(f"ao_distance must be finite and >= 0, got {ao_distance!r}")
+    if sampler not in SAMPLERS:
+        raise ValueError(f"sampler must be one of {SAMPLERS}, got {sampler!r}")
+    if error_target is not None and not (np.isfinite(error_target) and error_target > 0):
+        raise ValueError(f"error_target must be None or > 0, got {error_target!r}")
+    if isinstance(min_samples, bool) or not isinstance(min_samples, (int, np.integer)) or min_samples < 2:
+        raise ValueError(f"min_samples must be an integer >= 2, got {min_samples!r}")
+    if not 0.0 <= ambient <= 1.0:
+        raise ValueError(f"ambient must be in [0, 1], got {ambient!r}")
+    if not isinstance(seed, (int, np.integer)):
+        raise ValueError(f"seed must be an integer, got {seed!r}")
+    if threads is not None and (not isinstance(threads, (int, np.integer)) or threads < 1):
+        raise ValueError(f"threads must be None or an integer >= 1, got {threads!r}")

@@ -1,0 +1,107 @@
+"""Sample points: Owen-scrambled, shuffled Sobol (low discrepancy) or independent random numbers.
+
+Low discrepancy: Burley 2020, "Practical Hash-based Owen Scrambling" (JCGT 9(4)). The 2D Sobol set
+(van der Corput and Sobol's second dimension) is Owen-scrambled with a hash-based nested uniform
+scramble, and the sample index itself is scrambled too (shuffled), both seeded per pixel and per use
+(AO, each light), which decorrelates pixels and uses while keeping every power-of-two prefix of a
+pixel's samples stratified.
+Random: a per-(pixel, sample, use) hash: independent uniform numbers, for comparison.
+Everything is pure integer arithmetic on 32-bit values kept in int64, so it is deterministic.
+"""
+import numpy as np
+from numba import njit
+
+SOBOL = 0
+RANDOM = 1
+SAMPLERS = ("sobol", "random")
+
+MASK = 0xFFFFFFFF
+INV_2_32 = 1.0 / 4294967296.0
+
+
+def _sobol_dim1_matrix():
+    """Direction vectors of Sobol's second dimension (primitive polynomial x + 1)."""
+    v = np.empty(32, np.int64)
+    v[0] = 1 << 31
+    for i in range(1, 32):
+        v[i] = v[i - 1] ^ (v[i - 1] >> 1)
+    return v
+
+
+SOBOL_DIM1 = _sobol_dim1_matrix()
+
+
+@njit(cache=True, inline="always")
+def hash32(x):
+    """A strong 32-bit integer hash (Wellons' lowbias32)."""
+    x &= MASK
+    x ^= x >> 16
+    x = (x * 0x7FEB352D) & MASK
+    x ^= x >> 15
+    x = (x * 0x846CA68B) & MASK
+    x ^= x >> 16
+    return x
+
+
+@njit(cache=True, inline="always")
+def hash_combine(seed, value):
+    return hash32(seed ^ (hash32(value) + 0x9E3779B9 + ((seed << 6) & MASK) + (seed >> 2)))
+
+
+@njit(cache=True, inline="always")
+def reverse_bits(x):
+    x &= MASK
+    x = ((x >> 1) & 0x55555555) | ((x & 0x55555555) << 1)
+    x = ((x >> 2) & 0x33333333) | ((x & 0x33333333) << 2)
+    x = ((x >> 4) & 0x0F0F0F0F) | ((x & 0x0F0F0F0F) << 4)
+    x = ((x >> 8) & 0x00FF00FF) | ((x & 0x00FF00FF) << 8)
+    return ((x >> 16) | (x << 16)) & MASK
+
+
+@njit(cache=True, inline="always")
+def _laine_karras(x, seed):
+    """Burley's improved Laine-Karras permutation: an Owen scramble of bit-reversed values."""
+    x = (x + seed) & MASK
+    x ^= (x * 0x6C50B47C) & MASK
+    x ^= (x * 0xB82F1E52) & MASK
+    x ^= (x * 0xC7AFE638) & MASK
+    x ^= (x * 0x8D22F6E6) & MASK
+    return x
+
+
+@njit(cache=True, inline="always")
+def nested_uniform_scramble(x, seed):
+    return reverse_bits(_laine_karras(reverse_bits(x), seed))
+
+
+@njit(cache=True, inline="always")
+def sobol_2d(index, dim1):
+    """The index-th point of the 2D Sobol set as two 32-bit integers."""
+    y = 0
+    i = index & MASK
+    bit = 0
+    while i:
+        if i & 1:
+            y ^= dim1[bit]
+        i >>= 1
+        bit += 1
+    return reverse_bits(index), y
+
+
+@njit(cache=True, inline="always")
+def sample_2d(sampler, pixel_seed, index, use, dim1):
+    """Two uniform numbers in [0, 1) for sample `index` of a pixel, for one use (AO, light k, ...)."""
+    seed = hash_combine(pixel_seed, use)
+    if sampler == RANDOM:
+        a = hash_combine(seed, index)
+        return a * INV_2_32, hash32(a ^ 0x5BD1E995) * INV_2_32
+    shuffled = nested_uniform_scramble(index, hash_combine(seed, 0x1B873593))
+    x, y = sobol_2d(shuffled, dim1)
+    x = nested_uniform_scramble(x, hash_combine(seed, 0xCC9E2D51))
+    y = nested_uniform_scramble(y, hash_combine(seed, 0xE6546B64))
+    return x * INV_2_32, y * INV_2_32
+
+
+@njit(cache=True, inline="always")
+def pixel_seed(pixel, seed):
+    return hash_combine(hash32(seed), pixel)

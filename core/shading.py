@@ -1,0 +1,132 @@
+"""Per-sample shading pieces: robust ray offsets, cosine-weighted directions, light sampling."""
+import numpy as np
+from numba import njit
+
+from .lights import AREA, POINT, SPOT, SUN
+
+TWO_PI = 2.0 * np.pi
+
+
+@njit(cache=True, inline="always")
+def offset_origin(p, n, out):
+    """Move a hit point off its surface along the normal, by an amount that scales with |p|.
+
+    Wachter and Binder, "A Fast and Robust Method for Avoiding Self-Intersection" (Ray Tracing Gems,
+    ch. 6): 256 float32 ulps per component (2^-15 relative), and an absolute 2^-16 near the origin
+    where ulps vanish. The scene is float32, so this clears the surface at any magnitude without
+    pushing origins through nearby geometry in corners, as a fixed epsilon would.
+    """
+    for k in range(3):
+        out[k] = p[k] + n[k] * max(abs(p[k]) * 3.0517578125e-05, 1.52587890625e-05)
+
+
+@njit(cache=True, inline="always")
+def tangent_frame(n):
+    """Two unit vectors completing n to an orthonormal basis (Duff et al. 2017, branchless ONB)."""
+    sign = 1.0 if n[2] >= 0.0 else -1.0
+    a = -1.0 / (sign + n[2])
+    b = n[0] * n[1] * a
+    return (1.0 + sign * n[0] * n[0] * a, sign * b, -sign * n[0]), (b, sign + n[1] * n[1] * a, -n[1])
+
+
+@njit(cache=True, inline="always")
+def cosine_direction(n, u1, u2, out):
+    """A direction about unit normal n with density cos(theta)/pi (Malley's method)."""
+    t, b = tangent_frame(n)
+    r = np.sqrt(u1)
+    phi = TWO_PI * u2
+    x, y, z = r * np.cos(phi), r * np.sin(phi), np.sqrt(max(0.0, 1.0 - u1))
+    for k in range(3):
+        out[k] = x * t[k] + y * b[k] + z * n[k]
+
+
+@njit(cache=True)
+def sample_light(light, p, u1, u2, out_dir):
+    """Direction (into out_dir, unit) and distance from p to a sampled point of the light, and the
+    light's mask there (spot cone, area light's front side): returns (distance, mask)."""
+    kind = int(light[0])
+    if kind == SUN:
+        _cone_direction(light, u1, u2, out_dir)
+        return np.inf, 1.0
+    target = np.empty(3)
+    if kind == AREA:
+        _area_point(light, u1, u2, target)
+    else:
+        _disk_point(light, p, u1, u2, target)
+    dist = 0.0
+    for k in range(3):
+        out_dir[k] = target[k] - p[k]
+        dist += out_dir[k] * out_dir[k]
+    dist = np.sqrt(dist)
+    if dist == 0.0:
+        return 0.0, 0.0
+    for k in range(3):
+        out_dir[k] /= dist
+    return dist, _light_mask(light, kind, out_dir)
+
+
+@njit(cache=True, inline="always")
+def _light_mask(light, kind, to_light):
+    """Spot cone with Cycles' smoothstep blend; area lights emit only to their front (-Z) side."""
+    cos_a = -(to_light[0] * light[4] + to_light[1] * light[5] + to_light[2] * light[6])
+    if kind == SPOT:
+        if cos_a <= light[9]:
+            return 0.0
+        t = cos_a - light[9]
+        if light[10] > 0.0 and t < light[10]:
+            x = t / light[10]
+            return x * x * (3.0 - 2.0 * x)
+        return 1.0
+    if kind == AREA:
+        return 1.0 if cos_a > 0.0 else 0.0
+    return 1.0
+
+
+@njit(cache=True, inline="always")
+def _cone_direction(light, u1, u2, out):
+    """Towards the sun: uniform in the cone of half-angle angle/2 around minus its direction."""
+    cos_max = light[8]
+    cos_t = 1.0 - u1 * (1.0 - cos_max)
+    sin_t = np.sqrt(max(0.0, 1.0 - cos_t * cos_t))
+    phi = TWO_PI * u2
+    axis = (-light[4], -light[5], -light[6])
+    t, b = tangent_frame(axis)
+    for k in range(3):
+        out[k] = sin_t * np.cos(phi) * t[k] + sin_t * np.sin(phi) * b[k] + cos_t * axis[k]
+
+
+@njit(cache=True, inline="always")
+def _disk_point(light, p, u1, u2, out):
+    """A point on the disk of the light's radius facing p (a sphere light seen from p)."""
+    radius = light[7]
+    for k in range(3):
+        out[k] = light[1 + k]
+    if radius <= 0.0:
+        return
+    axis = np.empty(3)
+    norm = 0.0
+    for k in range(3):
+        axis[k] = p[k] - light[1 + k]
+        norm += axis[k] * axis[k]
+    norm = np.sqrt(norm)
+    if norm == 0.0:
+        return
+    axis /= norm
+    t, b = tangent_frame(axis)
+    r = radius * np.sqrt(u1)
+    phi = TWO_PI * u2
+    for k in range(3):
+        out[k] += r * (np.cos(phi) * t[k] + np.sin(phi) * b[k])
+
+
+@njit(cache=True, inline="always")
+def _area_point(light, u1, u2, out):
+    """A uniformly distributed point on the area light's square, rectangle, disk or ellipse."""
+    if light[20] >= 2:  # disk or ellipse: concentric-free polar mapping, uniform in area
+        r = np.sqrt(u1)
+        phi = TWO_PI * u2
+        su, sv = r * np.cos(phi), r * np.sin(phi)
+    else:
+        su, sv = 2.0 * u1 - 1.0, 2.0 * u2 - 1.0
+    for k in range(3):
+        out[k] = light[1 + k] + su * light[11 + k] + sv * light[14 + k]
