@@ -1,0 +1,40 @@
+"""Small analytic scenes for renderer tests: planes, boxes and cameras looking at them."""
+import numpy as np
+
+import core
+
+
+def quad(center, u, v):
+    """Two triangles spanning center +- u +- v."""
+    c, u, v = (np.asarray(x, np.float64) for x in (center, u, v))
+    p = [c - u - v, c + u - v, c + u + v, c - u + v]
+    return np.array([[p[0], p[1], p[2]], [p[0], p[2], p[3]]])
+
+
+def floor(z=0.0, half=1000.0, center=(0.0, 0.0)):
+    return quad((center[0], center[1], z), (half, 0, 0), (0, half, 0))
+
+
+def look_down(position, fov=0.5):
+    """A camera at `position` looking straight down -Z (Blender's default camera orientation)."""
+    m = np.eye(4)
+    m[:3, 3] = position
+    return core.Camera(m, fov)
+
+
+def look_at(position, target, fov=0.8):
+    """A perspective camera at `position` looking at `target` with +Z up."""
+    p, t = np.asarray(position, float), np.asarray(target, float)
+    back = (p - t) / np.linalg.norm(p - t)
+    right = np.cross([0.0, 0.0, 1.0], back)
+    if np.linalg.norm(right) < 1e-9:
+        right = np.array([1.0, 0.0, 0.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(back, right)
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = right, up, back, p
+    return core.Camera(m, fov)
+
+
+def hit_mask(image):
+    return image[..., 3] > 0.5

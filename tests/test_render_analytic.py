@@ -1,0 +1,151 @@
+"""The renderer against cases with a known answer."""
+import numpy as np
+import pytest
+
+import core
+from tests.render_scenes import floor, hit_mask, look_at, look_down, quad
+
+
+def render(tris, camera, size=32, **settings):
+    tree = core.build_kdtree(tris)
+    return core.render_preview(tree, camera, size, size, **settings)
+
+
+@pytest.mark.parametrize("offset", [0.0, 1e3, 1e5])
+def test_lone_plane_is_fully_unoccluded_even_far_from_origin(offset):
+    """No self-intersection ("acne") anywhere on a large floor, also far from the origin."""
+    tris = floor(z=offset, center=(offset, offset))
+    img = render(tris, look_down((offset + 0.3, offset - 0.2, offset + 2.0)), samples=64, ao_distance=10.0)
+    assert hit_mask(img).all()
+    assert (img[..., :3] == 1.0).all()
+
+
+def test_parallel_planes_within_and_beyond_their_gap():
+    """Floor at z=0, ceiling at z=d, camera between them looking down. A cosine-weighted direction at
+    angle theta reaches the ceiling at distance d/cos(theta), so AO = 1 when ao_distance R < d and
+    AO = P(cos(theta) < d/R) = (d/R)^2 when R > d."""
+    d = 1.0
+    tris = np.concatenate([floor(0.0), floor(d)])
+    camera = look_down((0.0, 0.0, 0.5))
+    near = render(tris, camera, samples=16, ao_distance=0.99 * d)
+    assert hit_mask(near).all() and (near[..., 0] == 1.0).all()
+    for r in (1.5, 3.0):
+        img = render(tris, camera, size=48, samples=256, ao_distance=r)
+        assert img[..., 0].mean() == pytest.approx((d / r) ** 2, abs=0.01)
+
+
+def test_point_in_box_corner():
+    """On the floor of a corner formed by two infinite walls, directions toward either wall are
+    blocked: a quarter of the cosine-weighted hemisphere stays open (AO = 1/4) at any distance."""
+    big = 1e4
+    tris = np.concatenate([floor(0.0, half=big, center=(big, big)),
+                           quad((0.0, big, big), (0, big, 0), (0, 0, big)),
+                           quad((big, 0.0, big), (big, 0, 0), (0, 0, big))])
+    camera = look_at((0.6, 0.6, 0.6), (0.1, 0.1, 0.0), fov=0.2)
+    img = render(tris, camera, size=16, samples=1024, ao_distance=1e6)
+    floor_pixels = img[..., 0][hit_mask(img)]
+    assert floor_pixels.mean() == pytest.approx(0.25, abs=0.01)
+
+
+def test_floor_under_large_occluder_is_fully_shadowed():
+    tris = np.concatenate([floor(0.0, half=50), quad((0, 0, 1.0), (10, 0, 0), (0, 10, 0))])
+    camera = look_at((0.0, -0.5, 0.5), (0.0, 0.0, 0.0), fov=0.6)
+    lights = [core.Light.point((0.5, 0.2, 3.0), radius=0.3), core.Light.sun((0.1, 0.1, -1.0), angle=0.05)]
+    img = render(tris, camera, samples=16, mode="shadow", lights=lights)
+    assert hit_mask(img).all()
+    assert (img[..., :3] == 0.0).all()
+
+
+def test_point_light_cosine_falloff():
+    """A bare floor lit by a point light at height h: value = N.L = h / sqrt(r^2 + h^2)."""
+    h = 2.0
+    light = core.Light.point((0.3, -0.1, h))
+    camera = look_down((0.0, 0.0, 3.0), fov=1.2)
+    tree = core.build_kdtree(floor(0.0))
+    size = 24
+    img = core.render_preview(tree, camera, size, size, samples=1, mode="shadow", lights=[light])
+    origins, directions, _, _ = camera.rays(size, size)
+    p = origins + directions * 3.0  # the floor is 3 units below the camera along the view axis
+    r2 = (p[:, 0] - 0.3) ** 2 + (p[:, 1] + 0.1) ** 2
+    expected = (h / np.sqrt(r2 + h * h)).reshape(size, size)
+    np.testing.assert_allclose(img[..., 0], expected, rtol=1e-6)
+
+
+def test_light_behind_surface_and_spot_cone_send_no_rays():
+    tree = core.build_kdtree(floor(0.0))
+    camera = look_down((0.0, 0.0, 1.0))
+    below = core.Light.point((0.0, 0.0, -1.0))
+    r = core.PreviewRender(tree, camera, 16, 16, samples=4, mode="shadow", lights=[below])
+    r.step(4)
+    assert r.rays_traced == r.camera_rays  # N.L <= 0: no shadow rays at all
+    assert (r.image()[..., :3] == 0).all()
+    spot = core.Light.spot((0, 0, 2.0), (1.0, 0.0, 0.0), spot_size=0.3)  # points sideways
+    r = core.PreviewRender(tree, camera, 16, 16, samples=4, mode="shadow", lights=[spot])
+    r.step(4)
+    assert r.rays_traced == r.camera_rays
+
+
+def test_spot_cone_and_area_light_side():
+    tree = core.build_kdtree(floor(0.0))
+    camera = look_down((0.0, 0.0, 4.0), fov=1.4)
+    spot = core.Light.spot((0, 0, 2.0), (0, 0, -1.0), spot_size=np.radians(40), spot_blend=0.0)
+    img = core.render_preview(tree, camera, 40, 40, samples=1, mode="shadow", lights=[spot])
+    o, d, _, _ = camera.rays(40, 40)
+    p = o + 4.0 * d
+    inside = (np.degrees(np.arctan2(np.hypot(p[:, 0], p[:, 1]), 2.0)) < 20).reshape(40, 40)
+    assert (img[..., 0][~inside] == 0).all() and (img[..., 0][inside] > 0).all()
+    m = np.eye(4)
+    m[:3, 3] = (0, 0, 1.0)
+    facing_down = core.Light.area(m, size=0.5)
+    m2 = m.copy()
+    m2[:3, 2] *= -1
+    m2[:3, 1] *= -1
+    facing_up = core.Light.area(m2, size=0.5)
+    lit = core.render_preview(tree, camera, 16, 16, samples=4, mode="shadow", lights=[facing_down])
+    dark = core.render_preview(tree, camera, 16, 16, samples=4, mode="shadow", lights=[facing_up])
+    assert lit[..., 0].min() > 0 and (dark[..., :3] == 0).all()
+
+
+def test_background_is_transparent_and_alpha_marks_hits():
+    tris = quad((0, 0, 0), (0.5, 0, 0), (0, 0.5, 0))
+    camera = look_down((0.0, 0.0, 2.0), fov=1.0)
+    tree = core.build_kdtree(tris)
+    r = core.PreviewRender(tree, camera, 32, 32, samples=4)
+    r.step(4)
+    img = r.image()
+    o, d, _, _ = camera.rays(32, 32)
+    p = o + 2.0 * d
+    inside = ((np.abs(p[:, 0]) < 0.5) & (np.abs(p[:, 1]) < 0.5)).reshape(32, 32)
+    np.testing.assert_array_equal(hit_mask(img), inside)
+    assert (img[~inside] == 0).all()
+    assert r.rays_traced == 32 * 32 + 4 * inside.sum()  # no secondary rays for background pixels
+
+
+def test_image_orientation_row_zero_is_top():
+    """A quad above the image centre (+Y in camera space) appears in the top rows."""
+    tris = quad((0, 0.4, 0), (0.3, 0, 0), (0, 0.1, 0))
+    img = render(tris, look_down((0.0, 0.0, 2.0), fov=1.0), size=20, samples=1)
+    rows = np.flatnonzero(hit_mask(img).any(axis=1))
+    assert rows.max() < 10
+
+
+def test_orthographic_camera_sees_parallel_projection():
+    tris = quad((0, 0, 0), (0.25, 0, 0), (0, 0.25, 0))
+    m = np.eye(4)
+    m[:3, 3] = (0, 0, 5.0)
+    img = render(tris, core.Camera(m, ortho_scale=1.0), size=40, samples=1)
+    assert hit_mask(img).sum() == 20 * 20  # exactly half the width and height
+
+
+def test_bad_settings_are_named():
+    tree = core.build_kdtree(floor(0.0))
+    cam = look_down((0, 0, 1.0))
+    for kwargs, word in [({"mode": "x"}, "mode"), ({"samples": 0}, "samples"), ({"ao_distance": -1}, "ao_distance"),
+                         ({"sampler": "halton"}, "sampler"), ({"error_target": 0}, "error_target"),
+                         ({"mode": "shadow"}, "light")]:
+        with pytest.raises(ValueError, match=word):
+            core.render_preview(tree, cam, 8, 8, **kwargs)
+    with pytest.raises(ValueError, match="width"):
+        core.render_preview(tree, cam, 0, 8)
+    with pytest.raises(ValueError, match="fov"):
+        core.Camera(np.eye(4), fov=4.0)
