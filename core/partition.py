@@ -17,9 +17,10 @@ LEFT, RIGHT, BOTH = 1, 2, 3
 
 @njit(cache=True)
 def new_split_scratch():
-    """Per-thread buffers for split_reference: two polygons and one clip region."""
+    """Per-thread buffers for split_reference (two polygons, one clip region) and for the two child
+    boxes of a straddler, so partitioning allocates nothing per node."""
     poly_a, poly_b = new_clip_scratch()
-    return poly_a, poly_b, np.empty(6, np.float32)
+    return poly_a, poly_b, np.empty(6, np.float32), np.empty(6, np.float32), np.empty(6, np.float32)
 
 
 @njit(cache=True, inline="always")
@@ -45,7 +46,7 @@ def split_reference(tri, box, axis, pos, clip, scratch, out_left, out_right):
     out_right[axis] = pos
     if not clip:
         return BOTH
-    poly_a, poly_b, region = scratch
+    poly_a, poly_b, region, _, _ = scratch
     region[:] = out_left
     in_left = clip_triangle(tri, region, poly_a, poly_b, out_left)
     region[:] = box
@@ -70,8 +71,7 @@ def partition_in_place(tris, prims, boxes, start, end, axis, pos, planar_left, c
     for 2 * (end - start) references from `start`. Returns (n_right, n_left).
     The left child ends up on top of the pool, so building it first lets it grow freely (seed 000 §3.5).
     """
-    box_l = np.empty(6, np.float32)
-    box_r = np.empty(6, np.float32)
+    box_l, box_r = scratch[3], scratch[4]
     w_right = start
     w_left = end
     for i in range(start, end):

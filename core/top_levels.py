@@ -147,8 +147,7 @@ def partition_parallel(tris, prims, boxes, axis, pos, planar_left, clip, nchunks
     counts = np.zeros((nchunks, 2), np.int64)
     for c in prange(nchunks):
         scratch = new_split_scratch()
-        box_l = np.empty(6, np.float32)
-        box_r = np.empty(6, np.float32)
+        box_l, box_r = scratch[3], scratch[4]
         for i in range(c * n // nchunks, (c + 1) * n // nchunks):
             side = side_of(boxes, i, axis, pos, planar_left)
             if side == BOTH:
@@ -173,8 +172,7 @@ def partition_parallel(tris, prims, boxes, axis, pos, planar_left, clip, nchunks
 def _write_chunk(tris, prims, boxes, sides, axis, pos, clip, start, end, w_left, w_right, lp, lb, rp, rb):
     """Second pass of partition_parallel: write one slice's references (straddlers clipped again)."""
     scratch = new_split_scratch()
-    box_l = np.empty(6, np.float32)
-    box_r = np.empty(6, np.float32)
+    box_l, box_r = scratch[3], scratch[4]
     for i in range(start, end):
         side = sides[i]
         box_l[:] = boxes[i]

@@ -1,0 +1,206 @@
+"""Render benchmark: run time against error for the AO preview, and seed 000's time-to-image setting.
+
+Usage: python benchmarks/bench_render.py [--size 512] [--runs 3] [--reference-samples 1024]
+                                         [--samples 1,2,4,...] [--no-cycles] [--out benchmarks/out]
+
+1. A converged reference of suzanne-251k (512x512, ao_distance 1.0, --reference-samples samples, Sobol),
+   cached in benchmarks/data/.
+2. A sweep over samples per pixel, samplers (sobol, random), builders and a few builder settings:
+   time (build + trace, median of --runs, JIT compile excluded and reported once) and RMSE against the
+   reference on hit pixels. Written to OUT/render_sweep.csv and plotted to OUT/render_rmse_vs_time.png
+   with the Pareto front marked.
+3. Cycles' AO pass of the same .blend and camera at matching sample counts, timed in the same run,
+   RMSE against the same reference; our time / Cycles' time at equal RMSE (interpolated on our
+   Pareto front in log-log).
+4. Seed 000 Table 3's setting: 640x480, camera rays and one shadow ray to a point light, the tree
+   rebuilt from scratch each time; median time to image.
+"""
+import argparse
+import csv
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path[:0] = [str(HERE), str(HERE.parent)]
+
+import core  # noqa: E402
+from scenes import DATA_DIR, blend_path, load_scene  # noqa: E402
+
+BUILD_CONFIGS = {
+    "binned": {},
+    "exact": {"builder": "exact"},
+    "median": {"builder": "median"},
+    "binned leaf_size=8": {"leaf_size": 8},
+    "binned max_depth=28": {"max_depth": 28},
+}
+
+
+def reference_image(scene, camera, size, samples, ao_distance):
+    path = DATA_DIR / f"ref_{scene.name}_{size}_{samples}spp_ao{ao_distance}.npy"
+    if path.exists():
+        return np.load(path)
+    print(f"computing the {samples}-sample reference (cached at {path}) ...", flush=True)
+    tree = core.build_kdtree(scene.triangles, builder="exact")
+    img = core.render_preview(tree, camera, size, size, samples=samples, ao_distance=ao_distance, seed=12345)
+    np.save(path, img)
+    return img
+
+
+def rmse(img, ref):
+    mask = ref[..., 3] > 0.5
+    return float(np.sqrt(np.mean((img[..., 0][mask] - ref[..., 0][mask]) ** 2)))
+
+
+def timed_render(scene, camera, size, options, samples, sampler, ao_distance, runs):
+    """Median time of build + render, and the image of the last run."""
+    times = []
+    for _ in range(runs):
+        t = time.perf_counter()
+        tree = core.build_kdtree(scene.triangles, **options)
+        img = core.render_preview(tree, camera, size, size, samples=samples, sampler=sampler,
+                                  ao_distance=ao_distance)
+        times.append(time.perf_counter() - t)
+    return float(np.median(times)), img
+
+
+def sweep(scene, camera, ref, args):
+    rows = []
+    for label, options in BUILD_CONFIGS.items():
+        samplers = ("sobol", "random") if label == "binned" else ("sobol",)
+        for sampler in samplers:
+            for spp in args.samples:
+                seconds, img = timed_render(scene, camera, args.size, options, spp, sampler, args.ao_distance,
+                                            args.runs)
+                rows.append({"method": f"kd {label} {sampler}", "samples": spp, "seconds": seconds,
+                             "rmse": rmse(img, ref)})
+                print(f"  {rows[-1]['method']:>32} spp {spp:>4}: {seconds:8.3f} s  RMSE {rows[-1]['rmse']:.5f}",
+                      flush=True)
+    return rows
+
+
+def cycles_rows(scene, ref, args):
+    from cycles_ao import render_cycles_ao
+    rows = []
+    for spp in args.samples:
+        img, seconds = render_cycles_ao(blend_path(scene.name), args.size, args.size, spp,
+                                        ao_distance=args.ao_distance, threads=args.threads)
+        full = np.zeros_like(ref)
+        full[..., 0] = img
+        rows.append({"method": "cycles ao pass", "samples": spp, "seconds": seconds, "rmse": rmse(full, ref)})
+        print(f"  {'cycles ao pass':>32} spp {spp:>4}: {seconds:8.3f} s  RMSE {rows[-1]['rmse']:.5f}", flush=True)
+    return rows
+
+
+def pareto(rows):
+    """Rows not beaten in both time and error by another row."""
+    front = []
+    for r in sorted(rows, key=lambda r: (r["seconds"], r["rmse"])):
+        if not front or r["rmse"] < front[-1]["rmse"]:
+            front.append(r)
+    return front
+
+
+def time_at_rmse(front, target):
+    """Our time at a given RMSE, interpolated on the Pareto front in log-log (None if out of range)."""
+    e = np.log([r["rmse"] for r in front])
+    t = np.log([r["seconds"] for r in front])
+    if not e.min() <= np.log(target) <= e.max():
+        return None
+    order = np.argsort(e)
+    return float(np.exp(np.interp(np.log(target), e[order], t[order])))
+
+
+def plot(rows, front, path):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(8, 6))
+    for method in sorted({r["method"] for r in rows}):
+        pts = sorted((r["seconds"], r["rmse"]) for r in rows if r["method"] == method)
+        ax.plot(*zip(*pts), marker="o", ms=3, lw=1, label=method)
+    ax.plot([r["seconds"] for r in front], [r["rmse"] for r in front], "k--", lw=2, label="Pareto front (KD Preview)")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("time to image: build + trace (s), median")
+    ax.set_ylabel("RMSE against the converged reference (hit pixels)")
+    ax.set_title("suzanne-251k, 512x512 AO, ao_distance 1.0")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+
+
+def seed000_time_to_image(scene, runs, size=(640, 480)):
+    """Camera rays plus one shadow ray to a point light per hit, tree rebuilt from scratch."""
+    camera = core.Camera(scene.camera_matrix, scene.camera_fov)
+    light = core.Light.point((2.0, -3.0, 4.0))
+    times, builds = [], []
+    for _ in range(runs):
+        t = time.perf_counter()
+        tree = core.build_kdtree(scene.triangles)
+        builds.append(time.perf_counter() - t)
+        core.render_preview(tree, camera, size[0], size[1], samples=1, mode="shadow", lights=[light])
+        times.append(time.perf_counter() - t)
+    return float(np.median(times)), float(np.median(builds))
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--size", type=int, default=512)
+    ap.add_argument("--runs", type=int, default=3)
+    ap.add_argument("--reference-samples", type=int, default=1024)
+    ap.add_argument("--samples", default="1,2,4,8,16,32,64,128,256")
+    ap.add_argument("--ao-distance", type=float, default=1.0)
+    ap.add_argument("--threads", type=int, default=2, help="Cycles' thread count (ours uses all cores)")
+    ap.add_argument("--no-cycles", action="store_true")
+    ap.add_argument("--only-seed000", action="store_true")
+    ap.add_argument("--out", default=str(HERE / "out"))
+    args = ap.parse_args()
+    args.samples = [int(s) for s in args.samples.split(",")]
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+
+    scene = load_scene("suzanne-251k")
+    camera = core.Camera(scene.camera_matrix, scene.camera_fov)
+    t = time.perf_counter()
+    warm = core.build_kdtree(scene.triangles[:5000])
+    core.render_preview(warm, camera, 8, 8, samples=1)
+    core.render_preview(warm, camera, 8, 8, samples=1, mode="shadow", lights=[core.Light.point((0, 0, 3))])
+    print(f"JIT compile / cache load: {time.perf_counter() - t:.2f} s (excluded from all timings)")
+
+    seconds, build = seed000_time_to_image(scene, max(args.runs, 5))
+    print(f"seed 000 Table 3 setting (640x480, camera + 1 shadow ray, rebuild): {seconds:.3f} s median "
+          f"(build {build:.3f} s); paper: 0.235 s on 1 core, 0.062 s on 4 cores (2007); target <= 0.15 s")
+    if args.only_seed000:
+        return
+
+    ref = reference_image(scene, camera, args.size, args.reference_samples, args.ao_distance)
+    rows = sweep(scene, camera, ref, args)
+    front = pareto(rows)
+    by = {(r["method"], r["samples"]): r for r in rows}
+    print("\nLow discrepancy against random (binned), RMSE ratio random / sobol:")
+    for spp in args.samples:
+        a, b = by.get(("kd binned sobol", spp)), by.get(("kd binned random", spp))
+        if a and b:
+            print(f"  {spp:>4} spp: {b['rmse'] / a['rmse']:.2f}x")
+    if not args.no_cycles:
+        crow = cycles_rows(scene, ref, args)
+        rows += crow
+        print("\nOur time / Cycles' time at equal RMSE (target <= 0.2):")
+        for r in crow:
+            ours = time_at_rmse(front, r["rmse"])
+            ratio = f"{ours / r['seconds']:.3f}" if ours else "out of our measured range"
+            print(f"  Cycles {r['samples']:>4} spp (RMSE {r['rmse']:.4f}, {r['seconds']:.2f} s): {ratio}")
+    with open(out / "render_sweep.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=["method", "samples", "seconds", "rmse"])
+        w.writeheader()
+        w.writerows(rows)
+    plot(rows, front, out / "render_rmse_vs_time.png")
+    print(f"\nwrote {out / 'render_sweep.csv'} and {out / 'render_rmse_vs_time.png'}")
+
+
+if __name__ == "__main__":
+    main()
