@@ -1,4 +1,21 @@
 """KD Preview's Blender glue: scene extraction, settings, operators, panel and command line.
 
-Registration lives here; the logic lives in the modules beside it.
+Only registration lives here; the logic lives in the modules beside it.
+Nothing imported here touches core or numba (corelib imports them on the first
+render), so enabling the add-on is instant.
 """
+
+from . import cli, live_update, operators, panel, properties
+
+# Registration order: settings before the operators and panel that use them.
+MODULES = (properties, operators, panel, live_update, cli)
+
+
+def register():
+    for module in MODULES:
+        module.register()
+
+
+def unregister():
+    for module in reversed(MODULES):
+        module.unregister()

@@ -1,0 +1,172 @@
+"""Command line: one parser and one run function behind both entry points.
+
+    blender -b scene.blend --command kdpreview render --frames 1-24 --out DIR [options]
+    python -m kd_addon render [scene.blend] --frames 1-24 --out DIR [options]
+
+Which scene is rendered: the .blend given as argument; otherwise the file
+Blender already has open (`blender -b scene.blend --command ...`); otherwise,
+or with --demo, the built-in animated demo scene. Frames default to the
+scene's range. Writes DIR/frame_0001.png... and DIR/report.json, prints one
+table row per frame. Exit codes: 0 done, 1 a problem with the scene, files or
+settings (the message names it), 2 bad command-line usage, 130 interrupted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import bpy
+
+from . import demo_scene
+from .config import DEFAULTS, OUTPUT_FORMATS, make_config
+from .errors import Cancelled, PreviewError
+from .pipeline import claim, release, run_job
+from .sequence import SequenceJob, parse_frames
+
+COMMAND_ID = "kdpreview"
+FORMAT_ALIASES = {"PNG": "PNG", "EXR": "OPEN_EXR", "OPEN_EXR": "OPEN_EXR"}
+TABLE = "{:>6} {:>10} {:>8} {:>11} {:>10} {:>10} {:>10} {:>12} {:>8}"
+HEADER = TABLE.format("frame", "triangles", "objects", "extract ms", "build ms", "trace ms", "total ms", "rays",
+                      "Mrays/s")
+_handle = None  # register_cli_command's handle
+
+
+class UsageError(Exception):
+    """Bad command-line usage (argparse's complaint, raised instead of exiting the process)."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that raises instead of calling sys.exit, which would end Blender itself."""
+
+    def error(self, message):
+        raise UsageError(f"{self.format_usage()}{self.prog}: error: {message}")
+
+
+def _output_format(text: str) -> str:
+    try:
+        return FORMAT_ALIASES[text.upper()]
+    except KeyError:
+        raise argparse.ArgumentTypeError(f"use one of {', '.join(OUTPUT_FORMATS)} (or EXR)") from None
+
+
+def build_parser(prog: str = COMMAND_ID) -> argparse.ArgumentParser:
+    """The one parser. Setting options default to SUPPRESS so absent ones take config.DEFAULTS."""
+    parser = _Parser(prog=prog, description="KD Preview: ray-traced AO / shadow previews from the command line")
+    commands = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    render = commands.add_parser("render", help="render frames to images and report.json")
+    render.add_argument("blend", nargs="?", help=".blend file to render (default: the open file, else the demo)")
+    render.add_argument("--out", required=True, help="output folder (created if missing)")
+    render.add_argument("--frames", help="N, A-B, A-B:STEP or a comma list (default: the scene's frame range)")
+    render.add_argument("--demo", action="store_true", help="render the built-in animated demo scene")
+    s = argparse.SUPPRESS
+    render.add_argument("--mode", default=s, help=f"ao, shadow or ao+shadow (default {DEFAULTS.mode})")
+    render.add_argument("--samples", type=int, default=s, help=f"samples per pixel (default {DEFAULTS.samples})")
+    render.add_argument("--ao-distance", dest="ao_distance", type=float, default=s,
+                        help=f"AO ray length (default {DEFAULTS.ao_distance})")
+    render.add_argument("--resolution", dest="resolution_percentage", type=int, default=s,
+                        help=f"percent of the scene's render resolution (default {DEFAULTS.resolution_percentage})")
+    render.add_argument("--builder", default=s, help=f"binned, exact or median (default {DEFAULTS.builder})")
+    render.add_argument("--leaf-size", dest="leaf_size", type=int, default=s,
+                        help=f"(default {DEFAULTS.leaf_size})")
+    render.add_argument("--max-depth", dest="max_depth", type=int, default=s, help="0 = automatic (default)")
+    render.add_argument("--bins", type=int, default=s, help=f"(default {DEFAULTS.bins})")
+    render.add_argument("--threads", type=int, default=s, help="0 = all cores (default)")
+    render.add_argument("--error-target", dest="error_target", type=float, default=s, help="0 = off (default)")
+    render.add_argument("--seed", type=int, default=s, help=f"(default {DEFAULTS.seed})")
+    render.add_argument("--format", dest="output_format", type=_output_format, default=s,
+                        help="PNG (default) or EXR")
+    return parser
+
+
+def load_scene(args) -> bpy.types.Scene:
+    """Open the requested .blend, or keep the open file, or build the demo; return the scene."""
+    if args.blend:
+        path = Path(args.blend)
+        if not path.is_file():
+            raise PreviewError(f"no such .blend file: {path}")
+        try:
+            bpy.ops.wm.open_mainfile(filepath=str(path.resolve()), load_ui=False)
+        except RuntimeError as error:
+            raise PreviewError(f"could not open {path}: {error}") from None
+    elif args.demo or not bpy.data.filepath:
+        bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+        demo_scene.build_demo_scene(bpy.context.scene)
+    return bpy.context.scene
+
+
+def _print_row(result, path) -> None:
+    mark = "*" if result.first_run else ""
+    print(TABLE.format(f"{mark}{result.frame}", f"{result.triangles:,}", result.objects, f"{result.extract_ms:.1f}",
+                       f"{result.build_ms:.1f}", f"{result.trace_ms:.1f}", f"{result.total_ms:.1f}",
+                       f"{result.rays:,}", f"{result.mrays_per_s:.2f}"), flush=True)
+
+
+def run(args) -> int:
+    """Render args.frames of the chosen scene into args.out; return the exit code."""
+    try:
+        config = make_config(args)
+        scene = load_scene(args)
+        frames = parse_frames(args.frames or f"{scene.frame_start}-{scene.frame_end}:{max(1, scene.frame_step)}")
+        job = SequenceJob(scene, config, frames, Path(args.out), lambda _s: bpy.context.evaluated_depsgraph_get(),
+                          on_frame=_print_row)
+        print(f"KD Preview: scene '{scene.name}', {len(frames)} frame(s), mode {config.settings.mode}, "
+              f"{config.settings.samples} samples, {config.resolution_percentage}% resolution -> {args.out}")
+        print(HEADER)
+        _run_claimed(job)
+    except PreviewError as error:
+        print(f"{COMMAND_ID}: error: {error}", file=sys.stderr)
+        return 1
+    except (Cancelled, KeyboardInterrupt):
+        print(f"{COMMAND_ID}: interrupted; frames already written are kept", file=sys.stderr)
+        return 130
+    _print_totals(job)
+    return 0
+
+
+def _run_claimed(job) -> None:
+    claim(job)
+    try:
+        run_job(job)
+    finally:
+        release(job)
+        job.close()
+
+
+def _print_totals(job) -> None:
+    t = job.totals
+    print(f"total: {t['frames']} frames, {t['triangles']:,} triangles, extract {t['extract_ms']:.0f} ms, "
+          f"build {t['build_ms']:.0f} ms, trace {t['trace_ms']:.0f} ms, {t['mrays_per_s']:.2f} Mrays/s; "
+          f"mean frame after the first {t['mean_total_ms_after_first']:.0f} ms  (* = includes kernel compile/load)")
+    print(f"report: {job.report_path}")
+
+
+def execute(argv: list[str], prog: str = COMMAND_ID) -> int:
+    """Parse argv (the words after the command id) and run; never raises SystemExit."""
+    try:
+        args = build_parser(prog).parse_args(argv)
+    except UsageError as error:
+        print(error, file=sys.stderr)
+        return 2
+    except SystemExit as done:  # --help
+        return int(done.code or 0)
+    return run(args)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """`python -m kd_addon` entry point."""
+    return execute(sys.argv[1:] if argv is None else argv, prog="python -m kd_addon")
+
+
+def register():
+    global _handle
+    unregister()
+    _handle = bpy.utils.register_cli_command(COMMAND_ID, execute)
+
+
+def unregister():
+    global _handle
+    if _handle is not None:
+        bpy.utils.unregister_cli_command(_handle)
+        _handle = None

@@ -1,0 +1,166 @@
+"""User settings -> core build options and render keywords, validated once.
+
+The panel's PropertyGroup and the command line expose the same names as
+:class:`Settings`, so both go through :func:`make_config` and fail with the
+same messages. This module imports neither bpy nor core: it is plain data,
+testable anywhere, and cheap enough to run when the add-on is enabled.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, fields
+
+from .errors import PreviewError
+
+MODES = ("ao", "shadow", "ao+shadow")
+BUILDERS = ("binned", "exact", "median")  # core.options.BUILDERS (a test keeps them equal)
+OUTPUT_FORMATS = {"PNG": ".png", "OPEN_EXR": ".exr"}
+MAX_SAMPLES = 65536
+MAX_DEPTH = 60  # core.options.DEPTH_LIMIT
+
+
+class SettingsError(PreviewError, ValueError):
+    """A setting is out of range; the message names it and the allowed values."""
+
+
+@dataclass(frozen=True)
+class Settings:
+    """Every user-facing render setting with its default (0 means "automatic" where noted).
+
+    mode: "ao", "shadow" or "ao+shadow".
+    samples: samples per pixel (AO directions / light samples).
+    ao_distance: AO ray length in scene units; also how far occluders darken.
+    resolution_percentage: percent of the scene's render resolution (resolution_x/y), so a
+        preview can be much smaller than the final render without touching the scene.
+    builder, leaf_size, bins: core.BuildOptions fields (defaults equal core's; a test checks).
+    max_depth: kd-tree depth limit; 0 = core's automatic 1.2 log2(N) + 2.
+    threads: worker threads for build and trace; 0 = every core Numba sees.
+    error_target: stop sampling a pixel once its standard error is below this; 0 = off.
+    output_format: "PNG" or "OPEN_EXR" for animation frames.
+    seed: sampler seed, so two runs of a frame give the same image.
+    """
+
+    mode: str = "ao"
+    samples: int = 16
+    ao_distance: float = 1.0
+    resolution_percentage: int = 50
+    builder: str = "binned"
+    leaf_size: int = 2
+    max_depth: int = 0
+    bins: int = 32
+    threads: int = 0
+    error_target: float = 0.0
+    output_format: str = "PNG"
+    seed: int = 0
+
+
+DEFAULTS = Settings()
+SETTING_NAMES = tuple(f.name for f in fields(Settings))
+
+
+@dataclass(frozen=True)
+class RenderConfig:
+    """Validated settings in the shapes core wants.
+
+    build_options: keywords for core.build_kdtree.
+    render_options: keywords for core.PreviewRender / core.render_preview.
+    """
+
+    settings: Settings
+    build_options: dict
+    render_options: dict
+
+    @property
+    def resolution_percentage(self) -> int:
+        return self.settings.resolution_percentage
+
+    @property
+    def file_extension(self) -> str:
+        return OUTPUT_FORMATS[self.settings.output_format]
+
+    def as_dict(self) -> dict:
+        """The user settings, for reports."""
+        return asdict(self.settings)
+
+
+def make_config(source) -> RenderConfig:
+    """Validate the settings read from `source` (any object with Settings' attribute names,
+    e.g. the scene's KDPreviewSettings or parsed command-line arguments) and map them.
+
+    Raises SettingsError naming the first bad setting.
+    """
+    values = {name: getattr(source, name, getattr(DEFAULTS, name)) for name in SETTING_NAMES}
+    settings = Settings(**values)
+    _validate(settings)
+    return RenderConfig(settings, _build_options(settings), _render_options(settings))
+
+
+def _build_options(s: Settings) -> dict:
+    return {
+        "builder": s.builder,
+        "leaf_size": int(s.leaf_size),
+        "bins": int(s.bins),
+        "max_depth": int(s.max_depth) or None,
+        "threads": int(s.threads) or None,
+    }
+
+
+def _render_options(s: Settings) -> dict:
+    return {
+        "mode": s.mode,
+        "samples": int(s.samples),
+        "ao_distance": float(s.ao_distance),
+        "error_target": float(s.error_target) or None,
+        "threads": int(s.threads) or None,
+        "seed": int(s.seed),
+    }
+
+
+def _validate(s: Settings) -> None:
+    _choice("mode", s.mode, MODES)
+    _choice("builder", s.builder, BUILDERS)
+    _choice("output_format", s.output_format, tuple(OUTPUT_FORMATS))
+    _integer("samples", s.samples, 1, MAX_SAMPLES)
+    _integer("resolution_percentage", s.resolution_percentage, 1, 100)
+    _integer("leaf_size", s.leaf_size, 1, 1 << 20)
+    _integer("max_depth", s.max_depth, 0, MAX_DEPTH, "0 = automatic")
+    _integer("bins", s.bins, 2, 4096)
+    _integer("threads", s.threads, 0, 1024, "0 = all cores")
+    _integer("seed", s.seed, 0, 2**31 - 1)
+    _number("ao_distance", s.ao_distance, positive=True)
+    _number("error_target", s.error_target, positive=False, note="0 = off")
+
+
+def _choice(name, value, choices) -> None:
+    if value not in choices:
+        raise SettingsError(f"{name} must be one of {', '.join(choices)}; got {value!r}")
+
+
+def _integer(name, value, low, high, note="") -> None:
+    suffix = f" ({note})" if note else ""
+    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+        raise SettingsError(f"{name} must be an integer from {low} to {high}{suffix}; got {value!r}")
+
+
+def _number(name, value, *, positive, note="") -> None:
+    ok = not isinstance(value, bool) and isinstance(value, (int, float)) and value == value
+    ok = ok and value != float("inf") and (value > 0 if positive else value >= 0)
+    if not ok:
+        bound = "greater than 0" if positive else "0 or more"
+        suffix = f" ({note})" if note else ""
+        raise SettingsError(f"{name} must be a finite number {bound}{suffix}; got {value!r}")
+
+
+def frame_size(resolution_x: int, resolution_y: int, percentage: int) -> tuple[int, int]:
+    """Preview size in pixels: the scene's resolution scaled as Blender scales it (floor).
+
+    Raises SettingsError when either side comes out below one pixel.
+    """
+    width = int(resolution_x) * int(percentage) // 100
+    height = int(resolution_y) * int(percentage) // 100
+    if width < 1 or height < 1:
+        raise SettingsError(
+            f"the preview would be {width}x{height} pixels: render resolution "
+            f"{resolution_x}x{resolution_y} at {percentage}% is too small"
+        )
+    return width, height

@@ -1,0 +1,104 @@
+"""The one place that imports `core` (lazily) and points Numba's cache somewhere writable first.
+
+Why lazily: importing core imports numba and llvmlite (~0.4 s) and its kernels
+compile on first use (tens of seconds cold), so enabling the add-on must not
+touch it; the first render does.
+
+Why the cache folder: without one, Numba writes `__pycache__` next to core's
+sources, i.e. inside the installed extension, which is wiped on every update
+and may be read-only (system repositories). Inside an installed extension the
+cache goes to Blender's per-extension user folder
+(`bpy.utils.extension_path_user`); outside one (tests, `python -m kd_addon`)
+to the platform's user cache folder. An explicit NUMBA_CACHE_DIR wins.
+
+Why the two import spellings: installed, the package is
+`bl_ext.<repo>.kd_preview` and core is its sibling subpackage
+(`bl_ext.<repo>.kd_preview.core`); in the repository both `kd_addon` and
+`core` are top-level packages.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import sys
+from pathlib import Path
+
+APP_NAME = "kd_preview"
+
+
+def extension_package(package: str | None = __package__) -> str | None:
+    """The extension's 3-part package name ("bl_ext.<repo>.<id>"), or None outside one.
+
+    extension_path_user rejects any other number of parts (see notes/packaging.md).
+    """
+    parts = (package or "").split(".")
+    if len(parts) >= 3 and parts[0] == "bl_ext":
+        return ".".join(parts[:3])
+    return None
+
+
+def core_module_name(package: str | None = __package__) -> str:
+    """Absolute name of the core package that sits beside this add-on package."""
+    parent = (package or "").rpartition(".")[0]
+    return f"{parent}.core" if parent else "core"
+
+
+def user_cache_dir() -> Path:
+    """Per-user cache folder outside any extension (XDG / Windows / macOS conventions)."""
+    if sys.platform == "win32":
+        base = Path(os.environ.get("LOCALAPPDATA") or Path.home() / "AppData" / "Local")
+    elif sys.platform == "darwin":
+        base = Path.home() / "Library" / "Caches"
+    else:
+        base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    return base / APP_NAME / "numba"
+
+
+def numba_cache_dir(package: str | None = __package__) -> Path:
+    """Where compiled kernels are cached: NUMBA_CACHE_DIR if set, else the extension's user
+    folder, else the user cache folder."""
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        return Path(os.environ["NUMBA_CACHE_DIR"])
+    ext = extension_package(package)
+    if ext is not None:
+        try:
+            import bpy
+
+            return Path(bpy.utils.extension_path_user(ext, path="numba_cache", create=True))
+        except (ImportError, ValueError, AttributeError):
+            pass
+    return user_cache_dir()
+
+
+def configure_numba_cache(path: Path) -> None:
+    """Send Numba's cache to `path`. Must run before core's modules are imported, since
+    Numba picks a function's cache location when the function is decorated.
+
+    Both the environment and numba.config are set: Numba re-reads NUMBA_* variables at each
+    compilation whenever any of them changed, which would otherwise undo the config value.
+    """
+    path.mkdir(parents=True, exist_ok=True)
+    os.environ["NUMBA_CACHE_DIR"] = str(path)
+    import numba
+
+    numba.config.CACHE_DIR = str(path)
+
+
+def is_loaded() -> bool:
+    """Whether core has been imported in this process (i.e. no import cost left)."""
+    return core_module_name() in sys.modules
+
+
+def load_core():
+    """Import and return the core package, configuring the Numba cache on first import."""
+    name = core_module_name()
+    if name not in sys.modules:
+        configure_numba_cache(numba_cache_dir())
+    return importlib.import_module(name)
+
+
+def cache_is_warm() -> bool:
+    """Whether the cache folder already holds compiled kernels (so the first run only loads them)."""
+    folder = numba_cache_dir()
+    return folder.is_dir() and any(folder.rglob("*.nbi"))

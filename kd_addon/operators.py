@@ -1,0 +1,241 @@
+"""Render and Render Animation operators.
+
+Both drive a job with `tick()` (pipeline.FrameJob or sequence.SequenceJob).
+From the UI (invoke) they run modal: a window-manager timer ticks the job for
+a few tens of milliseconds per event, so Blender stays responsive and ESC
+cancels between ticks. In background mode (`blender -b`, the bpy module)
+timers never fire and INVOKE_DEFAULT returns at once, so there the job runs
+to the end inside `execute`. Only a finished frame reaches the preview image
+or the disk; cancel and failure leave both, and the scene's frame, as they were.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import bpy
+
+from . import output
+from .config import make_config
+from .errors import Cancelled, PreviewError
+from .pipeline import FrameJob, claim, release, run_job
+from .properties import run_state
+from .sequence import SequenceJob
+
+TICK_SECONDS = 0.01  # timer interval
+TICK_BUDGET = 0.05  # seconds of work per timer event before handing control back to Blender
+
+
+def modal_possible(context) -> bool:
+    """Timers only fire with a UI; in background mode (and the bpy module) they never do."""
+    return not bpy.app.background and context.window is not None
+
+
+def redraw_panels(context) -> None:
+    for window in context.window_manager.windows:
+        for area in window.screen.areas if window.screen else ():
+            if area.type in {"VIEW_3D", "IMAGE_EDITOR"}:
+                area.tag_redraw()
+
+
+class _JobOperator:
+    """Runs the job `make_job` returns, modal from the UI and synchronous otherwise."""
+
+    def make_job(self, context):
+        raise NotImplementedError
+
+    def finish(self, context, job) -> str:
+        """Publish a finished job; return the message to report."""
+        raise NotImplementedError
+
+    def cleanup(self, job) -> None:
+        """Called after success, cancel and failure alike."""
+
+    # -- synchronous ----------------------------------------------------------
+
+    def execute(self, context):
+        job = self._start(context)
+        if job is None:
+            return {"CANCELLED"}
+        error = None
+        try:
+            run_job(job, progress=lambda fraction, status: self._show(context, fraction, status))
+        except PreviewError as failure:
+            error = failure
+        except KeyboardInterrupt:
+            error = Cancelled("cancelled")
+        except Exception as bug:
+            self._end(context, job, bug)
+            raise
+        return self._end(context, job, error)
+
+    # -- modal ----------------------------------------------------------------
+
+    def invoke(self, context, event):
+        if not modal_possible(context):
+            return self.execute(context)
+        job = self._start(context)
+        if job is None:
+            return {"CANCELLED"}
+        self._job, self._started = job, False
+        wm = context.window_manager
+        self._timer = wm.event_timer_add(TICK_SECONDS, window=context.window)
+        wm.modal_handler_add(self)
+        wm.progress_begin(0, 100)
+        self._show(context, 0.0, job.status)
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context, event):
+        if event.type == "ESC":
+            return self._end_modal(context, Cancelled("cancelled"))
+        if event.type != "TIMER" or event.timer is not self._timer:
+            return {"PASS_THROUGH"}
+        if not self._started:  # let the status ("Compiling kernels…") draw before blocking work
+            self._started = True
+            return {"RUNNING_MODAL"}
+        try:
+            if self._tick_for(TICK_BUDGET):
+                return self._end_modal(context, None)
+        except PreviewError as error:
+            return self._end_modal(context, error)
+        except Exception as error:  # keep Blender usable: stop the timer, then show the bug
+            self._end_modal(context, error)
+            raise
+        self._show(context, self._job.progress, self._job.status)
+        return {"RUNNING_MODAL"}
+
+    def cancel(self, context):
+        """Blender calls this when the modal operator is killed (e.g. the file is closed)."""
+        self._end_modal(context, Cancelled("cancelled"))
+
+    def _tick_for(self, budget: float) -> bool:
+        deadline = time.perf_counter() + budget
+        while not self._job.tick():
+            if time.perf_counter() > deadline:
+                return False
+        return True
+
+    def _end_modal(self, context, error):
+        wm = context.window_manager
+        if getattr(self, "_timer", None) is not None:
+            wm.event_timer_remove(self._timer)
+            self._timer = None
+        wm.progress_end()
+        return self._end(context, self._job, error)
+
+    # -- shared ---------------------------------------------------------------
+
+    def _start(self, context):
+        try:
+            job = self.make_job(context)
+            claim(job)
+        except PreviewError as error:
+            self._fail(context, error)
+            return None
+        state = run_state(context)
+        state.running, state.progress = True, 0.0
+        return job
+
+    def _end(self, context, job, error):
+        release(job)
+        state = run_state(context)
+        state.running = False
+        try:
+            self.cleanup(job)
+            if error is None:
+                message = self.finish(context, job)
+                state.status, state.progress = message, 1.0
+                self.report({"INFO"}, message)
+                return {"FINISHED"}
+        except PreviewError as late_error:
+            error = late_error
+        redraw_panels(context)
+        if isinstance(error, Cancelled):
+            state.status = "Cancelled: the previous preview is unchanged"
+            self.report({"WARNING"}, state.status)
+            return {"CANCELLED"}
+        return self._fail(context, error)
+
+    def _fail(self, context, error):
+        run_state(context).status = f"Error: {error}"
+        if isinstance(error, PreviewError):
+            self.report({"ERROR"}, str(error))
+        redraw_panels(context)
+        return {"CANCELLED"}
+
+    def _show(self, context, fraction: float, status: str) -> None:
+        state = run_state(context)
+        state.progress, state.status = fraction, status
+        if modal_possible(context):
+            context.window_manager.progress_update(int(100 * fraction))
+            redraw_panels(context)
+
+
+class KDPREVIEW_OT_render(_JobOperator, bpy.types.Operator):
+    """Ray-trace an ambient-occlusion / shadow preview of the current frame into the "KD Preview" image"""
+
+    bl_idname = "kdpreview.render"
+    bl_label = "Render Preview"
+    bl_options = {"REGISTER"}
+
+    def make_job(self, context):
+        config = make_config(context.scene.kd_preview)
+        return FrameJob(context.scene, context.evaluated_depsgraph_get(), config)
+
+    def finish(self, context, job) -> str:
+        result = job.result()
+        output.store_preview(result.image)
+        summary = result.summary()
+        run_state(context).set_last_run(summary)
+        return (f"KD Preview: {result.width}x{result.height}, {result.triangles:,} triangles, "
+                f"{result.total_ms:.0f} ms ({result.mrays_per_s:.1f} Mrays/s)")
+
+
+class KDPREVIEW_OT_render_animation(_JobOperator, bpy.types.Operator):
+    """Render the scene's frame range to an image sequence and report.json in the output folder"""
+
+    bl_idname = "kdpreview.render_animation"
+    bl_label = "Render Preview Animation"
+    bl_options = {"REGISTER"}
+
+    def make_job(self, context):
+        scene = context.scene
+        settings = scene.kd_preview
+        config = make_config(settings)
+        frames = list(range(scene.frame_start, scene.frame_end + 1, max(1, scene.frame_step)))
+        # bpy.context, not `context`: the operator's context must not be kept beyond invoke.
+        return SequenceJob(scene, config, frames, output_folder(settings.output_dir),
+                           lambda _scene: bpy.context.evaluated_depsgraph_get())
+
+    def cleanup(self, job) -> None:
+        job.close()
+
+    def finish(self, context, job) -> str:
+        last = job.results[-1].summary()
+        last["animation"] = {"frames": len(job.results), "report": str(job.report_path)}
+        run_state(context).set_last_run(last)
+        return f"KD Preview: {len(job.results)} frames written to {job.out_dir}"
+
+
+def output_folder(path: str) -> Path:
+    """The output folder as an absolute path; a "//" path needs a saved .blend to be relative to."""
+    if path.startswith("//") and not bpy.data.filepath:
+        raise PreviewError(f"the output folder '{path}' is relative to the .blend file, which is not saved: "
+                           "save the file or choose an absolute folder")
+    if not path.strip():
+        raise PreviewError("the output folder is empty: choose one in the KD Preview panel")
+    return Path(bpy.path.abspath(path))
+
+
+CLASSES = (KDPREVIEW_OT_render, KDPREVIEW_OT_render_animation)
+
+
+def register():
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+
+
+def unregister():
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)

@@ -1,0 +1,68 @@
+"""Getting a finished frame into Blender: the "KD Preview" image, image editors, and files.
+
+Only called with a complete frame, never with a partial one, so a cancelled
+or failed run leaves the previous preview untouched.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import bpy
+import numpy as np
+
+IMAGE_NAME = "KD Preview"
+
+
+def preview_image(width: int, height: int) -> bpy.types.Image:
+    """The float RGBA preview image, created or resized to width x height.
+
+    Resized in place (not replaced) so image editors already showing it keep showing it.
+    """
+    image = bpy.data.images.get(IMAGE_NAME)
+    if image is None or image.source != "GENERATED" or not image.is_float:
+        if image is not None:
+            image.name = IMAGE_NAME + " (old)"
+        image = bpy.data.images.new(IMAGE_NAME, width, height, alpha=True, float_buffer=True)
+    elif tuple(image.size) != (width, height):
+        image.scale(width, height)
+    return image
+
+
+def blender_pixels(image: np.ndarray) -> np.ndarray:
+    """(H, W, 4) rows top-down -> flat float32 in Blender's bottom-up row order."""
+    return np.ascontiguousarray(image[::-1], dtype=np.float32).ravel()
+
+
+def store_preview(image: np.ndarray) -> bpy.types.Image:
+    """Write a finished frame into the preview image and show it in an image editor."""
+    height, width = image.shape[:2]
+    target = preview_image(width, height)
+    target.pixels.foreach_set(blender_pixels(image))
+    target.update()
+    show_in_image_editor(target)
+    return target
+
+
+def show_in_image_editor(image: bpy.types.Image) -> None:
+    """Redraw editors showing the preview; if none does, switch the first image editor to it."""
+    editors = [area for window in bpy.context.window_manager.windows
+               for area in window.screen.areas if area.type == "IMAGE_EDITOR"]
+    showing = [area for area in editors if area.spaces.active.image == image]
+    if not showing and editors:
+        editors[0].spaces.active.image = image
+        showing = editors[:1]
+    for area in showing:
+        area.tag_redraw()
+
+
+def save_frame(image: np.ndarray, path: Path, file_format: str) -> Path:
+    """Save a finished frame as PNG (8-bit sRGB, as Blender converts a linear float image)
+    or OPEN_EXR (linear float) without changing the preview image's own file path."""
+    target = store_preview(image)
+    target.file_format = file_format
+    path.parent.mkdir(parents=True, exist_ok=True)
+    target.save(filepath=str(path), save_copy=True)
+    if not path.is_file():
+        raise OSError(f"Blender did not write {path}")
+    return path

@@ -1,0 +1,138 @@
+"""The "KD Preview" tab in the 3D viewport sidebar: settings, buttons, status and the last run."""
+
+from __future__ import annotations
+
+import bpy
+
+from .properties import run_state
+
+# (label, key in the last-run summary, format) in display order.
+RUN_ROWS = (
+    ("Frame", "frame", "{}"),
+    ("Size", "size", "{}"),
+    ("Triangles", "triangles", "{:,}"),
+    ("Objects", "objects", "{:,}"),
+    ("Lights", "lights", "{}"),
+    ("Extract", "extract_ms", "{:.1f} ms"),
+    ("Build", "build_ms", "{:.1f} ms"),
+    ("Trace", "trace_ms", "{:.1f} ms"),
+    ("Total", "total_ms", "{:.1f} ms"),
+    ("Rays", "rays", "{:,}"),
+    ("Speed", "mrays_per_s", "{:.2f} Mrays/s"),
+)
+TREE_ROWS = (
+    ("Nodes", "nodes", "{:,}"),
+    ("Leaves", "leaves", "{:,}"),
+    ("Empty Leaves", "empty_leaves", "{:,}"),
+    ("Depth", "max_depth", "{}"),
+    ("SAH Cost", "sah_cost", "{:.2f}"),
+    ("Refs / Triangle", "references_per_triangle", "{:.2f}"),
+)
+
+
+def _rows(layout, values: dict, rows) -> None:
+    grid = layout.grid_flow(row_major=True, columns=2, align=True)
+    for label, key, fmt in rows:
+        if key in values:
+            grid.label(text=label)
+            grid.label(text=fmt.format(values[key]))
+
+
+class KDPREVIEW_PT_panel(bpy.types.Panel):
+    """Settings and the Render buttons."""
+
+    bl_label = "KD Preview"
+    bl_idname = "KDPREVIEW_PT_panel"
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "KD Preview"
+
+    def draw(self, context):
+        settings, state = context.scene.kd_preview, run_state(context)
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        for name in ("mode", "samples", "ao_distance", "resolution_percentage", "error_target", "live_update"):
+            layout.prop(settings, name)
+        row = layout.row(align=True)
+        row.enabled = not state.running
+        row.operator("kdpreview.render", icon="RENDER_STILL", text="Render")
+        row.operator("kdpreview.render_animation", icon="RENDER_ANIMATION", text="Animation")
+        if state.running:
+            layout.progress(factor=state.progress, type="BAR", text=state.status or "Rendering…")
+            layout.label(text="Esc to cancel", icon="INFO")
+        elif state.status:
+            layout.label(text=state.status, icon="ERROR" if state.status.startswith("Error") else "NONE")
+
+
+class KDPREVIEW_PT_tree(bpy.types.Panel):
+    """kd-tree builder settings (collapsed: the defaults suit most scenes)."""
+
+    bl_label = "kd-Tree"
+    bl_parent_id = "KDPREVIEW_PT_panel"
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "KD Preview"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        settings = context.scene.kd_preview
+        self.layout.use_property_split = True
+        for name in ("builder", "bins", "leaf_size", "max_depth", "threads", "seed"):
+            self.layout.prop(settings, name)
+
+
+class KDPREVIEW_PT_output(bpy.types.Panel):
+    """Where Render Animation writes."""
+
+    bl_label = "Output"
+    bl_parent_id = "KDPREVIEW_PT_panel"
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "KD Preview"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        settings = context.scene.kd_preview
+        self.layout.use_property_split = True
+        self.layout.prop(settings, "output_dir")
+        self.layout.prop(settings, "output_format")
+
+
+class KDPREVIEW_PT_last_run(bpy.types.Panel):
+    """Timings and tree statistics of the last finished run."""
+
+    bl_label = "Last Run"
+    bl_parent_id = "KDPREVIEW_PT_panel"
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "KD Preview"
+
+    def draw(self, context):
+        last = run_state(context).last_run_dict()
+        layout = self.layout
+        if not last:
+            layout.label(text="No run yet")
+            return
+        last.setdefault("size", f"{last.get('width')} x {last.get('height')}")
+        if last.get("first_run"):
+            layout.label(text="Includes kernel compile / cache load", icon="TIME")
+        _rows(layout, last, RUN_ROWS)
+        _rows(layout.box(), last.get("tree", {}), TREE_ROWS)
+        if "animation" in last:
+            layout.label(text=f"{last['animation']['frames']} frames, report: {last['animation']['report']}")
+        for warning in last.get("warnings", []):
+            layout.label(text=warning, icon="ERROR")
+
+
+CLASSES = (KDPREVIEW_PT_panel, KDPREVIEW_PT_tree, KDPREVIEW_PT_output, KDPREVIEW_PT_last_run)
+
+
+def register():
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+
+
+def unregister():
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)

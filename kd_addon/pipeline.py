@@ -1,0 +1,266 @@
+"""One preview frame: extract -> triangles relative to the camera -> kd-tree -> progressive trace.
+
+`FrameJob` splits the frame into short calls (`tick`) so a modal operator can
+spread it over timer events and stay responsive; `render_frame` runs one to
+the end for scripts, background mode, the command line and the live-update
+handler. Nothing here writes images or touches the scene: a cancelled or
+failed frame leaves everything as it was.
+
+Why relative to the camera: world_triangles() is float32; a scene a few km
+from the origin would lose millimetres. The instance matrices (float64) are
+shifted by minus the camera position *before* the float32 cast, and the
+camera and lights are moved by the same offset (core's `.translated`).
+
+Why a lock: Numba's workqueue threading layer aborts the process when two
+threads launch parallel kernels at once. Blender can call the frame-change
+handler from its render thread, and bpy's tbb layer is not guaranteed on
+every platform, so every kernel call here is serialized by KERNEL_LOCK.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from . import corelib, scene_input
+from .config import RenderConfig, frame_size
+from .errors import Cancelled, PreviewError
+from .extract import ExtractedScene, extract_scene
+
+KERNEL_LOCK = threading.Lock()
+COMPILING_STATUS = "Compiling kernels (first run)…"
+LOADING_STATUS = "Loading compiled kernels (first run)…"
+_kernels_ready = False  # set once a frame has traced in this process: no compile cost left
+
+
+def _ms_since(t0: float) -> float:
+    return (time.perf_counter() - t0) * 1e3
+
+
+@dataclass
+class FrameResult:
+    """A finished frame: the image (H, W, 4) float32, row 0 at the top, plus what it cost."""
+
+    frame: int
+    image: np.ndarray
+    triangles: int
+    objects: int
+    lights: int
+    extract_ms: float
+    build_ms: float
+    trace_ms: float
+    total_ms: float
+    rays: int
+    rays_saved: int
+    samples: int
+    first_run: bool  # kernels were compiled or loaded from cache during this frame
+    tree_stats: dict = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def height(self) -> int:
+        return int(self.image.shape[0])
+
+    @property
+    def width(self) -> int:
+        return int(self.image.shape[1])
+
+    @property
+    def mrays_per_s(self) -> float:
+        return self.rays / (self.trace_ms * 1e3) if self.trace_ms > 0 else 0.0
+
+    def summary(self) -> dict:
+        """Everything but the image, JSON-ready (report rows, the panel's last-run box)."""
+        row = {k: getattr(self, k) for k in (
+            "frame", "width", "height", "triangles", "objects", "lights", "extract_ms", "build_ms",
+            "trace_ms", "total_ms", "rays", "rays_saved", "mrays_per_s", "samples", "first_run")}
+        row["tree"] = {k: _plain(v) for k, v in self.tree_stats.items()}
+        row["warnings"] = list(self.warnings)
+        return row
+
+
+def _plain(value):
+    """numpy scalars -> Python numbers, so json.dumps accepts tree stats."""
+    return value.item() if isinstance(value, np.generic) else value
+
+
+def relative_triangles(extracted: ExtractedScene, offset: np.ndarray) -> np.ndarray:
+    """World triangles minus `offset`, subtracted in float64 before the float32 cast."""
+    def shifted(inst):
+        matrix = inst.matrix_world.copy()
+        matrix[:3, 3] -= offset
+        return replace(inst, matrix_world=matrix)
+
+    return replace(extracted, instances=[shifted(i) for i in extracted.instances]).world_triangles()
+
+
+class FrameJob:
+    """One frame of one scene, driven by `tick()` until `done`.
+
+    The first tick reads the scene and builds the tree (blocking: it cannot be
+    split, and on the first run it includes Numba's compile); every later tick
+    adds one sample per unconverged pixel (core keeps each such call short).
+    """
+
+    def __init__(self, scene, depsgraph, config: RenderConfig):
+        self.scene, self.depsgraph, self.config = scene, depsgraph, config
+        self.renderer = None
+        self._timings = {"extract_ms": 0.0, "build_ms": 0.0, "trace_ms": 0.0, "other_ms": 0.0}
+        self._info: dict = {}
+        self._first_run = not _kernels_ready
+
+    # -- state the operators show ------------------------------------------
+
+    @property
+    def done(self) -> bool:
+        return self.renderer is not None and self.renderer.done
+
+    @property
+    def progress(self) -> float:
+        """0..1: the traced fraction of the target samples."""
+        if self.renderer is None:
+            return 0.0
+        return min(1.0, self.renderer.samples_done / max(1, self.renderer.target_samples))
+
+    @property
+    def status(self) -> str:
+        if not _kernels_ready:
+            return LOADING_STATUS if corelib.cache_is_warm() else COMPILING_STATUS
+        if self.renderer is None:
+            return "Reading scene and building kd-tree…"
+        return f"Tracing: {self.renderer.samples_done}/{self.renderer.target_samples} samples"
+
+    # -- work ---------------------------------------------------------------
+
+    def tick(self) -> bool:
+        """Do the next short piece of work; return True when the frame is finished."""
+        if self.renderer is None:
+            self.prepare()
+        elif not self.renderer.done:
+            self.step()
+        return self.done
+
+    def prepare(self) -> None:
+        """Camera, lights and triangles from the scene, then the kd-tree and the renderer."""
+        t0 = time.perf_counter()
+        inputs = self._scene_inputs()
+        triangles, extracted = self._triangles(inputs.camera.position)
+        core = corelib.load_core()
+        self._timings["other_ms"] += _ms_since(t0) - self._timings["extract_ms"]
+        tree = self._build(core, triangles)
+        self._start_tracing(core, tree, inputs)
+        self._info = dict(triangles=int(len(triangles)), objects=extracted.object_count, lights=len(inputs.lights),
+                          frame=extracted.frame, tree_stats=tree.stats(),
+                          warnings=inputs.warnings + extracted.warnings)
+
+    def _scene_inputs(self) -> scene_input.SceneInputs:
+        render = self.scene.render
+        width, height = frame_size(render.resolution_x, render.resolution_y, self.config.resolution_percentage)
+        inputs = scene_input.read_scene(self.scene, self.depsgraph, width, height)
+        if self.config.settings.mode != "ao" and not inputs.lights:
+            raise PreviewError(f"mode '{self.config.settings.mode}' needs a light, but scene '{self.scene.name}' "
+                               "has no render-visible light: add one or use mode 'ao'")
+        return inputs
+
+    def _start_tracing(self, core, tree, inputs: scene_input.SceneInputs) -> None:
+        """Camera and lights moved by the same offset as the triangles, then the renderer
+        (whose constructor already traces the camera rays, so it counts as trace time)."""
+        offset = inputs.camera.position
+        try:
+            camera = core.Camera(**inputs.camera.keywords()).translated(offset)
+            lights = [getattr(core.Light, light.kind)(**light.keywords).translated(offset)
+                      for light in inputs.lights]
+        except ValueError as error:  # core's own checks, e.g. clip start >= clip end
+            raise PreviewError(f"the scene's camera or lights cannot be used: {error}") from None
+        t0 = time.perf_counter()
+        with KERNEL_LOCK:
+            self.renderer = core.PreviewRender(tree, camera, inputs.width, inputs.height, lights=lights,
+                                               **self.config.render_options)
+        self._timings["trace_ms"] += _ms_since(t0)
+
+    def _triangles(self, offset: np.ndarray) -> tuple[np.ndarray, ExtractedScene]:
+        t0 = time.perf_counter()
+        extracted = extract_scene(self.depsgraph)
+        if extracted.triangle_count == 0:
+            raise PreviewError(f"nothing to render at frame {self.scene.frame_current}: the scene has no "
+                               "render-visible mesh triangles")
+        triangles = relative_triangles(extracted, offset)
+        self._timings["extract_ms"] = _ms_since(t0)
+        return triangles, extracted
+
+    def _build(self, core, triangles: np.ndarray):
+        t0 = time.perf_counter()
+        with KERNEL_LOCK:
+            tree = core.build_kdtree(triangles, **self.config.build_options)
+        self._timings["build_ms"] = _ms_since(t0)
+        return tree
+
+    def step(self) -> None:
+        """One more sample per unconverged pixel."""
+        global _kernels_ready
+        t0 = time.perf_counter()
+        with KERNEL_LOCK:
+            self.renderer.step(1)
+        self._timings["trace_ms"] += _ms_since(t0)
+        _kernels_ready = True
+
+    def result(self) -> FrameResult:
+        """The finished frame; call only once `done`."""
+        if not self.done:
+            raise RuntimeError("FrameJob.result() called before the frame finished")
+        with KERNEL_LOCK:
+            image = np.array(self.renderer.image(), dtype=np.float32, copy=True)
+        t = self._timings
+        return FrameResult(image=image, extract_ms=t["extract_ms"], build_ms=t["build_ms"], trace_ms=t["trace_ms"],
+                           total_ms=sum(t.values()), rays=int(self.renderer.rays_traced),
+                           rays_saved=int(self.renderer.rays_saved), samples=int(self.renderer.samples_done),
+                           first_run=self._first_run, **self._info)
+
+
+_active_job = None  # at most one preview job per process; see claim()
+
+
+def claim(job) -> None:
+    """Mark `job` as the one running preview job; raise PreviewError if another runs.
+
+    Operators, the command line and the live-update handler all go through this, so a
+    frame change caused by a running job never starts a second one.
+    """
+    global _active_job
+    if _active_job is not None:
+        raise PreviewError("a KD Preview render is already running")
+    _active_job = job
+
+
+def release(job) -> None:
+    """End `job`'s claim (no-op if it does not hold it)."""
+    global _active_job
+    if _active_job is job:
+        _active_job = None
+
+
+def job_running() -> bool:
+    return _active_job is not None
+
+
+def run_job(job, cancel=None, progress=None) -> None:
+    """Tick `job` until done. `cancel()` is polled before every tick (True: raise Cancelled);
+    `progress(fraction, status)` is called after every tick."""
+    while True:
+        if cancel is not None and cancel():
+            raise Cancelled("cancelled")
+        done = job.tick()
+        if progress is not None:
+            progress(job.progress, job.status)
+        if done:
+            return
+
+
+def render_frame(scene, depsgraph, config: RenderConfig, *, cancel=None, progress=None) -> FrameResult:
+    """Render the scene's current frame (depsgraph must be evaluated at it) to the end."""
+    job = FrameJob(scene, depsgraph, config)
+    run_job(job, cancel, progress)
+    return job.result()

@@ -1,0 +1,96 @@
+"""Settings (saved with the .blend, on the scene) and run state (not saved, on the window manager).
+
+`KDPreviewSettings` is the one settings group: its property names are
+config.Settings' names, so `config.make_config(scene.kd_preview)` maps and
+validates it exactly as it does command-line arguments. The run state is a
+separate group on the window manager because it is not a setting: it must
+not be saved with the file or travel with a linked scene.
+"""
+
+from __future__ import annotations
+
+import json
+
+import bpy
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
+
+from .config import DEFAULTS, MAX_DEPTH, MAX_SAMPLES
+
+
+class KDPreviewSettings(bpy.types.PropertyGroup):
+    """KD Preview render settings of a scene."""
+
+    mode: EnumProperty(
+        name="Mode", default=DEFAULTS.mode,
+        items=[("ao", "Ambient Occlusion", "Occlusion within AO Distance"),
+               ("shadow", "Shadows", "Direct light from the scene's lights, with shadows"),
+               ("ao+shadow", "AO + Shadows", "Both, multiplied")])
+    samples: IntProperty(name="Samples", description="Samples per pixel", default=DEFAULTS.samples,
+                         min=1, max=MAX_SAMPLES, soft_max=1024)
+    ao_distance: FloatProperty(name="AO Distance", description="Length of ambient-occlusion rays",
+                               default=DEFAULTS.ao_distance, min=1e-6, soft_max=100.0, subtype="DISTANCE",
+                               unit="LENGTH")
+    resolution_percentage: IntProperty(name="Resolution", description="Percent of the scene's render resolution",
+                                       default=DEFAULTS.resolution_percentage, min=1, max=100, subtype="PERCENTAGE")
+    builder: EnumProperty(
+        name="Builder", default=DEFAULTS.builder,
+        items=[("binned", "Binned SAH", "Min-max binned SAH: fast, near-exact quality"),
+               ("exact", "Exact SAH", "Full event sweep: best tree, slowest build"),
+               ("median", "Spatial Median", "Cheapest build, slower tracing")])
+    leaf_size: IntProperty(name="Leaf Size", description="Nodes with this many triangles or fewer become leaves",
+                           default=DEFAULTS.leaf_size, min=1, soft_max=64)
+    max_depth: IntProperty(name="Max Depth", description="Tree depth limit (0 = automatic)",
+                           default=DEFAULTS.max_depth, min=0, max=MAX_DEPTH)
+    bins: IntProperty(name="Bins", description="SAH bins per axis (binned builder)", default=DEFAULTS.bins,
+                      min=2, max=4096, soft_max=256)
+    threads: IntProperty(name="Threads", description="Worker threads (0 = all cores)", default=DEFAULTS.threads,
+                         min=0, max=1024)
+    error_target: FloatProperty(name="Error Target",
+                                description="Stop sampling a pixel once its standard error is below this (0 = off)",
+                                default=DEFAULTS.error_target, min=0.0, soft_max=0.1, precision=4)
+    seed: IntProperty(name="Seed", description="Sampler seed", default=DEFAULTS.seed, min=0)
+    output_format: EnumProperty(name="Format", default=DEFAULTS.output_format,
+                                items=[("PNG", "PNG", "8-bit sRGB PNG"), ("OPEN_EXR", "OpenEXR", "Linear float EXR")])
+    output_dir: StringProperty(name="Output Folder", description="Where Render Animation writes frames and report.json",
+                               default="//kd_preview/", subtype="DIR_PATH")
+    live_update: BoolProperty(name="Live Update", description="Re-render the preview whenever the frame changes",
+                              default=False)
+
+
+class KDPreviewRunState(bpy.types.PropertyGroup):
+    """What the panel shows about the current and the last run (never saved)."""
+
+    running: BoolProperty(name="Running", default=False)
+    status: StringProperty(name="Status", default="")
+    progress: FloatProperty(name="Progress", default=0.0, min=0.0, max=1.0, subtype="FACTOR")
+    last_run: StringProperty(name="Last Run", description="JSON summary of the last finished run", default="")
+
+    def set_last_run(self, summary: dict) -> None:
+        self.last_run = json.dumps(summary)
+
+    def last_run_dict(self) -> dict:
+        try:
+            return json.loads(self.last_run) if self.last_run else {}
+        except ValueError:
+            return {}
+
+
+CLASSES = (KDPreviewSettings, KDPreviewRunState)
+
+
+def run_state(context=None) -> KDPreviewRunState:
+    return (context or bpy.context).window_manager.kd_preview_state
+
+
+def register():
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+    bpy.types.Scene.kd_preview = PointerProperty(type=KDPreviewSettings)
+    bpy.types.WindowManager.kd_preview_state = PointerProperty(type=KDPreviewRunState)
+
+
+def unregister():
+    del bpy.types.WindowManager.kd_preview_state
+    del bpy.types.Scene.kd_preview
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)

@@ -1,0 +1,197 @@
+"""The scene's camera and lights, converted to the plain keywords core.Camera and core.Light take.
+
+The conversions are pure functions of numbers (tested against analytic values);
+`read_scene` only gathers those numbers from bpy. Nothing here imports core,
+so the conversion can be checked, and fail with a clear message, before any
+kernel is compiled.
+
+Camera: Blender's `lens` and sensor size give the field of view along the
+*fitted* image axis (sensor fit AUTO: the larger one; HORIZONTAL: width;
+VERTICAL: height), `ortho_scale` the extent along the same axis. core wants
+both along the larger image dimension, so the fitted value is rescaled by
+the image aspect (as BKE_camera_params_compute_viewplane does).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import PreviewError
+from .extract import _Visibility  # the render-visibility rules extraction uses, reused for lights
+
+
+@dataclass(frozen=True)
+class CameraInput:
+    """Keywords for core.Camera, plus the world position the preview traces relative to."""
+
+    matrix_world: np.ndarray  # (4, 4) float64, rotation columns normalized
+    fov: float | None  # radians along the larger image dimension (perspective)
+    ortho_scale: float | None  # extent along the larger image dimension (orthographic)
+    clip_start: float
+    clip_end: float
+
+    @property
+    def position(self) -> np.ndarray:
+        return self.matrix_world[:3, 3].copy()
+
+    def keywords(self) -> dict:
+        return {
+            "matrix_world": self.matrix_world,
+            "fov": self.fov,
+            "ortho_scale": self.ortho_scale,
+            "clip_start": self.clip_start,
+            "clip_end": self.clip_end,
+        }
+
+
+@dataclass(frozen=True)
+class LightInput:
+    """One light: `kind` names the core.Light constructor, `keywords` its arguments."""
+
+    name: str
+    kind: str  # "point", "sun", "spot" or "area"
+    keywords: dict
+
+
+@dataclass
+class SceneInputs:
+    """What the renderer needs from the scene besides triangles."""
+
+    camera: CameraInput
+    lights: list[LightInput]
+    width: int
+    height: int
+    warnings: list[str] = field(default_factory=list)
+
+
+# --------------------------------------------------------------------------
+# Pure conversions
+# --------------------------------------------------------------------------
+
+
+def fitted_axis(sensor_fit: str, width: int, height: int) -> str:
+    """"x" or "y": the image axis Blender fits the sensor (or ortho scale) to."""
+    if sensor_fit == "HORIZONTAL":
+        return "x"
+    if sensor_fit == "VERTICAL":
+        return "y"
+    return "x" if width >= height else "y"
+
+
+def to_larger_dimension(extent: float, sensor_fit: str, width: int, height: int) -> float:
+    """Rescale an extent measured along the fitted axis to the larger image dimension.
+
+    Works for anything proportional to the image plane size: 2*tan(fov/2) or ortho_scale.
+    """
+    axis = fitted_axis(sensor_fit, width, height)
+    larger = "x" if width >= height else "y"
+    if axis == larger:
+        return extent
+    return extent * max(width, height) / min(width, height)
+
+
+def perspective_fov(lens: float, sensor_width: float, sensor_height: float,
+                    sensor_fit: str, width: int, height: int) -> float:
+    """Field of view in radians along the larger image dimension."""
+    sensor = sensor_height if sensor_fit == "VERTICAL" else sensor_width
+    tan_half = to_larger_dimension(sensor / (2.0 * lens), sensor_fit, width, height)
+    return 2.0 * math.atan(tan_half)
+
+
+def orthographic_scale(ortho_scale: float, sensor_fit: str, width: int, height: int) -> float:
+    """Orthographic view extent along the larger image dimension."""
+    return to_larger_dimension(ortho_scale, sensor_fit, width, height)
+
+
+def normalized_matrix(matrix) -> np.ndarray:
+    """A float64 4x4 copy whose rotation columns are unit length: Blender ignores a camera's
+    object scale when rendering, and so must the preview."""
+    m = np.array(matrix, dtype=np.float64).reshape(4, 4)
+    norms = np.linalg.norm(m[:3, :3], axis=0)
+    if not np.all(np.isfinite(m)) or np.any(norms < 1e-12):
+        raise PreviewError("the camera's transform is degenerate (zero scale or not finite)")
+    m[:3, :3] /= norms
+    return m
+
+
+def camera_input(data, matrix_world, width: int, height: int) -> tuple[CameraInput, list[str]]:
+    """CameraInput from a bpy Camera datablock (or anything with its attribute names)."""
+    warnings = []
+    if data.type == "PANO":
+        raise PreviewError("panoramic cameras are not supported: use a perspective or orthographic camera")
+    if data.shift_x or data.shift_y:
+        warnings.append("camera shift is ignored by the preview")
+    fov = ortho = None
+    if data.type == "ORTHO":
+        ortho = orthographic_scale(data.ortho_scale, data.sensor_fit, width, height)
+    else:
+        fov = perspective_fov(data.lens, data.sensor_width, data.sensor_height, data.sensor_fit, width, height)
+    camera = CameraInput(normalized_matrix(matrix_world), fov, ortho, float(data.clip_start), float(data.clip_end))
+    return camera, warnings
+
+
+def light_direction(matrix_world) -> np.ndarray:
+    """Unit direction the light travels: the object's local -Z in world space."""
+    m = np.array(matrix_world, dtype=np.float64).reshape(4, 4)
+    d = m[:3, :3] @ np.array([0.0, 0.0, -1.0])
+    return d / np.linalg.norm(d)
+
+
+def light_input(name: str, data, matrix_world) -> LightInput | None:
+    """LightInput from a bpy Light datablock; None for a type the preview does not know."""
+    m = np.array(matrix_world, dtype=np.float64).reshape(4, 4)
+    position, color = m[:3, 3].copy(), tuple(float(c) for c in data.color)
+    if data.type == "POINT":
+        kw = dict(position=position, radius=float(data.shadow_soft_size), power=float(data.energy))
+    elif data.type == "SUN":
+        kw = dict(direction=light_direction(m), angle=float(data.angle), strength=float(data.energy))
+    elif data.type == "SPOT":
+        kw = dict(position=position, direction=light_direction(m), spot_size=float(data.spot_size),
+                  spot_blend=float(data.spot_blend), radius=float(data.shadow_soft_size), power=float(data.energy))
+    elif data.type == "AREA":
+        size_y = float(data.size_y) if data.shape in ("RECTANGLE", "ELLIPSE") else None
+        kw = dict(matrix_world=m, shape=data.shape, size=float(data.size), size_y=size_y, power=float(data.energy))
+    else:
+        return None
+    kw["color"] = color
+    return LightInput(name, data.type.lower(), kw)
+
+
+# --------------------------------------------------------------------------
+# Reading the scene
+# --------------------------------------------------------------------------
+
+
+def read_camera(scene, depsgraph, width: int, height: int) -> tuple[CameraInput, list[str]]:
+    """The scene camera, evaluated (so animated lens or constraints count)."""
+    if scene.camera is None:
+        raise PreviewError(f"scene '{scene.name}' has no active camera: add one and set it as the scene camera")
+    if scene.camera.type != "CAMERA":
+        raise PreviewError(f"the scene camera '{scene.camera.name}' is a {scene.camera.type}, not a camera object")
+    evaluated = scene.camera.evaluated_get(depsgraph)
+    return camera_input(evaluated.data, evaluated.matrix_world, width, height)
+
+
+def read_lights(depsgraph) -> list[LightInput]:
+    """Render-visible scene lights (own hide_render and collection path, as for meshes)."""
+    visibility = _Visibility(depsgraph.view_layer)
+    lights = []
+    for ob in depsgraph.objects:
+        if ob.type == "LIGHT" and visibility.scene_object(ob.original):
+            light = light_input(ob.original.name, ob.data, ob.matrix_world)
+            if light is not None:
+                lights.append(light)
+    return lights
+
+
+def read_scene(scene, depsgraph, width: int, height: int) -> SceneInputs:
+    """Camera and lights of the evaluated scene for a width x height preview."""
+    if scene.render.pixel_aspect_x != scene.render.pixel_aspect_y:
+        warnings = ["non-square pixel aspect is ignored by the preview"]
+    else:
+        warnings = []
+    camera, camera_warnings = read_camera(scene, depsgraph, width, height)
+    return SceneInputs(camera, read_lights(depsgraph), width, height, warnings + camera_warnings)

@@ -1,0 +1,152 @@
+"""A frame range rendered to an image sequence plus `report.json`, one FrameJob per frame.
+
+Shared by the Render Animation operator (ticked from a modal timer, or run to
+the end in background mode) and the command line, so the files and the report
+are the same however the sequence is started. The scene's current frame is
+put back afterwards, also on cancel or failure.
+"""
+
+from __future__ import annotations
+
+import json
+import platform
+import re
+import time
+from pathlib import Path
+
+from . import output
+from .config import RenderConfig
+from .errors import PreviewError
+from .pipeline import FrameJob, FrameResult
+
+REPORT_NAME = "report.json"
+TOTAL_KEYS = ("triangles", "extract_ms", "build_ms", "trace_ms", "total_ms", "rays", "rays_saved")
+
+
+def frame_filename(frame: int, extension: str) -> str:
+    return f"frame_{frame:04d}{extension}"
+
+
+def parse_frames(text: str) -> list[int]:
+    """Frames from "7", "1-24", "1-24:2" or a comma list of those; raises PreviewError naming the problem."""
+    frames: list[int] = []
+    for part in filter(None, (p.strip() for p in str(text).split(","))):
+        frames += _parse_range(part)
+    if not frames:
+        raise PreviewError(f"bad frame range {text!r}: no frames")
+    return list(dict.fromkeys(frames))
+
+
+_RANGE = re.compile(r"^(-?\d+)(?:-(-?\d+))?(?::(\d+))?$")
+
+
+def _parse_range(part: str) -> list[int]:
+    match = _RANGE.match(part)
+    if match is None:
+        raise PreviewError(f"bad frame range {part!r}: use N, A-B or A-B:STEP")
+    first = int(match.group(1))
+    last = int(match.group(2)) if match.group(2) is not None else first
+    stride = int(match.group(3) or 1)
+    if last < first or stride < 1:
+        raise PreviewError(f"bad frame range {part!r}: the end is before the start or the step is below 1")
+    return list(range(first, last + 1, stride))
+
+
+class SequenceJob:
+    """Renders `frames` of `scene` into `out_dir`; drive with tick(), then call close()."""
+
+    def __init__(self, scene, config: RenderConfig, frames: list[int], out_dir: Path, depsgraph_for, on_frame=None):
+        """`depsgraph_for(scene)` returns the evaluated depsgraph after frame_set (e.g.
+        `lambda s: context.evaluated_depsgraph_get()`); `on_frame(result, path)` is called
+        after each frame is written."""
+        if not frames:
+            raise PreviewError("no frames to render")
+        self.scene, self.config, self.frames = scene, config, list(frames)
+        self.out_dir, self.depsgraph_for, self.on_frame = Path(out_dir), depsgraph_for, on_frame
+        self.results: list[FrameResult] = []
+        self.files: list[Path] = []
+        self.job: FrameJob | None = None
+        self._start_frame = scene.frame_current
+        self._t0 = time.perf_counter()
+        self.report_path: Path | None = None
+        self.totals: dict = {}
+
+    @property
+    def done(self) -> bool:
+        return len(self.results) == len(self.frames)
+
+    @property
+    def progress(self) -> float:
+        current = self.job.progress if self.job is not None else 0.0
+        return (len(self.results) + current) / len(self.frames)
+
+    @property
+    def status(self) -> str:
+        frame = self.frames[min(len(self.results), len(self.frames) - 1)]
+        inner = self.job.status if self.job is not None else "Starting"
+        return f"Frame {frame} ({len(self.results) + 1}/{len(self.frames)}): {inner}"
+
+    def tick(self) -> bool:
+        """Next short piece of work; True once every frame is written and the report saved."""
+        if self.job is None:
+            frame = self.frames[len(self.results)]
+            self.scene.frame_set(frame)
+            self.job = FrameJob(self.scene, self.depsgraph_for(self.scene), self.config)
+        if self.job.tick():
+            self._write(self.job.result())
+            self.job = None
+            if self.done:
+                self.totals = summarize(self.results, (time.perf_counter() - self._t0) * 1e3)
+                self.report_path = write_report(self.out_dir, self.scene.name, self.config, self.results,
+                                                self.files, self.totals)
+        return self.done
+
+    def _write(self, result: FrameResult) -> None:
+        path = self.out_dir / frame_filename(self.frames[len(self.results)], self.config.file_extension)
+        try:
+            output.save_frame(result.image, path, self.config.settings.output_format)
+        except (OSError, RuntimeError) as error:  # RuntimeError: Image.save's own failure
+            raise PreviewError(f"could not write {path}: {error}") from None
+        self.results.append(result)
+        self.files.append(path)
+        if self.on_frame is not None:
+            self.on_frame(result, path)
+
+    def close(self) -> None:
+        """Put the scene back on the frame it was on (call on success, cancel and failure)."""
+        if self.scene.frame_current != self._start_frame:
+            self.scene.frame_set(self._start_frame)
+
+
+def summarize(results: list[FrameResult], wall_ms: float) -> dict:
+    """Sums over the frames, the throughput, and the mean time of the frames after the first
+    (the first includes Numba's compile or cache load when it ran in a fresh process)."""
+    out = {key: sum(getattr(r, key) for r in results) for key in TOTAL_KEYS}
+    out["frames"] = len(results)
+    out["wall_ms"] = wall_ms
+    out["mrays_per_s"] = out["rays"] / (out["trace_ms"] * 1e3) if out["trace_ms"] else 0.0
+    warm = results[1:] or results
+    out["mean_total_ms_after_first"] = sum(r.total_ms for r in warm) / len(warm)
+    return out
+
+
+def write_report(out_dir: Path, scene_name: str, config: RenderConfig, results: list[FrameResult],
+                 files: list[Path], totals: dict) -> Path:
+    """Write `report.json` (settings, one row per frame, totals) and return its path."""
+    first = results[0]
+    report = {
+        "scene": scene_name,
+        "resolution": [first.width, first.height],
+        "settings": config.as_dict(),
+        "build_options": config.build_options,
+        "render_options": config.render_options,
+        "frames": [dict(r.summary(), file=p.name) for r, p in zip(results, files)],
+        "totals": totals,
+        "machine": {"python": platform.python_version(), "platform": platform.platform()},
+    }
+    path = Path(out_dir) / REPORT_NAME
+    try:
+        path.write_text(json.dumps(report, indent=2), encoding="utf-8")
+    except OSError as error:
+        raise PreviewError(f"could not write {path}: {error}") from None
+    return path

@@ -1,0 +1,95 @@
+"""Shared setup for the add-on tests (tests/test_addon_*.py).
+
+Importing this first sends Numba's cache to a folder under the system temp
+dir (unless NUMBA_CACHE_DIR is already set), so the add-on's fallback cache
+in the home folder is never written by tests and later runs start warm.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+os.environ.setdefault("NUMBA_CACHE_DIR", os.path.join(tempfile.gettempdir(), "kd_preview_test_numba_cache"))
+
+import bpy  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+import kd_addon  # noqa: E402
+from tests import bpy_scenes as scenes  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+PYTHON = sys.executable
+
+
+@pytest.fixture
+def addon():
+    """The add-on registered on a fresh empty scene; unregistered afterwards."""
+    scenes.reset()
+    kd_addon.register()
+    yield kd_addon
+    kd_addon.unregister()
+
+
+def add_quad(name, half_x, half_y, *, location=(0, 0, 0)):
+    """Axis-aligned rectangle in the XY plane, centred on `location`."""
+    verts = [(-half_x, -half_y, 0), (half_x, -half_y, 0), (half_x, half_y, 0), (-half_x, half_y, 0)]
+    return scenes.add_mesh(name, verts, [(0, 1, 2, 3)], location=location)
+
+
+def add_top_camera(*, location=(0, 0, 10), ortho_scale=None, lens=50.0, name="Cam"):
+    """Camera looking straight down -Z (Blender's default orientation), made the scene camera."""
+    cam = scenes.add_camera(name)
+    cam.location = location
+    if ortho_scale is not None:
+        cam.data.type, cam.data.ortho_scale = "ORTHO", ortho_scale
+    cam.data.lens = lens
+    bpy.context.scene.camera = cam
+    return cam
+
+
+def add_sun(name="Sun", rotation=(0.0, 0.0, 0.0), energy=3.0):
+    sun = scenes.link(bpy.data.objects.new(name, bpy.data.lights.new(name, "SUN")))
+    sun.rotation_euler = rotation
+    sun.data.energy = energy
+    return sun
+
+
+def half_plane_scene(*, offset=(0.0, 0.0, 0.0), size=(64, 32)):
+    """Orthographic camera 10 above a plane covering exactly the left half of its view, a cube
+    standing on the plane, and a sun. Returns the scene. The view is 8 x 4 units (ortho_scale 8
+    along the larger, horizontal side); the plane spans x in [-4, 0], y in [-2, 2] (+ offset)."""
+    scene = bpy.context.scene
+    ox, oy, oz = offset
+    add_quad("Ground", 2.0, 2.0, location=(ox - 2.0, oy, oz))
+    scenes.add_cube("Box", scale=0.5, location=(ox - 2.0, oy, oz + 0.5))
+    add_top_camera(location=(ox, oy, oz + 10.0), ortho_scale=8.0)
+    add_sun(rotation=(math.radians(30), 0.0, 0.0))
+    scene.render.resolution_x, scene.render.resolution_y = size
+    settings = getattr(scene, "kd_preview", None)
+    if settings is not None:
+        settings.resolution_percentage, settings.samples, settings.ao_distance = 100, 8, 1.0
+    return scene
+
+
+def preview_pixels(name="KD Preview") -> np.ndarray:
+    """The preview image as (H, W, 4), row 0 at the top (as the renderer returns it)."""
+    image = bpy.data.images[name]
+    width, height = image.size
+    flat = np.empty(width * height * 4, np.float32)
+    image.pixels.foreach_get(flat)
+    return flat.reshape(height, width, 4)[::-1]
+
+
+def run_python(code_or_args, *, env=None, timeout=600, cwd=REPO) -> subprocess.CompletedProcess:
+    """Run the venv's Python (a -c snippet or argument list) from the repo root.
+    `env` adds to this process's environment; a value of None removes that variable."""
+    args = ["-c", code_or_args] if isinstance(code_or_args, str) else list(code_or_args)
+    full_env = dict(os.environ, **(env or {}))
+    full_env = {k: v for k, v in full_env.items() if v is not None}
+    return subprocess.run([PYTHON, *args], cwd=cwd, env=full_env, capture_output=True, text=True, timeout=timeout)

@@ -1,0 +1,134 @@
+"""The command line: demo scene, a saved .blend, error exits; in-process (fast) and one real
+`python -m kd_addon` run (the README's main job)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from tests.addon_support import add_quad, add_top_camera, run_python  # noqa: F401
+
+import bpy  # noqa: E402
+import numpy as np  # noqa: E402
+
+from kd_addon import cli, demo_scene  # noqa: E402
+from tests import bpy_scenes as scenes  # noqa: E402
+
+SMALL = ["--demo", "--resolution", "5", "--samples", "2"]  # 48x27 from the demo's 960x540
+
+
+def frame_rows(out):
+    return json.loads((out / "report.json").read_text())["frames"]
+
+
+def test_demo_scene_is_animated_in_every_way():
+    scenes.reset()
+    scene = demo_scene.build_demo_scene()
+    from kd_addon.extract import extract_scene
+
+    def snapshot(frame):
+        scene.frame_set(frame)
+        result = extract_scene(bpy.context.evaluated_depsgraph_get())
+        return result, result.world_triangles(), result.triangle_object_ids()
+
+    first, tris1, ids = snapshot(1)
+    last, tris24, _ = snapshot(24)
+    names = first.object_names
+    assert names == last.object_names and first.triangle_count == last.triangle_count > 10000
+    moved = {name for i, name in enumerate(names) if not np.allclose(tris1[ids == i], tris24[ids == i])}
+    assert {"WaveSheet", "TwistColumn", "Monkey", "Cube"} <= moved and "Ground" not in moved
+    instanced = [inst for inst in first.instances if inst.instancer and inst.instancer.startswith("Pillar.")]
+    assert len(instanced) == 12  # 6 instancers x (shaft + ball)
+    lights = {ob.data.type for ob in scene.objects if ob.type == "LIGHT"}
+    assert lights == {"SUN", "POINT"} and scene.camera is not None
+
+
+def test_cli_renders_the_demo(tmp_path, capsys):
+    out = tmp_path / "demo"
+    assert cli.execute(["render", "--frames", "1-2", "--out", str(out), *SMALL]) == 0
+    printed = capsys.readouterr().out
+    assert "frame  triangles" in printed and "report:" in printed
+    assert sorted(p.name for p in out.iterdir()) == ["frame_0001.png", "frame_0002.png", "report.json"]
+    report = json.loads((out / "report.json").read_text())
+    assert report["resolution"] == [48, 27] and report["settings"]["samples"] == 2
+    assert report["totals"]["frames"] == 2
+    image = bpy.data.images.load(str(out / "frame_0002.png"))
+    assert tuple(image.size) == (48, 27)
+
+
+def test_cli_renders_a_saved_blend_with_its_frame_range(tmp_path):
+    scenes.reset()
+    add_quad("Floor", 5, 5)
+    scenes.add_cube("Box", location=(0, 0, 1))
+    add_top_camera(location=(0, 0, 12))
+    scene = bpy.context.scene
+    scene.frame_start, scene.frame_end = 3, 4
+    scene.render.resolution_x, scene.render.resolution_y = 40, 30
+    blend = tmp_path / "scene.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    scenes.reset()
+    out = tmp_path / "out"
+    args = ["render", str(blend), "--out", str(out), "--resolution", "100", "--samples", "2", "--format", "exr",
+            "--builder", "median", "--threads", "1"]
+    assert cli.execute(args) == 0
+    rows = frame_rows(out)
+    assert [r["frame"] for r in rows] == [3, 4] and rows[0]["triangles"] == 14
+    assert (out / "frame_0003.exr").is_file()
+    report = json.loads((out / "report.json").read_text())
+    assert report["build_options"]["builder"] == "median" and report["build_options"]["threads"] == 1
+
+
+@pytest.mark.parametrize("args, code, message", [
+    (["render", "--out", "X", "--frames", "5-2"], 1, "bad frame range '5-2'"),
+    (["render", "--out", "X", "--resolution", "0"], 1, "resolution_percentage must be an integer from 1 to 100"),
+    (["render", "--out", "X", "--mode", "normals"], 1, "mode must be one of ao, shadow, ao+shadow"),
+    (["render", "missing.blend", "--out", "X"], 1, "no such .blend file: missing.blend"),
+    (["render", "--frames", "1"], 2, "the following arguments are required: --out"),
+    (["render", "--out", "X", "--samples", "many"], 2, "argument --samples: invalid int value"),
+    (["paint", "--out", "X"], 2, "invalid choice: 'paint'"),
+])
+def test_usage_and_setting_errors_exit_nonzero_with_the_message(tmp_path, capsys, monkeypatch, args, code, message):
+    monkeypatch.chdir(tmp_path)
+    assert cli.execute(args) == code
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "X").exists()
+
+
+def test_scene_errors_exit_nonzero_with_the_message(tmp_path, capsys):
+    scenes.reset()
+    add_quad("Floor", 5, 5)
+    scene = bpy.context.scene
+    scene.render.resolution_x, scene.render.resolution_y = 40, 30
+    no_camera = tmp_path / "no_camera.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(no_camera))
+    add_top_camera()
+    bpy.data.objects["Floor"].hide_render = True
+    nothing = tmp_path / "nothing.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(nothing))
+    for blend, message in ((no_camera, "has no active camera"), (nothing, "nothing to render at frame 1")):
+        assert cli.execute(["render", str(blend), "--out", str(tmp_path / "o"), "--frames", "1"]) == 1
+        assert message in capsys.readouterr().err
+
+
+def test_unwritable_output_folder_is_named(tmp_path, capsys):
+    blocker = tmp_path / "a_file"
+    blocker.write_text("not a folder")
+    assert cli.execute(["render", "--frames", "1", "--out", str(blocker / "sub"), *SMALL]) == 1
+    assert f"could not write {blocker / 'sub' / 'frame_0001.png'}" in capsys.readouterr().err
+
+
+def test_help_exits_zero(capsys):
+    assert cli.execute(["render", "--help"]) == 0
+    assert "--frames" in capsys.readouterr().out
+
+
+def test_python_dash_m_main_job(tmp_path):
+    """The README's main command, end to end in a fresh process."""
+    out = tmp_path / "x"
+    proc = run_python(["-m", "kd_addon", "render", "--frames", "1-3", "--out", str(out), "--resolution", "5"])
+    assert proc.returncode == 0, proc.stderr
+    assert [r["frame"] for r in frame_rows(out)] == [1, 2, 3]
+    assert proc.stdout.count("\n") >= 6 and "Mrays/s" in proc.stdout
+    bad = run_python(["-m", "kd_addon", "render", "--frames", "x", "--out", str(out)])
+    assert bad.returncode == 1 and "bad frame range 'x'" in bad.stderr

@@ -1,0 +1,103 @@
+"""Settings -> core options: defaults, mapping, validation messages, frame ranges (no rendering)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import fields
+from types import SimpleNamespace
+
+import pytest
+
+from tests.addon_support import addon  # noqa: F401  (fixture)
+
+import bpy  # noqa: E402  (after addon_support, which sets the Numba cache)
+
+from kd_addon import config  # noqa: E402
+from kd_addon.config import DEFAULTS, SettingsError, frame_size, make_config  # noqa: E402
+from kd_addon.errors import PreviewError  # noqa: E402
+from kd_addon.sequence import parse_frames  # noqa: E402
+
+
+def test_defaults_map_to_core_keywords():
+    cfg = make_config(SimpleNamespace())
+    assert cfg.build_options == {"builder": "binned", "leaf_size": 2, "bins": 32, "max_depth": None, "threads": None}
+    assert cfg.render_options == {"mode": "ao", "samples": 16, "ao_distance": 1.0, "error_target": None,
+                                  "threads": None, "seed": 0}
+    assert cfg.resolution_percentage == 50 and cfg.file_extension == ".png"
+
+
+def test_zero_means_automatic_and_values_pass_through():
+    cfg = make_config(SimpleNamespace(max_depth=20, threads=2, error_target=0.01, builder="exact", bins=64,
+                                      leaf_size=4, mode="ao+shadow", samples=7, ao_distance=2.5,
+                                      output_format="OPEN_EXR"))
+    assert cfg.build_options == {"builder": "exact", "leaf_size": 4, "bins": 64, "max_depth": 20, "threads": 2}
+    assert cfg.render_options["threads"] == 2 and cfg.render_options["error_target"] == 0.01
+    assert cfg.render_options["mode"] == "ao+shadow" and cfg.file_extension == ".exr"
+
+
+@pytest.mark.parametrize("name, value, words", [
+    ("mode", "normals", "mode must be one of ao, shadow, ao+shadow"),
+    ("builder", "sah", "builder must be one of binned, exact, median"),
+    ("samples", 0, "samples must be an integer from 1"),
+    ("samples", 2.5, "samples must be an integer"),
+    ("resolution_percentage", 0, "resolution_percentage must be an integer from 1 to 100"),
+    ("max_depth", 61, "max_depth must be an integer from 0 to 60 (0 = automatic)"),
+    ("bins", 1, "bins must be an integer from 2"),
+    ("threads", -1, "threads must be an integer from 0 to 1024 (0 = all cores)"),
+    ("ao_distance", 0.0, "ao_distance must be a finite number greater than 0"),
+    ("ao_distance", math.nan, "ao_distance must be a finite number"),
+    ("error_target", -0.1, "error_target must be a finite number 0 or more (0 = off)"),
+    ("output_format", "JPEG", "output_format must be one of PNG, OPEN_EXR"),
+])
+def test_bad_settings_are_named(name, value, words):
+    with pytest.raises(SettingsError, match=None) as info:
+        make_config(SimpleNamespace(**{name: value}))
+    assert words in str(info.value)
+    assert isinstance(info.value, PreviewError)
+
+
+def test_defaults_agree_with_core():
+    import core
+    from core import options
+
+    core_defaults = core.BuildOptions()
+    assert (DEFAULTS.builder, DEFAULTS.leaf_size, DEFAULTS.bins) == (
+        core_defaults.builder, core_defaults.leaf_size, core_defaults.bins)
+    assert config.BUILDERS == options.BUILDERS and config.MAX_DEPTH == options.DEPTH_LIMIT
+    core.BuildOptions(**make_config(SimpleNamespace()).build_options)  # core accepts the mapping
+
+
+def test_property_group_mirrors_settings(addon):  # noqa: F811
+    settings = bpy.context.scene.kd_preview
+    for f in fields(config.Settings):
+        assert getattr(settings, f.name) == pytest.approx(getattr(DEFAULTS, f.name)), f.name
+    modes = [item.identifier for item in settings.bl_rna.properties["mode"].enum_items]
+    builders = [item.identifier for item in settings.bl_rna.properties["builder"].enum_items]
+    formats = [item.identifier for item in settings.bl_rna.properties["output_format"].enum_items]
+    assert tuple(modes) == config.MODES and tuple(builders) == config.BUILDERS
+    assert tuple(formats) == tuple(config.OUTPUT_FORMATS)
+    assert settings.live_update is False
+    settings.mode, settings.samples, settings.threads = "ao+shadow", 5, 3
+    cfg = make_config(settings)
+    assert cfg.render_options["mode"] == "ao+shadow" and cfg.render_options["samples"] == 5
+    assert cfg.build_options["threads"] == 3
+
+
+def test_frame_size_floors_like_blender_and_rejects_zero():
+    assert frame_size(1920, 1080, 50) == (960, 540)
+    assert frame_size(1001, 11, 10) == (100, 1)
+    with pytest.raises(SettingsError, match="would be 0x0 pixels"):
+        frame_size(4, 4, 1)
+
+
+@pytest.mark.parametrize("text, frames", [
+    ("7", [7]), ("1-4", [1, 2, 3, 4]), ("1-9:4", [1, 5, 9]), ("1-3,10,2", [1, 2, 3, 10]), ("-2-0", [-2, -1, 0]),
+])
+def test_parse_frames(text, frames):
+    assert parse_frames(text) == frames
+
+
+@pytest.mark.parametrize("text", ["5-2", "a-b", "1-3:0", "", "1..3"])
+def test_bad_frame_ranges_are_named(text):
+    with pytest.raises(PreviewError, match="bad frame range"):
+        parse_frames(text)

@@ -1,0 +1,50 @@
+"""The extension as users get it: build the linux-x64 zip with tools/build_extension.py, then install,
+enable, render and uninstall it in a separate bpy process with its own Blender user folder.
+
+Slow by nature: the first run downloads ~60 MB of wheels into build/wheels_cache/, and the
+installed copy of core compiles its kernels from scratch (its Numba cache lives in the fresh user
+folder, as in a real install), ~1 minute on two cores.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import zipfile
+
+from tests.addon_support import REPO, run_python
+
+ZIP_NAME = "kd_preview-0.1.0-linux_x64.zip"
+
+
+def build_zip(tmp_path):
+    proc = run_python([str(REPO / "tools" / "build_extension.py"), "--platforms", "linux-x64",
+                       "--out", str(tmp_path / "dist"), "--stage", str(tmp_path / "stage")])
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return tmp_path / "dist" / ZIP_NAME
+
+
+def test_extension_builds_installs_renders_and_uninstalls(tmp_path):
+    if not sys.platform.startswith("linux"):
+        import pytest
+
+        pytest.skip("the test builds the linux-x64 zip only")
+    path = build_zip(tmp_path)
+    with zipfile.ZipFile(path) as zf:
+        names = set(zf.namelist())
+    assert {"__init__.py", "blender_manifest.toml", "kd_addon/__init__.py", "kd_addon/corelib.py",
+            "core/__init__.py", "core/render.py"} <= names
+    assert not any(n.startswith(("tests/", "benchmarks/", "tools/", "scripts/")) for n in names)
+    user = tmp_path / "user"
+    env = {"BLENDER_USER_RESOURCES": str(user), "NUMBA_CACHE_DIR": None}  # None: the extension picks the folder
+    proc = run_python([str(REPO / "tests" / "extension_smoke.py"), str(path)], env=env, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    facts = json.loads(next(line for line in proc.stdout.splitlines() if line.startswith("FACTS "))[6:])
+    assert facts["numba_after_enable"] is False and facts["core_after_enable"] is False
+    assert facts["core_module"] == "bl_ext.user_default.kd_preview.core"
+    user_folder = user / "extensions" / ".user" / "user_default" / "kd_preview"  # extension_path_user
+    assert facts["numba_cache_dir"] == str(user_folder / "numba_cache")
+    assert facts["size"] == [96, 54] and 0.02 < facts["hit_fraction"] < 0.6
+    assert facts["last_run"]["triangles"] == 12 and facts["last_run"]["lights"] == 1
+    assert facts["enabled_after_uninstall"] is False and facts["files_after_uninstall"] is False
+    assert facts["scene_prop_after_uninstall"] is False

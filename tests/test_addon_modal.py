@@ -1,0 +1,142 @@
+"""The operators' modal path (the one users get from the UI), driven by hand.
+
+In background mode Blender never delivers timer events and refuses modal
+handlers, so the test feeds TIMER / ESC events to the operator's own
+invoke/modal methods. The only stand-in is the window manager's
+`modal_handler_add` (recorded instead of called); timers, progress and the
+run state are Blender's real ones.
+"""
+
+from __future__ import annotations
+
+import json
+from types import SimpleNamespace
+
+import pytest
+
+from tests.addon_support import addon, half_plane_scene, preview_pixels  # noqa: F401
+
+import bpy  # noqa: E402
+
+from kd_addon import operators, pipeline  # noqa: E402
+from kd_addon.operators import KDPREVIEW_OT_render, KDPREVIEW_OT_render_animation, _JobOperator  # noqa: E402
+
+
+class WindowManagerProxy:
+    def __init__(self, wm):
+        self._wm, self.modal_handlers = wm, []
+
+    def modal_handler_add(self, operator):
+        self.modal_handlers.append(operator)
+        return True
+
+    def __getattr__(self, name):
+        return getattr(self._wm, name)
+
+
+def make_context():
+    real = bpy.context
+    return SimpleNamespace(window_manager=WindowManagerProxy(real.window_manager), window=real.window,
+                           scene=real.scene, evaluated_depsgraph_get=real.evaluated_depsgraph_get)
+
+
+def driver(operator_cls):
+    """A plain object running `operator_cls`'s job logic (bpy operators cannot be instantiated)."""
+    class Driver(_JobOperator):
+        make_job = operator_cls.make_job
+        finish = operator_cls.finish
+        cleanup = operator_cls.cleanup
+
+        def __init__(self):
+            self.reports = []
+
+        def report(self, kind, message):
+            self.reports.append((kind, message))
+
+    return Driver()
+
+
+@pytest.fixture
+def modal(addon, monkeypatch):  # noqa: F811
+    monkeypatch.setattr(operators, "modal_possible", lambda context: True)
+    monkeypatch.setattr(operators, "TICK_BUDGET", 0.0)  # one job tick per timer event
+    return make_context()
+
+
+def timer_events(op, context, limit=500):
+    """Feed timer events until the operator leaves modal; return (result, statuses seen)."""
+    statuses = []
+    for _ in range(limit):
+        result = op.modal(context, SimpleNamespace(type="TIMER", timer=op._timer))
+        statuses.append(context.window_manager.kd_preview_state.status)
+        if result != {"RUNNING_MODAL"}:
+            return result, statuses
+    raise AssertionError("the modal operator never finished")
+
+
+def test_modal_render_ticks_to_the_end(modal):
+    half_plane_scene()
+    op = driver(KDPREVIEW_OT_render)
+    assert op.invoke(modal, None) == {"RUNNING_MODAL"}
+    assert modal.window_manager.modal_handlers == [op] and op._timer is not None
+    state = modal.window_manager.kd_preview_state
+    assert state.running and pipeline.job_running()
+    assert op.modal(modal, SimpleNamespace(type="MOUSEMOVE", timer=None)) == {"PASS_THROUGH"}
+    result, statuses = timer_events(op, modal)
+    assert result == {"FINISHED"} and op._timer is None and not state.running and not pipeline.job_running()
+    assert any(s.startswith("Tracing: ") for s in statuses)
+    assert preview_pixels()[:, :32, 3].min() == 1.0
+    assert json.loads(state.last_run)["samples"] == 8
+    assert op.reports[-1][0] == {"INFO"}
+
+
+def test_esc_cancels_and_keeps_the_previous_image(modal):
+    scene = half_plane_scene()
+    bpy.ops.kdpreview.render()
+    before = preview_pixels().copy()
+    scene.kd_preview.ao_distance = 3.0
+    op = driver(KDPREVIEW_OT_render)
+    op.invoke(modal, None)
+    for _ in range(4):  # first event only shows the status, then build, then two trace steps
+        assert op.modal(modal, SimpleNamespace(type="TIMER", timer=op._timer)) == {"RUNNING_MODAL"}
+    assert op.modal(modal, SimpleNamespace(type="ESC", timer=None)) == {"CANCELLED"}
+    state = modal.window_manager.kd_preview_state
+    assert state.status.startswith("Cancelled") and not state.running and not pipeline.job_running()
+    assert op._timer is None
+    assert (preview_pixels() == before).all()
+
+
+def test_esc_during_animation_restores_the_frame(modal, tmp_path):
+    scene = half_plane_scene()
+    scene.frame_start, scene.frame_end, scene.frame_current = 1, 3, 7
+    scene.kd_preview.output_dir = str(tmp_path)
+    op = driver(KDPREVIEW_OT_render_animation)
+    op.invoke(modal, None)
+    while not (tmp_path / "frame_0001.png").exists():
+        assert op.modal(modal, SimpleNamespace(type="TIMER", timer=op._timer)) == {"RUNNING_MODAL"}
+    assert op.modal(modal, SimpleNamespace(type="ESC", timer=None)) == {"CANCELLED"}
+    assert scene.frame_current == 7
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["frame_0001.png"]  # no report for a cancelled run
+
+
+def test_modal_animation_runs_every_frame(modal, tmp_path):
+    scene = half_plane_scene()
+    scene.frame_start, scene.frame_end = 1, 2
+    scene.kd_preview.output_dir = str(tmp_path)
+    op = driver(KDPREVIEW_OT_render_animation)
+    op.invoke(modal, None)
+    result, statuses = timer_events(op, modal)
+    assert result == {"FINISHED"}
+    assert any(s.startswith("Frame 2 (2/2): Tracing") for s in statuses)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["frame_0001.png", "frame_0002.png", "report.json"]
+
+
+def test_modal_failure_is_reported_and_released(modal):
+    scene = half_plane_scene()
+    scene.kd_preview.mode = "shadow"
+    bpy.data.objects.remove(bpy.data.objects["Sun"])
+    op = driver(KDPREVIEW_OT_render)
+    op.invoke(modal, None)
+    result, _ = timer_events(op, modal)
+    assert result == {"CANCELLED"} and op._timer is None and not pipeline.job_running()
+    assert op.reports == [({"ERROR"}, op.reports[0][1])] and "needs a light" in op.reports[0][1]

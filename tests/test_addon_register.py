@@ -1,0 +1,137 @@
+"""Registration leaves nothing behind, enabling is light, the panel draws every statistic."""
+
+from __future__ import annotations
+
+import json
+from types import SimpleNamespace
+
+import pytest
+
+from tests.addon_support import REPO, run_python  # noqa: F401
+
+import bpy  # noqa: E402
+
+import kd_addon  # noqa: E402
+from kd_addon import cli, live_update, operators, panel, properties  # noqa: E402
+from tests import bpy_scenes as scenes  # noqa: E402
+
+CLASSES = properties.CLASSES + operators.CLASSES + panel.CLASSES
+
+
+def registered_names():
+    return {cls.__name__ for cls in CLASSES if cls.is_registered}
+
+
+def our_handlers():
+    return [h for h in bpy.app.handlers.frame_change_post if getattr(h, "__module__", "").endswith("live_update")]
+
+
+def test_register_unregister_twice_leaves_nothing():
+    scenes.reset()
+    for _ in range(2):
+        kd_addon.register()
+        assert registered_names() == {cls.__name__ for cls in CLASSES}
+        assert hasattr(bpy.types.Scene, "kd_preview") and hasattr(bpy.types.WindowManager, "kd_preview_state")
+        assert hasattr(bpy.ops.kdpreview, "render") and bpy.ops.kdpreview.render.poll() is not None
+        assert len(our_handlers()) == 1 and cli._handle is not None
+        kd_addon.unregister()
+        assert registered_names() == set()
+        assert not hasattr(bpy.types.Scene, "kd_preview")
+        assert not hasattr(bpy.types.WindowManager, "kd_preview_state")
+        assert our_handlers() == [] and cli._handle is None
+        assert not bpy.app.timers.is_registered(live_update.kd_preview_frame_change)
+
+
+def test_handler_never_stacks():
+    live_update.register()
+    live_update.register()
+    try:
+        assert len(our_handlers()) == 1
+    finally:
+        live_update.unregister()
+    assert our_handlers() == []
+
+
+def test_enabling_does_not_import_numba_or_core():
+    """Enabling must be instant: numba, llvmlite and core load on the first render only."""
+    code = ("import sys, bpy, kd_addon; kd_addon.register(); "
+            "bad = [m for m in ('numba', 'llvmlite', 'core') if m in sys.modules]; "
+            "kd_addon.unregister(); print(bad); sys.exit(1 if bad else 0)")
+    proc = run_python(code)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+def test_root_package_registers_the_addon(tmp_path):
+    """The repo root is the extension package (installed as bl_ext.<repo>.kd_preview): importing it
+    as a package registers the add-on, and kd_addon finds core as its sibling, not top-level."""
+    (tmp_path / "kd_preview").symlink_to(REPO, target_is_directory=True)
+    code = ("import sys, bpy; sys.path.insert(0, {!r}); import kd_preview; "
+            "kd_preview.register(); assert hasattr(bpy.types.Scene, 'kd_preview'); kd_preview.unregister(); "
+            "assert not hasattr(bpy.types.Scene, 'kd_preview'); "
+            "from kd_preview.kd_addon import corelib; "
+            "assert corelib.core_module_name() == 'kd_preview.core', corelib.core_module_name(); "
+            "assert corelib.extension_package('bl_ext.user_default.kd_preview.kd_addon') == "
+            "'bl_ext.user_default.kd_preview'; print('ok')").format(str(tmp_path))
+    proc = run_python(code, cwd=tmp_path)
+    assert proc.returncode == 0 and "ok" in proc.stdout, proc.stdout + proc.stderr
+
+
+class RecordingLayout:
+    """Stands in for bpy's UILayout (which only exists while Blender draws): records the text."""
+
+    def __init__(self, texts):
+        self.texts = texts
+
+    def __getattr__(self, name):
+        def call(*args, **kwargs):
+            if "text" in kwargs:
+                self.texts.append(kwargs["text"])
+            return RecordingLayout(self.texts)
+        return call
+
+    def __setattr__(self, name, value):
+        if name == "texts":
+            object.__setattr__(self, name, value)
+
+
+def draw_texts(panel_cls, context):
+    texts = []
+    panel_cls.draw(SimpleNamespace(layout=RecordingLayout(texts)), context)
+    return texts
+
+
+def test_panels_draw_settings_status_and_last_run():
+    scenes.reset()
+    kd_addon.register()
+    try:
+        context = bpy.context
+        state = context.window_manager.kd_preview_state
+        assert draw_texts(panel.KDPREVIEW_PT_last_run, context) == ["No run yet"]
+        state.set_last_run({"frame": 1, "width": 64, "height": 32, "triangles": 1234, "objects": 3, "lights": 1,
+                            "extract_ms": 1.5, "build_ms": 2.5, "trace_ms": 30.0, "total_ms": 35.0,
+                            "rays": 99999, "mrays_per_s": 3.3, "first_run": True, "warnings": ["camera shift"],
+                            "tree": {"nodes": 7, "leaves": 4, "empty_leaves": 1, "max_depth": 3,
+                                     "sah_cost": 12.5, "references_per_triangle": 1.25}})
+        texts = draw_texts(panel.KDPREVIEW_PT_last_run, context)
+        for expected in ("1,234", "64 x 32", "2.5 ms", "35.0 ms", "99,999", "3.30 Mrays/s", "7", "12.50", "1.25",
+                         "camera shift", "Includes kernel compile / cache load"):
+            assert expected in texts, expected
+        state.running, state.status, state.progress = True, "Compiling kernels (first run)…", 0.0
+        assert "Compiling kernels (first run)…" in draw_texts(panel.KDPREVIEW_PT_panel, context)
+        for cls in (panel.KDPREVIEW_PT_tree, panel.KDPREVIEW_PT_output):
+            draw_texts(cls, context)
+        assert json.loads(state.last_run)["triangles"] == 1234
+    finally:
+        kd_addon.unregister()
+
+
+def test_cli_command_registration_round_trip():
+    cli.register()
+    first = cli._handle
+    cli.register()  # re-registering replaces, never duplicates
+    assert cli._handle is not None and cli._handle is not first
+    cli.unregister()
+    cli.unregister()
+    assert cli._handle is None
+    with pytest.raises(ValueError):
+        bpy.utils.unregister_cli_command(first)

@@ -1,0 +1,201 @@
+"""Operators, pipeline and live update in background mode, on scenes with a known answer.
+
+half_plane_scene: an orthographic camera sees a plane over exactly the left half of the image
+(x in [-4, 0] of an 8 x 4 view) with a 1 x 1 x 1 cube standing on it, so the hit mask and the
+places where AO must be 1 (open plane, cube top) or below 1 (plane next to the cube) are known.
+"""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from tests.addon_support import addon, half_plane_scene, preview_pixels  # noqa: F401
+
+import bpy  # noqa: E402
+import numpy as np  # noqa: E402
+
+from kd_addon import live_update, pipeline  # noqa: E402
+from kd_addon.config import make_config  # noqa: E402
+from kd_addon.errors import Cancelled, PreviewError  # noqa: E402
+from kd_addon.output import IMAGE_NAME  # noqa: E402
+
+
+def column_of(x, width=64):
+    """Pixel column whose centre is at world x (view x in [-4, 4])."""
+    return int((x + 4.0) / 8.0 * width)
+
+
+def check_half_plane_image(img):
+    """Alpha exactly on the left half; AO in [0, 1]; 1 on open ground and on the cube's top."""
+    assert img.shape == (32, 64, 4) and img.dtype == np.float32
+    assert (img[:, :32, 3] == 1.0).all() and (img[:, 32:, 3] == 0.0).all()
+    assert (img[:, 32:, :3] == 0.0).all()
+    ao = img[:, :32, 0]
+    assert (ao >= 0.0).all() and (ao <= 1.0).all()
+    assert (img[..., 0] == img[..., 1]).all() and (img[..., 1] == img[..., 2]).all()  # grey AO
+    assert ao[16, column_of(-3.9)] == 1.0  # ground 1.4 from the cube: nothing within ao_distance 1
+    assert ao[16, column_of(-2.0)] == 1.0  # centre of the cube's top face
+    assert ao[16, column_of(-2.6)] < 0.9  # ground right beside the cube's wall
+
+
+def test_render_operator_fills_the_preview_image(addon):  # noqa: F811
+    half_plane_scene()
+    assert bpy.ops.kdpreview.render() == {"FINISHED"}
+    check_half_plane_image(preview_pixels())
+    image = bpy.data.images[IMAGE_NAME]
+    assert image.is_float and tuple(image.size) == (64, 32)
+    state = bpy.context.window_manager.kd_preview_state
+    last = json.loads(state.last_run)
+    assert (last["triangles"], last["objects"], last["lights"], last["samples"]) == (14, 2, 1, 8)
+    assert last["rays"] > 64 * 32 and last["tree"]["nodes"] >= 1 and last["tree"]["sah_cost"] > 0
+    assert not state.running and state.status.startswith("KD Preview: 64x32")
+
+
+def test_invoke_in_background_runs_synchronously(addon):  # noqa: F811
+    half_plane_scene()
+    assert bpy.ops.kdpreview.render("INVOKE_DEFAULT") == {"FINISHED"}
+    check_half_plane_image(preview_pixels())
+
+
+def test_far_from_origin_gives_the_same_image(addon):  # noqa: F811
+    """Tracing relative to the camera: 100 km away the image matches the one at the origin."""
+    half_plane_scene()
+    bpy.ops.kdpreview.render()
+    near = preview_pixels()
+    scenes_root = bpy.context.scene.collection
+    for obj in scenes_root.objects:
+        obj.location = obj.location + type(obj.location)((1e5, -1e5, 1e4))
+    bpy.ops.kdpreview.render()
+    far = preview_pixels()
+    assert (near[..., 3] == far[..., 3]).all()
+    assert np.abs(near - far).max() < 1e-5
+
+
+def test_modes_with_lights(addon):  # noqa: F811
+    scene = half_plane_scene()
+    for mode in ("shadow", "ao+shadow"):
+        scene.kd_preview.mode = mode
+        assert bpy.ops.kdpreview.render() == {"FINISHED"}
+        img = preview_pixels()
+        assert (img[:, :32, 3] == 1.0).all() and (img[..., :3] >= 0).all() and (img[..., :3] <= 1).all()
+        assert img[16, column_of(-3.9), 0] > 0.5  # lit open ground
+
+
+def test_errors_leave_the_previous_image_and_report(addon):  # noqa: F811
+    scene = half_plane_scene()
+    bpy.ops.kdpreview.render()
+    before = preview_pixels().copy()
+    camera, scene.camera = scene.camera, None
+    with pytest.raises(RuntimeError, match="has no active camera"):
+        bpy.ops.kdpreview.render()
+    scene.camera = camera
+    scene.kd_preview.mode = "shadow"
+    bpy.data.objects.remove(bpy.data.objects["Sun"])
+    with pytest.raises(RuntimeError, match="needs a light"):
+        bpy.ops.kdpreview.render()
+    state = bpy.context.window_manager.kd_preview_state
+    assert state.status.startswith("Error: mode 'shadow' needs a light") and not state.running
+    assert (preview_pixels() == before).all()
+
+
+def test_nothing_renderable_and_zero_size_are_named(addon):  # noqa: F811
+    scene = half_plane_scene()
+    for obj in ("Ground", "Box"):
+        bpy.data.objects[obj].hide_render = True
+    with pytest.raises(PreviewError, match="nothing to render at frame 1"):
+        pipeline.render_frame(scene, bpy.context.evaluated_depsgraph_get(), make_config(scene.kd_preview))
+    scene.render.resolution_x = 4
+    scene.kd_preview.resolution_percentage = 10
+    with pytest.raises(PreviewError, match="would be 0x3 pixels"):
+        pipeline.render_frame(scene, bpy.context.evaluated_depsgraph_get(), make_config(scene.kd_preview))
+
+
+def test_cancel_callback_leaves_previous_image(addon):  # noqa: F811
+    """A cancel after the tree is built (between trace steps) raises Cancelled; nothing is written."""
+    scene = half_plane_scene()
+    bpy.ops.kdpreview.render()
+    before = preview_pixels().copy()
+    scene.kd_preview.ao_distance = 3.0  # would change the image
+    calls, fractions = [], []
+    cancel = lambda: len(calls) >= 3 or calls.append(1)  # noqa: E731  (False twice, then True)
+    with pytest.raises(Cancelled):
+        pipeline.render_frame(scene, bpy.context.evaluated_depsgraph_get(), make_config(scene.kd_preview),
+                              cancel=cancel, progress=lambda f, s: fractions.append(f))
+    assert 0 < len(fractions) < 8 and fractions == sorted(fractions)
+    assert (preview_pixels() == before).all() and not pipeline.job_running()
+
+
+def test_one_job_at_a_time(addon):  # noqa: F811
+    half_plane_scene()
+    token = object()
+    pipeline.claim(token)
+    try:
+        with pytest.raises(RuntimeError, match="already running"):
+            bpy.ops.kdpreview.render()
+    finally:
+        pipeline.release(token)
+    assert bpy.ops.kdpreview.render() == {"FINISHED"}
+
+
+def test_animation_writes_frames_and_report(addon, tmp_path):  # noqa: F811
+    scene = half_plane_scene()
+    box = bpy.data.objects["Box"]
+    box.keyframe_insert("location", frame=1)
+    box.location.x = -1.0
+    box.keyframe_insert("location", frame=3)
+    scene.frame_start, scene.frame_end, scene.frame_current = 1, 3, 2
+    scene.kd_preview.output_dir = str(tmp_path / "seq")
+    scene.kd_preview.output_format = "OPEN_EXR"
+    assert bpy.ops.kdpreview.render_animation() == {"FINISHED"}
+    assert scene.frame_current == 2  # put back
+    names = sorted(p.name for p in (tmp_path / "seq").iterdir())
+    assert names == ["frame_0001.exr", "frame_0002.exr", "frame_0003.exr", "report.json"]
+    report = json.loads((tmp_path / "seq" / "report.json").read_text())
+    assert [row["frame"] for row in report["frames"]] == [1, 2, 3]
+    for row in report["frames"]:
+        for key in ("triangles", "objects", "extract_ms", "build_ms", "trace_ms", "total_ms", "rays",
+                    "mrays_per_s", "tree", "file"):
+            assert key in row, key
+        assert row["total_ms"] >= row["extract_ms"] + row["build_ms"] + row["trace_ms"]
+    assert report["settings"]["output_format"] == "OPEN_EXR" and report["resolution"] == [64, 32]
+    assert report["totals"]["frames"] == 3 and report["totals"]["rays"] == sum(r["rays"] for r in report["frames"])
+    exr = bpy.data.images.load(str(tmp_path / "seq" / "frame_0003.exr"))
+    pixels = np.empty(64 * 32 * 4, np.float32)
+    exr.pixels.foreach_get(pixels)
+    img = pixels.reshape(32, 64, 4)[::-1]
+    assert (img[:, :32, 3] == 1.0).all() and (img[:, 32:, 3] == 0.0).all()
+    assert img[16, column_of(-1.0), 0] == pytest.approx(1.0, abs=1e-3)  # box moved to x = -1: its top is open
+
+
+def test_animation_needs_a_saved_file_for_relative_output(addon):  # noqa: F811
+    half_plane_scene()
+    with pytest.raises(RuntimeError, match="relative to the .blend file, which is not saved"):
+        bpy.ops.kdpreview.render_animation()
+
+
+def test_live_update_renders_on_frame_change_only_when_enabled(addon):  # noqa: F811
+    scene = half_plane_scene()
+    scene.frame_set(2)
+    assert IMAGE_NAME not in bpy.data.images
+    scene.kd_preview.live_update = True
+    scene.frame_set(3)
+    check_half_plane_image(preview_pixels())
+    assert json.loads(bpy.context.window_manager.kd_preview_state.last_run)["frame"] == 3
+    handlers = [h for h in bpy.app.handlers.frame_change_post if h.__name__ == "kd_preview_frame_change"]
+    assert handlers == [live_update.kd_preview_frame_change]
+
+
+def test_preview_image_is_resized_in_place_and_shown_in_an_image_editor(addon):  # noqa: F811
+    scene = half_plane_scene()
+    area = bpy.context.window.screen.areas[0]
+    area.type = "IMAGE_EDITOR"
+    bpy.ops.kdpreview.render()
+    image = bpy.data.images[IMAGE_NAME]
+    assert area.spaces.active.image == image
+    scene.kd_preview.resolution_percentage = 50
+    bpy.ops.kdpreview.render()
+    assert bpy.data.images[IMAGE_NAME] == image and tuple(image.size) == (32, 16)
+    img = preview_pixels()
+    assert (img[:, :16, 3] == 1.0).all() and (img[:, 16:, 3] == 0.0).all()

@@ -1,0 +1,162 @@
+"""Camera and light conversion against analytic values and against Blender's own camera frame."""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import pytest
+
+from tests.addon_support import add_top_camera
+
+import bpy  # noqa: E402
+import numpy as np  # noqa: E402
+
+from kd_addon import scene_input  # noqa: E402
+from kd_addon.errors import PreviewError  # noqa: E402
+from tests import bpy_scenes as scenes  # noqa: E402
+
+
+@pytest.fixture
+def scene():
+    return scenes.reset()
+
+
+def camera_data(**kw):
+    base = dict(type="PERSP", lens=50.0, sensor_width=36.0, sensor_height=24.0, sensor_fit="AUTO",
+                ortho_scale=6.0, shift_x=0.0, shift_y=0.0, clip_start=0.1, clip_end=100.0)
+    return SimpleNamespace(**dict(base, **kw))
+
+
+@pytest.mark.parametrize("fit, width, height, expected_tan_half", [
+    ("AUTO", 200, 100, 18 / 50),               # larger (x) gets the sensor width
+    ("AUTO", 100, 200, 18 / 50),               # larger (y) gets the sensor width too
+    ("HORIZONTAL", 200, 100, 18 / 50),         # x is fitted and is the larger side
+    ("HORIZONTAL", 100, 200, 18 / 50 * 2),     # x fitted, y twice as long
+    ("VERTICAL", 100, 200, 12 / 50),           # y fitted to the sensor height and larger
+    ("VERTICAL", 200, 100, 12 / 50 * 2),       # y fitted, x twice as long
+])
+def test_perspective_fov_along_larger_side(fit, width, height, expected_tan_half):
+    fov = scene_input.perspective_fov(50.0, 36.0, 24.0, fit, width, height)
+    assert math.tan(fov / 2) == pytest.approx(expected_tan_half, rel=1e-12)
+
+
+def test_auto_fit_fov_equals_blenders_angle(scene):
+    cam = scenes.add_camera()
+    cam.data.lens = 35.0
+    fov = scene_input.perspective_fov(cam.data.lens, cam.data.sensor_width, cam.data.sensor_height, "AUTO", 640, 480)
+    assert fov == pytest.approx(cam.data.angle, rel=1e-6)
+
+
+@pytest.mark.parametrize("kind", ["PERSP", "ORTHO"])
+@pytest.mark.parametrize("fit", ["AUTO", "HORIZONTAL", "VERTICAL"])
+@pytest.mark.parametrize("size", [(160, 90), (90, 160), (100, 100)])
+def test_view_extent_matches_blender_view_frame(scene, kind, fit, size):
+    """Camera.view_frame gives the corners of Blender's own image plane (at z = -1 for perspective)."""
+    cam = scenes.add_camera()
+    cam.data.type, cam.data.sensor_fit, cam.data.lens, cam.data.ortho_scale = kind, fit, 28.0, 7.0
+    scene.render.resolution_x, scene.render.resolution_y = size
+    corners = np.array([tuple(v) for v in cam.data.view_frame(scene=scene)])
+    half_x, half_y = np.abs(corners[:, 0]).max(), np.abs(corners[:, 1]).max()
+    depth = np.abs(corners[:, 2]).max() if kind == "PERSP" else 1.0
+    larger_half = (half_x if size[0] >= size[1] else half_y) / depth
+    converted, _ = scene_input.camera_input(cam.data, cam.matrix_world, *size)
+    if kind == "PERSP":
+        assert math.tan(converted.fov / 2) == pytest.approx(larger_half, rel=1e-5)
+        assert converted.ortho_scale is None
+    else:
+        assert converted.ortho_scale / 2 == pytest.approx(larger_half, rel=1e-5)
+        assert converted.fov is None
+
+
+def test_camera_matrix_drops_scale_and_keeps_clip(scene):
+    data = camera_data(clip_start=0.5, clip_end=40.0)
+    matrix = np.diag([2.0, 3.0, 4.0, 1.0])
+    matrix[:3, 3] = (1e5, -2e5, 3.0)
+    cam, warnings = scene_input.camera_input(data, matrix, 64, 32)
+    np.testing.assert_allclose(cam.matrix_world[:3, :3], np.eye(3))
+    np.testing.assert_array_equal(cam.position, (1e5, -2e5, 3.0))
+    assert (cam.clip_start, cam.clip_end, warnings) == (0.5, 40.0, [])
+
+
+def test_camera_problems_are_named():
+    with pytest.raises(PreviewError, match="panoramic cameras are not supported"):
+        scene_input.camera_input(camera_data(type="PANO"), np.eye(4), 10, 10)
+    _, warnings = scene_input.camera_input(camera_data(shift_x=0.1), np.eye(4), 10, 10)
+    assert warnings == ["camera shift is ignored by the preview"]
+    with pytest.raises(PreviewError, match="degenerate"):
+        scene_input.camera_input(camera_data(), np.diag([0.0, 1.0, 1.0, 1.0]), 10, 10)
+
+
+def test_no_scene_camera_is_named(scene):
+    with pytest.raises(PreviewError, match="has no active camera"):
+        scene_input.read_camera(scene, bpy.context.evaluated_depsgraph_get(), 10, 10)
+
+
+def light_object(kind, name=None, **data):
+    name = name or kind.title()
+    obj = scenes.link(bpy.data.objects.new(name, bpy.data.lights.new(name, kind)))
+    for key, value in data.items():
+        setattr(obj.data, key, value)
+    return obj
+
+
+def test_lights_convert_with_analytic_directions(scene):
+    point = light_object("POINT", energy=250.0, shadow_soft_size=0.4, color=(1.0, 0.5, 0.25))
+    point.location = (1, 2, 3)
+    sun = light_object("SUN", energy=4.0, angle=0.1)
+    sun.rotation_euler = (math.pi / 2, 0.0, 0.0)  # -Z turned about X by 90 degrees -> +Y
+    sun.scale = (3.0, 3.0, 3.0)  # scale must not change the unit direction
+    spot = light_object("SPOT", energy=900.0, spot_size=0.8, spot_blend=0.3, shadow_soft_size=0.0)
+    spot.location = (0, 0, 5)
+    area = light_object("AREA", energy=50.0, shape="RECTANGLE", size=2.0, size_y=0.5)
+    area.location = (4, 0, 2)
+    disk = light_object("AREA", name="Disk", shape="DISK", size=1.5)
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    lights = {light.name: light for light in scene_input.read_lights(depsgraph)}
+    assert set(lights) == {"Point", "Sun", "Spot", "Area", "Disk"}
+    p = lights["Point"].keywords
+    assert lights["Point"].kind == "point" and p["radius"] == pytest.approx(0.4) and p["power"] == 250.0
+    np.testing.assert_allclose(p["position"], (1, 2, 3))
+    assert p["color"] == pytest.approx((1.0, 0.5, 0.25))
+    s = lights["Sun"].keywords
+    np.testing.assert_allclose(s["direction"], (0, 1, 0), atol=1e-6)
+    assert (s["angle"], s["strength"]) == (pytest.approx(0.1), 4.0)
+    sp = lights["Spot"].keywords
+    np.testing.assert_allclose(sp["direction"], (0, 0, -1), atol=1e-7)
+    assert (sp["spot_size"], sp["spot_blend"]) == (pytest.approx(0.8), pytest.approx(0.3))
+    a = lights["Area"].keywords
+    assert (a["shape"], a["size"], a["size_y"], a["power"]) == ("RECTANGLE", 2.0, 0.5, 50.0)
+    np.testing.assert_allclose(a["matrix_world"][:3, 3], (4, 0, 2))
+    assert lights["Disk"].keywords["size_y"] is None
+
+
+def test_render_hidden_lights_are_left_out(scene):
+    light_object("POINT", name="Shown")
+    light_object("POINT", name="Hidden").hide_render = True
+    hidden_coll = scenes.new_collection("Off")
+    hidden_coll.hide_render = True
+    scenes.link(bpy.data.objects.new("InOff", bpy.data.lights.new("InOff", "SUN")), hidden_coll)
+    names = [light.name for light in scene_input.read_lights(bpy.context.evaluated_depsgraph_get())]
+    assert names == ["Shown"]
+
+
+def test_lights_are_accepted_by_core(scene):
+    import core
+
+    for kind in ("POINT", "SUN", "SPOT", "AREA"):
+        light_object(kind)
+    for light in scene_input.read_lights(bpy.context.evaluated_depsgraph_get()):
+        getattr(core.Light, light.kind)(**light.keywords).translated(np.ones(3))
+
+
+def test_read_scene_uses_the_evaluated_camera(scene):
+    cam = add_top_camera(location=(0, 0, 5), lens=50.0)
+    cam.data.lens = 25.0
+    cam.data.keyframe_insert("lens", frame=1)
+    cam.data.lens = 100.0
+    cam.data.keyframe_insert("lens", frame=10)
+    scene.frame_set(10)
+    inputs = scene_input.read_scene(scene, bpy.context.evaluated_depsgraph_get(), 100, 50)
+    assert math.tan(inputs.camera.fov / 2) == pytest.approx(18 / 100, rel=1e-6)
+    assert inputs.lights == [] and inputs.warnings == []
