@@ -5,6 +5,8 @@ true or raise a ValueError that names the first bad index.
 """
 import numpy as np
 
+MIN_DIRECTION = 1e-20  # largest direction component allowed below this is rejected (see as_rays)
+
 
 def as_triangles(triangles):
     """Triangles as a C-contiguous (N, 3, 3) float32 array of finite vertex positions."""
@@ -29,6 +31,13 @@ def as_rays(origins, directions):
     zero = ~(d != 0.0).any(axis=1)
     if zero.any():
         raise ValueError(f"ray {int(np.flatnonzero(zero)[0])} has a zero direction vector")
+    # t is in units of the direction and returned as float32: a direction this short would put
+    # hits at t beyond float32's range (found by hypothesis with subnormal directions).
+    short = np.abs(d).max(axis=1) < MIN_DIRECTION
+    if short.any():
+        bad = int(np.flatnonzero(short)[0])
+        raise ValueError(f"ray {bad} has a direction too short to trace ({d[bad].tolist()}, every component "
+                         f"below {MIN_DIRECTION:g}): normalise it")
     return o, d
 
 

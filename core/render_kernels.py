@@ -36,7 +36,7 @@ def _sample_pixel(tree, points, normals, pixels, i, first, count, mode, ao_dista
     """All of one pixel's new samples (kept out of the parallel loop body: Numba's parfor analysis
     does not cope with the inlined tuple code of the samplers)."""
     stack_node = np.empty(STACK_SIZE, np.int32)
-    stack_t = np.empty((STACK_SIZE, 2))
+    stack_t = np.empty((STACK_SIZE, 3))
     inv = np.empty(3)
     origin = np.empty(3)
     direction = np.empty(3)

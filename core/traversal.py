@@ -7,7 +7,8 @@ lies inside the interval of the leaf just finished, since everything still on th
 
 Robustness without NaN paths:
 - A zero direction component (either sign of zero) never divides: the ray stays on its origin's side,
-  and a ray lying in the plane visits both children.
+  and a ray lying in the plane visits both children. Both then cover the same interval, so the
+  closest-hit stop test uses a separate exit bound that such a sibling caps at the interval's start.
 - A ray starting on a plane goes to the side its direction points to.
 - Interval tests are widened by a relative 1e-9 (float64 errors are ~1e-16), so a ray grazing a node
   corner or an edge on a split plane visits every cell that might own the hit.
@@ -60,12 +61,12 @@ def trace_ray(tree, o, d, tmin, tmax, any_hit, stack_node, stack_t, inv):
         return np.inf, -1, 0.0, 0.0
     kx, ky, kz, sx, sy, sz = ray_shear(d)
     best_t, best_prim, best_u, best_v = tmax, -1, 0.0, 0.0
-    node, sp = 0, 0
+    node, sp, t_exit = 0, 0, t1
     while True:
         a = axis[node]
         if a != LEAF:
-            node, t1, sp = _descend(node, a, split[node], child[node], o[a], d[a], inv[a], t0, t1,
-                                    stack_node, stack_t, sp)
+            node, t1, t_exit, sp = _descend(node, a, split[node], child[node], o[a], d[a], inv[a], t0, t1,
+                                            t_exit, stack_node, stack_t, sp)
             continue
         first = child[node]
         for j in range(first, first + count[node]):
@@ -75,12 +76,12 @@ def trace_ray(tree, o, d, tmin, tmax, any_hit, stack_node, stack_t, inv):
                 best_t, best_prim, best_u, best_v = t, prim, u, v
                 if any_hit:
                     return best_t, best_prim, best_u, best_v
-        if best_prim >= 0 and best_t <= t1:  # no slack: stopping late is safe, early is not
+        if best_prim >= 0 and best_t <= t_exit:  # no slack: stopping late is safe, early is not
             break
         if sp == 0:
             break
         sp -= 1
-        node, t0, t1 = stack_node[sp], stack_t[sp, 0], stack_t[sp, 1]
+        node, t0, t1, t_exit = stack_node[sp], stack_t[sp, 0], stack_t[sp, 1], stack_t[sp, 2]
         if best_prim >= 0 and best_t < t0 - _slack(t0):
             break
     if best_prim < 0:
@@ -89,29 +90,37 @@ def trace_ray(tree, o, d, tmin, tmax, any_hit, stack_node, stack_t, inv):
 
 
 @njit(cache=True, inline="always")
-def _descend(node, a, pos, left, oa, da, inv_a, t0, t1, stack_node, stack_t, sp):
-    """Step into an inner node: (next node, its t1, stack size), pushing the far child if needed."""
+def _descend(node, a, pos, left, oa, da, inv_a, t0, t1, t_exit, stack_node, stack_t, sp):
+    """Step into an inner node: (next node, its t1, its exit bound, stack size), pushing the far child.
+
+    t_exit bounds where a closest hit lets the search stop: everything still on the stack starts at
+    or after it. A ray lying in the plane pushes a sibling covering the same interval, so below it the
+    bound drops to t0.
+    """
     if da == 0.0:
         if oa < pos:
-            return left, t1, sp
+            return left, t1, t_exit, sp
         if oa > pos:
-            return left + 1, t1, sp
-        return left, t1, _push(stack_node, stack_t, sp, left + 1, t0, t1)
+            return left + 1, t1, t_exit, sp
+        sp = _push(stack_node, stack_t, sp, left + 1, t0, t1, t_exit)
+        return left, t1, min(t_exit, t0), sp
     near, far = (left, left + 1) if (oa < pos or (oa == pos and da < 0.0)) else (left + 1, left)
     ts = (pos - oa) * inv_a
     if ts <= 0.0 or ts > t1 + _slack(ts):
-        return near, t1, sp
+        return near, t1, t_exit, sp
     if ts < t0 - _slack(ts):
-        return far, t1, sp
+        return far, t1, t_exit, sp
     ts = min(max(ts, t0), t1)
-    return near, ts, _push(stack_node, stack_t, sp, far, ts, t1)
+    sp = _push(stack_node, stack_t, sp, far, ts, t1, t_exit)
+    return near, ts, min(t_exit, ts), sp
 
 
 @njit(cache=True, inline="always")
-def _push(stack_node, stack_t, sp, node, t0, t1):
+def _push(stack_node, stack_t, sp, node, t0, t1, t_exit):
     stack_node[sp] = node
     stack_t[sp, 0] = t0
     stack_t[sp, 1] = t1
+    stack_t[sp, 2] = t_exit
     return sp + 1
 
 
@@ -122,7 +131,7 @@ def trace_rays(tree, origins, directions, tmin, tmax, any_hit, out_t, out_prim, 
     n_blocks = (n + RAYS_PER_TASK - 1) // RAYS_PER_TASK
     for b in prange(n_blocks):
         stack_node = np.empty(STACK_SIZE, np.int32)
-        stack_t = np.empty((STACK_SIZE, 2))
+        stack_t = np.empty((STACK_SIZE, 3))
         inv = np.empty(3)
         for r in range(b * RAYS_PER_TASK, min(n, (b + 1) * RAYS_PER_TASK)):
             t, prim, u, v = trace_ray(tree, origins[r], directions[r], tmin[r], tmax[r], any_hit,

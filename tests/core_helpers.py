@@ -22,7 +22,8 @@ def assert_same_as_brute(tree, tris, origins, directions, tmin=0.0, tmax=np.inf)
     hit = prim >= 0
     missed = np.flatnonzero((hits.prim >= 0) != hit)
     assert len(missed) == 0, f"{len(missed)} rays disagree on hit/miss, first {missed[:5]}"
-    np.testing.assert_allclose(hits.t[hit], t[hit], rtol=1e-6)
+    # t is float32 by contract: compare at that precision (a t of 1e-46 is 0 in float32)
+    np.testing.assert_allclose(hits.t[hit], t[hit].astype(np.float32), rtol=1e-6)
     assert np.all(np.isinf(hits.t[~hit])) and np.all(hits.prim[~hit] == -1)
     np.testing.assert_array_equal(core.occluded(tree, origins, directions, tmin, tmax), hit)
     return hits

@@ -36,7 +36,7 @@ def scenes(draw):
     origins = np.array(draw(st.lists(coordinate, min_size=3 * m, max_size=3 * m))).reshape(m, 3)
     directions = np.array(draw(st.lists(st.one_of(st.sampled_from([0.0, -0.0, 1.0, -1.0]), free),
                                         min_size=3 * m, max_size=3 * m))).reshape(m, 3)
-    directions[~(directions != 0).any(axis=1)] = [0.0, 0.0, 1.0]
+    directions[np.abs(directions).max(axis=1) < 1e-20] = [0.0, 0.0, 1.0]  # zero or too short: rejected
     return tris, origins, directions
 
 

@@ -57,6 +57,13 @@ def test_zero_direction_is_named(tree):
         core.intersect(tree, np.zeros((4, 3)), d)
 
 
+def test_too_short_direction_is_named(tree):
+    d = np.ones((4, 3))
+    d[1] = [1e-45, 0.0, -1e-30]
+    with pytest.raises(ValueError, match="ray 1 has a direction too short"):
+        core.occluded(tree, np.zeros((4, 3)), d)
+
+
 @pytest.mark.parametrize("o_shape, d_shape", [((5,), (5,)), ((5, 2), (5, 2)), ((5, 3), (4, 3))])
 def test_ray_shapes(tree, o_shape, d_shape):
     with pytest.raises(ValueError, match=r"\(R, 3\)"):

@@ -134,3 +134,16 @@ def test_only_degenerate_triangles_give_empty_tree():
     tris = np.zeros((5, 3, 3), np.float32)
     tree = core.build_kdtree(tris)
     assert not core.occluded(tree, np.full((3, 3), -1.0), np.ones((3, 3))).any()
+
+
+@pytest.mark.parametrize("options", BUILDERS)
+def test_ray_lying_in_split_plane_finds_closest_hit_in_either_child(options):
+    """Found by hypothesis: a ray in the plane z=0 visits both children, which cover the same interval;
+    a hit in the first must not stop the search before the closer one in the second."""
+    tris = np.zeros((46, 3, 3))
+    tris[0] = [[0.5, -0.5, 0], [0, 0.5, 0], [0, 0, 0.5]]
+    tris[1] = [[0.5, 0, 0], [0, 0, 0], [0, 0, 0.5]]
+    tris[23] = [[0.5, 0, 0.5], [0, -0.5, 0], [0, 0, -1.0]]
+    tree = core.build_kdtree(tris, leaf_size=1, **options)
+    hits = assert_same_as_brute(tree, tris, np.zeros((2, 3)), np.array([[1.0, 0, 0], [0, 0, 1.0]]))
+    assert hits.t[0] == np.float32(0.25) and hits.prim[0] == 0
