@@ -4,4 +4,4 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
-exec .venv/bin/python -m kd_addon render --frames 1-24 --out out/demo "$@"
+exec .venv/bin/python -m kd_addon render --frames 1-24 --out out/demo --mode ao+shadow "$@"
