@@ -230,12 +230,5 @@ def output_folder(path: str) -> Path:
 
 CLASSES = (KDPREVIEW_OT_render, KDPREVIEW_OT_render_animation)
 
-
-def register():
-    for cls in CLASSES:
-        bpy.utils.register_class(cls)
-
-
-def unregister():
-    for cls in reversed(CLASSES):
-        bpy.utils.unregister_class(cls)
+# Registers in order and unregisters in reverse.
+register, unregister = bpy.utils.register_classes_factory(CLASSES)

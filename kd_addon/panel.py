@@ -38,14 +38,23 @@ def _rows(layout, values: dict, rows) -> None:
             grid.label(text=fmt.format(values[key]))
 
 
-class KDPREVIEW_PT_panel(bpy.types.Panel):
+class _SidebarTab:
+    """Where every KD Preview panel lives: the 3D viewport sidebar's "KD Preview" tab."""
+
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "KD Preview"
+
+
+class _SubPanel(_SidebarTab):
+    bl_parent_id = "KDPREVIEW_PT_panel"
+
+
+class KDPREVIEW_PT_panel(_SidebarTab, bpy.types.Panel):
     """Settings and the Render buttons."""
 
     bl_label = "KD Preview"
     bl_idname = "KDPREVIEW_PT_panel"
-    bl_space_type = "VIEW_3D"
-    bl_region_type = "UI"
-    bl_category = "KD Preview"
 
     def draw(self, context):
         settings, state = context.scene.kd_preview, run_state(context)
@@ -65,14 +74,10 @@ class KDPREVIEW_PT_panel(bpy.types.Panel):
             layout.label(text=state.status, icon="ERROR" if state.status.startswith("Error") else "NONE")
 
 
-class KDPREVIEW_PT_tree(bpy.types.Panel):
+class KDPREVIEW_PT_tree(_SubPanel, bpy.types.Panel):
     """kd-tree builder settings (collapsed: the defaults suit most scenes)."""
 
     bl_label = "kd-Tree"
-    bl_parent_id = "KDPREVIEW_PT_panel"
-    bl_space_type = "VIEW_3D"
-    bl_region_type = "UI"
-    bl_category = "KD Preview"
     bl_options = {"DEFAULT_CLOSED"}
 
     def draw(self, context):
@@ -82,14 +87,10 @@ class KDPREVIEW_PT_tree(bpy.types.Panel):
             self.layout.prop(settings, name)
 
 
-class KDPREVIEW_PT_output(bpy.types.Panel):
+class KDPREVIEW_PT_output(_SubPanel, bpy.types.Panel):
     """Where Render Animation writes."""
 
     bl_label = "Output"
-    bl_parent_id = "KDPREVIEW_PT_panel"
-    bl_space_type = "VIEW_3D"
-    bl_region_type = "UI"
-    bl_category = "KD Preview"
     bl_options = {"DEFAULT_CLOSED"}
 
     def draw(self, context):
@@ -99,14 +100,10 @@ class KDPREVIEW_PT_output(bpy.types.Panel):
         self.layout.prop(settings, "output_format")
 
 
-class KDPREVIEW_PT_last_run(bpy.types.Panel):
+class KDPREVIEW_PT_last_run(_SubPanel, bpy.types.Panel):
     """Timings and tree statistics of the last finished run."""
 
     bl_label = "Last Run"
-    bl_parent_id = "KDPREVIEW_PT_panel"
-    bl_space_type = "VIEW_3D"
-    bl_region_type = "UI"
-    bl_category = "KD Preview"
 
     def draw(self, context):
         last = run_state(context).last_run_dict()
@@ -127,12 +124,5 @@ class KDPREVIEW_PT_last_run(bpy.types.Panel):
 
 CLASSES = (KDPREVIEW_PT_panel, KDPREVIEW_PT_tree, KDPREVIEW_PT_output, KDPREVIEW_PT_last_run)
 
-
-def register():
-    for cls in CLASSES:
-        bpy.utils.register_class(cls)
-
-
-def unregister():
-    for cls in reversed(CLASSES):
-        bpy.utils.unregister_class(cls)
+# Registers in order and unregisters in reverse.
+register, unregister = bpy.utils.register_classes_factory(CLASSES)
