@@ -54,14 +54,14 @@ def rmse(img, ref):
     return float(np.sqrt(np.mean((img[..., 0][mask] - ref[..., 0][mask]) ** 2)))
 
 
-def timed_render(scene, camera, size, options, samples, sampler, ao_distance, runs):
+def timed_render(scene, camera, size, options, samples, sampler, ao_distance, runs, error_target=None):
     """Median time of build + render, and the image of the last run."""
     times = []
     for _ in range(runs):
         t = time.perf_counter()
         tree = core.build_kdtree(scene.triangles, **options)
         img = core.render_preview(tree, camera, size, size, samples=samples, sampler=sampler,
-                                  ao_distance=ao_distance)
+                                  ao_distance=ao_distance, error_target=error_target)
         times.append(time.perf_counter() - t)
     return float(np.median(times)), img
 
@@ -78,6 +78,13 @@ def sweep(scene, camera, ref, args):
                              "rmse": rmse(img, ref)})
                 print(f"  {rows[-1]['method']:>32} spp {spp:>4}: {seconds:8.3f} s  RMSE {rows[-1]['rmse']:.5f}",
                       flush=True)
+    for target in args.error_targets:  # adaptive: pixels stop once their standard error is below target
+        seconds, img = timed_render(scene, camera, args.size, {}, max(args.samples), "sobol", args.ao_distance,
+                                    args.runs, error_target=target)
+        rows.append({"method": "kd binned sobol adaptive", "samples": max(args.samples), "seconds": seconds,
+                     "rmse": rmse(img, ref), "error_target": target})
+        print(f"  {rows[-1]['method']:>32} target {target:g}: {seconds:8.3f} s  RMSE {rows[-1]['rmse']:.5f}",
+              flush=True)
     return rows
 
 
@@ -153,6 +160,8 @@ def main():
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--reference-samples", type=int, default=1024)
     ap.add_argument("--samples", default="1,2,4,8,16,32,64,128,256")
+    ap.add_argument("--error-targets", default="0.1,0.05,0.02",
+                    help="adaptive rows: at most max(--samples) samples, a pixel stops below this standard error")
     ap.add_argument("--ao-distance", type=float, default=1.0)
     ap.add_argument("--threads", type=int, default=2, help="Cycles' thread count (ours uses all cores)")
     ap.add_argument("--no-cycles", action="store_true")
@@ -160,6 +169,7 @@ def main():
     ap.add_argument("--out", default=str(HERE / "out"))
     args = ap.parse_args()
     args.samples = [int(s) for s in args.samples.split(",")]
+    args.error_targets = [float(s) for s in args.error_targets.split(",") if s]
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
 
@@ -195,7 +205,7 @@ def main():
             ratio = f"{ours / r['seconds']:.3f}" if ours else "out of our measured range"
             print(f"  Cycles {r['samples']:>4} spp (RMSE {r['rmse']:.4f}, {r['seconds']:.2f} s): {ratio}")
     with open(out / "render_sweep.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=["method", "samples", "seconds", "rmse"])
+        w = csv.DictWriter(f, fieldnames=["method", "samples", "seconds", "rmse", "error_target"])
         w.writeheader()
         w.writerows(rows)
     plot(rows, front, out / "render_rmse_vs_time.png")
