@@ -3,8 +3,8 @@
 The SAH cost is the expected cost of a random ray through the tree under the SAH's assumptions
 (seed 001 eq. 6): traversal_cost * sum over inner nodes of A(node)/A(root) + intersection_cost * sum
 over leaves of A(leaf)/A(root) * count. Empty leaves cost nothing but their traversal step.
-An unbuilt subtree of a lazy tree is costed as a leaf of its references (the most its eventual subtree
-can cost when cost_ratio <= 1, since every split it gets must beat that leaf).
+An unbuilt subtree of a lazy tree is costed as a leaf of its references: the cost of the tree as it
+stands, not a bound on the finished tree's.
 """
 import numpy as np
 from numba import njit
