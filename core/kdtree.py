@@ -63,8 +63,8 @@ class KdTree:
 
     def _compute_stats(self):
         o = self.options
-        sah, leaves, empty, depth, refs, _, _, unbuilt = walk_stats(self.axis, self.split, self.child, self.count,
-                                                           self.bounds, o.traversal_cost, o.intersection_cost)
+        sah, leaves, empty, depth, refs, _, _, unbuilt = walk_stats(
+            self.axis, self.split, self.child, self.count, self.bounds, o.traversal_cost, o.intersection_cost)
         n = len(self.triangles)
         nbytes = sum(a.nbytes for a in (self.axis, self.split, self.child, self.count, self.leaf_prims))
         return {
@@ -88,7 +88,7 @@ class KdTree:
     def _lazy_stats(self, unbuilt):
         if self.deferred is None:
             return {"lazy": False, "subtrees_total": 0, "subtrees_built": 0, "unbuilt_references": 0,
-                    "lazy_build_ms": 0.0, "lazy_rounds": 0}
+                    "lazy_build_ms": 0.0, "lazy_rounds": 0, "deferred_bytes": 0}
         lazy = self.deferred.stats()
         assert unbuilt == lazy["subtrees_total"] - lazy["subtrees_built"], "unbuilt nodes out of step"
         return lazy

@@ -56,7 +56,8 @@ class DeferredSubtrees:
         """The lazy fields of KdTree.stats() (see README, Build options)."""
         return {"lazy": True, "subtrees_total": self.total, "subtrees_built": int(self.built.sum()),
                 "unbuilt_references": int(np.diff(self.start)[~self.built].sum()),
-                "lazy_build_ms": self.build_ms, "lazy_rounds": self.rounds}
+                "lazy_build_ms": self.build_ms, "lazy_rounds": self.rounds,
+                "deferred_bytes": int(self.prims.nbytes + self.boxes.nbytes)}
 
     def select(self, requested):
         """The unbuilt subtrees to build for these requests: the requested ones and, if speculative,
@@ -83,6 +84,8 @@ def build_requested(tree, requested, threads=None):
         subtrees = build_subtrees(tree.triangles, deferred.tasks(ids), deferred.params, n_threads)
     tree.replace_nodes(splice_subtrees(tree.node_arrays, deferred.node[ids], subtrees))
     deferred.built[ids] = True
+    if deferred.built.all():  # nothing left to build: let the kept references go
+        deferred.prims, deferred.boxes = deferred.prims[:0], deferred.boxes[:0]
     deferred.rounds += 1
     deferred.build_ms += (perf_counter() - start) * 1e3
 

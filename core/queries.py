@@ -42,7 +42,8 @@ def _trace(tree, origins, directions, tmin, tmax, any_hit, threads):
         trace_rays(tree.arrays, o, d, lo, hi, any_hit, t, prim, u, v)
 
         def retrace(rays):  # rays that stopped at unbuilt subtrees, now built (lazy trees only)
-            out = [np.empty(len(rays)), np.empty(len(rays), np.int32), np.empty(len(rays)), np.empty(len(rays))]
+            m = len(rays)
+            out = [np.empty(m), np.empty(m, np.int32), np.empty(m), np.empty(m)]
             trace_rays(tree.arrays, o[rays], d[rays], lo[rays], hi[rays], any_hit, *out)
             t[rays], prim[rays], u[rays], v[rays] = out
 

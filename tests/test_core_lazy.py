@@ -22,7 +22,8 @@ def assert_same_queries(lazy, eager, o, d, tmin=0.0, tmax=np.inf):
     """intersect and occluded give bit-identical arrays on both trees."""
     for a, b in zip(core.intersect(lazy, o, d, tmin, tmax), core.intersect(eager, o, d, tmin, tmax)):
         np.testing.assert_array_equal(a, b)
-    np.testing.assert_array_equal(core.occluded(lazy, o, d, tmin, tmax), core.occluded(eager, o, d, tmin, tmax))
+    np.testing.assert_array_equal(core.occluded(lazy, o, d, tmin, tmax),
+                                  core.occluded(eager, o, d, tmin, tmax))
 
 
 def built(tree):
