@@ -61,7 +61,8 @@ class DeferredSubtrees:
 
     def select(self, requested):
         """The unbuilt subtrees to build for these requests: the requested ones and, if speculative,
-        their neighbours in depth-first build order (usually a sibling or cousin, seed 003 §3.5)."""
+        their neighbours in depth-first build order (usually a sibling or cousin; seed 003 §4
+        "speculative unlocking")."""
         ids = np.unique(requested)
         if self.speculative:
             ids = np.unique(np.clip(np.concatenate([ids - 1, ids, ids + 1]), 0, self.total - 1))
