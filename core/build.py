@@ -1,5 +1,4 @@
 """build_kdtree: checks the input, then runs the parallel top levels, the subtree builds and the merge."""
-from concurrent.futures import ThreadPoolExecutor
 from time import perf_counter
 
 import numpy as np
@@ -7,9 +6,10 @@ import numpy as np
 from .geometry import triangle_boxes, union_of_boxes
 from .inputs import as_triangles
 from .kdtree import KdTree, empty_arrays
+from .lazy import DeferredSubtrees
 from .merge import merge_tree
 from .options import make_options
-from .subtree import build_subtree
+from .subtree import build_subtrees
 from .threads import thread_count
 from .top_levels import build_top_levels
 
@@ -18,7 +18,8 @@ def build_kdtree(triangles, **options):
     """Build a kd-tree over an (N, 3, 3) array of triangle vertex positions.
 
     Keyword options are those of `BuildOptions` (builder, bins, leaf_size, max_depth, traversal_cost,
-    intersection_cost, empty_bonus, cost_ratio, clip, skip, top, threads, ...), each validated.
+    intersection_cost, empty_bonus, cost_ratio, clip, skip, top, threads, lazy, ...), each validated.
+    With lazy=True only the top of the tree is built now and the rest as rays reach it (lazy.py).
     Raises ValueError naming the first bad triangle or setting.
     """
     opts = make_options(options)
@@ -28,12 +29,13 @@ def build_kdtree(triangles, **options):
     with thread_count(opts.threads) as threads:
         prims, boxes, bounds, dropped = _initial_references(tris)
         timings["prepare"] = _ms_since(start)
+        deferred = None
         if len(prims) == 0:
             arrays = empty_arrays()
         else:
-            arrays = _build_arrays(tris, prims, boxes, bounds, opts, threads, timings)
+            arrays, deferred = _build_arrays(tris, prims, boxes, bounds, opts, threads, timings)
     return KdTree(tris, bounds, *arrays, options=opts, build_ms=_ms_since(start), dropped=dropped,
-                  timings=timings)
+                  timings=timings, deferred=deferred)
 
 
 def _initial_references(tris):
@@ -56,28 +58,15 @@ def _build_arrays(tris, prims, boxes, bounds, opts, threads, timings):
     del prims, boxes
     timings["top"] = _ms_since(t)
     t = perf_counter()
-    subtrees = _build_subtrees(tris, tasks, params, threads)
+    subtrees = build_subtrees(tris, tasks, params, threads)
     timings["subtrees"] = _ms_since(t)
     t = perf_counter()
     arrays = merge_tree(top_nodes, subtrees)
+    deferred = None
+    if opts.lazy:
+        deferred = DeferredSubtrees(subtrees, arrays[0], arrays[2], params, opts.lazy_speculative)
     timings["merge"] = _ms_since(t)
-    return arrays
-
-
-def _build_subtrees(tris, tasks, params, threads):
-    """Build every task's subtree, largest first, on `threads` threads (the kernel releases the GIL)."""
-    def build(task):
-        return build_subtree(tris, task.prims, task.boxes, len(task.prims), task.box, task.depth, params)
-
-    if threads == 1 or len(tasks) == 1:
-        return [build(task) for task in tasks]
-    order = sorted(range(len(tasks)), key=lambda i: -tasks[i].size)
-    results = [None] * len(tasks)
-    with ThreadPoolExecutor(max_workers=threads) as pool:
-        futures = {i: pool.submit(build, tasks[i]) for i in order}
-        for i, future in futures.items():
-            results[i] = future.result()
-    return results
+    return arrays, deferred
 
 
 def _ms_since(start):

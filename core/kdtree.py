@@ -11,11 +11,12 @@ class KdTree:
     Attributes: `triangles` (N, 3, 3) float32; `bounds` (6,) float32 box of the triangles in the tree;
     `axis`, `split`, `child`, `count` (per node, layout.py) and `leaf_prims` (triangle indices);
     `options` (the BuildOptions used); `build_ms`; `dropped` (indices of zero-area triangles, which can
-    never be hit and are left out).
+    never be hit and are left out); `deferred` (lazy builds: the subtrees not built yet, lazy.py; None
+    for an eager tree). Queries on a lazy tree build what they need, so its node arrays grow.
     """
 
     def __init__(self, triangles, bounds, axis, split, child, count, leaf_prims, options, build_ms,
-                 dropped, timings=None):
+                 dropped, timings=None, deferred=None):
         self.triangles = triangles
         self.bounds = bounds
         self.axis, self.split, self.child, self.count = axis, split, child, count
@@ -24,6 +25,7 @@ class KdTree:
         self.build_ms = build_ms
         self.dropped = dropped
         self.timings = dict(timings or {})
+        self.deferred = deferred
         self._stats = None
 
     @property
@@ -32,19 +34,37 @@ class KdTree:
         return (self.axis, self.split, self.child, self.count, self.leaf_prims, self.triangles, self.bounds)
 
     @property
+    def node_arrays(self):
+        return (self.axis, self.split, self.child, self.count, self.leaf_prims)
+
+    def replace_nodes(self, node_arrays):
+        """Swap in grown node arrays (a lazy tree after building deferred subtrees)."""
+        self.axis, self.split, self.child, self.count, self.leaf_prims = node_arrays
+        self._stats = None
+
+    @property
+    def lazy(self):
+        return self.deferred is not None
+
+    @property
     def node_count(self):
         return len(self.axis)
 
     def stats(self):
-        """Triangles, nodes, leaves, empty leaves, depth, references, SAH cost, build time and more."""
+        """Triangles, nodes, leaves, empty leaves, depth, references, SAH cost, build time and more.
+
+        On a lazy tree the figures describe the tree as built so far: `nodes`, `leaves`, `references`
+        count built nodes only; `sah_cost` counts each unbuilt subtree as a leaf of its references;
+        `build_ms` is the eager part, `lazy_build_ms` the on-demand building so far (see README).
+        """
         if self._stats is None:
             self._stats = self._compute_stats()
         return dict(self._stats)
 
     def _compute_stats(self):
         o = self.options
-        sah, leaves, empty, depth, refs, _, _ = walk_stats(self.axis, self.split, self.child, self.count,
-                                                           self.bounds, o.traversal_cost, o.intersection_cost)
+        sah, leaves, empty, depth, refs, _, _, unbuilt = walk_stats(
+            self.axis, self.split, self.child, self.count, self.bounds, o.traversal_cost, o.intersection_cost)
         n = len(self.triangles)
         nbytes = sum(a.nbytes for a in (self.axis, self.split, self.child, self.count, self.leaf_prims))
         return {
@@ -62,12 +82,22 @@ class KdTree:
             "leaf_sizes": leaf_size_histogram(self.axis, self.count),
             "builder": o.builder,
             **{f"{k}_ms": v for k, v in self.timings.items()},
+            **self._lazy_stats(unbuilt),
         }
+
+    def _lazy_stats(self, unbuilt):
+        if self.deferred is None:
+            return {"lazy": False, "subtrees_total": 0, "subtrees_built": 0, "unbuilt_references": 0,
+                    "lazy_build_ms": 0.0, "lazy_rounds": 0, "deferred_bytes": 0}
+        lazy = self.deferred.stats()
+        assert unbuilt == lazy["subtrees_total"] - lazy["subtrees_built"], "unbuilt nodes out of step"
+        return lazy
 
     def __repr__(self):
         s = self.stats()
+        lazy = f", lazy: {s['subtrees_built']}/{s['subtrees_total']} subtrees built" if s["lazy"] else ""
         return (f"KdTree({s['triangles']} triangles, {s['nodes']} nodes, depth {s['max_depth']}, "
-                f"SAH {s['sah_cost']:.2f}, built in {s['build_ms']:.1f} ms by {s['builder']!r})")
+                f"SAH {s['sah_cost']:.2f}, built in {s['build_ms']:.1f} ms by {s['builder']!r}{lazy})")
 
 
 def empty_arrays():

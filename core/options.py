@@ -42,7 +42,16 @@ class BuildOptions:
     top: how the parallel top levels are split: "sah" (data-parallel binned SAH at every top node) or
         "clustering" (seed 000 §4.1: equal-count sub-domains from one high-resolution binning).
     threads: worker threads; None uses every core Numba sees.
-    lazy: build only the top levels now and the rest when rays reach them (seed 003).
+    lazy: on-demand construction (seed 003 §3): build the top of the tree now and defer every node
+        of at most `lazy_subtree_size` references; a deferred subtree is built (exactly as the eager
+        build would build it) when a query or render first sends a ray into it. Results are identical
+        to the eager tree's; it pays when rays see only part of the scene (seed 003 §5.3).
+    lazy_subtree_size: the largest deferred subtree, in references. Smaller builds more levels
+        eagerly (each one a pass over all references) but defers in finer pieces, so less is built
+        around what the rays reach; larger the opposite. 4096 measured best (README, bench_lazy.py).
+    lazy_speculative: also build, with each requested subtree, its neighbours in depth-first build
+        order (the previous and next deferred subtree, usually its sibling or a cousin): seed 003 §4's
+        speculative building, trading some unneeded building for fewer suspend/build/retrace rounds.
     """
 
     builder: str = "binned"
@@ -59,6 +68,8 @@ class BuildOptions:
     top: str = "sah"
     threads: Optional[int] = None
     lazy: bool = False
+    lazy_subtree_size: int = 4096
+    lazy_speculative: bool = False
 
     def __post_init__(self):
         _check_choice("builder", self.builder, BUILDERS)
@@ -74,7 +85,8 @@ class BuildOptions:
         _check_float("intersection_cost", self.intersection_cost, 0.0, None, low_open=True)
         _check_float("empty_bonus", self.empty_bonus, 0.0, 1.0, high_open=True)
         _check_float("cost_ratio", self.cost_ratio, 0.0, None, low_open=True)
-        for name in ("clip", "skip", "lazy"):
+        _check_int("lazy_subtree_size", self.lazy_subtree_size, 1, 1 << 30)
+        for name in ("clip", "skip", "lazy", "lazy_speculative"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"build option {name!r} must be True or False, got {getattr(self, name)!r}")
 
@@ -98,6 +110,7 @@ class BuildOptions:
             cost_ratio=float(self.cost_ratio),
             clip=self.clip,
             skip=self.skip,
+            defer_size=self.lazy_subtree_size if self.lazy else 0,
         )
 
     def as_dict(self):
@@ -118,6 +131,7 @@ class BuildParams(NamedTuple):
     cost_ratio: float
     clip: bool
     skip: bool
+    defer_size: int  # build_subtree defers nodes of at most this many references (0: none, eager)
 
 
 BINNED, EXACT, MEDIAN = 0, 1, 2

@@ -4,6 +4,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .inputs import as_ray_limits, as_rays
+from .lazy import resolve_suspended
 from .threads import thread_count
 from .traversal import trace_rays
 
@@ -39,4 +40,12 @@ def _trace(tree, origins, directions, tmin, tmax, any_hit, threads):
     v = np.empty(n)
     with thread_count(threads):
         trace_rays(tree.arrays, o, d, lo, hi, any_hit, t, prim, u, v)
+
+        def retrace(rays):  # rays that stopped at unbuilt subtrees, now built (lazy trees only)
+            m = len(rays)
+            out = [np.empty(m), np.empty(m, np.int32), np.empty(m), np.empty(m)]
+            trace_rays(tree.arrays, o[rays], d[rays], lo[rays], hi[rays], any_hit, *out)
+            t[rays], prim[rays], u[rays], v[rays] = out
+
+        resolve_suspended(tree, prim, retrace, threads)
     return t, prim, u, v

@@ -22,6 +22,7 @@ import numpy as np
 
 from .camera import Camera
 from .kdtree import KdTree
+from .lazy import resolve_suspended
 from .lights import pack_lights
 from .queries import _trace
 from .render_kernels import MODES, add_samples, surface_frames
@@ -92,17 +93,31 @@ class PreviewRender:
         while added < samples and len(self.active):
             batch = min(samples - added, CHECK_EVERY - self.samples_done % CHECK_EVERY)
             start = perf_counter()
-            with thread_count(self.threads):
-                add_samples(self.tree.arrays, self.points, self.normals, self.pixels, self.active,
-                            self.samples_done, batch, MODES[self.mode], self.ao_distance, self.ambient,
-                            self.lights, self.sampler, self.seed, SOBOL_DIM1, self.sums, self.sq_sums,
-                            self.counts, self.ray_counts)
+            self._add_samples(batch)
             self.trace_ms += (perf_counter() - start) * 1e3
             self.samples_done += batch
             added += batch
             if self.samples_done % CHECK_EVERY == 0:
                 self._retire_converged()
         return added
+
+    def _add_samples(self, batch):
+        """Samples samples_done .. +batch of every active pixel; on a lazy tree, pixels stopped by an
+        unbuilt subtree redo the batch once it is built (same samples, so the eager tree's sums)."""
+        def run(active):
+            status = np.empty(len(active), np.int64)
+            add_samples(self.tree.arrays, self.points, self.normals, self.pixels, active, self.samples_done,
+                        batch, MODES[self.mode], self.ao_distance, self.ambient, self.lights, self.sampler,
+                        self.seed, SOBOL_DIM1, self.sums, self.sq_sums, self.counts, self.ray_counts, status)
+            return status
+
+        with thread_count(self.threads):
+            status = run(self.active)
+
+            def redo(pixels):
+                status[pixels] = run(self.active[pixels])
+
+            resolve_suspended(self.tree, status, redo, self.threads)
 
     def _retire_converged(self):
         """Stop sampling pixels whose standard error is below the target (after min_samples)."""

@@ -4,10 +4,15 @@ One sample of a pixel is one cosine-weighted AO ray (mode ao), one shadow ray pe
 surface (mode shadow), or both multiplied (mode ao+shadow). Every ray is an any-hit query through the
 same traversal as everything else. Sample k of pixel p depends only on (p, k, seed), so adding samples
 in any batches gives the same sums as one big batch.
+
+On a lazy tree a ray may stop at an unbuilt subtree (traversal.py). The pixel then puts its sums back
+as they were before the batch and reports the subtree; the caller builds it and redoes the batch for
+that pixel, which by the rule above gives exactly the eager tree's sums.
 """
 import numpy as np
 from numba import njit, prange
 
+from .layout import NO_HIT
 from .sampling import pixel_seed, sample_2d
 from .shading import cosine_direction, offset_origin, sample_light
 from .traversal import STACK_SIZE, trace_ray
@@ -19,22 +24,24 @@ USE_AO = 0  # the sampler's "use" ids: 0 for AO, 1 + k for light k
 
 @njit(cache=True, parallel=True)
 def add_samples(tree, points, normals, pixels, active, first, count, mode, ao_distance, ambient, lights,
-                sampler, seed, dim1, sums, sq_sums, counts, rays):
+                sampler, seed, dim1, sums, sq_sums, counts, rays, status):
     """Add samples first .. first+count-1 to every pixel listed in `active` (indices into points).
 
     sums (M, 3) and sq_sums (M,) (of the sample's grey value) accumulate; counts[i] += count;
-    rays[i] counts the rays traced for pixel i.
+    rays[i] counts the rays traced for pixel i. status[a] is NO_HIT when pixel active[a] got its
+    samples, or the suspended prim of the unbuilt subtree that stopped it (lazy trees; sums untouched).
     """
     for a in prange(active.shape[0]):
-        _sample_pixel(tree, points, normals, pixels, active[a], first, count, mode, ao_distance, ambient,
-                      lights, sampler, seed, dim1, sums, sq_sums, counts, rays)
+        status[a] = _sample_pixel(tree, points, normals, pixels, active[a], first, count, mode, ao_distance,
+                                  ambient, lights, sampler, seed, dim1, sums, sq_sums, counts, rays)
 
 
 @njit(cache=True)
 def _sample_pixel(tree, points, normals, pixels, i, first, count, mode, ao_distance, ambient, lights,
                   sampler, seed, dim1, sums, sq_sums, counts, rays):
     """All of one pixel's new samples (kept out of the parallel loop body: Numba's parfor analysis
-    does not cope with the inlined tuple code of the samplers)."""
+    does not cope with the inlined tuple code of the samplers). Returns NO_HIT, or the suspended prim
+    of a ray that reached an unbuilt subtree, after restoring the pixel's sums."""
     stack_node = np.empty(STACK_SIZE, np.int32)
     stack_t = np.empty((STACK_SIZE, 3))
     inv = np.empty(3)
@@ -42,16 +49,22 @@ def _sample_pixel(tree, points, normals, pixels, i, first, count, mode, ao_dista
     direction = np.empty(3)
     offset_origin(points[i], normals[i], origin)
     ps = pixel_seed(pixels[i], seed)
+    before = (sums[i, 0], sums[i, 1], sums[i, 2], sq_sums[i], rays[i])
     for s in range(first, first + count):
         ao = 1.0
         if mode != SHADOW:
-            ao = _ao_sample(tree, origin, normals[i], ao_distance, sampler, ps, s, dim1, direction,
-                            stack_node, stack_t, inv)
+            prim = _ao_ray(tree, origin, normals[i], ao_distance, sampler, ps, s, dim1, direction,
+                           stack_node, stack_t, inv)
+            if prim < NO_HIT:
+                return _restore(sums, sq_sums, rays, i, before, prim)
+            ao = 1.0 if prim < 0 else 0.0
             rays[i] += 1
         r = g = b = ao
         if mode != AO:
-            lr, lg, lb, n_rays = _light_samples(tree, points[i], origin, normals[i], lights, sampler, ps,
-                                                s, dim1, direction, stack_node, stack_t, inv)
+            lr, lg, lb, n_rays, prim = _light_samples(tree, points[i], origin, normals[i], lights, sampler,
+                                                      ps, s, dim1, direction, stack_node, stack_t, inv)
+            if prim < NO_HIT:
+                return _restore(sums, sq_sums, rays, i, before, prim)
             rays[i] += n_rays
             if mode == SHADOW:
                 r, g, b = lr, lg, lb
@@ -65,21 +78,30 @@ def _sample_pixel(tree, points, normals, pixels, i, first, count, mode, ao_dista
         grey = (r + g + b) / 3.0
         sq_sums[i] += grey * grey
     counts[i] += count
+    return NO_HIT
 
 
 @njit(cache=True, inline="always")
-def _ao_sample(tree, origin, normal, ao_distance, sampler, ps, s, dim1, direction, stack_node, stack_t, inv):
-    """1 if a cosine-weighted ray from the surface escapes within ao_distance, else 0."""
+def _restore(sums, sq_sums, rays, i, before, prim):
+    """Put pixel i's sums back as they were before the batch; pass on the suspended prim."""
+    sums[i, 0], sums[i, 1], sums[i, 2], sq_sums[i], rays[i] = before
+    return prim
+
+
+@njit(cache=True, inline="always")
+def _ao_ray(tree, origin, normal, ao_distance, sampler, ps, s, dim1, direction, stack_node, stack_t, inv):
+    """The any-hit prim of a cosine-weighted ray from the surface within ao_distance (< 0: escapes)."""
     u1, u2 = sample_2d(sampler, ps, s, USE_AO, dim1)
     cosine_direction(normal, u1, u2, direction)
     _, prim, _, _ = trace_ray(tree, origin, direction, 0.0, ao_distance, True, stack_node, stack_t, inv)
-    return 1.0 if prim < 0 else 0.0
+    return prim
 
 
 @njit(cache=True, inline="always")
 def _light_samples(tree, point, origin, normal, lights, sampler, ps, s, dim1, direction, stack_node,
                    stack_t, inv):
-    """Mean over lights of colour * visibility * max(0, N.L) * mask, and the number of rays traced."""
+    """Mean over lights of colour * visibility * max(0, N.L) * mask, the number of rays traced, and
+    NO_HIT or the suspended prim of a ray that reached an unbuilt subtree (the rest is then void)."""
     r = g = b = 0.0
     n_rays = 0
     n_lights = lights.shape[0]
@@ -91,12 +113,14 @@ def _light_samples(tree, point, origin, normal, lights, sampler, ps, s, dim1, di
             continue  # behind the surface or outside the light: no ray needed
         n_rays += 1
         _, prim, _, _ = trace_ray(tree, origin, direction, 0.0, dist, True, stack_node, stack_t, inv)
+        if prim < NO_HIT:
+            return r, g, b, n_rays, prim
         if prim < 0:
             w = cos_nl * mask / n_lights
             r += w * lights[k, 21]
             g += w * lights[k, 22]
             b += w * lights[k, 23]
-    return r, g, b, n_rays
+    return r, g, b, n_rays, NO_HIT
 
 
 @njit(cache=True, parallel=True)

@@ -4,11 +4,18 @@ This is the work each thread does after the parallel top levels (seed 000 §4: "
 sub-tree"). Nodes are processed from an explicit stack, left child first; a node's references live in
 one reference pool (partition.py keeps the left child on top), so the pool's live part is the pending
 right siblings plus the current node and never needs per-node allocation.
+
+A lazy build (params.defer_size > 0, seed 003 §3) stops at nodes of at most defer_size references:
+such a node is marked UNBUILT and its references are copied out. Building it later with build_subtree
+from those references (in the same order), its box and its depth gives exactly the subtree the eager
+build makes there, because a node's split choice and partition depend on nothing else.
 """
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 from numba import njit
 
-from .layout import LEAF
+from .layout import LEAF, UNBUILT
 from .options import EXACT
 from .partition import new_split_scratch, partition_in_place
 from .pools import ensure_floats, ensure_ints, ensure_nodes, ensure_refs
@@ -20,7 +27,9 @@ def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, params):
     """Build the subtree over the first `n_refs` references of (prims, boxes) inside `root_box`.
 
     Returns the node arrays (axis, split, child, count; see layout.py) with local indices, node 0 being
-    the subtree's root, and the leaf triangle indices.
+    the subtree's root, and the leaf triangle indices; then the deferred subtrees (none unless
+    params.defer_size > 0): (d_node, d_start, d_depth, d_box, d_prims, d_boxes), deferred subtree k
+    being local node d_node[k] (whose child is k) with references d_prims/d_boxes[d_start[k]:d_start[k+1]].
     """
     stack_size = params.max_depth - root_depth + 2
     stack_node = np.empty(stack_size, np.int32)
@@ -39,6 +48,9 @@ def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, params):
                                              max(16, n_refs // 2))
     leaf_prims = np.empty(max(16, n_refs + n_refs // 2), np.int32)
     n_nodes, n_leaf_prims = 1, 0
+    deferred = (np.empty(0, np.int32), np.zeros(1, np.int32), np.empty(0, np.int32),
+                np.empty((0, 6), np.float32), np.empty(0, np.int32), np.empty((0, 6), np.float32))
+    n_deferred = 0
 
     stack_node[0], stack_range[0, 0], stack_range[0, 1], stack_depth[0] = 0, 0, n_refs, root_depth
     stack_box[0] = root_box
@@ -48,6 +60,11 @@ def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, params):
         node, start, end, depth = stack_node[sp], stack_range[sp, 0], stack_range[sp, 1], stack_depth[sp]
         box[:] = stack_box[sp]
         n = end - start
+        if params.leaf_size < n <= params.defer_size:
+            deferred = _defer(deferred, n_deferred, node, prims, boxes, start, end, box, depth)
+            axis[node], split[node], child[node], count[node] = UNBUILT, 0.0, n_deferred, n
+            n_deferred += 1
+            continue
         prims, boxes = ensure_refs(prims, boxes, end, start + 2 * n + 1)
         if params.builder == EXACT or n <= params.exact_below:
             scratch = ensure_floats(scratch, 3 * n)
@@ -70,8 +87,30 @@ def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, params):
                    depth + 1, box, split_axis, pos, False)
         sp = _push(stack_node, stack_range, stack_depth, stack_box, sp, left, start + n_right,
                    start + n_right + n_left, depth + 1, box, split_axis, pos, True)
+    d_node, d_start, d_depth, d_box, d_prims, d_boxes = deferred
+    n_deferred_refs = d_start[n_deferred]
     return (axis[:n_nodes].copy(), split[:n_nodes].copy(), child[:n_nodes].copy(),
-            count[:n_nodes].copy(), leaf_prims[:n_leaf_prims].copy())
+            count[:n_nodes].copy(), leaf_prims[:n_leaf_prims].copy(),
+            d_node[:n_deferred].copy(), d_start[:n_deferred + 1].copy(), d_depth[:n_deferred].copy(),
+            d_box[:n_deferred].copy(), d_prims[:n_deferred_refs].copy(), d_boxes[:n_deferred_refs].copy())
+
+
+@njit(cache=True)
+def _defer(deferred, k, node, prims, boxes, start, end, box, depth):
+    """Record node `node` as deferred subtree k: copy its references (the pool range is reused)."""
+    d_node, d_start, d_depth, d_box, d_prims, d_boxes = deferred
+    d_node, d_box = ensure_refs(d_node, d_box, k, k + 1)
+    d_start = ensure_ints(d_start, k + 1, k + 2)
+    d_depth = ensure_ints(d_depth, k, k + 1)
+    used = d_start[k]
+    n = end - start
+    d_prims, d_boxes = ensure_refs(d_prims, d_boxes, used, used + n)
+    d_prims[used:used + n] = prims[start:end]
+    d_boxes[used:used + n] = boxes[start:end]
+    d_node[k], d_depth[k] = node, depth
+    d_box[k] = box
+    d_start[k + 1] = used + n
+    return d_node, d_start, d_depth, d_box, d_prims, d_boxes
 
 
 @njit(cache=True, inline="always")
@@ -88,3 +127,20 @@ def _push(stack_node, stack_range, stack_depth, stack_box, sp, node, start, end,
     else:
         stack_box[sp, axis] = pos
     return sp + 1
+
+
+def build_subtrees(tris, tasks, params, threads):
+    """Build every task's subtree (top_levels.Task), largest first, on `threads` threads (the kernel
+    releases the GIL). Returns build_subtree's tuples in task order."""
+    def build(task):
+        return build_subtree(tris, task.prims, task.boxes, len(task.prims), task.box, task.depth, params)
+
+    if threads == 1 or len(tasks) == 1:
+        return [build(task) for task in tasks]
+    order = sorted(range(len(tasks)), key=lambda i: -tasks[i].size)
+    results = [None] * len(tasks)
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        futures = {i: pool.submit(build, tasks[i]) for i in order}
+        for i, future in futures.items():
+            results[i] = future.result()
+    return results

@@ -16,7 +16,7 @@ Robustness without NaN paths:
 import numpy as np
 from numba import njit, prange
 
-from .layout import LEAF
+from .layout import LEAF, suspended_prim
 from .triangle_test import intersect_triangle, ray_shear
 
 STACK_SIZE = 64  # > DEPTH_LIMIT + 1: one pushed node per level
@@ -51,6 +51,9 @@ def clip_to_box(box, o, d, inv, tmin, tmax):
 def trace_ray(tree, o, d, tmin, tmax, any_hit, stack_node, stack_t, inv):
     """(t, prim, u, v) of the closest hit in (tmin, tmax), or of any hit if `any_hit`; prim -1 on a miss.
 
+    On a lazily built tree a ray that reaches an unbuilt subtree stops there and returns
+    prim = suspended_prim(subtree) (<= -2): front to back, that subtree is exactly one the eager tree's
+    traversal would enter, so the caller builds it and traces the ray again (lazy.py, seed 003 §3).
     `stack_node`, `stack_t` and `inv` (3 floats) are the caller's scratch, reused across rays.
     """
     axis, split, child, count, leaf_prims, tris, root_box = tree
@@ -64,11 +67,13 @@ def trace_ray(tree, o, d, tmin, tmax, any_hit, stack_node, stack_t, inv):
     node, sp, t_exit = 0, 0, t1
     while True:
         a = axis[node]
-        if a != LEAF:
+        if a < LEAF:
             node, t1, t_exit, sp = _descend(node, a, split[node], child[node], o[a], d[a], inv[a], t0, t1,
                                             t_exit, stack_node, stack_t, sp)
             continue
         first = child[node]
+        if a != LEAF:  # UNBUILT: the one extra test, made only at leaves
+            return np.inf, suspended_prim(first), 0.0, 0.0
         for j in range(first, first + count[node]):
             prim = leaf_prims[j]
             t, u, v = intersect_triangle(tris[prim], o, kx, ky, kz, sx, sy, sz)

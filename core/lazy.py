@@ -1,0 +1,102 @@
+"""On-demand (lazy) construction (seed 003 §3): deferred subtrees are built when rays first reach them.
+
+A lazy `build_kdtree` builds the parallel top levels and, inside each task, every node down to
+`lazy_subtree_size` references; smaller nodes are left UNBUILT (layout.py) and their references are kept
+here. Queries and renders trace all their rays through the one traversal; a ray that reaches an
+unbuilt node stops there and reports it. The caller then builds all the requested subtrees at once,
+in parallel, one thread per subtree, exactly like the eager subtrees (subtree.py), splices them into the
+flat arrays (merge.py) and traces only the suspended rays again, from the start.
+
+The traversal enters a subtree only where the eager traversal would, and a deferred subtree is built
+exactly as the eager build builds it, so every result is identical to the eager tree's and only the
+subtrees some ray needs get built. Seed 003 interleaves building and tracing in one GPU task pool;
+on a few CPU cores this simple alternation (trace everything, build the requested batch, retrace
+those rays) keeps one traversal and one builder, at the price of a few rounds per query.
+"""
+from time import perf_counter
+
+import numpy as np
+
+from .layout import NO_HIT, UNBUILT, subtree_of
+from .merge import splice_subtrees
+from .subtree import build_subtrees
+from .threads import thread_count
+from .top_levels import Task
+
+
+class DeferredSubtrees:
+    """The subtrees a lazy build left for later, and what has been built of them since.
+
+    Subtree k is node `node[k]` of the tree (axis UNBUILT, child k) with references
+    prims/boxes[start[k]:start[k+1]], box `box[k]` and depth `depth[k]`. Plain arrays: it pickles.
+    """
+
+    def __init__(self, subtrees, axis, child, params, speculative):
+        parts = [s[5:] for s in subtrees]
+        sizes = np.concatenate([np.diff(p[1]) for p in parts]).astype(np.int64)
+        self.start = np.concatenate([[0], np.cumsum(sizes)])
+        self.depth = np.concatenate([p[2] for p in parts])
+        self.box = np.concatenate([p[3] for p in parts])
+        self.prims = np.concatenate([p[4] for p in parts])
+        self.boxes = np.concatenate([p[5] for p in parts])
+        unbuilt = np.flatnonzero(axis == UNBUILT)
+        self.node = np.empty(len(sizes), np.int64)
+        self.node[child[unbuilt]] = unbuilt
+        self.built = np.zeros(len(sizes), bool)
+        self.params = params._replace(defer_size=0)  # a deferred subtree is built whole
+        self.speculative = speculative
+        self.build_ms = 0.0
+        self.rounds = 0
+
+    @property
+    def total(self):
+        return len(self.built)
+
+    def stats(self):
+        """The lazy fields of KdTree.stats() (see README, Build options)."""
+        return {"lazy": True, "subtrees_total": self.total, "subtrees_built": int(self.built.sum()),
+                "unbuilt_references": int(np.diff(self.start)[~self.built].sum()),
+                "lazy_build_ms": self.build_ms, "lazy_rounds": self.rounds,
+                "deferred_bytes": int(self.prims.nbytes + self.boxes.nbytes)}
+
+    def select(self, requested):
+        """The unbuilt subtrees to build for these requests: the requested ones and, if speculative,
+        their neighbours in depth-first build order (usually a sibling or cousin; seed 003 §4
+        "speculative unlocking")."""
+        ids = np.unique(requested)
+        if self.speculative:
+            ids = np.unique(np.clip(np.concatenate([ids - 1, ids, ids + 1]), 0, self.total - 1))
+        return ids[~self.built[ids]]
+
+    def tasks(self, ids):
+        return [Task(int(self.node[k]), self.prims[self.start[k]:self.start[k + 1]],
+                     self.boxes[self.start[k]:self.start[k + 1]], self.box[k], int(self.depth[k]))
+                for k in ids]
+
+
+def build_requested(tree, requested, threads=None):
+    """Build the deferred subtrees `requested` (indices, repeats allowed) and splice them into `tree`."""
+    deferred = tree.deferred
+    ids = deferred.select(requested)
+    if len(ids) == 0:
+        return
+    start = perf_counter()
+    with thread_count(threads) as n_threads:
+        subtrees = build_subtrees(tree.triangles, deferred.tasks(ids), deferred.params, n_threads)
+    tree.replace_nodes(splice_subtrees(tree.node_arrays, deferred.node[ids], subtrees))
+    deferred.built[ids] = True
+    if deferred.built.all():  # nothing left to build: let the kept references go
+        deferred.prims, deferred.boxes = deferred.prims[:0], deferred.boxes[:0]
+    deferred.rounds += 1
+    deferred.build_ms += (perf_counter() - start) * 1e3
+
+
+def resolve_suspended(tree, status, retrace, threads=None):
+    """Finish work that stopped at unbuilt subtrees: while some items (rays, pixels) have a suspended
+    status (<= -2, layout.suspended_prim), build the subtrees they name and call retrace(indices), which
+    must redo those items from the start and update status[indices]. Nothing to do on an eager tree."""
+    pending = np.flatnonzero(status < NO_HIT)
+    while len(pending):
+        build_requested(tree, subtree_of(status[pending]), threads)
+        retrace(pending)
+        pending = pending[status[pending] < NO_HIT]
