@@ -43,6 +43,8 @@ class BuildOptions:
         "clustering" (seed 000 §4.1: equal-count sub-domains from one high-resolution binning).
     threads: worker threads; None uses every core Numba sees.
     lazy: build only the top levels now and the rest when rays reach them (seed 003).
+    memory_limit: bytes; a build whose estimated peak memory (memory.py) is above this raises
+        memory.MemoryLimitError (a ValueError) before allocating anything. None: no limit.
     """
 
     builder: str = "binned"
@@ -59,6 +61,7 @@ class BuildOptions:
     top: str = "sah"
     threads: Optional[int] = None
     lazy: bool = False
+    memory_limit: Optional[int] = None
 
     def __post_init__(self):
         _check_choice("builder", self.builder, BUILDERS)
@@ -70,6 +73,8 @@ class BuildOptions:
             _check_int("max_depth", self.max_depth, 0, DEPTH_LIMIT)
         if self.threads is not None:
             _check_int("threads", self.threads, 1, 1024)
+        if self.memory_limit is not None:
+            _check_int("memory_limit", self.memory_limit, 0, 1 << 62)
         _check_float("traversal_cost", self.traversal_cost, 0.0, None)
         _check_float("intersection_cost", self.intersection_cost, 0.0, None, low_open=True)
         _check_float("empty_bonus", self.empty_bonus, 0.0, 1.0, high_open=True)
