@@ -34,11 +34,12 @@ RENDER = dict(width=960, height=540, samples=16, ao_distance=0.5)
 # -- scenes (parent side) ------------------------------------------------------
 
 
-def wavy_grid(n):
-    """About n triangles of a displaced height field over [0, 1]^2 (a regular, open surface)."""
+def wavy_grid(n, amplitude=0.05):
+    """About n triangles of a displaced height field over [0, 1]^2 (a regular, open surface); amplitude 0
+    gives a flat subdivided plane, the worst case of the binned builder (see README *Reliability*)."""
     k = int(np.sqrt(n / 2))
     x, y = np.meshgrid(np.linspace(0, 1, k + 1), np.linspace(0, 1, k + 1), indexing="ij")
-    p = np.stack([x, y, 0.05 * np.sin(25 * x) * np.cos(25 * y)], -1).astype(np.float32)
+    p = np.stack([x, y, amplitude * np.sin(25 * x) * np.cos(25 * y)], -1).astype(np.float32)
     a, b, c, d = p[:-1, :-1], p[1:, :-1], p[1:, 1:], p[:-1, 1:]
     return np.concatenate([np.stack([a, b, c], -2).reshape(-1, 3, 3), np.stack([a, c, d], -2).reshape(-1, 3, 3)])
 
@@ -56,6 +57,7 @@ def scene_file(name):
     if not path.is_file():
         from scenes import load_scene
         makers = {"grid-1m": lambda: wavy_grid(1_000_000), "five-suzannes-5m": five_suzannes,
+                  "flat-grid-1m": lambda: wavy_grid(1_000_000, amplitude=0.0),
                   "soup-1m": lambda: load_scene("soup-1m").triangles,
                   "suzanne-1m": lambda: load_scene("suzanne-1m").triangles}
         DATA.mkdir(exist_ok=True)
@@ -194,7 +196,7 @@ def main():
         return run_child(sys.argv[2:])
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--calibrate", action="store_true")
-    ap.add_argument("--scenes", default="soup-1m,suzanne-1m,grid-1m")
+    ap.add_argument("--scenes", default="soup-1m,suzanne-1m,grid-1m,flat-grid-1m")
     ap.add_argument("--builders", default="binned,median,exact")
     ap.add_argument("--builder", default="binned", help="builder for the 5M run")
     ap.add_argument("--runs", type=int, default=3)

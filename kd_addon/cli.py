@@ -103,6 +103,8 @@ def _print_row(result, path) -> None:
     print(TABLE.format(f"{mark}{result.frame}", f"{result.triangles:,}", result.objects, f"{result.extract_ms:.1f}",
                        f"{result.build_ms:.1f}", f"{result.trace_ms:.1f}", f"{result.total_ms:.1f}",
                        f"{result.rays:,}", f"{result.mrays_per_s:.2f}"), flush=True)
+    for warning in result.warnings:  # e.g. an object left out for non-finite vertices
+        print(f"{COMMAND_ID}: warning: frame {result.frame}: {warning}", file=sys.stderr, flush=True)
 
 
 def run(args) -> int:

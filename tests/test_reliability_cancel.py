@@ -1,0 +1,143 @@
+"""Cancellation and re-entrancy: ESC in the middle of a multi-second build returns at once and leaves the
+scene and the previous image as they were; the abandoned build cannot spoil the next render; a frame
+change during a render cannot change what it renders; the live-update handler never stacks.
+
+Times are checked loosely here (a shared CI machine); benchmarks/bench_cancel.py reports the figures.
+"""
+
+from __future__ import annotations
+
+import importlib
+import time
+from types import SimpleNamespace
+
+from tests.addon_support import addon, half_plane_scene, preview_pixels  # noqa: F401
+from tests.test_addon_modal import driver, modal, timer_events  # noqa: F401
+
+import bpy  # noqa: E402
+import numpy as np  # noqa: E402
+
+from kd_addon import live_update, pipeline  # noqa: E402
+from kd_addon.config import make_config  # noqa: E402
+from kd_addon.operators import KDPREVIEW_OT_render  # noqa: E402
+from kd_addon.output import IMAGE_NAME  # noqa: E402
+
+LOOSE_SECONDS = 2.0  # what a test on a loaded machine can promise; the design bound is POLL_SECONDS
+
+
+def timed(fn, *args):
+    start = time.perf_counter()
+    result = fn(*args)
+    return result, time.perf_counter() - start
+
+
+def add_wavy_sheet(name, cells, *, location):
+    """A cells x cells height field of 2 cells^2 triangles, made with foreach_set (bpy.ops primitives this
+    size take minutes in the bpy module)."""
+    x, y = np.meshgrid(np.linspace(-1, 1, cells + 1), np.linspace(-1, 1, cells + 1), indexing="ij")
+    verts = np.stack([x, y, 0.05 * np.sin(20 * x) * np.cos(20 * y)], -1).reshape(-1, 3).astype(np.float32)
+    i = (np.arange(cells)[:, None] * (cells + 1) + np.arange(cells)[None, :]).ravel()
+    tris = np.concatenate([np.stack([i, i + cells + 1, i + cells + 2], -1), np.stack([i, i + cells + 2, i + 1], -1)])
+    mesh = bpy.data.meshes.new(name)
+    mesh.vertices.add(len(verts))
+    mesh.vertices.foreach_set("co", verts.ravel())
+    mesh.loops.add(tris.size)
+    mesh.loops.foreach_set("vertex_index", tris.astype(np.int32).ravel())
+    mesh.polygons.add(len(tris))
+    mesh.polygons.foreach_set("loop_start", np.arange(0, tris.size, 3, dtype=np.int32))
+    mesh.update()
+    obj = bpy.data.objects.new(name, mesh)
+    obj.location = location
+    bpy.context.scene.collection.objects.link(obj)
+    return obj
+
+
+def timer(op, context):
+    return op.modal(context, SimpleNamespace(type="TIMER", timer=op._timer))
+
+
+def test_esc_during_a_long_build_returns_at_once_and_the_next_render_is_right(modal):  # noqa: F811
+    scene = half_plane_scene()
+    assert bpy.ops.kdpreview.render() == {"FINISHED"}
+    reference = preview_pixels().copy()
+    sheet = add_wavy_sheet("Sheet", 700, location=(-2.0, 0.0, 3.0))  # 980k triangles: seconds to build
+    op = driver(KDPREVIEW_OT_render)
+    op.invoke(modal, None)
+    assert timer(op, modal) == {"RUNNING_MODAL"}  # shows the status only
+    assert timer(op, modal) == {"RUNNING_MODAL"}  # reads the scene, starts the build on the worker
+    job = op._job
+    assert job._pending is not None and job.renderer is None and job.status == "Building kd-tree…"
+    result, seconds = timed(timer, op, modal)  # Blender gets control back while the build runs
+    assert result == {"RUNNING_MODAL"} and seconds < LOOSE_SECONDS
+    result, seconds = timed(op.modal, modal, SimpleNamespace(type="ESC", timer=None))
+    assert result == {"CANCELLED"} and seconds < LOOSE_SECONDS
+    assert not job._pending.finished  # the build was still running: the cancel did not wait for it
+    state = modal.window_manager.kd_preview_state
+    assert state.status.startswith("Cancelled") and not state.running and not pipeline.job_running()
+    assert (preview_pixels() == reference).all() and scene.frame_current == 1
+    assert len(sheet.data.polygons) == 980_000 and tuple(sheet.location) == (-2.0, 0.0, 3.0)  # untouched
+    bpy.data.objects.remove(sheet)
+    # The abandoned build still holds the kernel lock; the next render waits for it, then is exact.
+    assert bpy.ops.kdpreview.render() == {"FINISHED"}
+    assert (preview_pixels() == reference).all()
+    assert job._pending.finished
+
+
+def test_cancel_callback_during_tracing_returns_at_once(addon):  # noqa: F811
+    scene = half_plane_scene(size=(640, 320))
+    scene.kd_preview.samples = 4096
+    config = make_config(scene.kd_preview)
+    job = pipeline.FrameJob(scene, bpy.context.evaluated_depsgraph_get(), config)
+    asked = []
+
+    def cancel():
+        if job.renderer is not None and job.renderer.samples_done >= 2:
+            asked.append(time.perf_counter())
+            return True
+        return False
+
+    try:
+        pipeline.run_job(job, cancel)
+    except pipeline.Cancelled:
+        returned = time.perf_counter()
+    else:
+        raise AssertionError("not cancelled")
+    assert returned - asked[0] < LOOSE_SECONDS and job.renderer.samples_done < 4096
+    assert IMAGE_NAME not in bpy.data.images
+
+
+def test_frame_change_during_a_render_cannot_change_it(modal):  # noqa: F811
+    scene = half_plane_scene()
+    box = bpy.data.objects["Box"]
+    box.keyframe_insert("location", frame=1)
+    box.location.x = -1.0
+    box.keyframe_insert("location", frame=5)
+    scene.frame_set(1)
+    reference = pipeline.render_frame(scene, bpy.context.evaluated_depsgraph_get(), make_config(scene.kd_preview))
+    scene.kd_preview.live_update = True
+    op = driver(KDPREVIEW_OT_render)
+    op.invoke(modal, None)
+    timer(op, modal)
+    timer(op, modal)  # frame 1 read, build running
+    scene.frame_set(5)  # the live-update handler fires, sees the running job and stays out
+    assert IMAGE_NAME not in bpy.data.images and pipeline.job_running()
+    result, _ = timer_events(op, modal)
+    assert result == {"FINISHED"}
+    assert (preview_pixels() == reference.image).all()
+    assert '"frame": 1' in modal.window_manager.kd_preview_state.last_run
+
+
+def our_handlers():
+    return [h for h in bpy.app.handlers.frame_change_post if getattr(h, "__name__", "") == "kd_preview_frame_change"]
+
+
+def test_live_update_never_stacks_even_across_a_module_reload():
+    live_update.register()
+    old = live_update.kd_preview_frame_change
+    importlib.reload(live_update)  # a script reload: the list still holds the old function object
+    try:
+        live_update.register()
+        assert our_handlers() == [live_update.kd_preview_frame_change] and our_handlers()[0] is not old
+    finally:
+        live_update.unregister()
+    assert our_handlers() == []
