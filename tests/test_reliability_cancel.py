@@ -12,10 +12,10 @@ import time
 from types import SimpleNamespace
 
 from tests.addon_support import addon, half_plane_scene, preview_pixels  # noqa: F401
+from tests.bpy_scenes import add_wavy_sheet  # noqa: E402
 from tests.test_addon_modal import driver, modal, timer_events  # noqa: F401
 
 import bpy  # noqa: E402
-import numpy as np  # noqa: E402
 
 from kd_addon import live_update, pipeline  # noqa: E402
 from kd_addon.config import make_config  # noqa: E402
@@ -29,27 +29,6 @@ def timed(fn, *args):
     start = time.perf_counter()
     result = fn(*args)
     return result, time.perf_counter() - start
-
-
-def add_wavy_sheet(name, cells, *, location):
-    """A cells x cells height field of 2 cells^2 triangles, made with foreach_set (bpy.ops primitives this
-    size take minutes in the bpy module)."""
-    x, y = np.meshgrid(np.linspace(-1, 1, cells + 1), np.linspace(-1, 1, cells + 1), indexing="ij")
-    verts = np.stack([x, y, 0.05 * np.sin(20 * x) * np.cos(20 * y)], -1).reshape(-1, 3).astype(np.float32)
-    i = (np.arange(cells)[:, None] * (cells + 1) + np.arange(cells)[None, :]).ravel()
-    tris = np.concatenate([np.stack([i, i + cells + 1, i + cells + 2], -1), np.stack([i, i + cells + 2, i + 1], -1)])
-    mesh = bpy.data.meshes.new(name)
-    mesh.vertices.add(len(verts))
-    mesh.vertices.foreach_set("co", verts.ravel())
-    mesh.loops.add(tris.size)
-    mesh.loops.foreach_set("vertex_index", tris.astype(np.int32).ravel())
-    mesh.polygons.add(len(tris))
-    mesh.polygons.foreach_set("loop_start", np.arange(0, tris.size, 3, dtype=np.int32))
-    mesh.update()
-    obj = bpy.data.objects.new(name, mesh)
-    obj.location = location
-    bpy.context.scene.collection.objects.link(obj)
-    return obj
 
 
 def timer(op, context):
