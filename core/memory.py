@@ -57,4 +57,4 @@ def check_build_memory(triangles, options):
     copies = arr.dtype != np.float32 or not arr.flags.c_contiguous
     check_limit(build_bytes(n, options.builder, copies_input=copies), options.memory_limit,
                 f"building a kd-tree over {n:,} triangles ({options.builder!r} builder)",
-                "pass fewer triangles, use builder 'median', or raise memory_limit (None = no limit)")
+                "pass fewer triangles or raise memory_limit (None = no limit)")

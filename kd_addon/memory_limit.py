@@ -42,5 +42,5 @@ def check_frame(n_triangles: int, width: int, height: int, config) -> None:
         raise MemoryLimitError(
             f"this frame needs about {(geometry + pixels) / MIB:,.0f} MiB ({n_triangles:,} triangles and their "
             f"kd-tree: {geometry / MIB:,.0f} MiB; {width}x{height} pixels: {pixels / MIB:,.0f} MiB), above the "
-            f"memory limit of {limit / MIB:,.0f} MiB: lower the resolution, hide objects, use the 'median' "
-            "builder, or raise the memory limit (0 = no limit)")
+            f"memory limit of {limit / MIB:,.0f} MiB: lower the resolution, hide objects, or raise the memory "
+            "limit (0 = no limit)")
