@@ -8,10 +8,13 @@ Times are checked loosely here (a shared CI machine); benchmarks/bench_cancel.py
 from __future__ import annotations
 
 import importlib
+import signal
+import subprocess
 import time
 from types import SimpleNamespace
 
-from tests.addon_support import addon, half_plane_scene, preview_pixels  # noqa: F401
+from tests.addon_support import PYTHON, REPO, addon, half_plane_scene, preview_pixels  # noqa: F401
+from tests import bpy_scenes as scenes  # noqa: E402
 from tests.bpy_scenes import add_wavy_sheet  # noqa: E402
 from tests.test_addon_modal import driver, modal, timer_events  # noqa: F401
 
@@ -120,3 +123,29 @@ def test_live_update_never_stacks_even_across_a_module_reload():
     finally:
         live_update.unregister()
     assert our_handlers() == []
+
+
+def test_ctrl_c_on_the_command_line_exits_at_once_mid_render(tmp_path):
+    """SIGINT while the worker builds or traces a 1M-triangle frame: exit code 130 and the message at
+    once, without waiting for the abandoned kernel work."""
+    scenes.reset()
+    half_plane_scene(size=(960, 540))
+    add_wavy_sheet("Sheet", 707, location=(-2.0, 0.0, 3.0))
+    blend = tmp_path / "big.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    proc = subprocess.Popen([PYTHON, "-m", "kd_addon", "render", str(blend), "--out", str(tmp_path / "out"),
+                             "--frames", "1", "--resolution", "100", "--samples", "4096"],
+                            cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        while "frame  triangles" not in proc.stdout.readline():  # the header: the frame starts now
+            assert proc.poll() is None, proc.stderr.read()
+        time.sleep(1.0)  # importing core and reading the scene, then kernel work on the worker
+        proc.send_signal(signal.SIGINT)
+        sent = time.perf_counter()
+        code = proc.wait(timeout=60)
+        seconds = time.perf_counter() - sent
+    finally:
+        proc.kill()
+    assert code == 130 and seconds < LOOSE_SECONDS, (code, seconds)
+    assert "interrupted; frames already written are kept" in proc.stderr.read()
+    assert not (tmp_path / "out" / "frame_0001.png").exists()
