@@ -25,7 +25,6 @@ import bpy  # noqa: E402
 
 from kd_addon import output, pipeline  # noqa: E402
 from kd_addon.config import make_config  # noqa: E402
-from kd_addon.demo_scene import build_demo_scene  # noqa: E402,F401  (imports the add-on package fully)
 
 
 def rss_mib():

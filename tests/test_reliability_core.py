@@ -8,7 +8,7 @@ import pytest
 import core
 from core import memory
 from tests.meshes import subdivided_cube
-from tests.render_scenes import floor, look_at, quad
+from tests.render_scenes import floor, look_at
 
 SIZE = (48, 32)
 
