@@ -110,3 +110,20 @@ def test_scaled_scene_renders_like_scale_one(scale):
     np.testing.assert_array_equal(reference[..., 3], scaled[..., 3])
     rmse = np.sqrt(np.mean((reference[..., 0] - scaled[..., 0]) ** 2))
     assert rmse < 0.01, rmse
+
+
+# -- found by the long property run ------------------------------------------------------
+
+
+def test_ray_in_a_split_plane_finds_the_closer_hit_in_the_in_plane_sibling():
+    """HYPOTHESIS_PROFILE=long found this (exact builder, leaf_size 1), shrunk to six triangles: the ray
+    lies in the split plane y = 0, so both children cover the same interval; the search stopped after a
+    farther hit in one child (t 0.4) when it popped a node starting after it, although the in-plane
+    sibling, still lower on the stack, held the closer hit on its edge (t 0.375)."""
+    tris = np.array([[[-0.5, -1, 0], [2, 0, 1.5], [0, 0, -1.5]], [[0, 0, -0.5], [-1, 2, 2], [0, -1.5, -1.5]],
+                     [[0, 0, -1.5], [0, 1, 0], [-1, -2, 0]], [[2, 0, 0], [0, 0, 2], [-0.5, 0, 0]],
+                     [[0, -0.5, 0], [0, -1, 2], [-1, 1, 0]], [[-1.5, 0, 0], [0, 0, 0.5], [0, 0.5, 0]]], np.float32)
+    origins, directions = np.zeros((1, 3)), np.array([[-1.0, 0.0, 1.0]])
+    for options in ({"builder": "exact", "leaf_size": 1}, {"builder": "exact", "leaf_size": 1, "clip": False}, {}):
+        hits = core.intersect(core.build_kdtree(tris, **options), origins, directions)
+        assert (hits.t[0], hits.prim[0]) == (np.float32(0.375), 5), options
