@@ -9,14 +9,16 @@ Public API:
     Light.point / Light.sun / Light.spot / Light.area
     render_preview(tree, camera, width, height, *, mode="ao", samples=16, ...) -> (H, W, 4) float32
     PreviewRender(tree, camera, width, height, ...)   progressive: step(), image(), done
+    memory.build_bytes / memory.render_bytes: peak-memory estimates; MemoryLimitError
 """
 from .build import build_kdtree
 from .camera import Camera
 from .lights import Light
 from .render import PreviewRender, render_preview
 from .kdtree import KdTree
+from .memory import MemoryLimitError
 from .options import BuildOptions
 from .queries import Hits, intersect, occluded
 
 __all__ = ["build_kdtree", "intersect", "occluded", "KdTree", "Hits", "BuildOptions", "Camera", "Light",
-           "render_preview", "PreviewRender"]
+           "render_preview", "PreviewRender", "MemoryLimitError"]

@@ -7,6 +7,7 @@ from .geometry import triangle_boxes, union_of_boxes
 from .inputs import as_triangles
 from .kdtree import KdTree, empty_arrays
 from .lazy import DeferredSubtrees
+from .memory import check_build_memory
 from .merge import merge_tree
 from .options import make_options
 from .subtree import build_subtrees
@@ -18,11 +19,13 @@ def build_kdtree(triangles, **options):
     """Build a kd-tree over an (N, 3, 3) array of triangle vertex positions.
 
     Keyword options are those of `BuildOptions` (builder, bins, leaf_size, max_depth, traversal_cost,
-    intersection_cost, empty_bonus, cost_ratio, clip, skip, top, threads, lazy, ...), each validated.
-    With lazy=True only the top of the tree is built now and the rest as rays reach it (lazy.py).
-    Raises ValueError naming the first bad triangle or setting.
+    intersection_cost, empty_bonus, cost_ratio, clip, skip, top, threads, lazy, memory_limit, ...), each
+    validated. With lazy=True only the top of the tree is built now and the rest as rays reach it (lazy.py).
+    Raises ValueError naming the first bad triangle or setting, or memory.MemoryLimitError (a ValueError)
+    when the estimated peak memory is above memory_limit.
     """
     opts = make_options(options)
+    check_build_memory(triangles, opts)
     tris = as_triangles(triangles)
     start = perf_counter()
     timings = {}

@@ -52,6 +52,8 @@ class BuildOptions:
     lazy_speculative: also build, with each requested subtree, its neighbours in depth-first build
         order (the previous and next deferred subtree, usually its sibling or a cousin): seed 003 §4's
         speculative building, trading some unneeded building for fewer suspend/build/retrace rounds.
+    memory_limit: bytes; a build whose estimated peak memory (memory.py) is above this raises
+        memory.MemoryLimitError (a ValueError) before allocating anything. None: no limit.
     """
 
     builder: str = "binned"
@@ -70,6 +72,7 @@ class BuildOptions:
     lazy: bool = False
     lazy_subtree_size: int = 4096
     lazy_speculative: bool = False
+    memory_limit: Optional[int] = None
 
     def __post_init__(self):
         _check_choice("builder", self.builder, BUILDERS)
@@ -81,6 +84,8 @@ class BuildOptions:
             _check_int("max_depth", self.max_depth, 0, DEPTH_LIMIT)
         if self.threads is not None:
             _check_int("threads", self.threads, 1, 1024)
+        if self.memory_limit is not None:
+            _check_int("memory_limit", self.memory_limit, 0, 1 << 62)
         _check_float("traversal_cost", self.traversal_cost, 0.0, None)
         _check_float("intersection_cost", self.intersection_cost, 0.0, None, low_open=True)
         _check_float("empty_bonus", self.empty_bonus, 0.0, 1.0, high_open=True)

@@ -83,11 +83,8 @@ def trace_ray(tree, o, d, tmin, tmax, any_hit, stack_node, stack_t, inv):
                     return best_t, best_prim, best_u, best_v
         if best_prim >= 0 and best_t <= t_exit:  # no slack: stopping late is safe, early is not
             break
-        if sp == 0:
-            break
-        sp -= 1
-        node, t0, t1, t_exit = stack_node[sp], stack_t[sp, 0], stack_t[sp, 1], stack_t[sp, 2]
-        if best_prim >= 0 and best_t < t0 - _slack(t0):
+        node, t0, t1, t_exit, sp = _pop(stack_node, stack_t, sp, best_t, best_prim >= 0)
+        if node < 0:
             break
     if best_prim < 0:
         return np.inf, -1, 0.0, 0.0
@@ -118,6 +115,22 @@ def _descend(node, a, pos, left, oa, da, inv_a, t0, t1, t_exit, stack_node, stac
     ts = min(max(ts, t0), t1)
     sp = _push(stack_node, stack_t, sp, far, ts, t1, t_exit)
     return near, ts, min(t_exit, ts), sp
+
+
+@njit(cache=True, inline="always")
+def _pop(stack_node, stack_t, sp, best_t, found):
+    """The next stacked node that may hold a hit closer than best_t: (node, t0, t1, t_exit, sp), node -1
+    when none can. A node starting after best_t is skipped, but the search ends only once best_t is
+    within the entry's exit bound: below an in-plane sibling, which starts where its twin did, the
+    entries do not start in order."""
+    while sp > 0:
+        sp -= 1
+        node, t0, t1, t_exit = stack_node[sp], stack_t[sp, 0], stack_t[sp, 1], stack_t[sp, 2]
+        if not found or best_t >= t0 - _slack(t0):
+            return node, t0, t1, t_exit, sp
+        if best_t <= t_exit:
+            break
+    return -1, 0.0, 0.0, 0.0, 0
 
 
 @njit(cache=True, inline="always")

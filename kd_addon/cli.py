@@ -75,6 +75,8 @@ def build_parser(prog: str = COMMAND_ID) -> argparse.ArgumentParser:
     render.add_argument("--threads", type=int, default=s, help="0 = all cores (default)")
     render.add_argument("--error-target", dest="error_target", type=float, default=s, help="0 = off (default)")
     render.add_argument("--seed", type=int, default=s, help=f"(default {DEFAULTS.seed})")
+    render.add_argument("--memory-limit", dest="memory_limit_mb", type=int, default=s,
+                        help="MiB; refuse a frame estimated to need more (default 0 = no limit)")
     render.add_argument("--format", dest="output_format", type=_output_format, default=s,
                         help="PNG (default) or EXR")
     return parser
@@ -101,6 +103,8 @@ def _print_row(result, path) -> None:
     print(TABLE.format(f"{mark}{result.frame}", f"{result.triangles:,}", result.objects, f"{result.extract_ms:.1f}",
                        f"{result.build_ms:.1f}", f"{result.trace_ms:.1f}", f"{result.total_ms:.1f}",
                        f"{result.rays:,}", f"{result.mrays_per_s:.2f}"), flush=True)
+    for warning in result.warnings:  # e.g. an object left out for non-finite vertices
+        print(f"{COMMAND_ID}: warning: frame {result.frame}: {warning}", file=sys.stderr, flush=True)
 
 
 def run(args) -> int:

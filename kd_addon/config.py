@@ -38,6 +38,8 @@ class Settings:
     error_target: stop sampling a pixel once its standard error is below this; 0 = off.
     output_format: "PNG" or "OPEN_EXR" for animation frames.
     seed: sampler seed, so two runs of a frame give the same image.
+    memory_limit_mb: refuse a frame whose estimated peak memory (triangles, kd-tree, pixel
+        buffers; see memory_limit.py) is above this many MiB, before allocating it; 0 = no limit.
     """
 
     mode: str = "ao"
@@ -52,6 +54,7 @@ class Settings:
     error_target: float = 0.0
     output_format: str = "PNG"
     seed: int = 0
+    memory_limit_mb: int = 0
 
 
 DEFAULTS = Settings()
@@ -73,6 +76,11 @@ class RenderConfig:
     @property
     def resolution_percentage(self) -> int:
         return self.settings.resolution_percentage
+
+    @property
+    def memory_limit(self) -> int | None:
+        """The memory limit in bytes, None for no limit."""
+        return self.settings.memory_limit_mb * (1 << 20) or None
 
     @property
     def file_extension(self) -> str:
@@ -127,6 +135,7 @@ def _validate(s: Settings) -> None:
     _integer("bins", s.bins, 2, 4096)
     _integer("threads", s.threads, 0, 1024, "0 = all cores")
     _integer("seed", s.seed, 0, 2**31 - 1)
+    _integer("memory_limit_mb", s.memory_limit_mb, 0, 1 << 30, "0 = no limit")
     _number("ao_distance", s.ao_distance, positive=True)
     _number("error_target", s.error_target, positive=False, note="0 = off")
 

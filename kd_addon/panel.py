@@ -83,7 +83,7 @@ class KDPREVIEW_PT_tree(_SubPanel, bpy.types.Panel):
     def draw(self, context):
         settings = context.scene.kd_preview
         self.layout.use_property_split = True
-        for name in ("builder", "bins", "leaf_size", "max_depth", "threads", "seed"):
+        for name in ("builder", "bins", "leaf_size", "max_depth", "threads", "seed", "memory_limit_mb"):
             self.layout.prop(settings, name)
 
 

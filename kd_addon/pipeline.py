@@ -15,6 +15,10 @@ Why a lock: Numba's workqueue threading layer aborts the process when two
 threads launch parallel kernels at once. Blender can call the frame-change
 handler from its render thread, and bpy's tbb layer is not guaranteed on
 every platform, so every kernel call here is serialized by KERNEL_LOCK.
+
+Why a worker thread: the build and each trace step run in a BackgroundCall
+(background.py) that `tick` polls for at most POLL_SECONDS, so a cancel is
+seen within that time even in the middle of a multi-second build.
 """
 
 from __future__ import annotations
@@ -25,12 +29,14 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from . import corelib, scene_input
+from . import corelib, memory_limit, scene_input
+from .background import BackgroundCall
 from .config import RenderConfig, frame_size
 from .errors import Cancelled, PreviewError
 from .extract import ExtractedScene, extract_scene
 
 KERNEL_LOCK = threading.Lock()
+POLL_SECONDS = 0.05  # longest a tick waits for the worker: the bound on cancel latency
 COMPILING_STATUS = "Compiling kernels (first run)…"
 LOADING_STATUS = "Loading compiled kernels (first run)…"
 _kernels_ready = False  # set once a frame has traced in this process: no compile cost left
@@ -111,12 +117,13 @@ class FrameJob:
         self._timings = {"extract_ms": 0.0, "build_ms": 0.0, "trace_ms": 0.0, "other_ms": 0.0}
         self._info: dict = {}
         self._first_run = not _kernels_ready
+        self._pending: BackgroundCall | None = None  # the kernel call running on the worker
 
     # -- state the operators show ------------------------------------------
 
     @property
     def done(self) -> bool:
-        return self.renderer is not None and self.renderer.done
+        return self._pending is None and self.renderer is not None and self.renderer.done
 
     @property
     def progress(self) -> float:
@@ -130,31 +137,44 @@ class FrameJob:
         if not _kernels_ready:
             return LOADING_STATUS if corelib.cache_is_warm() else COMPILING_STATUS
         if self.renderer is None:
-            return "Reading scene and building kd-tree…"
+            return "Building kd-tree…" if self._pending is not None else "Reading scene…"
         return f"Tracing: {self.renderer.samples_done}/{self.renderer.target_samples} samples"
 
     # -- work ---------------------------------------------------------------
 
     def tick(self) -> bool:
-        """Do the next short piece of work; return True when the frame is finished."""
-        if self.renderer is None:
+        """Do the next short piece of work (at most POLL_SECONDS of waiting for the worker, or
+        reading the scene); return True when the frame is finished."""
+        if self._pending is not None:
+            if not self._pending.wait(POLL_SECONDS):
+                return False
+            pending, self._pending = self._pending, None
+            pending.result()  # the worker's exception, if any, is raised here
+        elif self.renderer is None:
             self.prepare()
         elif not self.renderer.done:
             self.step()
         return self.done
 
     def prepare(self) -> None:
-        """Camera, lights and triangles from the scene, then the kd-tree and the renderer."""
+        """Camera, lights and triangles from the scene (here: bpy is not thread-safe), then the
+        kd-tree and the renderer on the worker."""
         t0 = time.perf_counter()
         inputs = self._scene_inputs()
-        triangles, extracted = self._triangles(inputs.camera.position)
         core = corelib.load_core()
+        triangles, extracted = self._triangles(inputs)
+        camera, lights = self._camera_and_lights(core, inputs)
         self._timings["other_ms"] += _ms_since(t0) - self._timings["extract_ms"]
-        tree = self._build(core, triangles)
-        self._start_tracing(core, tree, inputs)
         self._info = dict(triangles=int(len(triangles)), objects=extracted.object_count, lights=len(inputs.lights),
-                          frame=extracted.frame, tree_stats=tree.stats(),
-                          warnings=inputs.warnings + extracted.warnings)
+                          frame=extracted.frame, warnings=inputs.warnings + extracted.warnings)
+        self._pending = BackgroundCall(KERNEL_LOCK, self._build_and_start, core, triangles, camera, lights,
+                                       inputs.width, inputs.height)
+
+    def _build_and_start(self, core, triangles, camera, lights, width, height) -> None:
+        """On the worker: the tree, then the renderer (whose constructor traces the camera rays)."""
+        tree = self._build(core, triangles)
+        self._info["tree_stats"] = tree.stats()
+        self._start_tracing(core, tree, camera, lights, width, height)
 
     def _scene_inputs(self) -> scene_input.SceneInputs:
         render = self.scene.render
@@ -165,9 +185,8 @@ class FrameJob:
                                "has no render-visible light: add one or use mode 'ao'")
         return inputs
 
-    def _start_tracing(self, core, tree, inputs: scene_input.SceneInputs) -> None:
-        """Camera and lights moved by the same offset as the triangles, then the renderer
-        (whose constructor already traces the camera rays, so it counts as trace time)."""
+    def _camera_and_lights(self, core, inputs: scene_input.SceneInputs):
+        """Camera and lights moved by the same offset as the triangles."""
         offset = inputs.camera.position
         try:
             camera = core.Camera(**inputs.camera.keywords()).translated(offset)
@@ -175,35 +194,41 @@ class FrameJob:
                       for light in inputs.lights]
         except ValueError as error:  # core's own checks, e.g. clip start >= clip end
             raise PreviewError(f"the scene's camera or lights cannot be used: {error}") from None
+        return camera, lights
+
+    def _start_tracing(self, core, tree, camera, lights, width, height) -> None:
+        """The renderer (its constructor already traces the camera rays, so it counts as trace time)."""
         t0 = time.perf_counter()
-        with KERNEL_LOCK:
-            self.renderer = core.PreviewRender(tree, camera, inputs.width, inputs.height, lights=lights,
-                                               **self.config.render_options)
+        self.renderer = core.PreviewRender(tree, camera, width, height, lights=lights, **self.config.render_options)
         self._timings["trace_ms"] += _ms_since(t0)
 
-    def _triangles(self, offset: np.ndarray) -> tuple[np.ndarray, ExtractedScene]:
+    def _triangles(self, inputs: scene_input.SceneInputs) -> tuple[np.ndarray, ExtractedScene]:
+        """The scene's triangles relative to the camera, once the memory they need is known to fit."""
         t0 = time.perf_counter()
         extracted = extract_scene(self.depsgraph)
         if extracted.triangle_count == 0:
             raise PreviewError(f"nothing to render at frame {self.scene.frame_current}: the scene has no "
                                "render-visible mesh triangles")
-        triangles = relative_triangles(extracted, offset)
+        memory_limit.check_frame(extracted.triangle_count, inputs.width, inputs.height, self.config)
+        triangles = relative_triangles(extracted, inputs.camera.position)
         self._timings["extract_ms"] = _ms_since(t0)
         return triangles, extracted
 
     def _build(self, core, triangles: np.ndarray):
+        """On the worker, holding KERNEL_LOCK."""
         t0 = time.perf_counter()
-        with KERNEL_LOCK:
-            tree = core.build_kdtree(triangles, **self.config.build_options)
+        tree = core.build_kdtree(triangles, **self.config.build_options)
         self._timings["build_ms"] = _ms_since(t0)
         return tree
 
     def step(self) -> None:
-        """One more sample per unconverged pixel."""
+        """One more sample per unconverged pixel, on the worker."""
+        self._pending = BackgroundCall(KERNEL_LOCK, self._step_once)
+
+    def _step_once(self) -> None:
         global _kernels_ready
         t0 = time.perf_counter()
-        with KERNEL_LOCK:
-            self.renderer.step(1)
+        self.renderer.step(1)
         self._timings["trace_ms"] += _ms_since(t0)
         _kernels_ready = True
 

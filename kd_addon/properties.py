@@ -49,6 +49,9 @@ class KDPreviewSettings(bpy.types.PropertyGroup):
                                 description="Stop sampling a pixel once its standard error is below this (0 = off)",
                                 default=DEFAULTS.error_target, min=0.0, soft_max=0.1, precision=4)
     seed: IntProperty(name="Seed", description="Sampler seed", default=DEFAULTS.seed, min=0)
+    memory_limit_mb: IntProperty(name="Memory Limit (MiB)",
+                                 description="Refuse a frame whose estimated peak memory is above this (0 = no limit)",
+                                 default=DEFAULTS.memory_limit_mb, min=0, soft_max=65536)
     output_format: EnumProperty(name="Format", default=DEFAULTS.output_format,
                                 items=[("PNG", "PNG", "8-bit sRGB PNG"), ("OPEN_EXR", "OpenEXR", "Linear float EXR")])
     output_dir: StringProperty(name="Output Folder", description="Where Render Animation writes frames and report.json",

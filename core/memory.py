@@ -1,0 +1,60 @@
+"""Peak memory of a build and of a render, estimated from sizes alone, before anything is allocated.
+
+Why: a scene too big for the machine should fail with a message naming the estimate, the limit and what
+to change, not get the process killed by the out-of-memory killer half-way through a build. The figures
+are the peak resident-memory growth measured per triangle and per pixel in fresh processes
+(`benchmarks/bench_memory.py --calibrate`, numbers in README *Reliability*), times a safety margin:
+the build's working set (references, boxes, clipped boxes, pools, nodes) grows linearly with the
+triangle count, and the renderer's buffers (camera rays, hit points, normals, sums) with the pixel count.
+"""
+import numpy as np
+
+MB = 1 << 20
+MARGIN = 1.25  # measured peaks vary by scene (references per triangle); the limit is a promise
+
+# Peak RSS growth of build_kdtree per input triangle, not counting the triangle array itself, worst scene
+# measured (bench_memory.py --calibrate). It follows the references per triangle: 108-192 B on soup-1m,
+# suzanne-1m and a wavy 1M height field (1.6-4.3 references a triangle), but a *flat* subdivided plane
+# makes the binned and median builders clip it into 13-14 references a triangle: 612 B (binned) and
+# 487 B (median) per triangle. The exact sweep splits such a plane on its grid lines (1.0 reference).
+# The limit is a promise, so the estimate covers the flat plane: typical scenes need 3-6x less.
+BUILD_BYTES_PER_TRIANGLE = {"binned": 620.0, "exact": 190.0, "median": 490.0}
+TRIANGLE_BYTES = 36  # (3, 3) float32: the array the tree keeps
+# Peak RSS growth of PreviewRender plus image(), per pixel, every pixel hit (the worst case): measured
+# 198 B at 960x540 and 171 B at 1920x1080.
+RENDER_BYTES_PER_PIXEL = 200.0
+
+
+class MemoryLimitError(ValueError):
+    """A request whose estimated peak memory is above the caller's limit; nothing was allocated."""
+
+
+def build_bytes(n_triangles, builder="binned", *, copies_input=False):
+    """Estimated peak bytes of building a tree over `n_triangles` (plus the float32 copy of the input when
+    it is not already a C-contiguous float32 array)."""
+    per_triangle = BUILD_BYTES_PER_TRIANGLE[builder] + (TRIANGLE_BYTES if copies_input else 0)
+    return int(MARGIN * per_triangle * n_triangles)
+
+
+def render_bytes(width, height):
+    """Estimated peak bytes of a PreviewRender of width x height pixels and its image."""
+    return int(MARGIN * RENDER_BYTES_PER_PIXEL * width * height)
+
+
+def check_limit(estimate, limit, what, advice):
+    """Raise MemoryLimitError when `estimate` bytes exceed `limit` (None: no limit)."""
+    if limit is not None and estimate > limit:
+        raise MemoryLimitError(f"{what} needs about {estimate / MB:,.0f} MB, above the memory limit of "
+                               f"{limit / MB:,.0f} MB: {advice}")
+
+
+def check_build_memory(triangles, options):
+    """build_kdtree's check, from the input's shape and dtype only (before it is even converted)."""
+    if options.memory_limit is None:
+        return
+    arr = np.asarray(triangles)
+    n = int(arr.shape[0]) if arr.ndim >= 1 else 0
+    copies = arr.dtype != np.float32 or not arr.flags.c_contiguous
+    check_limit(build_bytes(n, options.builder, copies_input=copies), options.memory_limit,
+                f"building a kd-tree over {n:,} triangles ({options.builder!r} builder)",
+                "pass fewer triangles or raise memory_limit (None = no limit)")

@@ -1,0 +1,63 @@
+"""Kernel work on a worker thread, so the caller can stop waiting at any moment.
+
+Why: a Numba kernel cannot be interrupted, and a kd-tree build over a few
+million triangles (or one trace step at a large resolution) takes seconds.
+If the main thread ran it, ESC, a cancel callback or Ctrl-C would only be
+seen once it returned. Instead every kernel call of a frame runs here and
+the main thread polls it in short waits (`FrameJob.tick`), checking for
+cancel in between, so a cancel returns within one poll interval (~50 ms).
+
+A cancelled job simply stops polling: its worker runs to the end and writes
+only into that job's own tree and renderer, which nobody reads any more.
+The worker holds `lock` (the pipeline's KERNEL_LOCK) while it runs, so a
+later job's kernels wait for the abandoned ones instead of running beside
+them: Numba's workqueue threading layer aborts the process when two threads
+launch parallel kernels at once.
+
+The thread is a daemon, so a process that ends after a cancel (Ctrl-C on the
+command line) ends at once instead of waiting for the abandoned build.
+Measured: exiting while a daemon worker was inside a 1M-triangle build ended
+cleanly with the intended exit code in 5 of 5 runs, with Numba's workqueue
+layer and with the tbb layer bpy brings.
+"""
+
+from __future__ import annotations
+
+import threading
+
+
+class BackgroundCall:
+    """`fn(*args)` running on its own thread under `lock`; poll with wait(), collect with result()."""
+
+    def __init__(self, lock: threading.Lock, fn, *args):
+        self._finished = threading.Event()
+        self._value = None
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, args=(lock, fn, args), name="kd-preview-kernels",
+                                        daemon=True)
+        self._thread.start()
+
+    def _run(self, lock, fn, args) -> None:
+        try:
+            with lock:
+                self._value = fn(*args)
+        except BaseException as error:  # handed to the polling thread by result()
+            self._error = error
+        finally:
+            self._finished.set()
+
+    @property
+    def finished(self) -> bool:
+        return self._finished.is_set()
+
+    def wait(self, timeout: float) -> bool:
+        """Wait at most `timeout` seconds; True once the call has finished."""
+        return self._finished.wait(timeout)
+
+    def result(self):
+        """The call's return value, or its exception re-raised here; call only once finished."""
+        if not self.finished:
+            raise RuntimeError("BackgroundCall.result() called before the call finished")
+        if self._error is not None:
+            raise self._error
+        return self._value

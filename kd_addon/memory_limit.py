@@ -1,0 +1,46 @@
+"""The frame's memory limit: triangles, kd-tree and pixel buffers, estimated before any is allocated.
+
+Checked right after extraction, which only reads each distinct mesh once
+(small next to the instanced world triangles), and before the world
+triangles, the tree or the renderer exist: a frame over the limit fails
+with a message naming the estimate, the limit and what to change, instead
+of the out-of-memory killer ending Blender during the build.
+
+The per-triangle and per-pixel figures are core's (core/memory.py, measured
+by benchmarks/bench_memory.py). The world triangles the tree keeps are added
+on top of the build's own working set; their transient copies while being
+transformed (under 60 bytes a triangle) are smaller than that working set and
+freed before the build starts, so the sum bounds the peak.
+"""
+
+from __future__ import annotations
+
+from . import corelib
+from .errors import PreviewError
+
+MIB = 1 << 20
+
+
+class MemoryLimitError(PreviewError):
+    """The frame's estimated peak memory is above the Memory Limit setting."""
+
+
+def frame_bytes(n_triangles: int, width: int, height: int, builder: str) -> tuple[int, int]:
+    """(bytes for the triangles and the kd-tree, bytes for the pixel buffers), estimated."""
+    memory = corelib.load_core().memory
+    geometry = memory.build_bytes(n_triangles, builder) + int(memory.MARGIN * memory.TRIANGLE_BYTES * n_triangles)
+    return geometry, memory.render_bytes(width, height)
+
+
+def check_frame(n_triangles: int, width: int, height: int, config) -> None:
+    """Raise MemoryLimitError when the frame would need more than config.memory_limit bytes."""
+    limit = config.memory_limit
+    if limit is None:
+        return
+    geometry, pixels = frame_bytes(n_triangles, width, height, config.settings.builder)
+    if geometry + pixels > limit:
+        raise MemoryLimitError(
+            f"this frame needs about {(geometry + pixels) / MIB:,.0f} MiB ({n_triangles:,} triangles and their "
+            f"kd-tree: {geometry / MIB:,.0f} MiB; {width}x{height} pixels: {pixels / MIB:,.0f} MiB), above the "
+            f"memory limit of {limit / MIB:,.0f} MiB: lower the resolution, hide objects, or raise the memory "
+            "limit (0 = no limit)")

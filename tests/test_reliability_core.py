@@ -1,0 +1,129 @@
+"""Core reliability: the memory limit refuses before allocating, AO at distance 0 and at huge distances, and
+scenes at scale 1e-4 and 1e4 render like the same scene at scale 1 (no bpy)."""
+import tracemalloc
+
+import numpy as np
+import pytest
+
+import core
+from core import memory
+from tests.meshes import subdivided_cube
+from tests.render_scenes import floor, look_at
+
+SIZE = (48, 32)
+
+
+def box_on_floor(scale=1.0):
+    """A 1 x 1 x 1 box (closed, 12 triangles) standing on a 6 x 6 floor, all times `scale`."""
+    cube = subdivided_cube(1, half=0.5) + np.array([0.0, 0.0, 0.5])
+    return np.concatenate([cube, floor(0.0, half=3.0)]) * scale
+
+
+def camera(scale=1.0):
+    return look_at(np.array([3.0, -4.0, 3.0]) * scale, np.array([0.0, 0.0, 0.3]) * scale)
+
+
+def render(tris, cam, **settings):
+    tree = core.build_kdtree(tris)
+    return core.render_preview(tree, cam, *SIZE, **dict(dict(samples=16, ao_distance=1.0), **settings))
+
+
+# -- memory limit -------------------------------------------------------------------
+
+
+def test_memory_limit_refuses_before_allocating():
+    tris = np.random.default_rng(3).uniform(-1, 1, (200_000, 3, 3)).astype(np.float32)  # 7.2 MB
+    limit = memory.build_bytes(len(tris)) - 1
+    tracemalloc.start()
+    try:
+        with pytest.raises(core.MemoryLimitError) as info:
+            core.build_kdtree(tris, memory_limit=limit)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < 100_000  # bytes: nothing the size of the input, let alone the build, was allocated
+    message = str(info.value)
+    assert "kd-tree over 200,000 triangles ('binned' builder)" in message
+    assert f"needs about {memory.build_bytes(len(tris)) / memory.MB:,.0f} MB" in message
+    assert f"above the memory limit of {limit / memory.MB:,.0f} MB" in message and "raise memory_limit" in message
+    assert isinstance(info.value, ValueError)
+
+
+def test_memory_limit_counts_the_float32_copy_of_float64_input():
+    tris64 = box_on_floor()
+    n = len(tris64)
+    assert memory.build_bytes(n, copies_input=True) - memory.build_bytes(n) == int(memory.MARGIN * 36 * n)
+    with pytest.raises(core.MemoryLimitError):
+        core.build_kdtree(tris64, memory_limit=memory.build_bytes(n))  # enough for float32 only
+    core.build_kdtree(tris64.astype(np.float32), memory_limit=memory.build_bytes(n))
+
+
+def test_memory_limit_within_bounds_builds_the_same_tree():
+    tris = box_on_floor().astype(np.float32)
+    free = core.build_kdtree(tris)
+    limited = core.build_kdtree(tris, memory_limit=memory.build_bytes(len(tris), "binned"))
+    for a, b in zip(free.arrays, limited.arrays):
+        np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("bad", [-1, 1.5, "1GB", True])
+def test_bad_memory_limit_is_named(bad):
+    with pytest.raises(ValueError, match="memory_limit"):
+        core.build_kdtree(box_on_floor(), memory_limit=bad)
+
+
+def test_estimates_grow_with_triangles_and_pixels():
+    assert memory.build_bytes(2_000_000) == 2 * memory.build_bytes(1_000_000) > 0
+    assert memory.render_bytes(1920, 1080) == 4 * memory.render_bytes(960, 540) > 0
+    for builder in core.options.BUILDERS:
+        assert memory.build_bytes(10, builder) > 0
+
+
+# -- ao_distance ----------------------------------------------------------------------
+
+
+def test_ao_distance_zero_is_exactly_unoccluded():
+    img = render(box_on_floor(), camera(), ao_distance=0.0)
+    hit = img[..., 3] == 1.0
+    assert hit.sum() > 200 and (img[..., :3][hit] == 1.0).all() and (img[..., :3][~hit] == 0.0).all()
+
+
+@pytest.mark.parametrize("far", [1e6, 1e30])
+def test_ao_distance_far_beyond_the_scene_equals_the_scene_size(far):
+    """No occluder lies further than the scene's diagonal (~9), so any longer distance gives the same image."""
+    tris = box_on_floor()
+    near = render(tris, camera(), ao_distance=20.0)
+    huge = render(tris, camera(), ao_distance=far)
+    assert np.isfinite(huge).all()
+    np.testing.assert_array_equal(near, huge)
+    assert near[..., 0][near[..., 3] == 1.0].min() < 0.8  # the box does occlude the floor
+
+
+# -- scale ------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("scale", [1e-4, 1e4])
+def test_scaled_scene_renders_like_scale_one(scale):
+    """Everything (geometry, camera, ao_distance) times `scale`: the same image up to sampling-free noise."""
+    reference = render(box_on_floor(), camera())
+    scaled = render(box_on_floor(scale), camera(scale), ao_distance=scale)
+    np.testing.assert_array_equal(reference[..., 3], scaled[..., 3])
+    rmse = np.sqrt(np.mean((reference[..., 0] - scaled[..., 0]) ** 2))
+    assert rmse < 0.01, rmse
+
+
+# -- found by the long property run ------------------------------------------------------
+
+
+def test_ray_in_a_split_plane_finds_the_closer_hit_in_the_in_plane_sibling():
+    """HYPOTHESIS_PROFILE=long found this (exact builder, leaf_size 1), shrunk to six triangles: the ray
+    lies in the split plane y = 0, so both children cover the same interval; the search stopped after a
+    farther hit in one child (t 0.4) when it popped a node starting after it, although the in-plane
+    sibling, still lower on the stack, held the closer hit on its edge (t 0.375)."""
+    tris = np.array([[[-0.5, -1, 0], [2, 0, 1.5], [0, 0, -1.5]], [[0, 0, -0.5], [-1, 2, 2], [0, -1.5, -1.5]],
+                     [[0, 0, -1.5], [0, 1, 0], [-1, -2, 0]], [[2, 0, 0], [0, 0, 2], [-0.5, 0, 0]],
+                     [[0, -0.5, 0], [0, -1, 2], [-1, 1, 0]], [[-1.5, 0, 0], [0, 0, 0.5], [0, 0.5, 0]]], np.float32)
+    origins, directions = np.zeros((1, 3)), np.array([[-1.0, 0.0, 1.0]])
+    for options in ({"builder": "exact", "leaf_size": 1}, {"builder": "exact", "leaf_size": 1, "clip": False}, {}):
+        hits = core.intersect(core.build_kdtree(tris, **options), origins, directions)
+        assert (hits.t[0], hits.prim[0]) == (np.float32(0.375), 5), options

@@ -1,0 +1,257 @@
+"""Bad and extreme scenes through the add-on (bpy module): each case asserts the outcome and the message.
+
+The reference is the same scene without the problem (objects that must be skipped, far away, scaled,
+linked from a library), rendered with the same seed, so most comparisons are exact.
+"""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from tests.addon_support import add_quad, add_top_camera, addon, half_plane_scene, preview_pixels  # noqa: F401
+
+import bpy  # noqa: E402
+import numpy as np  # noqa: E402
+
+from kd_addon import cli, memory_limit, pipeline  # noqa: E402
+from kd_addon.config import make_config  # noqa: E402
+from kd_addon.errors import PreviewError  # noqa: E402
+from tests import bpy_scenes as scenes  # noqa: E402
+
+
+def render(scene=None):
+    scene = scene or bpy.context.scene
+    return pipeline.render_frame(scene, bpy.context.evaluated_depsgraph_get(), make_config(scene.kd_preview))
+
+
+def cli_render(tmp_path, blend, *extra):
+    return cli.execute(["render", str(blend), "--out", str(tmp_path / "out"), "--frames", "1", *extra])
+
+
+# -- headless exit codes ---------------------------------------------------------------------
+
+
+def test_zero_resolution_exits_nonzero_with_the_message(tmp_path, capsys):
+    scenes.reset()
+    add_quad("Floor", 5, 5)
+    add_top_camera()
+    scene = bpy.context.scene
+    scene.render.resolution_x, scene.render.resolution_y = 4, 30  # Blender's smallest width is 4
+    blend = tmp_path / "tiny.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    assert cli_render(tmp_path, blend, "--resolution", "10") == 1
+    assert "the preview would be 0x3 pixels: render resolution 4x30 at 10% is too small" in capsys.readouterr().err
+    assert not (tmp_path / "out" / "frame_0001.png").exists()
+
+
+def test_memory_limit_exits_nonzero_before_rendering(tmp_path, capsys):
+    scenes.reset()
+    add_quad("Floor", 5, 5)
+    add_top_camera()
+    scene = bpy.context.scene
+    scene.render.resolution_x, scene.render.resolution_y = 400, 300
+    blend = tmp_path / "scene.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    assert cli_render(tmp_path, blend, "--resolution", "100", "--memory-limit", "1") == 1
+    geometry, pixels = memory_limit.frame_bytes(2, 400, 300, "binned")
+    err = capsys.readouterr().err
+    assert f"this frame needs about {(geometry + pixels) / 2**20:,.0f} MiB (2 triangles" in err
+    assert "400x300 pixels" in err and "above the memory limit of 1 MiB" in err and "raise the memory limit" in err
+    assert not (tmp_path / "out" / "frame_0001.png").exists()
+    assert cli_render(tmp_path, blend, "--resolution", "100", "--memory-limit", "64") == 0  # fits: renders
+
+
+def test_non_finite_object_warns_on_the_command_line_and_the_rest_renders(tmp_path, capsys):
+    scenes.reset()
+    add_quad("Floor", 5, 5)
+    add_top_camera()
+    scenes.add_mesh("Broken", [(0, 0, 1), (1, 0, 1), (math.inf, 1, 1)], [(0, 1, 2)])
+    scene = bpy.context.scene
+    scene.render.resolution_x, scene.render.resolution_y = 40, 30
+    blend = tmp_path / "broken.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    assert cli_render(tmp_path, blend, "--resolution", "100", "--samples", "2") == 0
+    assert "warning: frame 1: object 'Broken' has non-finite vertex coordinates; left out" in capsys.readouterr().err
+    assert (tmp_path / "out" / "frame_0001.png").is_file()
+
+
+# -- objects that are left out -------------------------------------------------------------
+
+
+def test_non_finite_objects_are_named_and_nothing_else_changes(addon):  # noqa: F811
+    scene = half_plane_scene()
+    reference = render(scene)
+    scenes.add_mesh("NaNTri", [(-3, 0, 2), (-1, 0, 2), (math.nan, 1, 2)], [(0, 1, 2)])
+    # A cube in view above the ground with one vertex at infinity, as a script or a broken modifier may
+    # leave it (setting vertex.co through RNA would clamp inf to the largest float; from_pydata does not).
+    verts = [(0.3 * x, 0.3 * y, 0.3 * z) for x, y, z in scenes.CUBE_VERTS]
+    verts[5] = (math.inf, 0.3, -0.3)
+    scenes.add_mesh("Exploded", verts, scenes.CUBE_FACES, location=(-2, 1, 1))
+    result = render(scene)
+    assert sorted(w for w in result.warnings if "non-finite" in w) == [
+        "object 'Exploded' has non-finite vertex coordinates; left out",
+        "object 'NaNTri' has non-finite vertex coordinates; left out"]
+    assert result.triangles == reference.triangles == 14
+    np.testing.assert_array_equal(result.image, reference.image)
+
+
+def test_faceless_flat_and_non_mesh_objects_are_skipped_quietly(addon):  # noqa: F811
+    scene = half_plane_scene()
+    reference = render(scene)
+    scenes.add_mesh("Points", [(-2, 0, 3), (-1, 0, 3)], [])
+    scenes.add_mesh("Wire", [(-2, 0, 3), (-1, 0, 3)], [], edges=[(0, 1)])
+    scenes.add_mesh("Sliver", [(-3, -1, 2), (-2, -1, 2), (-1, -1, 2)], [(0, 1, 2)])  # collinear: zero area
+    scenes.add_mesh("Dot", [(-3, 1, 2)] * 3, [(0, 1, 2)])  # one point: zero area
+    scenes.add_empty("Nothing", location=(-2, 0, 2))
+    scenes.add_light("Lamp")
+    scenes.add_camera("SpareCam")
+    result = render(scene)
+    assert result.warnings == reference.warnings == []
+    assert result.tree_stats["degenerate_dropped"] == 2 and result.triangles == 16
+    np.testing.assert_array_equal(result.image, reference.image)
+
+
+# -- cameras and placement -------------------------------------------------------------------
+
+
+def test_camera_inside_a_closed_mesh(addon):  # noqa: F811
+    """Every camera ray hits the inside of the box; within a long ao_distance every AO ray hits too."""
+    scene = bpy.context.scene
+    scenes.add_cube("Room", scale=2.0)
+    cam = scenes.add_camera("Inside")
+    cam.rotation_euler = (math.radians(70), 0.0, math.radians(30))
+    scene.camera = cam
+    scene.render.resolution_x, scene.render.resolution_y = 48, 32
+    settings = scene.kd_preview
+    settings.resolution_percentage, settings.samples = 100, 8
+    settings.ao_distance = 10.0
+    closed = render(scene).image
+    assert (closed[..., 3] == 1.0).all() and (closed[..., :3] == 0.0).all()
+    settings.ao_distance = 0.2
+    open_ = render(scene).image
+    assert np.isfinite(open_).all() and (open_[..., :3] >= 0).all() and (open_[..., :3] <= 1).all()
+    assert np.median(open_[..., 0]) == 1.0 and open_[..., 0].min() < 0.8  # open walls, darker corners
+
+
+@pytest.mark.parametrize("distance", [1e6, 1e7])
+def test_far_offsets_give_the_same_image(addon, distance):  # noqa: F811
+    """1e6 and 1e7 units away (exactly representable in Blender's float32 locations)."""
+    scenes.reset()
+    near = render(half_plane_scene()).image
+    scenes.reset()
+    far = render(half_plane_scene(offset=(distance, -distance, 0.0))).image
+    np.testing.assert_array_equal(near[..., 3], far[..., 3])
+    assert np.sqrt(np.mean((near - far) ** 2)) < 1e-4 and np.abs(near - far).max() < 1e-3
+
+
+def scaled_half_plane_scene(scale):
+    """half_plane_scene with every length times `scale` (locations, sizes, view, clipping, AO distance)."""
+    scene = half_plane_scene()
+    for obj in scene.objects:
+        obj.location = obj.location * scale
+        obj.scale = obj.scale * scale
+    cam = scene.camera.data
+    cam.ortho_scale *= scale
+    cam.clip_start, cam.clip_end = cam.clip_start * scale, cam.clip_end * scale
+    scene.kd_preview.ao_distance *= scale
+    return scene
+
+
+@pytest.mark.parametrize("scale", [1e-4, 1e4])
+def test_tiny_and_huge_scenes_render_like_scale_one(addon, scale):  # noqa: F811
+    near = render(half_plane_scene()).image
+    scenes.reset()
+    scaled = render(scaled_half_plane_scene(scale)).image
+    np.testing.assert_array_equal(near[..., 3], scaled[..., 3])
+    assert np.sqrt(np.mean((near - scaled) ** 2)) < 0.01
+
+
+# -- many instances, linked data ---------------------------------------------------------------
+
+
+def tile_instances_group(columns, rows):
+    """Geometry nodes: a columns x rows grid of points 1 apart, a 0.5 x 0.5 quad (2 triangles) on each."""
+    group = bpy.data.node_groups.new("Tiles", "GeometryNodeTree")
+    group.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    group.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    nodes, links = group.nodes, group.links
+    nodes.new("NodeGroupInput")
+    out = nodes.new("NodeGroupOutput")
+    points = nodes.new("GeometryNodeMeshGrid")
+    points.inputs["Vertices X"].default_value, points.inputs["Vertices Y"].default_value = columns, rows
+    points.inputs["Size X"].default_value, points.inputs["Size Y"].default_value = columns - 1, rows - 1
+    tile = nodes.new("GeometryNodeMeshGrid")
+    tile.inputs["Vertices X"].default_value = tile.inputs["Vertices Y"].default_value = 2
+    tile.inputs["Size X"].default_value = tile.inputs["Size Y"].default_value = 0.5
+    on_points = nodes.new("GeometryNodeInstanceOnPoints")
+    links.new(points.outputs["Mesh"], on_points.inputs["Points"])
+    links.new(tile.outputs["Mesh"], on_points.inputs["Instance"])
+    links.new(on_points.outputs["Instances"], out.inputs[0])
+    return group
+
+
+def test_a_hundred_thousand_instances_of_one_mesh(addon):  # noqa: F811
+    """400 x 250 tiles seen from above: a quarter of each unit cell is covered, and nothing occludes a
+    flat layer of tiles from above, so every hit pixel has AO exactly 1."""
+    scene = bpy.context.scene
+    host = scenes.add_mesh("Host", [], [])
+    host.modifiers.new("Tiles", "NODES").node_group = tile_instances_group(400, 250)
+    add_top_camera(location=(0, 0, 10), ortho_scale=40.0)  # sees 40 x 20 of the 400 x 250 field
+    scene.render.resolution_x, scene.render.resolution_y = 160, 80  # 4 pixels per unit
+    settings = scene.kd_preview
+    settings.resolution_percentage, settings.samples = 100, 4
+    result = render(scene)
+    assert result.objects == 100_000 and result.triangles == 200_000
+    hit = result.image[..., 3] == 1.0
+    assert hit.mean() == pytest.approx(0.25, abs=0.02)
+    assert (result.image[..., 0][hit] == 1.0).all()
+    print(f"\n100,000 instances: extract {result.extract_ms:.0f} ms, build {result.build_ms:.0f} ms")
+
+
+def write_library(path):
+    """A .blend holding collection 'LibColl' with the half-plane scene's box (object 'LibBox')."""
+    scenes.reset()
+    coll = bpy.data.collections.new("LibColl")
+    scenes.add_cube("LibBox", scale=0.5, location=(-2.0, 0.0, 0.5), collection=coll)
+    bpy.data.libraries.write(str(path), {coll}, fake_user=True)
+
+
+@pytest.mark.parametrize("how", ["object", "collection instance"])
+def test_linked_library_data_renders_like_local_data(addon, tmp_path, how):  # noqa: F811
+    reference = render(half_plane_scene()).image
+    library = tmp_path / "library.blend"
+    write_library(library)
+    scene = half_plane_scene()
+    bpy.data.objects.remove(bpy.data.objects["Box"])
+    with bpy.data.libraries.load(str(library), link=True) as (source, target):
+        if how == "object":
+            target.objects = ["LibBox"]
+        else:
+            target.collections = ["LibColl"]
+    if how == "object":
+        linked = target.objects[0]
+        scene.collection.objects.link(linked)
+    else:
+        linked = target.collections[0]
+        scenes.add_collection_instance("LibInstance", linked)
+    assert linked.library is not None and linked.library.filepath.endswith("library.blend")
+    result = render(scene)
+    assert result.triangles == 14 and result.warnings == []
+    np.testing.assert_array_equal(result.image, reference)
+
+
+def test_memory_limit_refuses_the_frame_and_keeps_the_previous_image(addon):  # noqa: F811
+    scene = half_plane_scene()
+    bpy.ops.kdpreview.render()
+    before = preview_pixels().copy()
+    scene.render.resolution_x, scene.render.resolution_y = 640, 320
+    scene.kd_preview.memory_limit_mb = 1
+    with pytest.raises(RuntimeError, match="above the memory limit of 1 MiB"):
+        bpy.ops.kdpreview.render()
+    with pytest.raises(PreviewError, match=r"14 triangles and their kd-tree: 0 MiB; 640x320 pixels: \d+ MiB"):
+        render(scene)
+    assert (preview_pixels() == before).all()
+    scene.kd_preview.memory_limit_mb = 0  # no limit
+    assert bpy.ops.kdpreview.render() == {"FINISHED"}
