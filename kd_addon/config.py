@@ -38,6 +38,8 @@ class Settings:
     error_target: stop sampling a pixel once its standard error is below this; 0 = off.
     output_format: "PNG" or "OPEN_EXR" for animation frames.
     seed: sampler seed, so two runs of a frame give the same image.
+    rebuild_all: build every kd-tree and trace every frame anew, as if nothing were kept from
+        the frame before (turns off tree and image reuse; for comparisons and benchmarks).
     """
 
     mode: str = "ao"
@@ -52,6 +54,7 @@ class Settings:
     error_target: float = 0.0
     output_format: str = "PNG"
     seed: int = 0
+    rebuild_all: bool = False
 
 
 DEFAULTS = Settings()
@@ -129,6 +132,8 @@ def _validate(s: Settings) -> None:
     _integer("seed", s.seed, 0, 2**31 - 1)
     _number("ao_distance", s.ao_distance, positive=True)
     _number("error_target", s.error_target, positive=False, note="0 = off")
+    if not isinstance(s.rebuild_all, bool):
+        raise SettingsError(f"rebuild_all must be True or False; got {s.rebuild_all!r}")
 
 
 def _choice(name, value, choices) -> None:

@@ -49,6 +49,10 @@ class KDPreviewSettings(bpy.types.PropertyGroup):
                                 description="Stop sampling a pixel once its standard error is below this (0 = off)",
                                 default=DEFAULTS.error_target, min=0.0, soft_max=0.1, precision=4)
     seed: IntProperty(name="Seed", description="Sampler seed", default=DEFAULTS.seed, min=0)
+    rebuild_all: BoolProperty(name="Rebuild All",
+                              description="Rebuild every kd-tree and re-trace every frame instead of reusing "
+                                          "unchanged objects' trees and unchanged images (for comparisons)",
+                              default=DEFAULTS.rebuild_all)
     output_format: EnumProperty(name="Format", default=DEFAULTS.output_format,
                                 items=[("PNG", "PNG", "8-bit sRGB PNG"), ("OPEN_EXR", "OpenEXR", "Linear float EXR")])
     output_dir: StringProperty(name="Output Folder", description="Where Render Animation writes frames and report.json",
