@@ -127,8 +127,10 @@ def world_normal(scene, inst, prim, out):
     tris = scene[16]
     tri = tris[scene[10][scene[7][inst]] + prim]
     w2o = rows(scene[6], inst, inst + 1)[0]
-    e1x, e1y, e1z = np.float64(tri[1, 0]) - tri[0, 0], np.float64(tri[1, 1]) - tri[0, 1], np.float64(tri[1, 2]) - tri[0, 2]
-    e2x, e2y, e2z = np.float64(tri[2, 0]) - tri[0, 0], np.float64(tri[2, 1]) - tri[0, 1], np.float64(tri[2, 2]) - tri[0, 2]
+    e1x, e1y, e1z = (np.float64(tri[1, 0]) - tri[0, 0], np.float64(tri[1, 1]) - tri[0, 1],
+                     np.float64(tri[1, 2]) - tri[0, 2])
+    e2x, e2y, e2z = (np.float64(tri[2, 0]) - tri[0, 0], np.float64(tri[2, 1]) - tri[0, 1],
+                     np.float64(tri[2, 2]) - tri[0, 2])
     nx = e1y * e2z - e1z * e2y
     ny = e1z * e2x - e1x * e2z
     nz = e1x * e2y - e1y * e2x

@@ -2,9 +2,9 @@
 
 One sample of a pixel is one cosine-weighted AO ray (mode ao), one shadow ray per light facing the
 surface (mode shadow), or both multiplied (mode ao+shadow). Every ray is an any-hit query through the
-same traversal as everything else, through the scene's instances (a flat tree is one instance with
-the identity, see two_level.as_two_level). Sample k of pixel p depends only on (p, k, seed), so adding samples
-in any batches gives the same sums as one big batch.
+same traversal as everything else, via the scene's instances (a flat tree is one instance with the
+identity, see two_level.as_two_level). Sample k of pixel p depends only on (p, k, seed), so adding
+samples in any batches gives the same sums as one big batch.
 """
 import numpy as np
 from numba import njit, prange
