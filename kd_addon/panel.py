@@ -19,6 +19,7 @@ RUN_ROWS = (
     ("Total", "total_ms", "{:.1f} ms"),
     ("Rays", "rays", "{:,}"),
     ("Speed", "mrays_per_s", "{:.2f} Mrays/s"),
+    ("Rays Saved", "rays_saved", "{:,}"),
     ("Trees Built", "objects_rebuilt", "{:,}"),
     ("Trees Kept", "objects_reused", "{:,}"),
 )
