@@ -10,6 +10,12 @@ Public API:
     render_preview(tree, camera, width, height, *, mode="ao", samples=16, ...) -> (H, W, 4) float32
     PreviewRender(tree, camera, width, height, ...)   progressive: step(), image(), done
     memory.build_bytes / memory.render_bytes: peak-memory estimates; MemoryLimitError
+Two-level scenes (a kd-tree per mesh in object space under a top-level tree over instances):
+    build_two_level(mesh_trees, mesh_of, matrices, **options) -> TwoLevelScene
+    build_scene(meshes, mesh_of, matrices, origin=None, layout="auto", **options) -> TwoLevelScene
+    SceneBuilder(layout="auto", **options).build(MeshInputs, mesh_of, matrices, origin, reuse) -> (scene, report)
+    intersect_scene / occluded_scene (scene or tree, origins, directions, ...) -> SceneHits / (R,) bool
+    A TwoLevelScene renders wherever a KdTree does.
 """
 from .build import build_kdtree
 from .camera import Camera
@@ -19,6 +25,10 @@ from .kdtree import KdTree
 from .memory import MemoryLimitError
 from .options import BuildOptions
 from .queries import Hits, intersect, occluded
+from .scene_builder import BuildReport, MeshInput, SceneBuilder, build_scene
+from .scene_queries import SceneHits, intersect_scene, occluded_scene
+from .two_level import TwoLevelScene, build_two_level
 
 __all__ = ["build_kdtree", "intersect", "occluded", "KdTree", "Hits", "BuildOptions", "Camera", "Light",
-           "render_preview", "PreviewRender", "MemoryLimitError"]
+           "render_preview", "PreviewRender", "TwoLevelScene", "build_two_level", "build_scene", "SceneBuilder",
+           "MeshInput", "BuildReport", "SceneHits", "intersect_scene", "occluded_scene", "MemoryLimitError"]

@@ -24,16 +24,20 @@ from .camera import Camera
 from .kdtree import KdTree
 from .lazy import resolve_suspended
 from .lights import pack_lights
-from .queries import _trace
 from .render_kernels import MODES, add_samples, surface_frames
 from .sampling import SAMPLERS, SOBOL_DIM1
+from .scene_queries import trace_scene_all
 from .threads import thread_count
+from .two_level import TwoLevelScene, as_two_level
 
 CHECK_EVERY = 4
 
 
 class PreviewRender:
     """A progressive preview: call `step()` until `done`, read `image()` at any time.
+
+    `tree` is a KdTree or a TwoLevelScene; a KdTree is traced as a one-instance scene with the
+    identity matrix, so both take the same kernels (the overhead is measured in the README).
 
     Settings: mode ("ao", "shadow", "ao+shadow"), samples (per pixel), ao_distance, lights (core.Light),
     seed, sampler ("sobol" or "random"), error_target (None: off), min_samples, ambient, threads.
@@ -44,6 +48,7 @@ class PreviewRender:
         _check_settings(tree, camera, width, height, mode, samples, ao_distance, seed, sampler, error_target,
                         min_samples, ambient, threads)
         self.tree, self.camera, self.width, self.height = tree, camera, int(width), int(height)
+        self.scene = as_two_level(tree)
         self.mode, self.target_samples, self.ao_distance = mode, int(samples), float(ao_distance)
         self.lights = pack_lights(lights)
         if mode != "ao" and len(self.lights) == 0:
@@ -59,13 +64,14 @@ class PreviewRender:
     def _trace_camera(self):
         start = perf_counter()
         origins, directions, tmin, tmax = self.camera.rays(self.width, self.height)
-        t, prim, _, _ = _trace(self.tree, origins, directions, tmin, tmax, False, self.threads)
+        t, inst, prim, _, _ = trace_scene_all(self.tree, origins, directions, tmin, tmax, False, self.threads)
+        self._refresh_scene()  # a lazy tree may have grown
         hit = np.flatnonzero(prim >= 0).astype(np.int64)
         self.pixels = hit
         self.points = np.empty((len(hit), 3))
         self.normals = np.empty((len(hit), 3))
         with thread_count(self.threads):
-            surface_frames(self.tree.triangles, origins, directions, t, prim, hit, self.points, self.normals)
+            surface_frames(self.scene.arrays, origins, directions, t, inst, prim, hit, self.points, self.normals)
         self.sums = np.zeros((len(hit), 3))
         self.sq_sums = np.zeros(len(hit))
         self.counts = np.zeros(len(hit), np.int64)
@@ -106,7 +112,7 @@ class PreviewRender:
         unbuilt subtree redo the batch once it is built (same samples, so the eager tree's sums)."""
         def run(active):
             status = np.empty(len(active), np.int64)
-            add_samples(self.tree.arrays, self.points, self.normals, self.pixels, active, self.samples_done,
+            add_samples(self.scene.arrays, self.points, self.normals, self.pixels, active, self.samples_done,
                         batch, MODES[self.mode], self.ao_distance, self.ambient, self.lights, self.sampler,
                         self.seed, SOBOL_DIM1, self.sums, self.sq_sums, self.counts, self.ray_counts, status)
             return status
@@ -115,9 +121,15 @@ class PreviewRender:
             status = run(self.active)
 
             def redo(pixels):
+                self._refresh_scene()
                 status[pixels] = run(self.active[pixels])
 
             resolve_suspended(self.tree, status, redo, self.threads)
+
+    def _refresh_scene(self):
+        """A lazy tree's node arrays grow as subtrees are built: wrap the grown tree again."""
+        if isinstance(self.tree, KdTree) and self.tree.lazy:
+            self.scene = as_two_level(self.tree)
 
     def _retire_converged(self):
         """Stop sampling pixels whose standard error is below the target (after min_samples)."""
@@ -162,8 +174,8 @@ def render_preview(tree, camera, width, height, **settings):
 
 def _check_settings(tree, camera, width, height, mode, samples, ao_distance, seed, sampler, error_target,
                     min_samples, ambient, threads):
-    if not isinstance(tree, KdTree):
-        raise ValueError(f"tree must be a core.KdTree, got {type(tree).__name__}")
+    if not isinstance(tree, (KdTree, TwoLevelScene)):
+        raise ValueError(f"tree must be a core.KdTree or core.TwoLevelScene, got {type(tree).__name__}")
     if not isinstance(camera, Camera):
         raise ValueError(f"camera must be a core.Camera, got {type(camera).__name__}")
     for name, v in (("width", width), ("height", height)):

@@ -2,8 +2,9 @@
 
 One sample of a pixel is one cosine-weighted AO ray (mode ao), one shadow ray per light facing the
 surface (mode shadow), or both multiplied (mode ao+shadow). Every ray is an any-hit query through the
-same traversal as everything else. Sample k of pixel p depends only on (p, k, seed), so adding samples
-in any batches gives the same sums as one big batch.
+same traversal as everything else, via the scene's instances (a flat tree is one instance with the
+identity, see two_level.as_two_level). Sample k of pixel p depends only on (p, k, seed), so adding
+samples in any batches gives the same sums as one big batch.
 
 On a lazy tree a ray may stop at an unbuilt subtree (traversal.py). The pixel then puts its sums back
 as they were before the batch and reports the subtree; the caller builds it and redoes the batch for
@@ -12,10 +13,10 @@ that pixel, which by the rule above gives exactly the eager tree's sums.
 import numpy as np
 from numba import njit, prange
 
+from .instance_traversal import new_scratch, trace_scene, world_normal
 from .layout import NO_HIT
 from .sampling import pixel_seed, sample_2d
 from .shading import cosine_direction, offset_origin, sample_light
-from .traversal import STACK_SIZE, trace_ray
 
 AO, SHADOW, AO_SHADOW = 1, 2, 3
 MODES = {"ao": AO, "shadow": SHADOW, "ao+shadow": AO_SHADOW}
@@ -23,7 +24,7 @@ USE_AO = 0  # the sampler's "use" ids: 0 for AO, 1 + k for light k
 
 
 @njit(cache=True, parallel=True)
-def add_samples(tree, points, normals, pixels, active, first, count, mode, ao_distance, ambient, lights,
+def add_samples(scene, points, normals, pixels, active, first, count, mode, ao_distance, ambient, lights,
                 sampler, seed, dim1, sums, sq_sums, counts, rays, status):
     """Add samples first .. first+count-1 to every pixel listed in `active` (indices into points).
 
@@ -32,19 +33,17 @@ def add_samples(tree, points, normals, pixels, active, first, count, mode, ao_di
     samples, or the suspended prim of the unbuilt subtree that stopped it (lazy trees; sums untouched).
     """
     for a in prange(active.shape[0]):
-        status[a] = _sample_pixel(tree, points, normals, pixels, active[a], first, count, mode, ao_distance,
+        status[a] = _sample_pixel(scene, points, normals, pixels, active[a], first, count, mode, ao_distance,
                                   ambient, lights, sampler, seed, dim1, sums, sq_sums, counts, rays)
 
 
 @njit(cache=True)
-def _sample_pixel(tree, points, normals, pixels, i, first, count, mode, ao_distance, ambient, lights,
+def _sample_pixel(scene, points, normals, pixels, i, first, count, mode, ao_distance, ambient, lights,
                   sampler, seed, dim1, sums, sq_sums, counts, rays):
     """All of one pixel's new samples (kept out of the parallel loop body: Numba's parfor analysis
     does not cope with the inlined tuple code of the samplers). Returns NO_HIT, or the suspended prim
     of a ray that reached an unbuilt subtree, after restoring the pixel's sums."""
-    stack_node = np.empty(STACK_SIZE, np.int32)
-    stack_t = np.empty((STACK_SIZE, 3))
-    inv = np.empty(3)
+    scratch = new_scratch()
     origin = np.empty(3)
     direction = np.empty(3)
     offset_origin(points[i], normals[i], origin)
@@ -53,16 +52,15 @@ def _sample_pixel(tree, points, normals, pixels, i, first, count, mode, ao_dista
     for s in range(first, first + count):
         ao = 1.0
         if mode != SHADOW:
-            prim = _ao_ray(tree, origin, normals[i], ao_distance, sampler, ps, s, dim1, direction,
-                           stack_node, stack_t, inv)
+            prim = _ao_ray(scene, origin, normals[i], ao_distance, sampler, ps, s, dim1, direction, scratch)
             if prim < NO_HIT:
                 return _restore(sums, sq_sums, rays, i, before, prim)
             ao = 1.0 if prim < 0 else 0.0
             rays[i] += 1
         r = g = b = ao
         if mode != AO:
-            lr, lg, lb, n_rays, prim = _light_samples(tree, points[i], origin, normals[i], lights, sampler,
-                                                      ps, s, dim1, direction, stack_node, stack_t, inv)
+            lr, lg, lb, n_rays, prim = _light_samples(scene, points[i], origin, normals[i], lights, sampler,
+                                                      ps, s, dim1, direction, scratch)
             if prim < NO_HIT:
                 return _restore(sums, sq_sums, rays, i, before, prim)
             rays[i] += n_rays
@@ -89,17 +87,16 @@ def _restore(sums, sq_sums, rays, i, before, prim):
 
 
 @njit(cache=True, inline="always")
-def _ao_ray(tree, origin, normal, ao_distance, sampler, ps, s, dim1, direction, stack_node, stack_t, inv):
+def _ao_ray(scene, origin, normal, ao_distance, sampler, ps, s, dim1, direction, scratch):
     """The any-hit prim of a cosine-weighted ray from the surface within ao_distance (< 0: escapes)."""
     u1, u2 = sample_2d(sampler, ps, s, USE_AO, dim1)
     cosine_direction(normal, u1, u2, direction)
-    _, prim, _, _ = trace_ray(tree, origin, direction, 0.0, ao_distance, True, stack_node, stack_t, inv)
+    _, _, prim, _, _ = trace_scene(scene, origin, direction, 0.0, ao_distance, True, scratch)
     return prim
 
 
 @njit(cache=True, inline="always")
-def _light_samples(tree, point, origin, normal, lights, sampler, ps, s, dim1, direction, stack_node,
-                   stack_t, inv):
+def _light_samples(scene, point, origin, normal, lights, sampler, ps, s, dim1, direction, scratch):
     """Mean over lights of colour * visibility * max(0, N.L) * mask, the number of rays traced, and
     NO_HIT or the suspended prim of a ray that reached an unbuilt subtree (the rest is then void)."""
     r = g = b = 0.0
@@ -112,7 +109,7 @@ def _light_samples(tree, point, origin, normal, lights, sampler, ps, s, dim1, di
         if mask <= 0.0 or cos_nl <= 0.0:
             continue  # behind the surface or outside the light: no ray needed
         n_rays += 1
-        _, prim, _, _ = trace_ray(tree, origin, direction, 0.0, dist, True, stack_node, stack_t, inv)
+        _, _, prim, _, _ = trace_scene(scene, origin, direction, 0.0, dist, True, scratch)
         if prim < NO_HIT:
             return r, g, b, n_rays, prim
         if prim < 0:
@@ -124,21 +121,14 @@ def _light_samples(tree, point, origin, normal, lights, sampler, ps, s, dim1, di
 
 
 @njit(cache=True, parallel=True)
-def surface_frames(tris, origins, directions, t, prim, hit_index, points, normals):
-    """Hit points and geometric normals (turned to face the incoming ray) of the camera hits."""
+def surface_frames(scene, origins, directions, t, inst, prim, hit_index, points, normals):
+    """Hit points and world-space geometric normals (turned to face the incoming ray) of the camera hits."""
     for a in prange(hit_index.shape[0]):
         r = hit_index[a]
-        tri = tris[prim[r]]
-        e1 = np.empty(3)
-        e2 = np.empty(3)
         for k in range(3):
             points[a, k] = origins[r, k] + t[r] * directions[r, k]
-            e1[k] = np.float64(tri[1, k]) - tri[0, k]
-            e2[k] = np.float64(tri[2, k]) - tri[0, k]
-        nx = e1[1] * e2[2] - e1[2] * e2[1]
-        ny = e1[2] * e2[0] - e1[0] * e2[2]
-        nz = e1[0] * e2[1] - e1[1] * e2[0]
-        norm = np.sqrt(nx * nx + ny * ny + nz * nz)
-        facing = nx * directions[r, 0] + ny * directions[r, 1] + nz * directions[r, 2]
-        sign = -1.0 / norm if facing > 0.0 else 1.0 / norm
-        normals[a, 0], normals[a, 1], normals[a, 2] = nx * sign, ny * sign, nz * sign
+        world_normal(scene, inst[r], prim[r], normals[a])
+        facing = normals[a, 0] * directions[r, 0] + normals[a, 1] * directions[r, 1] + normals[a, 2] * directions[r, 2]
+        if facing > 0.0:
+            for k in range(3):
+                normals[a, k] = -normals[a, k]

@@ -5,7 +5,7 @@ Nothing imported here touches core or numba (corelib imports them on the first
 render), so enabling the add-on is instant.
 """
 
-from . import cli, live_update, operators, panel, properties
+from . import cli, live_update, operators, panel, properties, tree_cache
 
 # Registration order: settings before the operators and panel that use them.
 MODULES = (properties, operators, panel, live_update, cli)
@@ -19,3 +19,4 @@ def register():
 def unregister():
     for module in reversed(MODULES):
         module.unregister()
+    tree_cache.clear()  # kept trees and images go with the add-on

@@ -40,6 +40,8 @@ class Settings:
     seed: sampler seed, so two runs of a frame give the same image.
     memory_limit_mb: refuse a frame whose estimated peak memory (triangles, kd-tree, pixel
         buffers; see memory_limit.py) is above this many MiB, before allocating it; 0 = no limit.
+    rebuild_all: build every kd-tree and trace every frame anew, as if nothing were kept from
+        the frame before (turns off tree and image reuse; for comparisons and benchmarks).
     """
 
     mode: str = "ao"
@@ -55,6 +57,7 @@ class Settings:
     output_format: str = "PNG"
     seed: int = 0
     memory_limit_mb: int = 0
+    rebuild_all: bool = False
 
 
 DEFAULTS = Settings()
@@ -138,6 +141,8 @@ def _validate(s: Settings) -> None:
     _integer("memory_limit_mb", s.memory_limit_mb, 0, 1 << 30, "0 = no limit")
     _number("ao_distance", s.ao_distance, positive=True)
     _number("error_target", s.error_target, positive=False, note="0 = off")
+    if not isinstance(s.rebuild_all, bool):
+        raise SettingsError(f"rebuild_all must be True or False; got {s.rebuild_all!r}")
 
 
 def _choice(name, value, choices) -> None:

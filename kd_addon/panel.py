@@ -19,6 +19,9 @@ RUN_ROWS = (
     ("Total", "total_ms", "{:.1f} ms"),
     ("Rays", "rays", "{:,}"),
     ("Speed", "mrays_per_s", "{:.2f} Mrays/s"),
+    ("Rays Saved", "rays_saved", "{:,}"),
+    ("Trees Built", "objects_rebuilt", "{:,}"),
+    ("Trees Kept", "objects_reused", "{:,}"),
 )
 TREE_ROWS = (
     ("Nodes", "nodes", "{:,}"),
@@ -83,7 +86,8 @@ class KDPREVIEW_PT_tree(_SubPanel, bpy.types.Panel):
     def draw(self, context):
         settings = context.scene.kd_preview
         self.layout.use_property_split = True
-        for name in ("builder", "bins", "leaf_size", "max_depth", "threads", "seed", "memory_limit_mb"):
+        for name in ("builder", "bins", "leaf_size", "max_depth", "threads", "seed", "memory_limit_mb",
+                     "rebuild_all"):
             self.layout.prop(settings, name)
 
 
@@ -114,6 +118,8 @@ class KDPREVIEW_PT_last_run(_SubPanel, bpy.types.Panel):
         last.setdefault("size", f"{last.get('width')} x {last.get('height')}")
         if last.get("first_run"):
             layout.label(text="Includes kernel compile / cache load", icon="TIME")
+        if last.get("image_reused"):
+            layout.label(text="Nothing changed: last image reused", icon="FILE_REFRESH")
         _rows(layout, last, RUN_ROWS)
         _rows(layout.box(), last.get("tree", {}), TREE_ROWS)
         if "animation" in last:

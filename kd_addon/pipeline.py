@@ -1,4 +1,4 @@
-"""One preview frame: extract -> triangles relative to the camera -> kd-tree -> progressive trace.
+"""One preview frame: extract -> two-level scene (trees kept across frames) -> progressive trace.
 
 `FrameJob` splits the frame into short calls (`tick`) so a modal operator can
 spread it over timer events and stay responsive; `render_frame` runs one to
@@ -6,10 +6,16 @@ the end for scripts, background mode, the command line and the live-update
 handler. Nothing here writes images or touches the scene: a cancelled or
 failed frame leaves everything as it was.
 
-Why relative to the camera: world_triangles() is float32; a scene a few km
-from the origin would lose millimetres. The instance matrices (float64) are
-shifted by minus the camera position *before* the float32 cast, and the
-camera and lights are moved by the same offset (core's `.translated`).
+Why relative to the camera: triangles are float32; a scene a few km from the
+origin would lose millimetres. Mesh trees are in object space and the instance
+matrices (float64) are shifted by minus the camera position before anything is
+rounded (core.SceneBuilder's `origin`); the camera and lights are moved by the
+same offset (core's `.translated`).
+
+Reuse across frames (tree_cache.py): a mesh whose fingerprint did not change
+keeps its tree, a moved object only costs the top level, and when nothing that
+affects the image changed the last image is reused. The `rebuild_all` setting
+turns both off.
 
 Why a lock: Numba's workqueue threading layer aborts the process when two
 threads launch parallel kernels at once. Blender can call the frame-change
@@ -25,11 +31,11 @@ from __future__ import annotations
 
 import threading
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import corelib, memory_limit, scene_input
+from . import corelib, memory_limit, scene_input, tree_cache
 from .background import BackgroundCall
 from .config import RenderConfig, frame_size
 from .errors import Cancelled, PreviewError
@@ -63,6 +69,9 @@ class FrameResult:
     rays_saved: int
     samples: int
     first_run: bool  # kernels were compiled or loaded from cache during this frame
+    objects_rebuilt: int = 0  # meshes whose kd-tree was built this frame
+    objects_reused: int = 0  # meshes whose kd-tree was kept from an earlier frame
+    image_reused: bool = False  # nothing affecting the image changed: the last image was reused
     tree_stats: dict = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
 
@@ -82,7 +91,8 @@ class FrameResult:
         """Everything but the image, JSON-ready (report rows, the panel's last-run box)."""
         row = {k: getattr(self, k) for k in (
             "frame", "width", "height", "triangles", "objects", "lights", "extract_ms", "build_ms",
-            "trace_ms", "total_ms", "rays", "rays_saved", "mrays_per_s", "samples", "first_run")}
+            "trace_ms", "total_ms", "rays", "rays_saved", "mrays_per_s", "samples", "first_run", "objects_rebuilt",
+            "objects_reused", "image_reused")}
         row["tree"] = {k: _plain(v) for k, v in self.tree_stats.items()}
         row["warnings"] = list(self.warnings)
         return row
@@ -91,16 +101,6 @@ class FrameResult:
 def _plain(value):
     """numpy scalars -> Python numbers, so json.dumps accepts tree stats."""
     return value.item() if isinstance(value, np.generic) else value
-
-
-def relative_triangles(extracted: ExtractedScene, offset: np.ndarray) -> np.ndarray:
-    """World triangles minus `offset`, subtracted in float64 before the float32 cast."""
-    def shifted(inst):
-        matrix = inst.matrix_world.copy()
-        matrix[:3, 3] -= offset
-        return replace(inst, matrix_world=matrix)
-
-    return replace(extracted, instances=[shifted(i) for i in extracted.instances]).world_triangles()
 
 
 class FrameJob:
@@ -117,17 +117,24 @@ class FrameJob:
         self._timings = {"extract_ms": 0.0, "build_ms": 0.0, "trace_ms": 0.0, "other_ms": 0.0}
         self._info: dict = {}
         self._first_run = not _kernels_ready
+        self._state = None  # tree_cache.SceneState
+        self._image_key = None
+        self._reused_image = None
         self._pending: BackgroundCall | None = None  # the kernel call running on the worker
 
     # -- state the operators show ------------------------------------------
 
     @property
     def done(self) -> bool:
-        return self._pending is None and self.renderer is not None and self.renderer.done
+        if self._pending is not None:
+            return False
+        return self._reused_image is not None or (self.renderer is not None and self.renderer.done)
 
     @property
     def progress(self) -> float:
         """0..1: the traced fraction of the target samples."""
+        if self._reused_image is not None:
+            return 1.0
         if self.renderer is None:
             return 0.0
         return min(1.0, self.renderer.samples_done / max(1, self.renderer.target_samples))
@@ -150,31 +157,45 @@ class FrameJob:
                 return False
             pending, self._pending = self._pending, None
             pending.result()  # the worker's exception, if any, is raised here
-        elif self.renderer is None:
+        elif self.renderer is None and self._reused_image is None:
             self.prepare()
-        elif not self.renderer.done:
+        elif not self.done:
             self.step()
         return self.done
 
     def prepare(self) -> None:
-        """Camera, lights and triangles from the scene (here: bpy is not thread-safe), then the
-        kd-tree and the renderer on the worker."""
+        """Camera, lights and meshes from the scene (here: bpy is not thread-safe); then the last image
+        if nothing changed, else, on the worker, the two-level scene (reusing unchanged trees) and the
+        renderer."""
         t0 = time.perf_counter()
         inputs = self._scene_inputs()
+        extracted = self._extract()
+        memory_limit.check_frame(extracted.triangle_count, inputs.width, inputs.height, self.config)
         core = corelib.load_core()
-        triangles, extracted = self._triangles(inputs)
-        camera, lights = self._camera_and_lights(core, inputs)
+        meshes, mesh_of, matrices = tree_cache.mesh_inputs(core, extracted)
+        self._state = tree_cache.state_for(self.scene, core, self.config.build_options)
+        self._image_key = tree_cache.image_key(meshes, mesh_of, matrices, inputs.camera.keywords(), inputs.lights,
+                                               (inputs.width, inputs.height), self.config.as_dict())
         self._timings["other_ms"] += _ms_since(t0) - self._timings["extract_ms"]
-        self._info = dict(triangles=int(len(triangles)), objects=extracted.object_count, lights=len(inputs.lights),
-                          frame=extracted.frame, warnings=inputs.warnings + extracted.warnings)
-        self._pending = BackgroundCall(KERNEL_LOCK, self._build_and_start, core, triangles, camera, lights,
-                                       inputs.width, inputs.height)
+        reuse = not self.config.settings.rebuild_all
+        self._info = dict(triangles=extracted.triangle_count, objects=extracted.object_count,
+                          lights=len(inputs.lights), frame=extracted.frame,
+                          warnings=inputs.warnings + extracted.warnings)
+        if reuse and self._state.image is not None and self._state.image_key == self._image_key:
+            self._reused_image = self._state.image
+            self._info.update(self._state.info, objects_reused=len(meshes), image_reused=True)
+            return
+        camera, lights = self._camera_and_lights(core, inputs)
+        self._pending = BackgroundCall(KERNEL_LOCK, self._build_and_start, core, (meshes, mesh_of, matrices),
+                                       inputs.camera.position, reuse, camera, lights, inputs.width, inputs.height)
 
-    def _build_and_start(self, core, triangles, camera, lights, width, height) -> None:
-        """On the worker: the tree, then the renderer (whose constructor traces the camera rays)."""
-        tree = self._build(core, triangles)
-        self._info["tree_stats"] = tree.stats()
-        self._start_tracing(core, tree, camera, lights, width, height)
+    def _build_and_start(self, core, instances, origin, reuse, camera, lights, width, height) -> None:
+        """On the worker, holding KERNEL_LOCK: the scene, then the renderer (whose constructor traces
+        the camera rays)."""
+        scene, report = self._build(*instances, origin, reuse)
+        self._info.update(tree_stats=scene.stats(), objects_rebuilt=report.meshes_rebuilt,
+                          objects_reused=report.meshes_reused)
+        self._start_tracing(core, scene, camera, lights, width, height)
 
     def _scene_inputs(self) -> scene_input.SceneInputs:
         render = self.scene.render
@@ -196,30 +217,27 @@ class FrameJob:
             raise PreviewError(f"the scene's camera or lights cannot be used: {error}") from None
         return camera, lights
 
-    def _start_tracing(self, core, tree, camera, lights, width, height) -> None:
+    def _start_tracing(self, core, scene, camera, lights, width, height) -> None:
         """The renderer (its constructor already traces the camera rays, so it counts as trace time)."""
         t0 = time.perf_counter()
-        self.renderer = core.PreviewRender(tree, camera, width, height, lights=lights, **self.config.render_options)
+        self.renderer = core.PreviewRender(scene, camera, width, height, lights=lights, **self.config.render_options)
         self._timings["trace_ms"] += _ms_since(t0)
 
-    def _triangles(self, inputs: scene_input.SceneInputs) -> tuple[np.ndarray, ExtractedScene]:
-        """The scene's triangles relative to the camera, once the memory they need is known to fit."""
+    def _extract(self) -> ExtractedScene:
         t0 = time.perf_counter()
         extracted = extract_scene(self.depsgraph)
         if extracted.triangle_count == 0:
             raise PreviewError(f"nothing to render at frame {self.scene.frame_current}: the scene has no "
                                "render-visible mesh triangles")
-        memory_limit.check_frame(extracted.triangle_count, inputs.width, inputs.height, self.config)
-        triangles = relative_triangles(extracted, inputs.camera.position)
         self._timings["extract_ms"] = _ms_since(t0)
-        return triangles, extracted
+        return extracted
 
-    def _build(self, core, triangles: np.ndarray):
+    def _build(self, meshes, mesh_of, matrices, origin: np.ndarray, reuse: bool):
         """On the worker, holding KERNEL_LOCK."""
         t0 = time.perf_counter()
-        tree = core.build_kdtree(triangles, **self.config.build_options)
+        scene, report = self._state.builder.build(meshes, mesh_of, matrices, origin=origin, reuse=reuse)
         self._timings["build_ms"] = _ms_since(t0)
-        return tree
+        return scene, report
 
     def step(self) -> None:
         """One more sample per unconverged pixel, on the worker."""
@@ -233,16 +251,22 @@ class FrameJob:
         _kernels_ready = True
 
     def result(self) -> FrameResult:
-        """The finished frame; call only once `done`."""
+        """The finished frame; call only once `done`. Also remembers it for image reuse."""
         if not self.done:
             raise RuntimeError("FrameJob.result() called before the frame finished")
+        t = self._timings
+        if self._reused_image is not None:
+            return FrameResult(image=self._reused_image.copy(), extract_ms=t["extract_ms"], build_ms=0.0, trace_ms=0.0,
+                               total_ms=sum(t.values()), rays=0, rays_saved=0, first_run=False, **self._info)
         with KERNEL_LOCK:
             image = np.array(self.renderer.image(), dtype=np.float32, copy=True)
-        t = self._timings
-        return FrameResult(image=image, extract_ms=t["extract_ms"], build_ms=t["build_ms"], trace_ms=t["trace_ms"],
-                           total_ms=sum(t.values()), rays=int(self.renderer.rays_traced),
-                           rays_saved=int(self.renderer.rays_saved), samples=int(self.renderer.samples_done),
-                           first_run=self._first_run, **self._info)
+        result = FrameResult(image=image, extract_ms=t["extract_ms"], build_ms=t["build_ms"], trace_ms=t["trace_ms"],
+                             total_ms=sum(t.values()), rays=int(self.renderer.rays_traced),
+                             rays_saved=int(self.renderer.rays_saved), samples=int(self.renderer.samples_done),
+                             first_run=self._first_run, **self._info)
+        self._state.image_key, self._state.image = self._image_key, image.copy()
+        self._state.info = dict(samples=result.samples, tree_stats=result.tree_stats)
+        return result
 
 
 _active_job = None  # at most one preview job per process; see claim()

@@ -52,6 +52,10 @@ class KDPreviewSettings(bpy.types.PropertyGroup):
     memory_limit_mb: IntProperty(name="Memory Limit (MiB)",
                                  description="Refuse a frame whose estimated peak memory is above this (0 = no limit)",
                                  default=DEFAULTS.memory_limit_mb, min=0, soft_max=65536)
+    rebuild_all: BoolProperty(name="Rebuild All",
+                              description="Rebuild every kd-tree and re-trace every frame instead of reusing "
+                                          "unchanged objects' trees and unchanged images (for comparisons)",
+                              default=DEFAULTS.rebuild_all)
     output_format: EnumProperty(name="Format", default=DEFAULTS.output_format,
                                 items=[("PNG", "PNG", "8-bit sRGB PNG"), ("OPEN_EXR", "OpenEXR", "Linear float EXR")])
     output_dir: StringProperty(name="Output Folder", description="Where Render Animation writes frames and report.json",

@@ -20,7 +20,8 @@ from .errors import PreviewError
 from .pipeline import FrameJob, FrameResult
 
 REPORT_NAME = "report.json"
-TOTAL_KEYS = ("triangles", "extract_ms", "build_ms", "trace_ms", "total_ms", "rays", "rays_saved")
+TOTAL_KEYS = ("triangles", "extract_ms", "build_ms", "trace_ms", "total_ms", "rays", "rays_saved", "objects_rebuilt",
+              "objects_reused")
 
 
 def frame_filename(frame: int, extension: str) -> str:
@@ -123,6 +124,7 @@ def summarize(results: list[FrameResult], wall_ms: float) -> dict:
     (the first includes Numba's compile or cache load when it ran in a fresh process)."""
     out = {key: sum(getattr(r, key) for r in results) for key in TOTAL_KEYS}
     out["frames"] = len(results)
+    out["images_reused"] = sum(bool(r.image_reused) for r in results)
     out["wall_ms"] = wall_ms
     out["mrays_per_s"] = out["rays"] / (out["trace_ms"] * 1e3) if out["trace_ms"] else 0.0
     warm = results[1:] or results

@@ -123,6 +123,7 @@ def test_modal_animation_runs_every_frame(modal, tmp_path):
     scene = half_plane_scene()
     scene.frame_start, scene.frame_end = 1, 2
     scene.kd_preview.output_dir = str(tmp_path)
+    scene.kd_preview.rebuild_all = True  # the scene is static: with reuse, frame 2 would take frame 1's image
     op = driver(KDPREVIEW_OT_render_animation)
     op.invoke(modal, None)
     result, statuses = timer_events(op, modal)

@@ -1,0 +1,181 @@
+"""Building two-level scenes frame after frame, keeping every tree whose input did not change.
+
+The caller names each mesh with a key that is stable across frames (e.g. an object's name) and a
+fingerprint that changes whenever its geometry does (e.g. a CRC of its vertex and index bytes). Then:
+- a mesh with the same key and fingerprint as last frame keeps its object-space tree, however its
+  instances moved; only the top level, built over instance boxes, is rebuilt;
+- a mesh whose fingerprint changed (it deforms) is rebuilt, and from then on counts as dynamic;
+- the soup (scene_policy.py: small or overlapping static objects merged into one flat tree) is kept
+  while its members' keys, fingerprints and matrices are unchanged. Its triangles are stored relative
+  to its own centre and placed by a translation, so a moving camera never rebuilds it;
+- a single-use mesh whose matrix changed counts as dynamic too (it leaves the soup).
+Trees of keys absent from a frame are dropped. `reuse=False` rebuilds everything (the same layout),
+so the two can be compared.
+
+Precision: every matrix is shifted by minus `origin` (the camera position) in float64 before anything
+is rounded, and mesh trees are in object space, so nothing far from the origin loses precision.
+"""
+from time import perf_counter
+from typing import Hashable, NamedTuple
+
+import numpy as np
+
+from .build import build_kdtree
+from .options import make_options
+from .scene_policy import LAYOUTS, plan_soup
+from .two_level import build_two_level
+
+
+class MeshInput(NamedTuple):
+    """One mesh: `key` (stable across frames), object-space `vertices` (V, 3), `triangles` (T, 3)
+    vertex indices, and a `fingerprint` that changes whenever vertices or triangles change."""
+
+    key: Hashable
+    vertices: np.ndarray
+    triangles: np.ndarray
+    fingerprint: Hashable
+
+
+class BuildReport(NamedTuple):
+    """What a build did: meshes (objects) whose tree was built or kept, soup membership, timings."""
+
+    meshes_rebuilt: int
+    meshes_reused: int
+    instanced_meshes: int
+    soup_objects: int
+    soup_rebuilt: bool
+    build_ms: float
+    top_ms: float
+
+
+class SceneBuilder:
+    """Builds a TwoLevelScene per frame, reusing trees across calls (see the module docstring).
+
+    layout: "auto" (scene_policy.plan_soup), "two_level" (every mesh its own tree) or "flat"
+    (everything in one soup tree, the single-tree baseline). Other keywords are BuildOptions.
+    """
+
+    def __init__(self, layout="auto", **options):
+        if layout not in LAYOUTS:
+            raise ValueError(f"layout must be one of {LAYOUTS}, got {layout!r}")
+        self.layout = layout
+        self.options = make_options(options).as_dict()
+        self._trees = {}  # key -> (fingerprint, KdTree)
+        self._fingerprints = {}  # key -> fingerprint seen last frame
+        self._matrices = {}  # key of a single-use mesh -> its matrix last frame
+        self._dynamic = set()  # keys that changed or moved in an earlier frame
+        self._soup = None  # (signature, KdTree, anchor)
+
+    def build(self, meshes, mesh_of, matrices, origin=None, reuse=True):
+        """(TwoLevelScene, BuildReport) for one frame. meshes: list of MeshInput; mesh_of (I,) index
+        into meshes per instance; matrices (I, 4, 4) object-to-world; origin (3,) subtracted from
+        every position (float64) before anything is rounded."""
+        start = perf_counter()
+        mesh_of = np.asarray(mesh_of, np.int64).reshape(-1)
+        o2w = np.asarray(matrices, np.float64).reshape(len(mesh_of), 4, 4)
+        origin = np.zeros(3) if origin is None else np.asarray(origin, np.float64)
+        keys = [m.key for m in meshes]
+        if len(set(keys)) != len(keys):
+            raise ValueError("mesh keys must be unique within a frame")
+        self._track_changes(meshes, mesh_of, o2w)
+        soup = plan_soup(self.layout, np.array([len(m.triangles) for m in meshes], np.int64),
+                         _bounds(meshes), mesh_of, o2w, np.array([k in self._dynamic for k in keys], bool))
+        trees, new_mesh_of, rebuilt, reused = self._mesh_trees(meshes, mesh_of, ~soup, reuse)
+        shifted = o2w[~soup].copy()
+        shifted[:, :3, 3] -= origin
+        soup_rebuilt = False
+        if soup.any():
+            soup_tree, anchor, soup_rebuilt = self._soup_tree(meshes, mesh_of, o2w, np.flatnonzero(soup), reuse)
+            members = len(set(mesh_of[soup].tolist()))
+            rebuilt, reused = (rebuilt + members, reused) if soup_rebuilt else (rebuilt, reused + members)
+            trees.append(soup_tree)
+            new_mesh_of = np.append(new_mesh_of, len(trees) - 1)
+            place = np.eye(4)
+            place[:3, 3] = anchor - origin
+            shifted = np.concatenate([shifted, place[None]])
+        self._forget_absent(keys)
+        t = perf_counter()
+        scene = build_two_level(trees, new_mesh_of, shifted, **self.options)
+        top_ms = (perf_counter() - t) * 1e3
+        report = BuildReport(rebuilt, reused, len(trees) - int(soup.any()), int(soup.sum()), soup_rebuilt,
+                             (perf_counter() - start) * 1e3, top_ms)
+        return scene, report
+
+    def _track_changes(self, meshes, mesh_of, o2w):
+        """Mark keys whose geometry changed, or whose single instance moved, since last frame."""
+        uses = np.bincount(mesh_of, minlength=len(meshes))
+        for i, m in enumerate(meshes):
+            before = self._fingerprints.get(m.key)
+            if before is not None and before != m.fingerprint:
+                self._dynamic.add(m.key)
+            self._fingerprints[m.key] = m.fingerprint
+        for inst in np.flatnonzero(uses[mesh_of] == 1):
+            key = meshes[mesh_of[inst]].key
+            before = self._matrices.get(key)
+            if before is not None and not np.array_equal(before, o2w[inst]):
+                self._dynamic.add(key)
+            self._matrices[key] = o2w[inst]
+
+    def _mesh_trees(self, meshes, mesh_of, instanced, reuse):
+        """Object-space trees of the meshes instanced this frame, kept or built; (trees, new mesh_of for
+        the instanced instances, built count, kept count)."""
+        used = np.unique(mesh_of[instanced])
+        index = np.full(len(meshes), -1, np.int64)
+        index[used] = np.arange(len(used))
+        trees, rebuilt = [], 0
+        for i in used:
+            m = meshes[i]
+            cached = self._trees.get(m.key)
+            if not (reuse and cached is not None and cached[0] == m.fingerprint):
+                cached = (m.fingerprint, build_kdtree(_gather(m), **self.options))
+                self._trees[m.key] = cached
+                rebuilt += 1
+            trees.append(cached[1])
+        return trees, index[mesh_of[instanced]], rebuilt, len(used) - rebuilt
+
+    def _soup_tree(self, meshes, mesh_of, o2w, members, reuse):
+        """(tree, anchor, rebuilt): the members' world triangles relative to their centre, kept when the
+        members' keys, fingerprints and matrices are those of last frame's soup."""
+        signature = [(meshes[mesh_of[i]].key, meshes[mesh_of[i]].fingerprint, o2w[i].tobytes()) for i in members]
+        if reuse and self._soup is not None and self._soup[0] == signature:
+            return self._soup[1], self._soup[2], False
+        parts = [(_gather(meshes[mesh_of[i]]).astype(np.float64), o2w[i]) for i in members]
+        world = [tris @ m[:3, :3].T + m[:3, 3] for tris, m in parts]
+        stacked = np.concatenate(world) if world else np.zeros((0, 3, 3))
+        anchor = (stacked.reshape(-1, 3).min(axis=0) + stacked.reshape(-1, 3).max(axis=0)) / 2 \
+            if len(stacked) else np.zeros(3)
+        tree = build_kdtree((stacked - anchor).astype(np.float32), **self.options)
+        self._soup = (signature, tree, anchor)
+        return tree, anchor, True
+
+    def _forget_absent(self, keys):
+        present = set(keys)
+        for table in (self._trees, self._fingerprints, self._matrices):
+            for key in [k for k in table if k not in present]:
+                del table[key]
+        self._dynamic &= present
+
+
+def _gather(mesh):
+    """(T, 3, 3) float32 object-space triangles of a MeshInput, with its indices checked."""
+    tris = np.asarray(mesh.triangles)
+    verts = np.asarray(mesh.vertices, np.float32)
+    if tris.size and (tris.min() < 0 or tris.max() >= len(verts)):
+        raise ValueError(f"mesh {mesh.key!r}: triangle indices must be in [0, {len(verts)})")
+    return verts[tris]
+
+
+def _bounds(meshes):
+    """(M, 6) float32 object-space boxes of the meshes' vertices (inverted when empty)."""
+    out = np.empty((len(meshes), 6), np.float32)
+    for i, m in enumerate(meshes):
+        v = np.asarray(m.vertices, np.float32)
+        out[i] = np.concatenate([v.min(axis=0), v.max(axis=0)]) if len(v) and len(m.triangles) else \
+            (np.inf,) * 3 + (-np.inf,) * 3
+    return out
+
+
+def build_scene(meshes, mesh_of, matrices, origin=None, layout="auto", **options):
+    """One frame's TwoLevelScene without reuse: meshes are (vertices, triangles) pairs or MeshInputs."""
+    inputs = [m if isinstance(m, MeshInput) else MeshInput(i, m[0], m[1], i) for i, m in enumerate(meshes)]
+    return SceneBuilder(layout, **options).build(inputs, mesh_of, matrices, origin)[0]

@@ -1,0 +1,55 @@
+"""Closest-hit and any-hit queries over a TwoLevelScene: input checks, then one parallel kernel."""
+from typing import NamedTuple
+
+import numpy as np
+
+from .inputs import as_ray_limits, as_rays
+from .instance_traversal import trace_scene_rays
+from .lazy import resolve_suspended
+from .threads import thread_count
+from .two_level import as_two_level
+
+
+class SceneHits(NamedTuple):
+    """Per-ray results: `t` (float32, inf on a miss), `instance` and `prim` (int32, the instance and
+    its mesh's triangle index, -1 on a miss), `u`, `v` (float32 barycentric weights of vertices 1, 2)."""
+
+    t: np.ndarray
+    instance: np.ndarray
+    prim: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+
+
+def intersect_scene(scene, origins, directions, tmin=0.0, tmax=np.inf, threads=None):
+    """Closest hit of each ray in (tmin, tmax); `scene` a TwoLevelScene (or a KdTree, as one instance)."""
+    t, inst, prim, u, v = trace_scene_all(scene, origins, directions, tmin, tmax, False, threads)
+    return SceneHits(t.astype(np.float32), inst, prim, u.astype(np.float32), v.astype(np.float32))
+
+
+def occluded_scene(scene, origins, directions, tmin=0.0, tmax=np.inf, threads=None):
+    """(R,) bool: does each ray hit anything in (tmin, tmax)? Stops at the first hit found."""
+    return trace_scene_all(scene, origins, directions, tmin, tmax, True, threads)[2] >= 0
+
+
+def trace_scene_all(scene, origins, directions, tmin, tmax, any_hit, threads):
+    """Checked rays through the scene: float64 (t, u, v) and int32 (instance, prim) arrays. A lazy
+    KdTree builds the subtrees its rays reach (lazy.py) and the rays that stopped there are retraced."""
+    tree, scene = scene, as_two_level(scene)
+    o, d = as_rays(origins, directions)
+    lo, hi = as_ray_limits(tmin, tmax, len(o))
+    n = len(o)
+    t, u, v = np.empty(n), np.empty(n), np.empty(n)
+    inst, prim = np.empty(n, np.int32), np.empty(n, np.int32)
+    with thread_count(threads):
+        trace_scene_rays(scene.arrays, o, d, lo, hi, any_hit, t, inst, prim, u, v)
+
+    def retrace(rays):  # rays that stopped at unbuilt subtrees of a lazy tree, now built
+        out = [np.empty(len(rays)), np.empty(len(rays), np.int32), np.empty(len(rays), np.int32),
+               np.empty(len(rays)), np.empty(len(rays))]
+        with thread_count(threads):
+            trace_scene_rays(as_two_level(tree).arrays, o[rays], d[rays], lo[rays], hi[rays], any_hit, *out)
+        t[rays], inst[rays], prim[rays], u[rays], v[rays] = out
+
+    resolve_suspended(tree, prim, retrace, threads)
+    return t, inst, prim, u, v

@@ -1,0 +1,101 @@
+"""What one scene keeps between frames: its mesh trees (core.SceneBuilder) and its last image.
+
+Trees: every evaluated mesh gets a key that is stable across frames -- (mesh name, name of the first
+object placing it, that object's instancer, occurrence number) -- because `MeshGeometry.key`
+(`as_pointer`) is only stable within one extraction. A key is only a name for the cache: a tree is
+reused only when the mesh's fingerprint (extract.geometry_fingerprint, a CRC of its vertex and index
+bytes) is the same as when the tree was built, so a key mix-up costs a rebuild, never a wrong image.
+
+Image: `image_key` digests everything that affects the pixels (each mesh's key and fingerprint, every
+instance's mesh and matrix, camera, lights, resolution, settings); an unchanged key reuses the last
+image without building or tracing.
+
+State lives per scene (by `session_uid`, which survives renames) in this module, so the Render
+operator, Render Animation, the command line and live update all share it. `clear()` drops it all.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .extract import ExtractedScene, geometry_fingerprint
+
+# Settings that cannot change the image (output format, the reuse switch itself).
+NOT_IN_IMAGE = ("output_format", "rebuild_all")
+
+
+@dataclass
+class SceneState:
+    """One scene's builder (per build options) and its last finished image."""
+
+    builder: object
+    build_options: dict
+    image_key: bytes | None = None
+    image: np.ndarray | None = None
+    info: dict = field(default_factory=dict)
+
+
+_states: dict[int, SceneState] = {}
+
+
+def state_for(scene, core, build_options: dict) -> SceneState:
+    """The scene's state; a fresh one when the build options changed (trees built otherwise differ)."""
+    uid = getattr(scene, "session_uid", None) or id(scene)
+    state = _states.get(uid)
+    if state is None or state.build_options != build_options:
+        state = SceneState(core.SceneBuilder(**build_options), dict(build_options))
+        _states[uid] = state
+    return state
+
+
+def clear() -> None:
+    """Forget every scene's trees and images (frees their memory)."""
+    _states.clear()
+
+
+def mesh_inputs(core, extracted: ExtractedScene):
+    """(MeshInputs, mesh_of (I,), matrices (I, 4, 4)) for core.SceneBuilder.build."""
+    owners: dict[int, tuple] = {}
+    for inst in extracted.instances:
+        owners.setdefault(inst.geometry_key, (inst.name, inst.instancer))
+    seen: dict[tuple, int] = {}
+    order = {}
+    meshes = []
+    for geom_key, geom in extracted.geometries.items():
+        base = (geom.name, *owners.get(geom_key, ("", None)))
+        seen[base] = seen.get(base, -1) + 1
+        order[geom_key] = len(meshes)
+        meshes.append(core.MeshInput((*base, seen[base]), geom.vertices, geom.triangles, geometry_fingerprint(geom)))
+    mesh_of = np.array([order[i.geometry_key] for i in extracted.instances], np.int64)
+    matrices = np.stack([i.matrix_world for i in extracted.instances]) if extracted.instances else np.zeros((0, 4, 4))
+    return meshes, mesh_of, matrices
+
+
+def image_key(meshes, mesh_of, matrices, camera_keywords: dict, lights: list, size: tuple, settings: dict) -> bytes:
+    """Digest of everything the image depends on (see the module docstring)."""
+    h = hashlib.blake2b(digest_size=20)
+    h.update(repr([(m.key, m.fingerprint) for m in meshes]).encode())
+    h.update(np.ascontiguousarray(mesh_of).tobytes())
+    h.update(np.ascontiguousarray(matrices, np.float64).tobytes())
+    _update(h, camera_keywords)
+    for light in lights:
+        h.update(f"{light.name}:{light.kind}".encode())
+        _update(h, light.keywords)
+    h.update(repr(size).encode())
+    h.update(repr(sorted((k, v) for k, v in settings.items() if k not in NOT_IN_IMAGE)).encode())
+    return h.digest()
+
+
+def _update(h, keywords: dict) -> None:
+    for name in sorted(keywords):
+        value = keywords[name]
+        h.update(name.encode())
+        if isinstance(value, np.ndarray):
+            h.update(np.ascontiguousarray(value, np.float64).tobytes())
+        elif isinstance(value, (list, tuple)):
+            h.update(np.asarray(value, np.float64).tobytes())
+        else:
+            h.update(repr(value).encode())

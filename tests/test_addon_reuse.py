@@ -1,0 +1,112 @@
+"""Reuse across frames in the add-on: kept trees for static and rigidly moving objects, rebuilt trees
+for deforming ones, the last image when nothing changed, and `rebuild_all` / `--rebuild-all`.
+
+The scene: a static ground quad, a cube whose location is keyed (rigid motion, frames 1-10), a quad
+with a keyed shape key (deforms, frames 1-10), an orthographic camera and a sun. Reference for the
+images: the same frames rendered with rebuild_all, from an empty cache.
+"""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from tests.addon_support import add_quad, add_sun, add_top_camera, addon  # noqa: F401
+
+import bpy  # noqa: E402
+import numpy as np  # noqa: E402
+
+from kd_addon import cli, pipeline, tree_cache  # noqa: E402
+from kd_addon.config import make_config  # noqa: E402
+from tests import bpy_scenes as scenes  # noqa: E402
+
+
+def animated_scene():
+    scene = bpy.context.scene
+    add_quad("Ground", 4.0, 2.0)
+    mover = scenes.add_cube("Mover", scale=0.4, location=(-2.0, 0.0, 0.4))
+    for frame, x in ((1, -2.0), (10, 2.0)):
+        mover.location.x = x
+        mover.keyframe_insert("location", frame=frame)
+    keyed = scenes.add_shape_key_plane("Keyed", lift=1.0)
+    keyed.location = (1.0, -1.0, 0.0)
+    add_top_camera(location=(0.0, 0.0, 10.0), ortho_scale=8.0)
+    add_sun(rotation=(0.5, 0.0, 0.0))
+    scene.render.resolution_x, scene.render.resolution_y = 48, 24
+    settings = scene.kd_preview
+    settings.resolution_percentage, settings.samples, settings.ao_distance = 100, 4, 1.0
+    settings.mode = "ao+shadow"
+    return scene
+
+
+def render(scene, frame, **changes):
+    scene.frame_set(frame)
+    for name, value in changes.items():
+        setattr(scene.kd_preview, name, value)
+    return pipeline.render_frame(scene, bpy.context.evaluated_depsgraph_get(), make_config(scene.kd_preview))
+
+
+def test_static_and_moved_objects_keep_their_trees_deforming_ones_are_rebuilt(addon):  # noqa: F811
+    scene = animated_scene()
+    tree_cache.clear()
+    reused = [render(scene, f) for f in (1, 2, 3, 4)]
+    tree_cache.clear()
+    rebuilt = [render(scene, f, rebuild_all=True) for f in (1, 2, 3, 4)]
+    counts = [(r.objects_rebuilt, r.objects_reused) for r in reused]
+    # frame 1 builds all; frame 2 learns which objects change (they leave the static soup, which is
+    # rebuilt once); from frame 3 only the deforming quad is rebuilt, the moved cube keeps its tree
+    assert counts[0] == (3, 0) and sum(counts[1]) == 3
+    assert counts[2] == counts[3] == (1, 2)
+    assert all((r.objects_rebuilt, r.objects_reused) == (3, 0) for r in rebuilt)
+    assert not any(r.image_reused for r in reused + rebuilt)
+    for a, b in zip(reused, rebuilt):
+        np.testing.assert_array_equal(a.image, b.image)  # reuse changes the work, never the pixels
+    assert not np.array_equal(reused[2].image, reused[3].image)  # the animation does show
+
+
+def test_image_reused_only_when_nothing_changed(addon):  # noqa: F811
+    scene = animated_scene()
+    tree_cache.clear()
+    first = render(scene, 11)  # the animation ended at frame 10: frames 11 and 12 are identical
+    same = render(scene, 12)
+    assert not first.image_reused and same.image_reused and same.frame == 12
+    assert same.rays == 0 and same.build_ms == 0.0 and same.objects_reused == 3
+    np.testing.assert_array_equal(first.image, same.image)
+    assert render(scene, 12).image_reused
+
+    bpy.data.objects["Cam"].location.x += 0.1
+    assert not render(scene, 12).image_reused
+    bpy.data.objects["Sun"].data.energy += 1.0  # no effect on the pixels, but a light changed
+    assert not render(scene, 12).image_reused
+    assert not render(scene, 12, samples=5).image_reused
+    assert render(scene, 12).image_reused
+    assert not render(scene, 12, rebuild_all=True).image_reused
+    assert render(scene, 12, rebuild_all=False, output_format="OPEN_EXR").image_reused  # no effect on pixels
+
+
+def test_cli_rebuild_all_flag_and_report_columns(addon, tmp_path, capsys):  # noqa: F811
+    scene = animated_scene()
+    scene.frame_start, scene.frame_end = 10, 12
+    blend = tmp_path / "anim.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    rows = {}
+    for flag in ((), ("--rebuild-all",)):
+        out = tmp_path / ("all" if flag else "reuse")
+        assert cli.execute(["render", str(blend), "--out", str(out), *flag]) == 0
+        rows[bool(flag)] = json.loads((out / "report.json").read_text())["frames"]
+    printed = capsys.readouterr().out
+    assert "rebuilt" in printed and "2 of 3 images reused" in printed and "(--rebuild-all)" in printed
+    assert [r["image_reused"] for r in rows[False]] == [False, True, True]
+    assert [r["objects_reused"] for r in rows[False]][1:] == [3, 3]
+    assert all(r["objects_reused"] == 0 and not r["image_reused"] for r in rows[True])
+    assert all(r["objects_rebuilt"] == 3 for r in rows[True])
+
+
+@pytest.mark.parametrize("value", ["yes", 1])
+def test_rebuild_all_must_be_a_bool(value):
+    class Source:
+        rebuild_all = value
+
+    with pytest.raises(ValueError, match="rebuild_all must be True or False"):
+        make_config(Source())

@@ -1,0 +1,237 @@
+"""Two-level scenes against the flat tree over the same world triangles, and reuse across frames.
+
+Reference: one flat kd-tree (and a brute-force Moller-Trumbore) over the instances' world triangles.
+Exact equality is not expected: the flat tree stores world triangles rounded to float32 while the
+two-level scene keeps object-space triangles and transforms rays in float64. So t is compared within
+1e-5 relative to t, or 1e-5 absolute (1e-6 of the scenes' size of ~10): a hit at t = 0.07 on a world
+triangle whose vertices (~8 units out) were rounded to float32 moves by ~1e-6.
+"""
+import numpy as np
+import pytest
+
+import core
+from core.scene_policy import OVERLAP_LIMIT, SMALL_OBJECT, overlap_depth, plan_soup
+from tests.oracles import moller_trumbore
+
+
+def _random_matrix(rng, mirror=False, spread=6.0):
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    scale = rng.uniform(0.4, 2.5, 3)  # non-uniform
+    if mirror:
+        scale[rng.integers(3)] *= -1.0
+    m = np.eye(4)
+    m[:3, :3] = q * scale
+    m[:3, 3] = rng.uniform(-spread, spread, 3)
+    return m
+
+
+def _blob(rng, n=150):
+    """A small closed-ish cloud of triangles around the origin (object space)."""
+    centres = rng.normal(size=(n, 1, 3)) * 0.6
+    return (centres + rng.normal(size=(n, 3, 3)) * 0.25).astype(np.float32)
+
+
+def _instanced_scene(rng, n_meshes=3, n_instances=12):
+    meshes = [_blob(rng, 100 + 40 * i) for i in range(n_meshes)]
+    mesh_of = rng.integers(0, n_meshes, n_instances).astype(np.int32)
+    mats = np.stack([_random_matrix(rng, mirror=(i % 3 == 0)) for i in range(n_instances)])
+    return meshes, mesh_of, mats
+
+
+def _world(meshes, mesh_of, mats):
+    return np.concatenate([meshes[m].astype(np.float64) @ mats[i, :3, :3].T + mats[i, :3, 3]
+                           for i, m in enumerate(mesh_of)])
+
+
+def _global_prim(meshes, mesh_of, inst, prim):
+    starts = np.concatenate([[0], np.cumsum([len(meshes[m]) for m in mesh_of])])
+    return np.where(prim >= 0, starts[np.maximum(inst, 0)] + prim, -1)
+
+
+def _rays(rng, n, spread=8.0):
+    return rng.uniform(-spread, spread, (n, 3)), rng.normal(size=(n, 3))
+
+
+def _assert_matches_flat(scene, world, o, d, tmin=0.0, tmax=np.inf, global_prim=None):
+    flat = core.build_kdtree(world)
+    ref = core.intersect(flat, o, d, tmin, tmax)
+    hits = core.intersect_scene(scene, o, d, tmin, tmax)
+    hit = ref.prim >= 0
+    np.testing.assert_array_equal(hits.prim >= 0, hit)
+    np.testing.assert_allclose(hits.t[hit], ref.t[hit], rtol=1e-5, atol=1e-5)
+    if global_prim is not None:
+        assert (global_prim(hits.instance, hits.prim)[hit] == ref.prim[hit]).mean() > 0.995
+    np.testing.assert_array_equal(core.occluded_scene(scene, o, d, tmin, tmax), hit)
+    return hits, ref
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_instances_match_flat_tree_and_brute_force(seed):
+    rng = np.random.default_rng(seed)
+    meshes, mesh_of, mats = _instanced_scene(rng)
+    scene = core.build_two_level([core.build_kdtree(m) for m in meshes], mesh_of, mats)
+    world = _world(meshes, mesh_of, mats)
+    o, d = _rays(rng, 3000)
+    hits, _ = _assert_matches_flat(scene, world, o, d,
+                                   global_prim=lambda i, p: _global_prim(meshes, mesh_of, i, p))
+    t_bf, prim_bf = moller_trumbore(world, o, d)
+    hit = prim_bf >= 0
+    assert ((hits.prim >= 0) != hit).sum() <= 2  # float32 world rounding at edges aside
+    both = hit & (hits.prim >= 0)
+    np.testing.assert_allclose(hits.t[both], t_bf[both], rtol=1e-5, atol=1e-5)
+
+
+def test_limited_intervals_and_overlapping_instances():
+    rng = np.random.default_rng(5)
+    mesh = _blob(rng, 200)
+    mats = np.stack([_random_matrix(rng, spread=0.5) for _ in range(8)])  # heavily overlapping
+    mesh_of = np.zeros(8, np.int32)
+    scene = core.build_two_level([core.build_kdtree(mesh)], mesh_of, mats)
+    o, d = _rays(rng, 2000, spread=3.0)
+    tmin, tmax = rng.uniform(0, 0.5, 2000), rng.uniform(0.5, 4.0, 2000)
+    _assert_matches_flat(scene, _world([mesh], mesh_of, mats), o, d, tmin, tmax)
+
+
+def test_many_instances_of_one_mesh():
+    rng = np.random.default_rng(7)
+    mesh = _blob(rng, 40)
+    n = 3000
+    mats = np.stack([_random_matrix(rng, spread=40.0) for _ in range(n)])
+    scene = core.build_two_level([core.build_kdtree(mesh)], np.zeros(n, np.int32), mats)
+    assert scene.stats()["top_nodes"] > n // 4  # a real top-level tree, not one big leaf
+    o, d = _rays(rng, 2000, spread=45.0)
+    _assert_matches_flat(scene, _world([mesh], np.zeros(n, np.int32), mats), o, d)
+
+
+def test_far_from_origin_keeps_precision():
+    """Instance 1e5 units away, camera next to it: the scene shifted by the camera position finds the
+    same hits as a flat tree built around the camera."""
+    rng = np.random.default_rng(3)
+    mesh = _blob(rng, 100)
+    far = _random_matrix(rng)
+    far[:3, 3] += 1e5
+    scene = core.build_scene([(mesh.reshape(-1, 3), np.arange(300).reshape(-1, 3))], [0], far[None],
+                             origin=far[:3, 3] + 3.0, layout="two_level")
+    shifted = far.copy()
+    shifted[:3, 3] = -3.0
+    o, d = _rays(rng, 2000, spread=3.0)
+    _assert_matches_flat(scene, _world([mesh], [0], shifted[None]), o, d)
+
+
+def test_degenerate_inputs():
+    rng = np.random.default_rng(0)
+    tree = core.build_kdtree(_blob(rng, 20))
+    empty = core.build_two_level([tree], np.zeros(0, np.int32), np.zeros((0, 4, 4)))
+    o, d = _rays(rng, 10)
+    assert (core.intersect_scene(empty, o, d).prim == -1).all()
+    flat_mesh = core.build_kdtree(np.zeros((4, 3, 3), np.float32))  # zero-area only: nothing to hit
+    scene = core.build_two_level([flat_mesh, tree], np.array([0, 1]), np.stack([np.eye(4)] * 2))
+    _assert_matches_flat(scene, _blob(np.random.default_rng(0), 20), o, d)
+    singular = np.eye(4)
+    singular[2, 2] = 0.0
+    with pytest.raises(ValueError, match="instance 1 has a singular matrix"):
+        core.build_two_level([tree], np.zeros(2, np.int32), np.stack([np.eye(4), singular]))
+    with pytest.raises(ValueError, match="instance 0 names mesh 3"):
+        core.build_two_level([tree], np.array([3]), np.eye(4)[None])
+    with pytest.raises(ValueError, match="non-finite"):
+        core.build_two_level([tree], np.array([0]), np.full((1, 4, 4), np.nan))
+
+
+def test_render_of_instanced_scene_matches_flat_render():
+    rng = np.random.default_rng(11)
+    meshes, mesh_of, mats = _instanced_scene(rng, n_meshes=2, n_instances=6)
+    scene = core.build_two_level([core.build_kdtree(m) for m in meshes], mesh_of, mats)
+    flat = core.build_kdtree(_world(meshes, mesh_of, mats))
+    cam = np.eye(4)
+    cam[:3, 3] = (0.0, 0.0, 15.0)
+    camera = core.Camera(cam, 0.9)
+    settings = dict(mode="ao+shadow", samples=8, ao_distance=2.0, lights=[core.Light.sun((0.3, 0.2, -1.0))])
+    a = core.render_preview(scene, camera, 48, 48, **settings)
+    b = core.render_preview(flat, camera, 48, 48, **settings)
+    np.testing.assert_array_equal(a[..., 3], b[..., 3])
+    assert b[..., 3].mean() > 0.15
+    rmse = np.sqrt(np.mean((a[..., :3] - b[..., :3]) ** 2))
+    assert rmse < 0.01, rmse
+
+
+def test_policy():
+    big, small = SMALL_OBJECT * 2, SMALL_OBJECT // 2
+    bounds = np.array([[-1, -1, -1, 1, 1, 1]] * 4, np.float32)
+    apart = np.stack([np.eye(4)] * 4)
+    apart[:, 0, 3] = [0, 10, 20, 30]
+    tri_counts = np.array([big, big, small, big])
+    dynamic = np.array([False, False, False, True])
+    soup = plan_soup("auto", tri_counts, bounds, np.arange(4), apart, dynamic)
+    np.testing.assert_array_equal(soup, [False, False, True, False])  # only the small static one
+    together = apart.copy()
+    together[:, 0, 3] = 0.0
+    soup = plan_soup("auto", tri_counts, bounds, np.arange(4), together, dynamic)
+    np.testing.assert_array_equal(soup, [True, True, True, False])  # overlap merges; dynamic stays out
+    shared = plan_soup("auto", tri_counts, bounds, np.zeros(4, np.int64), together, np.zeros(4, bool))
+    assert not shared.any()  # a mesh with several instances keeps its tree
+    assert overlap_depth(np.array([[0, 0, 0, 1, 1, 1], [2, 0, 0, 3, 1, 1]], float)) < 0.01
+    assert overlap_depth(np.array([[0, 0, 0, 1, 1, 1]] * 3, float)) > OVERLAP_LIMIT
+
+
+def _frame_inputs(rng_seed, frame):
+    """Frame `frame` of a small animation: a static mesh, a rigidly moving one, a deforming one and a
+    mesh with 4 instances."""
+    rng = np.random.default_rng(rng_seed)
+    static, mover, wave, shared = (_blob(rng, SMALL_OBJECT + 50) for _ in range(4))
+    wave = wave + np.float32(0.05 * frame) * np.sin(wave)
+    meshes = [core.MeshInput(name, tris.reshape(-1, 3), np.arange(3 * len(tris)).reshape(-1, 3),
+                             hash(tris.tobytes()))
+              for name, tris in (("static", static), ("mover", mover), ("wave", wave), ("shared", shared))]
+    mats = np.stack([np.eye(4)] * 7)
+    mats[:, 0, 3] = [0, 5, 10, 15, 20, 25, 30]
+    mats[1, 1, 3] = 0.5 * frame  # the mover
+    return meshes, np.array([0, 1, 2, 3, 3, 3, 3]), mats
+
+
+def test_builder_reuses_static_and_moved_meshes_and_rebuilds_deforming_ones():
+    builder = core.SceneBuilder()
+    reference = core.SceneBuilder()
+    rng = np.random.default_rng(2)
+    o, d = _rays(rng, 2000, spread=30.0)
+    reports = []
+    for frame in range(4):
+        meshes, mesh_of, mats = _frame_inputs(0, frame)
+        scene, report = builder.build(meshes, mesh_of, mats, origin=(1.0, 2.0, 3.0))
+        fresh, fresh_report = reference.build(meshes, mesh_of, mats, origin=(1.0, 2.0, 3.0), reuse=False)
+        reports.append(report)
+        assert fresh_report.meshes_reused == 0 and fresh_report.meshes_rebuilt == 4
+        a, b = core.intersect_scene(scene, o, d), core.intersect_scene(fresh, o, d)
+        np.testing.assert_array_equal(a.t, b.t)  # reuse gives exactly the rebuilt scene's hits
+        world = _world([m.vertices[m.triangles] for m in meshes], mesh_of, mats - _shift((1.0, 2.0, 3.0)))
+        _assert_matches_flat(scene, world, o, d)
+    assert reports[0].meshes_rebuilt == 4
+    # frame 1: only the deforming mesh changed geometry; the mover keeps its tree
+    assert (reports[1].meshes_rebuilt, reports[1].meshes_reused) == (1, 3)
+    assert (reports[3].meshes_rebuilt, reports[3].meshes_reused) == (1, 3)
+
+
+def _shift(origin):
+    s = np.zeros((4, 4))
+    s[:3, 3] = origin
+    return s
+
+
+def test_builder_soup_leaves_dynamic_objects_out():
+    rng = np.random.default_rng(4)
+    small = [_blob(rng, 30) for _ in range(3)]
+    builder = core.SceneBuilder()
+    reports = []
+    for frame in range(3):
+        tris = [s + np.float32(0.1 * frame) if i == 0 else s for i, s in enumerate(small)]
+        meshes = [core.MeshInput(i, t.reshape(-1, 3), np.arange(90).reshape(-1, 3), hash(t.tobytes()))
+                  for i, t in enumerate(tris)]
+        mats = np.stack([np.eye(4)] * 3)
+        mats[:, 0, 3] = [0, 4, 8]
+        scene, report = builder.build(meshes, np.arange(3), mats)
+        reports.append(report)
+        o, d = _rays(rng, 500, spread=9.0)
+        _assert_matches_flat(scene, _world(tris, np.arange(3), mats), o, d)
+    assert reports[0].soup_objects == 3 and reports[0].instanced_meshes == 0
+    assert reports[1].soup_objects == 2 and reports[1].soup_rebuilt  # the changed one left the soup
+    assert reports[2].soup_objects == 2 and not reports[2].soup_rebuilt
+    assert (reports[2].meshes_rebuilt, reports[2].meshes_reused) == (1, 2)
