@@ -210,3 +210,24 @@ def test_empty_and_tiny_lazy_trees():
     rng = np.random.default_rng(4)
     assert_same_queries(lazy, eager, rng.uniform(-2, 2, (300, 3)), rng.normal(size=(300, 3)))
     assert built(lazy) == 1
+
+
+def test_scene_queries_on_a_lazy_tree_build_what_they_reach_and_match_eager():
+    """intersect_scene takes a KdTree as one identity instance: on a lazy tree the rays that stop at
+    unbuilt subtrees are retraced after the build, so the answers are the eager tree's."""
+    rng = np.random.default_rng(7)
+    tris = two_clusters(rng)
+    lazy, eager = lazy_and_eager(tris)
+    o, d = rays_at(rng, np.array([-2.0, 0.0, 0.0]), 300)
+    got, want = core.intersect_scene(lazy, o, d), core.intersect(eager, o, d)
+    np.testing.assert_array_equal(got.prim, want.prim)
+    np.testing.assert_array_equal(got.t, want.t)
+    assert (got.instance[got.prim >= 0] == 0).all() and (got.instance[got.prim < 0] == -1).all()
+    assert 0 < built(lazy) < lazy.stats()["subtrees_total"]
+
+
+def test_two_level_scene_refuses_lazy_mesh_trees():
+    tris = two_clusters(np.random.default_rng(3))
+    lazy = core.build_kdtree(tris, lazy=True, lazy_subtree_size=8)
+    with pytest.raises(ValueError, match="mesh 1 is a lazy tree"):
+        core.build_two_level([core.build_kdtree(tris), lazy], np.array([0, 1]), np.stack([np.eye(4)] * 2))

@@ -60,6 +60,8 @@ def test_esc_during_a_long_build_returns_at_once_and_the_next_render_is_right(mo
     assert len(sheet.data.polygons) == 980_000 and tuple(sheet.location) == (-2.0, 0.0, 3.0)  # untouched
     bpy.data.objects.remove(sheet)
     # The abandoned build still holds the kernel lock; the next render waits for it, then is exact.
+    # (rebuild_all: the scene is the reference's again, so it would otherwise reuse that image at once.)
+    scene.kd_preview.rebuild_all = True
     assert bpy.ops.kdpreview.render() == {"FINISHED"}
     assert (preview_pixels() == reference).all()
     assert job._pending.finished
@@ -97,6 +99,7 @@ def test_frame_change_during_a_render_cannot_change_it(modal):  # noqa: F811
     scene.frame_set(1)
     reference = pipeline.render_frame(scene, bpy.context.evaluated_depsgraph_get(), make_config(scene.kd_preview))
     scene.kd_preview.live_update = True
+    scene.kd_preview.rebuild_all = True  # render for real: frame 1 unchanged would reuse the reference image
     op = driver(KDPREVIEW_OT_render)
     op.invoke(modal, None)
     timer(op, modal)
