@@ -3,6 +3,7 @@ import numpy as np
 import pytest
 
 import core
+from core import Hits
 from tests.oracles import brute_watertight, moller_trumbore
 
 BUILDERS = [
@@ -20,6 +21,10 @@ def assert_same_as_brute(tree, tris, origins, directions, tmin=0.0, tmax=np.inf)
     hits = core.intersect(tree, origins, directions, tmin, tmax)
     t, prim, _ = brute_watertight(tris, origins, directions, tmin, tmax)
     hit = prim >= 0
+    keep = ~_origin_on_hit_triangle(t, tmin, origins)
+    hits, t, prim, hit = Hits(*(a[keep] for a in hits)), t[keep], prim[keep], hit[keep]
+    origins, directions = origins[keep], directions[keep]
+    tmin, tmax = (np.broadcast_to(v, keep.shape)[keep] for v in (tmin, tmax))
     missed = np.flatnonzero((hits.prim >= 0) != hit)
     assert len(missed) == 0, f"{len(missed)} rays disagree on hit/miss, first {missed[:5]}"
     # t is float32 by contract: compare at that precision (a t of 1e-46 is 0 in float32)
@@ -27,6 +32,16 @@ def assert_same_as_brute(tree, tris, origins, directions, tmin=0.0, tmax=np.inf)
     assert np.all(np.isinf(hits.t[~hit])) and np.all(hits.prim[~hit] == -1)
     np.testing.assert_array_equal(core.occluded(tree, origins, directions, tmin, tmax), hit)
     return hits
+
+
+def _origin_on_hit_triangle(t, tmin, origins):
+    """Rays whose brute-force hit lies within rounding of tmin: the origin is on that triangle, the true
+    t is tmin itself (outside the open interval) and the triangle test's rounding decides. The tree may
+    then rightly never test that triangle: a triangle lying in a split plane sits on one side, and a ray
+    starting on the plane visits only the side it leaves to (found by HYPOTHESIS_PROFILE=long, exact
+    builder: t = 1.7e-17 for a ray from a vertex of a triangle in the plane x = 0)."""
+    scale = 1.0 + np.abs(origins).max(axis=1)
+    return np.isfinite(t) & (t - tmin < 1e-12 * scale)
 
 
 def assert_same_as_moller_trumbore(tree, tris, origins, directions, tmin=0.0, tmax=np.inf):
