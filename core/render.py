@@ -64,8 +64,7 @@ class PreviewRender:
     def _trace_camera(self):
         start = perf_counter()
         origins, directions, tmin, tmax = self.camera.rays(self.width, self.height)
-        t, inst, prim, _, _ = trace_scene_all(self.tree, origins, directions, tmin, tmax, False, self.threads)
-        self._refresh_scene()  # a lazy tree may have grown
+        t, inst, prim, _, _ = trace_scene_all(self.scene, origins, directions, tmin, tmax, False, self.threads)
         hit = np.flatnonzero(prim >= 0).astype(np.int64)
         self.pixels = hit
         self.points = np.empty((len(hit), 3))
@@ -121,15 +120,11 @@ class PreviewRender:
             status = run(self.active)
 
             def redo(pixels):
-                self._refresh_scene()
+                self.scene.refresh()
                 status[pixels] = run(self.active[pixels])
 
-            resolve_suspended(self.tree, status, redo, self.threads)
-
-    def _refresh_scene(self):
-        """A lazy tree's node arrays grow as subtrees are built: wrap the grown tree again."""
-        if isinstance(self.tree, KdTree) and self.tree.lazy:
-            self.scene = as_two_level(self.tree)
+            if self.scene.lazy_tree is not None:
+                resolve_suspended(self.scene.lazy_tree, status, redo, self.threads)
 
     def _retire_converged(self):
         """Stop sampling pixels whose standard error is below the target (after min_samples)."""

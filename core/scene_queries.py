@@ -35,7 +35,7 @@ def occluded_scene(scene, origins, directions, tmin=0.0, tmax=np.inf, threads=No
 def trace_scene_all(scene, origins, directions, tmin, tmax, any_hit, threads):
     """Checked rays through the scene: float64 (t, u, v) and int32 (instance, prim) arrays. A lazy
     KdTree builds the subtrees its rays reach (lazy.py) and the rays that stopped there are retraced."""
-    tree, scene = scene, as_two_level(scene)
+    scene = as_two_level(scene)
     o, d = as_rays(origins, directions)
     lo, hi = as_ray_limits(tmin, tmax, len(o))
     n = len(o)
@@ -45,11 +45,13 @@ def trace_scene_all(scene, origins, directions, tmin, tmax, any_hit, threads):
         trace_scene_rays(scene.arrays, o, d, lo, hi, any_hit, t, inst, prim, u, v)
 
     def retrace(rays):  # rays that stopped at unbuilt subtrees of a lazy tree, now built
+        scene.refresh()
         out = [np.empty(len(rays)), np.empty(len(rays), np.int32), np.empty(len(rays), np.int32),
                np.empty(len(rays)), np.empty(len(rays))]
         with thread_count(threads):
-            trace_scene_rays(as_two_level(tree).arrays, o[rays], d[rays], lo[rays], hi[rays], any_hit, *out)
+            trace_scene_rays(scene.arrays, o[rays], d[rays], lo[rays], hi[rays], any_hit, *out)
         t[rays], inst[rays], prim[rays], u[rays], v[rays] = out
 
-    resolve_suspended(tree, prim, retrace, threads)
+    if scene.lazy_tree is not None:
+        resolve_suspended(scene.lazy_tree, prim, retrace, threads)
     return t, inst, prim, u, v

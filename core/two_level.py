@@ -44,6 +44,16 @@ class TwoLevelScene:
         return (*self.top, self.world_to_object, self.mesh_of, *self._packed)
 
     @property
+    def lazy_tree(self):
+        """The scene's one mesh tree when it is lazy (its unbuilt subtrees are built as rays reach them,
+        then `refresh` re-packs it), else None."""
+        return self.meshes[0] if len(self.meshes) == 1 and self.meshes[0].lazy else None
+
+    def refresh(self):
+        """Re-pack the mesh arrays after a lazy mesh tree grew (no copy for one mesh)."""
+        self._packed = pack_meshes(self.meshes)
+
+    @property
     def instance_count(self):
         return len(self.mesh_of)
 
@@ -87,13 +97,9 @@ def build_two_level(meshes, mesh_of, matrices, **options):
     references are boxes, so `clip` is ignored). Raises ValueError naming a bad instance.
     """
     lazy = [i for i, m in enumerate(meshes) if isinstance(m, KdTree) and m.lazy]
-    if lazy:
-        raise ValueError(f"mesh {lazy[0]} is a lazy tree: a two-level scene takes eagerly built mesh trees "
-                         "(a lazy tree renders and answers queries on its own)")
-    return _build_two_level(meshes, mesh_of, matrices, **options)
-
-
-def _build_two_level(meshes, mesh_of, matrices, **options):
+    if lazy and len(meshes) > 1:
+        raise ValueError(f"mesh {lazy[0]} is a lazy tree: a two-level scene with several meshes takes eagerly "
+                         "built mesh trees (one lazy mesh, placed by any number of instances, is fine)")
     opts = make_options(options)
     mesh_of, o2w = _check_instances(meshes, mesh_of, matrices)
     start = perf_counter()
@@ -109,8 +115,7 @@ def as_two_level(tree):
         return tree
     if not isinstance(tree, KdTree):
         raise ValueError(f"expected a core.KdTree or core.TwoLevelScene, got {type(tree).__name__}")
-    # A lazy tree is allowed here: its callers (scene_queries, render) build what rays ask for.
-    return _build_two_level([tree], np.zeros(1, np.int32), np.eye(4)[None], threads=1)
+    return build_two_level([tree], np.zeros(1, np.int32), np.eye(4)[None], threads=1)
 
 
 def _check_instances(meshes, mesh_of, matrices):
@@ -152,7 +157,8 @@ def mesh_bounds(meshes):
     """(M, 6) float32 object-space boxes; inverted (inf, -inf) for a mesh with nothing to hit."""
     out = np.empty((len(meshes), 6), np.float32)
     for i, m in enumerate(meshes):
-        out[i] = m.bounds if len(m.leaf_prims) else (np.inf,) * 3 + (-np.inf,) * 3
+        # triangles with area, not leaf_prims: a lazy tree may not have built any leaf yet
+        out[i] = m.bounds if len(m.triangles) > len(m.dropped) else (np.inf,) * 3 + (-np.inf,) * 3
     return out
 
 

@@ -27,9 +27,9 @@ from .sequence import SequenceJob, parse_frames
 
 COMMAND_ID = "kdpreview"
 FORMAT_ALIASES = {"PNG": "PNG", "EXR": "OPEN_EXR", "OPEN_EXR": "OPEN_EXR"}
-TABLE = "{:>6} {:>10} {:>8} {:>11} {:>10} {:>10} {:>10} {:>12} {:>8} {:>8} {:>7} {:>6}"
+TABLE = "{:>6} {:>10} {:>8} {:>11} {:>10} {:>10} {:>10} {:>12} {:>8} {:>10} {:>10} {:>8} {:>7} {:>6}"
 HEADER = TABLE.format("frame", "triangles", "objects", "extract ms", "build ms", "trace ms", "total ms", "rays",
-                      "Mrays/s", "rebuilt", "reused", "image")
+                      "Mrays/s", "rays saved", "nodes", "rebuilt", "reused", "image")
 _handle = None  # register_cli_command's handle
 
 
@@ -79,6 +79,8 @@ def build_parser(prog: str = COMMAND_ID) -> argparse.ArgumentParser:
                         help="MiB; refuse a frame estimated to need more (default 0 = no limit)")
     render.add_argument("--format", dest="output_format", type=_output_format, default=s,
                         help="PNG (default) or EXR")
+    render.add_argument("--lazy", action="store_true", default=s,
+                        help="build the kd-tree on demand, only where rays go (same image)")
     render.add_argument("--rebuild-all", dest="rebuild_all", action="store_true", default=s,
                         help="rebuild every kd-tree and re-trace every frame (no reuse of unchanged objects' "
                              "trees or of unchanged images)")
@@ -105,7 +107,8 @@ def _print_row(result, path) -> None:
     mark = "*" if result.first_run else ""
     print(TABLE.format(f"{mark}{result.frame}", f"{result.triangles:,}", result.objects, f"{result.extract_ms:.1f}",
                        f"{result.build_ms:.1f}", f"{result.trace_ms:.1f}", f"{result.total_ms:.1f}",
-                       f"{result.rays:,}", f"{result.mrays_per_s:.2f}", result.objects_rebuilt, result.objects_reused,
+                       f"{result.rays:,}", f"{result.mrays_per_s:.2f}", f"{result.rays_saved:,}",
+                       f"{result.tree_stats.get('nodes', 0):,}", result.objects_rebuilt, result.objects_reused,
                        "reused" if result.image_reused else "new"), flush=True)
     for warning in result.warnings:  # e.g. an object left out for non-finite vertices
         print(f"{COMMAND_ID}: warning: frame {result.frame}: {warning}", file=sys.stderr, flush=True)

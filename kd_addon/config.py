@@ -40,6 +40,9 @@ class Settings:
     seed: sampler seed, so two runs of a frame give the same image.
     memory_limit_mb: refuse a frame whose estimated peak memory (triangles, kd-tree, pixel
         buffers; see memory_limit.py) is above this many MiB, before allocating it; 0 = no limit.
+    lazy: build the kd-tree on demand (seed 003): only the parts rays reach; the same image. The
+        scene then goes into one flat tree (core.SceneBuilder layout "flat"), since a two-level
+        scene's mesh trees are built eagerly. Pays when most of the scene is hidden.
     rebuild_all: build every kd-tree and trace every frame anew, as if nothing were kept from
         the frame before (turns off tree and image reuse; for comparisons and benchmarks).
     """
@@ -58,6 +61,7 @@ class Settings:
     seed: int = 0
     memory_limit_mb: int = 0
     rebuild_all: bool = False
+    lazy: bool = False
 
 
 DEFAULTS = Settings()
@@ -113,6 +117,7 @@ def _build_options(s: Settings) -> dict:
         "bins": int(s.bins),
         "max_depth": int(s.max_depth) or None,
         "threads": int(s.threads) or None,
+        "lazy": bool(s.lazy),
     }
 
 
@@ -141,8 +146,9 @@ def _validate(s: Settings) -> None:
     _integer("memory_limit_mb", s.memory_limit_mb, 0, 1 << 30, "0 = no limit")
     _number("ao_distance", s.ao_distance, positive=True)
     _number("error_target", s.error_target, positive=False, note="0 = off")
-    if not isinstance(s.rebuild_all, bool):
-        raise SettingsError(f"rebuild_all must be True or False; got {s.rebuild_all!r}")
+    for name in ("rebuild_all", "lazy"):
+        if not isinstance(getattr(s, name), bool):
+            raise SettingsError(f"{name} must be True or False; got {getattr(s, name)!r}")
 
 
 def _choice(name, value, choices) -> None:

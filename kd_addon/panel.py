@@ -23,6 +23,11 @@ RUN_ROWS = (
     ("Trees Built", "objects_rebuilt", "{:,}"),
     ("Trees Kept", "objects_reused", "{:,}"),
 )
+LAZY_ROWS = (  # a lazy tree (Lazy Build): how much of it the rays made it build
+    ("Subtrees Built", "subtrees_built", "{:,}"),
+    ("Subtrees Deferred", "subtrees_total", "{:,}"),
+    ("Lazy Build", "lazy_build_ms", "{:.1f} ms"),
+)
 TREE_ROWS = (
     ("Nodes", "nodes", "{:,}"),
     ("Leaves", "leaves", "{:,}"),
@@ -87,7 +92,7 @@ class KDPREVIEW_PT_tree(_SubPanel, bpy.types.Panel):
         settings = context.scene.kd_preview
         self.layout.use_property_split = True
         for name in ("builder", "bins", "leaf_size", "max_depth", "threads", "seed", "memory_limit_mb",
-                     "rebuild_all"):
+                     "lazy", "rebuild_all"):
             self.layout.prop(settings, name)
 
 
@@ -121,7 +126,8 @@ class KDPREVIEW_PT_last_run(_SubPanel, bpy.types.Panel):
         if last.get("image_reused"):
             layout.label(text="Nothing changed: last image reused", icon="FILE_REFRESH")
         _rows(layout, last, RUN_ROWS)
-        _rows(layout.box(), last.get("tree", {}), TREE_ROWS)
+        tree = last.get("tree", {})
+        _rows(layout.box(), tree, TREE_ROWS + (LAZY_ROWS if tree.get("lazy") else ()))
         if "animation" in last:
             layout.label(text=f"{last['animation']['frames']} frames, report: {last['animation']['report']}")
         for warning in last.get("warnings", []):

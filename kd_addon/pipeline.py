@@ -260,6 +260,8 @@ class FrameJob:
                                total_ms=sum(t.values()), rays=0, rays_saved=0, first_run=False, **self._info)
         with KERNEL_LOCK:
             image = np.array(self.renderer.image(), dtype=np.float32, copy=True)
+            if self.renderer.scene.lazy_tree is not None:  # what the rays made it build, not the start
+                self._info["tree_stats"] = self.renderer.scene.stats()
         result = FrameResult(image=image, extract_ms=t["extract_ms"], build_ms=t["build_ms"], trace_ms=t["trace_ms"],
                              total_ms=sum(t.values()), rays=int(self.renderer.rays_traced),
                              rays_saved=int(self.renderer.rays_saved), samples=int(self.renderer.samples_done),

@@ -52,6 +52,10 @@ class KDPreviewSettings(bpy.types.PropertyGroup):
     memory_limit_mb: IntProperty(name="Memory Limit (MiB)",
                                  description="Refuse a frame whose estimated peak memory is above this (0 = no limit)",
                                  default=DEFAULTS.memory_limit_mb, min=0, soft_max=65536)
+    lazy: BoolProperty(name="Lazy Build",
+                       description="Build the kd-tree on demand, only where rays go (same image; pays when "
+                                   "most of the scene is hidden)",
+                       default=DEFAULTS.lazy)
     rebuild_all: BoolProperty(name="Rebuild All",
                               description="Rebuild every kd-tree and re-trace every frame instead of reusing "
                                           "unchanged objects' trees and unchanged images (for comparisons)",

@@ -46,7 +46,9 @@ def state_for(scene, core, build_options: dict) -> SceneState:
     uid = getattr(scene, "session_uid", None) or id(scene)
     state = _states.get(uid)
     if state is None or state.build_options != build_options:
-        state = SceneState(core.SceneBuilder(**build_options), dict(build_options))
+        # A lazy tree must be the scene's one mesh tree (core.build_two_level): one flat tree then.
+        layout = "flat" if build_options.get("lazy") else "auto"
+        state = SceneState(core.SceneBuilder(layout, **build_options), dict(build_options))
         _states[uid] = state
     return state
 

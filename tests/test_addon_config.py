@@ -20,7 +20,8 @@ from kd_addon.sequence import parse_frames  # noqa: E402
 
 def test_defaults_map_to_core_keywords():
     cfg = make_config(SimpleNamespace())
-    assert cfg.build_options == {"builder": "binned", "leaf_size": 2, "bins": 32, "max_depth": None, "threads": None}
+    assert cfg.build_options == {"builder": "binned", "leaf_size": 2, "bins": 32, "max_depth": None, "threads": None,
+                                 "lazy": False}
     assert cfg.render_options == {"mode": "ao", "samples": 16, "ao_distance": 1.0, "error_target": None,
                                   "threads": None, "seed": 0}
     assert cfg.resolution_percentage == 50 and cfg.file_extension == ".png"
@@ -29,8 +30,9 @@ def test_defaults_map_to_core_keywords():
 def test_zero_means_automatic_and_values_pass_through():
     cfg = make_config(SimpleNamespace(max_depth=20, threads=2, error_target=0.01, builder="exact", bins=64,
                                       leaf_size=4, mode="ao+shadow", samples=7, ao_distance=2.5,
-                                      output_format="OPEN_EXR"))
-    assert cfg.build_options == {"builder": "exact", "leaf_size": 4, "bins": 64, "max_depth": 20, "threads": 2}
+                                      output_format="OPEN_EXR", lazy=True))
+    assert cfg.build_options == {"builder": "exact", "leaf_size": 4, "bins": 64, "max_depth": 20, "threads": 2,
+                                 "lazy": True}
     assert cfg.render_options["threads"] == 2 and cfg.render_options["error_target"] == 0.01
     assert cfg.render_options["mode"] == "ao+shadow" and cfg.file_extension == ".exr"
 

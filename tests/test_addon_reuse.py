@@ -110,3 +110,17 @@ def test_rebuild_all_must_be_a_bool(value):
 
     with pytest.raises(ValueError, match="rebuild_all must be True or False"):
         make_config(Source())
+
+
+def test_lazy_build_setting_renders_the_same_image_and_skips_hidden_geometry(addon):  # noqa: F811
+    """The Lazy Build setting: one flat tree built on demand. A 20k-triangle sheet under the ground is
+    reached by no camera or AO ray, so most of its subtrees stay unbuilt; the image is the eager one."""
+    scene = animated_scene()
+    scenes.add_wavy_sheet("Hidden", 100, location=(0.0, 0.0, -3.0))
+    tree_cache.clear()
+    eager = render(scene, 1, rebuild_all=True)
+    lazy = render(scene, 1, rebuild_all=True, lazy=True)
+    np.testing.assert_array_equal(lazy.image, eager.image)
+    stats = lazy.tree_stats
+    assert stats["lazy"] and 0 < stats["subtrees_built"] < stats["subtrees_total"] / 2
+    assert not eager.tree_stats.get("lazy")
