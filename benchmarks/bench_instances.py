@@ -25,24 +25,8 @@ from tests import bpy_scenes  # noqa: E402
 def tiles_scene(count):
     """`count` quads (0.5 x 0.5) on a line of points 1 apart, from one geometry-nodes modifier."""
     bpy_scenes.reset()
-    group = bpy.data.node_groups.new("Tiles", "GeometryNodeTree")
-    group.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
-    group.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
-    nodes, links = group.nodes, group.links
-    nodes.new("NodeGroupInput")
-    out = nodes.new("NodeGroupOutput")
-    points = nodes.new("GeometryNodeMeshLine")
-    points.inputs["Count"].default_value = count
-    points.inputs["Offset"].default_value = (1.0, 0.0, 0.0)
-    tile = nodes.new("GeometryNodeMeshGrid")
-    tile.inputs["Vertices X"].default_value = tile.inputs["Vertices Y"].default_value = 2
-    tile.inputs["Size X"].default_value = tile.inputs["Size Y"].default_value = 0.5
-    on_points = nodes.new("GeometryNodeInstanceOnPoints")
-    links.new(points.outputs["Mesh"], on_points.inputs["Points"])
-    links.new(tile.outputs["Mesh"], on_points.inputs["Instance"])
-    links.new(on_points.outputs["Instances"], out.inputs[0])
     host = bpy_scenes.add_mesh("Host", [], [])
-    host.modifiers.new("Tiles", "NODES").node_group = group
+    host.modifiers.new("Tiles", "NODES").node_group = bpy_scenes.tile_line_group(count)
     return bpy.context.evaluated_depsgraph_get()
 
 

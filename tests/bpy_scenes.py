@@ -116,25 +116,52 @@ def add_shape_key_plane(name="Keyed", *, lift=2.0, value_at_frame=((1, 0.0), (10
     return obj
 
 
-def gn_line_instances_group(count, offset, cube_size):
-    """Geometry-nodes tree: Mesh Line(count, offset) -> Instance on Points
-    with a Mesh Cube(cube_size). The input geometry is dropped."""
-    group = bpy.data.node_groups.new("LineInstances", "GeometryNodeTree")
+def instances_on_points_group(name, make_points, make_instance):
+    """Geometry-nodes tree: an instance of the mesh `make_instance(nodes)` on every point of the mesh
+    `make_points(nodes)` (both return a node with a "Mesh" output). The input geometry is dropped."""
+    group = bpy.data.node_groups.new(name, "GeometryNodeTree")
     group.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
     group.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
     nodes, links = group.nodes, group.links
     nodes.new("NodeGroupInput")
     out = nodes.new("NodeGroupOutput")
-    line = nodes.new("GeometryNodeMeshLine")
-    line.inputs["Count"].default_value = count
-    line.inputs["Offset"].default_value = offset
-    cube = nodes.new("GeometryNodeMeshCube")
-    cube.inputs["Size"].default_value = (cube_size,) * 3
     on_points = nodes.new("GeometryNodeInstanceOnPoints")
-    links.new(line.outputs["Mesh"], on_points.inputs["Points"])
-    links.new(cube.outputs["Mesh"], on_points.inputs["Instance"])
+    links.new(make_points(nodes).outputs["Mesh"], on_points.inputs["Points"])
+    links.new(make_instance(nodes).outputs["Mesh"], on_points.inputs["Instance"])
     links.new(on_points.outputs["Instances"], out.inputs[0])
     return group
+
+
+def _node(nodes, kind, **inputs):
+    node = nodes.new(kind)
+    for key, value in inputs.items():
+        node.inputs[key.replace("_", " ")].default_value = value
+    return node
+
+
+def gn_line_instances_group(count, offset, cube_size):
+    """Mesh Line(count, offset) -> Instance on Points with a Mesh Cube(cube_size)."""
+    return instances_on_points_group(
+        "LineInstances", lambda nodes: _node(nodes, "GeometryNodeMeshLine", Count=count, Offset=offset),
+        lambda nodes: _node(nodes, "GeometryNodeMeshCube", Size=(cube_size,) * 3))
+
+
+def tile_instances_group(columns, rows):
+    """A columns x rows grid of points 1 apart, a 0.5 x 0.5 quad (2 triangles) on each."""
+    return instances_on_points_group(
+        "Tiles", lambda nodes: _node(nodes, "GeometryNodeMeshGrid", Vertices_X=columns, Vertices_Y=rows,
+                                     Size_X=columns - 1, Size_Y=rows - 1),
+        _tile)
+
+
+def tile_line_group(count):
+    """`count` points 1 apart on a line, a 0.5 x 0.5 quad (2 triangles) on each."""
+    return instances_on_points_group(
+        "Tiles", lambda nodes: _node(nodes, "GeometryNodeMeshLine", Count=count, Offset=(1.0, 0.0, 0.0)), _tile)
+
+
+def _tile(nodes):
+    return _node(nodes, "GeometryNodeMeshGrid", Vertices_X=2, Vertices_Y=2, Size_X=0.5, Size_Y=0.5)
 
 
 def add_gn_instancer(name="GNHost", *, count=4, offset=(2, 0, 0), cube_size=1.0, location=(0, 0, 0)):

@@ -171,33 +171,12 @@ def test_tiny_and_huge_scenes_render_like_scale_one(addon, scale):  # noqa: F811
 # -- many instances, linked data ---------------------------------------------------------------
 
 
-def tile_instances_group(columns, rows):
-    """Geometry nodes: a columns x rows grid of points 1 apart, a 0.5 x 0.5 quad (2 triangles) on each."""
-    group = bpy.data.node_groups.new("Tiles", "GeometryNodeTree")
-    group.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
-    group.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
-    nodes, links = group.nodes, group.links
-    nodes.new("NodeGroupInput")
-    out = nodes.new("NodeGroupOutput")
-    points = nodes.new("GeometryNodeMeshGrid")
-    points.inputs["Vertices X"].default_value, points.inputs["Vertices Y"].default_value = columns, rows
-    points.inputs["Size X"].default_value, points.inputs["Size Y"].default_value = columns - 1, rows - 1
-    tile = nodes.new("GeometryNodeMeshGrid")
-    tile.inputs["Vertices X"].default_value = tile.inputs["Vertices Y"].default_value = 2
-    tile.inputs["Size X"].default_value = tile.inputs["Size Y"].default_value = 0.5
-    on_points = nodes.new("GeometryNodeInstanceOnPoints")
-    links.new(points.outputs["Mesh"], on_points.inputs["Points"])
-    links.new(tile.outputs["Mesh"], on_points.inputs["Instance"])
-    links.new(on_points.outputs["Instances"], out.inputs[0])
-    return group
-
-
 def test_a_hundred_thousand_instances_of_one_mesh(addon):  # noqa: F811
     """400 x 250 tiles seen from above: a quarter of each unit cell is covered, and nothing occludes a
     flat layer of tiles from above, so every hit pixel has AO exactly 1."""
     scene = bpy.context.scene
     host = scenes.add_mesh("Host", [], [])
-    host.modifiers.new("Tiles", "NODES").node_group = tile_instances_group(400, 250)
+    host.modifiers.new("Tiles", "NODES").node_group = scenes.tile_instances_group(400, 250)
     add_top_camera(location=(0, 0, 10), ortho_scale=40.0)  # sees 40 x 20 of the 400 x 250 field
     scene.render.resolution_x, scene.render.resolution_y = 160, 80  # 4 pixels per unit
     settings = scene.kd_preview
