@@ -12,6 +12,7 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 
 import core
 from tests.core_helpers import BUILDERS, assert_same_as_brute
+from tests.strategies import coordinate, draw_soup, free
 
 # CI is derandomized: the same cases every run, so a rare oracle disagreement cannot make CI flaky;
 # the long profile draws new cases each run.
@@ -21,16 +22,11 @@ settings.register_profile("long", max_examples=5000, deadline=None,
                           suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
-grid = st.integers(-4, 4).map(lambda i: i / 2.0)
-free = st.floats(-2.0, 2.0, allow_nan=False, width=32)
-coordinate = st.one_of(grid, free)
 
 
 @st.composite
 def scenes(draw):
-    n = draw(st.integers(1, 60))
-    flat = draw(st.lists(coordinate, min_size=9 * n, max_size=9 * n))
-    tris = np.array(flat, np.float64).reshape(n, 3, 3)
+    tris = draw_soup(draw, 60)
     copies = draw(st.integers(0, 3))  # stacked duplicates
     if copies:
         tris = np.concatenate([tris] + [tris[:1]] * copies)

@@ -9,6 +9,8 @@ import os
 import numpy as np
 from hypothesis import HealthCheck, given, settings, strategies as st
 
+from tests.strategies import draw_soup, grid
+
 import core
 from tests.oracles import brute_watertight
 from tests.render_scenes import look_at
@@ -16,15 +18,11 @@ from tests.render_scenes import look_at
 EXAMPLES = 2000 if os.environ.get("HYPOTHESIS_PROFILE") == "long" else 20
 WIDTH, HEIGHT = 8, 6
 
-grid = st.integers(-4, 4).map(lambda i: i / 2.0)
-free = st.floats(-2.0, 2.0, allow_nan=False, width=32)
-coordinate = st.one_of(grid, free)
 
 
 @st.composite
 def render_cases(draw):
-    n = draw(st.integers(1, 40))
-    tris = np.array(draw(st.lists(coordinate, min_size=9 * n, max_size=9 * n)), np.float64).reshape(n, 3, 3)
+    tris = draw_soup(draw, 40)
     scale = draw(st.sampled_from([1e-3, 1.0, 1e3]))
     offset = np.array(draw(st.sampled_from([(0, 0, 0), (1e5, 0, 0), (-3e5, 2e5, 1e6)])), np.float64)
     position = np.array(draw(st.lists(st.floats(-6, 6, width=32), min_size=3, max_size=3)))
