@@ -10,7 +10,6 @@ measured in a child process per builder (ru_maxrss growth over the loaded scene)
 """
 import argparse
 import json
-import os
 import subprocess
 import sys
 import time

@@ -5,7 +5,6 @@ Cost of splitting a node with box B at `pos` on `axis` into children L and R (se
 where bonus is `empty_bonus` when one child is empty and 0 otherwise. A leaf costs Ci * n. A node is
 split only when the best C < cost_ratio * Ci * n (seed 003 §3.5 uses cost_ratio 0.9).
 """
-import numpy as np
 from numba import njit
 
 from .geometry import half_area_cut

@@ -2,7 +2,7 @@
 import numpy as np
 from numba import njit
 
-from .lights import AREA, POINT, SPOT, SUN
+from .lights import AREA, SPOT, SUN
 
 TWO_PI = 2.0 * np.pi
 
