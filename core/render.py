@@ -23,7 +23,9 @@ import numpy as np
 from .camera import Camera
 from .kdtree import KdTree
 from .lazy import resolve_suspended
+from .instance_signature import changed_boxes
 from .lights import pack_lights
+from .pixel_reuse import PixelState, prepared_boxes, segments_touch, settings_key, surface_rays_touch
 from .render_kernels import MODES, add_samples, surface_frames
 from .sampling import SAMPLERS, SOBOL_DIM1
 from .scene_queries import trace_scene_all
@@ -41,12 +43,20 @@ class PreviewRender:
 
     Settings: mode ("ao", "shadow", "ao+shadow"), samples (per pixel), ao_distance, lights (core.Light),
     seed, sampler ("sobol" or "random"), error_target (None: off), min_samples, ambient, threads.
+
+    previous: the last frame's `pixel_state()`. With the same camera, lights and settings, and a scene
+    from the same SceneBuilder (whose instance signature says what changed), pixels whose rays cannot
+    reach changed geometry are kept as they were (pixel_reuse.py): the image is the full render's,
+    `pixels_reused` and `rays_reused` say what that saved. Anything else renders from scratch.
     """
 
     def __init__(self, tree, camera, width, height, *, mode="ao", samples=16, ao_distance=1.0, lights=(),
-                 seed=0, sampler="sobol", error_target=None, min_samples=8, ambient=0.25, threads=None):
+                 seed=0, sampler="sobol", error_target=None, min_samples=8, ambient=0.25, threads=None,
+                 previous=None):
         _check_settings(tree, camera, width, height, mode, samples, ao_distance, seed, sampler, error_target,
                         min_samples, ambient, threads)
+        if previous is not None and not isinstance(previous, PixelState):
+            raise ValueError(f"previous must be None or a PreviewRender's pixel_state(), got {type(previous).__name__}")
         self.tree, self.camera, self.width, self.height = tree, camera, int(width), int(height)
         self.scene = as_two_level(tree)
         self.mode, self.target_samples, self.ao_distance = mode, int(samples), float(ao_distance)
@@ -59,25 +69,86 @@ class PreviewRender:
         self.samples_done = 0
         self.trace_ms = 0.0
         self.rays_saved = 0
-        self._trace_camera()
+        self.pixels_reused = self.rays_reused = self._rays_before = self.converged_pixels = 0
+        self.settings = settings_key(camera, self.width, self.height, mode, self.target_samples, self.ao_distance,
+                                     self.lights, self.seed, self.sampler, error_target, self.min_samples,
+                                     self.ambient)
+        start = perf_counter()
+        boxes = self._changed_boxes(previous)
+        if boxes is None:
+            self._trace_camera()
+        else:
+            self._continue(previous, boxes)
+        self.trace_ms += (perf_counter() - start) * 1e3
 
     def _trace_camera(self):
-        start = perf_counter()
-        origins, directions, tmin, tmax = self.camera.rays(self.width, self.height)
+        """Every pixel from scratch."""
+        rays = self.camera.rays(self.width, self.height)
+        self.camera_rays = len(rays[0])
+        pixels, depths, points, normals = self._camera_hits(rays)
+        zero = np.zeros(len(pixels), np.int64)
+        self._start(pixels, depths, points, normals, np.zeros((len(pixels), 3)), np.zeros(len(pixels)), zero,
+                    zero.copy(), np.arange(len(pixels), dtype=np.int64))
+
+    def _camera_hits(self, rays, which=None):
+        """(pixels, depths, points, normals) of the camera rays (`which`: a subset) that hit."""
+        origins, directions, tmin, tmax = rays if which is None else (a[which] for a in rays)
         t, inst, prim, _, _ = trace_scene_all(self.scene, origins, directions, tmin, tmax, False, self.threads)
         hit = np.flatnonzero(prim >= 0).astype(np.int64)
-        self.pixels = hit
-        self.points = np.empty((len(hit), 3))
-        self.normals = np.empty((len(hit), 3))
+        points, normals = np.empty((len(hit), 3)), np.empty((len(hit), 3))
         with thread_count(self.threads):
-            surface_frames(self.scene.arrays, origins, directions, t, inst, prim, hit, self.points, self.normals)
-        self.sums = np.zeros((len(hit), 3))
-        self.sq_sums = np.zeros(len(hit))
-        self.counts = np.zeros(len(hit), np.int64)
-        self.ray_counts = np.zeros(len(hit), np.int64)
-        self.active = np.arange(len(hit), dtype=np.int64)
-        self.camera_rays = len(origins)
-        self.trace_ms += (perf_counter() - start) * 1e3
+            surface_frames(self.scene.arrays, origins, directions, t, inst, prim, hit, points, normals)
+        return (hit if which is None else which[hit]), t[hit], points, normals
+
+    def _start(self, pixels, depths, points, normals, sums, sq_sums, counts, ray_counts, active):
+        self.pixels, self.depths, self.points, self.normals = pixels, depths, points, normals
+        self.sums, self.sq_sums, self.counts, self.ray_counts = sums, sq_sums, counts, ray_counts
+        self.active = active
+
+    def _changed_boxes(self, previous):
+        """Where geometry changed since `previous` (a PixelState), or None when its pixels cannot be
+        kept: none given, other settings, camera or lights, or a scene without a signature."""
+        if previous is None or previous.settings != self.settings:
+            return None
+        return changed_boxes(previous.signature, self.scene.signature)
+
+    def _continue(self, prev, boxes):
+        """Keep the pixels of `prev` whose rays cannot meet a changed box (pixel_reuse.py); sample the
+        others again from sample 0, tracing camera rays only where they cross a changed box."""
+        boxes = prepared_boxes(boxes)
+        rays = self.camera.rays(self.width, self.height)
+        ends = rays[3].copy()
+        ends[prev.pixels] = prev.depths
+        with thread_count(self.threads):
+            retrace = segments_touch(*rays[:3], ends, boxes)
+            kept = np.flatnonzero(~retrace[prev.pixels])
+            ao_radius = self.ao_distance if self.mode != "shadow" else 0.0
+            touched = surface_rays_touch(prev.points[kept], prev.normals[kept], ao_radius, self.lights, boxes)
+        clean, dirty = kept[~touched], kept[touched]
+        traced = np.flatnonzero(retrace)
+        self.camera_rays = len(traced)
+        new = self._camera_hits(rays, traced)
+        fresh = len(dirty) + len(new[0])
+        order = np.concatenate([clean, dirty])
+        join = lambda old, add: np.concatenate([old[order], add])  # noqa: E731
+        self._start(join(prev.pixels, new[0]), join(prev.depths, new[1]), join(prev.points, new[2]),
+                    join(prev.normals, new[3]), np.concatenate([prev.sums[clean], np.zeros((fresh, 3))]),
+                    np.concatenate([prev.sq_sums[clean], np.zeros(fresh)]),
+                    np.concatenate([prev.counts[clean], np.zeros(fresh, np.int64)]),
+                    np.concatenate([prev.ray_counts[clean], np.zeros(fresh, np.int64)]),
+                    np.arange(len(clean), len(clean) + fresh, dtype=np.int64))
+        self._rays_before = int(prev.ray_counts[clean].sum())
+        self.pixels_reused = len(clean)
+        self.rays_reused = self._rays_before + self.width * self.height - self.camera_rays
+        if fresh == 0:
+            self.samples_done = self.target_samples
+
+    def pixel_state(self):
+        """This frame's pixels for the next frame's `previous` (None until the render is done)."""
+        if not self.done:
+            return None
+        return PixelState(self.settings, self.scene.signature, self.pixels, self.depths, self.points, self.normals,
+                          self.sums, self.sq_sums, self.counts, self.ray_counts)
 
     @property
     def done(self):
@@ -85,7 +156,7 @@ class PreviewRender:
 
     @property
     def rays_traced(self):
-        return self.camera_rays + int(self.ray_counts.sum())
+        return self.camera_rays + int(self.ray_counts.sum()) - self._rays_before
 
     @property
     def hit_pixels(self):
@@ -138,6 +209,7 @@ class PreviewRender:
             rays_per_sample = self.ray_counts[self.active[converged]] / n[converged]
             remaining = self.target_samples - self.samples_done
             self.rays_saved += int(np.rint(rays_per_sample * remaining).sum())
+            self.converged_pixels += int(converged.sum())
             self.active = self.active[~converged]
 
     def image(self):
@@ -156,8 +228,9 @@ class PreviewRender:
 
     def stats(self):
         return {"samples": self.samples_done, "hit_pixels": self.hit_pixels, "rays": self.rays_traced,
-                "rays_saved": self.rays_saved, "trace_ms": self.trace_ms,
-                "converged_pixels": self.hit_pixels - len(self.active) if self.error_target else 0}
+                "rays_saved": self.rays_saved, "trace_ms": self.trace_ms, "pixels_reused": self.pixels_reused,
+                "rays_reused": self.rays_reused,
+                "converged_pixels": self.converged_pixels}
 
 
 def render_preview(tree, camera, width, height, **settings):

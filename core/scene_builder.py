@@ -10,7 +10,8 @@ fingerprint that changes whenever its geometry does (e.g. a CRC of its vertex an
   to its own centre and placed by a translation, so a moving camera never rebuilds it;
 - a single-use mesh whose matrix changed counts as dynamic too (it leaves the soup).
 Trees of keys absent from a frame are dropped. `reuse=False` rebuilds everything (the same layout),
-so the two can be compared.
+so the two can be compared. Every scene carries the instances' signature (instance_signature.py), from
+which the renderer tells where the next frame's geometry changed (pixel reuse).
 
 Precision: every matrix is shifted by minus `origin` (the camera position) in float64 before anything
 is rounded, and mesh trees are in object space, so nothing far from the origin loses precision.
@@ -21,6 +22,7 @@ from typing import Hashable, NamedTuple
 import numpy as np
 
 from .build import build_kdtree
+from .instance_signature import instance_signature, mesh_digest
 from .options import make_options
 from .scene_policy import LAYOUTS, plan_soup
 from .two_level import build_two_level
@@ -78,8 +80,9 @@ class SceneBuilder:
         if len(set(keys)) != len(keys):
             raise ValueError("mesh keys must be unique within a frame")
         self._track_changes(meshes, mesh_of, o2w)
+        bounds = _bounds(meshes)
         soup = plan_soup(self.layout, np.array([len(m.triangles) for m in meshes], np.int64),
-                         _bounds(meshes), mesh_of, o2w, np.array([k in self._dynamic for k in keys], bool))
+                         bounds, mesh_of, o2w, np.array([k in self._dynamic for k in keys], bool))
         trees, new_mesh_of, rebuilt, reused = self._mesh_trees(meshes, mesh_of, ~soup, reuse)
         shifted = o2w[~soup].copy()
         shifted[:, :3, 3] -= origin
@@ -97,6 +100,8 @@ class SceneBuilder:
         t = perf_counter()
         scene = build_two_level(trees, new_mesh_of, shifted, **self.options)
         top_ms = (perf_counter() - t) * 1e3
+        scene.signature = instance_signature([mesh_digest(m.key, m.fingerprint) for m in meshes], bounds, mesh_of,
+                                             o2w, origin)
         report = BuildReport(rebuilt, reused, len(trees) - int(soup.any()), int(soup.sum()), soup_rebuilt,
                              (perf_counter() - start) * 1e3, top_ms)
         return scene, report

@@ -36,6 +36,7 @@ class TwoLevelScene:
         self.world_boxes = world_boxes
         self.top = top
         self.build_ms = build_ms
+        self.signature = None  # an InstanceSignature when a SceneBuilder made it (pixel reuse across frames)
         self._packed = pack_meshes(self.meshes)
 
     @property

@@ -1,0 +1,59 @@
+"""What a frame's instances were, so the next frame can tell which parts of space changed.
+
+A signature lists every instance that has something to hit as a row of bytes (a digest of its mesh's
+key and fingerprint, then its object-to-world matrix) with its world box, in the coordinates the
+scene was built in (minus `origin`, see scene_builder.py). Two frames' signatures give the boxes
+where geometry may differ (`changed_boxes`): the boxes of rows present in only one of them, i.e.
+instances that moved, deformed, appeared or vanished, each at its old and its new place. Everything
+outside those boxes is the same triangles at the same places in both frames, which is what lets the
+renderer keep pixels whose rays stay outside them (pixel_reuse.py).
+
+Rows compare as sets: an instance duplicated exactly where another one is adds no new surface.
+"""
+import hashlib
+from typing import NamedTuple
+
+import numpy as np
+
+from .two_level import transformed_boxes
+
+
+class InstanceSignature(NamedTuple):
+    """origin (3,) float64; rows (I,) void (digest + matrix bytes); boxes (I, 6) float64."""
+
+    origin: np.ndarray
+    rows: np.ndarray
+    boxes: np.ndarray
+
+
+def mesh_digest(key, fingerprint):
+    """8 bytes naming a mesh's content: stable across frames, processes and builders."""
+    return hashlib.blake2b(repr((key, fingerprint)).encode(), digest_size=8).digest()
+
+
+def instance_signature(digests, bounds, mesh_of, o2w, origin):
+    """The signature of a frame. digests: one 8-byte `mesh_digest` per mesh; bounds (M, 6) object-
+    space boxes (inverted for a mesh with nothing to hit); mesh_of (I,); o2w (I, 4, 4) world matrices
+    (before the origin shift); origin (3,)."""
+    origin = np.asarray(origin, np.float64).copy()
+    mesh_of = np.asarray(mesh_of, np.int64)
+    solid = bounds[mesh_of, 0] <= bounds[mesh_of, 3] if len(mesh_of) else np.zeros(0, bool)
+    mesh_of, o2w = mesh_of[solid], np.ascontiguousarray(o2w[solid], np.float64)
+    table = np.frombuffer(b"".join(digests), np.uint8).reshape(len(digests), 8) if digests else \
+        np.zeros((0, 8), np.uint8)
+    raw = np.concatenate([table[mesh_of], o2w.reshape(len(o2w), 16).view(np.uint8)], axis=1)
+    rows = np.ascontiguousarray(raw).view(np.dtype((np.void, raw.shape[1]))).reshape(-1)
+    shifted = o2w.copy()
+    shifted[:, :3, 3] -= origin
+    boxes = transformed_boxes(bounds[mesh_of], shifted) if len(mesh_of) else np.zeros((0, 6))
+    return InstanceSignature(origin, rows, boxes)
+
+
+def changed_boxes(before, after):
+    """(K, 6) float64 boxes, in `after`'s coordinates, outside which both frames hold the same
+    geometry; None when that cannot be said (a signature is missing or the origin moved)."""
+    if before is None or after is None or not np.array_equal(before.origin, after.origin):
+        return None
+    gone = ~np.isin(before.rows, after.rows)
+    new = ~np.isin(after.rows, before.rows)
+    return np.concatenate([before.boxes[gone], after.boxes[new]])

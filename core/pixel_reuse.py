@@ -1,0 +1,168 @@
+"""Keeping last frame's pixels whose rays cannot meet anything that changed.
+
+Sample k of pixel p depends only on (p, k, seed) and on what its rays hit (render_kernels.py). So
+when the camera, the lights and every setting are those of the last frame, a pixel's samples are
+exactly last frame's unless one of its rays can reach a changed box (instance_signature.py: where
+an instance moved, deformed, appeared or vanished). Per pixel, conservatively:
+- the camera ray: the segment from clip start to the hit (or to clip end for a miss);
+- AO rays start at the offset hit point and are at most ao_distance long: a sphere;
+- a shadow ray runs from the offset hit point to a point sampled on the light: within the light's
+  radius (point, spot) or half-diagonal (area) of its centre, so the segment to the centre against
+  the box grown by that much covers every such ray; a sun's rays leave within angle/2 of its axis,
+  so within distance D of the point they stay within D sin(angle/2) of the axis (D: the box's
+  farthest corner).
+A pixel that passes keeps its sums, sample count and convergence; the others are sampled again from
+sample 0, so the image is the one a full render of this frame gives.
+
+Many changed boxes (e.g. particles) are merged into at most MAX_BOXES unions, which only makes the
+test more conservative and keeps it O(pixels x MAX_BOXES).
+"""
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit, prange
+
+from .lights import AREA, SUN
+from .shading import offset_origin
+
+MAX_BOXES = 64
+RELATIVE_PAD = 1e-6  # boxes grow by this times their size and distance from the origin: float32 rounding
+
+
+class PixelState(NamedTuple):
+    """A finished render's per-pixel state, enough to continue the next frame (PreviewRender.pixel_state).
+
+    settings: everything besides geometry that the pixels depend on (bytes); signature: the scene's
+    InstanceSignature (None: no reuse); the rest are the renderer's per-hit-pixel arrays."""
+
+    settings: bytes
+    signature: object
+    pixels: np.ndarray
+    depths: np.ndarray
+    points: np.ndarray
+    normals: np.ndarray
+    sums: np.ndarray
+    sq_sums: np.ndarray
+    counts: np.ndarray
+    ray_counts: np.ndarray
+
+
+def settings_key(camera, width, height, mode, samples, ao_distance, lights, seed, sampler, error_target,
+                 min_samples, ambient):
+    """Bytes that differ whenever a setting that affects pixels differs (lights: packed rows)."""
+    cam = np.concatenate([camera.matrix_world.ravel(), [camera.fov or 0.0, camera.ortho_scale or 0.0,
+                                                         camera.clip_start, camera.clip_end]])
+    head = repr((width, height, mode, samples, ao_distance, seed, sampler, error_target, min_samples, ambient))
+    return head.encode() + cam.tobytes() + np.ascontiguousarray(lights, np.float64).tobytes()
+
+
+def prepared_boxes(boxes):
+    """Changed boxes padded for rounding and merged down to MAX_BOXES: (K, 6) float64."""
+    boxes = np.asarray(boxes, np.float64).reshape(-1, 6)
+    boxes = boxes[(boxes[:, :3] <= boxes[:, 3:]).all(axis=1)]
+    if len(boxes) > MAX_BOXES:
+        boxes = _merged(boxes)
+    size = boxes[:, 3:] - boxes[:, :3]
+    reach = np.maximum(np.abs(boxes[:, :3]), np.abs(boxes[:, 3:]))
+    pad = RELATIVE_PAD * (size + reach).max(axis=1, keepdims=True) + 1e-12
+    return np.concatenate([boxes[:, :3] - pad, boxes[:, 3:] + pad], axis=1)
+
+
+def _merged(boxes):
+    """MAX_BOXES unions of runs of boxes sorted by centre along the widest axis."""
+    centres = (boxes[:, :3] + boxes[:, 3:]) / 2
+    axis = int(np.argmax(centres.max(axis=0) - centres.min(axis=0)))
+    groups = np.array_split(boxes[np.argsort(centres[:, axis], kind="stable")], MAX_BOXES)
+    return np.array([np.concatenate([g[:, :3].min(axis=0), g[:, 3:].max(axis=0)]) for g in groups])
+
+
+@njit(cache=True, parallel=True)
+def segments_touch(origins, directions, t0, t1, boxes):
+    """(R,) bool: the segment origin + t * direction, t in [t0, t1], meets one of the boxes."""
+    out = np.zeros(origins.shape[0], np.bool_)
+    for r in prange(origins.shape[0]):
+        for k in range(boxes.shape[0]):
+            if _segment_meets_box(origins[r], directions[r], t0[r], t1[r], boxes[k], 0.0):
+                out[r] = True
+                break
+    return out
+
+
+@njit(cache=True, parallel=True)
+def surface_rays_touch(points, normals, ao_radius, lights, boxes):
+    """(P,) bool: some AO ray (ao_radius > 0: within that distance) or shadow ray to one of the lights
+    (packed rows, lights.py) from the hit points (offset as the renderer does) can meet one of the boxes."""
+    out = np.zeros(points.shape[0], np.bool_)
+    for p in prange(points.shape[0]):
+        o = np.empty(3)
+        offset_origin(points[p], normals[p], o)
+        for k in range(boxes.shape[0]):
+            if _rays_meet_box(o, ao_radius, lights, boxes[k]):
+                out[p] = True
+                break
+    return out
+
+
+@njit(cache=True)
+def _rays_meet_box(o, ao_radius, lights, box):
+    if ao_radius > 0.0 and _distance_to_box(o, box) <= ao_radius:
+        return True
+    d = np.empty(3)
+    for i in range(lights.shape[0]):
+        light = lights[i]
+        kind = int(light[0])
+        if kind == SUN:
+            far = _farthest_corner(o, box)
+            grow = far * np.sqrt(max(0.0, 1.0 - light[8] * light[8]))
+            for k in range(3):
+                d[k] = -light[4 + k]
+            if _segment_meets_box(o, d, 0.0, far, box, grow):
+                return True
+            continue
+        grow = light[7]
+        if kind == AREA:
+            grow = np.sqrt(light[11] ** 2 + light[12] ** 2 + light[13] ** 2) + \
+                np.sqrt(light[14] ** 2 + light[15] ** 2 + light[16] ** 2)
+        for k in range(3):
+            d[k] = light[1 + k] - o[k]
+        if _segment_meets_box(o, d, 0.0, 1.0, box, grow):
+            return True
+    return False
+
+
+@njit(cache=True, inline="always")
+def _segment_meets_box(o, d, t0, t1, box, grow):
+    """Slab test of o + t d, t in [t0, t1], against the box grown by `grow`; a zero direction
+    component tests the origin against that slab instead of dividing by zero."""
+    lo, hi = t0, t1
+    for k in range(3):
+        a, b = box[k] - grow, box[3 + k] + grow
+        if d[k] == 0.0:
+            if o[k] < a or o[k] > b:
+                return False
+            continue
+        ta, tb = (a - o[k]) / d[k], (b - o[k]) / d[k]
+        if ta > tb:
+            ta, tb = tb, ta
+        lo, hi = max(lo, ta), min(hi, tb)
+        if lo > hi:
+            return False
+    return True
+
+
+@njit(cache=True, inline="always")
+def _distance_to_box(o, box):
+    s = 0.0
+    for k in range(3):
+        e = max(box[k] - o[k], 0.0, o[k] - box[3 + k])
+        s += e * e
+    return np.sqrt(s)
+
+
+@njit(cache=True, inline="always")
+def _farthest_corner(o, box):
+    s = 0.0
+    for k in range(3):
+        e = max(abs(box[k] - o[k]), abs(box[3 + k] - o[k]))
+        s += e * e
+    return np.sqrt(s)
