@@ -23,6 +23,9 @@ TRIANGLE_BYTES = 36  # (3, 3) float32: the array the tree keeps
 # Peak RSS growth of PreviewRender plus image(), per pixel, every pixel hit (the worst case): measured
 # 198 B at 960x540 and 171 B at 1920x1080.
 RENDER_BYTES_PER_PIXEL = 200.0
+# The last frame's pixel state kept for pixel reuse (render.PreviewRender.pixel_state): pixel index,
+# depth, point, normal, sums, squared sums, sample and ray counts, float64 / int64 per hit pixel.
+PIXEL_STATE_BYTES_PER_PIXEL = 112
 
 
 class MemoryLimitError(ValueError):
@@ -36,9 +39,11 @@ def build_bytes(n_triangles, builder="binned", *, copies_input=False):
     return int(MARGIN * per_triangle * n_triangles)
 
 
-def render_bytes(width, height):
-    """Estimated peak bytes of a PreviewRender of width x height pixels and its image."""
-    return int(MARGIN * RENDER_BYTES_PER_PIXEL * width * height)
+def render_bytes(width, height, keeps_previous=False):
+    """Estimated peak bytes of a PreviewRender of width x height pixels and its image (plus the last
+    frame's pixel state while it is continued from it)."""
+    per_pixel = RENDER_BYTES_PER_PIXEL + (PIXEL_STATE_BYTES_PER_PIXEL if keeps_previous else 0)
+    return int(MARGIN * per_pixel * width * height)
 
 
 def check_limit(estimate, limit, what, advice):

@@ -27,9 +27,9 @@ from .sequence import SequenceJob, parse_frames
 
 COMMAND_ID = "kdpreview"
 FORMAT_ALIASES = {"PNG": "PNG", "EXR": "OPEN_EXR", "OPEN_EXR": "OPEN_EXR"}
-TABLE = "{:>6} {:>10} {:>8} {:>11} {:>10} {:>10} {:>10} {:>12} {:>8} {:>10} {:>10} {:>8} {:>7} {:>6}"
+TABLE = "{:>6} {:>10} {:>8} {:>11} {:>10} {:>10} {:>10} {:>12} {:>8} {:>10} {:>12} {:>10} {:>10} {:>8} {:>7} {:>6}"
 HEADER = TABLE.format("frame", "triangles", "objects", "extract ms", "build ms", "trace ms", "total ms", "rays",
-                      "Mrays/s", "rays saved", "nodes", "rebuilt", "reused", "image")
+                      "Mrays/s", "rays saved", "rays reused", "px kept", "nodes", "rebuilt", "reused", "image")
 _handle = None  # register_cli_command's handle
 
 
@@ -108,6 +108,7 @@ def _print_row(result, path) -> None:
     print(TABLE.format(f"{mark}{result.frame}", f"{result.triangles:,}", result.objects, f"{result.extract_ms:.1f}",
                        f"{result.build_ms:.1f}", f"{result.trace_ms:.1f}", f"{result.total_ms:.1f}",
                        f"{result.rays:,}", f"{result.mrays_per_s:.2f}", f"{result.rays_saved:,}",
+                       f"{result.rays_reused:,}", f"{result.pixels_reused:,}",
                        f"{result.tree_stats.get('nodes', 0):,}", result.objects_rebuilt, result.objects_reused,
                        "reused" if result.image_reused else "new"), flush=True)
     for warning in result.warnings:  # e.g. an object left out for non-finite vertices

@@ -25,11 +25,13 @@ class MemoryLimitError(PreviewError):
     """The frame's estimated peak memory is above the Memory Limit setting."""
 
 
-def frame_bytes(n_triangles: int, width: int, height: int, builder: str) -> tuple[int, int]:
-    """(bytes for the triangles and the kd-tree, bytes for the pixel buffers), estimated."""
+def frame_bytes(n_triangles: int, width: int, height: int, builder: str,
+                keeps_previous: bool = False) -> tuple[int, int]:
+    """(bytes for the triangles and the kd-tree, bytes for the pixel buffers), estimated; keeps_previous:
+    the last frame's pixels are held for pixel reuse."""
     memory = corelib.load_core().memory
     geometry = memory.build_bytes(n_triangles, builder) + int(memory.MARGIN * memory.TRIANGLE_BYTES * n_triangles)
-    return geometry, memory.render_bytes(width, height)
+    return geometry, memory.render_bytes(width, height, keeps_previous)
 
 
 def check_frame(n_triangles: int, width: int, height: int, config) -> None:
@@ -37,7 +39,8 @@ def check_frame(n_triangles: int, width: int, height: int, config) -> None:
     limit = config.memory_limit
     if limit is None:
         return
-    geometry, pixels = frame_bytes(n_triangles, width, height, config.settings.builder)
+    geometry, pixels = frame_bytes(n_triangles, width, height, config.settings.builder,
+                                   not config.settings.rebuild_all)
     if geometry + pixels > limit:
         raise MemoryLimitError(
             f"this frame needs about {(geometry + pixels) / MIB:,.0f} MiB ({n_triangles:,} triangles and their "

@@ -20,6 +20,8 @@ RUN_ROWS = (
     ("Rays", "rays", "{:,}"),
     ("Speed", "mrays_per_s", "{:.2f} Mrays/s"),
     ("Rays Saved", "rays_saved", "{:,}"),
+    ("Rays Reused", "rays_reused", "{:,}"),
+    ("Pixels Kept", "pixels_reused", "{:,}"),
     ("Trees Built", "objects_rebuilt", "{:,}"),
     ("Trees Kept", "objects_reused", "{:,}"),
 )

@@ -13,9 +13,11 @@ rounded (core.SceneBuilder's `origin`); the camera and lights are moved by the
 same offset (core's `.translated`).
 
 Reuse across frames (tree_cache.py): a mesh whose fingerprint did not change
-keeps its tree, a moved object only costs the top level, and when nothing that
+keeps its tree, a moved object only costs the top level, pixels whose rays
+cannot reach anything that moved or deformed keep last frame's samples (core
+pixel_reuse.py; same camera, lights and settings), and when nothing that
 affects the image changed the last image is reused. The `rebuild_all` setting
-turns both off.
+turns all of it off.
 
 Why a lock: Numba's workqueue threading layer aborts the process when two
 threads launch parallel kernels at once. Blender can call the frame-change
@@ -72,6 +74,8 @@ class FrameResult:
     objects_rebuilt: int = 0  # meshes whose kd-tree was built this frame
     objects_reused: int = 0  # meshes whose kd-tree was kept from an earlier frame
     image_reused: bool = False  # nothing affecting the image changed: the last image was reused
+    pixels_reused: int = 0  # pixels kept from the last frame: none of their rays can reach what changed
+    rays_reused: int = 0  # rays those pixels (and their camera rays) did not need again
     tree_stats: dict = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
 
@@ -92,7 +96,7 @@ class FrameResult:
         row = {k: getattr(self, k) for k in (
             "frame", "width", "height", "triangles", "objects", "lights", "extract_ms", "build_ms",
             "trace_ms", "total_ms", "rays", "rays_saved", "mrays_per_s", "samples", "first_run", "objects_rebuilt",
-            "objects_reused", "image_reused")}
+            "objects_reused", "image_reused", "pixels_reused", "rays_reused")}
         row["tree"] = {k: _plain(v) for k, v in self.tree_stats.items()}
         row["warnings"] = list(self.warnings)
         return row
@@ -195,7 +199,7 @@ class FrameJob:
         scene, report = self._build(*instances, origin, reuse)
         self._info.update(tree_stats=scene.stats(), objects_rebuilt=report.meshes_rebuilt,
                           objects_reused=report.meshes_reused)
-        self._start_tracing(core, scene, camera, lights, width, height)
+        self._start_tracing(core, scene, camera, lights, width, height, self._state.pixels if reuse else None)
 
     def _scene_inputs(self) -> scene_input.SceneInputs:
         render = self.scene.render
@@ -217,10 +221,12 @@ class FrameJob:
             raise PreviewError(f"the scene's camera or lights cannot be used: {error}") from None
         return camera, lights
 
-    def _start_tracing(self, core, scene, camera, lights, width, height) -> None:
-        """The renderer (its constructor already traces the camera rays, so it counts as trace time)."""
+    def _start_tracing(self, core, scene, camera, lights, width, height, previous) -> None:
+        """The renderer (its constructor already traces the camera rays, so it counts as trace time),
+        continued from the last finished frame's pixels where their rays cannot reach what changed."""
         t0 = time.perf_counter()
-        self.renderer = core.PreviewRender(scene, camera, width, height, lights=lights, **self.config.render_options)
+        self.renderer = core.PreviewRender(scene, camera, width, height, lights=lights, previous=previous,
+                                           **self.config.render_options)
         self._timings["trace_ms"] += _ms_since(t0)
 
     def _extract(self) -> ExtractedScene:
@@ -257,17 +263,21 @@ class FrameJob:
         t = self._timings
         if self._reused_image is not None:
             return FrameResult(image=self._reused_image.copy(), extract_ms=t["extract_ms"], build_ms=0.0, trace_ms=0.0,
-                               total_ms=sum(t.values()), rays=0, rays_saved=0, first_run=False, **self._info)
+                               total_ms=sum(t.values()), rays=0, rays_saved=0, first_run=False,
+                               pixels_reused=int((self._reused_image[..., 3] > 0).sum()), **self._info)
         with KERNEL_LOCK:
             image = np.array(self.renderer.image(), dtype=np.float32, copy=True)
             if self.renderer.scene.lazy_tree is not None:  # what the rays made it build, not the start
                 self._info["tree_stats"] = self.renderer.scene.stats()
+            pixels = self.renderer.pixel_state()
         result = FrameResult(image=image, extract_ms=t["extract_ms"], build_ms=t["build_ms"], trace_ms=t["trace_ms"],
                              total_ms=sum(t.values()), rays=int(self.renderer.rays_traced),
                              rays_saved=int(self.renderer.rays_saved), samples=int(self.renderer.samples_done),
-                             first_run=self._first_run, **self._info)
-        self._state.image_key, self._state.image = self._image_key, image.copy()
-        self._state.info = dict(samples=result.samples, tree_stats=result.tree_stats)
+                             first_run=self._first_run, pixels_reused=int(self.renderer.pixels_reused),
+                             rays_reused=int(self.renderer.rays_reused), **self._info)
+        self._state.image_key, self._state.image, self._state.pixels = self._image_key, image.copy(), pixels
+        self._state.info = dict(samples=result.samples, tree_stats=result.tree_stats,
+                                rays_reused=result.rays + result.rays_reused)
         return result
 
 

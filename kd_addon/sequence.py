@@ -20,8 +20,8 @@ from .errors import PreviewError
 from .pipeline import FrameJob, FrameResult
 
 REPORT_NAME = "report.json"
-TOTAL_KEYS = ("triangles", "extract_ms", "build_ms", "trace_ms", "total_ms", "rays", "rays_saved", "objects_rebuilt",
-              "objects_reused")
+TOTAL_KEYS = ("triangles", "extract_ms", "build_ms", "trace_ms", "total_ms", "rays", "rays_saved", "rays_reused",
+              "pixels_reused", "objects_rebuilt", "objects_reused")
 
 
 def frame_filename(frame: int, extension: str) -> str:

@@ -8,7 +8,8 @@ bytes) is the same as when the tree was built, so a key mix-up costs a rebuild, 
 
 Image: `image_key` digests everything that affects the pixels (each mesh's key and fingerprint, every
 instance's mesh and matrix, camera, lights, resolution, settings); an unchanged key reuses the last
-image without building or tracing.
+image without building or tracing. Pixels: the last finished frame's core PixelState; core keeps
+those of its pixels whose rays cannot reach what changed (same camera, lights and settings).
 
 State lives per scene (by `session_uid`, which survives renames) in this module, so the Render
 operator, Render Animation, the command line and live update all share it. `clear()` drops it all.
@@ -36,6 +37,7 @@ class SceneState:
     image_key: bytes | None = None
     image: np.ndarray | None = None
     info: dict = field(default_factory=dict)
+    pixels: object = None  # the last finished frame's core PixelState (pixel reuse)
 
 
 _states: dict[int, SceneState] = {}

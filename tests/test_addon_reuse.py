@@ -62,6 +62,11 @@ def test_static_and_moved_objects_keep_their_trees_deforming_ones_are_rebuilt(ad
     assert not any(r.image_reused for r in reused + rebuilt)
     for a, b in zip(reused, rebuilt):
         np.testing.assert_array_equal(a.image, b.image)  # reuse changes the work, never the pixels
+    # pixels whose rays cannot reach the moving cube or the deforming quad keep last frame's samples
+    assert reused[0].pixels_reused == 0 and all(r.pixels_reused == 0 for r in rebuilt)
+    for a, b in zip(reused[1:], rebuilt[1:]):
+        assert 0 < a.pixels_reused < (b.image[..., 3] > 0).sum()
+        assert a.rays < b.rays and a.rays + a.rays_reused >= b.rays
     assert not np.array_equal(reused[2].image, reused[3].image)  # the animation does show
 
 
@@ -97,6 +102,8 @@ def test_cli_rebuild_all_flag_and_report_columns(addon, tmp_path, capsys):  # no
         rows[bool(flag)] = json.loads((out / "report.json").read_text())["frames"]
     printed = capsys.readouterr().out
     assert "rebuilt" in printed and "2 of 3 images reused" in printed and "(--rebuild-all)" in printed
+    assert "px kept" in printed and "rays reused" in printed
+    assert all(r["pixels_reused"] > 0 for r in rows[False][1:]) and all(r["pixels_reused"] == 0 for r in rows[True])
     assert [r["image_reused"] for r in rows[False]] == [False, True, True]
     assert [r["objects_reused"] for r in rows[False]][1:] == [3, 3]
     assert all(r["objects_reused"] == 0 and not r["image_reused"] for r in rows[True])
