@@ -8,7 +8,9 @@ Public API:
     Camera(matrix_world, fov) / Camera(matrix_world, ortho_scale=s)
     Light.point / Light.sun / Light.spot / Light.area
     render_preview(tree, camera, width, height, *, mode="ao", samples=16, ...) -> (H, W, 4) float32
-    PreviewRender(tree, camera, width, height, ...)   progressive: step(), image(), done
+    PreviewRender(tree, camera, width, height, ..., previous=None)   progressive: step(), image(), done;
+        pixel_state() -> PixelState: continue the next frame from it (previous=), keeping the pixels
+        whose rays cannot reach what changed (scenes from a SceneBuilder)
     memory.build_bytes / memory.render_bytes: peak-memory estimates; MemoryLimitError
 Two-level scenes (a kd-tree per mesh in object space under a top-level tree over instances):
     build_two_level(mesh_trees, mesh_of, matrices, **options) -> TwoLevelScene
@@ -24,6 +26,7 @@ from .render import PreviewRender, render_preview
 from .kdtree import KdTree
 from .memory import MemoryLimitError
 from .options import BuildOptions
+from .pixel_reuse import PixelState
 from .queries import Hits, intersect, occluded
 from .scene_builder import BuildReport, MeshInput, SceneBuilder, build_scene
 from .scene_queries import SceneHits, intersect_scene, occluded_scene
@@ -31,4 +34,5 @@ from .two_level import TwoLevelScene, build_two_level
 
 __all__ = ["build_kdtree", "intersect", "occluded", "KdTree", "Hits", "BuildOptions", "Camera", "Light",
            "render_preview", "PreviewRender", "TwoLevelScene", "build_two_level", "build_scene", "SceneBuilder",
-           "MeshInput", "BuildReport", "SceneHits", "intersect_scene", "occluded_scene", "MemoryLimitError"]
+           "MeshInput", "BuildReport", "SceneHits", "intersect_scene", "occluded_scene", "MemoryLimitError",
+           "PixelState"]

@@ -34,13 +34,13 @@ def frame_bytes(n_triangles: int, width: int, height: int, builder: str,
     return geometry, memory.render_bytes(width, height, keeps_previous)
 
 
-def check_frame(n_triangles: int, width: int, height: int, config) -> None:
-    """Raise MemoryLimitError when the frame would need more than config.memory_limit bytes."""
+def check_frame(n_triangles: int, width: int, height: int, config, keeps_previous: bool = False) -> None:
+    """Raise MemoryLimitError when the frame would need more than config.memory_limit bytes
+    (keeps_previous: the last frame's pixel state is held while this one renders)."""
     limit = config.memory_limit
     if limit is None:
         return
-    geometry, pixels = frame_bytes(n_triangles, width, height, config.settings.builder,
-                                   not config.settings.rebuild_all)
+    geometry, pixels = frame_bytes(n_triangles, width, height, config.settings.builder, keeps_previous)
     if geometry + pixels > limit:
         raise MemoryLimitError(
             f"this frame needs about {(geometry + pixels) / MIB:,.0f} MiB ({n_triangles:,} triangles and their "

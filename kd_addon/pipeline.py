@@ -174,14 +174,15 @@ class FrameJob:
         t0 = time.perf_counter()
         inputs = self._scene_inputs()
         extracted = self._extract()
-        memory_limit.check_frame(extracted.triangle_count, inputs.width, inputs.height, self.config)
         core = corelib.load_core()
-        meshes, mesh_of, matrices = tree_cache.mesh_inputs(core, extracted)
         self._state = tree_cache.state_for(self.scene, core, self.config.build_options)
+        reuse = not self.config.settings.rebuild_all
+        memory_limit.check_frame(extracted.triangle_count, inputs.width, inputs.height, self.config,
+                                 keeps_previous=reuse and self._state.pixels is not None)
+        meshes, mesh_of, matrices = tree_cache.mesh_inputs(core, extracted)
         self._image_key = tree_cache.image_key(meshes, mesh_of, matrices, inputs.camera.keywords(), inputs.lights,
                                                (inputs.width, inputs.height), self.config.as_dict())
         self._timings["other_ms"] += _ms_since(t0) - self._timings["extract_ms"]
-        reuse = not self.config.settings.rebuild_all
         self._info = dict(triangles=extracted.triangle_count, objects=extracted.object_count,
                           lights=len(inputs.lights), frame=extracted.frame,
                           warnings=inputs.warnings + extracted.warnings)
