@@ -91,9 +91,54 @@ def skip_stride(n, params):
 
 @njit(cache=True)
 def binned_split(boxes, start, end, node_box, params, min_bins, max_bins):
-    """Bin the node's references and return the best binned split (cost, axis, position)."""
+    """Bin the node's references and return the best binned split (cost, axis, position, planar_left),
+    refined to the nearest box boundaries when every reference was binned (`snap_to_boundaries`)."""
     min_bins[:] = 0
     max_bins[:] = 0
     stride = skip_stride(end - start, params)
     bin_references(boxes, start, end, stride, node_box, min_bins, max_bins)
-    return best_binned_split(min_bins, max_bins, stride, node_box, params)
+    cost, axis, pos = best_binned_split(min_bins, max_bins, stride, node_box, params)
+    if axis < 0 or stride != 1 or not params.snap:
+        return cost, axis, pos, False
+    return snap_to_boundaries(boxes, start, end, node_box, params, cost, axis, pos)
+
+
+@njit(cache=True)
+def snap_to_boundaries(boxes, start, end, node_box, params, cost, axis, pos):
+    """Try the box boundaries nearest to the binned plane on each side (within one bin) and keep the
+    cheapest of the three, counted exactly. Why: bin boundaries fall between the vertex lines of grids
+    and height fields, so the binned plane cuts a row of triangles that a plane on the nearest vertex
+    line would not; each cut triangle is referenced twice, and on a wave-modified grid the builder
+    reached 7.6 references a triangle. Evaluating the SAH exactly at a few event positions next to the
+    binned optimum follows Hunt, Mark and Stoll 2006 (sampled SAH, refined near its minimum). Planar
+    references lying on a candidate go to the cheaper side (planar_left), as in the exact sweep."""
+    step = (np.float64(node_box[axis + 3]) - node_box[axis]) / params.bins
+    below, above = pos - step, pos + step
+    for i in range(start, end):  # nearest boundaries strictly below and above pos, within one bin
+        for v in (boxes[i, axis], boxes[i, axis + 3]):
+            if below < v < pos:
+                below = v
+            elif pos < v < above:
+                above = v
+    c_lo, c_hi = np.float32(below), np.float32(above)
+    counts = np.zeros((2, 3), np.int64)  # per candidate: left, right, planar on it
+    for i in range(start, end):  # one pass counts both candidates
+        lo, hi = boxes[i, axis], boxes[i, axis + 3]
+        for j, c in enumerate((c_lo, c_hi)):
+            if lo == hi == c:
+                counts[j, 2] += 1
+            else:
+                counts[j, 0] += lo < c
+                counts[j, 1] += hi > c
+    best = (cost, axis, pos, False)
+    inv_area = 1.0 / half_area(node_box)
+    for j, c in enumerate((c_lo, c_hi)):
+        if not (valid_position(node_box, axis, c) and pos - step < c < pos + step):
+            continue
+        n_left, n_right, n_planar = counts[j, 0], counts[j, 1], counts[j, 2]
+        for planar_left in (True, False):
+            c_cost = split_cost(node_box, inv_area, axis, c, n_left + n_planar * planar_left,
+                                n_right + n_planar * (not planar_left), params)
+            if c_cost < best[0]:
+                best = (c_cost, axis, c, planar_left)
+    return best
