@@ -9,9 +9,10 @@ or a sphere with the same modifier ("sphere"). Each mode renders the frames with
 per-frame `total_ms` (extract + build + trace) comes from report.json. Frame 1 (kernel load) and
 frame 2 (where reuse learns which objects change and splits them from the static rest) are shown
 but left out of the medians. Modes alternate, --runs times, for each resolution:samples pair of
---settings (the trace is the same work in both modes, so the ratio depends on how much of a frame
-the build is). Also measured: the fingerprint (kd_addon.extract.geometry_fingerprint) that decides
-whether a mesh changed.
+--settings. With reuse, pixels whose rays cannot reach the moving or deforming objects keep last
+frame's samples (core/pixel_reuse.py), so the trace shrinks too; the share of pixels kept is printed.
+Also measured: the fingerprint (kd_addon.extract.geometry_fingerprint) that decides whether a mesh
+changed.
 
     python benchmarks/bench_reuse.py [--frames 12] [--runs 2] [--settings 50:16,25:4] [--deformer grid]
 """
@@ -144,6 +145,10 @@ def compare(blend, frames, runs, resolution, samples):
               f"{a[0]['objects_reused']:>4}/{a[0]['objects_rebuilt']:<5} | {med(b, 'total_ms'):>14.0f} "
               f"{med(b, 'build_ms'):>7.0f}")
     steady = lambda mode, key: float(np.median([r[key] for run in rows[mode] for r in run[2:]]))  # noqa: E731
+    kept = [r["pixels_reused"] for run in rows[False] for r in run[2:]]
+    rays = [r["rays"] / max(1, r["rays"] + r["rays_reused"]) for run in rows[False] for r in run[2:]]
+    print(f"with reuse, frames 3-{frames}: median {np.median(kept):,.0f} pixels kept; rays traced "
+          f"{np.median(rays):.0%} of a full frame's")
     for key in ("total_ms", "build_ms", "trace_ms", "extract_ms"):
         reuse, rebuild = steady(False, key), steady(True, key)
         print(f"median {key} over frames 3-{frames}: reuse {reuse:.0f} ms, rebuild-all {rebuild:.0f} ms, "
