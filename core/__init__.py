@@ -8,7 +8,9 @@ Public API:
     Camera(matrix_world, fov) / Camera(matrix_world, ortho_scale=s)
     Light.point / Light.sun / Light.spot / Light.area
     render_preview(tree, camera, width, height, *, mode="ao", samples=16, ...) -> (H, W, 4) float32
-    PreviewRender(tree, camera, width, height, ...)   progressive: step(), image(), done
+    PreviewRender(tree, camera, width, height, ...)   progressive: step(), image(denoise=False), done
+    render_preview(..., denoise=True) / PreviewRender.image(denoise=True): edge-avoiding à-trous filter
+    denoise_pixels(width, height, pixels, points, normals, sums, sq_sums, counts) -> (H, W, 4) float32
     memory.build_bytes / memory.render_bytes: peak-memory estimates; MemoryLimitError
 Two-level scenes (a kd-tree per mesh in object space under a top-level tree over instances):
     build_two_level(mesh_trees, mesh_of, matrices, **options) -> TwoLevelScene
@@ -19,6 +21,7 @@ Two-level scenes (a kd-tree per mesh in object space under a top-level tree over
 """
 from .build import build_kdtree
 from .camera import Camera
+from .denoise import denoise_pixels
 from .lights import Light
 from .render import PreviewRender, render_preview
 from .kdtree import KdTree
@@ -31,4 +34,5 @@ from .two_level import TwoLevelScene, build_two_level
 
 __all__ = ["build_kdtree", "intersect", "occluded", "KdTree", "Hits", "BuildOptions", "Camera", "Light",
            "render_preview", "PreviewRender", "TwoLevelScene", "build_two_level", "build_scene", "SceneBuilder",
-           "MeshInput", "BuildReport", "SceneHits", "intersect_scene", "occluded_scene", "MemoryLimitError"]
+           "MeshInput", "BuildReport", "SceneHits", "intersect_scene", "occluded_scene", "MemoryLimitError",
+           "denoise_pixels"]

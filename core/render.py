@@ -21,6 +21,7 @@ from time import perf_counter
 import numpy as np
 
 from .camera import Camera
+from .denoise import SOBOL_VARIANCE_DECAY, denoise_pixels
 from .kdtree import KdTree
 from .lazy import resolve_suspended
 from .lights import pack_lights
@@ -140,8 +141,13 @@ class PreviewRender:
             self.rays_saved += int(np.rint(rays_per_sample * remaining).sum())
             self.active = self.active[~converged]
 
-    def image(self):
-        """The current estimate as an (H, W, 4) float32 image (row 0 at the top)."""
+    def image(self, denoise=False):
+        """The current estimate as an (H, W, 4) float32 image (row 0 at the top); with `denoise`, filtered
+        by core.denoise (edge-avoiding à-trous, variance-guided; background and alpha unchanged)."""
+        if denoise:
+            decay = SOBOL_VARIANCE_DECAY if SAMPLERS[self.sampler] == "sobol" else 0.0
+            return denoise_pixels(self.width, self.height, self.pixels, self.points, self.normals, self.sums,
+                                  self.sq_sums, self.counts, variance_decay=decay, threads=self.threads)
         img = np.zeros((self.height * self.width, 4), np.float32)
         n = np.maximum(self.counts, 1)[:, None]
         img[self.pixels, :3] = np.where(self.counts[:, None] > 0, self.sums / n, 0.0)
@@ -160,11 +166,12 @@ class PreviewRender:
                 "converged_pixels": self.hit_pixels - len(self.active) if self.error_target else 0}
 
 
-def render_preview(tree, camera, width, height, **settings):
-    """Render the whole preview at once: the (H, W, 4) float32 image (see PreviewRender for settings)."""
+def render_preview(tree, camera, width, height, denoise=False, **settings):
+    """Render the whole preview at once: the (H, W, 4) float32 image (see PreviewRender for settings;
+    `denoise` as in PreviewRender.image)."""
     render = PreviewRender(tree, camera, width, height, **settings)
     render.step(render.target_samples)
-    return render.image()
+    return render.image(denoise)
 
 
 def _check_settings(tree, camera, width, height, mode, samples, ao_distance, seed, sampler, error_target,
