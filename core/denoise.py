@@ -20,7 +20,7 @@ The luminance weight is what keeps the filter honest: two neighbours are only av
 estimates differ by no more than a few standard errors, and the standard error falls with the sample
 count, so the filter fades out as the image converges (the README gives the measured bias). The
 variance of pixel p's estimate is the per-sample variance of the grey value pooled over p's 5x5
-neighbourhood (same normal/plane weights, so edges do not pool) divided by n_p ** (1 + variance_decay):
+neighbourhood (neighbours across a normal or plane edge do not pool) divided by n_p ** (1 + variance_decay):
 
 - pooled, because at one sample per pixel a pixel's own sample variance does not exist, and at a few
   samples it is often 0 (all samples agree), which would stop the filter where the noise is worst
@@ -49,7 +49,6 @@ SIGMA_NORMAL = 128.0  # SVGF's sigma_n
 SIGMA_PLANE = 1.0  # tangent-plane distance allowed per pixel footprint per pixel of tap distance
 SOBOL_VARIANCE_DECAY = 0.5  # stratified sampling of a 2-D visibility: variance ~ n^-3/2 (module docstring)
 KERNEL = np.array([1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0])  # B3 spline (Dammertz et al.)
-_TINY = 1e-300  # keeps 0 / 0 out of the weights (see _ratio)
 _HUGE = 1e30  # stands for an infinite ratio without producing inf (0 * inf would be NaN)
 _ROUNDING = 1e-7  # luminance differences this small relative to the value are equal (see atrous_pass)
 _CUTOFF = 40.0  # taps with weight below exp(-40) are skipped
@@ -106,23 +105,18 @@ def denoise_pixels(width, height, pixels, points, normals, sums, sq_sums, counts
 
 
 @njit(cache=True, inline="always")
-def _ratio(distance, scale):
-    """distance / scale for exp(-ratio) weights: 0 when distance is 0 (even for a 0 scale), else huge
-    when scale is 0, so a constant image or a zero variance gives weights of exactly 1 or 0, never NaN."""
-    if distance <= 0.0:
-        return 0.0
-    return distance / max(scale, _TINY)
-
-
-@njit(cache=True, inline="always")
-def _geometry_weight(pos, nrm, foot, p, q, r, sigma_normal, sigma_plane):
-    """Normal and tangent-plane weight of tap q for pixel p at r pixels (see the module docstring)."""
-    c = nrm[p, 0] * nrm[q, 0] + nrm[p, 1] * nrm[q, 1] + nrm[p, 2] * nrm[q, 2]
-    if c <= 0.0:
-        return 0.0
-    d = abs(nrm[p, 0] * (pos[q, 0] - pos[p, 0]) + nrm[p, 1] * (pos[q, 1] - pos[p, 1])
-            + nrm[p, 2] * (pos[q, 2] - pos[p, 2]))
-    return min(c, 1.0) ** sigma_normal * np.exp(-_ratio(d, sigma_plane * foot[p] * r))
+def _exp_neg(e):
+    """exp(-e) for 0 <= e <= _CUTOFF as (1 - e/128)^128: seven multiplications, within 0.4% of exp at
+    e = 1 and 3% at e = 4 (weights that small hardly matter), and ~3x cheaper than exp in this loop,
+    which is the filter's cost."""
+    t = 1.0 - e * (1.0 / 128.0)
+    t *= t
+    t *= t
+    t *= t
+    t *= t
+    t *= t
+    t *= t
+    return t * t
 
 
 @njit(cache=True, inline="always")
@@ -161,10 +155,13 @@ def footprints(valid, pos, height, width, foot):
             foot[p] = best if best < np.inf else 0.0
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, fastmath=_FAST)
 def pooled_variance(valid, pos, nrm, foot, s1, s2, cnt, height, width, sigma_normal, sigma_plane, decay, var):
     """Variance of each valid pixel's mean grey value: the per-sample variance pooled over the 5x5
-    neighbourhood (geometry-weighted, Bessel-corrected by the weighted sample count) over its count."""
+    neighbourhood, Bessel-corrected by the pooled sample count, over n_p ** (1 + decay). A neighbour
+    pools when its normal and plane weights would be at least exp(-1) (a hard test: no exp per tap,
+    which made this step cost more than a filter pass)."""
+    min_cos = 1.0 - 1.0 / sigma_normal  # sigma_n (1 - c) <= -sigma_n log(c) <= 1
     for y in prange(height):
         for x in range(width):
             p = y * width + x
@@ -182,11 +179,18 @@ def pooled_variance(valid, pos, nrm, foot, s1, s2, cnt, height, width, sigma_nor
                     q = yy * width + xx
                     if not valid[q]:
                         continue
-                    w = _geometry_weight(pos, nrm, foot, p, q, np.sqrt(dx * dx + dy * dy), sigma_normal,
-                                         sigma_plane)
-                    w_n += w * cnt[q]
-                    w_1 += w * s1[q]
-                    w_2 += w * s2[q]
+                    if q != p:
+                        c = nrm[p, 0] * nrm[q, 0] + nrm[p, 1] * nrm[q, 1] + nrm[p, 2] * nrm[q, 2]
+                        if c < min_cos:
+                            continue
+                        d = abs(nrm[p, 0] * (pos[q, 0] - pos[p, 0]) + nrm[p, 1] * (pos[q, 1] - pos[p, 1])
+                                + nrm[p, 2] * (pos[q, 2] - pos[p, 2]))
+                        e = sigma_normal * (1.0 - c)
+                        if d > sigma_plane * foot[p] * np.sqrt(float(dx * dx + dy * dy)) * (1.0 - e):
+                            continue
+                    w_n += cnt[q]
+                    w_1 += s1[q]
+                    w_2 += s2[q]
             mean = w_1 / w_n
             v = max(w_2 / w_n - mean * mean, 0.0)
             if w_n > 1.0:
@@ -198,7 +202,7 @@ def pooled_variance(valid, pos, nrm, foot, s1, s2, cnt, height, width, sigma_nor
 def atrous_pass(valid, pos, nrm, foot, col, var, height, width, step, sigma_luminance, sigma_normal,
                 sigma_plane, col_out, var_out):
     """One edge-avoiding à-trous pass with taps `step` pixels apart (Dammertz et al. 2010, eq. 3, with
-    SVGF's weights and variance propagation). The plane and luminance weights share one exp per tap."""
+    SVGF's weights and variance propagation). The plane and luminance weights share one _exp_neg per tap."""
     h = np.array([1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0])
     inv_r = np.zeros(25)  # 1 / (tap distance in pixels), per tap
     for j in range(5):
@@ -252,7 +256,7 @@ def atrous_pass(valid, pos, nrm, foot, col, var, height, width, step, sigma_lumi
                             e += min(dl * inv_lum, _HUGE)
                         if e > _CUTOFF:
                             continue
-                        w *= wn * np.exp(-e)
+                        w *= wn * _exp_neg(e)
                     sw += w
                     sw2v += w * w * var[q]
                     r += w * col[q, 0]
