@@ -259,7 +259,7 @@ class FrameJob:
             return FrameResult(image=self._reused_image.copy(), extract_ms=t["extract_ms"], build_ms=0.0, trace_ms=0.0,
                                total_ms=sum(t.values()), rays=0, rays_saved=0, first_run=False, **self._info)
         with KERNEL_LOCK:
-            image = np.array(self.renderer.image(), dtype=np.float32, copy=True)
+            image = np.array(self.renderer.image(denoise=self.config.denoise), dtype=np.float32, copy=True)
             if self.renderer.scene.lazy_tree is not None:  # what the rays made it build, not the start
                 self._info["tree_stats"] = self.renderer.scene.stats()
         result = FrameResult(image=image, extract_ms=t["extract_ms"], build_ms=t["build_ms"], trace_ms=t["trace_ms"],
