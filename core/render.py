@@ -10,6 +10,9 @@ Value of a pixel whose camera ray hits (geometric normal N turned to face the ca
 - "ao+shadow": AO * (ambient + (1 - ambient) * S), ambient 0.25 by default: shadows from the lights
   over an occlusion-darkened ambient term.
 Background pixels are 0 with alpha 0; hit pixels have alpha 1. Row 0 is the top row.
+`image(denoise=True)` / `render_preview(..., denoise=True)` filter the estimate with core.denoise (edge-
+avoiding à-trous, guided by the per-pixel sample variance; background and alpha unchanged); the raw
+estimate stays the default.
 
 Sampling is deterministic for a seed. With an error target, a pixel stops once it has at least
 `min_samples` samples and the standard error of its mean (from the sample variance) is below the target.
