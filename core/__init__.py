@@ -8,9 +8,7 @@ Public API:
     Camera(matrix_world, fov) / Camera(matrix_world, ortho_scale=s)
     Light.point / Light.sun / Light.spot / Light.area
     render_preview(tree, camera, width, height, *, mode="ao", samples=16, ...) -> (H, W, 4) float32
-    PreviewRender(tree, camera, width, height, ...)   progressive: step(), image(denoise=False), done
-    render_preview(..., denoise=True) / PreviewRender.image(denoise=True): edge-avoiding à-trous filter
-    denoise_pixels(width, height, pixels, points, normals, sums, sq_sums, counts) -> (H, W, 4) float32
+    PreviewRender(tree, camera, width, height, ...)   progressive: step(), image(), done
     memory.build_bytes / memory.render_bytes: peak-memory estimates; MemoryLimitError
 Two-level scenes (a kd-tree per mesh in object space under a top-level tree over instances):
     build_two_level(mesh_trees, mesh_of, matrices, **options) -> TwoLevelScene
@@ -18,6 +16,9 @@ Two-level scenes (a kd-tree per mesh in object space under a top-level tree over
     SceneBuilder(layout="auto", **options).build(MeshInputs, mesh_of, matrices, origin, reuse) -> (scene, report)
     intersect_scene / occluded_scene (scene or tree, origins, directions, ...) -> SceneHits / (R,) bool
     A TwoLevelScene renders wherever a KdTree does.
+Denoising (edge-avoiding à-trous, variance-guided; the raw estimate stays the default):
+    render_preview(..., denoise=True) / PreviewRender.image(denoise=True) -> (H, W, 4) float32
+    denoise_pixels(width, height, pixels, points, normals, sums, sq_sums, counts) -> (H, W, 4) float32
 """
 from .build import build_kdtree
 from .camera import Camera
@@ -32,7 +33,7 @@ from .scene_builder import BuildReport, MeshInput, SceneBuilder, build_scene
 from .scene_queries import SceneHits, intersect_scene, occluded_scene
 from .two_level import TwoLevelScene, build_two_level
 
-__all__ = ["build_kdtree", "intersect", "occluded", "KdTree", "Hits", "BuildOptions", "Camera", "Light",
+__all__ = ["denoise_pixels",
+           "build_kdtree", "intersect", "occluded", "KdTree", "Hits", "BuildOptions", "Camera", "Light",
            "render_preview", "PreviewRender", "TwoLevelScene", "build_two_level", "build_scene", "SceneBuilder",
-           "MeshInput", "BuildReport", "SceneHits", "intersect_scene", "occluded_scene", "MemoryLimitError",
-           "denoise_pixels"]
+           "MeshInput", "BuildReport", "SceneHits", "intersect_scene", "occluded_scene", "MemoryLimitError"]
