@@ -3,9 +3,9 @@
 The filter is the edge-avoiding à-trous wavelet transform of Dammertz et al. 2010 ("Edge-Avoiding
 À-Trous Wavelet Transform for fast Global Illumination Filtering", HPG 2010): `iterations` passes of a
 5x5 B3-spline kernel (1/16, 1/4, 3/8, 1/4, 1/16) whose taps are 2^i pixels apart in pass i, so four
-passes (the default) cover a 61x61 footprint for 25 taps per pixel and pass. Each tap is weighted by edge-stopping
-functions, as in SVGF (Schied et al. 2017, "Spatiotemporal Variance-Guided Filtering", HPG 2017),
-without its temporal part:
+passes (the default) cover a 61x61 footprint for 25 taps per pixel and pass. Each tap is weighted by
+edge-stopping functions, as in SVGF (Schied et al. 2017, "Spatiotemporal Variance-Guided Filtering",
+HPG 2017), without its temporal part (exp is evaluated as (1 - x/128)^128, see _exp_neg):
 
 - normal: max(0, N_p . N_q) ^ sigma_normal on the geometric normals (SVGF: sigma_n = 128);
 - plane: exp(-|N_p . (X_q - X_p)| / (sigma_plane * f_p * r)), the distance of q's hit point from p's
@@ -48,7 +48,6 @@ SIGMA_LUMINANCE = 4.0  # SVGF's sigma_l
 SIGMA_NORMAL = 128.0  # SVGF's sigma_n
 SIGMA_PLANE = 1.0  # tangent-plane distance allowed per pixel footprint per pixel of tap distance
 SOBOL_VARIANCE_DECAY = 0.5  # stratified sampling of a 2-D visibility: variance ~ n^-3/2 (module docstring)
-KERNEL = np.array([1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0])  # B3 spline (Dammertz et al.)
 _HUGE = 1e30  # stands for an infinite ratio without producing inf (0 * inf would be NaN)
 _ROUNDING = 1e-7  # luminance differences this small relative to the value are equal (see atrous_pass)
 _CUTOFF = 40.0  # taps with weight below exp(-40) are skipped
@@ -203,7 +202,7 @@ def atrous_pass(valid, pos, nrm, foot, col, var, height, width, step, sigma_lumi
                 sigma_plane, col_out, var_out):
     """One edge-avoiding à-trous pass with taps `step` pixels apart (Dammertz et al. 2010, eq. 3, with
     SVGF's weights and variance propagation). The plane and luminance weights share one _exp_neg per tap."""
-    h = np.array([1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0])
+    h = np.array([1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0])  # B3 spline (Dammertz et al.)
     inv_r = np.zeros(25)  # 1 / (tap distance in pixels), per tap
     for j in range(5):
         for i in range(5):
