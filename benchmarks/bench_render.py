@@ -7,11 +7,13 @@ Usage: python benchmarks/bench_render.py [--size 512] [--runs 3] [--reference-sa
    cached in benchmarks/data/.
 2. A sweep over samples per pixel, samplers (sobol, random), builders and a few builder settings:
    time (build + trace, median of --runs, JIT compile excluded and reported once) and RMSE against the
-   reference on hit pixels. Written to OUT/render_sweep.csv and plotted to OUT/render_rmse_vs_time.png
-   with the Pareto front marked.
-3. Cycles' AO pass of the same .blend and camera at matching sample counts, timed in the same run,
-   RMSE against the same reference; our time / Cycles' time at equal RMSE (interpolated on our
-   Pareto front in log-log).
+   reference on hit pixels. The binned rows are repeated with the denoiser (core/denoise.py, time
+   includes the filter), "... denoised". Written to OUT/render_sweep.csv and plotted to
+   OUT/render_rmse_vs_time.png with two Pareto fronts marked: raw estimates only, and with denoised rows.
+   Also the denoiser's bias at convergence: RMSE between the reference and the denoised reference.
+3. Cycles' AO pass of the same .blend and camera at matching sample counts (raw, Cycles' denoiser off),
+   timed in the same run, RMSE against the same reference; our time / Cycles' time at equal RMSE
+   (interpolated on our Pareto front in log-log), for the raw front and the front with the denoiser.
 4. Seed 000 Table 3's setting: 640x480, camera rays and one shadow ray to a point light, the tree
    rebuilt from scratch each time; median time to image.
 """
@@ -27,6 +29,7 @@ HERE = Path(__file__).resolve().parent
 sys.path[:0] = [str(HERE), str(HERE.parent)]
 
 import core  # noqa: E402
+from core.denoise import SOBOL_VARIANCE_DECAY  # noqa: E402
 from scenes import DATA_DIR, blend_path, load_scene  # noqa: E402
 
 BUILD_CONFIGS = {
@@ -54,14 +57,15 @@ def rmse(img, ref):
     return float(np.sqrt(np.mean((img[..., 0][mask] - ref[..., 0][mask]) ** 2)))
 
 
-def timed_render(scene, camera, size, options, samples, sampler, ao_distance, runs, error_target=None):
-    """Median time of build + render, and the image of the last run."""
+def timed_render(scene, camera, size, options, samples, sampler, ao_distance, runs, error_target=None,
+                 denoise=False):
+    """Median time of build + render (+ denoise), and the image of the last run."""
     times = []
     for _ in range(runs):
         t = time.perf_counter()
         tree = core.build_kdtree(scene.triangles, **options)
         img = core.render_preview(tree, camera, size, size, samples=samples, sampler=sampler,
-                                  ao_distance=ao_distance, error_target=error_target)
+                                  ao_distance=ao_distance, error_target=error_target, denoise=denoise)
         times.append(time.perf_counter() - t)
     return float(np.median(times)), img
 
@@ -71,13 +75,14 @@ def sweep(scene, camera, ref, args):
     for label, options in BUILD_CONFIGS.items():
         samplers = ("sobol", "random") if label == "binned" else ("sobol",)
         for sampler in samplers:
-            for spp in args.samples:
-                seconds, img = timed_render(scene, camera, args.size, options, spp, sampler, args.ao_distance,
-                                            args.runs)
-                rows.append({"method": f"kd {label} {sampler}", "samples": spp, "seconds": seconds,
-                             "rmse": rmse(img, ref)})
-                print(f"  {rows[-1]['method']:>32} spp {spp:>4}: {seconds:8.3f} s  RMSE {rows[-1]['rmse']:.5f}",
-                      flush=True)
+            for denoise in (False, True) if label == "binned" else (False,):
+                for spp in args.samples:
+                    seconds, img = timed_render(scene, camera, args.size, options, spp, sampler,
+                                                args.ao_distance, args.runs, denoise=denoise)
+                    rows.append({"method": f"kd {label} {sampler}" + (" denoised" if denoise else ""),
+                                 "samples": spp, "seconds": seconds, "rmse": rmse(img, ref)})
+                    print(f"  {rows[-1]['method']:>32} spp {spp:>4}: {seconds:8.3f} s  "
+                          f"RMSE {rows[-1]['rmse']:.5f}", flush=True)
     for target in args.error_targets:  # adaptive: pixels stop once their standard error is below target
         seconds, img = timed_render(scene, camera, args.size, {}, max(args.samples), "sobol", args.ao_distance,
                                     args.runs, error_target=target)
@@ -120,7 +125,21 @@ def time_at_rmse(front, target):
     return float(np.exp(np.interp(np.log(target), e[order], t[order])))
 
 
-def plot(rows, front, path):
+def denoiser_bias(scene, camera, ref, args):
+    """RMSE between the reference and the reference denoised: how much the filter moves a converged
+    image. AO samples are 0 or 1, so the reference's grey sums of squares equal its sums."""
+    tree = core.build_kdtree(scene.triangles)
+    render = core.PreviewRender(tree, camera, args.size, args.size, samples=1, ao_distance=args.ao_distance)
+    n = args.reference_samples
+    value = ref.reshape(-1, 4)[render.pixels, 0].astype(np.float64)
+    counts = np.full(len(value), n, np.int64)
+    img = core.denoise_pixels(args.size, args.size, render.pixels, render.points, render.normals,
+                              np.repeat(value[:, None] * n, 3, axis=1), value * n, counts,
+                              variance_decay=SOBOL_VARIANCE_DECAY)  # the reference is a Sobol render
+    return rmse(img, ref)
+
+
+def plot(rows, fronts, path):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -128,10 +147,11 @@ def plot(rows, front, path):
     for method in sorted({r["method"] for r in rows}):
         pts = sorted((r["seconds"], r["rmse"]) for r in rows if r["method"] == method)
         ax.plot(*zip(*pts), marker="o", ms=3, lw=1, label=method)
-    ax.plot([r["seconds"] for r in front], [r["rmse"] for r in front], "k--", lw=2, label="Pareto front (KD Preview)")
+    for (label, front), style in zip(fronts.items(), ("k--", "k:")):
+        ax.plot([r["seconds"] for r in front], [r["rmse"] for r in front], style, lw=2, label=label)
     ax.set_xscale("log")
     ax.set_yscale("log")
-    ax.set_xlabel("time to image: build + trace (s), median")
+    ax.set_xlabel("time to image: build + trace (+ denoise) (s), median")
     ax.set_ylabel("RMSE against the converged reference (hit pixels)")
     ax.set_title("suzanne-251k, 512x512 AO, ao_distance 1.0")
     ax.grid(True, which="both", alpha=0.3)
@@ -189,7 +209,10 @@ def main():
 
     ref = reference_image(scene, camera, args.size, args.reference_samples, args.ao_distance)
     rows = sweep(scene, camera, ref, args)
-    front = pareto(rows)
+    fronts = {"Pareto front, raw (KD Preview)": pareto([r for r in rows if "denoised" not in r["method"]]),
+              "Pareto front, with denoiser (KD Preview)": pareto(rows)}
+    print(f"\ndenoiser bias at convergence: RMSE(denoised reference, reference) = "
+          f"{denoiser_bias(scene, camera, ref, args):.5f}")
     by = {(r["method"], r["samples"]): r for r in rows}
     print("\nLow discrepancy against random (binned), RMSE ratio random / sobol:")
     for spp in args.samples:
@@ -199,16 +222,20 @@ def main():
     if not args.no_cycles:
         crow = cycles_rows(scene, ref, args)
         rows += crow
-        print("\nOur time / Cycles' time at equal RMSE (target <= 0.2):")
+        print("\nOur time / Cycles' time at equal RMSE (target <= 0.2; Cycles raw, no denoiser):")
+        print(f"  {'':>44} {'ours raw':>12} {'ours denoised':>14}")
         for r in crow:
-            ours = time_at_rmse(front, r["rmse"])
-            ratio = f"{ours / r['seconds']:.3f}" if ours else "out of our measured range"
-            print(f"  Cycles {r['samples']:>4} spp (RMSE {r['rmse']:.4f}, {r['seconds']:.2f} s): {ratio}")
+            ratios = []
+            for front in fronts.values():
+                ours = time_at_rmse(front, r["rmse"])
+                ratios.append(f"{ours / r['seconds']:.3f}" if ours else "out of range")
+            print(f"  Cycles {r['samples']:>4} spp (RMSE {r['rmse']:.4f}, {r['seconds']:6.2f} s): "
+                  f"{ratios[0]:>12} {ratios[1]:>14}")
     with open(out / "render_sweep.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=["method", "samples", "seconds", "rmse", "error_target"])
         w.writeheader()
         w.writerows(rows)
-    plot(rows, front, out / "render_rmse_vs_time.png")
+    plot(rows, fronts, out / "render_rmse_vs_time.png")
     print(f"\nwrote {out / 'render_sweep.csv'} and {out / 'render_rmse_vs_time.png'}")
 
 

@@ -18,9 +18,13 @@ Two-level scenes (a kd-tree per mesh in object space under a top-level tree over
     SceneBuilder(layout="auto", **options).build(MeshInputs, mesh_of, matrices, origin, reuse) -> (scene, report)
     intersect_scene / occluded_scene (scene or tree, origins, directions, ...) -> SceneHits / (R,) bool
     A TwoLevelScene renders wherever a KdTree does.
+Denoising (edge-avoiding à-trous, variance-guided; the raw estimate stays the default):
+    render_preview(..., denoise=True) / PreviewRender.image(denoise=True) -> (H, W, 4) float32
+    denoise_pixels(width, height, pixels, points, normals, sums, sq_sums, counts) -> (H, W, 4) float32
 """
 from .build import build_kdtree
 from .camera import Camera
+from .denoise import denoise_pixels
 from .lights import Light
 from .render import PreviewRender, render_preview
 from .kdtree import KdTree
@@ -32,7 +36,8 @@ from .scene_builder import BuildReport, MeshInput, SceneBuilder, build_scene
 from .scene_queries import SceneHits, intersect_scene, occluded_scene
 from .two_level import TwoLevelScene, build_two_level
 
-__all__ = ["build_kdtree", "intersect", "occluded", "KdTree", "Hits", "BuildOptions", "Camera", "Light",
+__all__ = ["denoise_pixels",
+           "build_kdtree", "intersect", "occluded", "KdTree", "Hits", "BuildOptions", "Camera", "Light",
            "render_preview", "PreviewRender", "TwoLevelScene", "build_two_level", "build_scene", "SceneBuilder",
            "MeshInput", "BuildReport", "SceneHits", "intersect_scene", "occluded_scene", "MemoryLimitError",
            "PixelState"]

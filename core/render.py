@@ -10,6 +10,9 @@ Value of a pixel whose camera ray hits (geometric normal N turned to face the ca
 - "ao+shadow": AO * (ambient + (1 - ambient) * S), ambient 0.25 by default: shadows from the lights
   over an occlusion-darkened ambient term.
 Background pixels are 0 with alpha 0; hit pixels have alpha 1. Row 0 is the top row.
+`image(denoise=True)` / `render_preview(..., denoise=True)` filter the estimate with core.denoise (edge-
+avoiding à-trous, guided by the per-pixel sample variance; background and alpha unchanged); the raw
+estimate stays the default.
 
 Sampling is deterministic for a seed. With an error target, a pixel stops once it has at least
 `min_samples` samples and the standard error of its mean (from the sample variance) is below the target.
@@ -21,6 +24,7 @@ from time import perf_counter
 import numpy as np
 
 from .camera import Camera
+from .denoise import SOBOL_VARIANCE_DECAY, denoise_pixels
 from .kdtree import KdTree
 from .lazy import resolve_suspended
 from .instance_signature import changed_boxes
@@ -212,8 +216,13 @@ class PreviewRender:
             self.converged_pixels += int(converged.sum())
             self.active = self.active[~converged]
 
-    def image(self):
-        """The current estimate as an (H, W, 4) float32 image (row 0 at the top)."""
+    def image(self, denoise=False):
+        """The current estimate as an (H, W, 4) float32 image (row 0 at the top); with `denoise`, filtered
+        by core.denoise (edge-avoiding à-trous, variance-guided; background and alpha unchanged)."""
+        if denoise:
+            decay = SOBOL_VARIANCE_DECAY if SAMPLERS[self.sampler] == "sobol" else 0.0
+            return denoise_pixels(self.width, self.height, self.pixels, self.points, self.normals, self.sums,
+                                  self.sq_sums, self.counts, variance_decay=decay, threads=self.threads)
         img = np.zeros((self.height * self.width, 4), np.float32)
         n = np.maximum(self.counts, 1)[:, None]
         img[self.pixels, :3] = np.where(self.counts[:, None] > 0, self.sums / n, 0.0)
@@ -233,11 +242,12 @@ class PreviewRender:
                 "converged_pixels": self.converged_pixels}
 
 
-def render_preview(tree, camera, width, height, **settings):
-    """Render the whole preview at once: the (H, W, 4) float32 image (see PreviewRender for settings)."""
+def render_preview(tree, camera, width, height, denoise=False, **settings):
+    """Render the whole preview at once: the (H, W, 4) float32 image (see PreviewRender for settings;
+    `denoise` as in PreviewRender.image)."""
     render = PreviewRender(tree, camera, width, height, **settings)
     render.step(render.target_samples)
-    return render.image()
+    return render.image(denoise)
 
 
 def _check_settings(tree, camera, width, height, mode, samples, ao_distance, seed, sampler, error_target,

@@ -74,6 +74,8 @@ def build_parser(prog: str = COMMAND_ID) -> argparse.ArgumentParser:
     render.add_argument("--bins", type=int, default=s, help=f"(default {DEFAULTS.bins})")
     render.add_argument("--threads", type=int, default=s, help="0 = all cores (default)")
     render.add_argument("--error-target", dest="error_target", type=float, default=s, help="0 = off (default)")
+    render.add_argument("--denoise", action="store_true", default=s,
+                        help="filter each finished frame with the edge-avoiding à-trous denoiser (default off)")
     render.add_argument("--seed", type=int, default=s, help=f"(default {DEFAULTS.seed})")
     render.add_argument("--memory-limit", dest="memory_limit_mb", type=int, default=s,
                         help="MiB; refuse a frame estimated to need more (default 0 = no limit)")

@@ -36,6 +36,9 @@ class Settings:
     max_depth: kd-tree depth limit; 0 = core's automatic 1.2 log2(N) + 2.
     threads: worker threads for build and trace; 0 = every core Numba sees.
     error_target: stop sampling a pixel once its standard error is below this; 0 = off.
+    denoise: filter the finished image with core's edge-avoiding à-trous denoiser (core/denoise.py),
+        which fades out as pixels converge; off by default so the image stays the raw estimate
+        (README: "Denoising").
     output_format: "PNG" or "OPEN_EXR" for animation frames.
     seed: sampler seed, so two runs of a frame give the same image.
     memory_limit_mb: refuse a frame whose estimated peak memory (triangles, kd-tree, pixel
@@ -57,6 +60,7 @@ class Settings:
     bins: int = 32
     threads: int = 0
     error_target: float = 0.0
+    denoise: bool = False
     output_format: str = "PNG"
     seed: int = 0
     memory_limit_mb: int = 0
@@ -83,6 +87,11 @@ class RenderConfig:
     @property
     def resolution_percentage(self) -> int:
         return self.settings.resolution_percentage
+
+    @property
+    def denoise(self) -> bool:
+        """Whether to read the image as PreviewRender.image(denoise=True)."""
+        return self.settings.denoise
 
     @property
     def memory_limit(self) -> int | None:
@@ -146,7 +155,7 @@ def _validate(s: Settings) -> None:
     _integer("memory_limit_mb", s.memory_limit_mb, 0, 1 << 30, "0 = no limit")
     _number("ao_distance", s.ao_distance, positive=True)
     _number("error_target", s.error_target, positive=False, note="0 = off")
-    for name in ("rebuild_all", "lazy"):
+    for name in ("rebuild_all", "lazy", "denoise"):
         if not isinstance(getattr(s, name), bool):
             raise SettingsError(f"{name} must be True or False; got {getattr(s, name)!r}")
 

@@ -71,7 +71,8 @@ class KDPREVIEW_PT_panel(_SidebarTab, bpy.types.Panel):
         layout = self.layout
         layout.use_property_split = True
         layout.use_property_decorate = False
-        for name in ("mode", "samples", "ao_distance", "resolution_percentage", "error_target", "live_update"):
+        for name in ("mode", "samples", "ao_distance", "resolution_percentage", "error_target", "denoise",
+                     "live_update"):
             layout.prop(settings, name)
         row = layout.row(align=True)
         row.enabled = not state.running

@@ -267,7 +267,7 @@ class FrameJob:
                                total_ms=sum(t.values()), rays=0, rays_saved=0, first_run=False,
                                pixels_reused=int((self._reused_image[..., 3] > 0).sum()), **self._info)
         with KERNEL_LOCK:
-            image = np.array(self.renderer.image(), dtype=np.float32, copy=True)
+            image = np.array(self.renderer.image(denoise=self.config.denoise), dtype=np.float32, copy=True)
             if self.renderer.scene.lazy_tree is not None:  # what the rays made it build, not the start
                 self._info["tree_stats"] = self.renderer.scene.stats()
             pixels = self.renderer.pixel_state()

@@ -48,6 +48,11 @@ class KDPreviewSettings(bpy.types.PropertyGroup):
     error_target: FloatProperty(name="Error Target",
                                 description="Stop sampling a pixel once its standard error is below this (0 = off)",
                                 default=DEFAULTS.error_target, min=0.0, soft_max=0.1, precision=4)
+    denoise: BoolProperty(name="Denoise",
+                          description="Filter the finished image with an edge-avoiding à-trous denoiser guided by "
+                                      "each pixel's sample variance (smooth at low sample counts; fades out as "
+                                      "pixels converge)",
+                          default=DEFAULTS.denoise)
     seed: IntProperty(name="Seed", description="Sampler seed", default=DEFAULTS.seed, min=0)
     memory_limit_mb: IntProperty(name="Memory Limit (MiB)",
                                  description="Refuse a frame whose estimated peak memory is above this (0 = no limit)",

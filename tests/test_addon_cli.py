@@ -132,3 +132,18 @@ def test_python_dash_m_main_job(tmp_path):
     assert proc.stdout.count("\n") >= 6 and "Mrays/s" in proc.stdout
     bad = run_python(["-m", "kd_addon", "render", "--frames", "x", "--out", str(out)])
     assert bad.returncode == 1 and "bad frame range 'x'" in bad.stderr
+
+
+def test_denoise_flag_filters_the_frames(tmp_path):
+    """--denoise reaches the report and changes the pixels but not which pixels are hit (alpha)."""
+    images = {}
+    for name, extra in (("raw", []), ("denoised", ["--denoise"])):
+        out = tmp_path / name
+        assert cli.execute(["render", "--frames", "1", "--out", str(out), "--format", "exr", *SMALL, *extra]) == 0
+        report = json.loads((out / "report.json").read_text())
+        assert report["settings"]["denoise"] is (name == "denoised")
+        image = bpy.data.images.load(str(out / "frame_0001.exr"))
+        images[name] = np.array(image.pixels[:], dtype=np.float32).reshape(-1, 4)
+    raw, den = images["raw"], images["denoised"]
+    np.testing.assert_array_equal(raw[:, 3], den[:, 3])
+    assert np.isfinite(den).all() and not np.array_equal(raw[:, :3], den[:, :3])

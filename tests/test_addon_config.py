@@ -27,6 +27,14 @@ def test_defaults_map_to_core_keywords():
     assert cfg.resolution_percentage == 50 and cfg.file_extension == ".png"
 
 
+def test_denoise_is_off_by_default_and_not_a_render_keyword():
+    """The denoiser is applied when the image is read (PreviewRender.image(denoise=...)), so it is a
+    property of the config, not one of PreviewRender's keywords."""
+    assert make_config(SimpleNamespace()).denoise is False
+    cfg = make_config(SimpleNamespace(denoise=True))
+    assert cfg.denoise is True and "denoise" not in cfg.render_options and cfg.as_dict()["denoise"] is True
+
+
 def test_zero_means_automatic_and_values_pass_through():
     cfg = make_config(SimpleNamespace(max_depth=20, threads=2, error_target=0.01, builder="exact", bins=64,
                                       leaf_size=4, mode="ao+shadow", samples=7, ao_distance=2.5,
@@ -50,6 +58,7 @@ def test_zero_means_automatic_and_values_pass_through():
     ("ao_distance", math.nan, "ao_distance must be a finite number"),
     ("error_target", -0.1, "error_target must be a finite number 0 or more (0 = off)"),
     ("output_format", "JPEG", "output_format must be one of PNG, OPEN_EXR"),
+    ("denoise", "yes", "denoise must be True or False"),
 ])
 def test_bad_settings_are_named(name, value, words):
     with pytest.raises(SettingsError, match=None) as info:
