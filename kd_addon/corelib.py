@@ -11,6 +11,12 @@ cache goes to Blender's per-extension user folder
 (`bpy.utils.extension_path_user`); outside one (tests, `python -m kd_addon`)
 to the platform's user cache folder. An explicit NUMBA_CACHE_DIR wins.
 
+Why a folder per version of core's sources: Numba checks a cached function
+against its own file only, not against the functions it inlined or called
+from other files, so after an update that changed a callee but not its
+caller, the stale caller would run the old callee. Naming the folder by a
+digest of every core source file makes any change start a fresh cache.
+
 Why the two import spellings: installed, the package is
 `bl_ext.<repo>.kd_preview` and core is its sibling subpackage
 (`bl_ext.<repo>.kd_preview.core`); in the repository both `kd_addon` and
@@ -19,6 +25,7 @@ Why the two import spellings: installed, the package is
 
 from __future__ import annotations
 
+import hashlib
 import importlib
 import os
 import sys
@@ -56,8 +63,12 @@ def user_cache_dir() -> Path:
 
 
 def numba_cache_dir(package: str | None = __package__) -> Path:
-    """Where compiled kernels are cached: NUMBA_CACHE_DIR if set, else the extension's user
-    folder, else the user cache folder."""
+    """Where compiled kernels are cached: a folder named by the sources' digest inside
+    NUMBA_CACHE_DIR if set, else the extension's user folder, else the user cache folder."""
+    return _versioned(_cache_base(package))
+
+
+def _cache_base(package: str | None) -> Path:
     if os.environ.get("NUMBA_CACHE_DIR"):
         return Path(os.environ["NUMBA_CACHE_DIR"])
     ext = extension_package(package)
@@ -69,6 +80,23 @@ def numba_cache_dir(package: str | None = __package__) -> Path:
         except (ImportError, ValueError, AttributeError):
             pass
     return user_cache_dir()
+
+
+def _versioned(base: Path) -> Path:
+    """base / "core-<digest>", unless base already is that folder (a child process inherits the
+    configured NUMBA_CACHE_DIR)."""
+    name = f"core-{source_digest()}"
+    return base if base.name == name else base / name
+
+
+def source_digest(folder: Path | None = None) -> str:
+    """16 hex digits that change whenever any of core's source files (in `folder`) changes."""
+    folder = Path(__file__).resolve().parent.parent / "core" if folder is None else Path(folder)
+    h = hashlib.blake2b(digest_size=8)
+    for path in sorted(folder.glob("*.py")):
+        h.update(path.name.encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()
 
 
 def configure_numba_cache(path: Path) -> None:

@@ -12,7 +12,7 @@ from tests.addon_support import REPO, run_python  # noqa: F401
 import bpy  # noqa: E402
 
 import kd_addon  # noqa: E402
-from kd_addon import cli, live_update, operators, panel, properties  # noqa: E402
+from kd_addon import cli, corelib, live_update, operators, panel, properties  # noqa: E402
 from tests import bpy_scenes as scenes  # noqa: E402
 
 CLASSES = properties.CLASSES + operators.CLASSES + panel.CLASSES
@@ -135,3 +135,18 @@ def test_cli_command_registration_round_trip():
     assert cli._handle is None
     with pytest.raises(ValueError):
         bpy.utils.unregister_cli_command(first)
+
+
+def test_numba_cache_folder_follows_the_core_sources(tmp_path):
+    """Numba checks a cached kernel against its own file only, so a changed callee in another file
+    would leave a stale caller: the cache folder is named by a digest of every core source file."""
+    copy = tmp_path / "core"
+    copy.mkdir()
+    for path in (REPO / "core").glob("*.py"):
+        (copy / path.name).write_bytes(path.read_bytes())
+    assert corelib.source_digest(copy) == corelib.source_digest()
+    (copy / "split_binned.py").write_bytes((copy / "split_binned.py").read_bytes() + b"\n")
+    assert corelib.source_digest(copy) != corelib.source_digest()
+    versioned = corelib._versioned(tmp_path / "cache")
+    assert versioned.parent == tmp_path / "cache" and versioned.name == f"core-{corelib.source_digest()}"
+    assert corelib._versioned(versioned) == versioned  # a child process inheriting the folder keeps it
