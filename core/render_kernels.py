@@ -13,6 +13,7 @@ that pixel, which by the rule above gives exactly the eager tree's sums.
 import numpy as np
 from numba import njit, prange
 
+from .array_views import rows
 from .instance_traversal import new_scratch, trace_scene, world_normal
 from .layout import NO_HIT
 from .sampling import pixel_seed, sample_2d
@@ -59,21 +60,25 @@ def _sample_pixels(scene, points, normals, pixels, active, start, stop, first, c
 def _sample_pixel(scene, points, normals, pixels, i, first, count, mode, ao_distance, ambient, lights,
                   sampler, seed, dim1, sums, sq_sums, counts, rays, scratch, origin, direction):
     """All of one pixel's new samples. Returns NO_HIT, or the suspended prim of a ray that reached an
-    unbuilt subtree, after restoring the pixel's sums."""
-    offset_origin(points[i], normals[i], origin)
+    unbuilt subtree, after restoring the pixel's sums.
+
+    The pixel's point and normal (and each light's row below) are unowned views (array_views.py):
+    a slice would update its parent's shared reference count, from both threads, on every ray."""
+    point, normal = rows(points, i, i + 1)[0], rows(normals, i, i + 1)[0]
+    offset_origin(point, normal, origin)
     ps = pixel_seed(pixels[i], seed)
     before = (sums[i, 0], sums[i, 1], sums[i, 2], sq_sums[i], rays[i])
     for s in range(first, first + count):
         ao = 1.0
         if mode != SHADOW:
-            prim = _ao_ray(scene, origin, normals[i], ao_distance, sampler, ps, s, dim1, direction, scratch)
+            prim = _ao_ray(scene, origin, normal, ao_distance, sampler, ps, s, dim1, direction, scratch)
             if prim < NO_HIT:
                 return _restore(sums, sq_sums, rays, i, before, prim)
             ao = 1.0 if prim < 0 else 0.0
             rays[i] += 1
         r = g = b = ao
         if mode != AO:
-            lr, lg, lb, n_rays, prim = _light_samples(scene, points[i], origin, normals[i], lights, sampler,
+            lr, lg, lb, n_rays, prim = _light_samples(scene, point, origin, normal, lights, sampler,
                                                       ps, s, dim1, direction, scratch)
             if prim < NO_HIT:
                 return _restore(sums, sq_sums, rays, i, before, prim)
@@ -118,7 +123,8 @@ def _light_samples(scene, point, origin, normal, lights, sampler, ps, s, dim1, d
     n_lights = lights.shape[0]
     for k in range(n_lights):
         u1, u2 = sample_2d(sampler, ps, s, 1 + k, dim1)
-        dist, mask = sample_light(lights[k], point, u1, u2, direction)
+        light = rows(lights, k, k + 1)[0]
+        dist, mask = sample_light(light, point, u1, u2, direction)
         cos_nl = normal[0] * direction[0] + normal[1] * direction[1] + normal[2] * direction[2]
         if mask <= 0.0 or cos_nl <= 0.0:
             continue  # behind the surface or outside the light: no ray needed
@@ -128,9 +134,9 @@ def _light_samples(scene, point, origin, normal, lights, sampler, ps, s, dim1, d
             return r, g, b, n_rays, prim
         if prim < 0:
             w = cos_nl * mask / n_lights
-            r += w * lights[k, 21]
-            g += w * lights[k, 22]
-            b += w * lights[k, 23]
+            r += w * light[21]
+            g += w * light[22]
+            b += w * light[23]
     return r, g, b, n_rays, NO_HIT
 
 
