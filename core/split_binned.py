@@ -51,7 +51,7 @@ def best_binned_split(min_bins, max_bins, weight, node_box, params):
     With weight > 1 (skipping) an empty-looking side is counted as holding one reference.
     The node's extents are computed once and each candidate only swaps in its two cut extents
     (split_cost would re-read the box twice per candidate): the same arithmetic, 1.4x faster, and
-    this loop runs (bins - 1) x 3 times in every node of the tree (~25% of the build's CPU).
+    this loop runs (bins - 1) x 3 times in every node that may split (~0.6 us a node before).
     """
     nbins = min_bins.shape[1]
     inv_area = 1.0 / half_area(node_box)
