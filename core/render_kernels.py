@@ -18,6 +18,7 @@ from .instance_traversal import new_scratch, trace_scene, world_normal
 from .layout import NO_HIT
 from .sampling import pixel_seed, sample_2d
 from .shading import cosine_direction, offset_origin, sample_light
+from .traversal import interleaved_block, interleaved_blocks
 
 AO, SHADOW, AO_SHADOW = 1, 2, 3
 MODES = {"ao": AO, "shadow": SHADOW, "ao+shadow": AO_SHADOW}
@@ -35,7 +36,12 @@ def add_samples(scene, points, normals, pixels, active, first, count, mode, ao_d
     samples, or the suspended prim of the unbuilt subtree that stopped it (lazy trees; sums untouched).
     """
     n = active.shape[0]
-    for b in prange((n + PIXELS_PER_TASK - 1) // PIXELS_PER_TASK):
+    n_blocks = (n + PIXELS_PER_TASK - 1) // PIXELS_PER_TASK
+    iterations, per_band = interleaved_blocks(n_blocks)  # balances image regions (traversal.py)
+    for i in prange(iterations):
+        b = interleaved_block(i, per_band)
+        if b >= n_blocks:
+            continue
         _sample_pixels(scene, points, normals, pixels, active, b * PIXELS_PER_TASK,
                        min(n, (b + 1) * PIXELS_PER_TASK), first, count, mode, ao_distance, ambient, lights,
                        sampler, seed, dim1, sums, sq_sums, counts, rays, status)
