@@ -24,9 +24,9 @@ from .camera import Camera
 from .kdtree import KdTree
 from .lazy import resolve_suspended
 from .lights import pack_lights
-from .render_kernels import MODES, add_samples, surface_frames
+from .render_kernels import MODES, add_samples, assemble_image, surface_frames
 from .sampling import SAMPLERS, SOBOL_DIM1
-from .scene_queries import trace_scene_all
+from .scene_queries import trace_valid_rays
 from .threads import thread_count
 from .two_level import TwoLevelScene, as_two_level
 
@@ -64,7 +64,7 @@ class PreviewRender:
     def _trace_camera(self):
         start = perf_counter()
         origins, directions, tmin, tmax = self.camera.rays(self.width, self.height)
-        t, inst, prim, _, _ = trace_scene_all(self.scene, origins, directions, tmin, tmax, False, self.threads)
+        t, inst, prim, _, _ = trace_valid_rays(self.scene, origins, directions, tmin, tmax, False, self.threads)
         hit = np.flatnonzero(prim >= 0).astype(np.int64)
         self.pixels = hit
         self.points = np.empty((len(hit), 3))
@@ -143,9 +143,8 @@ class PreviewRender:
     def image(self):
         """The current estimate as an (H, W, 4) float32 image (row 0 at the top)."""
         img = np.zeros((self.height * self.width, 4), np.float32)
-        n = np.maximum(self.counts, 1)[:, None]
-        img[self.pixels, :3] = np.where(self.counts[:, None] > 0, self.sums / n, 0.0)
-        img[self.pixels, 3] = 1.0
+        with thread_count(self.threads):
+            assemble_image(self.pixels, self.sums, self.counts, img)
         return img.reshape(self.height, self.width, 4)
 
     def sample_counts(self):
