@@ -143,29 +143,33 @@ def _push(stack_node, stack_t, sp, node, t0, t1, t_exit):
 
 
 BANDS = 16  # interleaved_blocks: the bands of the image every thread gets a share of
+RUN = 8  # ... in runs of this many consecutive blocks, which keep the tree's cache lines warm
 
 
 @njit(cache=True, inline="always")
 def interleaved_blocks(n_blocks):
     """(iterations, per_band) of a prange over n_blocks blocks in which iteration i runs block
-    interleaved_block(i, per_band): consecutive iterations step through BANDS bands of the blocks.
+    interleaved_block(i, per_band): the iterations visit BANDS bands of the blocks in turn, RUN
+    consecutive blocks of a band at a time.
 
     Numba's prange gives each thread one contiguous range of iterations (a static schedule; under the
     OpenMP layer parallel_chunksize does not change that, checked with get_thread_id). Rays and pixels
-    come in image order and their cost differs by region: one half of the seed 000 setting's shadow
-    rays cost 1.6x the other (121 against 77 ms of CPU), so split in halves the step took 1.2x as long
-    as balanced. Dealt out band by band, any contiguous range of iterations takes the same share of
+    come in image order and their cost differs by region: the first half of the seed 000 setting's hit
+    pixels cost 1.4x the second (168 against 120 ms of CPU for their shadow rays), so split in halves
+    the step took ~1.17x as long as balanced. Dealt out band by band, any contiguous range of iterations takes the same share of
     every band, whatever the thread count (which a cached kernel cannot read: get_num_threads is a
-    dynamic global). Results do not depend on the order.
+    dynamic global). Dealt one block at a time, consecutive blocks fell in different bands and the
+    one-thread shadow step was 15% slower (cache misses), hence runs. Results do not depend on the order.
     """
     per_band = (n_blocks + BANDS - 1) // BANDS
+    per_band = (per_band + RUN - 1) // RUN * RUN
     return per_band * BANDS, per_band
 
 
 @njit(cache=True, inline="always")
 def interleaved_block(i, per_band):
     """The block iteration i runs (a permutation of the iterations; skip blocks >= n_blocks)."""
-    return (i % BANDS) * per_band + i // BANDS
+    return (i // RUN) % BANDS * per_band + i // (RUN * BANDS) * RUN + i % RUN
 
 
 @njit(cache=True, parallel=True)
