@@ -30,9 +30,9 @@ from .lazy import resolve_suspended
 from .instance_signature import changed_boxes
 from .lights import pack_lights
 from .pixel_reuse import PixelState, prepared_boxes, segments_touch, settings_key, surface_rays_touch
-from .render_kernels import MODES, add_samples, surface_frames
+from .render_kernels import MODES, add_samples, assemble_image, surface_frames
 from .sampling import SAMPLERS, SOBOL_DIM1
-from .scene_queries import trace_scene_all
+from .scene_queries import trace_valid_rays
 from .threads import thread_count
 from .two_level import TwoLevelScene, as_two_level
 
@@ -97,7 +97,7 @@ class PreviewRender:
     def _camera_hits(self, rays, which=None):
         """(pixels, depths, points, normals) of the camera rays (`which`: a subset) that hit."""
         origins, directions, tmin, tmax = rays if which is None else (a[which] for a in rays)
-        t, inst, prim, _, _ = trace_scene_all(self.scene, origins, directions, tmin, tmax, False, self.threads)
+        t, inst, prim, _, _ = trace_valid_rays(self.scene, origins, directions, tmin, tmax, False, self.threads)
         hit = np.flatnonzero(prim >= 0).astype(np.int64)
         points, normals = np.empty((len(hit), 3)), np.empty((len(hit), 3))
         with thread_count(self.threads):
@@ -224,9 +224,8 @@ class PreviewRender:
             return denoise_pixels(self.width, self.height, self.pixels, self.points, self.normals, self.sums,
                                   self.sq_sums, self.counts, variance_decay=decay, threads=self.threads)
         img = np.zeros((self.height * self.width, 4), np.float32)
-        n = np.maximum(self.counts, 1)[:, None]
-        img[self.pixels, :3] = np.where(self.counts[:, None] > 0, self.sums / n, 0.0)
-        img[self.pixels, 3] = 1.0
+        with thread_count(self.threads):
+            assemble_image(self.pixels, self.sums, self.counts, img)
         return img.reshape(self.height, self.width, 4)
 
     def sample_counts(self):

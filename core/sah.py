@@ -15,6 +15,12 @@ def split_cost(box, inv_area, axis, pos, n_left, n_right, params):
     """SAH cost of splitting `box` at `pos` on `axis` with n_left / n_right references."""
     area_left = half_area_cut(box, axis, box[axis], pos)
     area_right = half_area_cut(box, axis, pos, box[axis + 3])
+    return cost_of_areas(area_left, area_right, inv_area, n_left, n_right, params)
+
+
+@njit(cache=True, inline="always")
+def cost_of_areas(area_left, area_right, inv_area, n_left, n_right, params):
+    """The SAH cost from the children's half areas (inv_area: 1 / the node's half area)."""
     bonus = params.empty_bonus if (n_left == 0 or n_right == 0) else 0.0
     weighted = (area_left * n_left + area_right * n_right) * inv_area
     return params.traversal_cost + params.intersection_cost * (1.0 - bonus) * weighted

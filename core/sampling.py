@@ -28,7 +28,20 @@ def _sobol_dim1_matrix():
     return v
 
 
-SOBOL_DIM1 = _sobol_dim1_matrix()
+def _byte_tables(v):
+    """(4, 256) tables: entry [b, x] is the XOR of the direction vectors v[8b + j] over the bits j set in
+    byte value x. The product of the generator matrix with an index is then four lookups, one per byte
+    of the index, instead of a loop over its 32 bits (the same XOR, so the same points)."""
+    tables = np.zeros((4, 256), np.int64)
+    for b in range(4):
+        for x in range(256):
+            for j in range(8):
+                if x >> j & 1:
+                    tables[b, x] ^= v[8 * b + j]
+    return tables
+
+
+SOBOL_DIM1 = _byte_tables(_sobol_dim1_matrix())  # what the kernels take as `dim1`
 
 
 @njit(cache=True, inline="always")
@@ -76,15 +89,9 @@ def nested_uniform_scramble(x, seed):
 
 @njit(cache=True, inline="always")
 def sobol_2d(index, dim1):
-    """The index-th point of the 2D Sobol set as two 32-bit integers."""
-    y = 0
+    """The index-th point of the 2D Sobol set as two 32-bit integers; `dim1` is SOBOL_DIM1's byte tables."""
     i = index & MASK
-    bit = 0
-    while i:
-        if i & 1:
-            y ^= dim1[bit]
-        i >>= 1
-        bit += 1
+    y = dim1[0, i & 0xFF] ^ dim1[1, (i >> 8) & 0xFF] ^ dim1[2, (i >> 16) & 0xFF] ^ dim1[3, (i >> 24) & 0xFF]
     return reverse_bits(index), y
 
 

@@ -35,9 +35,17 @@ def occluded_scene(scene, origins, directions, tmin=0.0, tmax=np.inf, threads=No
 def trace_scene_all(scene, origins, directions, tmin, tmax, any_hit, threads):
     """Checked rays through the scene: float64 (t, u, v) and int32 (instance, prim) arrays. A lazy
     KdTree builds the subtrees its rays reach (lazy.py) and the rays that stopped there are retraced."""
-    scene = as_two_level(scene)
     o, d = as_rays(origins, directions)
     lo, hi = as_ray_limits(tmin, tmax, len(o))
+    return trace_valid_rays(scene, o, d, lo, hi, any_hit, threads)
+
+
+def trace_valid_rays(scene, o, d, lo, hi, any_hit, threads):
+    """trace_scene_all without the input checks, for rays that are valid by construction: C-contiguous
+    float64, finite, non-zero directions, 0 <= lo <= hi (a Camera's rays: it checks its matrix and fov).
+    The checks are several passes over the arrays: for 640 x 480 camera rays they took 31 ms of CPU
+    against 39-50 ms for making the rays (one loaded machine, same run)."""
+    scene = as_two_level(scene)
     n = len(o)
     t, u, v = np.empty(n), np.empty(n), np.empty(n)
     inst, prim = np.empty(n, np.int32), np.empty(n, np.int32)
