@@ -45,6 +45,7 @@ class PixelState(NamedTuple):
     sq_sums: np.ndarray
     counts: np.ndarray
     ray_counts: np.ndarray
+    memo: np.ndarray
 
 
 def settings_key(camera, width, height, mode, samples, ao_distance, lights, seed, sampler, error_target,
@@ -81,11 +82,17 @@ def segments_touch(origins, directions, t0, t1, boxes):
     """(R,) bool: the segment origin + t * direction, t in [t0, t1], meets one of the boxes."""
     out = np.zeros(origins.shape[0], np.bool_)
     for r in prange(origins.shape[0]):
-        for k in range(boxes.shape[0]):
-            if _segment_meets_box(origins[r], directions[r], t0[r], t1[r], boxes[k], 0.0):
-                out[r] = True
-                break
+        out[r] = segment_meets_any(origins[r], directions[r], t0[r], t1[r], boxes)
     return out
+
+
+@njit(cache=True, inline="always")
+def segment_meets_any(o, d, t0, t1, boxes):
+    """o + t d, t in [t0, t1], meets one of the boxes (K, 6)."""
+    for k in range(boxes.shape[0]):
+        if _segment_meets_box(o, d, t0, t1, boxes, k, 0.0):
+            return True
+    return False
 
 
 @njit(cache=True, parallel=True)
@@ -97,26 +104,26 @@ def surface_rays_touch(points, normals, ao_radius, lights, boxes):
         o = np.empty(3)
         offset_origin(points[p], normals[p], o)
         for k in range(boxes.shape[0]):
-            if _rays_meet_box(o, ao_radius, lights, boxes[k]):
+            if _rays_meet_box(o, ao_radius, lights, boxes, k):
                 out[p] = True
                 break
     return out
 
 
 @njit(cache=True)
-def _rays_meet_box(o, ao_radius, lights, box):
-    if ao_radius > 0.0 and _distance_to_box(o, box) <= ao_radius:
+def _rays_meet_box(o, ao_radius, lights, boxes, b):
+    if ao_radius > 0.0 and _distance_to_box(o, boxes, b) <= ao_radius:
         return True
     d = np.empty(3)
     for i in range(lights.shape[0]):
         light = lights[i]
         kind = int(light[0])
         if kind == SUN:
-            far = _farthest_corner(o, box)
+            far = _farthest_corner(o, boxes, b)
             grow = far * np.sqrt(max(0.0, 1.0 - light[8] * light[8]))
             for k in range(3):
                 d[k] = -light[4 + k]
-            if _segment_meets_box(o, d, 0.0, far, box, grow):
+            if _segment_meets_box(o, d, 0.0, far, boxes, b, grow):
                 return True
             continue
         grow = light[7]
@@ -125,18 +132,19 @@ def _rays_meet_box(o, ao_radius, lights, box):
                 np.sqrt(light[14] ** 2 + light[15] ** 2 + light[16] ** 2)
         for k in range(3):
             d[k] = light[1 + k] - o[k]
-        if _segment_meets_box(o, d, 0.0, 1.0, box, grow):
+        if _segment_meets_box(o, d, 0.0, 1.0, boxes, b, grow):
             return True
     return False
 
 
 @njit(cache=True, inline="always")
-def _segment_meets_box(o, d, t0, t1, box, grow):
-    """Slab test of o + t d, t in [t0, t1], against the box grown by `grow`; a zero direction
-    component tests the origin against that slab instead of dividing by zero."""
+def _segment_meets_box(o, d, t0, t1, boxes, i, grow):
+    """Slab test of o + t d, t in [t0, t1], against box i grown by `grow`; a zero direction component
+    tests the origin against that slab instead of dividing by zero. (Boxes by index: a row slice
+    would update the array's shared reference count on every ray.)"""
     lo, hi = t0, t1
     for k in range(3):
-        a, b = box[k] - grow, box[3 + k] + grow
+        a, b = boxes[i, k] - grow, boxes[i, 3 + k] + grow
         if d[k] == 0.0:
             if o[k] < a or o[k] > b:
                 return False
@@ -151,18 +159,18 @@ def _segment_meets_box(o, d, t0, t1, box, grow):
 
 
 @njit(cache=True, inline="always")
-def _distance_to_box(o, box):
+def _distance_to_box(o, boxes, i):
     s = 0.0
     for k in range(3):
-        e = max(box[k] - o[k], 0.0, o[k] - box[3 + k])
+        e = max(boxes[i, k] - o[k], 0.0, o[k] - boxes[i, 3 + k])
         s += e * e
     return np.sqrt(s)
 
 
 @njit(cache=True, inline="always")
-def _farthest_corner(o, box):
+def _farthest_corner(o, boxes, i):
     s = 0.0
     for k in range(3):
-        e = max(abs(box[k] - o[k]), abs(box[3 + k] - o[k]))
+        e = max(abs(boxes[i, k] - o[k]), abs(boxes[i, 3 + k] - o[k]))
         s += e * e
     return np.sqrt(s)

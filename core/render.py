@@ -30,7 +30,7 @@ from .lazy import resolve_suspended
 from .instance_signature import changed_boxes
 from .lights import pack_lights
 from .pixel_reuse import PixelState, prepared_boxes, segments_touch, settings_key, surface_rays_touch
-from .render_kernels import MODES, add_samples, assemble_image, surface_frames
+from .render_kernels import MEMO_BITS, MODES, add_samples, assemble_image, surface_frames
 from .sampling import SAMPLERS, SOBOL_DIM1
 from .scene_queries import trace_valid_rays
 from .threads import thread_count
@@ -73,7 +73,7 @@ class PreviewRender:
         self.samples_done = 0
         self.trace_ms = 0.0
         self.rays_saved = 0
-        self.pixels_reused = self.rays_reused = self._rays_before = self.converged_pixels = 0
+        self.pixels_reused = self._pixels_rays_reused = self._rays_before = self.converged_pixels = 0
         self.settings = settings_key(camera, self.width, self.height, mode, self.target_samples, self.ao_distance,
                                      self.lights, self.seed, self.sampler, error_target, self.min_samples,
                                      self.ambient)
@@ -92,7 +92,14 @@ class PreviewRender:
         pixels, depths, points, normals = self._camera_hits(rays)
         zero = np.zeros(len(pixels), np.int64)
         self._start(pixels, depths, points, normals, np.zeros((len(pixels), 3)), np.zeros(len(pixels)), zero,
-                    zero.copy(), np.arange(len(pixels), dtype=np.int64))
+                    zero.copy(), np.arange(len(pixels), dtype=np.int64), self._memo_rows(len(pixels)))
+        self.known, self.boxes = np.zeros(len(pixels), np.bool_), np.zeros((0, 6))
+
+    def _memo_rows(self, n):
+        """(n, B) zero visibility bits: one per ray of every sample (render_kernels.py), none when
+        more than MEMO_BITS would be needed."""
+        bits = self.target_samples * (1 + len(self.lights))
+        return np.zeros((n, (bits + 7) // 8 if bits <= MEMO_BITS else 0), np.uint8)
 
     def _camera_hits(self, rays, which=None):
         """(pixels, depths, points, normals) of the camera rays (`which`: a subset) that hit."""
@@ -104,10 +111,11 @@ class PreviewRender:
             surface_frames(self.scene.arrays, origins, directions, t, inst, prim, hit, points, normals)
         return (hit if which is None else which[hit]), t[hit], points, normals
 
-    def _start(self, pixels, depths, points, normals, sums, sq_sums, counts, ray_counts, active):
+    def _start(self, pixels, depths, points, normals, sums, sq_sums, counts, ray_counts, active, memo):
         self.pixels, self.depths, self.points, self.normals = pixels, depths, points, normals
         self.sums, self.sq_sums, self.counts, self.ray_counts = sums, sq_sums, counts, ray_counts
-        self.active = active
+        self.active, self.memo = active, memo
+        self.memo_reused = np.zeros(len(pixels), np.int64)
 
     def _changed_boxes(self, previous):
         """Where geometry changed since `previous` (a PixelState), or None when its pixels cannot be
@@ -118,7 +126,8 @@ class PreviewRender:
 
     def _continue(self, prev, boxes):
         """Keep the pixels of `prev` whose rays cannot meet a changed box (pixel_reuse.py); sample the
-        others again from sample 0, tracing camera rays only where they cross a changed box."""
+        others again from sample 0, tracing camera rays only where they cross a changed box, and other
+        rays only where they can meet one (the rest take last frame's visibility bit)."""
         boxes = prepared_boxes(boxes)
         rays = self.camera.rays(self.width, self.height)
         ends = rays[3].copy()
@@ -140,10 +149,14 @@ class PreviewRender:
                     np.concatenate([prev.sq_sums[clean], np.zeros(fresh)]),
                     np.concatenate([prev.counts[clean], np.zeros(fresh, np.int64)]),
                     np.concatenate([prev.ray_counts[clean], np.zeros(fresh, np.int64)]),
-                    np.arange(len(clean), len(clean) + fresh, dtype=np.int64))
+                    np.arange(len(clean), len(clean) + fresh, dtype=np.int64),
+                    np.concatenate([prev.memo[order], self._memo_rows(len(new[0]))]))
+        self.known = np.concatenate([np.zeros(len(clean), np.bool_), np.ones(len(dirty), np.bool_),
+                                     np.zeros(len(new[0]), np.bool_)])
+        self.boxes = boxes
         self._rays_before = int(prev.ray_counts[clean].sum())
         self.pixels_reused = len(clean)
-        self.rays_reused = self._rays_before + self.width * self.height - self.camera_rays
+        self._pixels_rays_reused = self._rays_before + self.width * self.height - self.camera_rays
         if fresh == 0:
             self.samples_done = self.target_samples
 
@@ -152,7 +165,13 @@ class PreviewRender:
         if not self.done:
             return None
         return PixelState(self.settings, self.scene.signature, self.pixels, self.depths, self.points, self.normals,
-                          self.sums, self.sq_sums, self.counts, self.ray_counts)
+                          self.sums, self.sq_sums, self.counts, self.ray_counts, self.memo)
+
+    @property
+    def rays_reused(self):
+        """Rays not traced thanks to `previous`: those of kept pixels (and their camera rays), and of
+        re-sampled pixels that took last frame's visibility bit."""
+        return self._pixels_rays_reused + int(self.memo_reused.sum())
 
     @property
     def done(self):
@@ -160,7 +179,7 @@ class PreviewRender:
 
     @property
     def rays_traced(self):
-        return self.camera_rays + int(self.ray_counts.sum()) - self._rays_before
+        return self.camera_rays + int(self.ray_counts.sum()) - self._rays_before - int(self.memo_reused.sum())
 
     @property
     def hit_pixels(self):
@@ -188,7 +207,8 @@ class PreviewRender:
             status = np.empty(len(active), np.int64)
             add_samples(self.scene.arrays, self.points, self.normals, self.pixels, active, self.samples_done,
                         batch, MODES[self.mode], self.ao_distance, self.ambient, self.lights, self.sampler,
-                        self.seed, SOBOL_DIM1, self.sums, self.sq_sums, self.counts, self.ray_counts, status)
+                        self.seed, SOBOL_DIM1, self.sums, self.sq_sums, self.counts, self.ray_counts, status,
+                        (self.memo, self.known, self.boxes, self.memo_reused))
             return status
 
         with thread_count(self.threads):

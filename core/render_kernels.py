@@ -9,6 +9,11 @@ samples in any batches gives the same sums as one big batch.
 On a lazy tree a ray may stop at an unbuilt subtree (traversal.py). The pixel then puts its sums back
 as they were before the batch and reports the subtree; the caller builds it and redoes the batch for
 that pixel, which by the rule above gives exactly the eager tree's sums.
+
+Ray memo (pixel reuse across frames, pixel_reuse.py): every AO and shadow ray's visibility is kept as
+one bit, at bit s * (1 + lights) + use of its pixel's row (when samples * (1 + lights) <= MEMO_BITS).
+A pixel continued from last frame (same hit point, `known`) takes last frame's bit for every ray that
+cannot meet a changed box, and traces only the others: the same bit, hence the same sums.
 """
 import numpy as np
 from numba import njit, prange
@@ -16,6 +21,7 @@ from numba import njit, prange
 from .array_views import rows
 from .instance_traversal import new_scratch, trace_scene, world_normal
 from .layout import NO_HIT
+from .pixel_reuse import segment_meets_any
 from .sampling import pixel_seed, sample_2d
 from .shading import cosine_direction, offset_origin, sample_light
 from .traversal import interleaved_block, interleaved_blocks
@@ -24,16 +30,19 @@ AO, SHADOW, AO_SHADOW = 1, 2, 3
 MODES = {"ao": AO, "shadow": SHADOW, "ao+shadow": AO_SHADOW}
 USE_AO = 0  # the sampler's "use" ids: 0 for AO, 1 + k for light k
 PIXELS_PER_TASK = 64  # pixels a parallel task samples with one set of scratch buffers
+MEMO_BITS = 512  # most visibility bits kept per pixel (64 bytes): 16 samples x 32 uses, 512 AO samples
 
 
 @njit(cache=True, parallel=True)
 def add_samples(scene, points, normals, pixels, active, first, count, mode, ao_distance, ambient, lights,
-                sampler, seed, dim1, sums, sq_sums, counts, rays, status):
+                sampler, seed, dim1, sums, sq_sums, counts, rays, status, memo):
     """Add samples first .. first+count-1 to every pixel listed in `active` (indices into points).
 
     sums (M, 3) and sq_sums (M,) (of the sample's grey value) accumulate; counts[i] += count;
-    rays[i] counts the rays traced for pixel i. status[a] is NO_HIT when pixel active[a] got its
+    rays[i] counts the rays of pixel i's samples. status[a] is NO_HIT when pixel active[a] got its
     samples, or the suspended prim of the unbuilt subtree that stopped it (lazy trees; sums untouched).
+    memo = (bits (M, B) uint8, known (M,) bool, boxes (K, 6), reused (M,) int64): see the module
+    docstring; reused[i] counts the rays whose bit was taken from last frame.
     """
     n = active.shape[0]
     n_blocks = (n + PIXELS_PER_TASK - 1) // PIXELS_PER_TASK
@@ -44,12 +53,12 @@ def add_samples(scene, points, normals, pixels, active, first, count, mode, ao_d
             continue
         _sample_pixels(scene, points, normals, pixels, active, b * PIXELS_PER_TASK,
                        min(n, (b + 1) * PIXELS_PER_TASK), first, count, mode, ao_distance, ambient, lights,
-                       sampler, seed, dim1, sums, sq_sums, counts, rays, status)
+                       sampler, seed, dim1, sums, sq_sums, counts, rays, status, memo)
 
 
 @njit(cache=True)
 def _sample_pixels(scene, points, normals, pixels, active, start, stop, first, count, mode, ao_distance,
-                   ambient, lights, sampler, seed, dim1, sums, sq_sums, counts, rays, status):
+                   ambient, lights, sampler, seed, dim1, sums, sq_sums, counts, rays, status, memo):
     """Pixels active[start:stop], sharing one set of scratch buffers: allocating them per pixel cost
     ~25% of a one-sample step (kept out of the parallel loop body: Numba's parfor analysis does not
     cope with the inlined tuple code of the samplers)."""
@@ -59,12 +68,12 @@ def _sample_pixels(scene, points, normals, pixels, active, start, stop, first, c
     for a in range(start, stop):
         status[a] = _sample_pixel(scene, points, normals, pixels, active[a], first, count, mode, ao_distance,
                                   ambient, lights, sampler, seed, dim1, sums, sq_sums, counts, rays, scratch,
-                                  origin, direction)
+                                  origin, direction, memo)
 
 
 @njit(cache=True, inline="always")
 def _sample_pixel(scene, points, normals, pixels, i, first, count, mode, ao_distance, ambient, lights,
-                  sampler, seed, dim1, sums, sq_sums, counts, rays, scratch, origin, direction):
+                  sampler, seed, dim1, sums, sq_sums, counts, rays, scratch, origin, direction, memo):
     """All of one pixel's new samples. Returns NO_HIT, or the suspended prim of a ray that reached an
     unbuilt subtree, after restoring the pixel's sums.
 
@@ -73,22 +82,23 @@ def _sample_pixel(scene, points, normals, pixels, i, first, count, mode, ao_dist
     point, normal = rows(points, i, i + 1)[0], rows(normals, i, i + 1)[0]
     offset_origin(point, normal, origin)
     ps = pixel_seed(pixels[i], seed)
-    before = (sums[i, 0], sums[i, 1], sums[i, 2], sq_sums[i], rays[i])
+    reused = memo[3]
+    before = (sums[i, 0], sums[i, 1], sums[i, 2], sq_sums[i], rays[i], reused[i])
+    uses = 1 + lights.shape[0]
     for s in range(first, first + count):
         ao = 1.0
         if mode != SHADOW:
-            prim = _ao_ray(scene, origin, normal, ao_distance, sampler, ps, s, dim1, direction, scratch)
+            prim = _ao_ray(scene, origin, normal, ao_distance, sampler, ps, s, dim1, direction, scratch, memo, i,
+                           s * uses, rays)
             if prim < NO_HIT:
-                return _restore(sums, sq_sums, rays, i, before, prim)
+                return _restore(sums, sq_sums, rays, reused, i, before, prim)
             ao = 1.0 if prim < 0 else 0.0
-            rays[i] += 1
         r = g = b = ao
         if mode != AO:
-            lr, lg, lb, n_rays, prim = _light_samples(scene, point, origin, normal, lights, sampler,
-                                                      ps, s, dim1, direction, scratch)
+            lr, lg, lb, prim = _light_samples(scene, point, origin, normal, lights, sampler, ps, s, dim1, direction,
+                                              scratch, memo, i, s * uses + 1, rays)
             if prim < NO_HIT:
-                return _restore(sums, sq_sums, rays, i, before, prim)
-            rays[i] += n_rays
+                return _restore(sums, sq_sums, rays, reused, i, before, prim)
             if mode == SHADOW:
                 r, g, b = lr, lg, lb
             else:
@@ -105,27 +115,44 @@ def _sample_pixel(scene, points, normals, pixels, i, first, count, mode, ao_dist
 
 
 @njit(cache=True, inline="always")
-def _restore(sums, sq_sums, rays, i, before, prim):
+def _restore(sums, sq_sums, rays, reused, i, before, prim):
     """Put pixel i's sums back as they were before the batch; pass on the suspended prim."""
-    sums[i, 0], sums[i, 1], sums[i, 2], sq_sums[i], rays[i] = before
+    sums[i, 0], sums[i, 1], sums[i, 2], sq_sums[i], rays[i], reused[i] = before
     return prim
 
 
 @njit(cache=True, inline="always")
-def _ao_ray(scene, origin, normal, ao_distance, sampler, ps, s, dim1, direction, scratch):
+def _visibility(scene, origin, direction, tmax, scratch, memo, i, bit, rays):
+    """The any-hit prim of a ray (< 0: escapes; < NO_HIT: suspended at an unbuilt subtree), taken from
+    last frame's bit when pixel i is `known` and the ray cannot meet a changed box (counted in
+    reused[i]), else traced; rays[i] counts both. The bit is kept for the next frame either way."""
+    bits, known, boxes, reused = memo
+    kept = bit < 8 * bits.shape[1]
+    rays[i] += 1
+    if kept and known[i] and not segment_meets_any(origin, direction, 0.0, tmax, boxes):
+        reused[i] += 1
+        return 0 if bits[i, bit >> 3] & (1 << (bit & 7)) else -1
+    _, _, prim, _, _ = trace_scene(scene, origin, direction, 0.0, tmax, True, scratch)
+    if kept and prim >= NO_HIT:
+        mask = np.uint8(1 << (bit & 7))
+        bits[i, bit >> 3] = bits[i, bit >> 3] | mask if prim >= 0 else bits[i, bit >> 3] & ~mask
+    return prim
+
+
+@njit(cache=True, inline="always")
+def _ao_ray(scene, origin, normal, ao_distance, sampler, ps, s, dim1, direction, scratch, memo, i, bit, rays):
     """The any-hit prim of a cosine-weighted ray from the surface within ao_distance (< 0: escapes)."""
     u1, u2 = sample_2d(sampler, ps, s, USE_AO, dim1)
     cosine_direction(normal, u1, u2, direction)
-    _, _, prim, _, _ = trace_scene(scene, origin, direction, 0.0, ao_distance, True, scratch)
-    return prim
+    return _visibility(scene, origin, direction, ao_distance, scratch, memo, i, bit, rays)
 
 
 @njit(cache=True, inline="always")
-def _light_samples(scene, point, origin, normal, lights, sampler, ps, s, dim1, direction, scratch):
-    """Mean over lights of colour * visibility * max(0, N.L) * mask, the number of rays traced, and
-    NO_HIT or the suspended prim of a ray that reached an unbuilt subtree (the rest is then void)."""
+def _light_samples(scene, point, origin, normal, lights, sampler, ps, s, dim1, direction, scratch, memo, i, bit,
+                   rays):
+    """Mean over lights of colour * visibility * max(0, N.L) * mask, and NO_HIT or the suspended prim
+    of a ray that reached an unbuilt subtree (the rest is then void). Light k's ray is bit + k."""
     r = g = b = 0.0
-    n_rays = 0
     n_lights = lights.shape[0]
     for k in range(n_lights):
         u1, u2 = sample_2d(sampler, ps, s, 1 + k, dim1)
@@ -134,16 +161,15 @@ def _light_samples(scene, point, origin, normal, lights, sampler, ps, s, dim1, d
         cos_nl = normal[0] * direction[0] + normal[1] * direction[1] + normal[2] * direction[2]
         if mask <= 0.0 or cos_nl <= 0.0:
             continue  # behind the surface or outside the light: no ray needed
-        n_rays += 1
-        _, _, prim, _, _ = trace_scene(scene, origin, direction, 0.0, dist, True, scratch)
+        prim = _visibility(scene, origin, direction, dist, scratch, memo, i, bit + k, rays)
         if prim < NO_HIT:
-            return r, g, b, n_rays, prim
+            return r, g, b, prim
         if prim < 0:
             w = cos_nl * mask / n_lights
             r += w * light[21]
             g += w * light[22]
             b += w * light[23]
-    return r, g, b, n_rays, NO_HIT
+    return r, g, b, NO_HIT
 
 
 @njit(cache=True, parallel=True)

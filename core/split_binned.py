@@ -11,7 +11,7 @@ import numpy as np
 from numba import njit
 
 from .geometry import cut_half_area, extents, half_area
-from .sah import cost_of_areas, valid_position
+from .sah import cost_of_areas, split_cost, valid_position
 
 
 @njit(cache=True)

@@ -9,6 +9,7 @@ import pytest
 
 import core
 from core.pixel_reuse import MAX_BOXES, prepared_boxes, segments_touch, surface_rays_touch
+from core.render_kernels import MEMO_BITS
 from core.scene_builder import MeshInput, SceneBuilder
 from core.shading import cosine_direction, offset_origin, sample_light
 
@@ -136,6 +137,24 @@ def test_small_move_keeps_far_pixels_and_traces_few_rays():
     assert second.pixels_reused > 0.5 * second.hit_pixels
     assert second.rays_traced < 0.5 * first.rays_traced
     assert second.camera_rays < SIZE[0] * SIZE[1]
+    # re-sampled pixels near the cube take last frame's bit for rays that cannot reach it
+    assert second.memo_reused.sum() > 0
+    assert second.rays_traced + second.rays_reused == first.rays_traced
+
+
+def test_more_samples_than_memo_bits_still_continue_exactly():
+    """Beyond MEMO_BITS rays a pixel keeps no visibility bits: re-sampled pixels trace everything."""
+    anim, cam = Animation(np.random.default_rng(4)), camera()
+    builder, local = SceneBuilder("two_level"), cam.translated(cam.position)
+    settings = dict(samples=MEMO_BITS + 8, mode="ao")
+    first = render(anim.build(builder, cam.position), local, **settings)
+    assert first.memo.shape[1] == 0
+    key, m = anim.instances[1]
+    anim.instances[1] = (key, m @ moved(0.2, 0, 0))
+    scene = anim.build(builder, cam.position)
+    second = render(scene, local, first.pixel_state(), **settings)
+    assert second.pixels_reused > 0 and second.memo_reused.sum() == 0
+    np.testing.assert_array_equal(second.image(), render(scene, local, **settings).image())
 
 
 def test_unchanged_frame_traces_nothing():
