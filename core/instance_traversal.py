@@ -16,7 +16,7 @@ from numba import njit, prange
 
 from .array_views import rows
 from .layout import LEAF, NO_HIT
-from .traversal import (RAYS_PER_TASK, STACK_SIZE, _descend, _pop, clip_to_box, interleaved_block,
+from .traversal import (RAYS_PER_TASK, STACK_SIZE, _descend, _pop, block_range, clip_to_box,
                         interleaved_blocks, trace_ray)
 
 
@@ -109,14 +109,11 @@ def trace_scene(scene, o, d, tmin, tmax, any_hit, scratch):
 def trace_scene_rays(scene, origins, directions, tmin, tmax, any_hit, out_t, out_inst, out_prim, out_u, out_v):
     """Trace all rays in parallel, in blocks of RAYS_PER_TASK that share one scratch."""
     n = origins.shape[0]
-    n_blocks = (n + RAYS_PER_TASK - 1) // RAYS_PER_TASK
-    iterations, per_band = interleaved_blocks(n_blocks)  # balances image regions (traversal.py)
+    iterations, per_band = interleaved_blocks(n, RAYS_PER_TASK)  # balances image regions (traversal.py)
     for i in prange(iterations):
-        b = interleaved_block(i, per_band)
-        if b >= n_blocks:
-            continue
+        start, stop = block_range(i, per_band, n, RAYS_PER_TASK)
         scratch = new_scratch()
-        for r in range(b * RAYS_PER_TASK, min(n, (b + 1) * RAYS_PER_TASK)):
+        for r in range(start, stop):
             t, inst, prim, u, v = trace_scene(scene, origins[r], directions[r], tmin[r], tmax[r], any_hit, scratch)
             out_t[r] = t
             out_inst[r] = inst

@@ -101,20 +101,20 @@ def surface_rays_touch(points, normals, ao_radius, lights, boxes):
     (packed rows, lights.py) from the hit points (offset as the renderer does) can meet one of the boxes."""
     out = np.zeros(points.shape[0], np.bool_)
     for p in prange(points.shape[0]):
-        o = np.empty(3)
+        o, d = np.empty(3), np.empty(3)
         offset_origin(points[p], normals[p], o)
         for k in range(boxes.shape[0]):
-            if _rays_meet_box(o, ao_radius, lights, boxes, k):
+            if _rays_meet_box(o, ao_radius, lights, boxes, k, d):
                 out[p] = True
                 break
     return out
 
 
 @njit(cache=True)
-def _rays_meet_box(o, ao_radius, lights, boxes, b):
+def _rays_meet_box(o, ao_radius, lights, boxes, b, d):
+    """Some AO or shadow ray from o can meet box b (d: scratch for a direction)."""
     if ao_radius > 0.0 and _distance_to_box(o, boxes, b) <= ao_radius:
         return True
-    d = np.empty(3)
     for i in range(lights.shape[0]):
         light = lights[i]
         kind = int(light[0])

@@ -24,7 +24,7 @@ from .layout import NO_HIT
 from .pixel_reuse import segment_meets_any
 from .sampling import pixel_seed, sample_2d
 from .shading import cosine_direction, offset_origin, sample_light
-from .traversal import interleaved_block, interleaved_blocks
+from .traversal import block_range, interleaved_blocks
 
 AO, SHADOW, AO_SHADOW = 1, 2, 3
 MODES = {"ao": AO, "shadow": SHADOW, "ao+shadow": AO_SHADOW}
@@ -45,15 +45,11 @@ def add_samples(scene, points, normals, pixels, active, first, count, mode, ao_d
     docstring; reused[i] counts the rays whose bit was taken from last frame.
     """
     n = active.shape[0]
-    n_blocks = (n + PIXELS_PER_TASK - 1) // PIXELS_PER_TASK
-    iterations, per_band = interleaved_blocks(n_blocks)  # balances image regions (traversal.py)
+    iterations, per_band = interleaved_blocks(n, PIXELS_PER_TASK)  # balances image regions (traversal.py)
     for i in prange(iterations):
-        b = interleaved_block(i, per_band)
-        if b >= n_blocks:
-            continue
-        _sample_pixels(scene, points, normals, pixels, active, b * PIXELS_PER_TASK,
-                       min(n, (b + 1) * PIXELS_PER_TASK), first, count, mode, ao_distance, ambient, lights,
-                       sampler, seed, dim1, sums, sq_sums, counts, rays, status, memo)
+        start, stop = block_range(i, per_band, n, PIXELS_PER_TASK)
+        _sample_pixels(scene, points, normals, pixels, active, start, stop, first, count, mode, ao_distance,
+                       ambient, lights, sampler, seed, dim1, sums, sq_sums, counts, rays, status, memo)
 
 
 @njit(cache=True)

@@ -147,10 +147,10 @@ RUN = 8  # ... in runs of this many consecutive blocks, which keep the tree's ca
 
 
 @njit(cache=True, inline="always")
-def interleaved_blocks(n_blocks):
-    """(iterations, per_band) of a prange over n_blocks blocks in which iteration i runs block
-    interleaved_block(i, per_band): the iterations visit BANDS bands of the blocks in turn, RUN
-    consecutive blocks of a band at a time.
+def interleaved_blocks(n, block_size):
+    """(iterations, per_band) of a prange over the blocks of block_size items among n, in which
+    iteration i runs items block_range(i, per_band, n, block_size): the iterations visit BANDS bands
+    of the blocks in turn, RUN consecutive blocks of a band at a time.
 
     Numba's prange gives each thread one contiguous range of iterations (a static schedule; under the
     OpenMP layer parallel_chunksize does not change that, checked with get_thread_id). Rays and pixels
@@ -161,31 +161,32 @@ def interleaved_blocks(n_blocks):
     dynamic global). Dealt one block at a time, consecutive blocks fell in different bands and the
     one-thread shadow step was 15% slower (cache misses), hence runs. Results do not depend on the order.
     """
+    n_blocks = (n + block_size - 1) // block_size
     per_band = (n_blocks + BANDS - 1) // BANDS
     per_band = (per_band + RUN - 1) // RUN * RUN
     return per_band * BANDS, per_band
 
 
 @njit(cache=True, inline="always")
-def interleaved_block(i, per_band):
-    """The block iteration i runs (a permutation of the iterations; skip blocks >= n_blocks)."""
-    return (i // RUN) % BANDS * per_band + i // (RUN * BANDS) * RUN + i % RUN
+def block_range(i, per_band, n, block_size):
+    """(start, stop) of the items iteration i runs (blocks are a permutation of the iterations;
+    iterations past the last block get an empty range)."""
+    b = (i // RUN) % BANDS * per_band + i // (RUN * BANDS) * RUN + i % RUN
+    start = min(n, b * block_size)
+    return start, min(n, start + block_size)
 
 
 @njit(cache=True, parallel=True)
 def trace_rays(tree, origins, directions, tmin, tmax, any_hit, out_t, out_prim, out_u, out_v):
     """Trace all rays in parallel, in blocks of RAYS_PER_TASK that share one traversal stack."""
     n = origins.shape[0]
-    n_blocks = (n + RAYS_PER_TASK - 1) // RAYS_PER_TASK
-    iterations, per_band = interleaved_blocks(n_blocks)
+    iterations, per_band = interleaved_blocks(n, RAYS_PER_TASK)
     for i in prange(iterations):
-        b = interleaved_block(i, per_band)
-        if b >= n_blocks:
-            continue
+        start, stop = block_range(i, per_band, n, RAYS_PER_TASK)
         stack_node = np.empty(STACK_SIZE, np.int32)
         stack_t = np.empty((STACK_SIZE, 3))
         inv = np.empty(3)
-        for r in range(b * RAYS_PER_TASK, min(n, (b + 1) * RAYS_PER_TASK)):
+        for r in range(start, stop):
             t, prim, u, v = trace_ray(tree, origins[r], directions[r], tmin[r], tmax[r], any_hit,
                                       stack_node, stack_t, inv)
             out_t[r] = t

@@ -25,6 +25,7 @@ Why the two import spellings: installed, the package is
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import importlib
 import os
@@ -90,8 +91,19 @@ def _versioned(base: Path) -> Path:
 
 
 def source_digest(folder: Path | None = None) -> str:
-    """16 hex digits that change whenever any of core's source files (in `folder`) changes."""
-    folder = Path(__file__).resolve().parent.parent / "core" if folder is None else Path(folder)
+    """16 hex digits that change whenever any of core's source files (in `folder`, default: this
+    installation's core) changes."""
+    return _digest(Path(folder)) if folder is not None else _installed_digest()
+
+
+@functools.lru_cache(maxsize=1)
+def _installed_digest() -> str:
+    """Read once a process: the status line asks for the cache folder on every tick until the
+    kernels are ready, and the installed sources do not change under a running process."""
+    return _digest(Path(__file__).resolve().parent.parent / "core")
+
+
+def _digest(folder: Path) -> str:
     h = hashlib.blake2b(digest_size=8)
     for path in sorted(folder.glob("*.py")):
         h.update(path.name.encode())
