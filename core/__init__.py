@@ -5,7 +5,7 @@ Public API:
     intersect(tree, origins, directions, tmin=0.0, tmax=inf) -> Hits(t, prim, u, v)
     occluded(tree, origins, directions, tmin=0.0, tmax=inf) -> (R,) bool
     KdTree.stats() -> dict
-    Camera(matrix_world, fov) / Camera(matrix_world, ortho_scale=s)
+    Camera(matrix_world, fov) / Camera(matrix_world, ortho_scale=s); clip_start, clip_end, shift
     Light.point / Light.sun / Light.spot / Light.area
     render_preview(tree, camera, width, height, *, mode="ao", samples=16, ...) -> (H, W, 4) float32
     PreviewRender(tree, camera, width, height, ..., previous=None)   progressive: step(), image(), done;

@@ -9,9 +9,13 @@ class Camera:
     fov: full field of view in radians along the larger image dimension (Blender's sensor fit AUTO).
     ortho_scale: width of the view along the larger image dimension (Blender's `ortho_scale`).
     clip_start, clip_end: distances along the view axis; geometry outside is not seen.
+    shift: (x, y) lens shift in units of the larger image dimension's view extent (Blender's shift_x and
+        shift_y with sensor fit AUTO): the image plane moves by shift times its larger extent, so the
+        view direction of the image centre changes while the camera stays put (architectural shots).
     """
 
-    def __init__(self, matrix_world, fov=None, *, ortho_scale=None, clip_start=0.0, clip_end=np.inf):
+    def __init__(self, matrix_world, fov=None, *, ortho_scale=None, clip_start=0.0, clip_end=np.inf,
+                 shift=(0.0, 0.0)):
         m = np.asarray(matrix_world, np.float64)
         if m.shape != (4, 4) or not np.isfinite(m).all():
             raise ValueError(f"camera matrix_world must be a finite 4x4 matrix, got shape {m.shape}")
@@ -25,6 +29,10 @@ class Camera:
             raise ValueError(f"camera clip range must satisfy 0 <= clip_start < clip_end, got {clip_start}, {clip_end}")
         if abs(np.linalg.det(m[:3, :3])) < 1e-12:
             raise ValueError("camera matrix_world is singular (zero scale)")
+        shift = np.asarray(shift, np.float64)
+        if shift.shape != (2,) or not np.isfinite(shift).all():
+            raise ValueError(f"camera shift must be two finite numbers (x, y), got {shift.tolist()}")
+        self.shift = (float(shift[0]), float(shift[1]))
         self.matrix_world = m
         self.fov, self.ortho_scale = fov, ortho_scale
         self.clip_start, self.clip_end = float(clip_start), float(clip_end)
@@ -38,16 +46,16 @@ class Camera:
         m = self.matrix_world.copy()
         m[:3, 3] -= np.asarray(offset, np.float64)
         return Camera(m, self.fov, ortho_scale=self.ortho_scale, clip_start=self.clip_start,
-                      clip_end=self.clip_end)
+                      clip_end=self.clip_end, shift=self.shift)
 
     def rays(self, width, height):
         """Rays through pixel centres, row 0 at the top: (origins, directions, tmin, tmax), (H*W, 3).
 
         Directions have unit length along the view axis, so tmin/tmax are the clip distances.
         """
-        half_w, half_h = self._half_extent(width, height)
-        x = ((np.arange(width) + 0.5) / width * 2.0 - 1.0) * half_w
-        y = (1.0 - (np.arange(height) + 0.5) / height * 2.0) * half_h
+        left, right, bottom, top = self.image_plane(width, height)
+        x = left + (np.arange(width) + 0.5) / width * (right - left)
+        y = top - (np.arange(height) + 0.5) / height * (top - bottom)
         xx, yy = np.meshgrid(x, y)
         rot = self.matrix_world[:3, :3] / np.linalg.norm(self.matrix_world[:3, :3], axis=0)
         n = width * height
@@ -61,6 +69,14 @@ class Camera:
             directions = np.broadcast_to(-rot[:, 2], (n, 3)).copy()
         return origins, directions, np.full(n, self.clip_start), np.full(n, self.clip_end)
 
+    def image_plane(self, width, height):
+        """(left, right, bottom, top) of the image in camera space: on the plane z = -1 (perspective) or
+        in world units (orthographic); the shift moves it by shift times its larger extent."""
+        half_w, half_h = self._half_extent(width, height)
+        larger = 2.0 * max(half_w, half_h)
+        cx, cy = self.shift[0] * larger, self.shift[1] * larger
+        return cx - half_w, cx + half_w, cy - half_h, cy + half_h
+
     def _half_extent(self, width, height):
         """Half the image plane's size at distance 1 (perspective) or in world units (ortho)."""
         half = np.tan(self.fov / 2.0) if self.fov is not None else self.ortho_scale / 2.0
@@ -70,4 +86,5 @@ class Camera:
 
     def __repr__(self):
         kind = f"fov={self.fov:.4f}" if self.fov is not None else f"ortho_scale={self.ortho_scale}"
-        return f"Camera(position={self.position.round(4).tolist()}, {kind})"
+        shift = f", shift={self.shift}" if any(self.shift) else ""
+        return f"Camera(position={self.position.round(4).tolist()}, {kind}{shift})"

@@ -9,7 +9,8 @@ Camera: Blender's `lens` and sensor size give the field of view along the
 *fitted* image axis (sensor fit AUTO: the larger one; HORIZONTAL: width;
 VERTICAL: height), `ortho_scale` the extent along the same axis. core wants
 both along the larger image dimension, so the fitted value is rescaled by
-the image aspect (as BKE_camera_params_compute_viewplane does).
+the image aspect (as BKE_camera_params_compute_viewplane does). Lens shift is measured
+along the fitted axis too and rescaled the same way.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ class CameraInput:
     ortho_scale: float | None  # extent along the larger image dimension (orthographic)
     clip_start: float
     clip_end: float
+    shift: tuple[float, float] = (0.0, 0.0)  # lens shift in units of the larger image dimension
 
     @property
     def position(self) -> np.ndarray:
@@ -44,6 +46,7 @@ class CameraInput:
             "ortho_scale": self.ortho_scale,
             "clip_start": self.clip_start,
             "clip_end": self.clip_end,
+            "shift": self.shift,
         }
 
 
@@ -93,6 +96,19 @@ def to_larger_dimension(extent: float, sensor_fit: str, width: int, height: int)
     return extent * max(width, height) / min(width, height)
 
 
+def shift_to_larger_dimension(shift: float, sensor_fit: str, width: int, height: int) -> float:
+    """Rescale a lens shift from Blender's unit (the fitted axis's extent) to the larger dimension's.
+
+    Blender moves the view plane by shift * (pixels along the fitted axis) (BKE_camera_params_compute_
+    viewplane; Cycles' viewplane agrees), the inverse of the rescaling of an extent.
+    """
+    axis = fitted_axis(sensor_fit, width, height)
+    larger = "x" if width >= height else "y"
+    if axis == larger:
+        return shift
+    return shift * min(width, height) / max(width, height)
+
+
 def perspective_fov(lens: float, sensor_width: float, sensor_height: float,
                     sensor_fit: str, width: int, height: int) -> float:
     """Field of view in radians along the larger image dimension."""
@@ -122,14 +138,15 @@ def camera_input(data, matrix_world, width: int, height: int) -> tuple[CameraInp
     warnings = []
     if data.type == "PANO":
         raise PreviewError("panoramic cameras are not supported: use a perspective or orthographic camera")
-    if data.shift_x or data.shift_y:
-        warnings.append("camera shift is ignored by the preview")
+    shift = tuple(shift_to_larger_dimension(float(v), data.sensor_fit, width, height)
+                  for v in (data.shift_x, data.shift_y))
     fov = ortho = None
     if data.type == "ORTHO":
         ortho = orthographic_scale(data.ortho_scale, data.sensor_fit, width, height)
     else:
         fov = perspective_fov(data.lens, data.sensor_width, data.sensor_height, data.sensor_fit, width, height)
-    camera = CameraInput(normalized_matrix(matrix_world), fov, ortho, float(data.clip_start), float(data.clip_end))
+    camera = CameraInput(normalized_matrix(matrix_world), fov, ortho, float(data.clip_start), float(data.clip_end),
+                         shift)
     return camera, warnings
 
 

@@ -12,6 +12,8 @@ from tests.addon_support import add_top_camera
 import bpy  # noqa: E402
 import numpy as np  # noqa: E402
 
+import core  # noqa: E402
+
 from kd_addon import scene_input  # noqa: E402
 from kd_addon.errors import PreviewError  # noqa: E402
 from tests import bpy_scenes as scenes  # noqa: E402
@@ -51,22 +53,23 @@ def test_auto_fit_fov_equals_blenders_angle(scene):
 @pytest.mark.parametrize("kind", ["PERSP", "ORTHO"])
 @pytest.mark.parametrize("fit", ["AUTO", "HORIZONTAL", "VERTICAL"])
 @pytest.mark.parametrize("size", [(160, 90), (90, 160), (100, 100)])
-def test_view_extent_matches_blender_view_frame(scene, kind, fit, size):
-    """Camera.view_frame gives the corners of Blender's own image plane (at z = -1 for perspective)."""
+@pytest.mark.parametrize("shift", [(0.0, 0.0), (0.3, -0.2)])
+def test_view_extent_matches_blender_view_frame(scene, kind, fit, size, shift):
+    """Camera.view_frame gives the corners of Blender's own image plane (at z = -1 for perspective),
+    lens shift included: core's image plane from the converted camera has the same corners."""
     cam = scenes.add_camera()
     cam.data.type, cam.data.sensor_fit, cam.data.lens, cam.data.ortho_scale = kind, fit, 28.0, 7.0
+    cam.data.shift_x, cam.data.shift_y = shift
     scene.render.resolution_x, scene.render.resolution_y = size
     corners = np.array([tuple(v) for v in cam.data.view_frame(scene=scene)])
-    half_x, half_y = np.abs(corners[:, 0]).max(), np.abs(corners[:, 1]).max()
     depth = np.abs(corners[:, 2]).max() if kind == "PERSP" else 1.0
-    larger_half = (half_x if size[0] >= size[1] else half_y) / depth
-    converted, _ = scene_input.camera_input(cam.data, cam.matrix_world, *size)
-    if kind == "PERSP":
-        assert math.tan(converted.fov / 2) == pytest.approx(larger_half, rel=1e-5)
-        assert converted.ortho_scale is None
-    else:
-        assert converted.ortho_scale / 2 == pytest.approx(larger_half, rel=1e-5)
-        assert converted.fov is None
+    expected = (corners[:, 0].min() / depth, corners[:, 0].max() / depth,
+                corners[:, 1].min() / depth, corners[:, 1].max() / depth)
+    converted, warnings = scene_input.camera_input(cam.data, cam.matrix_world, *size)
+    assert warnings == []
+    assert (converted.fov is None) == (kind == "ORTHO") and (converted.ortho_scale is None) == (kind == "PERSP")
+    plane = core.Camera(**converted.keywords()).image_plane(*size)
+    assert plane == pytest.approx(expected, rel=1e-5, abs=1e-6)
 
 
 def test_camera_matrix_drops_scale_and_keeps_clip(scene):
@@ -82,8 +85,6 @@ def test_camera_matrix_drops_scale_and_keeps_clip(scene):
 def test_camera_problems_are_named():
     with pytest.raises(PreviewError, match="panoramic cameras are not supported"):
         scene_input.camera_input(camera_data(type="PANO"), np.eye(4), 10, 10)
-    _, warnings = scene_input.camera_input(camera_data(shift_x=0.1), np.eye(4), 10, 10)
-    assert warnings == ["camera shift is ignored by the preview"]
     with pytest.raises(PreviewError, match="degenerate"):
         scene_input.camera_input(camera_data(), np.diag([0.0, 1.0, 1.0, 1.0]), 10, 10)
 

@@ -137,6 +137,28 @@ def test_orthographic_camera_sees_parallel_projection():
     assert hit_mask(img).sum() == 20 * 20  # exactly half the width and height
 
 
+def test_lens_shift_moves_the_image_plane():
+    """Shift is measured in the larger image extent (Blender's shift_x/shift_y with sensor fit AUTO).
+    Orthographic: a shift of (0.25, 0.25) of a 1-unit view moves the quad [0, 0.25]^2 from the upper
+    right quarter's corner to columns 10-19, rows 20-29 of a 40-pixel image. Perspective: the shifted
+    camera's rays are a window of the rays of a wider unshifted camera with the same pixel size."""
+    tris = quad((0.125, 0.125, 0), (0.125, 0, 0), (0, 0.125, 0))
+    m = np.eye(4)
+    m[:3, 3] = (0, 0, 5.0)
+    img = render(tris, core.Camera(m, ortho_scale=1.0, shift=(0.25, 0.25)), size=40, samples=1)
+    expected = np.zeros((40, 40), bool)
+    expected[20:30, 10:20] = True
+    np.testing.assert_array_equal(hit_mask(img), expected)
+
+    shifted = core.Camera(m, 2 * np.arctan(1.0), shift=(0.25, -0.125)).rays(40, 30)  # plane x in [-0.5, 1.5]
+    wide = core.Camera(m, 2 * np.arctan(2.0)).rays(80, 80)  # the same pixel size, 0.05
+    _, d_wide = (a.reshape(80, 80, 3) for a in wide[:2])
+    window = d_wide[40 - 15 + 5:40 + 15 + 5, 30:70]  # rows of y in [-1, 0.5], columns of x in [-0.5, 1.5]
+    np.testing.assert_allclose(shifted[1].reshape(30, 40, 3), window, atol=1e-12)
+    with pytest.raises(ValueError, match="shift"):
+        core.Camera(m, 1.0, shift=(np.nan, 0.0))
+
+
 def test_bad_settings_are_named():
     tree = core.build_kdtree(floor(0.0))
     cam = look_down((0, 0, 1.0))
