@@ -12,7 +12,8 @@ Usage: python benchmarks/bench_render.py [--size 512] [--runs 3] [--reference-sa
    OUT/render_rmse_vs_time.png with two Pareto fronts marked: raw estimates only, and with denoised rows.
    Also the denoiser's bias at convergence: RMSE between the reference and the denoised reference.
 3. Cycles' AO pass of the same .blend and camera at matching sample counts (raw, Cycles' denoiser off),
-   timed in the same run, RMSE against the same reference; our time / Cycles' time at equal RMSE
+   timed in the same run, round-robin with our rows of the same sample count (sweep() says why), RMSE
+   against the same reference; our time / Cycles' time at equal RMSE
    (interpolated on our Pareto front in log-log), for the raw front and the front with the denoiser.
 4. Seed 000 Table 3's setting: 640x480, camera rays and one shadow ray to a point light, the tree
    rebuilt from scratch each time; median time to image.
@@ -38,6 +39,7 @@ BUILD_CONFIGS = {
     "median": {"builder": "median"},
     "binned leaf_size=8": {"leaf_size": 8},
     "binned max_depth=28": {"max_depth": 28},
+    "binned clip=False": {"clip": False},
 }
 
 
@@ -57,53 +59,71 @@ def rmse(img, ref):
     return float(np.sqrt(np.mean((img[..., 0][mask] - ref[..., 0][mask]) ** 2)))
 
 
-def timed_render(scene, camera, size, options, samples, sampler, ao_distance, runs, error_target=None,
-                 denoise=False):
-    """Median time of build + render (+ denoise), and the image of the last run."""
-    times = []
-    for _ in range(runs):
-        t = time.perf_counter()
-        tree = core.build_kdtree(scene.triangles, **options)
-        img = core.render_preview(tree, camera, size, size, samples=samples, sampler=sampler,
-                                  ao_distance=ao_distance, error_target=error_target, denoise=denoise)
-        times.append(time.perf_counter() - t)
-    return float(np.median(times)), img
+def one_render(scene, camera, size, options, samples, sampler, ao_distance, error_target=None, denoise=False):
+    """(seconds of build + render (+ denoise), image)."""
+    t = time.perf_counter()
+    tree = core.build_kdtree(scene.triangles, **options)
+    img = core.render_preview(tree, camera, size, size, samples=samples, sampler=sampler,
+                              ao_distance=ao_distance, error_target=error_target, denoise=denoise)
+    return time.perf_counter() - t, img
+
+
+def our_methods():
+    """(method name, build options, sampler, denoise) of every swept configuration of ours."""
+    methods = []
+    for label, options in BUILD_CONFIGS.items():
+        for sampler in ("sobol", "random") if label == "binned" else ("sobol",):
+            for denoise in (False, True) if label == "binned" else (False,):
+                methods.append((f"kd {label} {sampler}" + (" denoised" if denoise else ""), options, sampler,
+                                denoise))
+    return methods
 
 
 def sweep(scene, camera, ref, args):
+    """Every method at every sample count, Cycles included (unless --no-cycles).
+
+    The machine's speed drifts by up to 1.5x over a long run (shared host), so each sample count is
+    measured on its own, round-robin: run r of every method, Cycles' too, before run r + 1, and the
+    median of --runs is kept. A method and the Cycles render it is compared with are timed minutes,
+    not half an hour, apart."""
     rows = []
-    for label, options in BUILD_CONFIGS.items():
-        samplers = ("sobol", "random") if label == "binned" else ("sobol",)
-        for sampler in samplers:
-            for denoise in (False, True) if label == "binned" else (False,):
-                for spp in args.samples:
-                    seconds, img = timed_render(scene, camera, args.size, options, spp, sampler,
-                                                args.ao_distance, args.runs, denoise=denoise)
-                    rows.append({"method": f"kd {label} {sampler}" + (" denoised" if denoise else ""),
-                                 "samples": spp, "seconds": seconds, "rmse": rmse(img, ref)})
-                    print(f"  {rows[-1]['method']:>32} spp {spp:>4}: {seconds:8.3f} s  "
-                          f"RMSE {rows[-1]['rmse']:.5f}", flush=True)
+    for spp in args.samples:
+        times, images = {}, {}
+        for _ in range(args.runs):
+            for method, options, sampler, denoise in our_methods():
+                seconds, images[method] = one_render(scene, camera, args.size, options, spp, sampler,
+                                                     args.ao_distance, denoise=denoise)
+                times.setdefault(method, []).append(seconds)
+            if not args.no_cycles:
+                images[CYCLES], seconds = cycles_image(scene, ref, args, spp)
+                times.setdefault(CYCLES, []).append(seconds)
+        for method in times:
+            rows.append({"method": method, "samples": spp, "seconds": float(np.median(times[method])),
+                         "rmse": rmse(images[method], ref)})
+            print(f"  {method:>32} spp {spp:>4}: {rows[-1]['seconds']:8.3f} s  RMSE {rows[-1]['rmse']:.5f}",
+                  flush=True)
     for target in args.error_targets:  # adaptive: pixels stop once their standard error is below target
-        seconds, img = timed_render(scene, camera, args.size, {}, max(args.samples), "sobol", args.ao_distance,
-                                    args.runs, error_target=target)
-        rows.append({"method": "kd binned sobol adaptive", "samples": max(args.samples), "seconds": seconds,
-                     "rmse": rmse(img, ref), "error_target": target})
-        print(f"  {rows[-1]['method']:>32} target {target:g}: {seconds:8.3f} s  RMSE {rows[-1]['rmse']:.5f}",
+        runs = [one_render(scene, camera, args.size, {}, max(args.samples), "sobol", args.ao_distance,
+                           error_target=target) for _ in range(args.runs)]
+        rows.append({"method": "kd binned sobol adaptive", "samples": max(args.samples),
+                     "seconds": float(np.median([r[0] for r in runs])), "rmse": rmse(runs[-1][1], ref),
+                     "error_target": target})
+        print(f"  {rows[-1]['method']:>32} target {target:g}: {rows[-1]['seconds']:8.3f} s  RMSE {rows[-1]['rmse']:.5f}",
               flush=True)
     return rows
 
 
-def cycles_rows(scene, ref, args):
+CYCLES = "cycles ao pass"
+
+
+def cycles_image(scene, ref, args, spp):
+    """Cycles' AO pass as an (H, W, 4) image like ours (AO in R), and its render seconds."""
     from cycles_ao import render_cycles_ao
-    rows = []
-    for spp in args.samples:
-        img, seconds = render_cycles_ao(blend_path(scene.name), args.size, args.size, spp,
-                                        ao_distance=args.ao_distance, threads=args.threads)
-        full = np.zeros_like(ref)
-        full[..., 0] = img
-        rows.append({"method": "cycles ao pass", "samples": spp, "seconds": seconds, "rmse": rmse(full, ref)})
-        print(f"  {'cycles ao pass':>32} spp {spp:>4}: {seconds:8.3f} s  RMSE {rows[-1]['rmse']:.5f}", flush=True)
-    return rows
+    img, seconds = render_cycles_ao(blend_path(scene.name), args.size, args.size, spp,
+                                    ao_distance=args.ao_distance, threads=args.threads)
+    full = np.zeros_like(ref)
+    full[..., 0] = img
+    return full, seconds
 
 
 def pareto(rows):
@@ -209,8 +229,9 @@ def main():
 
     ref = reference_image(scene, camera, args.size, args.reference_samples, args.ao_distance)
     rows = sweep(scene, camera, ref, args)
-    fronts = {"Pareto front, raw (KD Preview)": pareto([r for r in rows if "denoised" not in r["method"]]),
-              "Pareto front, with denoiser (KD Preview)": pareto(rows)}
+    ours = [r for r in rows if r["method"] != CYCLES]
+    fronts = {"Pareto front, raw (KD Preview)": pareto([r for r in ours if "denoised" not in r["method"]]),
+              "Pareto front, with denoiser (KD Preview)": pareto(ours)}
     print(f"\ndenoiser bias at convergence: RMSE(denoised reference, reference) = "
           f"{denoiser_bias(scene, camera, ref, args):.5f}")
     by = {(r["method"], r["samples"]): r for r in rows}
@@ -220,8 +241,7 @@ def main():
         if a and b:
             print(f"  {spp:>4} spp: {b['rmse'] / a['rmse']:.2f}x")
     if not args.no_cycles:
-        crow = cycles_rows(scene, ref, args)
-        rows += crow
+        crow = [r for r in rows if r["method"] == CYCLES]
         print("\nOur time / Cycles' time at equal RMSE (target <= 0.2; Cycles raw, no denoiser):")
         print(f"  {'':>44} {'ours raw':>12} {'ours denoised':>14}")
         for r in crow:
