@@ -135,6 +135,13 @@ def pareto(rows):
     return front
 
 
+def our_fronts(rows):
+    """Our two Pareto fronts, raw rows only and with the denoised ones (Cycles' rows left out)."""
+    ours = [r for r in rows if r["method"] != CYCLES]
+    return {"Pareto front, raw (KD Preview)": pareto([r for r in ours if "denoised" not in r["method"]]),
+            "Pareto front, with denoiser (KD Preview)": pareto(ours)}
+
+
 def time_at_rmse(front, target):
     """Our time at a given RMSE, interpolated on the Pareto front in log-log (None if out of range)."""
     e = np.log([r["rmse"] for r in front])
@@ -166,7 +173,8 @@ def plot(rows, fronts, path):
     fig, ax = plt.subplots(figsize=(8, 6))
     for method in sorted({r["method"] for r in rows}):
         pts = sorted((r["seconds"], r["rmse"]) for r in rows if r["method"] == method)
-        ax.plot(*zip(*pts), marker="o", ms=3, lw=1, label=method)
+        style = dict(color="red", marker="s", ms=4, lw=2) if method == CYCLES else dict(marker="o", ms=3, lw=1)
+        ax.plot(*zip(*pts), label=method, **style)
     for (label, front), style in zip(fronts.items(), ("k--", "k:")):
         ax.plot([r["seconds"] for r in front], [r["rmse"] for r in front], style, lw=2, label=label)
     ax.set_xscale("log")
@@ -207,7 +215,10 @@ def main():
     ap.add_argument("--no-cycles", action="store_true")
     ap.add_argument("--only-seed000", action="store_true")
     ap.add_argument("--out", default=str(HERE / "out"))
+    ap.add_argument("--replot", action="store_true", help="only redraw OUT's plot from OUT/render_sweep.csv")
     args = ap.parse_args()
+    if args.replot:
+        return replot(Path(args.out))
     args.samples = [int(s) for s in args.samples.split(",")]
     args.error_targets = [float(s) for s in args.error_targets.split(",") if s]
     out = Path(args.out)
@@ -229,9 +240,7 @@ def main():
 
     ref = reference_image(scene, camera, args.size, args.reference_samples, args.ao_distance)
     rows = sweep(scene, camera, ref, args)
-    ours = [r for r in rows if r["method"] != CYCLES]
-    fronts = {"Pareto front, raw (KD Preview)": pareto([r for r in ours if "denoised" not in r["method"]]),
-              "Pareto front, with denoiser (KD Preview)": pareto(ours)}
+    fronts = our_fronts(rows)
     print(f"\ndenoiser bias at convergence: RMSE(denoised reference, reference) = "
           f"{denoiser_bias(scene, camera, ref, args):.5f}")
     by = {(r["method"], r["samples"]): r for r in rows}
@@ -257,6 +266,16 @@ def main():
         w.writerows(rows)
     plot(rows, fronts, out / "render_rmse_vs_time.png")
     print(f"\nwrote {out / 'render_sweep.csv'} and {out / 'render_rmse_vs_time.png'}")
+
+
+def replot(out):
+    """Redraw the plot from a sweep's CSV (no rendering)."""
+    with open(out / "render_sweep.csv", newline="") as f:
+        rows = [{**r, "samples": int(r["samples"]), "seconds": float(r["seconds"]), "rmse": float(r["rmse"])}
+                for r in csv.DictReader(f)]
+    fronts = our_fronts(rows)
+    plot(rows, fronts, out / "render_rmse_vs_time.png")
+    print(f"wrote {out / 'render_rmse_vs_time.png'}")
 
 
 if __name__ == "__main__":

@@ -1,0 +1,72 @@
+"""The denoiser's cost and gain: filter time and RMSE, raw against denoised, on suzanne-251k.
+
+Usage: python benchmarks/bench_denoise.py [--runs 5] [--size 512] [--samples 1,4,16,64] [--threads N]
+
+For each sample count one Sobol render (binned tree, ao_distance 1.0) is made, then the filter
+(`core.denoise_pixels` on the render's accumulators, what `PreviewRender.image(denoise=True)` runs) is
+timed --runs times; the median is printed with the filter's share of the render time. RMSE is taken on
+hit pixels against the cached 1,024-spp reference that bench_render.py writes (skipped when it is
+missing). A first untimed filter call absorbs the JIT compile, reported on its own line.
+"""
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path[:0] = [str(HERE), str(HERE.parent)]
+
+import core  # noqa: E402
+from core.denoise import SOBOL_VARIANCE_DECAY  # noqa: E402
+from scenes import DATA_DIR, load_scene  # noqa: E402
+
+
+def rmse(img, ref):
+    mask = ref[..., 3] > 0.5
+    return float(np.sqrt(np.mean((img[..., 0][mask] - ref[..., 0][mask]) ** 2)))
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--runs", type=int, default=5)
+    ap.add_argument("--size", type=int, default=512)
+    ap.add_argument("--samples", default="1,4,16,64")
+    ap.add_argument("--threads", type=int, default=None)
+    args = ap.parse_args()
+    scene = load_scene("suzanne-251k")
+    camera = core.Camera(scene.camera_matrix, scene.camera_fov)
+    ref_path = DATA_DIR / f"ref_{scene.name}_{args.size}_1024spp_ao1.0.npy"
+    ref = np.load(ref_path) if ref_path.exists() else None
+    tree = core.build_kdtree(scene.triangles)
+
+    def filtered(render):
+        return core.denoise_pixels(args.size, args.size, render.pixels, render.points, render.normals,
+                                   render.sums, render.sq_sums, render.counts,
+                                   variance_decay=SOBOL_VARIANCE_DECAY, threads=args.threads)
+
+    warm = core.PreviewRender(tree, camera, 16, 16, samples=1)
+    warm.step(1)
+    t = time.perf_counter()
+    core.denoise_pixels(16, 16, warm.pixels, warm.points, warm.normals, warm.sums, warm.sq_sums, warm.counts)
+    print(f"JIT compile / cache load: {time.perf_counter() - t:.2f} s (excluded)")
+    print(f"{'spp':>5} {'render s':>9} {'filter ms':>10} {'share':>6} {'RMSE raw':>9} {'denoised':>9}")
+    for spp in (int(s) for s in args.samples.split(",")):
+        render = core.PreviewRender(tree, camera, args.size, args.size, samples=spp, threads=args.threads)
+        t = time.perf_counter()
+        render.step(spp)
+        render_s = time.perf_counter() - t
+        times = []
+        for _ in range(args.runs):
+            t = time.perf_counter()
+            img = filtered(render)
+            times.append(time.perf_counter() - t)
+        ms = float(np.median(times)) * 1e3
+        errors = (f"{rmse(render.image(), ref):9.5f} {rmse(img, ref):9.5f}" if ref is not None
+                  else f"{'-':>9} {'-':>9}")
+        print(f"{spp:>5} {render_s:9.3f} {ms:10.1f} {ms / 1e3 / render_s:6.0%} {errors}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
