@@ -14,7 +14,10 @@ settings (the message names it), 2 bad command-line usage, 130 interrupted.
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
+import threading
+from contextlib import contextmanager
 from pathlib import Path
 
 import bpy
@@ -117,8 +120,37 @@ def _print_row(result, path) -> None:
         print(f"{COMMAND_ID}: warning: frame {result.frame}: {warning}", file=sys.stderr, flush=True)
 
 
+@contextmanager
+def interrupt_flag():
+    """An Event that Ctrl-C (SIGINT) sets, for the job loop to poll, while SIGINT still raises
+    KeyboardInterrupt at once. Why both: an exception raised while Blender runs Python on our behalf
+    (a handler or driver during frame_set, say) is printed and cleared by Blender, and the render
+    would go on; the flag survives that and stops the job at its next tick. Outside the main thread
+    (where signal handlers cannot be set) the flag is never set and Ctrl-C behaves as before."""
+    flag = threading.Event()
+
+    def on_sigint(signum, frame):
+        flag.set()
+        raise KeyboardInterrupt
+
+    try:
+        previous = signal.signal(signal.SIGINT, on_sigint)
+    except ValueError:  # not the main thread
+        yield flag
+        return
+    try:
+        yield flag
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 def run(args) -> int:
     """Render args.frames of the chosen scene into args.out; return the exit code."""
+    with interrupt_flag() as interrupted:
+        return _run(args, interrupted.is_set)
+
+
+def _run(args, cancelled) -> int:
     try:
         config = make_config(args)
         scene = load_scene(args)
@@ -128,7 +160,7 @@ def run(args) -> int:
         print(f"KD Preview: scene '{scene.name}', {len(frames)} frame(s), mode {config.settings.mode}, "
               f"{config.settings.samples} samples, {config.resolution_percentage}% resolution -> {args.out}")
         print(HEADER)
-        _run_claimed(job)
+        _run_claimed(job, cancelled)
     except PreviewError as error:
         print(f"{COMMAND_ID}: error: {error}", file=sys.stderr)
         return 1
@@ -139,10 +171,10 @@ def run(args) -> int:
     return 0
 
 
-def _run_claimed(job) -> None:
+def _run_claimed(job, cancelled) -> None:
     claim(job)
     try:
-        run_job(job)
+        run_job(job, cancelled)
     finally:
         release(job)
         job.close()
