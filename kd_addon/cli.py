@@ -126,18 +126,20 @@ def interrupt_flag():
     KeyboardInterrupt at once. Why both: an exception raised while Blender runs Python on our behalf
     (a handler or driver during frame_set, say) is printed and cleared by Blender, and the render
     would go on; the flag survives that and stops the job at its next tick. Outside the main thread
-    (where signal handlers cannot be set) the flag is never set and Ctrl-C behaves as before."""
+    (where signal handlers cannot be set), or when SIGINT's handler was not installed from Python (an
+    embedding program's own, which Python could not put back), the flag is never set and Ctrl-C
+    behaves as before."""
     flag = threading.Event()
 
     def on_sigint(signum, frame):
         flag.set()
         raise KeyboardInterrupt
 
-    try:
-        previous = signal.signal(signal.SIGINT, on_sigint)
-    except ValueError:  # not the main thread
+    previous = signal.getsignal(signal.SIGINT)
+    if previous is None or threading.current_thread() is not threading.main_thread():
         yield flag
         return
+    signal.signal(signal.SIGINT, on_sigint)
     try:
         yield flag
     finally:

@@ -185,3 +185,21 @@ def test_ctrl_c_outlives_an_interrupt_that_blender_swallows():
             run_job(job, flag.is_set)
         assert ticks == []  # polled before the first tick
     assert signal.getsignal(signal.SIGINT) is before
+
+
+def test_interrupt_flag_off_the_main_thread_leaves_sigint_alone():
+    """Signal handlers can only be set on the main thread: elsewhere the flag is inert, nothing raises
+    and SIGINT's handler is untouched (an embedding program's own handler is left alone the same way)."""
+    import threading
+    from kd_addon import cli
+
+    before, seen = signal.getsignal(signal.SIGINT), []
+
+    def worker():
+        with cli.interrupt_flag() as flag:
+            seen.append((flag.is_set(), signal.getsignal(signal.SIGINT) is before))
+
+    thread = threading.Thread(target=worker)
+    thread.start()
+    thread.join()
+    assert seen == [(False, True)] and signal.getsignal(signal.SIGINT) is before
