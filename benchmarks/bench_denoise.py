@@ -19,13 +19,9 @@ HERE = Path(__file__).resolve().parent
 sys.path[:0] = [str(HERE), str(HERE.parent)]
 
 import core  # noqa: E402
+from bench_render import reference_path, rmse  # noqa: E402
 from core.denoise import SOBOL_VARIANCE_DECAY  # noqa: E402
-from scenes import DATA_DIR, load_scene  # noqa: E402
-
-
-def rmse(img, ref):
-    mask = ref[..., 3] > 0.5
-    return float(np.sqrt(np.mean((img[..., 0][mask] - ref[..., 0][mask]) ** 2)))
+from scenes import load_scene  # noqa: E402
 
 
 def main():
@@ -37,7 +33,7 @@ def main():
     args = ap.parse_args()
     scene = load_scene("suzanne-251k")
     camera = core.Camera(scene.camera_matrix, scene.camera_fov)
-    ref_path = DATA_DIR / f"ref_{scene.name}_{args.size}_1024spp_ao1.0.npy"
+    ref_path = reference_path(scene, args.size, 1024, 1.0)
     ref = np.load(ref_path) if ref_path.exists() else None
     tree = core.build_kdtree(scene.triangles)
 

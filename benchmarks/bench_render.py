@@ -43,8 +43,13 @@ BUILD_CONFIGS = {
 }
 
 
+def reference_path(scene, size, samples, ao_distance):
+    """Where the converged reference image is cached."""
+    return DATA_DIR / f"ref_{scene.name}_{size}_{samples}spp_ao{ao_distance}.npy"
+
+
 def reference_image(scene, camera, size, samples, ao_distance):
-    path = DATA_DIR / f"ref_{scene.name}_{size}_{samples}spp_ao{ao_distance}.npy"
+    path = reference_path(scene, size, samples, ao_distance)
     if path.exists():
         return np.load(path)
     print(f"computing the {samples}-sample reference (cached at {path}) ...", flush=True)

@@ -102,8 +102,9 @@ def denoise_pixels(width, height, pixels, points, normals, sums, sq_sums, counts
                             float(sigma_plane), float(variance_decay), var)
             col_b, var_b = np.empty_like(col), np.empty_like(var)
             rec = np.empty((n, 9))
+            pack_geometry(pos, nrm, rec)
             for i in range(int(iterations)):
-                pack_pixels(pos, nrm, col, var, rec)
+                pack_estimates(col, var, rec)
                 atrous_pass(valid, rec, foot, col, height, width, 1 << i, float(sigma_luminance),
                             float(sigma_normal), float(sigma_plane), col_b, var_b)
                 col, col_b, var, var_b = col_b, col, var_b, var
@@ -202,9 +203,10 @@ def pooled_variance(valid, pos, nrm, foot, s1, s2, cnt, height, width, sigma_nor
 
 
 @njit(cache=True, parallel=True)
-def pack_pixels(pos, nrm, col, var, rec):
-    """One record per pixel for atrous_pass: normal, n.x (its tangent plane's offset), hit point,
-    variance, luminance. A tap then reads two adjacent cache lines instead of five arrays."""
+def pack_geometry(pos, nrm, rec):
+    """Columns 0-6 of the per-pixel records atrous_pass reads: normal, n.x (its tangent plane's offset),
+    hit point. One record per tap read instead of five arrays; written once, the passes only change
+    the estimates (pack_estimates)."""
     for p in prange(pos.shape[0]):
         plane = 0.0
         for k in range(3):
@@ -212,6 +214,12 @@ def pack_pixels(pos, nrm, col, var, rec):
             rec[p, 4 + k] = pos[p, k]
             plane += nrm[p, k] * pos[p, k]
         rec[p, 3] = plane
+
+
+@njit(cache=True, parallel=True)
+def pack_estimates(col, var, rec):
+    """Columns 7-8 of the records: the variance and luminance of each pixel's current estimate."""
+    for p in prange(col.shape[0]):
         rec[p, 7] = var[p]
         rec[p, 8] = (col[p, 0] + col[p, 1] + col[p, 2]) / 3.0
 
@@ -220,7 +228,7 @@ def pack_pixels(pos, nrm, col, var, rec):
 def atrous_pass(valid, rec, foot, col, height, width, step, sigma_luminance, sigma_normal, sigma_plane,
                 col_out, var_out):
     """One edge-avoiding à-trous pass with taps `step` pixels apart (Dammertz et al. 2010, eq. 3, with
-    SVGF's weights and variance propagation) over pack_pixels' records. The normal, plane and
+    SVGF's weights and variance propagation) over the pack_geometry / pack_estimates records. The normal, plane and
     luminance weights are one exponential per tap: max(0, c) ** sigma_n = exp(-sigma_n * -log c)."""
     h = np.array([1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0])  # B3 spline (Dammertz et al.)
     inv_r = np.zeros(25)  # 1 / (tap distance in pixels), per tap

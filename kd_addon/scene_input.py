@@ -100,13 +100,10 @@ def shift_to_larger_dimension(shift: float, sensor_fit: str, width: int, height:
     """Rescale a lens shift from Blender's unit (the fitted axis's extent) to the larger dimension's.
 
     Blender moves the view plane by shift * (pixels along the fitted axis) (BKE_camera_params_compute_
-    viewplane; Cycles' viewplane agrees), the inverse of the rescaling of an extent.
+    viewplane; Cycles' viewplane agrees): a fraction of the fitted extent, which is the larger extent
+    divided by the rescaling of an extent.
     """
-    axis = fitted_axis(sensor_fit, width, height)
-    larger = "x" if width >= height else "y"
-    if axis == larger:
-        return shift
-    return shift * min(width, height) / max(width, height)
+    return shift / to_larger_dimension(1.0, sensor_fit, width, height)
 
 
 def perspective_fov(lens: float, sensor_width: float, sensor_height: float,
