@@ -5,7 +5,9 @@ atomic increment and decrement of one shared counter. Made for every instance a 
 threads at once, those atomics made rendering a flat tree wrapped as a one-instance scene 1.4x slower
 (the counter's cache line bounces between cores). `rows` builds the same C-contiguous view from the
 data pointer instead, with no owner: valid only while the caller holds the parent array, which every
-caller here does (the scene's arrays outlive the kernel call).
+caller here does (the scene's arrays outlive the kernel call). `unowned` views a whole array so:
+a kernel converts the arrays it hands to per-ray inlined code once per block of rays, because even
+reading an array out of a tuple or passing it to an inlined function can cost the same atomic pair.
 """
 from numba import carray, njit, types
 from numba.extending import intrinsic
@@ -31,3 +33,9 @@ def rows(array, start, stop):
     """array[start:stop] (along the first axis of a C-contiguous array) as an unowned view."""
     inner = array.size // max(array.shape[0], 1)
     return carray(_element_pointer(array, start * inner), (stop - start,) + array.shape[1:])
+
+
+@njit(cache=True, inline="always")
+def unowned(array):
+    """The whole of a C-contiguous array as an unowned view (see rows)."""
+    return rows(array, 0, array.shape[0])

@@ -14,7 +14,7 @@ suzanne-251k, a flat tree as one instance: +50% against the flat traversal; inli
 import numpy as np
 from numba import njit, prange
 
-from .array_views import rows
+from .array_views import rows, unowned
 from .layout import LEAF, NO_HIT
 from .traversal import (RAYS_PER_TASK, STACK_SIZE, _descend, _pop, block_range, clip_to_box,
                         interleaved_blocks, trace_ray)
@@ -31,6 +31,17 @@ def new_scratch():
     return (rows(nodes, 0, STACK_SIZE), rows(intervals, 0, STACK_SIZE), rows(vectors, 0, 3),
             rows(nodes, STACK_SIZE, 2 * STACK_SIZE), rows(intervals, STACK_SIZE, 2 * STACK_SIZE), rows(vectors, 3, 6),
             rows(vectors, 6, 9), rows(vectors, 9, 12), nodes, intervals, vectors)
+
+
+@njit(cache=True, inline="always")
+def unowned_scene(scene):
+    """The scene tuple (two_level.TwoLevelScene.arrays: 6 top-level arrays, world-to-object matrices,
+    mesh of each instance, 10 packed mesh arrays) as unowned views, made once per block of rays: with
+    owned arrays, the code inlined per ray took and dropped references to them (array_views.py)."""
+    s = scene
+    return (unowned(s[0]), unowned(s[1]), unowned(s[2]), unowned(s[3]), unowned(s[4]), unowned(s[5]),
+            unowned(s[6]), unowned(s[7]), unowned(s[8]), unowned(s[9]), unowned(s[10]), unowned(s[11]),
+            unowned(s[12]), unowned(s[13]), unowned(s[14]), unowned(s[15]), unowned(s[16]), unowned(s[17]))
 
 
 @njit(cache=True, inline="always")
@@ -112,14 +123,24 @@ def trace_scene_rays(scene, origins, directions, tmin, tmax, any_hit, out_t, out
     iterations, per_band = interleaved_blocks(n, RAYS_PER_TASK)  # balances image regions (traversal.py)
     for i in prange(iterations):
         start, stop = block_range(i, per_band, n, RAYS_PER_TASK)
-        scratch = new_scratch()
-        for r in range(start, stop):
-            t, inst, prim, u, v = trace_scene(scene, origins[r], directions[r], tmin[r], tmax[r], any_hit, scratch)
-            out_t[r] = t
-            out_inst[r] = inst
-            out_prim[r] = prim
-            out_u[r] = u
-            out_v[r] = v
+        _trace_block(scene, origins, directions, tmin, tmax, any_hit, start, stop, out_t, out_inst, out_prim, out_u,
+                     out_v)
+
+
+@njit(cache=True)
+def _trace_block(scene, origins, directions, tmin, tmax, any_hit, start, stop, out_t, out_inst, out_prim, out_u,
+                 out_v):
+    """Rays start..stop-1 with one scratch and the scene as unowned views."""
+    scratch = new_scratch()
+    views = unowned_scene(scene)
+    for r in range(start, stop):
+        t, inst, prim, u, v = trace_scene(views, rows(origins, r, r + 1)[0], rows(directions, r, r + 1)[0], tmin[r],
+                                          tmax[r], any_hit, scratch)
+        out_t[r] = t
+        out_inst[r] = inst
+        out_prim[r] = prim
+        out_u[r] = u
+        out_v[r] = v
 
 
 @njit(cache=True, inline="always")
