@@ -286,7 +286,7 @@ def _child(spec_path: str) -> int:
     settings.color_depth = "32"
     settings.exr_codec = "NONE"
     bpy.data.images["Render Result"].save_render(spec["exr"], scene=scene)
-    channels, reader = _read_exr(spec["exr"])
+    channels, reader = read_exr(spec["exr"])
 
     def find(suffixes):
         for s in suffixes:
@@ -320,7 +320,7 @@ def _child(spec_path: str) -> int:
     return 0
 
 
-def _read_exr(path):
+def read_exr(path):
     """{channel name: (H, W) float32, row 0 = top} of an EXR, with OpenImageIO if bpy ships it."""
     try:
         oiio = _import_bundled_oiio()

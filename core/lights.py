@@ -33,8 +33,9 @@ class Light:
     def sun(cls, direction, angle=0.0, strength=1.0, color=(1.0, 1.0, 1.0)):
         """`direction` is the direction the light travels (Blender: matrix_world @ (0, 0, -1))."""
         angle = _non_negative("sun angle", angle)
-        if angle >= np.pi:
-            raise ValueError(f"sun angle must be < pi, got {angle}")
+        if angle > np.pi * (1.0 + 1e-6):  # Blender's own limit (180 degrees: a hemisphere of directions)
+            raise ValueError(f"sun angle must be <= pi, got {angle}")
+        angle = min(angle, np.pi)  # Blender's 180 degrees is float32 pi, a hair above np.pi
         return cls(SUN, color, strength, direction=_unit("sun direction", direction), angle=angle)
 
     @classmethod
@@ -56,6 +57,10 @@ class Light:
             raise ValueError("area light matrix_world must be a finite 4x4 matrix")
         if shape not in AREA_SHAPES:
             raise ValueError(f"area light shape must be one of {sorted(AREA_SHAPES)}, got {shape!r}")
+        for k, name in enumerate("XYZ"):  # X, Y span the light, -Z is where it emits
+            if not np.linalg.norm(m[:3, k]) > 0.0:
+                raise ValueError(f"area light matrix_world has a zero {name} axis (zero scale): it has no "
+                                 "extent or no direction to emit in")
         size = _positive("area light size", size)
         size_y = size if size_y is None or shape in ("SQUARE", "DISK") else _positive("area light size_y", size_y)
         return cls(AREA, color, power, matrix_world=m, shape=shape, size=size, size_y=size_y)

@@ -6,7 +6,9 @@
 Which scene is rendered: the .blend given as argument; otherwise the file
 Blender already has open (`blender -b scene.blend --command ...`); otherwise,
 or with --demo, the built-in animated demo scene. Frames default to the
-scene's range. Writes DIR/frame_0001.png... and DIR/report.json, prints one
+scene's range. Settings are the scene's own KD Preview settings (saved with the
+.blend from the panel; the defaults for a file that has none), each overridden by
+the option of the same name when given. Writes DIR/frame_0001.png... and DIR/report.json, prints one
 table row per frame. Exit codes: 0 done, 1 a problem with the scene, files or
 settings (the message names it), 2 bad command-line usage, 130 interrupted.
 """
@@ -19,11 +21,12 @@ import sys
 import threading
 from contextlib import contextmanager
 from pathlib import Path
+from types import SimpleNamespace
 
 import bpy
 
-from . import demo_scene
-from .config import DEFAULTS, OUTPUT_FORMATS, make_config
+from . import demo_scene, properties
+from .config import DEFAULTS, OUTPUT_FORMATS, SETTING_NAMES, make_config
 from .errors import Cancelled, PreviewError
 from .pipeline import claim, release, run_job
 from .sequence import SequenceJob, parse_frames
@@ -55,13 +58,17 @@ def _output_format(text: str) -> str:
 
 
 def build_parser(prog: str = COMMAND_ID) -> argparse.ArgumentParser:
-    """The one parser. Setting options default to SUPPRESS so absent ones take config.DEFAULTS."""
+    """The one parser. Setting options default to SUPPRESS so absent ones take the scene's saved settings
+    (saved_settings_with_overrides), which default to config.DEFAULTS."""
     parser = _Parser(prog=prog, description="KD Preview: ray-traced AO / shadow previews from the command line")
     commands = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
-    render = commands.add_parser("render", help="render frames to images and report.json")
+    render = commands.add_parser("render", help="render frames to images and report.json",
+                                 epilog="Options not given take the scene's own KD Preview settings (saved in the "
+                                        ".blend from the panel), else the defaults shown.")
     render.add_argument("blend", nargs="?", help=".blend file to render (default: the open file, else the demo)")
     render.add_argument("--out", required=True, help="output folder (created if missing)")
-    render.add_argument("--frames", help="N, A-B, A-B:STEP or a comma list (default: the scene's frame range)")
+    render.add_argument("--frames", help="N, A-B, A-B:STEP or a comma list (default: the scene's frame range); "
+                                         "negative frames need '=': --frames=-3--1")
     render.add_argument("--demo", action="store_true", help="render the built-in animated demo scene")
     s = argparse.SUPPRESS
     render.add_argument("--mode", default=s, help=f"ao, shadow or ao+shadow (default {DEFAULTS.mode})")
@@ -106,6 +113,24 @@ def load_scene(args) -> bpy.types.Scene:
         bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
         demo_scene.build_demo_scene(bpy.context.scene)
     return bpy.context.scene
+
+
+def saved_settings_with_overrides(scene, args) -> SimpleNamespace:
+    """The scene's own KD Preview settings (saved in the .blend by the panel), each replaced by the
+    command-line option of the same name where one was given: so `blender -b scene.blend --command
+    kdpreview render` renders what the file's Render Animation would. Under `python -m kd_addon` the
+    add-on is not registered, so its settings group is registered for the reading (Blender keeps a
+    group's saved values as ID properties until a class claims them) and then removed again."""
+    registered = hasattr(bpy.types.Scene, "kd_preview")
+    if not registered:
+        properties.register()
+    try:
+        saved = scene.kd_preview
+        return SimpleNamespace(**{name: getattr(args, name) if hasattr(args, name) else getattr(saved, name)
+                                  for name in SETTING_NAMES})
+    finally:
+        if not registered:
+            properties.unregister()
 
 
 def _print_row(result, path) -> None:
@@ -154,8 +179,9 @@ def run(args) -> int:
 
 def _run(args, cancelled) -> int:
     try:
-        config = make_config(args)
+        make_config(args)  # bad options fail before a file is opened
         scene = load_scene(args)
+        config = make_config(saved_settings_with_overrides(scene, args))
         frames = parse_frames(args.frames or f"{scene.frame_start}-{scene.frame_end}:{max(1, scene.frame_step)}")
         job = SequenceJob(scene, config, frames, Path(args.out), lambda _s: bpy.context.evaluated_depsgraph_get(),
                           on_frame=_print_row)

@@ -58,11 +58,29 @@ def show_in_image_editor(image: bpy.types.Image) -> None:
 
 def save_frame(image: np.ndarray, path: Path, file_format: str) -> Path:
     """Save a finished frame as PNG (8-bit sRGB, as Blender converts a linear float image)
-    or OPEN_EXR (linear float) without changing the preview image's own file path."""
+    or OPEN_EXR (linear float RGBA) without changing the preview image's own file path."""
     target = store_preview(image)
-    target.file_format = file_format
     path.parent.mkdir(parents=True, exist_ok=True)
-    target.save(filepath=str(path), save_copy=True)
+    if file_format == "OPEN_EXR":
+        _save_linear_exr(target, path)
+    else:
+        target.file_format = file_format
+        target.save(filepath=str(path), save_copy=True)
     if not path.is_file():
         raise OSError(f"Blender did not write {path}")
     return path
+
+
+def _save_linear_exr(target: bpy.types.Image, path: Path) -> None:
+    """Image.save() of a generated float image writes sRGB-encoded values even to OPEN_EXR (bpy 5.0:
+    0.5 is stored as 0.7354), so EXRs go through save_render, which keeps scene-linear values, with
+    the EXR settings of a scratch scene: the user's own render output settings are not touched."""
+    scratch = bpy.data.scenes.new("KD Preview EXR settings")
+    try:
+        settings = scratch.render.image_settings
+        settings.file_format = "OPEN_EXR"
+        settings.color_mode = "RGBA"
+        settings.color_depth = "32"
+        target.save_render(str(path), scene=scratch)
+    finally:
+        bpy.data.scenes.remove(scratch)

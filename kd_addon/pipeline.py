@@ -212,14 +212,26 @@ class FrameJob:
         return inputs
 
     def _camera_and_lights(self, core, inputs: scene_input.SceneInputs):
-        """Camera and lights moved by the same offset as the triangles."""
+        """Camera and lights moved by the same offset as the triangles. Mode "ao" uses no lights, so
+        their settings cannot stop it; otherwise a light Blender accepts but that emits nothing or that
+        core cannot use (zero power, size or scale) is left out with a warning naming it."""
         offset = inputs.camera.position
         try:
             camera = core.Camera(**inputs.camera.keywords()).translated(offset)
-            lights = [getattr(core.Light, light.kind)(**light.keywords).translated(offset)
-                      for light in inputs.lights]
         except ValueError as error:  # core's own checks, e.g. clip start >= clip end
-            raise PreviewError(f"the scene's camera or lights cannot be used: {error}") from None
+            raise PreviewError(f"the scene's camera cannot be used: {error}") from None
+        if self.config.settings.mode == "ao":
+            return camera, []
+        lights, left_out = [], []
+        for light in inputs.lights:
+            try:
+                lights.append(_usable_light(core, light).translated(offset))
+            except ValueError as error:
+                left_out.append(f"light '{light.name}' left out: {error}")
+        self._info["warnings"] = self._info.get("warnings", []) + left_out
+        if not lights:
+            raise PreviewError(f"mode '{self.config.settings.mode}' needs a light, but no light of scene "
+                               f"'{self.scene.name}' can be used: " + "; ".join(left_out))
         return camera, lights
 
     def _start_tracing(self, core, scene, camera, lights, width, height, previous) -> None:
@@ -234,8 +246,10 @@ class FrameJob:
         t0 = time.perf_counter()
         extracted = extract_scene(self.depsgraph)
         if extracted.triangle_count == 0:
-            raise PreviewError(f"nothing to render at frame {self.scene.frame_current}: the scene has no "
-                               "render-visible mesh triangles")
+            # A warning, not an error: in an animation, objects may appear later (keyed hide_render), and
+            # Cycles renders such a frame transparent rather than stopping the sequence.
+            extracted.warnings.append(f"nothing to render at frame {self.scene.frame_current}: the scene has no "
+                                      "render-visible mesh triangles, so the frame is transparent")
         self._timings["extract_ms"] = _ms_since(t0)
         return extracted
 
@@ -319,6 +333,14 @@ def run_job(job, cancel=None, progress=None) -> None:
             progress(job.progress, job.status)
         if done:
             return
+
+
+def _usable_light(core, light: scene_input.LightInput):
+    """The core.Light of a scene light; ValueError saying why when it emits nothing or core rejects it."""
+    power = light.keywords.get("power", light.keywords.get("strength"))
+    if not power > 0.0:
+        raise ValueError(f"its power is {power:g}, so it emits no light")
+    return getattr(core.Light, light.kind)(**light.keywords)
 
 
 def render_frame(scene, depsgraph, config: RenderConfig, *, cancel=None, progress=None) -> FrameResult:

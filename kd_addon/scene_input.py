@@ -148,10 +148,12 @@ def camera_input(data, matrix_world, width: int, height: int) -> tuple[CameraInp
 
 
 def light_direction(matrix_world) -> np.ndarray:
-    """Unit direction the light travels: the object's local -Z in world space."""
+    """Unit direction the light travels: the object's local -Z in world space (the zero vector for a
+    zero Z scale, which core.Light then names)."""
     m = np.array(matrix_world, dtype=np.float64).reshape(4, 4)
     d = m[:3, :3] @ np.array([0.0, 0.0, -1.0])
-    return d / np.linalg.norm(d)
+    norm = np.linalg.norm(d)
+    return d / norm if norm > 0.0 else d
 
 
 def light_input(name: str, data, matrix_world) -> LightInput | None:

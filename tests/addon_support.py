@@ -36,6 +36,13 @@ def addon():
     kd_addon.unregister()
 
 
+def exr_channels(path):
+    """{channel: (H, W) float32, row 0 = top} of an EXR, read with OpenImageIO (or the benchmark's own
+    numpy reader), not with Blender, whose loading could hide a colour transform its saving applied."""
+    from benchmarks.cycles_ao import read_exr
+    return read_exr(path)[0]
+
+
 def add_quad(name, half_x, half_y, *, location=(0, 0, 0)):
     """Axis-aligned rectangle in the XY plane, centred on `location`."""
     verts = [(-half_x, -half_y, 0), (half_x, -half_y, 0), (half_x, half_y, 0), (-half_x, half_y, 0)]

@@ -7,11 +7,12 @@ import json
 
 import pytest
 
-from tests.addon_support import add_quad, add_top_camera, run_python  # noqa: F401
+from tests.addon_support import add_quad, add_sun, add_top_camera, exr_channels, run_python  # noqa: F401
 
 import bpy  # noqa: E402
 import numpy as np  # noqa: E402
 
+import kd_addon  # noqa: E402
 from kd_addon import cli, demo_scene  # noqa: E402
 from tests import bpy_scenes as scenes  # noqa: E402
 
@@ -79,6 +80,41 @@ def test_cli_renders_a_saved_blend_with_its_frame_range(tmp_path):
     assert report["build_options"]["builder"] == "median" and report["build_options"]["threads"] == 1
 
 
+@pytest.mark.parametrize("registered", [False, True])
+def test_cli_takes_the_files_saved_settings_and_options_override_them(tmp_path, registered):
+    """What the panel saved in the .blend is what the command line renders, option by option overridden;
+    with the add-on not registered (python -m kd_addon) as well as registered (blender --command)."""
+    scenes.reset()
+    add_quad("Floor", 5, 5)
+    add_top_camera(location=(0, 0, 12))
+    add_sun()
+    scene = bpy.context.scene
+    scene.render.resolution_x, scene.render.resolution_y = 40, 30
+    kd_addon.register()
+    try:
+        saved = scene.kd_preview
+        saved.mode, saved.samples, saved.ao_distance = "ao+shadow", 3, 0.25
+        saved.resolution_percentage, saved.output_format, saved.seed = 100, "OPEN_EXR", 7
+        blend = tmp_path / "panel.blend"
+        bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    finally:
+        kd_addon.unregister()
+    scenes.reset()
+    if registered:
+        kd_addon.register()
+    try:
+        out = tmp_path / "out"
+        assert cli.execute(["render", str(blend), "--out", str(out), "--frames", "1", "--samples", "2"]) == 0
+    finally:
+        if registered:
+            kd_addon.unregister()
+    settings = json.loads((out / "report.json").read_text())["settings"]
+    assert (settings["mode"], settings["samples"], settings["ao_distance"]) == ("ao+shadow", 2, 0.25)
+    assert (settings["resolution_percentage"], settings["output_format"], settings["seed"]) == (100, "OPEN_EXR", 7)
+    assert exr_channels(out / "frame_0001.exr")["A"].shape == (30, 40)
+    assert hasattr(bpy.types.Scene, "kd_preview") is False  # the settings group went again
+
+
 @pytest.mark.parametrize("args, code, message", [
     (["render", "--out", "X", "--frames", "5-2"], 1, "bad frame range '5-2'"),
     (["render", "--out", "X", "--resolution", "0"], 1, "resolution_percentage must be an integer from 1 to 100"),
@@ -106,9 +142,36 @@ def test_scene_errors_exit_nonzero_with_the_message(tmp_path, capsys):
     bpy.data.objects["Floor"].hide_render = True
     nothing = tmp_path / "nothing.blend"
     bpy.ops.wm.save_as_mainfile(filepath=str(nothing))
-    for blend, message in ((no_camera, "has no active camera"), (nothing, "nothing to render at frame 1")):
-        assert cli.execute(["render", str(blend), "--out", str(tmp_path / "o"), "--frames", "1"]) == 1
-        assert message in capsys.readouterr().err
+    assert cli.execute(["render", str(no_camera), "--out", str(tmp_path / "o"), "--frames", "1"]) == 1
+    assert "has no active camera" in capsys.readouterr().err
+    # Nothing visible is a warning, not an error: the frame is written transparent (objects may appear later).
+    assert cli.execute(["render", str(nothing), "--out", str(tmp_path / "o"), "--frames", "1"]) == 0
+    assert "warning: frame 1: nothing to render at frame 1" in capsys.readouterr().err
+    assert (tmp_path / "o" / "frame_0001.png").is_file()
+
+
+def test_frames_with_nothing_visible_are_transparent_and_the_sequence_goes_on(tmp_path, capsys):
+    scenes.reset()
+    add_quad("Floor", 5, 5)
+    add_top_camera()
+    scene = bpy.context.scene
+    scene.render.resolution_x, scene.render.resolution_y = 40, 30
+    floor = bpy.data.objects["Floor"]
+    floor.hide_render = True
+    floor.keyframe_insert("hide_render", frame=1)
+    floor.hide_render = False
+    floor.keyframe_insert("hide_render", frame=3)
+    blend = tmp_path / "appears.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    out = tmp_path / "seq"
+    assert cli.execute(["render", str(blend), "--out", str(out), "--frames", "1-3", "--format", "exr",
+                        "--samples", "2"]) == 0
+    err = capsys.readouterr().err
+    assert "frame 1: nothing to render" in err and "frame 2: nothing to render" in err and "frame 3" not in err
+    report = json.loads((out / "report.json").read_text())
+    assert [row["triangles"] for row in report["frames"]] == [0, 0, 2]
+    alphas = [exr_channels(out / f"frame_000{f}.exr")["A"] for f in (1, 2, 3)]
+    assert (alphas[0] == 0.0).all() and (alphas[1] == 0.0).all() and (alphas[2] == 1.0).all()
 
 
 def test_unwritable_output_folder_is_named(tmp_path, capsys):

@@ -8,10 +8,11 @@ places where AO must be 1 (open plane, cube top) or below 1 (plane next to the c
 from __future__ import annotations
 
 import json
+import math
 
 import pytest
 
-from tests.addon_support import addon, half_plane_scene, preview_pixels  # noqa: F401
+from tests.addon_support import addon, exr_channels, half_plane_scene, preview_pixels  # noqa: F401
 
 import bpy  # noqa: E402
 import numpy as np  # noqa: E402
@@ -19,7 +20,8 @@ import numpy as np  # noqa: E402
 from kd_addon import live_update, pipeline  # noqa: E402
 from kd_addon.config import make_config  # noqa: E402
 from kd_addon.errors import Cancelled, PreviewError  # noqa: E402
-from kd_addon.output import IMAGE_NAME  # noqa: E402
+from kd_addon.output import IMAGE_NAME, save_frame  # noqa: E402
+from tests import bpy_scenes as scenes  # noqa: E402
 
 
 def column_of(x, width=64):
@@ -83,6 +85,36 @@ def test_modes_with_lights(addon):  # noqa: F811
         assert img[16, column_of(-3.9), 0] > 0.5  # lit open ground
 
 
+def test_lights_blender_accepts_but_that_emit_nothing_are_left_out_by_name(addon):  # noqa: F811
+    """Negative power, zero area size, a zero-scale area light: Blender takes them all. Mode ao ignores
+    lights; the shadow modes leave such lights out with a warning that names each, and stop (naming
+    them) only when no light is left. A sun of Blender's largest angle (180 degrees) is usable."""
+    scene = half_plane_scene()
+    bpy.data.objects["Sun"].data.angle = math.pi
+    bad = {}
+    for name, kind in (("Negative", "POINT"), ("Flat", "AREA"), ("Squashed", "AREA")):
+        light = bpy.data.lights.new(name, kind)
+        bad[name] = scenes.link(bpy.data.objects.new(name, light))
+        bad[name].location = (-2.0, 0.0, 3.0)
+    bad["Negative"].data.energy = -100.0
+    bad["Flat"].data.size = 0.0
+    bad["Squashed"].scale = (1.0, 1.0, 0.0)
+
+    def frame(mode):
+        scene.kd_preview.mode = mode
+        return pipeline.render_frame(scene, bpy.context.evaluated_depsgraph_get(), make_config(scene.kd_preview))
+
+    assert not frame("ao").warnings
+    result = frame("shadow")
+    assert result.lights == 4 and result.image[16, column_of(-3.9), 0] > 0.3  # the sun still lights
+    left_out = sorted(w for w in result.warnings if "left out" in w)
+    assert [w.split("'")[1] for w in left_out] == ["Flat", "Negative", "Squashed"]
+    assert "power is -100" in left_out[1] and "zero Z axis" in left_out[2]
+    bpy.data.objects.remove(bpy.data.objects["Sun"])
+    with pytest.raises(PreviewError, match="no light of scene 'Scene' can be used: light 'Negative'"):
+        frame("ao+shadow")
+
+
 def test_errors_leave_the_previous_image_and_report(addon):  # noqa: F811
     scene = half_plane_scene()
     bpy.ops.kdpreview.render()
@@ -100,12 +132,13 @@ def test_errors_leave_the_previous_image_and_report(addon):  # noqa: F811
     assert (preview_pixels() == before).all()
 
 
-def test_nothing_renderable_and_zero_size_are_named(addon):  # noqa: F811
+def test_nothing_renderable_is_a_transparent_frame_with_a_warning_and_zero_size_is_named(addon):  # noqa: F811
     scene = half_plane_scene()
     for obj in ("Ground", "Box"):
         bpy.data.objects[obj].hide_render = True
-    with pytest.raises(PreviewError, match="nothing to render at frame 1"):
-        pipeline.render_frame(scene, bpy.context.evaluated_depsgraph_get(), make_config(scene.kd_preview))
+    result = pipeline.render_frame(scene, bpy.context.evaluated_depsgraph_get(), make_config(scene.kd_preview))
+    assert result.image.shape == (32, 64, 4) and (result.image == 0.0).all() and result.triangles == 0
+    assert any(w.startswith("nothing to render at frame 1") for w in result.warnings)
     scene.render.resolution_x = 4
     scene.kd_preview.resolution_percentage = 10
     with pytest.raises(PreviewError, match="would be 0x3 pixels"):
@@ -167,6 +200,20 @@ def test_animation_writes_frames_and_report(addon, tmp_path):  # noqa: F811
     img = pixels.reshape(32, 64, 4)[::-1]
     assert (img[:, :32, 3] == 1.0).all() and (img[:, 32:, 3] == 0.0).all()
     assert img[16, column_of(-1.0), 0] == pytest.approx(1.0, abs=1e-3)  # box moved to x = -1: its top is open
+
+
+def test_exr_frames_hold_the_linear_values(tmp_path):
+    """The EXR holds the image's own (linear) floats: Image.save() would store 0.5 as 0.7354 (sRGB)."""
+    scenes.reset()
+    image = np.zeros((3, 5, 4), np.float32)
+    image[..., 0] = np.linspace(0.0, 1.0, 5)
+    image[..., 1], image[..., 2], image[..., 3] = 0.25, 0.5, 1.0
+    image[2, 4] = 0.0  # one background pixel, bottom right
+    save_frame(image, tmp_path / "f.exr", "OPEN_EXR")
+    channels = exr_channels(tmp_path / "f.exr")
+    stored = np.stack([channels[c] for c in "RGBA"], axis=-1)
+    assert np.array_equal(stored, image)
+    assert [s.name for s in bpy.data.scenes] == ["Scene"]  # the scratch scene for the settings is gone
 
 
 def test_animation_needs_a_saved_file_for_relative_output(addon):  # noqa: F811

@@ -171,3 +171,23 @@ def test_bad_settings_are_named():
         core.render_preview(tree, cam, 0, 8)
     with pytest.raises(ValueError, match="fov"):
         core.Camera(np.eye(4), fov=4.0)
+
+
+def test_sun_of_blenders_largest_angle_lights_a_floor_by_half():
+    """Blender allows a sun angle of 180 degrees: directions uniform over the hemisphere around the
+    sun's axis. Pointing straight down on a bare floor, the mean of N.L over that hemisphere is 1/2."""
+    tree = core.build_kdtree(floor(0.0))
+    sun = core.Light.sun((0.0, 0.0, -1.0), angle=np.pi)
+    img = core.render_preview(tree, look_down((0.0, 0.0, 1.0)), 16, 16, samples=1024, mode="shadow", lights=[sun])
+    assert hit_mask(img).all()
+    assert img[..., 0].mean() == pytest.approx(0.5, abs=0.005)
+    with pytest.raises(ValueError, match="sun angle must be <= pi"):
+        core.Light.sun((0.0, 0.0, -1.0), angle=3.2)
+
+
+def test_area_light_with_a_zero_scale_axis_is_named():
+    for axis in range(3):
+        m = np.eye(4)
+        m[axis, axis] = 0.0
+        with pytest.raises(ValueError, match=f"zero {'XYZ'[axis]} axis"):
+            core.Light.area(m, size=1.0)
