@@ -15,7 +15,8 @@ avoiding à-trous, guided by the per-pixel sample variance; background and alpha
 estimate stays the default.
 
 Sampling is deterministic for a seed. With an error target, a pixel stops once it has at least
-`min_samples` samples and the standard error of its mean (from the sample variance) is below the target.
+`min_samples` samples and the standard error of its mean (from the sample variance, floored by Laplace's
+rule of succession so that samples that all agreed do not count as certainty) is below the target.
 Convergence is checked only at multiples of CHECK_EVERY samples, so the image does not depend on how the
 caller batches its steps.
 """
@@ -228,6 +229,12 @@ class PreviewRender:
         n = self.counts[self.active].astype(np.float64)
         mean = self.sums[self.active].mean(axis=1) / n
         var = np.maximum(self.sq_sums[self.active] / n - mean * mean, 0.0) * n / np.maximum(n - 1, 1)
+        # Laplace's rule of succession: after n samples, a visibility outcome not yet seen still has
+        # probability 1 / (n + 2), so a sample's variance is at least q (1 - q) for that q. Without this
+        # floor a pixel whose first samples all agreed had variance 0 and stopped at min_samples: at a
+        # target of 0.02, 5% of the hit pixels of a test scene ended more than 3 targets off.
+        q = 1.0 / (n + 2.0)
+        var = np.maximum(var, q * (1.0 - q))
         converged = np.sqrt(var / n) < self.error_target
         if converged.any():
             rays_per_sample = self.ray_counts[self.active[converged]] / n[converged]
