@@ -8,9 +8,10 @@ Blender already has open (`blender -b scene.blend --command ...`); otherwise,
 or with --demo, the built-in animated demo scene. Frames default to the
 scene's range. Settings are the scene's own KD Preview settings (saved with the
 .blend from the panel; the defaults for a file that has none), each overridden by
-the option of the same name when given. Writes DIR/frame_0001.png... and DIR/report.json, prints one
-table row per frame. Exit codes: 0 done, 1 a problem with the scene, files or
-settings (the message names it), 2 bad command-line usage, 130 interrupted.
+the option of the same name when given. Writes DIR/frame_0001.png... and
+DIR/report.json, prints one table row per frame. Exit codes: 0 done, 1 a problem
+with the scene, files or settings (the message names it), 2 bad command-line
+usage, 130 interrupted.
 """
 
 from __future__ import annotations
