@@ -21,14 +21,14 @@ MARGIN = 1.25  # measured peaks vary by scene (references per triangle); the lim
 BUILD_BYTES_PER_TRIANGLE = {"binned": 620.0, "exact": 190.0, "median": 490.0}
 TRIANGLE_BYTES = 36  # (3, 3) float32: the array the tree keeps
 # Peak RSS growth of PreviewRender plus image(), per pixel, every pixel hit (the worst case): measured
-# 198 B at 960x540 and 171 B at 1920x1080.
+# 198 B at 960x540 and 171 B at 1920x1080, before the 24 B of each pixel's ray start were added.
 # Plus, computed rather than measured, the ray memo of pixel reuse: up to 64 bytes of visibility bits,
 # a flag and a counter per pixel (render_kernels.MEMO_BITS).
-RENDER_BYTES_PER_PIXEL = 200.0 + 73.0
+RENDER_BYTES_PER_PIXEL = 200.0 + 24.0 + 73.0
 # The last frame's pixel state kept for pixel reuse (render.PreviewRender.pixel_state): pixel index,
-# depth, point, normal, sums, squared sums, sample and ray counts (float64 / int64) and up to 64 bytes
-# of visibility bits per hit pixel.
-PIXEL_STATE_BYTES_PER_PIXEL = 112 + 64
+# depth, point, normal, ray start, sums, squared sums, sample and ray counts (float64 / int64) and up to
+# 64 bytes of visibility bits per hit pixel.
+PIXEL_STATE_BYTES_PER_PIXEL = 136 + 64
 
 
 class MemoryLimitError(ValueError):

@@ -5,7 +5,7 @@ when the camera, the lights and every setting are those of the last frame, a pix
 exactly last frame's unless one of its rays can reach a changed box (instance_signature.py: where
 an instance moved, deformed, appeared or vanished). Per pixel, conservatively:
 - the camera ray: the segment from clip start to the hit (or to clip end for a miss);
-- AO rays start at the offset hit point and are at most ao_distance long: a sphere;
+- AO rays start at the pixel's ray start (the offset hit point) and are at most ao_distance long: a sphere;
 - a shadow ray runs from the offset hit point to a point sampled on the light: within the light's
   radius (point, spot) or half-diagonal (area) of its centre, so the segment to the centre against
   the box grown by that much covers every such ray; a sun's rays leave within angle/2 of its axis,
@@ -23,7 +23,6 @@ import numpy as np
 from numba import njit, prange
 
 from .lights import AREA, SUN
-from .shading import offset_origin
 
 MAX_BOXES = 64
 RELATIVE_PAD = 1e-6  # boxes grow by this times their size and distance from the origin: float32 rounding
@@ -41,6 +40,7 @@ class PixelState(NamedTuple):
     depths: np.ndarray
     points: np.ndarray
     normals: np.ndarray
+    starts: np.ndarray
     sums: np.ndarray
     sq_sums: np.ndarray
     counts: np.ndarray
@@ -96,13 +96,13 @@ def segment_meets_any(o, d, t0, t1, boxes):
 
 
 @njit(cache=True, parallel=True)
-def surface_rays_touch(points, normals, ao_radius, lights, boxes):
+def surface_rays_touch(starts, ao_radius, lights, boxes):
     """(P,) bool: some AO ray (ao_radius > 0: within that distance) or shadow ray to one of the lights
-    (packed rows, lights.py) from the hit points (offset as the renderer does) can meet one of the boxes."""
-    out = np.zeros(points.shape[0], np.bool_)
-    for p in prange(points.shape[0]):
-        o, d = np.empty(3), np.empty(3)
-        offset_origin(points[p], normals[p], o)
+    (packed rows, lights.py) from the pixels' ray starts (render_kernels.surface_frames) can meet one
+    of the boxes."""
+    out = np.zeros(starts.shape[0], np.bool_)
+    for p in prange(starts.shape[0]):
+        o, d = starts[p], np.empty(3)
         for k in range(boxes.shape[0]):
             if _rays_meet_box(o, ao_radius, lights, boxes, k, d):
                 out[p] = True

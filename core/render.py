@@ -90,9 +90,9 @@ class PreviewRender:
         """Every pixel from scratch."""
         rays = self.camera.rays(self.width, self.height)
         self.camera_rays = len(rays[0])
-        pixels, depths, points, normals = self._camera_hits(rays)
+        pixels, depths, points, normals, starts = self._camera_hits(rays)
         zero = np.zeros(len(pixels), np.int64)
-        self._start(pixels, depths, points, normals, np.zeros((len(pixels), 3)), np.zeros(len(pixels)), zero,
+        self._start(pixels, depths, points, normals, starts, np.zeros((len(pixels), 3)), np.zeros(len(pixels)), zero,
                     zero.copy(), np.arange(len(pixels), dtype=np.int64), self._memo_rows(len(pixels)))
         self.known, self.boxes = np.zeros(len(pixels), np.bool_), np.zeros((0, 6))
 
@@ -103,17 +103,17 @@ class PreviewRender:
         return np.zeros((n, (bits + 7) // 8 if bits <= MEMO_BITS else 0), np.uint8)
 
     def _camera_hits(self, rays, which=None):
-        """(pixels, depths, points, normals) of the camera rays (`which`: a subset) that hit."""
+        """(pixels, depths, points, normals, ray starts) of the camera rays (`which`: a subset) that hit."""
         origins, directions, tmin, tmax = rays if which is None else (a[which] for a in rays)
         t, inst, prim, _, _ = trace_valid_rays(self.scene, origins, directions, tmin, tmax, False, self.threads)
         hit = np.flatnonzero(prim >= 0).astype(np.int64)
-        points, normals = np.empty((len(hit), 3)), np.empty((len(hit), 3))
+        points, normals, starts = np.empty((len(hit), 3)), np.empty((len(hit), 3)), np.empty((len(hit), 3))
         with thread_count(self.threads):
-            surface_frames(self.scene.arrays, origins, directions, t, inst, prim, hit, points, normals)
-        return (hit if which is None else which[hit]), t[hit], points, normals
+            surface_frames(self.scene.arrays, origins, directions, t, inst, prim, hit, points, normals, starts)
+        return (hit if which is None else which[hit]), t[hit], points, normals, starts
 
-    def _start(self, pixels, depths, points, normals, sums, sq_sums, counts, ray_counts, active, memo):
-        self.pixels, self.depths, self.points, self.normals = pixels, depths, points, normals
+    def _start(self, pixels, depths, points, normals, starts, sums, sq_sums, counts, ray_counts, active, memo):
+        self.pixels, self.depths, self.points, self.normals, self.starts = pixels, depths, points, normals, starts
         self.sums, self.sq_sums, self.counts, self.ray_counts = sums, sq_sums, counts, ray_counts
         self.active, self.memo = active, memo
         self.memo_reused = np.zeros(len(pixels), np.int64)
@@ -137,7 +137,7 @@ class PreviewRender:
             retrace = segments_touch(*rays[:3], ends, boxes)
             kept = np.flatnonzero(~retrace[prev.pixels])
             ao_radius = self.ao_distance if self.mode != "shadow" else 0.0
-            touched = surface_rays_touch(prev.points[kept], prev.normals[kept], ao_radius, self.lights, boxes)
+            touched = surface_rays_touch(prev.starts[kept], ao_radius, self.lights, boxes)
         clean, dirty = kept[~touched], kept[touched]
         traced = np.flatnonzero(retrace)
         self.camera_rays = len(traced)
@@ -146,7 +146,7 @@ class PreviewRender:
         order = np.concatenate([clean, dirty])
         join = lambda old, add: np.concatenate([old[order], add])  # noqa: E731
         self._start(join(prev.pixels, new[0]), join(prev.depths, new[1]), join(prev.points, new[2]),
-                    join(prev.normals, new[3]), np.concatenate([prev.sums[clean], np.zeros((fresh, 3))]),
+                    join(prev.normals, new[3]), join(prev.starts, new[4]), np.concatenate([prev.sums[clean], np.zeros((fresh, 3))]),
                     np.concatenate([prev.sq_sums[clean], np.zeros(fresh)]),
                     np.concatenate([prev.counts[clean], np.zeros(fresh, np.int64)]),
                     np.concatenate([prev.ray_counts[clean], np.zeros(fresh, np.int64)]),
@@ -166,7 +166,7 @@ class PreviewRender:
         if not self.done:
             return None
         return PixelState(self.settings, self.scene.signature, self.pixels, self.depths, self.points, self.normals,
-                          self.sums, self.sq_sums, self.counts, self.ray_counts, self.memo)
+                          self.starts, self.sums, self.sq_sums, self.counts, self.ray_counts, self.memo)
 
     @property
     def rays_reused(self):
@@ -206,7 +206,7 @@ class PreviewRender:
         unbuilt subtree redo the batch once it is built (same samples, so the eager tree's sums)."""
         def run(active):
             status = np.empty(len(active), np.int64)
-            add_samples(self.scene.arrays, self.points, self.normals, self.pixels, active, self.samples_done,
+            add_samples(self.scene.arrays, self.points, self.normals, self.starts, self.pixels, active, self.samples_done,
                         batch, MODES[self.mode], self.ao_distance, self.ambient, self.lights, self.sampler,
                         self.seed, SOBOL_DIM1, self.sums, self.sq_sums, self.counts, self.ray_counts, status,
                         (self.memo, self.known, self.boxes, self.memo_reused))

@@ -23,7 +23,7 @@ from .instance_traversal import new_scratch, trace_scene, unowned_scene, world_n
 from .layout import NO_HIT
 from .pixel_reuse import segment_meets_any
 from .sampling import pixel_seed, sample_2d
-from .shading import cosine_direction, offset_origin, sample_light
+from .shading import cosine_direction, hit_error_scale, offset_origin, sample_light
 from .traversal import block_range, interleaved_blocks
 
 AO, SHADOW, AO_SHADOW = 1, 2, 3
@@ -34,9 +34,11 @@ MEMO_BITS = 512  # most visibility bits kept per pixel (64 bytes): 16 samples x 
 
 
 @njit(cache=True, parallel=True)
-def add_samples(scene, points, normals, pixels, active, first, count, mode, ao_distance, ambient, lights,
+def add_samples(scene, points, normals, starts, pixels, active, first, count, mode, ao_distance, ambient, lights,
                 sampler, seed, dim1, sums, sq_sums, counts, rays, status, memo):
     """Add samples first .. first+count-1 to every pixel listed in `active` (indices into points).
+    starts (M, 3) are the AO and shadow rays' origin per pixel: the hit point offset off its surface
+    (surface_frames).
 
     sums (M, 3) and sq_sums (M,) (of the sample's grey value) accumulate; counts[i] += count;
     rays[i] counts the rays of pixel i's samples. status[a] is NO_HIT when pixel active[a] got its
@@ -48,12 +50,12 @@ def add_samples(scene, points, normals, pixels, active, first, count, mode, ao_d
     iterations, per_band = interleaved_blocks(n, PIXELS_PER_TASK)  # balances image regions (traversal.py)
     for i in prange(iterations):
         start, stop = block_range(i, per_band, n, PIXELS_PER_TASK)
-        _sample_pixels(scene, points, normals, pixels, active, start, stop, first, count, mode, ao_distance,
+        _sample_pixels(scene, points, normals, starts, pixels, active, start, stop, first, count, mode, ao_distance,
                        ambient, lights, sampler, seed, dim1, sums, sq_sums, counts, rays, status, memo)
 
 
 @njit(cache=True)
-def _sample_pixels(scene, points, normals, pixels, active, start, stop, first, count, mode, ao_distance,
+def _sample_pixels(scene, points, normals, starts, pixels, active, start, stop, first, count, mode, ao_distance,
                    ambient, lights, sampler, seed, dim1, sums, sq_sums, counts, rays, status, memo):
     """Pixels active[start:stop], sharing one set of scratch buffers: allocating them per pixel cost
     ~25% of a one-sample step (kept out of the parallel loop body: Numba's parfor analysis does not
@@ -62,27 +64,26 @@ def _sample_pixels(scene, points, normals, pixels, active, start, stop, first, c
     as tracing the same rays alone."""
     scene = unowned_scene(scene)
     memo = (unowned(memo[0]), unowned(memo[1]), unowned(memo[2]), unowned(memo[3]))
-    points, normals, pixels, lights = unowned(points), unowned(normals), unowned(pixels), unowned(lights)
+    points, normals, starts = unowned(points), unowned(normals), unowned(starts)
+    pixels, lights = unowned(pixels), unowned(lights)
     sums, sq_sums, counts, rays = unowned(sums), unowned(sq_sums), unowned(counts), unowned(rays)
     scratch = new_scratch()
-    origin = np.empty(3)
     direction = np.empty(3)
     for a in range(start, stop):
-        status[a] = _sample_pixel(scene, points, normals, pixels, active[a], first, count, mode, ao_distance,
-                                  ambient, lights, sampler, seed, dim1, sums, sq_sums, counts, rays, scratch,
-                                  origin, direction, memo)
+        status[a] = _sample_pixel(scene, points, normals, starts, pixels, active[a], first, count, mode,
+                                  ao_distance, ambient, lights, sampler, seed, dim1, sums, sq_sums, counts, rays,
+                                  scratch, direction, memo)
 
 
 @njit(cache=True, inline="always")
-def _sample_pixel(scene, points, normals, pixels, i, first, count, mode, ao_distance, ambient, lights,
-                  sampler, seed, dim1, sums, sq_sums, counts, rays, scratch, origin, direction, memo):
+def _sample_pixel(scene, points, normals, starts, pixels, i, first, count, mode, ao_distance, ambient, lights,
+                  sampler, seed, dim1, sums, sq_sums, counts, rays, scratch, direction, memo):
     """All of one pixel's new samples. Returns NO_HIT, or the suspended prim of a ray that reached an
     unbuilt subtree, after restoring the pixel's sums.
 
-    The pixel's point and normal (and each light's row below) are unowned views (array_views.py):
+    The pixel's point, normal and ray start (and each light's row below) are unowned views (array_views.py):
     a slice would update its parent's shared reference count, from both threads, on every ray."""
-    point, normal = rows(points, i, i + 1)[0], rows(normals, i, i + 1)[0]
-    offset_origin(point, normal, origin)
+    point, normal, origin = rows(points, i, i + 1)[0], rows(normals, i, i + 1)[0], rows(starts, i, i + 1)[0]
     ps = pixel_seed(pixels[i], seed)
     reused = memo[3]
     before = (sums[i, 0], sums[i, 1], sums[i, 2], sq_sums[i], rays[i], reused[i])
@@ -175,8 +176,9 @@ def _light_samples(scene, point, origin, normal, lights, sampler, ps, s, dim1, d
 
 
 @njit(cache=True, parallel=True)
-def surface_frames(scene, origins, directions, t, inst, prim, hit_index, points, normals):
-    """Hit points and world-space geometric normals (turned to face the incoming ray) of the camera hits."""
+def surface_frames(scene, origins, directions, t, inst, prim, hit_index, points, normals, starts):
+    """Hit points, world-space geometric normals (turned to face the incoming ray) and the start of
+    the AO and shadow rays (the point offset off its surface, shading.offset_origin) of the camera hits."""
     for a in prange(hit_index.shape[0]):
         r = hit_index[a]
         for k in range(3):
@@ -186,6 +188,7 @@ def surface_frames(scene, origins, directions, t, inst, prim, hit_index, points,
         if facing > 0.0:
             for k in range(3):
                 normals[a, k] = -normals[a, k]
+        offset_origin(points[a], normals[a], hit_error_scale(origins[r], directions[r], t[r], points[a]), starts[a])
 
 
 @njit(cache=True, parallel=True)

@@ -262,13 +262,13 @@ def test_surface_ray_test_covers_every_sampled_ray(light):
     for _ in range(120):
         p = rng.uniform(-4, 4, 3) * (1, 1, 0)
         o, d = np.empty(3), np.empty(3)
-        offset_origin(p, n, o)
+        offset_origin(p, n, 10.0, o)
         dist, mask = sample_light(lights[0], o, *rng.random(2), d)
         along = rng.uniform(0.1, 0.9) * min(dist, 8.0)
         centre = o + along * d + rng.normal(0, 0.3, 3)
         box = np.concatenate([centre - 0.15, centre + 0.15])[None]
         ao_distance = rng.uniform(0.2, 3.0)
-        flagged = surface_rays_touch(p[None], n[None], ao_distance, lights, box)[0]
+        flagged = surface_rays_touch(o[None], ao_distance, lights, box)[0]
         dirs, lengths, lit = np.empty((80, 3)), np.empty(80), np.empty(80, bool)
         for k, (u1, u2) in enumerate(rng.random((80, 2))):
             dist, mask = sample_light(lights[0], o, u1, u2, dirs[k])

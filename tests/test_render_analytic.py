@@ -191,3 +191,31 @@ def test_area_light_with_a_zero_scale_axis_is_named():
         m[axis, axis] = 0.0
         with pytest.raises(ValueError, match=f"zero {'XYZ'[axis]} axis"):
             core.Light.area(m, size=1.0)
+
+
+@pytest.mark.parametrize("offset", [0.0, 1e3, 1e4, 1e5])
+def test_nothing_leaks_under_a_thin_roof_far_from_the_origin(offset):
+    """A floor with a roof 0.2 above it, the sun straight overhead: shadow 0 and AO (h/r)^2 under it,
+    wherever the porch stands. Offsetting ray starts by 256 float32 ulps of the hit point (0.3 units
+    at 1e4) carried shadow and AO rays through the roof: fully lit, AO 1."""
+    h, r = 0.2, 0.4
+    tris = np.concatenate([floor(0.0, half=50.0), floor(h, half=50.0)]) + offset
+    camera = look_down(np.array([0.0, 0.0, 0.1]) + offset, fov=1.0)
+    tree = core.build_kdtree(tris)
+    sun = core.Light.sun((0.1, 0.0, -1.0))
+    shadow = core.render_preview(tree, camera, 12, 12, mode="shadow", samples=4, lights=[sun])
+    ao = core.render_preview(tree, camera, 12, 12, samples=256, ao_distance=r)
+    assert hit_mask(shadow).all() and (shadow[..., :3] == 0.0).all()
+    assert ao[..., 0].mean() == pytest.approx((h / r) ** 2, abs=0.01)
+
+
+@pytest.mark.parametrize("scale", [1.0, 1e-3, 1e-6])
+def test_ao_between_planes_is_right_at_tiny_scales(scale):
+    """AO (h/r)^2 between two planes at any scale: no absolute floor on the ray offset biases it
+    (2^-16 units made the AO 0.4796 instead of 0.5102 at scale 1e-3)."""
+    h, r = 0.5, 0.7
+    tris = np.concatenate([floor(0.0, half=1e3), floor(h, half=1e3)]) * scale
+    camera = look_down(np.array([0.0, 0.0, 0.25]) * scale, fov=1.0)
+    img = core.render_preview(core.build_kdtree(tris), camera, 16, 16, samples=256, ao_distance=r * scale)
+    assert hit_mask(img).all()
+    assert img[..., 0].mean() == pytest.approx((h / r) ** 2, abs=0.01)
