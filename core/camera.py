@@ -23,15 +23,17 @@ class Camera:
             raise ValueError("camera needs exactly one of fov (perspective) or ortho_scale (orthographic)")
         if fov is not None and not 0.0 < fov < np.pi:
             raise ValueError(f"camera fov must be in (0, pi) radians, got {fov}")
-        if ortho_scale is not None and not ortho_scale > 0.0:
-            raise ValueError(f"camera ortho_scale must be > 0, got {ortho_scale}")
+        if ortho_scale is not None and not 0.0 < ortho_scale < np.inf:
+            raise ValueError(f"camera ortho_scale must be finite and > 0, got {ortho_scale}")
         if not 0.0 <= clip_start < clip_end:
             raise ValueError(f"camera clip range must satisfy 0 <= clip_start < clip_end, got {clip_start}, {clip_end}")
         if abs(np.linalg.det(m[:3, :3])) < 1e-12:
             raise ValueError("camera matrix_world is singular (zero scale)")
+        if not (m[3] == (0.0, 0.0, 0.0, 1.0)).all():
+            raise ValueError(f"camera matrix_world must be affine (bottom row 0 0 0 1), got {m[3].tolist()}")
         shift = np.asarray(shift, np.float64)
-        if shift.shape != (2,) or not np.isfinite(shift).all():
-            raise ValueError(f"camera shift must be two finite numbers (x, y), got {shift.tolist()}")
+        if shift.shape != (2,) or not (np.abs(shift) <= 1e6).all():
+            raise ValueError(f"camera shift must be two numbers (x, y) within +-1e6, got {shift.tolist()}")
         self.shift = (float(shift[0]), float(shift[1]))
         self.matrix_world = m
         self.fov, self.ortho_scale = fov, ortho_scale

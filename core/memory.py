@@ -52,8 +52,12 @@ def render_bytes(width, height, keeps_previous=False):
 def check_limit(estimate, limit, what, advice):
     """Raise MemoryLimitError when `estimate` bytes exceed `limit` (None: no limit)."""
     if limit is not None and estimate > limit:
-        raise MemoryLimitError(f"{what} needs about {estimate / MB:,.0f} MB, above the memory limit of "
-                               f"{limit / MB:,.0f} MB: {advice}")
+        raise MemoryLimitError(f"{what} needs about {_size(estimate)}, above the memory limit of "
+                               f"{_size(limit)}: {advice}")
+
+
+def _size(n_bytes):
+    return f"{n_bytes / MB:,.0f} MB" if n_bytes >= MB else f"{n_bytes:,.0f} bytes"
 
 
 def check_build_memory(triangles, options):

@@ -7,6 +7,8 @@ from dataclasses import dataclass, asdict
 from math import log2
 from typing import NamedTuple, Optional
 
+import numpy as np
+
 BUILDERS = ("binned", "exact", "median")
 TOP_STRATEGIES = ("sah", "clustering")
 
@@ -155,7 +157,8 @@ def make_options(options):
     unknown = sorted(set(options) - set(known))
     if unknown:
         raise TypeError(f"unknown build option(s) {unknown}; known: {sorted(known)}")
-    return BuildOptions(**options)
+    # numpy scalars (np.int64(4), np.True_) are the Python values they hold
+    return BuildOptions(**{k: v.item() if isinstance(v, np.generic) else v for k, v in options.items()})
 
 
 def _check_choice(name, value, choices):

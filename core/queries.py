@@ -8,6 +8,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .inputs import as_ray_limits, as_rays
+from .kdtree import KdTree
 from .lazy import resolve_suspended
 from .threads import thread_count
 from .traversal import trace_rays
@@ -35,6 +36,9 @@ def occluded(tree, origins, directions, tmin=0.0, tmax=np.inf, threads=None):
 
 
 def _trace(tree, origins, directions, tmin, tmax, any_hit, threads):
+    if not isinstance(tree, KdTree):
+        hint = ": use core.intersect_scene / occluded_scene for a TwoLevelScene" if hasattr(tree, "meshes") else ""
+        raise ValueError(f"tree must be a core.KdTree, got {type(tree).__name__}{hint}")
     o, d = as_rays(origins, directions)
     lo, hi = as_ray_limits(tmin, tmax, len(o))
     n = len(o)

@@ -25,7 +25,7 @@ from .build import build_kdtree
 from .instance_signature import instance_signature, mesh_digest
 from .options import make_options
 from .scene_policy import LAYOUTS, plan_soup
-from .two_level import build_two_level
+from .two_level import build_two_level, check_placement
 
 
 class MeshInput(NamedTuple):
@@ -48,6 +48,30 @@ class BuildReport(NamedTuple):
     soup_rebuilt: bool
     build_ms: float
     top_ms: float
+
+
+class CallerIds(NamedTuple):
+    """How the built scene's instances and triangles map back to the caller's (build() reorders them:
+    instances with their own tree first, in the caller's order, then one soup instance whose tree holds
+    its members' triangles one after the other). own: (J,) caller instance of scene instance j < J;
+    members: (K,) caller instance of soup member k; offsets: (K + 1,) its first soup triangle."""
+
+    own: np.ndarray
+    members: np.ndarray
+    offsets: np.ndarray
+
+    def map(self, inst, prim):
+        """(instance, prim) arrays of scene hits -> the caller's instance and its mesh's triangle
+        (-1 stays -1, a miss)."""
+        inst, prim = np.asarray(inst, np.int64), np.asarray(prim, np.int64)
+        out_inst, out_prim = np.full_like(inst, -1), np.full_like(prim, -1)
+        hit = inst >= 0
+        own = hit & (inst < len(self.own))
+        out_inst[own], out_prim[own] = self.own[inst[own]], prim[own]
+        soup = hit & ~own
+        member = np.searchsorted(self.offsets, prim[soup], side="right") - 1
+        out_inst[soup], out_prim[soup] = self.members[member], prim[soup] - self.offsets[member]
+        return out_inst.astype(np.int32), out_prim.astype(np.int32)
 
 
 class SceneBuilder:
@@ -73,9 +97,9 @@ class SceneBuilder:
         into meshes per instance; matrices (I, 4, 4) object-to-world; origin (3,) subtracted from
         every position (float64) before anything is rounded."""
         start = perf_counter()
-        mesh_of = np.asarray(mesh_of, np.int64).reshape(-1)
-        o2w = np.asarray(matrices, np.float64).reshape(len(mesh_of), 4, 4)
-        origin = np.zeros(3) if origin is None else np.asarray(origin, np.float64)
+        mesh_of, o2w = check_placement(len(meshes), mesh_of, matrices)
+        mesh_of = mesh_of.astype(np.int64)
+        origin = _checked_origin(origin)
         keys = [m.key for m in meshes]
         if len(set(keys)) != len(keys):
             raise ValueError("mesh keys must be unique within a frame")
@@ -102,6 +126,10 @@ class SceneBuilder:
         top_ms = (perf_counter() - t) * 1e3
         scene.signature = instance_signature([mesh_digest(m.key, m.fingerprint) for m in meshes], bounds, mesh_of,
                                              o2w, origin)
+        members = np.flatnonzero(soup)
+        sizes = [len(meshes[mesh_of[i]].triangles) for i in members]
+        scene.caller_ids = CallerIds(np.flatnonzero(~soup), members, np.concatenate([[0], np.cumsum(sizes)])
+                                     .astype(np.int64))
         report = BuildReport(rebuilt, reused, len(trees) - int(soup.any()), int(soup.sum()), soup_rebuilt,
                              (perf_counter() - start) * 1e3, top_ms)
         return scene, report
@@ -161,9 +189,20 @@ class SceneBuilder:
         self._dynamic &= present
 
 
+def _checked_origin(origin):
+    if origin is None:
+        return np.zeros(3)
+    out = np.asarray(origin, np.float64)
+    if out.shape != (3,) or not np.isfinite(out).all():
+        raise ValueError(f"origin must be 3 finite numbers, got {np.asarray(origin).tolist()}")
+    return out
+
+
 def _gather(mesh):
     """(T, 3, 3) float32 object-space triangles of a MeshInput, with its indices checked."""
     tris = np.asarray(mesh.triangles)
+    if tris.size and tris.dtype.kind not in "iu":
+        raise ValueError(f"mesh {mesh.key!r}: triangles must be integer vertex indices, got dtype {tris.dtype}")
     verts = np.asarray(mesh.vertices, np.float32)
     if tris.size and (tris.min() < 0 or tris.max() >= len(verts)):
         raise ValueError(f"mesh {mesh.key!r}: triangle indices must be in [0, {len(verts)})")

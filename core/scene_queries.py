@@ -12,7 +12,9 @@ from .two_level import as_two_level
 
 class SceneHits(NamedTuple):
     """Per-ray results: `t` (float32, inf on a miss), `instance` and `prim` (int32, the instance and
-    its mesh's triangle index, -1 on a miss), `u`, `v` (float32 barycentric weights of vertices 1, 2)."""
+    its mesh's triangle index, -1 on a miss), `u`, `v` (float32 barycentric weights of vertices 1, 2).
+    For a scene from build_scene or a SceneBuilder these are the caller's indices (instances in the
+    order given, triangles of the instance's mesh), whatever the layout merged or reordered."""
 
     t: np.ndarray
     instance: np.ndarray
@@ -24,6 +26,9 @@ class SceneHits(NamedTuple):
 def intersect_scene(scene, origins, directions, tmin=0.0, tmax=np.inf, threads=None):
     """Closest hit of each ray in (tmin, tmax); `scene` a TwoLevelScene (or a KdTree, as one instance)."""
     t, inst, prim, u, v = trace_scene_all(scene, origins, directions, tmin, tmax, False, threads)
+    ids = getattr(scene, "caller_ids", None)
+    if ids is not None:
+        inst, prim = ids.map(inst, prim)
     return SceneHits(t.astype(np.float32), inst, prim, u.astype(np.float32), v.astype(np.float32))
 
 

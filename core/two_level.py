@@ -37,6 +37,7 @@ class TwoLevelScene:
         self.top = top
         self.build_ms = build_ms
         self.signature = None  # an InstanceSignature when a SceneBuilder made it (pixel reuse across frames)
+        self.caller_ids = None  # a SceneBuilder's CallerIds: its caller's instance and triangle indices
         self._packed = pack_meshes(self.meshes)
 
     @property
@@ -123,20 +124,38 @@ def _check_instances(meshes, mesh_of, matrices):
     for i, m in enumerate(meshes):
         if not isinstance(m, KdTree):
             raise ValueError(f"mesh {i} must be a core.KdTree, got {type(m).__name__}")
-    mesh_of = np.ascontiguousarray(mesh_of, np.int32).reshape(-1)
-    o2w = np.ascontiguousarray(matrices, np.float64)
-    if o2w.shape != (len(mesh_of), 4, 4):
-        raise ValueError(f"matrices must have shape ({len(mesh_of)}, 4, 4), got {o2w.shape}")
-    if len(mesh_of) and (mesh_of.min() < 0 or mesh_of.max() >= len(meshes)):
-        bad = int(np.flatnonzero((mesh_of < 0) | (mesh_of >= len(meshes)))[0])
-        raise ValueError(f"instance {bad} names mesh {mesh_of[bad]}, but there are {len(meshes)} meshes")
-    finite = np.isfinite(o2w).reshape(len(o2w), 16).all(axis=1)
-    if not finite.all():
-        raise ValueError(f"instance {int(np.flatnonzero(~finite)[0])} has a non-finite matrix")
+    mesh_of, o2w = check_placement(len(meshes), mesh_of, matrices)
     singular = np.flatnonzero(~invertible(o2w))
     if len(singular):
         raise ValueError(f"instance {int(singular[0])} has a singular matrix (zero scale on some axis): "
                          "flatten it into world triangles instead")
+    return mesh_of, o2w
+
+
+def check_placement(n_meshes, mesh_of, matrices):
+    """(mesh_of int32 (I,), matrices float64 (I, 4, 4)) checked: integer mesh indices in range, one
+    finite affine matrix (bottom row 0 0 0 1) per instance. Raises ValueError naming the instance."""
+    raw = np.asarray(mesh_of).reshape(-1)
+    if raw.dtype.kind not in "iub" and not (raw.dtype.kind == "f" and np.array_equal(raw, np.round(raw))):
+        raise ValueError(f"mesh_of must hold integer mesh indices, got {raw[:5].tolist()}")
+    mesh_of = np.ascontiguousarray(raw, np.int32)
+    try:
+        o2w = np.ascontiguousarray(matrices, np.float64)
+    except (TypeError, ValueError):
+        raise ValueError("matrices must be an (I, 4, 4) array of numbers") from None
+    if o2w.shape != (len(mesh_of), 4, 4):
+        raise ValueError(f"matrices must have shape ({len(mesh_of)}, 4, 4), one per instance, got {o2w.shape}")
+    if len(mesh_of) and (mesh_of.min() < 0 or mesh_of.max() >= n_meshes):
+        bad = int(np.flatnonzero((mesh_of < 0) | (mesh_of >= n_meshes))[0])
+        raise ValueError(f"instance {bad} names mesh {mesh_of[bad]}, but there are {n_meshes} meshes")
+    finite = np.isfinite(o2w).reshape(len(o2w), 16).all(axis=1)
+    if not finite.all():
+        raise ValueError(f"instance {int(np.flatnonzero(~finite)[0])} has a non-finite matrix")
+    affine = (o2w[:, 3] == (0.0, 0.0, 0.0, 1.0)).all(axis=1)
+    if not affine.all():
+        bad = int(np.flatnonzero(~affine)[0])
+        raise ValueError(f"instance {bad}'s matrix is not affine: its bottom row is {o2w[bad, 3].tolist()}, "
+                         "not [0, 0, 0, 1]")
     return mesh_of, o2w
 
 

@@ -83,3 +83,42 @@ def test_ray_limits(tree):
 def test_empty_ray_batch(tree):
     h = core.intersect(tree, np.zeros((0, 3)), np.zeros((0, 3)))
     assert h.t.shape == (0,) and h.prim.dtype == np.int32
+
+
+def _box_mesh():
+    tris = np.random.default_rng(1).normal(size=(20, 3, 3))
+    return tris.reshape(-1, 3), np.arange(60).reshape(-1, 3)
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda t: core.intersect(None, np.zeros((1, 3)), np.ones((1, 3))), "tree must be a core.KdTree, got NoneType"),
+    (lambda t: core.intersect(core.build_scene([_box_mesh()], [0], np.eye(4)[None]), np.zeros((1, 3)),
+                              np.ones((1, 3))), "use core.intersect_scene"),
+    (lambda t: core.build_scene([_box_mesh()], [2], np.eye(4)[None]), "instance 0 names mesh 2, but there are 1"),
+    (lambda t: core.build_scene([_box_mesh()], [-1], np.eye(4)[None]), "instance 0 names mesh -1"),
+    (lambda t: core.build_scene([_box_mesh()], [0], np.full((1, 4, 4), np.nan)), "instance 0 has a non-finite matrix"),
+    (lambda t: core.build_scene([_box_mesh()], [0, 0], np.eye(4)[None]), r"matrices must have shape \(2, 4, 4\)"),
+    (lambda t: core.build_scene([(_box_mesh()[0], _box_mesh()[1] * 1.0)], [0], np.eye(4)[None]),
+     "triangles must be integer vertex indices"),
+    (lambda t: core.build_scene([_box_mesh()], [0], np.eye(4)[None], origin=(1, 2)), "origin must be 3 finite"),
+    (lambda t: core.build_two_level([t], [0.7], np.eye(4)[None]), "mesh_of must hold integer mesh indices"),
+    (lambda t: core.build_two_level([t], [0], np.array([[[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0.5, 2]]])),
+     "instance 0's matrix is not affine"),
+    (lambda t: core.Camera(np.eye(4), ortho_scale=np.inf), "ortho_scale must be finite and > 0"),
+    (lambda t: core.Camera(np.eye(4), 0.5, shift=(1e300, 0.0)), r"shift must be two numbers \(x, y\) within"),
+    (lambda t: core.Camera(np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 5], [0, 0, 1, 0.0]]), 0.5),
+     "must be affine"),
+])
+def test_scene_camera_and_query_inputs_are_named(tree, call, message):
+    with pytest.raises(ValueError, match=message):
+        call(tree)
+
+
+def test_numpy_scalars_are_accepted_and_huge_vectors_normalised(tree):
+    a = core.build_kdtree(tree.triangles, leaf_size=np.int64(4), clip=np.True_, cost_ratio=np.float32(1.0))
+    b = core.build_kdtree(tree.triangles, leaf_size=4)
+    assert all(np.array_equal(x, y) for x, y in zip(a.node_arrays, b.node_arrays))
+    sun = core.Light.sun((1e300, 1e300, 0.0))  # the norm would overflow to inf
+    np.testing.assert_allclose(sun.params["direction"], [2 ** -0.5, 2 ** -0.5, 0.0])
+    with pytest.raises(core.MemoryLimitError, match="above the memory limit of 1 bytes"):
+        core.build_kdtree(tree.triangles, memory_limit=1)

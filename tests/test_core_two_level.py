@@ -81,6 +81,24 @@ def test_instances_match_flat_tree_and_brute_force(seed):
     np.testing.assert_allclose(hits.t[both], t_bf[both], rtol=1e-5, atol=1e-5)
 
 
+@pytest.mark.parametrize("layout", ["auto", "flat", "two_level"])
+def test_scene_hits_name_the_callers_instance_and_triangle_in_every_layout(layout):
+    """build_scene merges small static meshes into one soup tree ("auto") or everything ("flat") and
+    puts instances with their own tree first; hits still name the caller's instance and the triangle
+    of that instance's mesh. Meshes of 60-260 triangles, some placed once (soup candidates in "auto")."""
+    rng = np.random.default_rng(11)
+    meshes = [_blob(rng, 60 + 40 * i) for i in range(6)]
+    mesh_of = np.array([0, 1, 2, 2, 3, 4, 5, 5, 1], np.int32)
+    mats = np.stack([_random_matrix(rng, mirror=(i % 4 == 1)) for i in range(len(mesh_of))])
+    indexed = [(m.reshape(-1, 3), np.arange(3 * len(m)).reshape(-1, 3)) for m in meshes]
+    scene = core.build_scene(indexed, mesh_of, mats, layout=layout)
+    world = _world(meshes, mesh_of, mats)
+    o, d = _rays(rng, 3000)
+    _assert_matches_flat(scene, world, o, d, global_prim=lambda i, p: _global_prim(meshes, mesh_of, i, p))
+    if layout == "auto":
+        assert scene.instance_count < len(mesh_of)  # some meshes did go into the soup
+
+
 def test_limited_intervals_and_overlapping_instances():
     rng = np.random.default_rng(5)
     mesh = _blob(rng, 200)
