@@ -76,3 +76,18 @@ def _as_limit(name, value, count):
     if arr.shape != (count,):
         raise ValueError(f"{name} must be a scalar or have shape ({count},), got {arr.shape}")
     return np.ascontiguousarray(arr)
+
+
+def hit_distances_as_float32(t, prim):
+    """The float64 hit distances as the float32 `t` queries return; ValueError naming the first ray
+    whose hit cannot be represented: beyond float32's range (inf would read as a miss) or below its
+    smallest positive value (0 is outside the open interval (tmin, tmax)). Only rays whose direction
+    is tiny or huge against the distance travelled (e.g. 1e-15 long, 1e30 away) get there."""
+    with np.errstate(over="ignore"):
+        out = t.astype(np.float32)
+    bad = (prim >= 0) & ((out == np.inf) | (out == 0.0))
+    if bad.any():
+        r = int(np.flatnonzero(bad)[0])
+        raise ValueError(f"ray {r} hits at t = {t[r]:.6g}, outside float32's range for t: scale its direction "
+                         "(t is in units of the direction's length)")
+    return out

@@ -7,7 +7,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .inputs import as_ray_limits, as_rays
+from .inputs import as_ray_limits, as_rays, hit_distances_as_float32
 from .kdtree import KdTree
 from .lazy import resolve_suspended
 from .threads import thread_count
@@ -27,7 +27,7 @@ class Hits(NamedTuple):
 def intersect(tree, origins, directions, tmin=0.0, tmax=np.inf, threads=None):
     """Closest hit of each ray in the open interval (tmin, tmax); tmin, tmax scalars or (R,) arrays."""
     t, prim, u, v = _trace(tree, origins, directions, tmin, tmax, False, threads)
-    return Hits(t.astype(np.float32), prim, u.astype(np.float32), v.astype(np.float32))
+    return Hits(hit_distances_as_float32(t, prim), prim, u.astype(np.float32), v.astype(np.float32))
 
 
 def occluded(tree, origins, directions, tmin=0.0, tmax=np.inf, threads=None):

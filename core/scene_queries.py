@@ -3,7 +3,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .inputs import as_ray_limits, as_rays
+from .inputs import as_ray_limits, as_rays, hit_distances_as_float32
 from .instance_traversal import trace_scene_rays
 from .lazy import resolve_suspended
 from .threads import thread_count
@@ -29,7 +29,7 @@ def intersect_scene(scene, origins, directions, tmin=0.0, tmax=np.inf, threads=N
     ids = getattr(scene, "caller_ids", None)
     if ids is not None:
         inst, prim = ids.map(inst, prim)
-    return SceneHits(t.astype(np.float32), inst, prim, u.astype(np.float32), v.astype(np.float32))
+    return SceneHits(hit_distances_as_float32(t, prim), inst, prim, u.astype(np.float32), v.astype(np.float32))
 
 
 def occluded_scene(scene, origins, directions, tmin=0.0, tmax=np.inf, threads=None):

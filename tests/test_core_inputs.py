@@ -122,3 +122,15 @@ def test_numpy_scalars_are_accepted_and_huge_vectors_normalised(tree):
     np.testing.assert_allclose(sun.params["direction"], [2 ** -0.5, 2 ** -0.5, 0.0])
     with pytest.raises(core.MemoryLimitError, match="above the memory limit of 1 bytes"):
         core.build_kdtree(tree.triangles, memory_limit=1)
+
+
+@pytest.mark.parametrize("origin, direction, t", [((0.1, 0.2, 1e30), (0.0, 0.0, -1e-15), "1e\\+45"),
+                                                   ((0.1, 0.2, 5.0), (0.0, 0.0, -1e300), "5e-300")])
+def test_hits_outside_float32s_range_of_t_are_named(origin, direction, t):
+    """A hit at t = 1e45 would read as t = inf (a miss) and one at 5e-300 as t = 0 (outside (tmin,
+    tmax)) once rounded to float32: both raise, naming the ray, for trees and scenes alike."""
+    tree = core.build_kdtree(np.array([[[-1, -1, 0], [1, -1, 0], [0, 1, 0]]], np.float32))
+    o, d = np.array([[0.0, 0.0, 0.0], origin]), np.array([[0.0, 0.0, 1.0], direction])
+    for query in (core.intersect, core.intersect_scene):
+        with pytest.raises(ValueError, match=f"ray 1 hits at t = {t}"):
+            query(tree, o, d)
