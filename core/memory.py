@@ -7,6 +7,8 @@ are the peak resident-memory growth measured per triangle and per pixel in fresh
 the build's working set (references, boxes, clipped boxes, pools, nodes) grows linearly with the
 triangle count, and the renderer's buffers (camera rays, hit points, normals, sums) with the pixel count.
 """
+import os
+
 import numpy as np
 
 MB = 1 << 20
@@ -70,3 +72,18 @@ def check_build_memory(triangles, options):
     check_limit(build_bytes(n, options.builder, copies_input=copies), options.memory_limit,
                 f"building a kd-tree over {n:,} triangles ({options.builder!r} builder)",
                 "pass fewer triangles or raise memory_limit (None = no limit)")
+
+
+def physical_memory():
+    """This machine's physical memory in bytes, or None where the OS does not say."""
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def check_render_memory(width, height):
+    """A render whose estimated buffers exceed the machine's physical memory is refused up front:
+    numpy would fail part-way (MemoryError) or the machine would swap."""
+    check_limit(render_bytes(width, height), physical_memory(), f"a {width}x{height} render",
+                "lower the resolution")

@@ -30,6 +30,7 @@ from .kdtree import KdTree
 from .lazy import resolve_suspended
 from .instance_signature import changed_boxes
 from .lights import pack_lights
+from .memory import check_render_memory
 from .pixel_reuse import PixelState, prepared_boxes, segments_touch, settings_key, surface_rays_touch
 from .render_kernels import MEMO_BITS, MODES, add_samples, assemble_image, surface_frames
 from .sampling import SAMPLERS, SOBOL_DIM1
@@ -62,6 +63,7 @@ class PreviewRender:
                         min_samples, ambient, threads)
         if previous is not None and not isinstance(previous, PixelState):
             raise ValueError(f"previous must be None or a PreviewRender's pixel_state(), got {type(previous).__name__}")
+        check_render_memory(width, height)
         self.tree, self.camera, self.width, self.height = tree, camera, int(width), int(height)
         self.scene = as_two_level(tree)
         self.mode, self.target_samples, self.ao_distance = mode, int(samples), float(ao_distance)

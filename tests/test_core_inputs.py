@@ -134,3 +134,14 @@ def test_hits_outside_float32s_range_of_t_are_named(origin, direction, t):
     for query in (core.intersect, core.intersect_scene):
         with pytest.raises(ValueError, match=f"ray 1 hits at t = {t}"):
             query(tree, o, d)
+
+
+def test_a_render_larger_than_the_machine_is_refused_before_allocating(tree):
+    """32768 x 32768 passes the resolution check but would need ~300 GB: refused up front, naming it."""
+    from core import memory
+    ram = memory.physical_memory()
+    if ram is None or ram > memory.render_bytes(32768, 32768):
+        pytest.skip("this machine could hold the render")
+    camera = core.Camera(np.eye(4), 0.5)
+    with pytest.raises(core.MemoryLimitError, match="a 32768x32768 render needs about .* MB, above the memory"):
+        core.PreviewRender(tree, camera, 32768, 32768)
