@@ -190,6 +190,8 @@ class PreviewRender:
 
     def step(self, samples=1):
         """Add up to `samples` samples to every pixel still sampling; returns how many were added."""
+        if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or samples < 1:
+            raise ValueError(f"step(samples): samples must be an integer >= 1, got {samples!r}")
         samples = min(int(samples), self.target_samples - self.samples_done)
         added = 0
         while added < samples and len(self.active):
@@ -248,6 +250,8 @@ class PreviewRender:
     def image(self, denoise=False):
         """The current estimate as an (H, W, 4) float32 image (row 0 at the top); with `denoise`, filtered
         by core.denoise (edge-avoiding à-trous, variance-guided; background and alpha unchanged)."""
+        if not isinstance(denoise, (bool, np.bool_)):
+            raise ValueError(f"denoise must be True or False, got {denoise!r}")
         if denoise:
             decay = SOBOL_VARIANCE_DECAY if SAMPLERS[self.sampler] == "sobol" else 0.0
             return denoise_pixels(self.width, self.height, self.pixels, self.points, self.normals, self.sums,

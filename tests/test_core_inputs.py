@@ -145,3 +145,13 @@ def test_a_render_larger_than_the_machine_is_refused_before_allocating(tree):
     camera = core.Camera(np.eye(4), 0.5)
     with pytest.raises(core.MemoryLimitError, match="a 32768x32768 render needs about .* MB, above the memory"):
         core.PreviewRender(tree, camera, 32768, 32768)
+
+
+def test_progressive_calls_name_bad_arguments(tree):
+    render = core.PreviewRender(tree, core.Camera(np.eye(4), 0.5), 4, 4, samples=4)
+    for bad in (2.5, 0, True, "2"):
+        with pytest.raises(ValueError, match="step\\(samples\\): samples must be an integer >= 1"):
+            render.step(bad)
+    with pytest.raises(ValueError, match="denoise must be True or False"):
+        render.image(denoise="yes")
+    assert render.step(2) == 2 and render.samples_done == 2
