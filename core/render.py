@@ -148,7 +148,8 @@ class PreviewRender:
         order = np.concatenate([clean, dirty])
         join = lambda old, add: np.concatenate([old[order], add])  # noqa: E731
         self._start(join(prev.pixels, new[0]), join(prev.depths, new[1]), join(prev.points, new[2]),
-                    join(prev.normals, new[3]), join(prev.starts, new[4]), np.concatenate([prev.sums[clean], np.zeros((fresh, 3))]),
+                    join(prev.normals, new[3]), join(prev.starts, new[4]),
+                    np.concatenate([prev.sums[clean], np.zeros((fresh, 3))]),
                     np.concatenate([prev.sq_sums[clean], np.zeros(fresh)]),
                     np.concatenate([prev.counts[clean], np.zeros(fresh, np.int64)]),
                     np.concatenate([prev.ray_counts[clean], np.zeros(fresh, np.int64)]),
@@ -210,10 +211,10 @@ class PreviewRender:
         unbuilt subtree redo the batch once it is built (same samples, so the eager tree's sums)."""
         def run(active):
             status = np.empty(len(active), np.int64)
-            add_samples(self.scene.arrays, self.points, self.normals, self.starts, self.pixels, active, self.samples_done,
-                        batch, MODES[self.mode], self.ao_distance, self.ambient, self.lights, self.sampler,
-                        self.seed, SOBOL_DIM1, self.sums, self.sq_sums, self.counts, self.ray_counts, status,
-                        (self.memo, self.known, self.boxes, self.memo_reused))
+            add_samples(self.scene.arrays, self.points, self.normals, self.starts, self.pixels, active,
+                        self.samples_done, batch, MODES[self.mode], self.ao_distance, self.ambient, self.lights,
+                        self.sampler, self.seed, SOBOL_DIM1, self.sums, self.sq_sums, self.counts, self.ray_counts,
+                        status, (self.memo, self.known, self.boxes, self.memo_reused))
             return status
 
         with thread_count(self.threads):

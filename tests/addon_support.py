@@ -60,6 +60,17 @@ def add_top_camera(*, location=(0, 0, 10), ortho_scale=None, lens=50.0, name="Ca
     return cam
 
 
+def floor_scene(width, height, *, camera=True):
+    """A fresh scene: a 10 x 10 floor, the top camera above it (unless camera=False), at width x height."""
+    scenes.reset()
+    add_quad("Floor", 5, 5)
+    if camera:
+        add_top_camera()
+    scene = bpy.context.scene
+    scene.render.resolution_x, scene.render.resolution_y = width, height
+    return scene
+
+
 def add_sun(name="Sun", rotation=(0.0, 0.0, 0.0), energy=3.0):
     sun = scenes.link(bpy.data.objects.new(name, bpy.data.lights.new(name, "SUN")))
     sun.rotation_euler = rotation

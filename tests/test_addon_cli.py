@@ -7,7 +7,7 @@ import json
 
 import pytest
 
-from tests.addon_support import add_quad, add_sun, add_top_camera, exr_channels, run_python  # noqa: F401
+from tests.addon_support import add_quad, add_sun, add_top_camera, exr_channels, floor_scene, run_python  # noqa: F401
 
 import bpy  # noqa: E402
 import numpy as np  # noqa: E402
@@ -132,10 +132,7 @@ def test_usage_and_setting_errors_exit_nonzero_with_the_message(tmp_path, capsys
 
 
 def test_scene_errors_exit_nonzero_with_the_message(tmp_path, capsys):
-    scenes.reset()
-    add_quad("Floor", 5, 5)
-    scene = bpy.context.scene
-    scene.render.resolution_x, scene.render.resolution_y = 40, 30
+    floor_scene(40, 30, camera=False)
     no_camera = tmp_path / "no_camera.blend"
     bpy.ops.wm.save_as_mainfile(filepath=str(no_camera))
     add_top_camera()
@@ -151,11 +148,7 @@ def test_scene_errors_exit_nonzero_with_the_message(tmp_path, capsys):
 
 
 def test_frames_with_nothing_visible_are_transparent_and_the_sequence_goes_on(tmp_path, capsys):
-    scenes.reset()
-    add_quad("Floor", 5, 5)
-    add_top_camera()
-    scene = bpy.context.scene
-    scene.render.resolution_x, scene.render.resolution_y = 40, 30
+    floor_scene(40, 30)
     floor = bpy.data.objects["Floor"]
     floor.hide_render = True
     floor.keyframe_insert("hide_render", frame=1)

@@ -10,7 +10,8 @@ import math
 
 import pytest
 
-from tests.addon_support import add_quad, add_top_camera, addon, half_plane_scene, preview_pixels  # noqa: F401
+from tests.addon_support import (add_quad, add_top_camera, addon, floor_scene, half_plane_scene,  # noqa: F401
+                                 preview_pixels)
 
 import bpy  # noqa: E402
 import numpy as np  # noqa: E402
@@ -34,11 +35,7 @@ def cli_render(tmp_path, blend, *extra):
 
 
 def test_zero_resolution_exits_nonzero_with_the_message(tmp_path, capsys):
-    scenes.reset()
-    add_quad("Floor", 5, 5)
-    add_top_camera()
-    scene = bpy.context.scene
-    scene.render.resolution_x, scene.render.resolution_y = 4, 30  # Blender's smallest width is 4
+    floor_scene(4, 30)  # Blender's smallest width is 4
     blend = tmp_path / "tiny.blend"
     bpy.ops.wm.save_as_mainfile(filepath=str(blend))
     assert cli_render(tmp_path, blend, "--resolution", "10") == 1
@@ -47,11 +44,7 @@ def test_zero_resolution_exits_nonzero_with_the_message(tmp_path, capsys):
 
 
 def test_memory_limit_exits_nonzero_before_rendering(tmp_path, capsys):
-    scenes.reset()
-    add_quad("Floor", 5, 5)
-    add_top_camera()
-    scene = bpy.context.scene
-    scene.render.resolution_x, scene.render.resolution_y = 400, 300
+    floor_scene(400, 300)
     blend = tmp_path / "scene.blend"
     bpy.ops.wm.save_as_mainfile(filepath=str(blend))
     assert cli_render(tmp_path, blend, "--resolution", "100", "--memory-limit", "1") == 1
