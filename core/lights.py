@@ -124,11 +124,11 @@ def _vector(name, v):
 
 def _unit(name, v):
     v = _vector(name, v)
-    v = v / np.abs(v).max() if np.abs(v).max() > 0 else v  # so the norm cannot overflow (1e300 components)
-    n = np.linalg.norm(v)
-    if n == 0:
+    largest = np.abs(v).max()
+    if largest == 0:
         raise ValueError(f"{name} must not be the zero vector")
-    return v / n
+    v = v / largest  # first, so the norm cannot overflow (1e300 components)
+    return v / np.linalg.norm(v)
 
 
 def _non_negative(name, x):

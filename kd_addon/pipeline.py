@@ -228,7 +228,7 @@ class FrameJob:
                 lights.append(_usable_light(core, light).translated(offset))
             except ValueError as error:
                 left_out.append(f"light '{light.name}' left out: {error}")
-        self._info["warnings"] = self._info.get("warnings", []) + left_out
+        self._info["warnings"] += left_out
         if not lights:
             raise PreviewError(f"mode '{self.config.settings.mode}' needs a light, but no light of scene "
                                f"'{self.scene.name}' can be used: " + "; ".join(left_out))
