@@ -1,5 +1,6 @@
 """Cameras in Blender's convention: camera-to-world matrix, looking down local -Z with +Y up."""
 import numpy as np
+from numba import njit, prange
 
 
 class Camera:
@@ -58,17 +59,10 @@ class Camera:
         left, right, bottom, top = self.image_plane(width, height)
         x = left + (np.arange(width) + 0.5) / width * (right - left)
         y = top - (np.arange(height) + 0.5) / height * (top - bottom)
-        xx, yy = np.meshgrid(x, y)
         rot = self.matrix_world[:3, :3] / np.linalg.norm(self.matrix_world[:3, :3], axis=0)
         n = width * height
-        if self.fov is not None:
-            local = np.stack([xx.ravel(), yy.ravel(), -np.ones(n)], axis=1)
-            directions = local @ rot.T
-            origins = np.broadcast_to(self.matrix_world[:3, 3], (n, 3)).copy()
-        else:
-            local = np.stack([xx.ravel(), yy.ravel(), np.zeros(n)], axis=1)
-            origins = local @ rot.T + self.matrix_world[:3, 3]
-            directions = np.broadcast_to(-rot[:, 2], (n, 3)).copy()
+        origins, directions = np.empty((n, 3)), np.empty((n, 3))
+        _pixel_rays(x, y, rot, self.matrix_world[:3, 3].copy(), self.fov is not None, origins, directions)
         return origins, directions, np.full(n, self.clip_start), np.full(n, self.clip_end)
 
     def image_plane(self, width, height):
@@ -90,3 +84,22 @@ class Camera:
         kind = f"fov={self.fov:.4f}" if self.fov is not None else f"ortho_scale={self.ortho_scale}"
         shift = f", shift={self.shift}" if any(self.shift) else ""
         return f"Camera(position={self.position.round(4).tolist()}, {kind}{shift})"
+
+
+@njit(cache=True, parallel=True)
+def _pixel_rays(x, y, rot, position, perspective, origins, directions):
+    """Row-major pixel rays from the image-plane coordinates x (W,) and y (H,). A kernel because numpy's
+    meshgrid, stack and matrix product took 30-40 ms at 640 x 480, a tenth of the seed 000 setting's
+    time to image."""
+    width = x.shape[0]
+    for i in prange(y.shape[0]):
+        for j in range(width):
+            r = i * width + j
+            for k in range(3):
+                spread = x[j] * rot[k, 0] + y[i] * rot[k, 1]
+                if perspective:
+                    origins[r, k] = position[k]
+                    directions[r, k] = spread - rot[k, 2]
+                else:
+                    origins[r, k] = spread + position[k]
+                    directions[r, k] = -rot[k, 2]
