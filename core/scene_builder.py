@@ -7,7 +7,8 @@ fingerprint that changes whenever its geometry does (e.g. a CRC of its vertex an
 - a mesh whose fingerprint changed (it deforms) is rebuilt, and from then on counts as dynamic;
 - the soup (scene_policy.py: small or overlapping static objects merged into one flat tree) is kept
   while its members' keys, fingerprints and matrices are unchanged. Its triangles are stored relative
-  to its own centre and placed by a translation, so a moving camera never rebuilds it;
+  to an anchor (its centre, kept while it stays near the soup's box: `_anchor`) and placed by a
+  translation, so a moving camera never rebuilds it;
 - a single-use mesh whose matrix changed counts as dynamic too (it leaves the soup).
 Trees of keys absent from a frame are dropped. `reuse=False` rebuilds everything (the same layout),
 so the two can be compared. Every scene carries the instances' signature (instance_signature.py), from
@@ -124,8 +125,11 @@ class SceneBuilder:
         t = perf_counter()
         scene = build_two_level(trees, new_mesh_of, shifted, **self.options)
         top_ms = (perf_counter() - t) * 1e3
+        rounding = np.zeros((len(mesh_of), 4))
+        if soup.any():
+            rounding[soup] = (1.0, *anchor)
         scene.signature = instance_signature([mesh_digest(m.key, m.fingerprint) for m in meshes], bounds, mesh_of,
-                                             o2w, origin)
+                                             o2w, origin, rounding)
         members = np.flatnonzero(soup)
         sizes = [len(meshes[mesh_of[i]].triangles) for i in members]
         scene.caller_ids = CallerIds(np.flatnonzero(~soup), members, np.concatenate([[0], np.cumsum(sizes)])
@@ -175,11 +179,25 @@ class SceneBuilder:
         parts = [(_gather(meshes[mesh_of[i]]).astype(np.float64), o2w[i]) for i in members]
         world = [tris @ m[:3, :3].T + m[:3, 3] for tris, m in parts]
         stacked = np.concatenate(world) if world else np.zeros((0, 3, 3))
-        anchor = (stacked.reshape(-1, 3).min(axis=0) + stacked.reshape(-1, 3).max(axis=0)) / 2 \
-            if len(stacked) else np.zeros(3)
+        anchor = self._anchor(stacked)
         tree = build_kdtree((stacked - anchor).astype(np.float32), **self.options)
         self._soup = (signature, tree, anchor)
         return tree, anchor, True
+
+    def _anchor(self, stacked):
+        """The point the soup's float32 triangles are relative to: last soup's anchor while it lies
+        within the new soup's box grown by the box's diagonal, else the box's centre. Re-anchoring
+        re-rounds every member, which costs kept pixels near all of them (instance_signature.py), so
+        an object leaving or joining the soup should not move it (the grown box keeps it for a flat
+        ground, whose own box a centre above it is never inside). A vertex is then at most (1 + sqrt 3)
+        diagonals from the anchor, against half of one from the centre: under 3 bits of float32."""
+        if len(stacked) == 0:
+            return np.zeros(3)
+        lo, hi = stacked.reshape(-1, 3).min(axis=0), stacked.reshape(-1, 3).max(axis=0)
+        grow = np.linalg.norm(hi - lo)
+        if self._soup is not None and ((lo - grow <= self._soup[2]) & (self._soup[2] <= hi + grow)).all():
+            return self._soup[2]
+        return (lo + hi) / 2
 
     def _forget_absent(self, keys):
         present = set(keys)
