@@ -1,7 +1,8 @@
 """Lights mirroring Blender's point, sun, spot and area lights, packed into rows for the kernels.
 
 Soft shadows come from sampling the light's extent: a point or spot light's radius (a disk facing the
-shaded point), a sun's angular diameter (a cone of directions), an area light's shape.
+shaded point), a sun's angular diameter (a cone of directions), an area light's shape. A light made
+with cast_shadow=False (Blender's "Cast Shadow" off) lights every surface facing it: no shadow ray.
 """
 import numpy as np
 
@@ -9,48 +10,59 @@ POINT, SUN, SPOT, AREA = 0, 1, 2, 3
 AREA_SHAPES = {"SQUARE": 0, "RECTANGLE": 1, "DISK": 2, "ELLIPSE": 3}
 
 # Packed row: kind, position(3), direction(3), radius, cos_half_angle, spot_cos, spot_smooth,
-# axis_u(3), axis_v(3), shape, color(3)
+# axis_u(3), axis_v(3) (area: half extents; spot: its frame's X and Y over their squared lengths),
+# spot_inv_len_z, no_shadow, (unused), shape, color(3)
 ROW = 24
+SPOT_INV_LEN_Z, NO_SHADOW = 17, 18
 
 
 class Light:
     """One light. Use the constructors `point`, `sun`, `spot`, `area`."""
 
-    def __init__(self, kind, color, power, **params):
+    def __init__(self, kind, color, power, cast_shadow=True, **params):
         color = np.asarray(color, np.float64).reshape(3)
         if not np.isfinite(color).all() or (color < 0).any():
             raise ValueError(f"light color must be 3 finite non-negative numbers, got {color.tolist()}")
         if not (np.isfinite(power) and power >= 0):
             raise ValueError(f"light power must be finite and >= 0, got {power}")
+        if not isinstance(cast_shadow, (bool, np.bool_)):
+            raise ValueError(f"light cast_shadow must be True or False, got {cast_shadow!r}")
         self.kind, self.color, self.power, self.params = kind, color, float(power), params
+        self.cast_shadow = bool(cast_shadow)
 
     @classmethod
-    def point(cls, position, radius=0.0, power=1000.0, color=(1.0, 1.0, 1.0)):
-        return cls(POINT, color, power, position=_vector("point light position", position),
+    def point(cls, position, radius=0.0, power=1000.0, color=(1.0, 1.0, 1.0), cast_shadow=True):
+        return cls(POINT, color, power, cast_shadow, position=_vector("point light position", position),
                    radius=_non_negative("point light radius", radius))
 
     @classmethod
-    def sun(cls, direction, angle=0.0, strength=1.0, color=(1.0, 1.0, 1.0)):
+    def sun(cls, direction, angle=0.0, strength=1.0, color=(1.0, 1.0, 1.0), cast_shadow=True):
         """`direction` is the direction the light travels (Blender: matrix_world @ (0, 0, -1))."""
         angle = _non_negative("sun angle", angle)
         if angle > np.pi * (1.0 + 1e-6):  # Blender's own limit (180 degrees: a hemisphere of directions)
             raise ValueError(f"sun angle must be <= pi, got {angle}")
         angle = min(angle, np.pi)  # Blender's 180 degrees is float32 pi, a hair above np.pi
-        return cls(SUN, color, strength, direction=_unit("sun direction", direction), angle=angle)
+        return cls(SUN, color, strength, cast_shadow, direction=_unit("sun direction", direction), angle=angle)
 
     @classmethod
     def spot(cls, position, direction, spot_size, spot_blend=0.15, radius=0.0, power=1000.0,
-             color=(1.0, 1.0, 1.0)):
+             color=(1.0, 1.0, 1.0), cast_shadow=True, axes=None):
+        """axes: optional 3x3 matrix whose columns are the light object's X, Y, Z axes in world space,
+        scale included (Blender's matrix_world.to_3x3()), with `direction` along minus its Z. The
+        cone is then measured in the object's own frame, as Cycles does (spot_light_to_local): a
+        non-uniform scale makes it elliptical."""
         if not 0.0 < spot_size <= np.pi:
             raise ValueError(f"spot_size must be in (0, pi], got {spot_size}")
         if not 0.0 <= spot_blend <= 1.0:
             raise ValueError(f"spot_blend must be in [0, 1], got {spot_blend}")
-        return cls(SPOT, color, power, position=_vector("spot position", position),
-                   direction=_unit("spot direction", direction), spot_size=float(spot_size),
-                   spot_blend=float(spot_blend), radius=_non_negative("spot radius", radius))
+        direction = _unit("spot direction", direction)
+        return cls(SPOT, color, power, cast_shadow, position=_vector("spot position", position),
+                   direction=direction, spot_size=float(spot_size), spot_blend=float(spot_blend),
+                   radius=_non_negative("spot radius", radius), frame=_spot_frame(direction, axes))
 
     @classmethod
-    def area(cls, matrix_world, shape="SQUARE", size=1.0, size_y=None, power=1000.0, color=(1.0, 1.0, 1.0)):
+    def area(cls, matrix_world, shape="SQUARE", size=1.0, size_y=None, power=1000.0, color=(1.0, 1.0, 1.0),
+             cast_shadow=True):
         """An area light in its object's XY plane, emitting along its -Z (as in Blender)."""
         m = np.asarray(matrix_world, np.float64)
         if m.shape != (4, 4) or not np.isfinite(m).all():
@@ -63,7 +75,7 @@ class Light:
                                  "extent or no direction to emit in")
         size = _positive("area light size", size)
         size_y = size if size_y is None or shape in ("SQUARE", "DISK") else _positive("area light size_y", size_y)
-        return cls(AREA, color, power, matrix_world=m, shape=shape, size=size, size_y=size_y)
+        return cls(AREA, color, power, cast_shadow, matrix_world=m, shape=shape, size=size, size_y=size_y)
 
     def translated(self, offset):
         """The same light in a frame whose origin is at `offset`."""
@@ -74,7 +86,7 @@ class Light:
         if "matrix_world" in params:
             params["matrix_world"] = params["matrix_world"].copy()
             params["matrix_world"][:3, 3] -= offset
-        return Light(self.kind, self.color, self.power, **params)
+        return Light(self.kind, self.color, self.power, self.cast_shadow, **params)
 
     def packed(self):
         """The light as one float64 row for the kernels (see ROW)."""
@@ -82,6 +94,7 @@ class Light:
         p = self.params
         row[0] = self.kind
         row[21:24] = self.color
+        row[NO_SHADOW] = 0.0 if self.cast_shadow else 1.0
         if self.kind in (POINT, SPOT):
             row[1:4], row[7] = p["position"], p["radius"]
         if self.kind == SUN:
@@ -90,6 +103,7 @@ class Light:
             row[4:7] = p["direction"]
             row[9] = np.cos(p["spot_size"] / 2.0)
             row[10] = (1.0 - row[9]) * p["spot_blend"]  # Cycles' spot_smooth
+            row[11:14], row[14:17], row[SPOT_INV_LEN_Z] = p["frame"]
         if self.kind == AREA:
             m = p["matrix_world"]
             row[1:4] = m[:3, 3]
@@ -102,6 +116,25 @@ class Light:
     def __repr__(self):
         names = {POINT: "point", SUN: "sun", SPOT: "spot", AREA: "area"}
         return f"Light.{names[self.kind]}(power={self.power}, color={self.color.tolist()})"
+
+
+def _spot_frame(direction, axes):
+    """(X / |X|^2, Y / |Y|^2, 1 / |Z|) of the spot's object axes: dotted with a direction they give
+    its coordinates in the object's frame (for orthogonal axes), as Cycles' scaled_axis_u/_v and
+    inv_len_z. Without axes, any orthonormal frame around the direction (a round cone)."""
+    if axes is None:
+        u = np.cross(direction, (1.0, 0.0, 0.0) if abs(direction[0]) < 0.9 else (0.0, 1.0, 0.0))
+        u /= np.linalg.norm(u)
+        return u, np.cross(direction, u), 1.0
+    a = np.asarray(axes, np.float64)
+    if a.shape != (3, 3) or not np.isfinite(a).all():
+        raise ValueError(f"spot axes must be a finite 3x3 matrix (columns X, Y, Z), got shape {a.shape}")
+    lengths = np.linalg.norm(a, axis=0)
+    if not (lengths > 0.0).all():
+        raise ValueError("spot axes have a zero-length axis (zero scale): the cone is undefined")
+    if np.dot(-a[:, 2] / lengths[2], direction) < 1.0 - 1e-6:
+        raise ValueError("spot direction must be minus the Z axis of its axes (Blender: the light's local -Z)")
+    return a[:, 0] / lengths[0] ** 2, a[:, 1] / lengths[1] ** 2, 1.0 / lengths[2]
 
 
 def pack_lights(lights):

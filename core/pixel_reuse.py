@@ -22,7 +22,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
-from .lights import AREA, SUN
+from .lights import AREA, NO_SHADOW, SUN
 
 MAX_BOXES = 64
 RELATIVE_PAD = 1e-6  # boxes grow by this times their size and distance from the origin: float32 rounding
@@ -118,6 +118,8 @@ def _rays_meet_box(o, ao_radius, lights, boxes, b, d):
     for i in range(lights.shape[0]):
         light = lights[i]
         kind = int(light[0])
+        if light[NO_SHADOW] != 0.0:
+            continue  # traces no shadow rays
         if kind == SUN:
             far = _farthest_corner(o, boxes, b)
             grow = far * np.sqrt(max(0.0, 1.0 - light[8] * light[8]))

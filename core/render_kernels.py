@@ -21,6 +21,7 @@ from numba import njit, prange
 from .array_views import rows, unowned
 from .instance_traversal import new_scratch, trace_scene, unowned_scene, world_normal
 from .layout import NO_HIT
+from .lights import NO_SHADOW
 from .pixel_reuse import segment_meets_any
 from .sampling import pixel_seed, sample_2d
 from .shading import cosine_direction, hit_error_scale, offset_origin, sample_light
@@ -164,7 +165,9 @@ def _light_samples(scene, point, origin, normal, lights, sampler, ps, s, dim1, d
         cos_nl = normal[0] * direction[0] + normal[1] * direction[1] + normal[2] * direction[2]
         if mask <= 0.0 or cos_nl <= 0.0:
             continue  # behind the surface or outside the light: no ray needed
-        prim = _visibility(scene, origin, direction, dist, scratch, memo, i, bit + k, rays)
+        prim = -1  # a light that casts no shadow reaches every surface facing it: no ray either
+        if light[NO_SHADOW] == 0.0:
+            prim = _visibility(scene, origin, direction, dist, scratch, memo, i, bit + k, rays)
         if prim < NO_HIT:
             return r, g, b, prim
         if prim < 0:

@@ -2,7 +2,7 @@
 import numpy as np
 from numba import njit
 
-from .lights import AREA, SPOT, SUN
+from .lights import AREA, SPOT, SPOT_INV_LEN_Z, SUN
 
 TWO_PI = 2.0 * np.pi
 
@@ -86,9 +86,16 @@ def sample_light(light, p, u1, u2, out_dir):
 
 @njit(cache=True, inline="always")
 def _light_mask(light, kind, to_light):
-    """Spot cone with Cycles' smoothstep blend; area lights emit only to their front (-Z) side."""
+    """Spot cone with Cycles' smoothstep blend, measured in the light object's frame (lights.py,
+    _spot_frame: a non-uniform scale makes it elliptical); area lights emit only to their front (-Z)
+    side."""
     cos_a = -(to_light[0] * light[4] + to_light[1] * light[5] + to_light[2] * light[6])
     if kind == SPOT:
+        x = to_light[0] * light[11] + to_light[1] * light[12] + to_light[2] * light[13]
+        y = to_light[0] * light[14] + to_light[1] * light[15] + to_light[2] * light[16]
+        z = cos_a * light[SPOT_INV_LEN_Z]
+        norm = np.sqrt(x * x + y * y + z * z)
+        cos_a = z / norm if norm > 0.0 else 0.0
         if cos_a <= light[9]:
             return 0.0
         t = cos_a - light[9]

@@ -321,18 +321,22 @@ def _instancer_hides_self(orig: bpy.types.Object, evaluated: bpy.types.Object) -
 def _entry_visible(vis: _Visibility, parent, ob: bpy.types.Object) -> bool:
     """Render-visibility of one object_instances entry (parent None: not an instance)."""
     orig = ob.original
+    if not light_visible(vis, parent, orig):
+        return False
     if parent is None:
-        return (
-            vis.scene_object(orig)
-            and _ray_visible(orig)
-            and not _instancer_hides_self(orig, ob)
-        )
+        return _ray_visible(orig) and not _instancer_hides_self(orig, ob)
+    return _ray_visible(orig, parent.original)
+
+
+def light_visible(vis: _Visibility, parent, orig: bpy.types.Object) -> bool:
+    """The collection and hide_render rules of an object_instances entry (parent None: not an
+    instance), without the ray-visibility flags: all that decides whether a light is rendered."""
+    if parent is None:
+        return vis.scene_object(orig)
     parent = parent.original
     if not vis.scene_object(parent):
         return False
-    if parent != orig and not vis.in_instanced_collection(parent, orig):
-        return False
-    return _ray_visible(orig, parent)
+    return parent == orig or vis.in_instanced_collection(parent, orig)
 
 
 # --------------------------------------------------------------------------

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import PreviewError
-from .extract import _Visibility  # the render-visibility rules extraction uses, reused for lights
+from .extract import _Visibility, light_visible  # the render-visibility rules extraction uses
 
 
 @dataclass(frozen=True)
@@ -164,15 +164,17 @@ def light_input(name: str, data, matrix_world) -> LightInput | None:
         kw = dict(position=position, radius=float(data.shadow_soft_size), power=float(data.energy))
     elif data.type == "SUN":
         kw = dict(direction=light_direction(m), angle=float(data.angle), strength=float(data.energy))
-    elif data.type == "SPOT":
+    elif data.type == "SPOT":  # axes: a non-uniformly scaled spot's cone is elliptical in Cycles
         kw = dict(position=position, direction=light_direction(m), spot_size=float(data.spot_size),
-                  spot_blend=float(data.spot_blend), radius=float(data.shadow_soft_size), power=float(data.energy))
+                  spot_blend=float(data.spot_blend), radius=float(data.shadow_soft_size), power=float(data.energy),
+                  axes=m[:3, :3].copy())
     elif data.type == "AREA":
         size_y = float(data.size_y) if data.shape in ("RECTANGLE", "ELLIPSE") else None
         kw = dict(matrix_world=m, shape=data.shape, size=float(data.size), size_y=size_y, power=float(data.energy))
     else:
         return None
     kw["color"] = color
+    kw["cast_shadow"] = bool(getattr(data, "use_shadow", True))
     return LightInput(name, data.type.lower(), kw)
 
 
@@ -192,14 +194,21 @@ def read_camera(scene, depsgraph, width: int, height: int) -> tuple[CameraInput,
 
 
 def read_lights(depsgraph) -> list[LightInput]:
-    """Render-visible scene lights (own hide_render and collection path, as for meshes)."""
+    """Render-visible scene lights, instanced ones too (a light in an instanced collection lights the
+    scene in Cycles): the render-visibility rules of meshes (extract.py), from object_instances."""
     visibility = _Visibility(depsgraph.view_layer)
     lights = []
-    for ob in depsgraph.objects:
-        if ob.type == "LIGHT" and visibility.scene_object(ob.original):
-            light = light_input(ob.original.name, ob.data, ob.matrix_world)
-            if light is not None:
-                lights.append(light)
+    for inst in depsgraph.object_instances:
+        ob = inst.object
+        if ob.type != "LIGHT":
+            continue
+        parent = inst.parent if inst.is_instance else None
+        if not light_visible(visibility, parent, ob.original):
+            continue
+        name = ob.original.name if parent is None else f"{ob.original.name} (instanced by {parent.original.name})"
+        light = light_input(name, ob.data, inst.matrix_world)
+        if light is not None:
+            lights.append(light)
     return lights
 
 

@@ -142,6 +142,34 @@ def test_render_hidden_lights_are_left_out(scene):
     assert names == ["Shown"]
 
 
+def test_instanced_lights_are_read_at_their_instances(scene):
+    """A light inside an instanced collection lights the scene in Cycles (found by outside QA: the
+    preview used to ignore it): one light per render-visible instance, at the instance's place."""
+    source = scenes.new_collection("Rig", exclude=True)  # excluded: only its instances render
+    lamp = scenes.link(bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", "POINT")), source)
+    lamp.location = (1.0, 0.0, 2.0)
+    for name, x, hidden in (("A", 10.0, False), ("B", 20.0, False), ("C", 30.0, True)):
+        empty = scenes.link(bpy.data.objects.new(name, None))
+        empty.instance_type, empty.instance_collection = "COLLECTION", source
+        empty.location, empty.hide_render = (x, 0.0, 0.0), hidden
+    lights = scene_input.read_lights(bpy.context.evaluated_depsgraph_get())
+    found = sorted((light.name, tuple(np.round(light.keywords["position"], 6))) for light in lights)
+    assert found == [("Lamp (instanced by A)", (11.0, 0.0, 2.0)), ("Lamp (instanced by B)", (21.0, 0.0, 2.0))]
+
+
+def test_cast_shadow_and_spot_scale_reach_core(scene):
+    """Blender's Cast Shadow switch and a spot's object scale (its cone is elliptical in Cycles)."""
+    sun = light_object("SUN")
+    sun.data.use_shadow = False
+    spot = light_object("SPOT", spot_size=0.8)
+    spot.scale = (2.0, 1.0, 0.5)
+    lights = {light.name: light for light in scene_input.read_lights(bpy.context.evaluated_depsgraph_get())}
+    assert lights["Sun"].keywords["cast_shadow"] is False and lights["Spot"].keywords["cast_shadow"] is True
+    np.testing.assert_allclose(lights["Spot"].keywords["axes"], np.diag([2.0, 1.0, 0.5]), atol=1e-6)
+    light = core.Light.spot(**lights["Spot"].keywords)
+    assert not core.Light.sun(**lights["Sun"].keywords).cast_shadow and light.cast_shadow
+
+
 def test_lights_are_accepted_by_core(scene):
     import core
 

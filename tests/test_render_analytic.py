@@ -106,6 +106,58 @@ def test_spot_cone_and_area_light_side():
     assert lit[..., 0].min() > 0 and (dark[..., :3] == 0).all()
 
 
+@pytest.mark.parametrize("scale", [(2.0, 1.0, 1.0), (1.5, 0.75, 0.75), (1.0, 1.0, 1.0)])
+def test_scaled_spot_cone_is_elliptical_as_in_cycles(scale):
+    """Cycles measures a spot's cone in the light object's own frame (spot_light_to_local): with
+    object scale (sx, sy, sz) a floor point (x, y) at depth h below it is inside when
+    h/sz / |(x/sx, y/sy, h/sz)| > cos(size/2), i.e. (x/sx)^2 + (y/sy)^2 < (h/sz)^2 tan^2(size/2)."""
+    h, size = 2.0, np.radians(40)
+    tree = core.build_kdtree(floor(0.0))
+    camera = look_down((0.0, 0.0, 4.0), fov=1.4)
+    axes = np.diag(scale)  # Blender's default light faces down its -Z
+    spot = core.Light.spot((0, 0, h), (0, 0, -1.0), spot_size=size, spot_blend=0.0, axes=axes)
+    img = core.render_preview(tree, camera, 48, 48, samples=1, mode="shadow", lights=[spot])
+    o, d, _, _ = camera.rays(48, 48)
+    p = o + 4.0 * d
+    sx, sy, sz = scale
+    ellipse = (p[:, 0] / sx) ** 2 + (p[:, 1] / sy) ** 2 - (h / sz * np.tan(size / 2)) ** 2
+    lit = img[..., 0].ravel() > 0
+    assert (lit[ellipse < -1e-9] == 1).all() and (lit[ellipse > 1e-9] == 0).all()
+    assert lit.sum() > 20
+
+
+def test_spot_axes_must_match_the_direction():
+    with pytest.raises(ValueError, match="minus the Z axis"):
+        core.Light.spot((0, 0, 2), (0, 0, -1.0), spot_size=1.0, axes=np.diag([1.0, 1.0, -1.0]))
+    with pytest.raises(ValueError, match="zero-length axis"):
+        core.Light.spot((0, 0, 2), (0, 0, -1.0), spot_size=1.0, axes=np.diag([0.0, 1.0, 1.0]))
+
+
+def moved_up(z):
+    m = np.eye(4)
+    m[2, 3] = z
+    return m
+
+
+@pytest.mark.parametrize("make", [lambda **k: core.Light.sun((0.3, 0.0, -1.0), **k),
+                                  lambda **k: core.Light.point((0.5, 0.0, 3.0), **k),
+                                  lambda **k: core.Light.spot((0.5, 0, 3.0), (0, 0, -1.0), spot_size=3.0, **k),
+                                  lambda **k: core.Light.area(moved_up(3.0), size=1.0, **k)])
+def test_light_without_shadows_lights_the_occluded_floor(make):
+    """Blender's Cast Shadow off: the floor under a large occluder gets N.L as if nothing were
+    there (and no shadow ray is traced), while the same light with shadows leaves it dark."""
+    tris = np.concatenate([floor(0.0), floor(1.0, half=0.6)])
+    camera = look_down((0.0, 0.0, 0.5), fov=0.5)
+    shadowed = render(tris, camera, size=16, samples=4, mode="shadow", lights=[make()])
+    r = core.PreviewRender(core.build_kdtree(tris), camera, 16, 16, samples=4, mode="shadow",
+                           lights=[make(cast_shadow=False)])
+    r.step(4)
+    assert (shadowed[..., :3] == 0).all()
+    assert r.rays_traced == r.camera_rays
+    open_floor = render(floor(0.0), camera, size=16, samples=4, mode="shadow", lights=[make()])
+    np.testing.assert_array_equal(r.image(), open_floor)
+
+
 def test_background_is_transparent_and_alpha_marks_hits():
     tris = quad((0, 0, 0), (0.5, 0, 0), (0, 0.5, 0))
     camera = look_down((0.0, 0.0, 2.0), fov=1.0)
