@@ -163,3 +163,30 @@ def world_normal(scene, inst, prim, out):
     norm = np.sqrt(out[0] * out[0] + out[1] * out[1] + out[2] * out[2])
     for k in range(3):
         out[k] /= norm
+
+
+@njit(cache=True, inline="always")
+def triangle_reach(scene, inst, prim, p):
+    """The largest world-space coordinate difference between point p and a vertex of an instance's
+    triangle. The triangle test works on vertex-minus-origin differences, so its t carries rounding
+    of this size: on a floor 1e4 wide seen 1e-3 across, an AO ray offset by p's magnitude alone hit
+    the floor it left at t ~ 1e-12 (outside QA). World vectors come from object ones by solving
+    w2o x = v (Cramer's rule; the scene keeps only world-to-object matrices)."""
+    tri = scene[16][scene[10][scene[7][inst]] + prim]
+    a = rows(scene[6], inst, inst + 1)[0]
+    px = a[0, 0] * p[0] + a[0, 1] * p[1] + a[0, 2] * p[2] + a[0, 3]
+    py = a[1, 0] * p[0] + a[1, 1] * p[1] + a[1, 2] * p[2] + a[1, 3]
+    pz = a[2, 0] * p[0] + a[2, 1] * p[1] + a[2, 2] * p[2] + a[2, 3]
+    c0x, c0y, c0z = a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1], a[1, 2] * a[2, 0] - a[1, 0] * a[2, 2], \
+        a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0]
+    c1x, c1y, c1z = a[0, 2] * a[2, 1] - a[0, 1] * a[2, 2], a[0, 0] * a[2, 2] - a[0, 2] * a[2, 0], \
+        a[0, 1] * a[2, 0] - a[0, 0] * a[2, 1]
+    c2x, c2y, c2z = a[0, 1] * a[1, 2] - a[0, 2] * a[1, 1], a[0, 2] * a[1, 0] - a[0, 0] * a[1, 2], \
+        a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]
+    det = a[0, 0] * c0x + a[0, 1] * c0y + a[0, 2] * c0z
+    reach = 0.0
+    for i in range(3):
+        ux, uy, uz = tri[i, 0] - px, tri[i, 1] - py, tri[i, 2] - pz
+        reach = max(reach, abs(c0x * ux + c1x * uy + c2x * uz), abs(c0y * ux + c1y * uy + c2y * uz),
+                    abs(c0z * ux + c1z * uy + c2z * uz))
+    return reach / abs(det)

@@ -8,6 +8,11 @@ TWO_PI = 2.0 * np.pi
 
 
 OFFSET_RELATIVE = 2.0 ** -32  # offset / error scale of the hit point: ~2e6 times float64's rounding
+# The triangle test's t carries a few float64 roundings (2^-52) of the vertex-minus-origin differences
+# (instance_traversal.triangle_reach), so the hit triangle's reach enters the error scale at 2^-8 of
+# it: an offset of 2^-40 of the reach, 4096 roundings. At 2^-32 of it, a floor 1e5 wide moved ray
+# starts 2e-5 up, and AO in a 5e-4 gap under a ceiling came out 0.227 instead of 0.25.
+TRIANGLE_REACH_WEIGHT = 2.0 ** -8
 
 
 @njit(cache=True, inline="always")

@@ -271,3 +271,21 @@ def test_ao_between_planes_is_right_at_tiny_scales(scale):
     img = core.render_preview(core.build_kdtree(tris), camera, 16, 16, samples=256, ao_distance=r * scale)
     assert hit_mask(img).all()
     assert img[..., 0].mean() == pytest.approx((h / r) ** 2, abs=0.01)
+
+
+@pytest.mark.parametrize("half", [1.0, 1e4, 1e5])
+@pytest.mark.parametrize("view", [1e-2, 1e-3])
+def test_huge_triangles_seen_up_close_have_no_acne(half, view):
+    """Two triangles half x half wide seen `view` across (plus one far away, so the tree's box is not
+    flat): the triangle test's t carries rounding of the vertices' size, and an offset scaled by the
+    hit point's magnitude alone let AO rays hit the floor they left (outside QA: AO 0.83-0.87 for
+    half / view >= 1e7). Open floor: AO exactly 1; a ceiling view/2 above: AO (h/r)^2."""
+    far = np.array([[[500, 500, 50], [501, 500, 50], [500, 501, 50]]], float)
+    camera = core.Camera(np.eye(4) + np.pad([[view / 4]], ((2, 1), (3, 0))), ortho_scale=view)
+    open_floor = core.build_kdtree(np.concatenate([floor(0.0, half=half), far]))
+    img = core.render_preview(open_floor, camera, 16, 16, samples=64, ao_distance=view)
+    assert hit_mask(img).all() and (img[..., :3] == 1.0).all()
+    h, r = view / 2, view
+    gap = core.build_kdtree(np.concatenate([floor(0.0, half=half), floor(h, half=half), far]))
+    ao = core.render_preview(gap, camera, 16, 16, samples=256, ao_distance=r)
+    assert ao[..., 0].mean() == pytest.approx((h / r) ** 2, abs=0.01)
