@@ -28,8 +28,9 @@ class Camera:
             raise ValueError(f"camera ortho_scale must be finite and > 0, got {ortho_scale}")
         if not 0.0 <= clip_start < clip_end:
             raise ValueError(f"camera clip range must satisfy 0 <= clip_start < clip_end, got {clip_start}, {clip_end}")
-        if abs(np.linalg.det(m[:3, :3])) < 1e-12:
-            raise ValueError("camera matrix_world is singular (zero scale)")
+        axes = np.linalg.norm(m[:3, :3], axis=0)  # the scale is ignored, so only a relative test
+        if not (axes > 0).all() or abs(np.linalg.det(m[:3, :3] / axes)) < 1e-9:
+            raise ValueError("camera matrix_world is singular (zero scale or collapsed axes)")
         if not (m[3] == (0.0, 0.0, 0.0, 1.0)).all():
             raise ValueError(f"camera matrix_world must be affine (bottom row 0 0 0 1), got {m[3].tolist()}")
         shift = np.asarray(shift, np.float64)

@@ -20,9 +20,9 @@ class Light:
     """One light. Use the constructors `point`, `sun`, `spot`, `area`."""
 
     def __init__(self, kind, color, power, cast_shadow=True, **params):
-        color = np.asarray(color, np.float64).reshape(3)
-        if not np.isfinite(color).all() or (color < 0).any():
-            raise ValueError(f"light color must be 3 finite non-negative numbers, got {color.tolist()}")
+        color = np.asarray(color, np.float64)
+        if color.shape != (3,) or not np.isfinite(color).all() or (color < 0).any():
+            raise ValueError(f"light color must be 3 finite non-negative numbers (r, g, b), got {color.tolist()}")
         if not (np.isfinite(power) and power >= 0):
             raise ValueError(f"light power must be finite and >= 0, got {power}")
         if not isinstance(cast_shadow, (bool, np.bool_)):
@@ -139,6 +139,8 @@ def _spot_frame(direction, axes):
 
 def pack_lights(lights):
     """All lights as an (L, ROW) float64 array."""
+    if isinstance(lights, Light):
+        raise ValueError("lights must be a list of core.Light, got one Light: pass [light]")
     lights = list(lights)
     for i, light in enumerate(lights):
         if not isinstance(light, Light):

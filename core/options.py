@@ -92,7 +92,7 @@ class BuildOptions:
         if self.threads is not None:
             _check_int("threads", self.threads, 1, 1024)
         if self.memory_limit is not None:
-            _check_int("memory_limit", self.memory_limit, 0, 1 << 62)
+            _check_int("memory_limit", self.memory_limit, 1, 1 << 62)  # None, not 0, means no limit
         _check_float("traversal_cost", self.traversal_cost, 0.0, None)
         _check_float("intersection_cost", self.intersection_cost, 0.0, None, low_open=True)
         _check_float("empty_bonus", self.empty_bonus, 0.0, 1.0, high_open=True)

@@ -304,7 +304,8 @@ def _check_settings(tree, camera, width, height, mode, samples, ao_distance, see
         raise ValueError(f"error_target must be None or > 0, got {error_target!r}")
     if isinstance(min_samples, bool) or not isinstance(min_samples, (int, np.integer)) or min_samples < 2:
         raise ValueError(f"min_samples must be an integer >= 2, got {min_samples!r}")
-    if not 0.0 <= ambient <= 1.0:
+    if isinstance(ambient, bool) or not isinstance(ambient, (int, float, np.integer, np.floating)) \
+            or not 0.0 <= ambient <= 1.0:
         raise ValueError(f"ambient must be in [0, 1], got {ambient!r}")
     if not isinstance(seed, (int, np.integer)):
         raise ValueError(f"seed must be an integer, got {seed!r}")

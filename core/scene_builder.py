@@ -104,6 +104,11 @@ class SceneBuilder:
         keys = [m.key for m in meshes]
         if len(set(keys)) != len(keys):
             raise ValueError("mesh keys must be unique within a frame")
+        for m in meshes:
+            for name, a in (("vertices", m.vertices), ("triangles", m.triangles)):
+                shape = np.shape(a)
+                if not (len(shape) == 2 and shape[1] == 3) and not (name == "triangles" and np.size(a) == 0):
+                    raise ValueError(f"mesh {m.key!r}: {name} must have shape (N, 3), got {shape}")
         self._track_changes(meshes, mesh_of, o2w)
         bounds = _bounds(meshes)
         soup = plan_soup(self.layout, np.array([len(m.triangles) for m in meshes], np.int64),
@@ -130,6 +135,7 @@ class SceneBuilder:
             rounding[soup] = (1.0, *anchor)
         scene.signature = instance_signature([mesh_digest(m.key, m.fingerprint) for m in meshes], bounds, mesh_of,
                                              o2w, origin, rounding)
+        scene.origin = origin.copy()
         members = np.flatnonzero(soup)
         sizes = [len(meshes[mesh_of[i]].triangles) for i in members]
         scene.caller_ids = CallerIds(np.flatnonzero(~soup), members, np.concatenate([[0], np.cumsum(sizes)])

@@ -14,11 +14,15 @@ from contextlib import contextmanager
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import numba  # noqa: E402
+import numpy as np  # noqa: E402
 
 
 @contextmanager
 def thread_count(threads):
     """Use `threads` Numba threads inside the block (None: all Numba was started with); yields the count."""
+    if threads is not None and (isinstance(threads, bool) or not isinstance(threads, (int, np.integer))
+                                or threads < 1):
+        raise ValueError(f"threads must be None or an integer >= 1, got {threads!r}")
     previous = numba.get_num_threads()
     wanted = numba.config.NUMBA_NUM_THREADS if threads is None else min(threads, numba.config.NUMBA_NUM_THREADS)
     numba.set_num_threads(wanted)

@@ -37,6 +37,10 @@ class TwoLevelScene:
         self.top = top
         self.build_ms = build_ms
         self.signature = None  # an InstanceSignature when a SceneBuilder made it (pixel reuse across frames)
+        # What a SceneBuilder / build_scene subtracted from every position: the scene's coordinates are
+        # world minus origin, so rays, cameras and lights must be shifted too (Camera.translated(origin),
+        # Light.translated(origin), origins - origin).
+        self.origin = np.zeros(3)
         self.caller_ids = None  # a SceneBuilder's CallerIds: its caller's instance and triangle indices
         self._packed = pack_meshes(self.meshes)
 

@@ -108,10 +108,37 @@ def _box_mesh():
     (lambda t: core.Camera(np.eye(4), 0.5, shift=(1e300, 0.0)), r"shift must be two numbers \(x, y\) within"),
     (lambda t: core.Camera(np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 5], [0, 0, 1, 0.0]]), 0.5),
      "must be affine"),
+    (lambda t: core.Camera(np.diag([1.0, 1.0, 0.0, 1.0]), 0.5), "singular"),
+    (lambda t: core.Camera(np.array([[1, 1, 0, 0], [0, 1e-12, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]]), 0.5), "singular"),
+    # found by outside QA: these raised TypeErrors or messages that named no setting
+    (lambda t: core.intersect(t, np.zeros((1, 3)), np.ones((1, 3)), threads=1.5), "threads must be None or an integer"),
+    (lambda t: core.render_preview(t, core.Camera(np.eye(4), 0.5), 4, 4, ambient="0.5"), r"ambient must be in \[0, 1\]"),
+    (lambda t: core.render_preview(t, core.Camera(np.eye(4), 0.5), 4, 4, mode="shadow",
+                                   lights=core.Light.sun((0, 0, -1))), r"pass \[light\]"),
+    (lambda t: core.Light.point((0, 0, 1), color=(1, 1)), r"light color must be 3 finite non-negative numbers \(r, g, b\)"),
+    (lambda t: core.build_scene([(np.zeros((4, 2)), np.array([[0, 1, 2]]))], [0], np.eye(4)[None]),
+     r"mesh 0: vertices must have shape \(N, 3\), got \(4, 2\)"),
+    (lambda t: core.build_kdtree(np.zeros((1, 3, 3)), memory_limit=0), "memory_limit"),
 ])
 def test_scene_camera_and_query_inputs_are_named(tree, call, message):
     with pytest.raises(ValueError, match=message):
         call(tree)
+
+
+def test_a_tiny_camera_scale_is_ignored_like_any_other_scale(tree):
+    """Blender ignores a camera's object scale; a uniform 1e-5 used to be refused as singular."""
+    m = np.diag([1e-5, 1e-5, 1e-5, 1.0])
+    m[:3, 3] = (0.0, 0.0, 3.0)
+    unit = m.copy()
+    unit[:3, :3] = np.eye(3)
+    np.testing.assert_array_equal(core.render_preview(tree, core.Camera(m, 0.8), 8, 8, samples=2),
+                                  core.render_preview(tree, core.Camera(unit, 0.8), 8, 8, samples=2))
+
+
+def test_scene_keeps_its_origin():
+    scene = core.build_scene([_box_mesh()], [0], np.eye(4)[None], origin=(0.0, 0.0, 100.0))
+    np.testing.assert_array_equal(scene.origin, (0.0, 0.0, 100.0))
+    np.testing.assert_array_equal(core.build_scene([_box_mesh()], [0], np.eye(4)[None]).origin, 0.0)
 
 
 def test_numpy_scalars_are_accepted_and_huge_vectors_normalised(tree):
