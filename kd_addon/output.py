@@ -12,20 +12,26 @@ import bpy
 import numpy as np
 
 IMAGE_NAME = "KD Preview"
+IMAGE_TAG = "kd_preview_image"  # custom property marking the image this add-on owns
 
 
 def preview_image(width: int, height: int) -> bpy.types.Image:
     """The float RGBA preview image, created or resized to width x height.
 
-    Resized in place (not replaced) so image editors already showing it keep showing it.
+    Resized in place (not replaced) so image editors already showing it keep showing it. Ours is
+    the image carrying IMAGE_TAG (or an untagged float "KD Preview" from an earlier version, adopted);
+    a user's own image of that name is never touched: ours then gets Blender's next free name.
     """
-    image = bpy.data.images.get(IMAGE_NAME)
+    image = next((im for im in bpy.data.images if im.get(IMAGE_TAG)), None)
+    if image is None:
+        named = bpy.data.images.get(IMAGE_NAME)
+        if named is not None and named.source == "GENERATED" and named.is_float:
+            image = named
     if image is None or image.source != "GENERATED" or not image.is_float:
-        if image is not None:
-            image.name = IMAGE_NAME + " (old)"
         image = bpy.data.images.new(IMAGE_NAME, width, height, alpha=True, float_buffer=True)
     elif tuple(image.size) != (width, height):
         image.scale(width, height)
+    image[IMAGE_TAG] = True
     return image
 
 

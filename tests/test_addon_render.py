@@ -234,6 +234,20 @@ def test_live_update_renders_on_frame_change_only_when_enabled(addon):  # noqa: 
     assert handlers == [live_update.kd_preview_frame_change]
 
 
+def test_a_users_image_named_kd_preview_is_left_alone(addon):  # noqa: F811
+    """Found by outside QA: a user's own (byte) image called "KD Preview" was silently renamed."""
+    half_plane_scene()
+    mine = bpy.data.images.new(IMAGE_NAME, 4, 4)
+    mine.pixels[:] = [0.5] * 64
+    bpy.ops.kdpreview.render()
+    bpy.ops.kdpreview.render()
+    assert mine.name == IMAGE_NAME and not mine.get("kd_preview_image")
+    np.testing.assert_allclose(mine.pixels[:], 0.5, atol=1 / 255)
+    ours = [im for im in bpy.data.images if im.get("kd_preview_image")]
+    assert len(ours) == 1 and ours[0].is_float and ours[0] != mine  # found again by its tag, not duplicated
+    check_half_plane_image(preview_pixels(ours[0].name))
+
+
 def test_preview_image_is_resized_in_place_and_shown_in_an_image_editor(addon):  # noqa: F811
     scene = half_plane_scene()
     area = bpy.context.window.screen.areas[0]
