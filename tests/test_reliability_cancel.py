@@ -203,3 +203,27 @@ def test_interrupt_flag_off_the_main_thread_leaves_sigint_alone():
     thread.start()
     thread.join()
     assert seen == [(False, True)] and signal.getsignal(signal.SIGINT) is before
+
+
+def test_a_sequence_stopped_early_still_reports_the_frames_it_wrote(addon, tmp_path):  # noqa: F811
+    """Found by outside QA: after Ctrl-C the written frames had no report.json. Closing a sequence
+    that stopped early writes one for them, marked incomplete; a finished one is marked complete."""
+    import json
+    from kd_addon.sequence import SequenceJob
+
+    scene = half_plane_scene()
+    config = make_config(scene.kd_preview)
+    depsgraph = lambda _s: bpy.context.evaluated_depsgraph_get()  # noqa: E731
+    stopped = SequenceJob(scene, config, [1, 2, 3], tmp_path / "stopped", depsgraph)
+    while len(stopped.results) < 1:
+        stopped.tick()
+    stopped.close()  # what the command line and the operator do on cancel
+    report = json.loads((tmp_path / "stopped" / "report.json").read_text())
+    assert (report["complete"], report["frames_requested"], len(report["frames"])) == (False, 3, 1)
+    assert report["frames"][0]["file"] == "frame_0001.png" and scene.frame_current == 1
+    finished = SequenceJob(scene, config, [1, 2], tmp_path / "finished", depsgraph)
+    while not finished.tick():
+        pass
+    finished.close()
+    report = json.loads((tmp_path / "finished" / "report.json").read_text())
+    assert (report["complete"], report["frames_requested"], len(report["frames"])) == (True, 2, 2)
