@@ -81,6 +81,40 @@ def test_far_from_origin_and_extreme_scales(offset, scale, rng):
 
 
 @pytest.mark.parametrize("options", BUILDERS)
+def test_rays_leaving_lattice_faces_hit_the_next_plane(options, rng):
+    """Analytic reference: inside the lattice every integer plane is a wall, so a ray starting on
+    one (on a face, an edge or a vertex) first hits the nearest integer plane strictly ahead of it,
+    never the face it leaves (t is in the open interval (0, tmax)). Outside QA found ~1 ray in 1000
+    reporting its own face at t ~ 1e-17, sometimes instead of its true hit."""
+    n_cells = 4
+    tree = core.build_kdtree(lattice(n_cells), **options)
+    n = 20000
+    o = rng.uniform(0.5, n_cells - 0.5, (n, 3))
+    snapped = rng.random((n, 3)) < [[1.0, 0.5, 0.3]]  # on a face, often an edge, sometimes a vertex
+    o[snapped] = np.round(o[snapped])
+    o = rng.permuted(o, axis=1)
+    d = rng.normal(size=(n, 3))
+    ahead = np.where(d > 0, np.floor(o) + 1, np.ceil(o) - 1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        expected = np.where(d != 0, (ahead - o) / d, np.inf).min(axis=1)
+    hits = core.intersect(tree, o, d)
+    np.testing.assert_allclose(hits.t, expected.astype(np.float32), rtol=1e-6)
+    assert not core.occluded(tree, o, d, tmax=0.5 * expected).any()
+
+
+@pytest.mark.parametrize("length", [1.0, 1e-8, 2.0 ** -52])
+def test_tiny_directions_keep_real_hits_far_from_t_zero(length):
+    """The t rounding bound scales with the direction's length (a far hit at t = 1.35e15 for a ray
+    along 2^-52 (0, -1, 0) was once rejected by a bound with the shear measured in scaled z; the
+    second triangle is hit exactly on its edge, the case hypothesis found)."""
+    wall = np.array([[[-1.0, -0.3, -1.0], [1.0, -0.3, -1.0], [0.0, -0.3, 1.0]]])
+    edge = np.array([[[0.0, 1.5, 0.5], [2.0, -1.5, 0.0], [-0.5, 0.0, 0.0]]])
+    for tris, t in ((wall, 0.3), (edge, 0.3)):
+        hits = core.intersect(core.build_kdtree(tris), np.zeros((1, 3)), np.array([[0.0, -length, 0.0]]))
+        np.testing.assert_allclose(hits.t, np.float32(t / length), rtol=1e-6)
+
+
+@pytest.mark.parametrize("options", BUILDERS)
 def test_rays_starting_on_triangles_and_split_planes(options, rng):
     tris = random_soup(rng, 2000)
     tree = core.build_kdtree(tris, **options)
