@@ -6,9 +6,10 @@ under its own tree, or to float32 in a soup relative to the soup's anchor) with 
 coordinates the scene was built in (minus `origin`, see scene_builder.py). The rounding is part of the
 row because kept pixels keep their hit points and ray starts: an unchanged object re-rounded (the
 soup re-anchored, or the object moved between the soup and a tree of its own) shifts its surface by a
-float32 ulp, enough to put a kept ray start behind it, so it counts as changed. Two frames' signatures give the boxes
-where geometry may differ (`changed_boxes`): the boxes of rows present in only one of them, i.e.
-instances that moved, deformed, appeared or vanished, each at its old and its new place. Everything
+float32 ulp, enough to put a kept ray start behind it, so it counts as changed. Two frames'
+signatures give the boxes where geometry may differ (`changed_boxes`): the boxes of rows present in
+only one of them, i.e. instances that moved, deformed, appeared or vanished, each at its old and its
+new place. Everything
 outside those boxes is the same triangles at the same places in both frames, which is what lets the
 renderer keep pixels whose rays stay outside them (pixel_reuse.py).
 
