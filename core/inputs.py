@@ -79,15 +79,19 @@ def _as_limit(name, value, count):
 
 
 def hit_distances_as_float32(t, prim):
-    """The float64 hit distances as the float32 `t` queries return; ValueError naming the first ray
-    whose hit cannot be represented: beyond float32's range (inf would read as a miss) or below its
-    smallest positive value (0 is outside the open interval (tmin, tmax)). Only rays whose direction
-    is tiny or huge against the distance travelled (e.g. 1e-15 long, 1e30 away) get there."""
+    """The float64 hit distances as the float32 `t` queries return. A hit beyond float32's range
+    raises ValueError naming the first such ray (inf would read as a miss; only rays whose direction is
+    tiny against the distance travelled, e.g. 1e-15 long and 1e30 away, get there). A positive t below
+    float32's smallest subnormal becomes that subnormal, not 0: 0 is outside the open interval (tmin,
+    tmax), and near 0 float32's precision is absolute (hypothesis found a ray 3.5e-46 behind a triangle
+    with a subnormal vertex, which used to fail its whole batch)."""
     with np.errstate(over="ignore"):
         out = t.astype(np.float32)
-    bad = (prim >= 0) & ((out == np.inf) | (out == 0.0))
+    hit = prim >= 0
+    bad = hit & (out == np.inf)
     if bad.any():
         r = int(np.flatnonzero(bad)[0])
-        raise ValueError(f"ray {r} hits at t = {t[r]:.6g}, outside float32's range for t: scale its direction "
+        raise ValueError(f"ray {r} hits at t = {t[r]:.6g}, beyond float32's range for t: scale its direction "
                          "(t is in units of the direction's length)")
+    out[hit & (out == 0.0)] = np.nextafter(np.float32(0), np.float32(1))
     return out

@@ -20,9 +20,13 @@ class Light:
     """One light. Use the constructors `point`, `sun`, `spot`, `area`."""
 
     def __init__(self, kind, color, power, cast_shadow=True, **params):
-        color = np.asarray(color, np.float64)
-        if color.shape != (3,) or not np.isfinite(color).all() or (color < 0).any():
-            raise ValueError(f"light color must be 3 finite non-negative numbers (r, g, b), got {color.tolist()}")
+        try:
+            rgb = np.asarray(color, np.float64)
+        except (TypeError, ValueError):
+            rgb = np.full(0, np.nan)
+        if rgb.shape != (3,) or not np.isfinite(rgb).all() or (rgb < 0).any():
+            raise ValueError(f"light color must be 3 finite non-negative numbers (r, g, b), got {color!r}")
+        color = rgb
         if not (np.isfinite(power) and power >= 0):
             raise ValueError(f"light power must be finite and >= 0, got {power}")
         if not isinstance(cast_shadow, (bool, np.bool_)):

@@ -58,7 +58,7 @@ def intersect_triangle(tri, o, kx, ky, kz, sx, sy, sz):
             or (w == 0.0 and not _owns_zero_edge(s * (ax - bx), s * (ay - by)))):
         return np.inf, 0.0, 0.0
     t = (u * az + v * bz + w * cz) * sz / det
-    if t <= _t_rounding(ax, ay, bx, by, cx, cy, az, bz, cz, sz, u, v, w, det):
+    if t <= _t_rounding(ax, ay, bx, by, cx, cy, az, bz, cz, sx, sy, sz, u, v, w, det):
         return np.inf, 0.0, 0.0  # not surely in front of the origin: a ray leaving a surface misses it
     return t, v / det, w / det
 
@@ -72,20 +72,21 @@ def _gamma(n):
 
 
 @njit(cache=True, inline="always")
-def _t_rounding(ax, ay, bx, by, cx, cy, az, bz, cz, sz, u, v, w, det):
+def _t_rounding(ax, ay, bx, by, cx, cy, az, bz, cz, sx, sy, sz, u, v, w, det):
     """A bound on the rounding error of t, from pbrt-v3's watertight test (Pharr, Jakob and Humphreys,
-    §3.9.6): a t below it may be 0 or negative. pbrt bounds the sheared x and y with the scaled z;
-    ours are sheared with the unscaled z (sz is applied only to t), which keeps the bound tight for
-    tiny directions: with pbrt's form a ray along 2e-16 * (0, -1, 0) lost a real hit at t = 1.4e15. Without it a ray starting exactly on a triangle (tmin 0)
+    §3.9.6): a t below it may be 0 or negative. pbrt bounds the shear term sx * z by the scaled z
+    (|sx| <= 1); ours is applied to the unscaled z (sz only scales t) and bounded by |sx| |z|, which
+    keeps the bound tight for tiny directions: with pbrt's form a ray along 2e-16 * (0, -1, 0) lost a
+    real hit at t = 1.4e15, and one 1e30 away along 1e-15 * (0, 0, -1) its hit at t = 1e45. Without it a ray starting exactly on a triangle (tmin 0)
     reported that triangle at t ~ 1e-17, and, in the tree, sometimes instead of its true closest hit
     (outside QA; the renderer's offset ray starts stay far above it)."""
-    shear_z = max(abs(az), abs(bz), abs(cz))  # the shear adds sx * z with |sx| <= 1: unscaled z
+    shear_z = max(abs(az), abs(bz), abs(cz))  # the shear adds sx * z: unscaled z, times |sx| <= 1
     max_z = shear_z * abs(sz)  # t's z values are scaled by sz (huge for a tiny direction)
     max_x = max(abs(ax), abs(bx), abs(cx))
     max_y = max(abs(ay), abs(by), abs(cy))
     delta_z = _gamma(3) * max_z
-    delta_x = _gamma(5) * (max_x + shear_z)
-    delta_y = _gamma(5) * (max_y + shear_z)
+    delta_x = _gamma(5) * (max_x + abs(sx) * shear_z)
+    delta_y = _gamma(5) * (max_y + abs(sy) * shear_z)
     delta_e = 2.0 * (_gamma(2) * max_x * max_y + delta_y * max_x + delta_x * max_y)
     max_e = max(u, v, w)
     return 3.0 * (_gamma(3) * max_e * max_z + delta_e * max_z + delta_z * max_e) / det

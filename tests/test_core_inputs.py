@@ -116,6 +116,7 @@ def _box_mesh():
     (lambda t: core.render_preview(t, core.Camera(np.eye(4), 0.5), 4, 4, mode="shadow",
                                    lights=core.Light.sun((0, 0, -1))), r"pass \[light\]"),
     (lambda t: core.Light.point((0, 0, 1), color=(1, 1)), r"light color must be 3 finite non-negative numbers \(r, g, b\)"),
+    (lambda t: core.Light.sun((0, 0, -1), color="red"), r"light color must be 3 finite .* got 'red'"),
     (lambda t: core.build_scene([(np.zeros((4, 2)), np.array([[0, 1, 2]]))], [0], np.eye(4)[None]),
      r"mesh 0: vertices must have shape \(N, 3\), got \(4, 2\)"),
     (lambda t: core.build_kdtree(np.zeros((1, 3, 3)), memory_limit=0), "memory_limit"),
@@ -151,16 +152,23 @@ def test_numpy_scalars_are_accepted_and_huge_vectors_normalised(tree):
         core.build_kdtree(tree.triangles, memory_limit=1)
 
 
-@pytest.mark.parametrize("origin, direction, t", [((0.1, 0.2, 1e30), (0.0, 0.0, -1e-15), "1e\\+45"),
-                                                   ((0.1, 0.2, 5.0), (0.0, 0.0, -1e300), "5e-300")])
-def test_hits_outside_float32s_range_of_t_are_named(origin, direction, t):
-    """A hit at t = 1e45 would read as t = inf (a miss) and one at 5e-300 as t = 0 (outside (tmin,
-    tmax)) once rounded to float32: both raise, naming the ray, for trees and scenes alike."""
+def test_hits_beyond_float32s_range_of_t_are_named_and_tiny_ones_kept():
+    """A hit at t = 1e45 would read as t = inf (a miss) once rounded to float32: it raises, naming the
+    ray, for trees and scenes alike. One at 5e-300 (or 3.5e-46, a ray just behind a triangle with a
+    subnormal vertex, found by hypothesis) would round to 0, outside (tmin, tmax): it is float32's
+    smallest subnormal instead, still a hit."""
     tree = core.build_kdtree(np.array([[[-1, -1, 0], [1, -1, 0], [0, 1, 0]]], np.float32))
-    o, d = np.array([[0.0, 0.0, 0.0], origin]), np.array([[0.0, 0.0, 1.0], direction])
+    o, d = np.array([[0.0, 0.0, 0.0], (0.1, 0.2, 1e30)]), np.array([[0.0, 0.0, 1.0], (0.0, 0.0, -1e-15)])
     for query in (core.intersect, core.intersect_scene):
-        with pytest.raises(ValueError, match=f"ray 1 hits at t = {t}"):
+        with pytest.raises(ValueError, match="ray 1 hits at t = 1e\\+45, beyond float32's range"):
             query(tree, o, d)
+    tiny = np.float32(1.4e-45)
+    subnormal = core.build_kdtree(np.array([[[1.25, 0, 0], [-1.5, 0, 1], [0, 4.203895392974451e-45, 1]]]))
+    for tree, origin, direction in ((tree, (0.1, 0.2, 5.0), (0.0, 0.0, -1e300)),
+                                    (subnormal, (0.0, 0.0, 0.5), (0.0, 1.0, 0.0))):
+        for query in (core.intersect, core.intersect_scene):
+            hits = query(tree, np.array([origin]), np.array([direction]))
+            assert hits.prim[0] == 0 and hits.t[0] == tiny
 
 
 def test_a_render_larger_than_the_machine_is_refused_before_allocating(tree):
