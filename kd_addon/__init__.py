@@ -5,7 +5,14 @@ Nothing imported here touches core or numba (corelib imports them on the first
 render), so enabling the add-on is instant.
 """
 
-from . import cli, live_update, operators, panel, properties, tree_cache
+import sys
+
+from . import early_interrupt
+
+if sys.argv[:1] == ["-m"]:  # `python -m kd_addon`, while Python locates __main__ (documented for -m)
+    early_interrupt.install()
+
+from . import cli, live_update, operators, panel, properties, tree_cache  # noqa: E402
 
 # Registration order: settings before the operators and panel that use them.
 MODULES = (properties, operators, panel, live_update, cli)

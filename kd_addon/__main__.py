@@ -2,6 +2,16 @@
 
 import sys
 
-from .cli import main
+from . import early_interrupt
 
-sys.exit(main())
+try:
+    from .cli import main
+
+    early_interrupt.uninstall()
+    if early_interrupt.interrupted.is_set():  # Ctrl-C while the package imported bpy
+        raise KeyboardInterrupt
+    code = main()
+except KeyboardInterrupt:
+    print("kdpreview: interrupted", file=sys.stderr)
+    code = 130
+sys.exit(code)

@@ -162,6 +162,22 @@ def test_ctrl_c_on_the_command_line_exits_at_once_mid_render(tmp_path):
     assert not (tmp_path / "out" / "frame_0001.png").exists()
 
 
+@pytest.mark.parametrize("delay", [0.3, 0.6])
+def test_ctrl_c_while_bpy_is_imported_is_not_lost(tmp_path, delay):
+    """Importing bpy (~0.6 s) swallowed a KeyboardInterrupt, so Ctrl-C in a command line's first half
+    second was lost and every frame rendered (outside QA). Now it exits with 130 and renders nothing."""
+    proc = subprocess.Popen([PYTHON, "-m", "kd_addon", "render", "--out", str(tmp_path / "out"), "--frames", "1-4",
+                             "--samples", "4"], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        time.sleep(delay)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130, (proc.returncode, err[-4000:])
+    assert "interrupted" in err and not (tmp_path / "out" / "frame_0001.png").exists()
+
+
 def test_ctrl_c_outlives_an_interrupt_that_blender_swallows():
     """Blender prints and clears an exception raised in Python it runs for us (a frame-change handler,
     a driver), so a KeyboardInterrupt landing there would let the render go on. The command line's
