@@ -116,7 +116,9 @@ def test_esc_during_animation_restores_the_frame(modal, tmp_path):
         assert op.modal(modal, SimpleNamespace(type="TIMER", timer=op._timer)) == {"RUNNING_MODAL"}
     assert op.modal(modal, SimpleNamespace(type="ESC", timer=None)) == {"CANCELLED"}
     assert scene.frame_current == 7
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["frame_0001.png"]  # no report for a cancelled run
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["frame_0001.png", "report.json"]
+    report = json.loads((tmp_path / "report.json").read_text())  # the frames written, marked incomplete
+    assert (report["complete"], report["frames_requested"], len(report["frames"])) == (False, 3, 1)
 
 
 def test_modal_animation_runs_every_frame(modal, tmp_path):
