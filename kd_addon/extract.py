@@ -321,14 +321,14 @@ def _instancer_hides_self(orig: bpy.types.Object, evaluated: bpy.types.Object) -
 def _entry_visible(vis: _Visibility, parent, ob: bpy.types.Object) -> bool:
     """Render-visibility of one object_instances entry (parent None: not an instance)."""
     orig = ob.original
-    if not light_visible(vis, parent, orig):
+    if not collection_visible(vis, parent, orig):
         return False
     if parent is None:
         return _ray_visible(orig) and not _instancer_hides_self(orig, ob)
     return _ray_visible(orig, parent.original)
 
 
-def light_visible(vis: _Visibility, parent, orig: bpy.types.Object) -> bool:
+def collection_visible(vis: _Visibility, parent, orig: bpy.types.Object) -> bool:
     """The collection and hide_render rules of an object_instances entry (parent None: not an
     instance), without the ray-visibility flags: all that decides whether a light is rendered."""
     if parent is None:

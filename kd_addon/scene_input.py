@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import PreviewError
-from .extract import _Visibility, light_visible  # the render-visibility rules extraction uses
+from .extract import _Visibility, collection_visible  # the render-visibility rules extraction uses
 
 
 @dataclass(frozen=True)
@@ -203,7 +203,7 @@ def read_lights(depsgraph) -> list[LightInput]:
         if ob.type != "LIGHT":
             continue
         parent = inst.parent if inst.is_instance else None
-        if not light_visible(visibility, parent, ob.original):
+        if not collection_visible(visibility, parent, ob.original):
             continue
         name = ob.original.name if parent is None else f"{ob.original.name} (instanced by {parent.original.name})"
         light = light_input(name, ob.data, inst.matrix_world)
