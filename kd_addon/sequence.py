@@ -97,9 +97,7 @@ class SequenceJob:
             self._write(self.job.result())
             self.job = None
             if self.done:
-                self.totals = summarize(self.results, (time.perf_counter() - self._t0) * 1e3)
-                self.report_path = write_report(self.out_dir, self.scene.name, self.config, self.results,
-                                                self.files, self.totals)
+                self._write_report()
         return self.done
 
     def _write(self, result: FrameResult) -> None:
@@ -118,14 +116,17 @@ class SequenceJob:
         the sequence stopped early, write report.json for the frames that were written, marked
         incomplete (best effort: the error that stopped it is the one to report)."""
         if self.results and not self.done:
-            self.totals = summarize(self.results, (time.perf_counter() - self._t0) * 1e3)
             try:
-                self.report_path = write_report(self.out_dir, self.scene.name, self.config, self.results,
-                                                self.files, self.totals, len(self.frames))
+                self._write_report()
             except PreviewError:
                 pass
         if self.scene.frame_current != self._start_frame:
             self.scene.frame_set(self._start_frame)
+
+    def _write_report(self) -> None:
+        self.totals = summarize(self.results, (time.perf_counter() - self._t0) * 1e3)
+        self.report_path = write_report(self.out_dir, self.scene.name, self.config, self.results, self.files,
+                                        self.totals, len(self.frames))
 
 
 def summarize(results: list[FrameResult], wall_ms: float) -> dict:
@@ -142,15 +143,14 @@ def summarize(results: list[FrameResult], wall_ms: float) -> dict:
 
 
 def write_report(out_dir: Path, scene_name: str, config: RenderConfig, results: list[FrameResult],
-                 files: list[Path], totals: dict, frames_requested: int | None = None) -> Path:
+                 files: list[Path], totals: dict, frames_requested: int) -> Path:
     """Write `report.json` (settings, one row per frame, totals) and return its path. `complete` is
     False when fewer frames than requested were written (a cancelled or failed sequence)."""
     first = results[0]
-    requested = len(results) if frames_requested is None else frames_requested
     report = {
         "scene": scene_name,
-        "complete": len(results) == requested,
-        "frames_requested": requested,
+        "complete": len(results) == frames_requested,
+        "frames_requested": frames_requested,
         "resolution": [first.width, first.height],
         "settings": config.as_dict(),
         "build_options": config.build_options,
