@@ -22,6 +22,7 @@ Denoising (edge-avoiding à-trous, variance-guided; the raw estimate stays the d
     render_preview(..., denoise=True) / PreviewRender.image(denoise=True) -> (H, W, 4) float32
     denoise_pixels(width, height, pixels, points, normals, sums, sq_sums, counts) -> (H, W, 4) float32
 """
+from . import kernel_cache  # first: kernels are keyed by all of core's sources when decorated
 from .build import build_kdtree
 from .camera import Camera
 from .denoise import denoise_pixels

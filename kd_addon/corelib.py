@@ -11,11 +11,11 @@ cache goes to Blender's per-extension user folder
 (`bpy.utils.extension_path_user`); outside one (tests, `python -m kd_addon`)
 to the platform's user cache folder. An explicit NUMBA_CACHE_DIR wins.
 
-Why a folder per version of core's sources: Numba checks a cached function
-against its own file only, not against the functions it inlined or called
-from other files, so after an update that changed a callee but not its
-caller, the stale caller would run the old callee. Naming the folder by a
-digest of every core source file makes any change start a fresh cache.
+Why a folder per version of core's sources: core keys its cached kernels by
+all of its sources (core/kernel_cache.py), so a stale kernel never runs; a
+folder per version also keeps an update from recompiling over the cache of
+the version before it (users switching back) and lets `cache_is_warm` tell
+"loading" from "compiling" by the folder alone.
 
 Why the two import spellings: installed, the package is
 `bl_ext.<repo>.kd_preview` and core is its sibling subpackage
@@ -26,13 +26,14 @@ Why the two import spellings: installed, the package is
 from __future__ import annotations
 
 import functools
-import hashlib
 import importlib
+import importlib.util
 import os
 import sys
 from pathlib import Path
 
 APP_NAME = "kd_preview"
+CORE_FOLDER = Path(__file__).resolve().parent.parent / "core"
 
 
 def extension_package(package: str | None = __package__) -> str | None:
@@ -100,15 +101,22 @@ def source_digest(folder: Path | None = None) -> str:
 def _installed_digest() -> str:
     """Read once a process: the status line asks for the cache folder on every tick until the
     kernels are ready, and the installed sources do not change under a running process."""
-    return _digest(Path(__file__).resolve().parent.parent / "core")
+    return _digest(CORE_FOLDER)
 
 
 def _digest(folder: Path) -> str:
-    h = hashlib.blake2b(digest_size=8)
-    for path in sorted(folder.glob("*.py")):
-        h.update(path.name.encode())
-        h.update(path.read_bytes())
-    return h.hexdigest()
+    return _core_sources_digest_module().sources_digest(folder)
+
+
+@functools.lru_cache(maxsize=1)
+def _core_sources_digest_module():
+    """core/sources_digest.py loaded as a file: importing it as part of core would import numba and
+    every kernel module, which enabling the add-on must not do (see above)."""
+    path = CORE_FOLDER / "sources_digest.py"
+    spec = importlib.util.spec_from_file_location(f"{APP_NAME}_core_sources_digest", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def configure_numba_cache(path: Path) -> None:

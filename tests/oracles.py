@@ -5,11 +5,16 @@
 - `brute_watertight`: every triangle tested with the core's own watertight test, no tree: isolates the
   tree and traversal, so results must match exactly (same arithmetic), and it counts hits per ray.
 """
+from pathlib import Path
+
 import numpy as np
 from numba import njit, prange
 
+from core import kernel_cache
 from core.geometry import has_area
 from core.triangle_test import intersect_triangle, ray_shear
+
+kernel_cache.register(Path(__file__).parent)  # before the kernels below, which inline core's test
 
 
 def moller_trumbore(tris, origins, directions, tmin=0.0, tmax=np.inf, chunk=256):

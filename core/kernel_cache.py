@@ -1,0 +1,74 @@
+"""Numba's on-disk kernel cache, invalidated by any change to core's sources, not just the kernel's file.
+
+Numba stamps a cached kernel with its own source file only (numba 0.68: a hash of that file's
+contents). Core's kernels inline functions from other files: `traversal.trace_rays` inlines
+`triangle_test.intersect_triangle`. After an update that edits the callee but not the caller, the
+caller's stamp still matches and the stale machine code runs the old callee. That happened: a
+test run picked up a `trace_rays` cached before the triangle test's t rounding bound was added,
+and rays leaving a surface hit it again. The cache must therefore be keyed by all of core.
+
+Numba has no public hook for that, so `register` puts a locator in front of Numba's own
+(`numba.core.caching.CacheImpl._locator_classes`, internal; the numba version is pinned): for a
+kernel in a registered folder it keeps the location Numba would choose (NUMBA_CACHE_DIR,
+`__pycache__` or the user cache) and adds the digest of core's sources to the stamp. A stamp
+mismatch makes Numba discard that cache index and compile afresh. Kernels elsewhere are untouched.
+"""
+import functools
+from pathlib import Path
+
+from numba.core import caching
+
+from .sources_digest import sources_digest
+
+CORE_FOLDER = Path(__file__).resolve().parent
+_sources_of = {}  # registered kernel folder -> the folder whose sources stamp its kernels
+
+
+@functools.lru_cache(maxsize=None)
+def folder_digest(folder: Path) -> str:
+    """Read once a process: sources do not change under kernels a process has already loaded."""
+    return sources_digest(folder)
+
+
+class SourcesDigestLocator(caching._CacheLocator):
+    """Numba's usual locator for the kernel's file, with the sources' digest added to its stamp."""
+
+    def __init__(self, usual, sources: Path):
+        self._usual = usual
+        self._sources = sources
+
+    def ensure_cache_path(self):
+        self._usual.ensure_cache_path()
+
+    def get_cache_path(self):
+        return self._usual.get_cache_path()
+
+    def get_source_stamp(self):
+        return self._usual.get_source_stamp(), folder_digest(self._sources)
+
+    def get_disambiguator(self):
+        return self._usual.get_disambiguator()
+
+    @classmethod
+    def from_function(cls, py_func, py_file):
+        sources = _sources_of.get(Path(py_file).resolve().parent)
+        if sources is None:
+            return None
+        for usual_class in caching.CacheImpl._locator_classes:
+            if usual_class is not cls:
+                usual = usual_class.from_function(py_func, py_file)
+                if usual is not None:
+                    return cls(usual, sources)
+        return None
+
+
+def register(folder=CORE_FOLDER, sources=CORE_FOLDER) -> None:
+    """Key the cached kernels of `folder` (core's, or e.g. a test's that inline core's functions)
+    by the `*.py` files of `sources` too. Must run before the folder's kernels are decorated:
+    Numba picks a kernel's locator when `njit(cache=True)` wraps it."""
+    _sources_of[Path(folder).resolve()] = Path(sources).resolve()
+    if SourcesDigestLocator not in caching.CacheImpl._locator_classes:
+        caching.CacheImpl._locator_classes.insert(0, SourcesDigestLocator)
+
+
+register()

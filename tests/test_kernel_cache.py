@@ -1,0 +1,85 @@
+"""Cached kernels are keyed by every source file they may inline, not only their own
+(core/kernel_cache.py). CI once ran a `trace_rays` cached before a fix to the triangle test it inlines."""
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import core
+from core import kernel_cache
+from core.traversal import trace_rays
+
+CALLER = """
+from numba import njit
+from .callee import value
+
+@njit(cache=True)
+def run():
+    return value()
+"""
+CALLEE = """
+from numba import njit
+
+@njit(cache=True, inline="always")
+def value():
+    return {}
+"""
+RUN = """
+import sys
+sys.path.insert(0, {root!r})
+from core import kernel_cache
+if {register}:
+    kernel_cache.register({package!r}, sources={package!r})
+from pkg.caller import run
+print(run())
+"""
+
+
+def _run_cached(root: Path, register: bool, cache: Path) -> int:
+    script = RUN.format(root=str(root), package=str(root / "pkg"), register=register)
+    env = {"NUMBA_CACHE_DIR": str(cache), "PATH": "/usr/bin:/bin"}
+    out = subprocess.run([sys.executable, "-c", script], cwd=Path(core.__file__).parent.parent, env=env,
+                         capture_output=True, text=True, check=True, timeout=300)
+    return int(out.stdout.split()[-1])
+
+
+def _package_returning(root: Path, value: int) -> None:
+    (root / "pkg").mkdir(exist_ok=True)
+    (root / "pkg" / "__init__.py").write_text("")
+    (root / "pkg" / "caller.py").write_text(CALLER)
+    (root / "pkg" / "callee.py").write_text(textwrap.dedent(CALLEE.format(value)))
+
+
+def test_editing_an_inlined_callee_recompiles_its_caller(tmp_path):
+    """The caller's own file is unchanged; only the callee's differs between the two processes."""
+    _package_returning(tmp_path, 1)
+    assert _run_cached(tmp_path, True, tmp_path / "cache") == 1
+    _package_returning(tmp_path, 2)
+    assert _run_cached(tmp_path, True, tmp_path / "cache") == 2
+
+
+def test_without_registering_numba_runs_the_stale_callee(tmp_path):
+    """The hazard the module exists for, in Numba as pinned: if this starts failing, Numba keys its
+    cache by callees itself and kernel_cache can go."""
+    _package_returning(tmp_path, 1)
+    assert _run_cached(tmp_path, False, tmp_path / "cache") == 1
+    _package_returning(tmp_path, 2)
+    assert _run_cached(tmp_path, False, tmp_path / "cache") == 1
+
+
+def test_core_kernels_are_stamped_with_all_of_core():
+    locator = trace_rays._cache._impl.locator
+    assert isinstance(locator, kernel_cache.SourcesDigestLocator)
+    own_stamp, digest = locator.get_source_stamp()
+    assert digest == kernel_cache.folder_digest(kernel_cache.CORE_FOLDER)
+
+
+def test_the_digest_follows_every_source_file(tmp_path):
+    for name in ("a.py", "b.py"):
+        (tmp_path / name).write_text("x = 1\n")
+    before = kernel_cache.sources_digest(tmp_path)
+    (tmp_path / "b.py").write_text("x = 2\n")
+    edited = kernel_cache.sources_digest(tmp_path)
+    (tmp_path / "c.py").write_text("")
+    added = kernel_cache.sources_digest(tmp_path)
+    assert len({before, edited, added}) == 3
