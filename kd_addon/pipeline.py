@@ -214,7 +214,8 @@ class FrameJob:
     def _camera_and_lights(self, core, inputs: scene_input.SceneInputs):
         """Camera and lights moved by the same offset as the triangles. Mode "ao" uses no lights, so
         their settings cannot stop it; otherwise a light Blender accepts but that emits nothing or that
-        core cannot use (zero power, size or scale) is left out with a warning naming it."""
+        core cannot use (zero power, size or scale) is left out with a warning naming it, and a light
+        used with settings the preview does not apply (light linking) gets a warning naming them."""
         offset = inputs.camera.position
         try:
             camera = core.Camera(**inputs.camera.keywords()).translated(offset)
@@ -222,13 +223,15 @@ class FrameJob:
             raise PreviewError(f"the scene's camera cannot be used: {error}") from None
         if self.config.settings.mode == "ao":
             return camera, []
-        lights, left_out = [], []
+        lights, left_out, unapplied = [], [], []
         for light in inputs.lights:
             try:
                 lights.append(_usable_light(core, light).translated(offset))
             except ValueError as error:
                 left_out.append(f"light '{light.name}' left out: {error}")
-        self._info["warnings"] += left_out
+                continue
+            unapplied += [f"light '{light.name}': {what} not applied by the preview" for what in light.unapplied]
+        self._info["warnings"] += left_out + unapplied
         if not lights:
             raise PreviewError(f"mode '{self.config.settings.mode}' needs a light, but no light of scene "
                                f"'{self.scene.name}' can be used: " + "; ".join(left_out))

@@ -16,7 +16,7 @@ along the fitted axis too and rescaled the same way.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -57,6 +57,7 @@ class LightInput:
     name: str
     kind: str  # "point", "sun", "spot" or "area"
     keywords: dict
+    unapplied: tuple[str, ...] = ()  # the light's settings that change Cycles' image but not the preview's
 
 
 @dataclass
@@ -208,8 +209,23 @@ def read_lights(depsgraph) -> list[LightInput]:
         name = ob.original.name if parent is None else f"{ob.original.name} (instanced by {parent.original.name})"
         light = light_input(name, ob.data, inst.matrix_world)
         if light is not None:
-            lights.append(light)
+            lights.append(replace(light, unapplied=unapplied_light_settings(ob)))
     return lights
+
+
+def unapplied_light_settings(ob) -> tuple[str, ...]:
+    """What Cycles would apply and the preview does not, named so a warning can say so: light and
+    shadow linking (Blender 4.0+: which objects the light lights, which block it) and the light's
+    Diffuse ray visibility (off: it lights no diffuse surface, which is all the preview shades)."""
+    found = []
+    linking = getattr(ob, "light_linking", None)
+    for attribute, what in (("receiver_collection", "light linking"), ("blocker_collection", "shadow linking")):
+        collection = getattr(linking, attribute, None)
+        if collection is not None:
+            found.append(f"{what} (collection '{collection.name}')")
+    if not getattr(ob, "visible_diffuse", True):
+        found.append("Ray Visibility > Diffuse off")
+    return tuple(found)
 
 
 def read_scene(scene, depsgraph, width: int, height: int) -> SceneInputs:

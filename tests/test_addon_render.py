@@ -115,6 +115,28 @@ def test_lights_blender_accepts_but_that_emit_nothing_are_left_out_by_name(addon
         frame("ao+shadow")
 
 
+def test_light_settings_the_preview_does_not_apply_are_named(addon):  # noqa: F811
+    """Light and shadow linking and a light's Diffuse ray visibility change Cycles' image; the preview
+    lights and shadows every object regardless, so the shadow modes say so, naming light and setting."""
+    scene = half_plane_scene()
+    sun = bpy.data.objects["Sun"]
+    linked = scenes.new_collection("Hero")
+    sun.light_linking.receiver_collection = linked
+    sun.light_linking.blocker_collection = linked
+    rim = scenes.link(bpy.data.objects.new("Rim", bpy.data.lights.new("Rim", "POINT")))
+    rim.location, rim.visible_diffuse = (0.0, 0.0, 3.0), False
+
+    def frame(mode):
+        scene.kd_preview.mode = mode
+        return pipeline.render_frame(scene, bpy.context.evaluated_depsgraph_get(), make_config(scene.kd_preview))
+
+    assert not frame("ao").warnings
+    assert sorted(frame("shadow").warnings) == [
+        "light 'Rim': Ray Visibility > Diffuse off not applied by the preview",
+        "light 'Sun': light linking (collection 'Hero') not applied by the preview",
+        "light 'Sun': shadow linking (collection 'Hero') not applied by the preview"]
+
+
 def test_errors_leave_the_previous_image_and_report(addon):  # noqa: F811
     scene = half_plane_scene()
     bpy.ops.kdpreview.render()
