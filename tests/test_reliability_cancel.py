@@ -243,3 +243,17 @@ def test_a_sequence_stopped_early_still_reports_the_frames_it_wrote(addon, tmp_p
     finished.close()
     report = json.loads((tmp_path / "finished" / "report.json").read_text())
     assert (report["complete"], report["frames_requested"], len(report["frames"])) == (True, 2, 2)
+
+
+def test_a_sequence_stopped_before_its_first_frame_keeps_the_earlier_report(addon, tmp_path):  # noqa: F811
+    """No frame written: no report, so the folder's report.json from an earlier run still describes
+    the frames on disk."""
+    from kd_addon.sequence import SequenceJob
+
+    scene = half_plane_scene()
+    earlier = tmp_path / "report.json"
+    earlier.write_text('{"frames": "earlier run"}')
+    job = SequenceJob(scene, make_config(scene.kd_preview), [1, 2], tmp_path,
+                      lambda _s: bpy.context.evaluated_depsgraph_get())
+    job.close()  # cancelled before the first tick
+    assert earlier.read_text() == '{"frames": "earlier run"}' and job.report_path is None
