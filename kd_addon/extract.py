@@ -311,6 +311,15 @@ def _ray_visible(*objs) -> bool:
     return camera or shadow
 
 
+def unapplied_object_settings(ob) -> list[str]:
+    """The ray-visibility switches of a rendered object that the preview ignores: an object with
+    camera rays off is still seen, one with shadow rays off still shadows, a holdout is shaded."""
+    found = [f"Ray Visibility > {label} off" for attribute, label in (("visible_camera", "Camera"),
+                                                                       ("visible_shadow", "Shadow"))
+             if not getattr(ob, attribute, True)]
+    return found + (["Holdout"] if getattr(ob, "is_holdout", False) else [])
+
+
 def _instancer_hides_self(orig: bpy.types.Object, evaluated: bpy.types.Object) -> bool:
     """Particle / vertex / face / collection instancers may hide themselves."""
     if orig.show_instancer_for_render:
@@ -406,6 +415,7 @@ class _EntryReader:
         self.vis = vis
         self.geometries = _GeometryReader()
         self._verdicts: dict[tuple[int, int], tuple[str, str | None] | None] = {}
+        self._warned: set[str] = set()
 
     def read(self, inst) -> Instance | None:
         """Record for one entry, or None to skip it. Copies everything out at
@@ -437,4 +447,14 @@ class _EntryReader:
             visible = _entry_visible(self.vis, parent, ob)
             instancer = parent.original.name if parent is not None else None
             self._verdicts[memo_key] = (orig.name, instancer) if visible else None
+            if visible:
+                self._warn_unapplied(orig)
         return self._verdicts[memo_key]
+
+    def _warn_unapplied(self, orig) -> None:
+        """Once per object: the settings of a rendered object that Cycles applies and the preview
+        does not (it traces every ray against every rendered object), so its image differs there."""
+        unapplied = unapplied_object_settings(orig)
+        if unapplied and orig.name not in self._warned:
+            self._warned.add(orig.name)
+            self.geometries.warnings.append(f"object '{orig.name}': {', '.join(unapplied)} not applied by the preview")

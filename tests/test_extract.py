@@ -231,8 +231,26 @@ def test_render_hidden_and_non_renderable_objects_left_out(scene):
     hidden_instancer.hide_render = True
     result = extract_scene()
     assert sorted(result.object_names) == ["ShadowOnly", "Shown", "SrcShown"]
-    assert result.warnings == []
+    assert result.warnings == ["object 'ShadowOnly': Ray Visibility > Camera off not applied by the preview"]
     assert result.triangle_count == 36
+
+
+def test_ray_visibility_the_preview_ignores_is_named_once_per_object(scene):
+    """Cycles hides an object from camera rays, from shadow rays, or cuts a holdout; the preview
+    traces every rendered object alike, so it says which objects' images differ, once each."""
+    scenes.add_cube("Plain")
+    scenes.add_cube("NoShadow").visible_shadow = False
+    scenes.add_cube("Hole").is_holdout = True
+    source = scenes.new_collection("Src", exclude=True)
+    scenes.add_cube("Unseen", collection=source).visible_camera = False
+    for k in range(3):
+        scenes.add_collection_instance(f"Inst{k}", source, location=(3.0 * k, 5.0, 0.0))
+    result = extract_scene()
+    assert sorted(result.object_names) == ["Hole", "NoShadow", "Plain", "Unseen", "Unseen", "Unseen"]
+    assert sorted(result.warnings) == [
+        "object 'Hole': Holdout not applied by the preview",
+        "object 'NoShadow': Ray Visibility > Shadow off not applied by the preview",
+        "object 'Unseen': Ray Visibility > Camera off not applied by the preview"]
 
 
 def test_non_finite_vertices_left_out_with_warning(scene):
