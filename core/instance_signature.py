@@ -9,9 +9,8 @@ soup re-anchored, or the object moved between the soup and a tree of its own) sh
 float32 ulp, enough to put a kept ray start behind it, so it counts as changed. Two frames'
 signatures give the boxes where geometry may differ (`changed_boxes`): the boxes of rows present in
 only one of them, i.e. instances that moved, deformed, appeared or vanished, each at its old and its
-new place. Everything
-outside those boxes is the same triangles at the same places in both frames, which is what lets the
-renderer keep pixels whose rays stay outside them (pixel_reuse.py).
+new place. Everything outside those boxes is the same triangles at the same places in both frames,
+which is what lets the renderer keep pixels whose rays stay outside them (pixel_reuse.py).
 
 Rows compare as sets: an instance duplicated exactly where another one is adds no new surface.
 """

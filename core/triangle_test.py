@@ -77,9 +77,10 @@ def _t_rounding(ax, ay, bx, by, cx, cy, az, bz, cz, sx, sy, sz, u, v, w, det):
     §3.9.6): a t below it may be 0 or negative. pbrt bounds the shear term sx * z by the scaled z
     (|sx| <= 1); ours is applied to the unscaled z (sz only scales t) and bounded by |sx| |z|, which
     keeps the bound tight for tiny directions: with pbrt's form a ray along 2e-16 * (0, -1, 0) lost a
-    real hit at t = 1.4e15, and one 1e30 away along 1e-15 * (0, 0, -1) its hit at t = 1e45. Without it a ray starting exactly on a triangle (tmin 0)
-    reported that triangle at t ~ 1e-17, and, in the tree, sometimes instead of its true closest hit
-    (outside QA; the renderer's offset ray starts stay far above it)."""
+    real hit at t = 1.4e15, and one 1e30 away along 1e-15 * (0, 0, -1) its hit at t = 1e45. Without
+    it a ray starting exactly on a triangle (tmin 0) reported that triangle at t ~ 1e-17, and, in the
+    tree, sometimes instead of its true closest hit (outside QA; the renderer's offset ray starts stay
+    far above it)."""
     shear_z = max(abs(az), abs(bz), abs(cz))  # the shear adds sx * z: unscaled z, times |sx| <= 1
     max_z = shear_z * abs(sz)  # t's z values are scaled by sz (huge for a tiny direction)
     max_x = max(abs(ax), abs(bx), abs(cx))
