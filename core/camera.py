@@ -2,6 +2,8 @@
 import numpy as np
 from numba import njit, prange
 
+TILE = 8  # tiled_pixels: 8 x 8 = 64 rays, one traversal task (traversal.RAYS_PER_TASK)
+
 
 class Camera:
     """A perspective (`fov`) or orthographic (`ortho_scale`) camera.
@@ -52,18 +54,21 @@ class Camera:
         return Camera(m, self.fov, ortho_scale=self.ortho_scale, clip_start=self.clip_start,
                       clip_end=self.clip_end, shift=self.shift)
 
-    def rays(self, width, height):
-        """Rays through pixel centres, row 0 at the top: (origins, directions, tmin, tmax), (H*W, 3).
+    def rays(self, width, height, pixels=None):
+        """Rays through pixel centres, row 0 at the top: (origins, directions, tmin, tmax), (R, 3).
 
-        Directions have unit length along the view axis, so tmin/tmax are the clip distances.
+        `pixels`: the row-major pixel indices to make rays for, in that order (default: every pixel in
+        row-major order; see tiled_pixels). Directions have unit length along the view axis, so
+        tmin/tmax are the clip distances.
         """
         left, right, bottom, top = self.image_plane(width, height)
         x = left + (np.arange(width) + 0.5) / width * (right - left)
         y = top - (np.arange(height) + 0.5) / height * (top - bottom)
         rot = self.matrix_world[:3, :3] / np.linalg.norm(self.matrix_world[:3, :3], axis=0)
-        n = width * height
+        pixels = np.arange(width * height, dtype=np.int64) if pixels is None else np.asarray(pixels, np.int64)
+        n = len(pixels)
         origins, directions = np.empty((n, 3)), np.empty((n, 3))
-        _pixel_rays(x, y, rot, self.matrix_world[:3, 3].copy(), self.fov is not None, origins, directions)
+        _pixel_rays(x, y, rot, self.matrix_world[:3, 3].copy(), self.fov is not None, pixels, origins, directions)
         return origins, directions, np.full(n, self.clip_start), np.full(n, self.clip_end)
 
     def image_plane(self, width, height):
@@ -87,20 +92,33 @@ class Camera:
         return f"Camera(position={self.position.round(4).tolist()}, {kind}{shift})"
 
 
+def tiled_pixels(width, height, tile=TILE):
+    """Every row-major pixel index once, tile by tile (tile x tile squares, row-major within a tile and
+    across tiles; edge tiles are cut short).
+
+    Rays traced in this order are coherent within each block a traversal task takes (64 rays: one 8 x 8
+    tile), so they walk the same nodes and triangles while those are in cache. On the seed 000 setting
+    (suzanne-251k, 640 x 480) camera rays traced 13-16% faster in 8 x 8 tiles than in rows (4, 8 and 16
+    within 3% of each other), and shadow rays from the hit points inherit the order.
+    """
+    tiles_across = (width + tile - 1) // tile
+    tile_of_pixel = (np.arange(height) // tile)[:, None] * tiles_across + (np.arange(width) // tile)[None, :]
+    return np.argsort(tile_of_pixel.ravel(), kind="stable")  # stable: row-major within a tile
+
+
 @njit(cache=True, parallel=True)
-def _pixel_rays(x, y, rot, position, perspective, origins, directions):
-    """Row-major pixel rays from the image-plane coordinates x (W,) and y (H,). A kernel because numpy's
-    meshgrid, stack and matrix product took 30-40 ms at 640 x 480, a tenth of the seed 000 setting's
-    time to image."""
+def _pixel_rays(x, y, rot, position, perspective, pixels, origins, directions):
+    """Rays for row-major pixel indices `pixels`, from the image-plane coordinates x (W,) and y (H,). A
+    kernel because numpy's meshgrid, stack and matrix product took 30-40 ms at 640 x 480, a tenth of the
+    seed 000 setting's time to image."""
     width = x.shape[0]
-    for i in prange(y.shape[0]):
-        for j in range(width):
-            r = i * width + j
-            for k in range(3):
-                spread = x[j] * rot[k, 0] + y[i] * rot[k, 1]
-                if perspective:
-                    origins[r, k] = position[k]
-                    directions[r, k] = spread - rot[k, 2]
-                else:
-                    origins[r, k] = spread + position[k]
-                    directions[r, k] = -rot[k, 2]
+    for r in prange(pixels.shape[0]):
+        i, j = pixels[r] // width, pixels[r] % width
+        for k in range(3):
+            spread = x[j] * rot[k, 0] + y[i] * rot[k, 1]
+            if perspective:
+                origins[r, k] = position[k]
+                directions[r, k] = spread - rot[k, 2]
+            else:
+                origins[r, k] = spread + position[k]
+                directions[r, k] = -rot[k, 2]

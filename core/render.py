@@ -24,7 +24,7 @@ from time import perf_counter
 
 import numpy as np
 
-from .camera import Camera
+from .camera import Camera, tiled_pixels
 from .denoise import SOBOL_VARIANCE_DECAY, denoise_pixels
 from .kdtree import KdTree
 from .lazy import resolve_suspended
@@ -90,9 +90,8 @@ class PreviewRender:
 
     def _trace_camera(self):
         """Every pixel from scratch."""
-        rays = self.camera.rays(self.width, self.height)
-        self.camera_rays = len(rays[0])
-        pixels, depths, points, normals, starts = self._camera_hits(rays)
+        self.camera_rays = self.width * self.height
+        pixels, depths, points, normals, starts = self._camera_hits(tiled_pixels(self.width, self.height))
         zero = np.zeros(len(pixels), np.int64)
         self._start(pixels, depths, points, normals, starts, np.zeros((len(pixels), 3)), np.zeros(len(pixels)), zero,
                     zero.copy(), np.arange(len(pixels), dtype=np.int64), self._memo_rows(len(pixels)))
@@ -104,15 +103,16 @@ class PreviewRender:
         bits = self.target_samples * (1 + len(self.lights))
         return np.zeros((n, (bits + 7) // 8 if bits <= MEMO_BITS else 0), np.uint8)
 
-    def _camera_hits(self, rays, which=None):
-        """(pixels, depths, points, normals, ray starts) of the camera rays (`which`: a subset) that hit."""
-        origins, directions, tmin, tmax = rays if which is None else (a[which] for a in rays)
+    def _camera_hits(self, traced):
+        """(pixels, depths, points, normals, ray starts) of the camera rays through pixels `traced` that hit,
+        in the order of `traced` (tiled_pixels' order keeps camera and later rays coherent)."""
+        origins, directions, tmin, tmax = self.camera.rays(self.width, self.height, traced)
         t, inst, prim, _, _ = trace_valid_rays(self.scene, origins, directions, tmin, tmax, False, self.threads)
         hit = np.flatnonzero(prim >= 0).astype(np.int64)
         points, normals, starts = np.empty((len(hit), 3)), np.empty((len(hit), 3)), np.empty((len(hit), 3))
         with thread_count(self.threads):
             surface_frames(self.scene.arrays, origins, directions, t, inst, prim, hit, points, normals, starts)
-        return (hit if which is None else which[hit]), t[hit], points, normals, starts
+        return traced[hit], t[hit], points, normals, starts
 
     def _start(self, pixels, depths, points, normals, starts, sums, sq_sums, counts, ray_counts, active, memo):
         self.pixels, self.depths, self.points, self.normals, self.starts = pixels, depths, points, normals, starts
@@ -141,9 +141,10 @@ class PreviewRender:
             ao_radius = self.ao_distance if self.mode != "shadow" else 0.0
             touched = surface_rays_touch(prev.starts[kept], ao_radius, self.lights, boxes)
         clean, dirty = kept[~touched], kept[touched]
-        traced = np.flatnonzero(retrace)
+        tiled = tiled_pixels(self.width, self.height)
+        traced = tiled[retrace[tiled]]
         self.camera_rays = len(traced)
-        new = self._camera_hits(rays, traced)
+        new = self._camera_hits(traced)
         fresh = len(dirty) + len(new[0])
         order = np.concatenate([clean, dirty])
         join = lambda old, add: np.concatenate([old[order], add])  # noqa: E731

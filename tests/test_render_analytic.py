@@ -3,6 +3,7 @@ import numpy as np
 import pytest
 
 import core
+from core.camera import tiled_pixels
 from tests.render_scenes import floor, hit_mask, look_at, look_down, quad
 
 
@@ -179,6 +180,39 @@ def test_image_orientation_row_zero_is_top():
     img = render(tris, look_down((0.0, 0.0, 2.0), fov=1.0), size=20, samples=1)
     rows = np.flatnonzero(hit_mask(img).any(axis=1))
     assert rows.max() < 10
+
+
+@pytest.mark.parametrize("width, height", [(1, 1), (13, 7), (8, 16), (33, 9)])
+def test_tiled_pixel_order_covers_every_pixel_once_tile_by_tile(width, height):
+    order = tiled_pixels(width, height, tile=8)
+    np.testing.assert_array_equal(np.sort(order), np.arange(width * height))
+    rows, cols = order // width, order % width
+    tile = (rows // 8) * ((width + 7) // 8) + cols // 8
+    assert (np.diff(tile) >= 0).all()  # tile by tile
+    within = np.diff(rows * width + cols)[np.diff(tile) == 0]
+    assert (within > 0).all()  # row-major inside a tile
+    camera = look_at((1.0, -2.0, 1.5), (0.0, 0.0, 0.0))
+    everything = camera.rays(width, height)
+    for full, subset in zip(everything, camera.rays(width, height, order)):
+        np.testing.assert_array_equal(subset, full[order])
+
+
+def test_the_order_pixels_are_traced_in_does_not_change_the_image(monkeypatch):
+    """The renderer traces pixels tile by tile; rows (the plain order) give the same image, bit for bit,
+    at a size that is no multiple of the tile, in every mode."""
+    tris = np.concatenate([floor(half=3.0), quad((0.2, 0.1, 0.6), (0.5, 0, 0), (0, 0.4, 0.1))])
+    tree = core.build_kdtree(tris)
+    camera = look_at((2.0, -3.0, 2.5), (0.0, 0.0, 0.3))
+    lights = [core.Light.point((1.0, -1.0, 3.0), radius=0.3)]
+    images = {}
+    for order in ("tiles", "rows"):
+        if order == "rows":
+            monkeypatch.setattr(core.render, "tiled_pixels", lambda w, h: np.arange(w * h))
+        images[order] = [core.render_preview(tree, camera, 37, 23, samples=4, mode=mode, lights=lights)
+                         for mode in ("ao", "shadow", "ao+shadow")]
+    for tiled, plain in zip(images["tiles"], images["rows"]):
+        assert hit_mask(tiled).any() and not hit_mask(tiled).all()
+        np.testing.assert_array_equal(tiled, plain)
 
 
 def test_orthographic_camera_sees_parallel_projection():
