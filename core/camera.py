@@ -65,7 +65,7 @@ class Camera:
         x = left + (np.arange(width) + 0.5) / width * (right - left)
         y = top - (np.arange(height) + 0.5) / height * (top - bottom)
         rot = self.matrix_world[:3, :3] / np.linalg.norm(self.matrix_world[:3, :3], axis=0)
-        pixels = np.arange(width * height, dtype=np.int64) if pixels is None else np.asarray(pixels, np.int64)
+        pixels = np.arange(width * height, dtype=np.int64) if pixels is None else _pixel_indices(pixels, width, height)
         n = len(pixels)
         origins, directions = np.empty((n, 3)), np.empty((n, 3))
         _pixel_rays(x, y, rot, self.matrix_world[:3, 3].copy(), self.fov is not None, pixels, origins, directions)
@@ -90,6 +90,17 @@ class Camera:
         kind = f"fov={self.fov:.4f}" if self.fov is not None else f"ortho_scale={self.ortho_scale}"
         shift = f", shift={self.shift}" if any(self.shift) else ""
         return f"Camera(position={self.position.round(4).tolist()}, {kind}{shift})"
+
+
+def _pixel_indices(pixels, width, height):
+    """`pixels` as int64 indices, checked: the ray kernel reads the image coordinates without bounds checks."""
+    given = np.asarray(pixels)
+    if given.ndim != 1 or not (np.issubdtype(given.dtype, np.integer) or given.size == 0):
+        raise ValueError(f"camera pixels must be a 1-D array of integer pixel indices, got {given.dtype} {given.shape}")
+    if given.size and (given.min() < 0 or given.max() >= width * height):
+        raise ValueError(f"camera pixels must lie in [0, {width * height}) for {width} x {height}, "
+                         f"got {given.min()} .. {given.max()}")
+    return given.astype(np.int64)
 
 
 def tiled_pixels(width, height, tile=TILE):

@@ -195,6 +195,9 @@ def test_tiled_pixel_order_covers_every_pixel_once_tile_by_tile(width, height):
     everything = camera.rays(width, height)
     for full, subset in zip(everything, camera.rays(width, height, order)):
         np.testing.assert_array_equal(subset, full[order])
+    for bad in ([width * height], [-1], [[0]], [0.5]):
+        with pytest.raises(ValueError, match="camera pixels"):
+            camera.rays(width, height, bad)
 
 
 def test_the_order_pixels_are_traced_in_does_not_change_the_image(monkeypatch):
