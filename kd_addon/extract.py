@@ -16,8 +16,8 @@ How bpy 5.0 hands over non-mesh objects
     second, and so do we: only entries whose evaluated data is a Mesh are read,
     and ``to_mesh()`` is never needed (calling it on the ``CURVE`` entry as
     well would count the geometry twice). Hair curves, point clouds, volumes
-    and grease pencil are not triangles and are skipped quietly, as are empties,
-    lights, cameras and meshes without faces.
+    and grease pencil are not triangles and are skipped with a warning naming
+    them; empties, lights, cameras and meshes without faces are skipped quietly.
 
 Render visibility (the viewport depsgraph also holds render-hidden objects)
     * A scene object is kept when its *original* has ``hide_render`` False and
@@ -30,7 +30,9 @@ Render visibility (the viewport depsgraph also holds render-hidden objects)
       nested collection instances), as Blender does when it instances a
       collection for a final render. Geometry-nodes and particle instances
       ignore the source object's ``hide_render`` (hiding the source is the usual
-      workflow and Cycles still renders the copies).
+      workflow and Cycles still renders the copies), except for members of a
+      collection a Collection Info node instances whole (node_instances.py):
+      those follow the collection-instance rule, as in Cycles.
     * An object that instances things (particles, vertex/face/collection
       instancing) is left out itself when ``show_instancer_for_render`` is off.
       Not handled: that flag on a geometry-nodes object whose output holds
@@ -45,7 +47,10 @@ Render visibility (the viewport depsgraph also holds render-hidden objects)
     * Limitation (the preview follows the viewport here): objects the viewport
       does not show -- eye icon (``hide_set``), ``hide_viewport``, collections
       disabled in viewports -- are not yielded by the viewport depsgraph, so
-      they are missing even though a final render would include them.
+      they are missing even though a final render would include them. Each
+      frame's warnings name every such render-visible object, and every
+      render-visible object that is not triangles (hair curves, point clouds,
+      volumes, grease pencil), which Cycles renders and the preview cannot.
     * The viewport depsgraph evaluates *viewport* settings: Subdivision
       "Levels Viewport", metaball ``resolution``, geometry-nodes "Is Viewport",
       modifiers enabled in the viewport. The preview shows that geometry.
@@ -54,7 +59,7 @@ Geometry whose evaluated positions contain NaN or inf is left out with a
 warning naming the object. Geometry keys are ``Mesh.as_pointer()`` values of
 evaluated meshes: unique and stable *within one extraction* only.
 
-This module imports bpy and numpy only (never ``core``).
+This module imports bpy, numpy and node_instances only (never ``core``).
 """
 
 from __future__ import annotations
@@ -65,6 +70,8 @@ from dataclasses import dataclass, field
 
 import bpy
 import numpy as np
+
+from .node_instances import node_references
 
 # --------------------------------------------------------------------------
 # Records
@@ -257,17 +264,32 @@ class _Visibility:
     def __init__(self, view_layer: bpy.types.ViewLayer):
         self.scene_objects = _layer_render_objects(view_layer.layer_collection)
         self._collection_memo: dict[int, frozenset[int]] = {}
+        self._node_memo: dict[int, tuple[frozenset, frozenset, frozenset]] = {}
 
     def scene_object(self, orig: bpy.types.Object) -> bool:
         """A non-instanced object: own flag plus collection path."""
         return (not orig.hide_render) and orig.as_pointer() in self.scene_objects
 
     def in_instanced_collection(self, instancer: bpy.types.Object, orig) -> bool:
-        """Whether a collection-instancer would instance `orig` in a render."""
-        if instancer.instance_type != "COLLECTION" or instancer.instance_collection is None:
-            return True
-        objs = self._collection_objects(instancer.instance_collection, set())
-        return orig.as_pointer() in objs
+        """Whether a collection-instancer, or a geometry-nodes object instancing collections through
+        Collection Info (node_instances.py), would instance `orig` in a render."""
+        if instancer.instance_type == "COLLECTION" and instancer.instance_collection is not None:
+            objs = self._collection_objects(instancer.instance_collection, set())
+            return orig.as_pointer() in objs
+        members, shown, direct = self._node_instanced(instancer)
+        ptr = orig.as_pointer()
+        return ptr not in members or ptr in shown or ptr in direct
+
+    def _node_instanced(self, instancer: bpy.types.Object) -> tuple[frozenset, frozenset, frozenset]:
+        """Pointers of (every member, the render-visible members) of the collections `instancer`'s
+        geometry nodes instance whole, and of the objects they name directly; memoized."""
+        ptr = instancer.as_pointer()
+        if ptr not in self._node_memo:
+            collections, objects = node_references(instancer)
+            members = frozenset(ob.as_pointer() for c in collections for ob in c.all_objects)
+            shown = frozenset().union(*(self._collection_objects(c, set()) for c in collections))
+            self._node_memo[ptr] = (members, shown, frozenset(ob.as_pointer() for ob in objects))
+        return self._node_memo[ptr]
 
     def _collection_objects(self, coll: bpy.types.Collection, stack: set) -> frozenset[int]:
         """Render-visible objects a collection instance yields, nested ones too."""
@@ -390,15 +412,42 @@ def extract_scene(depsgraph: bpy.types.Depsgraph | None = None) -> ExtractedScen
     t0 = time.perf_counter()
     if depsgraph is None:
         depsgraph = bpy.context.evaluated_depsgraph_get()
-    walker = _EntryReader(_Visibility(depsgraph.view_layer))
+    vis = _Visibility(depsgraph.view_layer)
+    walker = _EntryReader(vis)
     instances = [r for r in map(walker.read, depsgraph.object_instances) if r is not None]
     return ExtractedScene(
         geometries=walker.geometries.geometries,
         instances=instances,
-        warnings=walker.geometries.warnings,
+        warnings=walker.geometries.warnings + left_out_warnings(depsgraph, vis),
         extract_ms=(time.perf_counter() - t0) * 1e3,
         frame=depsgraph.scene.frame_current,
     )
+
+
+# Object types whose evaluated geometry is a mesh the preview reads, and those Cycles renders that
+# are not triangles.
+TRIANGLE_TYPES = frozenset(("MESH", "CURVE", "SURFACE", "FONT", "META"))
+NOT_TRIANGLES = {"CURVES": "hair curves", "POINTCLOUD": "a point cloud", "VOLUME": "a volume",
+                 "GREASEPENCIL": "grease pencil", "GPENCIL": "grease pencil"}
+
+
+def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility) -> list[str]:
+    """A warning per render-visible scene object a final render shows and the preview leaves out:
+    hidden in the viewport (the viewport depsgraph does not evaluate it), or not triangles."""
+    evaluated = {ob.original.as_pointer() for ob in depsgraph.objects}
+    warnings = []
+    for ob in depsgraph.view_layer.objects:
+        kind = ob.type
+        if kind in TRIANGLE_TYPES and ob.as_pointer() in evaluated:
+            continue  # the common case first: ~1.5 us an object
+        if (kind in TRIANGLE_TYPES or kind in NOT_TRIANGLES) and vis.scene_object(ob) and _ray_visible(ob):
+            if kind in NOT_TRIANGLES:
+                warnings.append(f"object '{ob.name}' is {NOT_TRIANGLES[kind]}, not triangles: left out of the preview")
+            else:
+                warnings.append(f"object '{ob.name}' is hidden in the viewport (eye icon, Disable in Viewports or "
+                                "a hidden collection): the preview reads the viewport's scene and leaves it out, "
+                                "a final render shows it")
+    return warnings
 
 
 class _EntryReader:

@@ -173,6 +173,35 @@ def add_gn_instancer(name="GNHost", *, count=4, offset=(2, 0, 0), cube_size=1.0,
     return obj
 
 
+def add_info_node_host(name, target, *, separate_children=False, via_modifier_input=False, location=(0, 0, 0)):
+    """Empty-mesh object whose geometry-nodes modifier outputs the instances of a Collection Info
+    node (`target` a collection) or an Object Info node (`target` an object), unrealized. With
+    `via_modifier_input` the target comes from a modifier input linked through a Group Input node."""
+    is_collection = isinstance(target, bpy.types.Collection)
+    group = bpy.data.node_groups.new(f"{name}Info", "GeometryNodeTree")
+    group.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    nodes, links = group.nodes, group.links
+    info = nodes.new("GeometryNodeCollectionInfo" if is_collection else "GeometryNodeObjectInfo")
+    port = "Collection" if is_collection else "Object"
+    if is_collection:
+        info.inputs["Separate Children"].default_value = separate_children
+    links.new(info.outputs[0 if is_collection else "Geometry"], nodes.new("NodeGroupOutput").inputs[0])
+    obj = add_mesh(name, [], [], location=location)
+    mod = obj.modifiers.new("GN", "NODES")
+    if via_modifier_input:
+        item = group.interface.new_socket(port, in_out="INPUT",
+                                          socket_type="NodeSocketCollection" if is_collection else "NodeSocketObject")
+        links.new(nodes.new("NodeGroupInput").outputs[port], info.inputs[port])
+        mod.node_group = group
+        mod[item.identifier] = target
+    else:
+        info.inputs[port].default_value = target
+        mod.node_group = group
+    if not is_collection:
+        info.inputs["As Instance"].default_value = True
+    return obj
+
+
 def add_bevel_curve(name="Tube", *, length=4.0, radius=0.5, location=(0, 0, 0)):
     """Straight poly curve from x=0 to x=length beveled into an open tube of
     the given radius around the x axis."""

@@ -235,6 +235,53 @@ def test_render_hidden_and_non_renderable_objects_left_out(scene):
     assert result.triangle_count == 36
 
 
+@pytest.mark.parametrize("via_modifier_input", [False, True])
+def test_collection_info_instances_follow_the_collection_rule(scene, via_modifier_input):
+    """Measured with Cycles (README): a collection that a Collection Info node instances whole is
+    expanded like a collection instance in a render, so its render-hidden members (own flag or a
+    hidden child collection) are not rendered; with Separate Children on they are, and so is a
+    hidden object that an Object Info node names."""
+    source = scenes.new_collection("Src", exclude=True)
+    scenes.add_cube("Shown", collection=source)
+    scenes.add_cube("Hidden", collection=source).hide_render = True
+    hidden_child = scenes.new_collection("HiddenChild", parent=source)
+    hidden_child.hide_render = True
+    scenes.add_cube("InHiddenChild", collection=hidden_child)
+    scenes.add_info_node_host("Whole", source, via_modifier_input=via_modifier_input)
+    scenes.add_info_node_host("Separate", source, separate_children=True, location=(10, 0, 0))
+    scenes.add_info_node_host("Named", bpy.data.objects["Hidden"], via_modifier_input=via_modifier_input,
+                              location=(20, 0, 0))
+    result = extract_scene()
+    by_host = {}
+    for inst in result.instances:
+        by_host.setdefault(inst.instancer, []).append(inst.name)
+    assert sorted(by_host["Whole"]) == ["Shown"]
+    assert sorted(by_host["Separate"]) == ["Hidden", "InHiddenChild", "Shown"]
+    assert by_host["Named"] == ["Hidden"]
+    assert result.warnings == []
+
+
+def test_viewport_hidden_and_non_triangle_objects_are_named(scene):
+    """The viewport depsgraph does not evaluate objects hidden in the viewport, so the preview cannot
+    show them although a final render does; it names them, and render-visible objects that are not
+    triangles. Render-hidden ones stay quiet: no render shows them either."""
+    scenes.add_cube("Shown")
+    scenes.add_cube("EyeHidden", location=(3, 0, 0)).hide_set(True)
+    scenes.add_cube("MonitorHidden", location=(6, 0, 0)).hide_viewport = True
+    quiet = scenes.add_cube("RenderHiddenToo", location=(9, 0, 0))
+    quiet.hide_viewport = quiet.hide_render = True
+    hair = bpy.data.objects.new("Hair", bpy.data.hair_curves.new("Hair"))
+    scenes.link(hair)
+    result = extract_scene()
+    assert result.object_names == ["Shown"]
+    assert sorted(result.warnings) == [
+        "object 'EyeHidden' is hidden in the viewport (eye icon, Disable in Viewports or a hidden collection): "
+        "the preview reads the viewport's scene and leaves it out, a final render shows it",
+        "object 'Hair' is hair curves, not triangles: left out of the preview",
+        "object 'MonitorHidden' is hidden in the viewport (eye icon, Disable in Viewports or a hidden "
+        "collection): the preview reads the viewport's scene and leaves it out, a final render shows it"]
+
+
 def test_ray_visibility_the_preview_ignores_is_named_once_per_object(scene):
     """Cycles hides an object from camera rays, from shadow rays, or cuts a holdout; the preview
     traces every rendered object alike, so it says which objects' images differ, once each."""
