@@ -4,6 +4,8 @@ import functools
 import numpy as np
 from numba import njit, prange
 
+from .inputs import as_number, check_image_size
+
 TILE = 8  # tiled_pixels: 8 x 8 = 64 rays, one traversal task (traversal.RAYS_PER_TASK)
 
 
@@ -26,11 +28,11 @@ class Camera:
             raise ValueError(f"camera matrix_world must be a finite 4x4 matrix, got shape {m.shape}")
         if (fov is None) == (ortho_scale is None):
             raise ValueError("camera needs exactly one of fov (perspective) or ortho_scale (orthographic)")
-        if fov is not None and not 0.0 < fov < np.pi:
+        if fov is not None and not 0.0 < as_number("camera fov", fov) < np.pi:
             raise ValueError(f"camera fov must be in (0, pi) radians, got {fov}")
-        if ortho_scale is not None and not 0.0 < ortho_scale < np.inf:
+        if ortho_scale is not None and not 0.0 < as_number("camera ortho_scale", ortho_scale) < np.inf:
             raise ValueError(f"camera ortho_scale must be finite and > 0, got {ortho_scale}")
-        if not 0.0 <= clip_start < clip_end:
+        if not 0.0 <= as_number("camera clip_start", clip_start) < as_number("camera clip_end", clip_end):
             raise ValueError(f"camera clip range must satisfy 0 <= clip_start < clip_end, got {clip_start}, {clip_end}")
         axes = np.linalg.norm(m[:3, :3], axis=0)  # the scale is ignored, so only a relative test
         if not (axes > 0).all() or abs(np.linalg.det(m[:3, :3] / axes)) < 1e-9:
@@ -42,7 +44,8 @@ class Camera:
             raise ValueError(f"camera shift must be two numbers (x, y) within +-1e6, got {shift.tolist()}")
         self.shift = (float(shift[0]), float(shift[1]))
         self.matrix_world = m
-        self.fov, self.ortho_scale = fov, ortho_scale
+        self.fov = None if fov is None else float(fov)
+        self.ortho_scale = None if ortho_scale is None else float(ortho_scale)
         self.clip_start, self.clip_end = float(clip_start), float(clip_end)
 
     @property
@@ -63,6 +66,7 @@ class Camera:
         row-major order; see tiled_pixels). Directions have unit length along the view axis, so
         tmin/tmax are the clip distances.
         """
+        check_image_size(width, height)
         left, right, bottom, top = self.image_plane(width, height)
         x = left + (np.arange(width) + 0.5) / width * (right - left)
         y = top - (np.arange(height) + 0.5) / height * (top - bottom)

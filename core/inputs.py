@@ -3,9 +3,29 @@
 Kernels assume finite float32 triangles and finite float64 rays in C order; these functions make that
 true or raise a ValueError that names the first bad index.
 """
+import numbers
+
 import numpy as np
 
 MIN_DIRECTION = 1e-20  # largest direction component allowed below this is rejected (see as_rays)
+
+
+def as_number(name, value):
+    """`value` as a float, or a ValueError naming `name` when it is not one real number (a string, an
+    array of several values, None or a bool): comparing those would raise TypeError or numpy's
+    "truth value of an array is ambiguous", which name nothing."""
+    if isinstance(value, np.ndarray) and value.ndim == 0:
+        value = value[()]
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        raise ValueError(f"{name} must be a number, got {value!r}")
+    return float(value)
+
+
+def check_image_size(width, height):
+    """Width and height must be integers in [1, 32768] (bools are not sizes)."""
+    for name, v in (("width", width), ("height", height)):
+        if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or not 1 <= v <= 1 << 15:
+            raise ValueError(f"{name} must be an integer in [1, 32768], got {v!r}")
 
 
 def as_triangles(triangles):
@@ -42,7 +62,9 @@ def as_rays(origins, directions):
 
 
 def as_ray_limits(tmin, tmax, count):
-    """tmin and tmax (scalars or (R,) arrays) as (R,) float64 arrays with 0 <= tmin <= tmax."""
+    """tmin and tmax (scalars or (R,) arrays) as (R,) float64 arrays: tmin finite and >= 0, neither NaN.
+    A ray whose interval is empty (tmax <= tmin, tmax = -inf included) misses: callers compute tmax
+    per ray (a light's distance, say) and an empty interval is a valid answer there, not an error."""
     lo = _as_limit("tmin", tmin, count)
     hi = _as_limit("tmax", tmax, count)
     if np.isnan(lo).any() or np.isnan(hi).any():

@@ -6,6 +6,8 @@ with cast_shadow=False (Blender's "Cast Shadow" off) lights every surface facing
 """
 import numpy as np
 
+from .inputs import as_number
+
 POINT, SUN, SPOT, AREA = 0, 1, 2, 3
 AREA_SHAPES = {"SQUARE": 0, "RECTANGLE": 1, "DISK": 2, "ELLIPSE": 3}
 
@@ -27,7 +29,7 @@ class Light:
         if rgb.shape != (3,) or not np.isfinite(rgb).all() or (rgb < 0).any():
             raise ValueError(f"light color must be 3 finite non-negative numbers (r, g, b), got {color!r}")
         color = rgb
-        if not (np.isfinite(power) and power >= 0):
+        if not (np.isfinite(as_number("light power", power)) and power >= 0):
             raise ValueError(f"light power must be finite and >= 0, got {power}")
         if not isinstance(cast_shadow, (bool, np.bool_)):
             raise ValueError(f"light cast_shadow must be True or False, got {cast_shadow!r}")
@@ -55,9 +57,9 @@ class Light:
         scale included (Blender's matrix_world.to_3x3()), with `direction` along minus its Z. The
         cone is then measured in the object's own frame, as Cycles does (spot_light_to_local): a
         non-uniform scale makes it elliptical."""
-        if not 0.0 < spot_size <= np.pi:
+        if not 0.0 < as_number("spot_size", spot_size) <= np.pi:
             raise ValueError(f"spot_size must be in (0, pi], got {spot_size}")
-        if not 0.0 <= spot_blend <= 1.0:
+        if not 0.0 <= as_number("spot_blend", spot_blend) <= 1.0:
             raise ValueError(f"spot_blend must be in [0, 1], got {spot_blend}")
         direction = _unit("spot direction", direction)
         return cls(SPOT, color, power, cast_shadow, position=_vector("spot position", position),
@@ -77,6 +79,10 @@ class Light:
             if not np.linalg.norm(m[:3, k]) > 0.0:
                 raise ValueError(f"area light matrix_world has a zero {name} axis (zero scale): it has no "
                                  "extent or no direction to emit in")
+        x_axis, y_axis = m[:3, 0], m[:3, 1]
+        if np.linalg.norm(np.cross(x_axis / np.linalg.norm(x_axis), y_axis / np.linalg.norm(y_axis))) < 1e-9:
+            raise ValueError("area light matrix_world has parallel X and Y axes (a sheared or collapsed scale): "
+                             "the light has no area")
         size = _positive("area light size", size)
         size_y = size if size_y is None or shape in ("SQUARE", "DISK") else _positive("area light size_y", size_y)
         return cls(AREA, color, power, cast_shadow, matrix_world=m, shape=shape, size=size, size_y=size_y)
@@ -171,12 +177,12 @@ def _unit(name, v):
 
 
 def _non_negative(name, x):
-    if not (np.isfinite(x) and x >= 0):
+    if not (np.isfinite(as_number(name, x)) and x >= 0):
         raise ValueError(f"{name} must be finite and >= 0, got {x}")
     return float(x)
 
 
 def _positive(name, x):
-    if not (np.isfinite(x) and x > 0):
+    if not (np.isfinite(as_number(name, x)) and x > 0):
         raise ValueError(f"{name} must be finite and > 0, got {x}")
     return float(x)

@@ -26,6 +26,7 @@ import numpy as np
 
 from .camera import Camera, tiled_pixels
 from .denoise import SOBOL_VARIANCE_DECAY, denoise_pixels
+from .inputs import as_number, check_image_size
 from .kdtree import KdTree
 from .lazy import resolve_suspended
 from .instance_signature import changed_boxes
@@ -290,18 +291,16 @@ def _check_settings(tree, camera, width, height, mode, samples, ao_distance, see
         raise ValueError(f"tree must be a core.KdTree or core.TwoLevelScene, got {type(tree).__name__}")
     if not isinstance(camera, Camera):
         raise ValueError(f"camera must be a core.Camera, got {type(camera).__name__}")
-    for name, v in (("width", width), ("height", height)):
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 1 <= v <= 1 << 15:
-            raise ValueError(f"{name} must be an integer in [1, 32768], got {v!r}")
+    check_image_size(width, height)
     if mode not in MODES:
         raise ValueError(f"mode must be one of {sorted(MODES)}, got {mode!r}")
     if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or samples < 1:
         raise ValueError(f"samples must be an integer >= 1, got {samples!r}")
-    if not (np.isfinite(ao_distance) and ao_distance >= 0):
+    if not (np.isfinite(as_number("ao_distance", ao_distance)) and ao_distance >= 0):
         raise ValueError(f"ao_distance must be finite and >= 0, got {ao_distance!r}")
     if sampler not in SAMPLERS:
         raise ValueError(f"sampler must be one of {SAMPLERS}, got {sampler!r}")
-    if error_target is not None and not (np.isfinite(error_target) and error_target > 0):
+    if error_target is not None and not (np.isfinite(as_number("error_target", error_target)) and error_target > 0):
         raise ValueError(f"error_target must be None or > 0, got {error_target!r}")
     if isinstance(min_samples, bool) or not isinstance(min_samples, (int, np.integer)) or min_samples < 2:
         raise ValueError(f"min_samples must be an integer >= 2, got {min_samples!r}")

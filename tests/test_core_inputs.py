@@ -80,6 +80,17 @@ def test_ray_limits(tree):
         core.intersect(tree, o, d, tmax=np.array([np.nan, 1, 1]))
 
 
+def test_an_empty_ray_interval_misses():
+    """tmax <= tmin (a per-ray limit such as a light's distance may come out so) is a valid empty
+    interval, not an error: the ray misses, whatever lies on it."""
+    tree = core.build_kdtree(np.array([[[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]]]))
+    o, d = np.array([[0.0, 0.0, 5.0]] * 4), np.array([[0.0, 0.0, -1.0]] * 4)
+    assert (core.intersect(tree, o, d).prim == 0).all()  # the triangle at t = 5
+    hits = core.intersect(tree, o, d, tmin=np.array([0.0, 9.0, 3.0, 0.0]), tmax=np.array([9.0, 2.0, 3.0, -np.inf]))
+    assert hits.prim[0] >= 0 and (hits.prim[1:] == -1).all()
+    assert not core.occluded(tree, o[1:], d[1:], tmin=9.0, tmax=2.0).any()
+
+
 def test_empty_ray_batch(tree):
     h = core.intersect(tree, np.zeros((0, 3)), np.zeros((0, 3)))
     assert h.t.shape == (0,) and h.prim.dtype == np.int32
@@ -120,6 +131,21 @@ def _box_mesh():
     (lambda t: core.build_scene([(np.zeros((4, 2)), np.array([[0, 1, 2]]))], [0], np.eye(4)[None]),
      r"mesh 0: vertices must have shape \(N, 3\), got \(4, 2\)"),
     (lambda t: core.build_kdtree(np.zeros((1, 3, 3)), memory_limit=0), "memory_limit"),
+    # a second outside review: settings of the wrong type raised TypeError or numpy's ambiguity error
+    (lambda t: core.Camera(np.eye(4), "wide"), "camera fov must be a number, got 'wide'"),
+    (lambda t: core.Camera(np.eye(4), np.array([0.5, 0.6])), "camera fov must be a number"),
+    (lambda t: core.Camera(np.eye(4), 0.5, clip_end="far"), "camera clip_end must be a number"),
+    (lambda t: core.Camera(np.eye(4), ortho_scale=True), "camera ortho_scale must be a number"),
+    (lambda t: core.Light.point((0, 0, 1), radius="big"), "point light radius must be a number"),
+    (lambda t: core.Light.point((0, 0, 1), power="a"), "light power must be a number"),
+    (lambda t: core.Light.spot((0, 0, 1), (0, 0, -1), "x"), "spot_size must be a number"),
+    (lambda t: core.Light.sun((0, 0, -1), angle=None), "sun angle must be a number"),
+    (lambda t: core.Light.area(np.array([[1, 1, 0, 0], [0, 0, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]])),
+     "parallel X and Y axes"),
+    (lambda t: core.render_preview(t, core.Camera(np.eye(4), 0.5), 4, 4, ao_distance="1"),
+     "ao_distance must be a number"),
+    (lambda t: core.Camera(np.eye(4), 0.5).rays(0, 4), r"width must be an integer in \[1, 32768\], got 0"),
+    (lambda t: core.Camera(np.eye(4), 0.5).rays(4, -2), r"height must be an integer in \[1, 32768\], got -2"),
 ])
 def test_scene_camera_and_query_inputs_are_named(tree, call, message):
     with pytest.raises(ValueError, match=message):
