@@ -13,10 +13,15 @@ Public API:
         whose rays cannot reach what changed (scenes from a SceneBuilder)
     memory.build_bytes / memory.render_bytes: peak-memory estimates; MemoryLimitError
 Two-level scenes (a kd-tree per mesh in object space under a top-level tree over instances):
-    build_two_level(mesh_trees, mesh_of, matrices, **options) -> TwoLevelScene
-    build_scene(meshes, mesh_of, matrices, origin=None, layout="auto", **options) -> TwoLevelScene
-    SceneBuilder(layout="auto", **options).build(MeshInputs, mesh_of, matrices, origin, reuse) -> (scene, report)
-    intersect_scene / occluded_scene (scene or tree, origins, directions, ...) -> SceneHits / (R,) bool
+    build_two_level(mesh_trees, mesh_of, matrices, visibility=None, **options) -> TwoLevelScene
+    build_scene(meshes, mesh_of, matrices, origin=None, layout="auto", visibility=None, **options)
+    SceneBuilder(layout="auto", **options).build(MeshInputs, mesh_of, matrices, origin, reuse, visibility)
+        -> (scene, report)
+    intersect_scene / occluded_scene (scene or tree, origins, directions, ..., ray_mask=ALL_RAYS)
+        -> SceneHits / (R,) bool
+    Per-instance ray visibility (Blender's Ray Visibility, as Cycles applies it): visibility bits
+    CAMERA_RAYS | SHADOW_RAYS; camera rays meet only instances visible to the camera, AO and shadow
+    rays only those that cast shadows.
     A TwoLevelScene renders wherever a KdTree does.
 Denoising (edge-avoiding à-trous, variance-guided; the raw estimate stays the default):
     render_preview(..., denoise=True) / PreviewRender.image(denoise=True) -> (H, W, 4) float32
@@ -33,6 +38,7 @@ from .memory import MemoryLimitError
 from .options import BuildOptions
 from .pixel_reuse import PixelState
 from .queries import Hits, intersect, occluded
+from .ray_visibility import ALL_RAYS, CAMERA_RAYS, SHADOW_RAYS
 from .scene_builder import BuildReport, MeshInput, SceneBuilder, build_scene
 from .scene_queries import SceneHits, intersect_scene, occluded_scene
 from .two_level import TwoLevelScene, build_two_level
@@ -41,4 +47,4 @@ __all__ = ["denoise_pixels",
            "build_kdtree", "intersect", "occluded", "KdTree", "Hits", "BuildOptions", "Camera", "Light",
            "render_preview", "PreviewRender", "TwoLevelScene", "build_two_level", "build_scene", "SceneBuilder",
            "MeshInput", "BuildReport", "SceneHits", "intersect_scene", "occluded_scene", "MemoryLimitError",
-           "PixelState"]
+           "PixelState", "CAMERA_RAYS", "SHADOW_RAYS", "ALL_RAYS"]

@@ -1,8 +1,9 @@
 """What a frame's instances were, so the next frame can tell which parts of space changed.
 
 A signature lists every instance that has something to hit as a row of bytes (a digest of its mesh's
-key and fingerprint, its object-to-world matrix, then how its triangles were rounded: in object space
-under its own tree, or to float32 in a soup relative to the soup's anchor) with its world box, in the
+key and fingerprint, its object-to-world matrix, how its triangles were rounded: in object space
+under its own tree, or to float32 in a soup relative to the soup's anchor, and which rays it stops:
+ray_visibility.py) with its world box, in the
 coordinates the scene was built in (minus `origin`, see scene_builder.py). The rounding is part of the
 row because kept pixels keep their hit points and ray starts: an unchanged object re-rounded (the
 soup re-anchored, or the object moved between the soup and a tree of its own) shifts its surface by a
@@ -35,20 +36,21 @@ def mesh_digest(key, fingerprint):
     return hashlib.blake2b(repr((key, fingerprint)).encode(), digest_size=8).digest()
 
 
-def instance_signature(digests, bounds, mesh_of, o2w, origin, rounding):
+def instance_signature(digests, bounds, mesh_of, o2w, origin, rounding, visibility):
     """The signature of a frame. digests: one 8-byte `mesh_digest` per mesh; bounds (M, 6) object-
     space boxes (inverted for a mesh with nothing to hit); mesh_of (I,); o2w (I, 4, 4) world matrices
     (before the origin shift); origin (3,); rounding (I, 4) float64: (0, 0, 0, 0) for an instance
-    under its own tree, (1, anchor) for a soup member."""
+    under its own tree, (1, anchor) for a soup member; visibility (I,) uint8 ray_visibility bits."""
     origin = np.asarray(origin, np.float64).copy()
     mesh_of = np.asarray(mesh_of, np.int64)
     solid = bounds[mesh_of, 0] <= bounds[mesh_of, 3] if len(mesh_of) else np.zeros(0, bool)
     mesh_of, o2w = mesh_of[solid], np.ascontiguousarray(o2w[solid], np.float64)
     rounding = np.ascontiguousarray(np.asarray(rounding, np.float64).reshape(-1, 4)[solid])
+    visibility = np.asarray(visibility, np.uint8)[solid].reshape(-1, 1)
     table = np.frombuffer(b"".join(digests), np.uint8).reshape(len(digests), 8) if digests else \
         np.zeros((0, 8), np.uint8)
     raw = np.concatenate([table[mesh_of], o2w.reshape(len(o2w), 16).view(np.uint8),
-                          rounding.view(np.uint8)], axis=1)
+                          rounding.view(np.uint8), visibility], axis=1)
     rows = np.ascontiguousarray(raw).view(np.dtype((np.void, raw.shape[1]))).reshape(-1)
     shifted = o2w.copy()
     shifted[:, :3, 3] -= origin

@@ -2,7 +2,8 @@
 in a top leaf, the mesh's own tree in object space through the one kd-tree traversal (trace_ray).
 
 The top level is walked with the traversal's own steps (clip_to_box, _descend, _push) and its stop
-rules; only the leaf test differs: an instance test instead of a triangle test. Each instance gets the
+rules; only the leaf test differs: an instance test instead of a triangle test, skipped for an
+instance that does not stop rays of the ray's kind (ray_visibility.py). Each instance gets the
 ray transformed by its world-to-object matrix without normalising the direction, so the ray parameter
 t is the same in both spaces (an affine map keeps it) and the best hit so far is passed on as tmax:
 a mesh is searched only in front of what is already known (Wald 2004, seed 000 §5).
@@ -36,12 +37,14 @@ def new_scratch():
 @njit(cache=True, inline="always")
 def unowned_scene(scene):
     """The scene tuple (two_level.TwoLevelScene.arrays: 6 top-level arrays, world-to-object matrices,
-    mesh of each instance, 10 packed mesh arrays) as unowned views, made once per block of rays: with
-    owned arrays, the code inlined per ray took and dropped references to them (array_views.py)."""
+    mesh of each instance, 10 packed mesh arrays, ray visibility of each instance) as unowned views,
+    made once per block of rays: with owned arrays, the code inlined per ray took and dropped
+    references to them (array_views.py)."""
     s = scene
     return (unowned(s[0]), unowned(s[1]), unowned(s[2]), unowned(s[3]), unowned(s[4]), unowned(s[5]),
             unowned(s[6]), unowned(s[7]), unowned(s[8]), unowned(s[9]), unowned(s[10]), unowned(s[11]),
-            unowned(s[12]), unowned(s[13]), unowned(s[14]), unowned(s[15]), unowned(s[16]), unowned(s[17]))
+            unowned(s[12]), unowned(s[13]), unowned(s[14]), unowned(s[15]), unowned(s[16]), unowned(s[17]),
+            unowned(s[18]))
 
 
 @njit(cache=True, inline="always")
@@ -74,13 +77,17 @@ def trace_instance(scene, inst, o, d, tmin, tmax, any_hit, scratch):
 
 
 @njit(cache=True, inline="always")
-def trace_scene(scene, o, d, tmin, tmax, any_hit, scratch):
-    """(t, instance, prim, u, v) of the closest hit in (tmin, tmax), or of any hit if `any_hit`;
+def trace_scene(scene, o, d, tmin, tmax, any_hit, ray_mask, scratch):
+    """(t, instance, prim, u, v) of the closest hit in (tmin, tmax), or of any hit if `any_hit`, among
+    the instances whose visibility shares a bit with `ray_mask` (the ray's kind, ray_visibility.py);
     instance and prim are -1 on a miss. A ray that reaches an unbuilt subtree of a lazy mesh tree stops
     there: prim is then trace_ray's suspended value (< NO_HIT) and instance the one it stopped in.
     `scratch` comes from new_scratch() and is reused across rays."""
     axis, split, child, count, items, root_box = scene[0], scene[1], scene[2], scene[3], scene[4], scene[5]
+    visibility = scene[18]
     if items.shape[0] == 1 and axis[0] == LEAF:  # one instance (a flat tree): its own tree clips the ray
+        if visibility[items[0]] & ray_mask == 0:
+            return np.inf, -1, -1, 0.0, 0.0
         t, prim, u, v = trace_instance(scene, items[0], o, d, tmin, tmax, any_hit, scratch)
         return t, items[0] if prim >= 0 or prim < NO_HIT else -1, prim, u, v
     stack_node, stack_t, inv = scratch[0], scratch[1], scratch[2]
@@ -99,6 +106,8 @@ def trace_scene(scene, o, d, tmin, tmax, any_hit, scratch):
             continue
         first = child[node]
         for j in range(first, first + count[node]):
+            if visibility[items[j]] & ray_mask == 0:
+                continue
             t, prim, u, v = trace_instance(scene, items[j], o, d, tmin, best_t, any_hit, scratch)
             if prim < NO_HIT:  # a lazy mesh tree's unbuilt subtree: the caller builds it and retraces
                 return np.inf, items[j], prim, 0.0, 0.0
@@ -117,25 +126,26 @@ def trace_scene(scene, o, d, tmin, tmax, any_hit, scratch):
 
 
 @njit(cache=True, parallel=True)
-def trace_scene_rays(scene, origins, directions, tmin, tmax, any_hit, out_t, out_inst, out_prim, out_u, out_v):
-    """Trace all rays in parallel, in blocks of RAYS_PER_TASK that share one scratch."""
+def trace_scene_rays(scene, origins, directions, tmin, tmax, any_hit, ray_mask, out_t, out_inst, out_prim, out_u,
+                     out_v):
+    """Trace all rays (of kind ray_mask) in parallel, in blocks of RAYS_PER_TASK that share one scratch."""
     n = origins.shape[0]
     iterations, per_band = interleaved_blocks(n, RAYS_PER_TASK)  # balances image regions (traversal.py)
     for i in prange(iterations):
         start, stop = block_range(i, per_band, n, RAYS_PER_TASK)
-        _trace_block(scene, origins, directions, tmin, tmax, any_hit, start, stop, out_t, out_inst, out_prim, out_u,
-                     out_v)
+        _trace_block(scene, origins, directions, tmin, tmax, any_hit, ray_mask, start, stop, out_t, out_inst, out_prim,
+                     out_u, out_v)
 
 
 @njit(cache=True)
-def _trace_block(scene, origins, directions, tmin, tmax, any_hit, start, stop, out_t, out_inst, out_prim, out_u,
-                 out_v):
+def _trace_block(scene, origins, directions, tmin, tmax, any_hit, ray_mask, start, stop, out_t, out_inst, out_prim,
+                 out_u, out_v):
     """Rays start..stop-1 with one scratch and the scene as unowned views."""
     scratch = new_scratch()
     views = unowned_scene(scene)
     for r in range(start, stop):
         t, inst, prim, u, v = trace_scene(views, rows(origins, r, r + 1)[0], rows(directions, r, r + 1)[0], tmin[r],
-                                          tmax[r], any_hit, scratch)
+                                          tmax[r], any_hit, ray_mask, scratch)
         out_t[r] = t
         out_inst[r] = inst
         out_prim[r] = prim

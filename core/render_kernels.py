@@ -2,9 +2,10 @@
 
 One sample of a pixel is one cosine-weighted AO ray (mode ao), one shadow ray per light facing the
 surface (mode shadow), or both multiplied (mode ao+shadow). Every ray is an any-hit query through the
-same traversal as everything else, via the scene's instances (a flat tree is one instance with the
-identity, see two_level.as_two_level). Sample k of pixel p depends only on (p, k, seed), so adding
-samples in any batches gives the same sums as one big batch.
+same traversal as everything else, of kind SHADOW_RAYS (as Cycles traces its AO rays: an instance
+with shadow rays off neither occludes nor shadows, ray_visibility.py), via the scene's instances (a
+flat tree is one instance with the identity, see two_level.as_two_level). Sample k of pixel p
+depends only on (p, k, seed), so adding samples in any batches gives the same sums as one big batch.
 
 On a lazy tree a ray may stop at an unbuilt subtree (traversal.py). The pixel then puts its sums back
 as they were before the batch and reports the subtree; the caller builds it and redoes the batch for
@@ -23,6 +24,7 @@ from .instance_traversal import new_scratch, trace_scene, triangle_reach, unowne
 from .layout import NO_HIT
 from .lights import NO_SHADOW
 from .pixel_reuse import segment_meets_any
+from .ray_visibility import SHADOW_RAYS
 from .sampling import pixel_seed, sample_2d
 from .shading import TRIANGLE_REACH_WEIGHT, cosine_direction, hit_error_scale, offset_origin, sample_light
 from .traversal import block_range, interleaved_blocks
@@ -136,7 +138,7 @@ def _visibility(scene, origin, direction, tmax, scratch, memo, i, bit, rays):
     if kept and known[i] and not segment_meets_any(origin, direction, 0.0, tmax, boxes):
         reused[i] += 1
         return 0 if bits[i, bit >> 3] & (1 << (bit & 7)) else -1
-    _, _, prim, _, _ = trace_scene(scene, origin, direction, 0.0, tmax, True, scratch)
+    _, _, prim, _, _ = trace_scene(scene, origin, direction, 0.0, tmax, True, SHADOW_RAYS, scratch)
     if kept and prim >= NO_HIT:
         mask = np.uint8(1 << (bit & 7))
         bits[i, bit >> 3] = bits[i, bit >> 3] | mask if prim >= 0 else bits[i, bit >> 3] & ~mask

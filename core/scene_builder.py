@@ -9,7 +9,9 @@ fingerprint that changes whenever its geometry does (e.g. a CRC of its vertex an
   while its members' keys, fingerprints and matrices are unchanged. Its triangles are stored relative
   to an anchor (its centre, kept while it stays near the soup's box: `_anchor`) and placed by a
   translation, so a moving camera never rebuilds it;
-- a single-use mesh whose matrix changed counts as dynamic too (it leaves the soup).
+- a single-use mesh whose matrix changed counts as dynamic too (it leaves the soup);
+- instances that stop different kinds of rays (ray_visibility.py) go to different soups, one per
+  visibility, since the traversal tells kinds apart per instance, not per triangle.
 Trees of keys absent from a frame are dropped. `reuse=False` rebuilds everything (the same layout),
 so the two can be compared. Every scene carries the instances' signature (instance_signature.py), from
 which the renderer tells where the next frame's geometry changed (pixel reuse).
@@ -25,6 +27,7 @@ import numpy as np
 from .build import build_kdtree
 from .instance_signature import instance_signature, mesh_digest
 from .options import make_options
+from .ray_visibility import as_visibility
 from .scene_policy import LAYOUTS, plan_soup
 from .two_level import build_two_level, check_placement
 
@@ -53,13 +56,16 @@ class BuildReport(NamedTuple):
 
 class CallerIds(NamedTuple):
     """How the built scene's instances and triangles map back to the caller's (build() reorders them:
-    instances with their own tree first, in the caller's order, then one soup instance whose tree holds
-    its members' triangles one after the other). own: (J,) caller instance of scene instance j < J;
-    members: (K,) caller instance of soup member k; offsets: (K + 1,) its first soup triangle."""
+    instances with their own tree first, in the caller's order, then the soup instances, one per
+    visibility, whose trees hold their members' triangles one after the other). own: (J,) caller
+    instance of scene instance j < J; members: (K,) caller instance of soup member k, soup after soup;
+    offsets: (K + 1,) member k's first triangle, counted over all soups in that order; soup_base: (S,)
+    the count at soup s's first triangle."""
 
     own: np.ndarray
     members: np.ndarray
     offsets: np.ndarray
+    soup_base: np.ndarray
 
     def map(self, inst, prim):
         """(instance, prim) arrays of scene hits -> the caller's instance and its mesh's triangle
@@ -70,8 +76,9 @@ class CallerIds(NamedTuple):
         own = hit & (inst < len(self.own))
         out_inst[own], out_prim[own] = self.own[inst[own]], prim[own]
         soup = hit & ~own
-        member = np.searchsorted(self.offsets, prim[soup], side="right") - 1
-        out_inst[soup], out_prim[soup] = self.members[member], prim[soup] - self.offsets[member]
+        counted = prim[soup] + self.soup_base[inst[soup] - len(self.own)]
+        member = np.searchsorted(self.offsets, counted, side="right") - 1
+        out_inst[soup], out_prim[soup] = self.members[member], counted - self.offsets[member]
         return out_inst.astype(np.int32), out_prim.astype(np.int32)
 
 
@@ -91,15 +98,20 @@ class SceneBuilder:
         self._fingerprints = {}  # key -> fingerprint seen last frame
         self._matrices = {}  # key of a single-use mesh -> its matrix last frame
         self._dynamic = set()  # keys that changed or moved in an earlier frame
-        self._soup = None  # (signature, KdTree, anchor)
+        self._soups = {}  # visibility -> (signature, KdTree, anchor)
 
-    def build(self, meshes, mesh_of, matrices, origin=None, reuse=True):
+    def build(self, meshes, mesh_of, matrices, origin=None, reuse=True, visibility=None):
         """(TwoLevelScene, BuildReport) for one frame. meshes: list of MeshInput; mesh_of (I,) index
         into meshes per instance; matrices (I, 4, 4) object-to-world; origin (3,) subtracted from
-        every position (float64) before anything is rounded."""
+        every position (float64) before anything is rounded; visibility (I,) ray_visibility bits per
+        instance (None: every instance stops every ray)."""
         start = perf_counter()
         mesh_of, o2w = check_placement(len(meshes), mesh_of, matrices)
         mesh_of = mesh_of.astype(np.int64)
+        visibility = as_visibility(visibility, len(mesh_of))
+        if self.options["lazy"] and len(set(visibility.tolist())) > 1:
+            raise ValueError("a lazy build traces the scene as one tree, so every instance must stop the same rays: "
+                             f"got visibilities {sorted(set(visibility.tolist()))}")
         origin = _checked_origin(origin)
         keys = [m.key for m in meshes]
         if len(set(keys)) != len(keys):
@@ -116,31 +128,36 @@ class SceneBuilder:
         trees, new_mesh_of, rebuilt, reused = self._mesh_trees(meshes, mesh_of, ~soup, reuse)
         shifted = o2w[~soup].copy()
         shifted[:, :3, 3] -= origin
-        soup_rebuilt = False
-        if soup.any():
-            soup_tree, anchor, soup_rebuilt = self._soup_tree(meshes, mesh_of, o2w, np.flatnonzero(soup), reuse)
-            members = len(set(mesh_of[soup].tolist()))
-            rebuilt, reused = (rebuilt + members, reused) if soup_rebuilt else (rebuilt, reused + members)
+        scene_visibility = [visibility[~soup]]
+        rounding = np.zeros((len(mesh_of), 4))
+        groups, soups, soup_rebuilt = [], {}, False
+        for kind in sorted(set(visibility[soup].tolist()), reverse=True):  # all rays first: the usual soup
+            group = np.flatnonzero(soup & (visibility == kind))
+            soups[kind] = self._soup_tree(meshes, mesh_of, o2w, group, reuse, kind)
+            _, soup_tree, anchor = soups[kind]
+            built = soups[kind] is not self._soups.get(kind)
+            soup_rebuilt |= built
+            members = len(set(mesh_of[group].tolist()))
+            rebuilt, reused = (rebuilt + members, reused) if built else (rebuilt, reused + members)
             trees.append(soup_tree)
             new_mesh_of = np.append(new_mesh_of, len(trees) - 1)
             place = np.eye(4)
             place[:3, 3] = anchor - origin
             shifted = np.concatenate([shifted, place[None]])
+            scene_visibility.append([kind])
+            rounding[group] = (1.0, *anchor)
+            groups.append(group)
+        self._soups = soups
         self._forget_absent(keys)
         t = perf_counter()
-        scene = build_two_level(trees, new_mesh_of, shifted, **self.options)
+        scene = build_two_level(trees, new_mesh_of, shifted, np.concatenate(scene_visibility).astype(np.uint8),
+                                **self.options)
         top_ms = (perf_counter() - t) * 1e3
-        rounding = np.zeros((len(mesh_of), 4))
-        if soup.any():
-            rounding[soup] = (1.0, *anchor)
         scene.signature = instance_signature([mesh_digest(m.key, m.fingerprint) for m in meshes], bounds, mesh_of,
-                                             o2w, origin, rounding)
+                                             o2w, origin, rounding, visibility)
         scene.origin = origin.copy()
-        members = np.flatnonzero(soup)
-        sizes = [len(meshes[mesh_of[i]].triangles) for i in members]
-        scene.caller_ids = CallerIds(np.flatnonzero(~soup), members, np.concatenate([[0], np.cumsum(sizes)])
-                                     .astype(np.int64))
-        report = BuildReport(rebuilt, reused, len(trees) - int(soup.any()), int(soup.sum()), soup_rebuilt,
+        scene.caller_ids = _caller_ids(meshes, mesh_of, np.flatnonzero(~soup), groups)
+        report = BuildReport(rebuilt, reused, len(trees) - len(groups), int(soup.sum()), soup_rebuilt,
                              (perf_counter() - start) * 1e3, top_ms)
         return scene, report
 
@@ -176,34 +193,19 @@ class SceneBuilder:
             trees.append(cached[1])
         return trees, index[mesh_of[instanced]], rebuilt, len(used) - rebuilt
 
-    def _soup_tree(self, meshes, mesh_of, o2w, members, reuse):
-        """(tree, anchor, rebuilt): the members' world triangles relative to their centre, kept when the
-        members' keys, fingerprints and matrices are those of last frame's soup."""
+    def _soup_tree(self, meshes, mesh_of, o2w, members, reuse, kind):
+        """(signature, tree, anchor) of the soup of visibility `kind`: the members' world triangles
+        relative to an anchor near their centre; last frame's soup of that kind itself when the
+        members' keys, fingerprints and matrices are the same."""
         signature = [(meshes[mesh_of[i]].key, meshes[mesh_of[i]].fingerprint, o2w[i].tobytes()) for i in members]
-        if reuse and self._soup is not None and self._soup[0] == signature:
-            return self._soup[1], self._soup[2], False
+        before = self._soups.get(kind)
+        if reuse and before is not None and before[0] == signature:
+            return before
         parts = [(_gather(meshes[mesh_of[i]]).astype(np.float64), o2w[i]) for i in members]
         world = [tris @ m[:3, :3].T + m[:3, 3] for tris, m in parts]
         stacked = np.concatenate(world) if world else np.zeros((0, 3, 3))
-        anchor = self._anchor(stacked)
-        tree = build_kdtree((stacked - anchor).astype(np.float32), **self.options)
-        self._soup = (signature, tree, anchor)
-        return tree, anchor, True
-
-    def _anchor(self, stacked):
-        """The point the soup's float32 triangles are relative to: last soup's anchor while it lies
-        within the new soup's box grown by the box's diagonal, else the box's centre. Re-anchoring
-        re-rounds every member, which costs kept pixels near all of them (instance_signature.py), so
-        an object leaving or joining the soup should not move it (the grown box keeps it for a flat
-        ground, whose own box a centre above it is never inside). A vertex is then at most (1 + sqrt 3)
-        diagonals from the anchor, against half of one from the centre: under 3 bits of float32."""
-        if len(stacked) == 0:
-            return np.zeros(3)
-        lo, hi = stacked.reshape(-1, 3).min(axis=0), stacked.reshape(-1, 3).max(axis=0)
-        grow = np.linalg.norm(hi - lo)
-        if self._soup is not None and ((lo - grow <= self._soup[2]) & (self._soup[2] <= hi + grow)).all():
-            return self._soup[2]
-        return (lo + hi) / 2
+        anchor = _anchor(stacked, before[2] if before is not None else None)
+        return signature, build_kdtree((stacked - anchor).astype(np.float32), **self.options), anchor
 
     def _forget_absent(self, keys):
         present = set(keys)
@@ -211,6 +213,31 @@ class SceneBuilder:
             for key in [k for k in table if k not in present]:
                 del table[key]
         self._dynamic &= present
+
+
+def _anchor(stacked, before):
+    """The point a soup's float32 triangles are relative to: the last soup's anchor `before` while it
+    lies within the new soup's box grown by the box's diagonal, else the box's centre. Re-anchoring
+    re-rounds every member, which costs kept pixels near all of them (instance_signature.py), so
+    an object leaving or joining the soup should not move it (the grown box keeps it for a flat
+    ground, whose own box a centre above it is never inside). A vertex is then at most (1 + sqrt 3)
+    diagonals from the anchor, against half of one from the centre: under 3 bits of float32."""
+    if len(stacked) == 0:
+        return np.zeros(3)
+    lo, hi = stacked.reshape(-1, 3).min(axis=0), stacked.reshape(-1, 3).max(axis=0)
+    grow = np.linalg.norm(hi - lo)
+    if before is not None and ((lo - grow <= before) & (before <= hi + grow)).all():
+        return before
+    return (lo + hi) / 2
+
+
+def _caller_ids(meshes, mesh_of, own, groups):
+    """CallerIds of a scene whose own-tree instances are `own` and whose soups hold `groups` in order."""
+    members = np.concatenate(groups) if groups else np.zeros(0, np.int64)
+    sizes = [len(meshes[mesh_of[i]].triangles) for i in members]
+    offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+    firsts = np.cumsum([0] + [len(g) for g in groups[:-1]]).astype(np.int64)
+    return CallerIds(own, members, offsets, offsets[firsts] if groups else np.zeros(0, np.int64))
 
 
 def _checked_origin(origin):
@@ -243,7 +270,8 @@ def _bounds(meshes):
     return out
 
 
-def build_scene(meshes, mesh_of, matrices, origin=None, layout="auto", **options):
-    """One frame's TwoLevelScene without reuse: meshes are (vertices, triangles) pairs or MeshInputs."""
+def build_scene(meshes, mesh_of, matrices, origin=None, layout="auto", visibility=None, **options):
+    """One frame's TwoLevelScene without reuse: meshes are (vertices, triangles) pairs or MeshInputs;
+    visibility (I,) ray_visibility bits per instance (None: all rays)."""
     inputs = [m if isinstance(m, MeshInput) else MeshInput(i, m[0], m[1], i) for i, m in enumerate(meshes)]
-    return SceneBuilder(layout, **options).build(inputs, mesh_of, matrices, origin)[0]
+    return SceneBuilder(layout, **options).build(inputs, mesh_of, matrices, origin, visibility=visibility)[0]

@@ -16,6 +16,7 @@ from .build import _build_arrays
 from .kdtree import KdTree, empty_arrays
 from .layout import LEAF
 from .options import make_options
+from .ray_visibility import as_visibility
 from .threads import thread_count
 
 SINGULAR = 1e-12  # |det| of the linear part below this times its column norms' product: not invertible
@@ -26,12 +27,14 @@ class TwoLevelScene:
 
     Attributes: `meshes` (list of KdTree); `mesh_of` (I,) int32; `object_to_world` (I, 4, 4) float64;
     `world_to_object` (I, 3, 4) float64; `world_boxes` (I, 6) float32 (rounded outward);
-    `top` (axis, split, child, count, items, bounds) of the top-level tree; `build_ms` (top level only).
+    `visibility` (I,) uint8 ray_visibility bits; `top` (axis, split, child, count, items, bounds) of the
+    top-level tree; `build_ms` (top level only).
     """
 
-    def __init__(self, meshes, mesh_of, object_to_world, world_to_object, world_boxes, top, build_ms):
+    def __init__(self, meshes, mesh_of, object_to_world, world_to_object, world_boxes, visibility, top, build_ms):
         self.meshes = list(meshes)
         self.mesh_of = mesh_of
+        self.visibility = visibility
         self.object_to_world, self.world_to_object = object_to_world, world_to_object
         self.world_boxes = world_boxes
         self.top = top
@@ -47,7 +50,7 @@ class TwoLevelScene:
     @property
     def arrays(self):
         """The tuple the instance traversal takes (see instance_traversal.trace_scene)."""
-        return (*self.top, self.world_to_object, self.mesh_of, *self._packed)
+        return (*self.top, self.world_to_object, self.mesh_of, *self._packed, self.visibility)
 
     @property
     def lazy_tree(self):
@@ -95,11 +98,12 @@ def _summed(per_mesh):
     return out
 
 
-def build_two_level(meshes, mesh_of, matrices, **options):
+def build_two_level(meshes, mesh_of, matrices, visibility=None, **options):
     """The top level over prebuilt object-space mesh trees.
 
     meshes: list of KdTree (object space); mesh_of: (I,) index of each instance's mesh; matrices:
-    (I, 4, 4) object-to-world. Keyword options are BuildOptions for the top-level tree (its
+    (I, 4, 4) object-to-world; visibility: (I,) ray_visibility bits, which kinds of rays each instance
+    stops (None: all of them). Keyword options are BuildOptions for the top-level tree (its
     references are boxes, so `clip` is ignored). Raises ValueError naming a bad instance.
     """
     lazy = [i for i, m in enumerate(meshes) if isinstance(m, KdTree) and m.lazy]
@@ -108,11 +112,12 @@ def build_two_level(meshes, mesh_of, matrices, **options):
                          "built mesh trees (one lazy mesh, placed by any number of instances, is fine)")
     opts = make_options(options)
     mesh_of, o2w = _check_instances(meshes, mesh_of, matrices)
+    visibility = as_visibility(visibility, len(mesh_of))
     start = perf_counter()
     w2o = world_to_object(o2w)
     boxes = world_boxes(mesh_bounds(meshes), mesh_of, o2w)
     top = build_top_level(boxes, opts)
-    return TwoLevelScene(meshes, mesh_of, o2w, w2o, boxes, top, (perf_counter() - start) * 1e3)
+    return TwoLevelScene(meshes, mesh_of, o2w, w2o, boxes, visibility, top, (perf_counter() - start) * 1e3)
 
 
 def as_two_level(tree):

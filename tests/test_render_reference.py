@@ -22,9 +22,11 @@ def boxes_on_floor():
     return np.concatenate(tris)
 
 
-def brute_force_ao(tris, camera, size, ao_distance, strata=24):
+def brute_force_ao(tris, camera, size, ao_distance, strata=24, occluders=None):
     """AO per pixel by stratified midpoint quadrature of the cosine-weighted hemisphere, every ray
-    tested against every triangle (Moller-Trumbore): no tree, no sampler, no code shared with core."""
+    tested against every triangle (Moller-Trumbore): no tree, no sampler, no code shared with core.
+    Camera rays see `tris`; AO rays meet `occluders` (default: `tris`)."""
+    occluders = tris if occluders is None else occluders
     o, d, tmin, tmax = camera.rays(size, size)
     t, prim = moller_trumbore(tris, o, d, tmin, tmax)
     hit = np.flatnonzero(prim >= 0)
@@ -46,7 +48,7 @@ def brute_force_ao(tris, camera, size, ao_distance, strata=24):
         ty = np.cross(nk, tx)
         dirs = local @ np.stack([tx, ty, nk])
         origins = np.repeat((pk + 1e-6 * nk)[None], len(dirs), 0)
-        _, blocked = moller_trumbore(tris, origins, dirs, 0.0, ao_distance)
+        _, blocked = moller_trumbore(occluders, origins, dirs, 0.0, ao_distance)
         ao[hit[k]] = (blocked < 0).mean()
     return ao.reshape(size, size), hit
 

@@ -1,0 +1,40 @@
+"""Per-instance ray visibility: which kinds of rays an instance stops (Blender's Object > Visibility >
+Ray Visibility, as Cycles applies it).
+
+An instance's visibility is a bit set, and so is a ray's kind: the ray meets the instance only when
+the two share a bit. Camera rays carry CAMERA_RAYS; the renderer's AO and shadow rays carry SHADOW_RAYS,
+because Cycles traces its AO rays as shadow rays (benchmarks/cycles_ao.py cites the kernel source), so
+an object with shadow rays off neither shadows nor occludes. Plain queries carry ALL_RAYS: they meet
+every instance that any ray kind meets. An instance with visibility 0 is never hit.
+"""
+import numpy as np
+
+CAMERA_RAYS = 1
+SHADOW_RAYS = 2
+ALL_RAYS = CAMERA_RAYS | SHADOW_RAYS
+
+
+def as_visibility(visibility, n_instances):
+    """(I,) uint8 visibility bits, ALL_RAYS for every instance when `visibility` is None; a ValueError
+    names the first instance whose value is not an integer in [0, ALL_RAYS]."""
+    if visibility is None:
+        return np.full(n_instances, ALL_RAYS, np.uint8)
+    raw = np.asarray(visibility)
+    if raw.shape != (n_instances,):
+        raise ValueError(f"visibility must have shape ({n_instances},), one value per instance, got {raw.shape}")
+    if n_instances and raw.dtype.kind not in "iu":
+        raise ValueError(f"visibility must hold integers (CAMERA_RAYS | SHADOW_RAYS bits), got dtype {raw.dtype}")
+    bad = np.flatnonzero((raw < 0) | (raw > ALL_RAYS))
+    if len(bad):
+        raise ValueError(f"instance {int(bad[0])} has visibility {raw[bad[0]]!r}: it must be a combination of "
+                         f"CAMERA_RAYS ({CAMERA_RAYS}) and SHADOW_RAYS ({SHADOW_RAYS}), in [0, {ALL_RAYS}]")
+    return raw.astype(np.uint8)
+
+
+def as_ray_mask(ray_mask):
+    """The kind of a query's rays, checked: an integer in [1, ALL_RAYS]."""
+    if isinstance(ray_mask, (bool, np.bool_)) or not isinstance(ray_mask, (int, np.integer)) \
+            or not 1 <= ray_mask <= ALL_RAYS:
+        raise ValueError(f"ray_mask must be CAMERA_RAYS ({CAMERA_RAYS}), SHADOW_RAYS ({SHADOW_RAYS}) or ALL_RAYS "
+                         f"({ALL_RAYS}), got {ray_mask!r}")
+    return int(ray_mask)

@@ -1,0 +1,133 @@
+"""Per-instance ray visibility (core/ray_visibility.py): camera rays meet only instances visible to the
+camera, AO and shadow rays only instances that cast shadows, in every layout, through soups, queries,
+renders and pixel reuse.
+
+References: a flat tree or a brute-force tracer over only the triangles a ray kind may meet, and a full
+render for frames continued from the last one."""
+import numpy as np
+import pytest
+
+import core
+from core.scene_builder import MeshInput, SceneBuilder
+from tests.render_scenes import floor, hit_mask, look_at, look_down, quad
+from tests.test_core_pixel_reuse import GROUND, camera as reuse_camera, cube, moved, render
+from tests.test_core_two_level import _blob, _random_matrix, _rays
+from tests.test_render_reference import boxes_on_floor, brute_force_ao
+
+CAMERA, SHADOW, ALL = core.CAMERA_RAYS, core.SHADOW_RAYS, core.ALL_RAYS
+
+
+@pytest.mark.parametrize("layout", ["auto", "flat", "two_level"])
+def test_queries_meet_only_the_instances_visible_to_the_ray_kind(layout):
+    """Shared and single-use meshes (small ones go to per-visibility soups in "auto" and "flat") with
+    mixed visibility: each ray kind's hits are those of a flat tree over the instances it may meet, and
+    still name the caller's instance and triangle."""
+    rng = np.random.default_rng(5)
+    meshes = [_blob(rng, 60 + 30 * i) for i in range(8)]
+    mesh_of = np.array([0, 1, 2, 2, 3, 4, 5, 5, 6, 7, 0], np.int32)  # 1, 3, 4, 6, 7 placed once
+    mats = np.stack([_random_matrix(rng) for _ in mesh_of])
+    visibility = np.array([ALL, CAMERA, SHADOW, ALL, CAMERA, SHADOW, 0, CAMERA, ALL, SHADOW, ALL], np.uint8)
+    indexed = [(m.reshape(-1, 3), np.arange(3 * len(m)).reshape(-1, 3)) for m in meshes]
+    scene = core.build_scene(indexed, mesh_of, mats, layout=layout, visibility=visibility)
+    if layout != "two_level":
+        assert scene.instance_count < len(mesh_of)  # soups were made, one per visibility
+    o, d = _rays(rng, 4000)
+    for mask in (CAMERA, SHADOW, ALL):
+        seen = np.flatnonzero(visibility & mask)
+        world = [meshes[mesh_of[i]].astype(np.float64) @ mats[i, :3, :3].T + mats[i, :3, 3] for i in seen]
+        owner = np.concatenate([np.full(len(w), i) for i, w in zip(seen, world)])
+        local = np.concatenate([np.arange(len(w)) for w in world])
+        ref = core.intersect(core.build_kdtree(np.concatenate(world)), o, d)
+        hits = core.intersect_scene(scene, o, d, ray_mask=mask)
+        hit = ref.prim >= 0
+        assert hit.sum() > 200
+        np.testing.assert_array_equal(hits.prim >= 0, hit)
+        np.testing.assert_allclose(hits.t[hit], ref.t[hit], rtol=1e-5, atol=1e-5)
+        same = (hits.instance[hit] == owner[ref.prim[hit]]) & (hits.prim[hit] == local[ref.prim[hit]])
+        assert same.mean() > 0.995  # float32 world triangles against object space: rare ties differ
+        assert set(hits.instance[hit].tolist()) <= set(seen.tolist())
+        np.testing.assert_array_equal(core.occluded_scene(scene, o, d, ray_mask=mask), hit)
+
+
+def _objects_on_floor():
+    """boxes_on_floor's floor and three boxes as four meshes (12 triangles a box)."""
+    tris = boxes_on_floor()
+    parts = [tris[:2], tris[2:14], tris[14:26], tris[26:38]]
+    return [(p.reshape(-1, 3), np.arange(3 * len(p)).reshape(-1, 3)) for p in parts], parts
+
+
+@pytest.mark.parametrize("layout", ["auto", "two_level"])
+def test_converged_ao_with_ray_visibility_matches_brute_force(layout):
+    """A box hidden from the camera still occludes; a box that casts no shadows is seen but lets AO
+    rays through: the converged AO equals a brute-force tracer whose camera rays see the floor and the
+    boxes visible to the camera and whose AO rays meet the floor and the boxes that cast shadows."""
+    indexed, parts = _objects_on_floor()
+    visibility = np.array([ALL, CAMERA, SHADOW, ALL], np.uint8)
+    scene = core.build_scene(indexed, np.arange(4), np.eye(4)[None].repeat(4, 0), layout=layout,
+                             visibility=visibility)
+    seen = np.concatenate([p for p, v in zip(parts, visibility) if v & CAMERA])
+    occluders = np.concatenate([p for p, v in zip(parts, visibility) if v & SHADOW])
+    camera = look_at((1.8, -2.2, 1.6), (0.0, 0.2, 0.2), fov=0.9)
+    size = 20
+    reference, hit = brute_force_ao(seen, camera, size, 0.8, occluders=occluders)
+    img = core.render_preview(scene, camera, size, size, samples=512, ao_distance=0.8)
+    np.testing.assert_array_equal(np.flatnonzero(hit_mask(img).ravel()), hit)
+    diff = np.abs(img[..., 0] - reference)[hit_mask(img)]
+    assert diff.mean() < 0.01 and diff.max() < 0.08, (diff.mean(), diff.max())
+    everything = core.render_preview(core.build_kdtree(np.concatenate(parts)), camera, size, size, samples=512,
+                                     ao_distance=0.8)
+    assert (np.abs(everything - img).max(axis=2) > 0.2).sum() >= 10  # the visibility really changed the image
+
+
+@pytest.mark.parametrize("visibility, seen, value", [(ALL, "roof", 1.0), (CAMERA, "roof", 1.0),
+                                                     (SHADOW, "floor", 0.0), (0, "floor", 1.0)])
+def test_shadow_of_a_roof_follows_its_ray_visibility(visibility, seen, value):
+    """A roof over a floor under a sun straight above, seen from above: the camera sees the roof unless
+    it is hidden from camera rays, and the floor under it is dark unless the roof casts no shadows."""
+    meshes = [(f.reshape(-1, 3), np.arange(6).reshape(-1, 3)) for f in (floor(0.0, 50.0), floor(1.0, 20.0))]
+    scene = core.build_scene(meshes, [0, 1], np.eye(4)[None].repeat(2, 0), layout="two_level",
+                             visibility=[ALL, visibility])
+    img = core.render_preview(scene, look_down((0, 0, 5), fov=1.0), 16, 16, mode="shadow", samples=4,
+                              lights=[core.Light.sun((0, 0, -1))])
+    assert hit_mask(img).all()
+    np.testing.assert_array_equal(img[..., 0], value)
+    hits = core.intersect_scene(scene, [(0.0, 0.0, 5.0)], [(0.0, 0.0, -1.0)], ray_mask=CAMERA)
+    assert hits.t[0] == pytest.approx(4.0 if seen == "roof" else 5.0)
+
+
+@pytest.mark.parametrize("layout", ["auto", "flat", "two_level"])
+def test_frames_that_toggle_visibility_continue_exactly(layout):
+    """Pixel reuse: an object switching its camera or shadow rays off and on is a change (its box is
+    retraced); every frame continued from the last equals its full render, and the toggles show."""
+    meshes = [MeshInput("ground", *GROUND, 0), MeshInput("a", *cube(0.8), 0), MeshInput("b", *cube(0.5), 0)]
+    matrices = np.stack([np.eye(4), moved(-2, 0, 1), moved(2.5, 1, 0.6)])
+    cam = reuse_camera()
+    lights = [core.Light.sun((0.3, 0.2, -1), angle=0.1)]
+    settings = dict(mode="ao+shadow", samples=4, ao_distance=2.0, lights=lights, seed=3)
+    builder, state, images, kept = SceneBuilder(layout), None, [], []
+    for vis_a in (ALL, CAMERA, SHADOW, SHADOW, ALL):
+        scene = builder.build(meshes, [0, 1, 2], matrices, visibility=[ALL, vis_a, ALL])[0]
+        continued = render(scene, cam, state, **settings)
+        full = render(scene, cam, **settings)
+        np.testing.assert_array_equal(continued.image(), full.image())
+        images.append(full.image())
+        kept.append(continued.pixels_reused / continued.hit_pixels)
+        state = continued.pixel_state()
+    assert kept[3] == 1.0 and 0.3 < min(kept[1:]) < 1.0  # a repeat keeps all; a toggle retraces near a
+    for k in (0, 1, 3):  # every toggle shows (frames 2 and 3 are the same)
+        assert (np.abs(images[k] - images[k + 1]).max(axis=2) > 0.2).sum() >= 5
+
+
+def test_bad_visibility_and_ray_masks_are_named():
+    mesh = (np.eye(3), np.array([[0, 1, 2]]))
+    for bad, words in [([4], "instance 0 has visibility 4"), ([-1], "instance 0 has visibility -1"),
+                       ([1.0], "must hold integers"), ([1, 2], "shape (1,)")]:
+        with pytest.raises(ValueError, match=words.replace("(", r"\(").replace(")", r"\)")):
+            core.build_scene([mesh], [0], np.eye(4)[None], visibility=bad)
+    scene = core.build_scene([mesh], [0], np.eye(4)[None])
+    for bad in (0, 4, True, 1.0):
+        with pytest.raises(ValueError, match="ray_mask must be"):
+            core.intersect_scene(scene, [(0.2, 0.2, 1.0)], [(0.0, 0.0, -1.0)], ray_mask=bad)
+    with pytest.raises(ValueError, match="lazy build .* same rays"):
+        SceneBuilder("flat", lazy=True).build([MeshInput(0, *mesh, 0)], [0, 0], np.eye(4)[None].repeat(2, 0),
+                                              visibility=[ALL, CAMERA])
