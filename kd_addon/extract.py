@@ -39,9 +39,11 @@ Render visibility (the viewport depsgraph also holds render-hidden objects)
       instances (the realized part is always kept).
     * Ray visibility: an object with ``visible_camera`` False *and*
       ``visible_shadow`` False is left out: it can neither be seen nor occlude.
-      Otherwise it is kept as an occluder, since an AO preview has no separate
-      camera and shadow rays. For instances the flags are combined with the
-      instancer's (logical AND, as Cycles does).
+      Otherwise each Instance carries the two flags (``camera``, ``shadow``),
+      combined with the instancer's for instances (logical AND, as Cycles
+      does): camera rays pass through an object hidden from them, and AO and
+      shadow rays through one that casts no shadows (Cycles traces its AO rays
+      as shadow rays).
     * Holdouts (``is_holdout`` and holdout collections) are ignored: a holdout
       is rendered as an ordinary occluder in the preview.
     * Limitation (the preview follows the viewport here): objects the viewport
@@ -107,6 +109,8 @@ class Instance:
     name: str  # original object's name
     instancer: str | None  # top-level instancer's name, None for scene objects
     is_instance: bool  # DepsgraphObjectInstance.is_instance
+    camera: bool = True  # Ray Visibility > Camera (ANDed with the instancer's)
+    shadow: bool = True  # Ray Visibility > Shadow: also what AO rays see (ANDed with the instancer's)
 
 
 @dataclass
@@ -328,18 +332,19 @@ def _layer_render_objects(layer_coll: bpy.types.LayerCollection) -> set[int]:
 
 def _ray_visible(*objs) -> bool:
     """False only when camera and shadow rays are both off (ANDed over objs)."""
-    camera = all(ob.visible_camera for ob in objs)
-    shadow = all(ob.visible_shadow for ob in objs)
-    return camera or shadow
+    return any(ray_flags(*objs))
+
+
+def ray_flags(*objs) -> tuple[bool, bool]:
+    """(camera, shadow): Ray Visibility > Camera and > Shadow, ANDed over objs (an instance and its
+    instancer)."""
+    return all(ob.visible_camera for ob in objs), all(ob.visible_shadow for ob in objs)
 
 
 def unapplied_object_settings(ob) -> list[str]:
-    """The ray-visibility switches of a rendered object that the preview ignores: an object with
-    camera rays off is still seen, one with shadow rays off still shadows, a holdout is shaded."""
-    found = [f"Ray Visibility > {label} off" for attribute, label in (("visible_camera", "Camera"),
-                                                                       ("visible_shadow", "Shadow"))
-             if not getattr(ob, attribute, True)]
-    return found + (["Holdout"] if getattr(ob, "is_holdout", False) else [])
+    """The settings of a rendered object that the preview ignores: a holdout is shaded like any
+    surface."""
+    return ["Holdout"] if getattr(ob, "is_holdout", False) else []
 
 
 def _instancer_hides_self(orig: bpy.types.Object, evaluated: bpy.types.Object) -> bool:
@@ -463,7 +468,7 @@ class _EntryReader:
     def __init__(self, vis: _Visibility):
         self.vis = vis
         self.geometries = _GeometryReader()
-        self._verdicts: dict[tuple[int, int], tuple[str, str | None] | None] = {}
+        self._verdicts: dict[tuple[int, int], tuple[str, str | None, bool, bool] | None] = {}
         self._warned: set[str] = set()
 
     def read(self, inst) -> Instance | None:
@@ -474,35 +479,39 @@ class _EntryReader:
         if not isinstance(mesh, bpy.types.Mesh):
             return None
         parent = inst.parent if inst.is_instance else None
-        names = self._verdict(ob, parent)
-        if names is None:
+        verdict = self._verdict(ob, parent)
+        if verdict is None:
             return None
-        key = self.geometries.get(mesh, names[0])
+        name, instancer, camera, shadow = verdict
+        key = self.geometries.get(mesh, name)
         if key is None:
             return None
         return Instance(
             geometry_key=key,
             matrix_world=np.array(inst.matrix_world, dtype=np.float64),
-            name=names[0],
-            instancer=names[1],
+            name=name,
+            instancer=instancer,
             is_instance=parent is not None,
+            camera=camera,
+            shadow=shadow,
         )
 
-    def _verdict(self, ob, parent) -> tuple[str, str | None] | None:
-        """(object name, instancer name) when visible, else None; memoized."""
+    def _verdict(self, ob, parent) -> tuple[str, str | None, bool, bool] | None:
+        """(object name, instancer name, camera, shadow) when visible, else None; memoized."""
         orig = ob.original
         memo_key = (orig.as_pointer(), parent.as_pointer() if parent else 0)
         if memo_key not in self._verdicts:
             visible = _entry_visible(self.vis, parent, ob)
             instancer = parent.original.name if parent is not None else None
-            self._verdicts[memo_key] = (orig.name, instancer) if visible else None
+            flags = ray_flags(orig) if parent is None else ray_flags(orig, parent.original)
+            self._verdicts[memo_key] = (orig.name, instancer, *flags) if visible else None
             if visible:
                 self._warn_unapplied(orig)
         return self._verdicts[memo_key]
 
     def _warn_unapplied(self, orig) -> None:
         """Once per object: the settings of a rendered object that Cycles applies and the preview
-        does not (it traces every ray against every rendered object), so its image differs there."""
+        does not (unapplied_object_settings), so its image differs there."""
         unapplied = unapplied_object_settings(orig)
         if unapplied and orig.name not in self._warned:
             self._warned.add(orig.name)

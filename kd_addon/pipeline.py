@@ -179,20 +179,33 @@ class FrameJob:
         reuse = not self.config.settings.rebuild_all
         memory_limit.check_frame(extracted.triangle_count, inputs.width, inputs.height, self.config,
                                  keeps_previous=reuse and self._state.pixels is not None)
-        meshes, mesh_of, matrices = tree_cache.mesh_inputs(core, extracted)
-        self._image_key = tree_cache.image_key(meshes, mesh_of, matrices, inputs.camera.keywords(), inputs.lights,
-                                               (inputs.width, inputs.height), self.config.as_dict())
+        meshes, mesh_of, matrices, visibility = tree_cache.mesh_inputs(core, extracted)
+        visibility, unapplied = self._lazy_visibility(core, extracted, visibility)
+        self._image_key = tree_cache.image_key(meshes, mesh_of, matrices, visibility, inputs.camera.keywords(),
+                                               inputs.lights, (inputs.width, inputs.height), self.config.as_dict())
         self._timings["other_ms"] += _ms_since(t0) - self._timings["extract_ms"]
         self._info = dict(triangles=extracted.triangle_count, objects=extracted.object_count,
                           lights=len(inputs.lights), frame=extracted.frame,
-                          warnings=inputs.warnings + extracted.warnings)
+                          warnings=inputs.warnings + extracted.warnings + unapplied)
         if reuse and self._state.image is not None and self._state.image_key == self._image_key:
             self._reused_image = self._state.image
             self._info.update(self._state.info, objects_reused=len(meshes), image_reused=True)
             return
         camera, lights = self._camera_and_lights(core, inputs)
-        self._pending = BackgroundCall(KERNEL_LOCK, self._build_and_start, core, (meshes, mesh_of, matrices),
-                                       inputs.camera.position, reuse, camera, lights, inputs.width, inputs.height)
+        self._pending = BackgroundCall(KERNEL_LOCK, self._build_and_start, core,
+                                       (meshes, mesh_of, matrices, visibility), inputs.camera.position, reuse, camera,
+                                       lights, inputs.width, inputs.height)
+
+    def _lazy_visibility(self, core, extracted: ExtractedScene, visibility: np.ndarray):
+        """(visibility, warnings): a lazy build traces the scene as one tree, which cannot tell objects'
+        ray visibility apart, so when it differs between objects it is not applied (every instance
+        stops every ray) and each object it would have changed is named."""
+        if not self.config.build_options.get("lazy") or len(set(visibility.tolist())) <= 1:
+            return visibility, []
+        names = sorted({i.name for i in extracted.instances if not (i.camera and i.shadow)})
+        return np.full_like(visibility, core.ALL_RAYS), [
+            f"object '{name}': Ray Visibility not applied with Lazy Build on (the scene is traced as one tree)"
+            for name in names]
 
     def _build_and_start(self, core, instances, origin, reuse, camera, lights, width, height) -> None:
         """On the worker, holding KERNEL_LOCK: the scene, then the renderer (whose constructor traces
@@ -256,10 +269,11 @@ class FrameJob:
         self._timings["extract_ms"] = _ms_since(t0)
         return extracted
 
-    def _build(self, meshes, mesh_of, matrices, origin: np.ndarray, reuse: bool):
+    def _build(self, meshes, mesh_of, matrices, visibility, origin: np.ndarray, reuse: bool):
         """On the worker, holding KERNEL_LOCK."""
         t0 = time.perf_counter()
-        scene, report = self._state.builder.build(meshes, mesh_of, matrices, origin=origin, reuse=reuse)
+        scene, report = self._state.builder.build(meshes, mesh_of, matrices, origin=origin, reuse=reuse,
+                                                  visibility=visibility)
         self._timings["build_ms"] = _ms_since(t0)
         return scene, report
 

@@ -7,7 +7,7 @@ reused only when the mesh's fingerprint (extract.geometry_fingerprint, a CRC of 
 bytes) is the same as when the tree was built, so a key mix-up costs a rebuild, never a wrong image.
 
 Image: `image_key` digests everything that affects the pixels (each mesh's key and fingerprint, every
-instance's mesh and matrix, camera, lights, resolution, settings); an unchanged key reuses the last
+instance's mesh, matrix and ray visibility, camera, lights, resolution, settings); an unchanged key reuses the last
 image without building or tracing. Pixels: the last finished frame's core PixelState; core keeps
 those of its pixels whose rays cannot reach what changed (same camera, lights and settings).
 
@@ -61,7 +61,8 @@ def clear() -> None:
 
 
 def mesh_inputs(core, extracted: ExtractedScene):
-    """(MeshInputs, mesh_of (I,), matrices (I, 4, 4)) for core.SceneBuilder.build."""
+    """(MeshInputs, mesh_of (I,), matrices (I, 4, 4), visibility (I,) core ray-visibility bits) for
+    core.SceneBuilder.build."""
     owners: dict[int, tuple] = {}
     for inst in extracted.instances:
         owners.setdefault(inst.geometry_key, (inst.name, inst.instancer))
@@ -75,15 +76,19 @@ def mesh_inputs(core, extracted: ExtractedScene):
         meshes.append(core.MeshInput((*base, seen[base]), geom.vertices, geom.triangles, geometry_fingerprint(geom)))
     mesh_of = np.array([order[i.geometry_key] for i in extracted.instances], np.int64)
     matrices = np.stack([i.matrix_world for i in extracted.instances]) if extracted.instances else np.zeros((0, 4, 4))
-    return meshes, mesh_of, matrices
+    visibility = np.array([core.CAMERA_RAYS * i.camera | core.SHADOW_RAYS * i.shadow for i in extracted.instances],
+                          np.uint8)
+    return meshes, mesh_of, matrices, visibility
 
 
-def image_key(meshes, mesh_of, matrices, camera_keywords: dict, lights: list, size: tuple, settings: dict) -> bytes:
+def image_key(meshes, mesh_of, matrices, visibility, camera_keywords: dict, lights: list, size: tuple,
+              settings: dict) -> bytes:
     """Digest of everything the image depends on (see the module docstring)."""
     h = hashlib.blake2b(digest_size=20)
     h.update(repr([(m.key, m.fingerprint) for m in meshes]).encode())
     h.update(np.ascontiguousarray(mesh_of).tobytes())
     h.update(np.ascontiguousarray(matrices, np.float64).tobytes())
+    h.update(np.ascontiguousarray(visibility, np.uint8).tobytes())
     _update(h, camera_keywords)
     for light in lights:
         h.update(f"{light.name}:{light.kind}".encode())

@@ -137,6 +137,34 @@ def test_light_settings_the_preview_does_not_apply_are_named(addon):  # noqa: F8
         "light 'Sun': shadow linking (collection 'Hero') not applied by the preview"]
 
 
+def test_object_ray_visibility_is_applied_and_changes_the_next_frame(addon):  # noqa: F811
+    """Cycles' Ray Visibility: with camera rays off the cube is not seen but still occludes the ground
+    (inside its footprint, under its top and between its walls, AO is well below 1, where its open
+    top is 1); with shadow rays off it is seen but the
+    ground beside it is open. Each toggle renders anew (the last image is not reused), and a lazy
+    build, one tree that cannot tell objects apart, names the cube instead."""
+    scene = half_plane_scene()
+    box = bpy.data.objects["Box"]
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+
+    def ao():
+        result = pipeline.render_frame(scene, depsgraph, make_config(scene.kd_preview))
+        return result.image[16, :, 0], result.warnings
+
+    plain, _ = ao()
+    box.visible_camera = False
+    unseen, _ = ao()
+    box.visible_camera, box.visible_shadow = True, False
+    no_shadow, warnings = ao()
+    assert plain[column_of(-2.0)] == 1.0 and unseen[column_of(-2.0)] < 0.6 and no_shadow[column_of(-2.0)] == 1.0
+    assert plain[column_of(-2.6)] < 0.9 and unseen[column_of(-2.6)] < 0.9 and no_shadow[column_of(-2.6)] == 1.0
+    assert not warnings
+    scene.kd_preview.lazy = True
+    lazy, warnings = ao()
+    np.testing.assert_array_equal(lazy, plain)
+    assert warnings == ["object 'Box': Ray Visibility not applied with Lazy Build on (the scene is traced as one tree)"]
+
+
 def test_errors_leave_the_previous_image_and_report(addon):  # noqa: F811
     scene = half_plane_scene()
     bpy.ops.kdpreview.render()

@@ -231,7 +231,7 @@ def test_render_hidden_and_non_renderable_objects_left_out(scene):
     hidden_instancer.hide_render = True
     result = extract_scene()
     assert sorted(result.object_names) == ["ShadowOnly", "Shown", "SrcShown"]
-    assert result.warnings == ["object 'ShadowOnly': Ray Visibility > Camera off not applied by the preview"]
+    assert result.warnings == []
     assert result.triangle_count == 36
 
 
@@ -282,22 +282,24 @@ def test_viewport_hidden_and_non_triangle_objects_are_named(scene):
         "collection): the preview reads the viewport's scene and leaves it out, a final render shows it"]
 
 
-def test_ray_visibility_the_preview_ignores_is_named_once_per_object(scene):
-    """Cycles hides an object from camera rays, from shadow rays, or cuts a holdout; the preview
-    traces every rendered object alike, so it says which objects' images differ, once each."""
+def test_ray_visibility_flags_are_read_and_anded_with_the_instancer(scene):
+    """Each instance carries Ray Visibility > Camera and > Shadow, ANDed with its instancer's as Cycles
+    does; a holdout, which the preview shades like any surface, is named once."""
     scenes.add_cube("Plain")
     scenes.add_cube("NoShadow").visible_shadow = False
     scenes.add_cube("Hole").is_holdout = True
     source = scenes.new_collection("Src", exclude=True)
     scenes.add_cube("Unseen", collection=source).visible_camera = False
+    scenes.add_cube("Member", collection=source)
     for k in range(3):
         scenes.add_collection_instance(f"Inst{k}", source, location=(3.0 * k, 5.0, 0.0))
+    bpy.data.objects["Inst2"].visible_shadow = False
     result = extract_scene()
-    assert sorted(result.object_names) == ["Hole", "NoShadow", "Plain", "Unseen", "Unseen", "Unseen"]
-    assert sorted(result.warnings) == [
-        "object 'Hole': Holdout not applied by the preview",
-        "object 'NoShadow': Ray Visibility > Shadow off not applied by the preview",
-        "object 'Unseen': Ray Visibility > Camera off not applied by the preview"]
+    flags = sorted((i.name, i.instancer, i.camera, i.shadow) for i in result.instances)
+    assert flags == [("Hole", None, True, True), ("Member", "Inst0", True, True), ("Member", "Inst1", True, True),
+                     ("Member", "Inst2", True, False), ("NoShadow", None, True, False), ("Plain", None, True, True),
+                     ("Unseen", "Inst0", False, True), ("Unseen", "Inst1", False, True)]  # Inst2's: no rays
+    assert result.warnings == ["object 'Hole': Holdout not applied by the preview"]
 
 
 def test_non_finite_vertices_left_out_with_warning(scene):
