@@ -1,6 +1,6 @@
 """What a frame's instances were, so the next frame can tell which parts of space changed.
 
-A signature lists every instance that has something to hit as a row of bytes (a digest of its mesh's
+A signature lists every instance that has something to hit, for some ray, as a row of bytes (a digest of its mesh's
 key and fingerprint, its object-to-world matrix, how its triangles were rounded: in object space
 under its own tree, or to float32 in a soup relative to the soup's anchor, and which rays it stops:
 ray_visibility.py) with its world box, in the
@@ -43,10 +43,12 @@ def instance_signature(digests, bounds, mesh_of, o2w, origin, rounding, visibili
     under its own tree, (1, anchor) for a soup member; visibility (I,) uint8 ray_visibility bits."""
     origin = np.asarray(origin, np.float64).copy()
     mesh_of = np.asarray(mesh_of, np.int64)
-    solid = bounds[mesh_of, 0] <= bounds[mesh_of, 3] if len(mesh_of) else np.zeros(0, bool)
+    visibility = np.asarray(visibility, np.uint8)
+    # rows for what rays can meet: an empty mesh or an instance no ray meets (visibility 0) changes nothing
+    solid = (bounds[mesh_of, 0] <= bounds[mesh_of, 3]) & (visibility != 0) if len(mesh_of) else np.zeros(0, bool)
     mesh_of, o2w = mesh_of[solid], np.ascontiguousarray(o2w[solid], np.float64)
     rounding = np.ascontiguousarray(np.asarray(rounding, np.float64).reshape(-1, 4)[solid])
-    visibility = np.asarray(visibility, np.uint8)[solid].reshape(-1, 1)
+    visibility = visibility[solid].reshape(-1, 1)
     table = np.frombuffer(b"".join(digests), np.uint8).reshape(len(digests), 8) if digests else \
         np.zeros((0, 8), np.uint8)
     raw = np.concatenate([table[mesh_of], o2w.reshape(len(o2w), 16).view(np.uint8),

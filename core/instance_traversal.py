@@ -8,7 +8,7 @@ ray transformed by its world-to-object matrix without normalising the direction,
 t is the same in both spaces (an affine map keeps it) and the best hit so far is passed on as tmax:
 a mesh is searched only in front of what is already known (Wald 2004, seed 000 §5).
 
-trace_scene is inlined into its callers: a call that passes the scene's 18 arrays costs an atomic
+trace_scene is inlined into its callers: a call that passes the scene's 19 arrays costs an atomic
 reference-count increment and decrement per array, which measured 0.2-0.4 us a ray (camera rays on
 suzanne-251k, a flat tree as one instance: +50% against the flat traversal; inlined: +10%).
 """

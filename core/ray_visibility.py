@@ -22,6 +22,8 @@ def as_visibility(visibility, n_instances):
     raw = np.asarray(visibility)
     if raw.shape != (n_instances,):
         raise ValueError(f"visibility must have shape ({n_instances},), one value per instance, got {raw.shape}")
+    if raw.dtype.kind == "f" and np.array_equal(raw, np.round(raw)):
+        raw = raw.astype(np.int64)  # whole numbers stored as floats, as mesh_of takes them
     if n_instances and raw.dtype.kind not in "iu":
         raise ValueError(f"visibility must hold integers (CAMERA_RAYS | SHADOW_RAYS bits), got dtype {raw.dtype}")
     bad = np.flatnonzero((raw < 0) | (raw > ALL_RAYS))

@@ -5,13 +5,15 @@ fingerprint that changes whenever its geometry does (e.g. a CRC of its vertex an
 - a mesh with the same key and fingerprint as last frame keeps its object-space tree, however its
   instances moved; only the top level, built over instance boxes, is rebuilt;
 - a mesh whose fingerprint changed (it deforms) is rebuilt, and from then on counts as dynamic;
-- the soup (scene_policy.py: small or overlapping static objects merged into one flat tree) is kept
+- the soup (scene_policy.py: small or overlapping static objects merged into one flat tree per
+  visibility) is kept
   while its members' keys, fingerprints and matrices are unchanged. Its triangles are stored relative
   to an anchor (its centre, kept while it stays near the soup's box: `_anchor`) and placed by a
   translation, so a moving camera never rebuilds it;
-- a single-use mesh whose matrix changed counts as dynamic too (it leaves the soup);
+- a single-use mesh whose matrix or visibility changed counts as dynamic too (it leaves the soup);
 - instances that stop different kinds of rays (ray_visibility.py) go to different soups, one per
-  visibility, since the traversal tells kinds apart per instance, not per triangle.
+  visibility, since the traversal tells kinds apart per instance, not per triangle; an instance that
+  stops no ray (visibility 0) is left out.
 Trees of keys absent from a frame are dropped. `reuse=False` rebuilds everything (the same layout),
 so the two can be compared. Every scene carries the instances' signature (instance_signature.py), from
 which the renderer tells where the next frame's geometry changed (pixel reuse).
@@ -86,7 +88,8 @@ class SceneBuilder:
     """Builds a TwoLevelScene per frame, reusing trees across calls (see the module docstring).
 
     layout: "auto" (scene_policy.plan_soup), "two_level" (every mesh its own tree) or "flat"
-    (everything in one soup tree, the single-tree baseline). Other keywords are BuildOptions.
+    (everything in one soup tree, one per visibility if they differ: the single-tree baseline). Other
+    keywords are BuildOptions.
     """
 
     def __init__(self, layout="auto", **options):
@@ -96,7 +99,7 @@ class SceneBuilder:
         self.options = make_options(options).as_dict()
         self._trees = {}  # key -> (fingerprint, KdTree)
         self._fingerprints = {}  # key -> fingerprint seen last frame
-        self._matrices = {}  # key of a single-use mesh -> its matrix last frame
+        self._placements = {}  # key of a single-use mesh -> its matrix and visibility last frame
         self._dynamic = set()  # keys that changed or moved in an earlier frame
         self._soups = {}  # visibility -> (signature, KdTree, anchor)
 
@@ -109,9 +112,6 @@ class SceneBuilder:
         mesh_of, o2w = check_placement(len(meshes), mesh_of, matrices)
         mesh_of = mesh_of.astype(np.int64)
         visibility = as_visibility(visibility, len(mesh_of))
-        if self.options["lazy"] and len(set(visibility.tolist())) > 1:
-            raise ValueError("a lazy build traces the scene as one tree, so every instance must stop the same rays: "
-                             f"got visibilities {sorted(set(visibility.tolist()))}")
         origin = _checked_origin(origin)
         keys = [m.key for m in meshes]
         if len(set(keys)) != len(keys):
@@ -121,14 +121,20 @@ class SceneBuilder:
                 shape = np.shape(a)
                 if not (len(shape) == 2 and shape[1] == 3) and not (name == "triangles" and np.size(a) == 0):
                     raise ValueError(f"mesh {m.key!r}: {name} must have shape (N, 3), got {shape}")
-        self._track_changes(meshes, mesh_of, o2w)
+        self._track_changes(meshes, mesh_of, o2w, visibility)
         bounds = _bounds(meshes)
-        soup = plan_soup(self.layout, np.array([len(m.triangles) for m in meshes], np.int64),
-                         bounds, mesh_of, o2w, np.array([k in self._dynamic for k in keys], bool))
-        trees, new_mesh_of, rebuilt, reused = self._mesh_trees(meshes, mesh_of, ~soup, reuse)
-        shifted = o2w[~soup].copy()
+        shown = np.flatnonzero(visibility != 0)  # an instance no ray meets is left out altogether
+        soup = np.zeros(len(mesh_of), bool)
+        soup[shown] = plan_soup(self.layout, np.array([len(m.triangles) for m in meshes], np.int64), bounds,
+                                mesh_of[shown], o2w[shown], np.array([k in self._dynamic for k in keys], bool))
+        if self.options["lazy"] and len(set(visibility[soup].tolist())) > 1:
+            raise ValueError("a lazy build has to be the scene's one tree, so the instances merged into it must stop "
+                             f"the same rays: got visibilities {sorted(set(visibility[soup].tolist()))}")
+        own = ~soup & (visibility != 0)
+        trees, new_mesh_of, rebuilt, reused = self._mesh_trees(meshes, mesh_of, own, reuse)
+        shifted = o2w[own].copy()
         shifted[:, :3, 3] -= origin
-        scene_visibility = [visibility[~soup]]
+        scene_visibility = [visibility[own]]
         rounding = np.zeros((len(mesh_of), 4))
         groups, soups, soup_rebuilt = [], {}, False
         for kind in sorted(set(visibility[soup].tolist()), reverse=True):  # all rays first: the usual soup
@@ -156,13 +162,14 @@ class SceneBuilder:
         scene.signature = instance_signature([mesh_digest(m.key, m.fingerprint) for m in meshes], bounds, mesh_of,
                                              o2w, origin, rounding, visibility)
         scene.origin = origin.copy()
-        scene.caller_ids = _caller_ids(meshes, mesh_of, np.flatnonzero(~soup), groups)
+        scene.caller_ids = _caller_ids(meshes, mesh_of, np.flatnonzero(own), groups)
         report = BuildReport(rebuilt, reused, len(trees) - len(groups), int(soup.sum()), soup_rebuilt,
                              (perf_counter() - start) * 1e3, top_ms)
         return scene, report
 
-    def _track_changes(self, meshes, mesh_of, o2w):
-        """Mark keys whose geometry changed, or whose single instance moved, since last frame."""
+    def _track_changes(self, meshes, mesh_of, o2w, visibility):
+        """Mark keys whose geometry changed, or whose single instance moved or changed visibility (which
+        moves it to another soup), since last frame."""
         uses = np.bincount(mesh_of, minlength=len(meshes))
         for i, m in enumerate(meshes):
             before = self._fingerprints.get(m.key)
@@ -171,10 +178,10 @@ class SceneBuilder:
             self._fingerprints[m.key] = m.fingerprint
         for inst in np.flatnonzero(uses[mesh_of] == 1):
             key = meshes[mesh_of[inst]].key
-            before = self._matrices.get(key)
-            if before is not None and not np.array_equal(before, o2w[inst]):
+            before = self._placements.get(key)
+            if before is not None and (not np.array_equal(before[0], o2w[inst]) or before[1] != visibility[inst]):
                 self._dynamic.add(key)
-            self._matrices[key] = o2w[inst]
+            self._placements[key] = (o2w[inst], visibility[inst])
 
     def _mesh_trees(self, meshes, mesh_of, instanced, reuse):
         """Object-space trees of the meshes instanced this frame, kept or built; (trees, new mesh_of for
@@ -209,7 +216,7 @@ class SceneBuilder:
 
     def _forget_absent(self, keys):
         present = set(keys)
-        for table in (self._trees, self._fingerprints, self._matrices):
+        for table in (self._trees, self._fingerprints, self._placements):
             for key in [k for k in table if k not in present]:
                 del table[key]
         self._dynamic &= present

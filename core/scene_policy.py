@@ -1,4 +1,5 @@
-"""Which instances keep their own tree and which are merged into one flat "soup" tree.
+"""Which instances keep their own tree and which are merged into a flat "soup" tree (SceneBuilder
+makes one per ray visibility, see scene_builder.py).
 
 Seed 000 §5: a tree per object under a top-level tree "works really well in case of large number of
 non-deforming objects" but gives "ambiguous results" otherwise: where object boxes overlap, a ray

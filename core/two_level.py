@@ -27,14 +27,15 @@ class TwoLevelScene:
 
     Attributes: `meshes` (list of KdTree); `mesh_of` (I,) int32; `object_to_world` (I, 4, 4) float64;
     `world_to_object` (I, 3, 4) float64; `world_boxes` (I, 6) float32 (rounded outward);
-    `visibility` (I,) uint8 ray_visibility bits; `top` (axis, split, child, count, items, bounds) of the
-    top-level tree; `build_ms` (top level only).
+    `top` (axis, split, child, count, items, bounds) of the top-level tree; `build_ms` (top level only);
+    `visibility` (I,) uint8 ray_visibility bits (None: every instance stops every ray).
     """
 
-    def __init__(self, meshes, mesh_of, object_to_world, world_to_object, world_boxes, visibility, top, build_ms):
+    def __init__(self, meshes, mesh_of, object_to_world, world_to_object, world_boxes, top, build_ms,
+                 visibility=None):
         self.meshes = list(meshes)
         self.mesh_of = mesh_of
-        self.visibility = visibility
+        self.visibility = as_visibility(visibility, len(mesh_of))
         self.object_to_world, self.world_to_object = object_to_world, world_to_object
         self.world_boxes = world_boxes
         self.top = top
@@ -117,7 +118,7 @@ def build_two_level(meshes, mesh_of, matrices, visibility=None, **options):
     w2o = world_to_object(o2w)
     boxes = world_boxes(mesh_bounds(meshes), mesh_of, o2w)
     top = build_top_level(boxes, opts)
-    return TwoLevelScene(meshes, mesh_of, o2w, w2o, boxes, visibility, top, (perf_counter() - start) * 1e3)
+    return TwoLevelScene(meshes, mesh_of, o2w, w2o, boxes, top, (perf_counter() - start) * 1e3, visibility)
 
 
 def as_two_level(tree):

@@ -48,6 +48,8 @@ POLL_SECONDS = 0.05  # longest a tick waits for the worker: the bound on cancel 
 COMPILING_STATUS = "Compiling kernels (first run)…"
 LOADING_STATUS = "Loading compiled kernels (first run)…"
 _kernels_ready = False  # set once a frame has traced in this process: no compile cost left
+# ... except the pixel-reuse kernels, first run by the first frame continued from the one before
+_reuse_kernels_ready = False
 
 
 def _ms_since(t0: float) -> float:
@@ -202,9 +204,11 @@ class FrameJob:
         stops every ray) and each object it would have changed is named."""
         if not self.config.build_options.get("lazy") or len(set(visibility.tolist())) <= 1:
             return visibility, []
-        names = sorted({i.name for i in extracted.instances if not (i.camera and i.shadow)})
+        names = sorted({f"object '{i.name}'" if i.instancer in (None, i.name) else
+                        f"object '{i.name}' instanced by '{i.instancer}'"
+                        for i in extracted.instances if not (i.camera and i.shadow)})
         return np.full_like(visibility, core.ALL_RAYS), [
-            f"object '{name}': Ray Visibility not applied with Lazy Build on (the scene is traced as one tree)"
+            f"{name}: Ray Visibility not applied with Lazy Build on (the scene is traced as one tree)"
             for name in names]
 
     def _build_and_start(self, core, instances, origin, reuse, camera, lights, width, height) -> None:
@@ -252,11 +256,16 @@ class FrameJob:
 
     def _start_tracing(self, core, scene, camera, lights, width, height, previous) -> None:
         """The renderer (its constructor already traces the camera rays, so it counts as trace time),
-        continued from the last finished frame's pixels where their rays cannot reach what changed."""
+        continued from the last finished frame's pixels where their rays cannot reach what changed.
+        The first frame of a process that continues one compiles or loads the pixel-reuse kernels, so
+        it is marked as a first run too."""
+        global _reuse_kernels_ready
         t0 = time.perf_counter()
         self.renderer = core.PreviewRender(scene, camera, width, height, lights=lights, previous=previous,
                                            **self.config.render_options)
         self._timings["trace_ms"] += _ms_since(t0)
+        if previous is not None and previous.settings == self.renderer.settings and not _reuse_kernels_ready:
+            self._first_run, _reuse_kernels_ready = True, True
 
     def _extract(self) -> ExtractedScene:
         t0 = time.perf_counter()
@@ -265,7 +274,9 @@ class FrameJob:
             # A warning, not an error: in an animation, objects may appear later (keyed hide_render), and
             # Cycles renders such a frame transparent rather than stopping the sequence.
             extracted.warnings.append(f"nothing to render at frame {self.scene.frame_current}: the scene has no "
-                                      "render-visible mesh triangles, so the frame is transparent")
+                                      "render-visible mesh triangles (objects hidden from renders, or with Ray "
+                                      "Visibility > Camera and Shadow both off, count as none), so the frame is "
+                                      "transparent")
         self._timings["extract_ms"] = _ms_since(t0)
         return extracted
 

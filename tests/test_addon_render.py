@@ -145,10 +145,9 @@ def test_object_ray_visibility_is_applied_and_changes_the_next_frame(addon):  # 
     build, one tree that cannot tell objects apart, names the cube instead."""
     scene = half_plane_scene()
     box = bpy.data.objects["Box"]
-    depsgraph = bpy.context.evaluated_depsgraph_get()
 
     def ao():
-        result = pipeline.render_frame(scene, depsgraph, make_config(scene.kd_preview))
+        result = pipeline.render_frame(scene, bpy.context.evaluated_depsgraph_get(), make_config(scene.kd_preview))
         return result.image[16, :, 0], result.warnings
 
     plain, _ = ao()
@@ -159,10 +158,14 @@ def test_object_ray_visibility_is_applied_and_changes_the_next_frame(addon):  # 
     assert plain[column_of(-2.0)] == 1.0 and unseen[column_of(-2.0)] < 0.6 and no_shadow[column_of(-2.0)] == 1.0
     assert plain[column_of(-2.6)] < 0.9 and unseen[column_of(-2.6)] < 0.9 and no_shadow[column_of(-2.6)] == 1.0
     assert not warnings
+    source = scenes.new_collection("Src", exclude=True)
+    scenes.add_cube("Member", collection=source)
+    scenes.add_collection_instance("FarInstancer", source, location=(100.0, 0.0, 0.0)).visible_camera = False
     scene.kd_preview.lazy = True
     lazy, warnings = ao()
-    np.testing.assert_array_equal(lazy, plain)
-    assert warnings == ["object 'Box': Ray Visibility not applied with Lazy Build on (the scene is traced as one tree)"]
+    np.testing.assert_array_equal(lazy, plain)  # the instance is out of view
+    assert warnings == [f"object '{name}': Ray Visibility not applied with Lazy Build on (the scene is traced as one "
+                        "tree)" for name in ("Box", "Member' instanced by 'FarInstancer")]
 
 
 def test_errors_leave_the_previous_image_and_report(addon):  # noqa: F811

@@ -131,3 +131,15 @@ def test_lazy_build_setting_renders_the_same_image_and_skips_hidden_geometry(add
     stats = lazy.tree_stats
     assert stats["lazy"] and 0 < stats["subtrees_built"] < stats["subtrees_total"] / 2
     assert not eager.tree_stats.get("lazy")
+
+
+def test_first_frame_continuing_another_is_marked_as_a_first_run(addon, monkeypatch):  # noqa: F811
+    """A process's first frame compiles or loads the tracing kernels, its first continued frame the
+    pixel-reuse ones: both carry first_run (the CLI's "*"), later frames do not."""
+    scene = animated_scene()
+    tree_cache.clear()
+    monkeypatch.setattr(pipeline, "_kernels_ready", False)
+    monkeypatch.setattr(pipeline, "_reuse_kernels_ready", False)
+    frames = [render(scene, f) for f in (1, 2, 3)]
+    assert [r.first_run for r in frames] == [True, True, False]
+    assert frames[1].pixels_reused > 0

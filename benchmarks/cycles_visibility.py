@@ -1,0 +1,112 @@
+"""Per-object Ray Visibility against Cycles' AO pass: the preview's image of a scene whose objects have
+camera or shadow rays off, compared with Cycles' on the same .blend.
+
+Usage: python benchmarks/cycles_visibility.py [--size 160 120] [--samples 64] [--out DIR]
+
+The scene (built here with bpy, saved as DIR/visibility.blend): a ground plane; a cube with camera rays
+off (not seen, still occludes), lifted 0.02 off the ground so that no face is coplanar with it (a
+coincident face is a degenerate case: Cycles' AO rays from the ground hit it at distance 0); a UV
+sphere with shadow rays off (seen, lets AO rays through); a cylinder and a small cube with both on;
+and a collection instance of a cone whose instancer has camera rays off. Printed: hit pixels of both,
+pixels only one of them hits, and the RMSE between them on common hits next to Cycles' own
+seed-to-seed RMSE (the noise floor), plus the same for the scene with every flag on, which shows how
+much the flags change the image.
+"""
+import argparse
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+from cycles_ao import read_exr, render_cycles  # noqa: E402
+
+BUILD = r'''
+import sys, bpy
+from mathutils import Vector
+bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+sc = bpy.context.scene
+sc.render.resolution_x, sc.render.resolution_y, sc.render.resolution_percentage = {w}, {h}, 100
+sc.frame_start = sc.frame_end = 1
+bpy.ops.mesh.primitive_plane_add(size=12)
+bpy.ops.mesh.primitive_cube_add(size=1.5, location=(0, 0, 0.77)); cube = bpy.context.object
+bpy.ops.mesh.primitive_uv_sphere_add(radius=0.7, location=(1.6, 0.4, 0.7)); sphere = bpy.context.object
+bpy.ops.mesh.primitive_cylinder_add(radius=0.4, depth=2.0, location=(-1.2, 1.2, 1.0))
+bpy.ops.mesh.primitive_cube_add(size=1, location=(-0.3, -1.6, 0.5), rotation=(0, 0, 0.6))
+source = bpy.data.collections.new("Source"); sc.collection.children.link(source)
+bpy.ops.mesh.primitive_cone_add(radius1=0.5, depth=1.2); cone = bpy.context.object
+for c in cone.users_collection:
+    c.objects.unlink(cone)
+source.objects.link(cone)
+bpy.context.view_layer.layer_collection.children["Source"].exclude = True
+instancer = bpy.data.objects.new("ConeInstance", None)
+instancer.instance_type, instancer.instance_collection = "COLLECTION", source
+sc.collection.objects.link(instancer); instancer.location = (2.0, -2.0, 0.6)
+if {flags}:
+    cube.visible_camera = False
+    sphere.visible_shadow = False
+    instancer.visible_camera = False
+cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera")); sc.collection.objects.link(cam)
+cam.data.lens = 35
+cam.location = (7, -7, 5)
+cam.rotation_euler = (Vector((0, 0, 0.5)) - cam.location).to_track_quat("-Z", "Y").to_euler()
+sc.camera = cam
+bpy.ops.wm.save_as_mainfile(filepath=sys.argv[-1])
+'''
+
+
+def make_blend(path, size, flags):
+    code = BUILD.format(w=size[0], h=size[1], flags=flags)
+    subprocess.run([sys.executable, "-c", code, str(path)], check=True, capture_output=True)
+
+
+def preview(blend, out, samples):
+    """The preview's (H, W, 4) image of frame 1 through the command line, as a user renders it."""
+    subprocess.run([sys.executable, "-m", "kd_addon", "render", str(blend), "--frames", "1-1", "--out", str(out),
+                    "--mode", "ao", "--samples", str(samples), "--ao-distance", "1.0", "--resolution", "100",
+                    "--format", "EXR"], check=True, capture_output=True, cwd=HERE.parent)
+    channels, _ = read_exr(str(out / "frame_0001.exr"))
+    return np.stack([channels[k] for k in "RGBA"], axis=-1)
+
+
+def rmse(a, b, mask):
+    return float(np.sqrt(np.mean((a[mask] - b[mask]) ** 2)))
+
+
+def compare(blend, out, size, samples):
+    kd = preview(blend, out, samples)
+    cy = [render_cycles(blend, *size, samples, seed=s) for s in (0, 1)]
+    kd_hit, cy_hit = kd[..., 3] > 0.5, cy[0].alpha > 0.5
+    both = kd_hit & cy_hit
+    return dict(kd_hits=int(kd_hit.sum()), cycles_hits=int(cy_hit.sum()), only_one=int((kd_hit ^ cy_hit).sum()),
+                rmse=rmse(kd[..., 0], cy[0].ao, both),
+                cycles_noise=rmse(cy[0].ao, cy[1].ao, both & (cy[1].alpha > 0.5))), cy[0].ao
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--size", type=int, nargs=2, default=(160, 120))
+    ap.add_argument("--samples", type=int, default=64)
+    ap.add_argument("--out", default=None, help="folder for the .blend files and frames (default: a temporary one)")
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory(prefix="kd_visibility_") as tmp:
+        out = Path(args.out or tmp)
+        out.mkdir(parents=True, exist_ok=True)
+        images = {}
+        for flags in (True, False):
+            name = "visibility" if flags else "all_visible"
+            blend = out / f"{name}.blend"
+            make_blend(blend, args.size, flags)
+            figures, images[flags] = compare(blend, out / name, args.size, args.samples)
+            print(f"{name:12} " + "  ".join(f"{k} {v:.4f}" if isinstance(v, float) else f"{k} {v}"
+                                            for k, v in figures.items()))
+        change = rmse(images[True], images[False], np.ones_like(images[True], bool))
+        print(f"Cycles, flags on against all visible: RMSE {change:.4f} (how much the flags change the image)")
+
+
+if __name__ == "__main__":
+    main()
