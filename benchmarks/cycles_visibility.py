@@ -1,7 +1,7 @@
 """Per-object Ray Visibility against Cycles' AO pass: the preview's image of a scene whose objects have
 camera or shadow rays off, compared with Cycles' on the same .blend.
 
-Usage: python benchmarks/cycles_visibility.py [--size 160 120] [--samples 64] [--out DIR]
+Usage: .venv/bin/python benchmarks/cycles_visibility.py [--size 160 120] [--samples 64] [--out DIR]
 
 The scene (built here with bpy, saved as DIR/visibility.blend): a ground plane; a cube with camera rays
 off (not seen, still occludes), lifted 0.02 off the ground so that no face is coplanar with it (a
