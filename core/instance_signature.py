@@ -1,10 +1,9 @@
 """What a frame's instances were, so the next frame can tell which parts of space changed.
 
-A signature lists every instance that has something to hit, for some ray, as a row of bytes (a digest of its mesh's
-key and fingerprint, its object-to-world matrix, how its triangles were rounded: in object space
-under its own tree, or to float32 in a soup relative to the soup's anchor, and which rays it stops:
-ray_visibility.py) with its world box, in the
-coordinates the scene was built in (minus `origin`, see scene_builder.py). The rounding is part of the
+A signature lists every instance that has something to hit, for some ray, as a row of bytes (a
+digest of its mesh's key and fingerprint, its object-to-world matrix, how its triangles were rounded:
+in object space under its own tree, or to float32 in a soup relative to the soup's anchor, and which
+rays it stops: ray_visibility.py) with its world box, in the coordinates the scene was built in (minus `origin`, see scene_builder.py). The rounding is part of the
 row because kept pixels keep their hit points and ray starts: an unchanged object re-rounded (the
 soup re-anchored, or the object moved between the soup and a tree of its own) shifts its surface by a
 float32 ulp, enough to put a kept ray start behind it, so it counts as changed. Two frames'

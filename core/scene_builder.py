@@ -123,14 +123,15 @@ class SceneBuilder:
                     raise ValueError(f"mesh {m.key!r}: {name} must have shape (N, 3), got {shape}")
         self._track_changes(meshes, mesh_of, o2w, visibility)
         bounds = _bounds(meshes)
-        shown = np.flatnonzero(visibility != 0)  # an instance no ray meets is left out altogether
+        met = visibility != 0  # an instance no ray meets is left out altogether
+        shown = np.flatnonzero(met)
         soup = np.zeros(len(mesh_of), bool)
         soup[shown] = plan_soup(self.layout, np.array([len(m.triangles) for m in meshes], np.int64), bounds,
                                 mesh_of[shown], o2w[shown], np.array([k in self._dynamic for k in keys], bool))
         if self.options["lazy"] and len(set(visibility[soup].tolist())) > 1:
             raise ValueError("a lazy build has to be the scene's one tree, so the instances merged into it must stop "
                              f"the same rays: got visibilities {sorted(set(visibility[soup].tolist()))}")
-        own = ~soup & (visibility != 0)
+        own = ~soup & met
         trees, new_mesh_of, rebuilt, reused = self._mesh_trees(meshes, mesh_of, own, reuse)
         shifted = o2w[own].copy()
         shifted[:, :3, 3] -= origin

@@ -28,14 +28,15 @@ class TwoLevelScene:
     Attributes: `meshes` (list of KdTree); `mesh_of` (I,) int32; `object_to_world` (I, 4, 4) float64;
     `world_to_object` (I, 3, 4) float64; `world_boxes` (I, 6) float32 (rounded outward);
     `top` (axis, split, child, count, items, bounds) of the top-level tree; `build_ms` (top level only);
-    `visibility` (I,) uint8 ray_visibility bits (None: every instance stops every ray).
+    `visibility` (I,) uint8 ray_visibility bits, checked by build_two_level (None: every instance stops
+    every ray).
     """
 
     def __init__(self, meshes, mesh_of, object_to_world, world_to_object, world_boxes, top, build_ms,
                  visibility=None):
         self.meshes = list(meshes)
         self.mesh_of = mesh_of
-        self.visibility = as_visibility(visibility, len(mesh_of))
+        self.visibility = as_visibility(None, len(mesh_of)) if visibility is None else visibility
         self.object_to_world, self.world_to_object = object_to_world, world_to_object
         self.world_boxes = world_boxes
         self.top = top

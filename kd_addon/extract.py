@@ -355,13 +355,12 @@ def _instancer_hides_self(orig: bpy.types.Object, evaluated: bpy.types.Object) -
 
 
 def _entry_visible(vis: _Visibility, parent, ob: bpy.types.Object) -> bool:
-    """Render-visibility of one object_instances entry (parent None: not an instance)."""
+    """Render-visibility of one object_instances entry (parent None: not an instance), apart from
+    its ray-visibility flags (ray_flags)."""
     orig = ob.original
     if not collection_visible(vis, parent, orig):
         return False
-    if parent is None:
-        return _ray_visible(orig) and not _instancer_hides_self(orig, ob)
-    return _ray_visible(orig, parent.original)
+    return parent is not None or not _instancer_hides_self(orig, ob)
 
 
 def collection_visible(vis: _Visibility, parent, orig: bpy.types.Object) -> bool:
@@ -501,9 +500,9 @@ class _EntryReader:
         orig = ob.original
         memo_key = (orig.as_pointer(), parent.as_pointer() if parent else 0)
         if memo_key not in self._verdicts:
-            visible = _entry_visible(self.vis, parent, ob)
-            instancer = parent.original.name if parent is not None else None
             flags = ray_flags(orig) if parent is None else ray_flags(orig, parent.original)
+            visible = any(flags) and _entry_visible(self.vis, parent, ob)
+            instancer = parent.original.name if parent is not None else None
             self._verdicts[memo_key] = (orig.name, instancer, *flags) if visible else None
             if visible:
                 self._warn_unapplied(orig)
