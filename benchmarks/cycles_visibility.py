@@ -1,5 +1,5 @@
-"""Per-object Ray Visibility against Cycles' AO pass: the preview's image of a scene whose objects have
-camera or shadow rays off, compared with Cycles' on the same .blend.
+"""Per-object Ray Visibility and Holdout against Cycles' AO pass: the preview's image of a scene whose
+objects have camera or shadow rays off, or are holdouts, compared with Cycles' on the same .blend.
 
 Usage: .venv/bin/python benchmarks/cycles_visibility.py [--size 160 120] [--samples 64] [--out DIR]
 
@@ -10,7 +10,11 @@ sphere with shadow rays off (seen, lets AO rays through); a cylinder and a small
 and a collection instance of a cone whose instancer has camera rays off. Printed: hit pixels of both,
 pixels only one of them hits, and the RMSE between them on common hits next to Cycles' own
 seed-to-seed RMSE (the noise floor), plus the same for the scene with every flag on, which shows how
-much the flags change the image.
+much the flags change the image. Then the holdout scenes (HOLDOUT_BUILD): a ground plane, a cube
+seen through a collection instance and spheres instanced by geometry nodes, each with no holdout, a
+holdout member of the instanced collection, a holdout instancer, a holdout node source object, a
+holdout node carrier, a holdout plain object and a plain object in a holdout collection. Cycles reads
+holdout from the object itself or, for an instance, from its top-level instancer only.
 """
 import argparse
 import subprocess
@@ -57,6 +61,63 @@ cam.rotation_euler = (Vector((0, 0, 0.5)) - cam.location).to_track_quat("-Z", "Y
 sc.camera = cam
 bpy.ops.wm.save_as_mainfile(filepath=sys.argv[-1])
 '''
+
+
+HOLDOUT_BUILD = r'''
+import sys, bpy
+from mathutils import Vector
+variant = sys.argv[-2]
+bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+sc = bpy.context.scene
+sc.render.resolution_x, sc.render.resolution_y, sc.render.resolution_percentage = {w}, {h}, 100
+sc.frame_start = sc.frame_end = 1
+bpy.ops.mesh.primitive_plane_add(size=12)
+bpy.ops.mesh.primitive_cylinder_add(radius=0.4, depth=1.4, location=(0.8, -2.2, 0.72)); post = bpy.context.object
+source = bpy.data.collections.new("Source"); sc.collection.children.link(source)
+bpy.ops.mesh.primitive_cube_add(size=1.5); cube = bpy.context.object
+for c in cube.users_collection:
+    c.objects.unlink(cube)
+source.objects.link(cube)
+bpy.context.view_layer.layer_collection.children["Source"].exclude = True
+instancer = bpy.data.objects.new("CubeInstance", None)
+instancer.instance_type, instancer.instance_collection = "COLLECTION", source
+sc.collection.objects.link(instancer); instancer.location = (0, 0, 0.77)
+bpy.ops.mesh.primitive_uv_sphere_add(radius=0.4, location=(0, 0, -50)); sphere = bpy.context.object
+bpy.ops.mesh.primitive_plane_add(size=3, location=(2.2, 0.5, 0.4)); carrier = bpy.context.object
+tree = bpy.data.node_groups.new("Spheres", "GeometryNodeTree")
+tree.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+tree.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+group_in, group_out = tree.nodes.new("NodeGroupInput"), tree.nodes.new("NodeGroupOutput")
+on_points, info = tree.nodes.new("GeometryNodeInstanceOnPoints"), tree.nodes.new("GeometryNodeObjectInfo")
+info.inputs["Object"].default_value = sphere
+tree.links.new(group_in.outputs[0], on_points.inputs["Points"])
+tree.links.new(info.outputs["Geometry"], on_points.inputs["Instance"])
+tree.links.new(on_points.outputs[0], group_out.inputs[0])
+carrier.modifiers.new("Spheres", "NODES").node_group = tree
+if variant == "member":
+    cube.is_holdout = True
+elif variant == "instancer":
+    instancer.is_holdout = True
+elif variant == "node_source":
+    sphere.is_holdout = True
+elif variant == "node_carrier":
+    carrier.is_holdout = True
+elif variant == "object":
+    post.is_holdout = True
+elif variant == "collection":
+    masked = bpy.data.collections.new("Masked"); sc.collection.children.link(masked)
+    for c in post.users_collection:
+        c.objects.unlink(post)
+    masked.objects.link(post)
+    bpy.context.view_layer.layer_collection.children["Masked"].holdout = True
+cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera")); sc.collection.objects.link(cam)
+cam.data.lens = 35
+cam.location = (7, -7, 5)
+cam.rotation_euler = (Vector((0, 0, 0.5)) - cam.location).to_track_quat("-Z", "Y").to_euler()
+sc.camera = cam
+bpy.ops.wm.save_as_mainfile(filepath=sys.argv[-1])
+'''
+HOLDOUT_VARIANTS = ("none", "member", "instancer", "node_source", "node_carrier", "object", "collection")
 
 
 def make_blend(path, size, flags):
@@ -106,6 +167,13 @@ def main():
                                             for k, v in figures.items()))
         change = rmse(images[True], images[False], np.ones_like(images[True], bool))
         print(f"Cycles, flags on against all visible: RMSE {change:.4f} (how much the flags change the image)")
+        for variant in HOLDOUT_VARIANTS:
+            blend = out / f"holdout_{variant}.blend"
+            subprocess.run([sys.executable, "-c", HOLDOUT_BUILD.format(w=args.size[0], h=args.size[1]), variant,
+                            str(blend)], check=True, capture_output=True)
+            figures, _ = compare(blend, out / f"holdout_{variant}", args.size, args.samples)
+            print(f"holdout {variant:12} " + "  ".join(f"{k} {v:.4f}" if isinstance(v, float) else f"{k} {v}"
+                                                    for k, v in figures.items()))
 
 
 if __name__ == "__main__":

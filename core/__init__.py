@@ -21,7 +21,8 @@ Two-level scenes (a kd-tree per mesh in object space under a top-level tree over
         -> SceneHits / (R,) bool
     Per-instance ray visibility (Blender's Ray Visibility, as Cycles applies it): visibility bits
     CAMERA_RAYS | SHADOW_RAYS; camera rays meet only instances visible to the camera, AO and shadow
-    rays only those that cast shadows.
+    rays only those that cast shadows. | HOLDOUT (Blender's Holdout): a pixel whose camera ray hits the
+    instance stays empty (alpha 0); the instance still occludes and shadows.
     A TwoLevelScene renders wherever a KdTree does.
 Denoising (edge-avoiding à-trous, variance-guided; the raw estimate stays the default):
     render_preview(..., denoise=True) / PreviewRender.image(denoise=True) -> (H, W, 4) float32
@@ -38,7 +39,7 @@ from .memory import MemoryLimitError
 from .options import BuildOptions
 from .pixel_reuse import PixelState
 from .queries import Hits, intersect, occluded
-from .ray_visibility import ALL_RAYS, CAMERA_RAYS, SHADOW_RAYS
+from .ray_visibility import ALL_RAYS, CAMERA_RAYS, HOLDOUT, SHADOW_RAYS
 from .scene_builder import BuildReport, MeshInput, SceneBuilder, build_scene
 from .scene_queries import SceneHits, intersect_scene, occluded_scene
 from .two_level import TwoLevelScene, build_two_level
@@ -47,4 +48,4 @@ __all__ = ["denoise_pixels",
            "build_kdtree", "intersect", "occluded", "KdTree", "Hits", "BuildOptions", "Camera", "Light",
            "render_preview", "PreviewRender", "TwoLevelScene", "build_two_level", "build_scene", "SceneBuilder",
            "MeshInput", "BuildReport", "SceneHits", "intersect_scene", "occluded_scene", "MemoryLimitError",
-           "PixelState", "CAMERA_RAYS", "SHADOW_RAYS", "ALL_RAYS"]
+           "PixelState", "CAMERA_RAYS", "SHADOW_RAYS", "ALL_RAYS", "HOLDOUT"]

@@ -3,7 +3,7 @@
 A signature lists every instance that has something to hit, for some ray, as a row of bytes (a
 digest of its mesh's key and fingerprint, its object-to-world matrix, how its triangles were rounded:
 in object space under its own tree, or to float32 in a soup relative to the soup's anchor, and which
-rays it stops: ray_visibility.py) with its world box, in the coordinates the scene was built in (minus `origin`, see scene_builder.py). The rounding is part of the
+rays it stops and whether it is a holdout: ray_visibility.py) with its world box, in the coordinates the scene was built in (minus `origin`, see scene_builder.py). The rounding is part of the
 row because kept pixels keep their hit points and ray starts: an unchanged object re-rounded (the
 soup re-anchored, or the object moved between the soup and a tree of its own) shifts its surface by a
 float32 ulp, enough to put a kept ray start behind it, so it counts as changed. Two frames'
@@ -19,6 +19,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .ray_visibility import stops_rays
 from .two_level import transformed_boxes
 
 
@@ -43,8 +44,8 @@ def instance_signature(digests, bounds, mesh_of, o2w, origin, rounding, visibili
     origin = np.asarray(origin, np.float64).copy()
     mesh_of = np.asarray(mesh_of, np.int64)
     visibility = np.asarray(visibility, np.uint8)
-    # rows for what rays can meet: an empty mesh or an instance no ray meets (visibility 0) changes nothing
-    solid = (bounds[mesh_of, 0] <= bounds[mesh_of, 3]) & (visibility != 0) if len(mesh_of) else np.zeros(0, bool)
+    # rows for what rays can meet: an empty mesh or an instance no ray meets changes nothing
+    solid = (bounds[mesh_of, 0] <= bounds[mesh_of, 3]) & stops_rays(visibility) if len(mesh_of) else np.zeros(0, bool)
     mesh_of, o2w = mesh_of[solid], np.ascontiguousarray(o2w[solid], np.float64)
     rounding = np.ascontiguousarray(np.asarray(rounding, np.float64).reshape(-1, 4)[solid])
     visibility = visibility[solid].reshape(-1, 1)

@@ -5,18 +5,26 @@ An instance's visibility is a bit set, and so is a ray's kind: the ray meets the
 the two share a bit. Camera rays carry CAMERA_RAYS; the renderer's AO and shadow rays carry SHADOW_RAYS,
 because Cycles traces its AO rays as shadow rays (benchmarks/cycles_ao.py cites the kernel source), so
 an object with shadow rays off neither shadows nor occludes. Plain queries carry ALL_RAYS: they meet
-every instance that any ray kind meets. An instance with visibility 0 is never hit.
+every instance that any ray kind meets. An instance with neither ray bit is never hit.
+
+HOLDOUT is not a ray kind but a property of what camera rays find (Blender's Holdout, as Cycles applies
+it): a pixel whose camera ray hits a holdout instance is left empty, alpha 0 like the background, while
+the instance still occludes and shadows everything else. Measured with Cycles (bpy 5.0.1, AO pass and
+alpha of one scene with and without a holdout cube, same seed): the cube's pixels became alpha 0 and
+AO 0, every other pixel was bit-identical, so the cube still darkened the floor's AO.
 """
 import numpy as np
 
 CAMERA_RAYS = 1
 SHADOW_RAYS = 2
 ALL_RAYS = CAMERA_RAYS | SHADOW_RAYS
+HOLDOUT = 4
+ALL_BITS = ALL_RAYS | HOLDOUT
 
 
 def as_visibility(visibility, n_instances):
     """(I,) uint8 visibility bits, ALL_RAYS for every instance when `visibility` is None; a ValueError
-    names the first instance whose value is not an integer in [0, ALL_RAYS]."""
+    names the first instance whose value is not an integer in [0, ALL_BITS]."""
     if visibility is None:
         return np.full(n_instances, ALL_RAYS, np.uint8)
     raw = np.asarray(visibility)
@@ -25,12 +33,19 @@ def as_visibility(visibility, n_instances):
     if raw.dtype.kind == "f" and np.array_equal(raw, np.round(raw)):
         raw = raw.astype(np.int64)  # whole numbers stored as floats, as mesh_of takes them
     if n_instances and raw.dtype.kind not in "iu":
-        raise ValueError(f"visibility must hold integers (CAMERA_RAYS | SHADOW_RAYS bits), got dtype {raw.dtype}")
-    bad = np.flatnonzero((raw < 0) | (raw > ALL_RAYS))
+        raise ValueError(f"visibility must hold integers (CAMERA_RAYS | SHADOW_RAYS | HOLDOUT bits), got dtype "
+                         f"{raw.dtype}")
+    bad = np.flatnonzero((raw < 0) | (raw > ALL_BITS))
     if len(bad):
         raise ValueError(f"instance {int(bad[0])} has visibility {raw[bad[0]]!r}: it must be a combination of "
-                         f"CAMERA_RAYS ({CAMERA_RAYS}) and SHADOW_RAYS ({SHADOW_RAYS}), in [0, {ALL_RAYS}]")
+                         f"CAMERA_RAYS ({CAMERA_RAYS}), SHADOW_RAYS ({SHADOW_RAYS}) and HOLDOUT ({HOLDOUT}), "
+                         f"in [0, {ALL_BITS}]")
     return raw.astype(np.uint8)
+
+
+def stops_rays(visibility):
+    """Per instance: whether any kind of ray meets it (an instance that stops none is left out)."""
+    return (np.asarray(visibility) & ALL_RAYS) != 0
 
 
 def as_ray_mask(ray_mask):

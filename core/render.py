@@ -11,7 +11,8 @@ Value of a pixel whose camera ray hits (geometric normal N turned to face the ca
   over an occlusion-darkened ambient term.
 Background pixels are 0 with alpha 0; hit pixels have alpha 1. Row 0 is the top row.
 In a scene with per-instance ray visibility (ray_visibility.py), camera rays meet only the instances
-visible to camera rays, and AO and shadow rays only those visible to shadow rays, as in Cycles.
+visible to camera rays, and AO and shadow rays only those visible to shadow rays, as in Cycles; a pixel
+whose camera ray hits a holdout instance is background (alpha 0), as Cycles' Holdout makes it.
 `image(denoise=True)` / `render_preview(..., denoise=True)` filter the estimate with core.denoise (edge-
 avoiding à-trous, guided by the per-pixel sample variance; background and alpha unchanged); the raw
 estimate stays the default.
@@ -35,7 +36,7 @@ from .instance_signature import changed_boxes
 from .lights import pack_lights
 from .memory import check_render_memory
 from .pixel_reuse import PixelState, prepared_boxes, segments_touch, settings_key, surface_rays_touch
-from .ray_visibility import CAMERA_RAYS
+from .ray_visibility import CAMERA_RAYS, HOLDOUT
 from .render_kernels import MEMO_BITS, MODES, add_samples, assemble_image, surface_frames
 from .sampling import SAMPLERS, SOBOL_DIM1
 from .scene_queries import trace_valid_rays
@@ -113,7 +114,9 @@ class PreviewRender:
         origins, directions, tmin, tmax = self.camera.rays(self.width, self.height, traced)
         t, inst, prim, _, _ = trace_valid_rays(self.scene, origins, directions, tmin, tmax, False, self.threads,
                                                CAMERA_RAYS)
-        hit = np.flatnonzero(prim >= 0).astype(np.int64)
+        seen = prim >= 0
+        seen[seen] = (self.scene.visibility[inst[seen]] & HOLDOUT) == 0  # a holdout leaves its pixels empty
+        hit = np.flatnonzero(seen).astype(np.int64)
         points, normals, starts = np.empty((len(hit), 3)), np.empty((len(hit), 3)), np.empty((len(hit), 3))
         with thread_count(self.threads):
             surface_frames(self.scene.arrays, origins, directions, t, inst, prim, hit, points, normals, starts)

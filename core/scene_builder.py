@@ -12,8 +12,8 @@ fingerprint that changes whenever its geometry does (e.g. a CRC of its vertex an
   translation, so a moving camera never rebuilds it;
 - a single-use mesh whose matrix or visibility changed counts as dynamic too (it leaves the soup);
 - instances that stop different kinds of rays (ray_visibility.py) go to different soups, one per
-  visibility, since the traversal tells kinds apart per instance, not per triangle; an instance that
-  stops no ray (visibility 0) is left out.
+  visibility (holdout included), since the traversal tells kinds apart per instance, not per triangle;
+  an instance that stops no ray (neither ray bit) is left out.
 Trees of keys absent from a frame are dropped. `reuse=False` rebuilds everything (the same layout),
 so the two can be compared. Every scene carries the instances' signature (instance_signature.py), from
 which the renderer tells where the next frame's geometry changed (pixel reuse).
@@ -29,7 +29,7 @@ import numpy as np
 from .build import build_kdtree
 from .instance_signature import instance_signature, mesh_digest
 from .options import make_options
-from .ray_visibility import as_visibility
+from .ray_visibility import ALL_RAYS, as_visibility, stops_rays
 from .scene_policy import LAYOUTS, plan_soup
 from .two_level import build_two_level, check_placement
 
@@ -123,7 +123,7 @@ class SceneBuilder:
                     raise ValueError(f"mesh {m.key!r}: {name} must have shape (N, 3), got {shape}")
         self._track_changes(meshes, mesh_of, o2w, visibility)
         bounds = _bounds(meshes)
-        met = visibility != 0  # an instance no ray meets is left out altogether
+        met = stops_rays(visibility)  # an instance no ray meets is left out altogether
         shown = np.flatnonzero(met)
         soup = np.zeros(len(mesh_of), bool)
         soup[shown] = plan_soup(self.layout, np.array([len(m.triangles) for m in meshes], np.int64), bounds,
@@ -138,7 +138,8 @@ class SceneBuilder:
         scene_visibility = [visibility[own]]
         rounding = np.zeros((len(mesh_of), 4))
         groups, soups, soup_rebuilt = [], {}, False
-        for kind in sorted(set(visibility[soup].tolist()), reverse=True):  # all rays first: the usual soup
+        kinds = sorted(set(visibility[soup].tolist()), key=lambda k: (k != ALL_RAYS, -k))  # the usual soup first
+        for kind in kinds:
             group = np.flatnonzero(soup & (visibility == kind))
             soups[kind] = self._soup_tree(meshes, mesh_of, o2w, group, reuse, kind)
             _, soup_tree, anchor = soups[kind]

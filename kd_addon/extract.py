@@ -44,8 +44,13 @@ Render visibility (the viewport depsgraph also holds render-hidden objects)
       does): camera rays pass through an object hidden from them, and AO and
       shadow rays through one that casts no shadows (Cycles traces its AO rays
       as shadow rays).
-    * Holdouts (``is_holdout`` and holdout collections) are ignored: a holdout
-      is rendered as an ordinary occluder in the preview.
+    * Holdout (``is_holdout`` or a holdout collection: ``holdout_get`` of the
+      view layer) is read from the object itself, and for an instance from its
+      top-level instancer only, as Cycles does (measured: a holdout member of an
+      instanced collection, or a holdout source object of geometry-nodes
+      instances, changed nothing; a holdout instancer made all its instances
+      holdouts). Indirect Only (a Cycles collection setting) is not applied and
+      is named in the warnings.
     * Limitation (the preview follows the viewport here): objects the viewport
       does not show -- eye icon (``hide_set``), ``hide_viewport``, collections
       disabled in viewports -- are not yielded by the viewport depsgraph, so
@@ -111,6 +116,7 @@ class Instance:
     is_instance: bool  # DepsgraphObjectInstance.is_instance
     camera: bool = True  # Ray Visibility > Camera (ANDed with the instancer's)
     shadow: bool = True  # Ray Visibility > Shadow: also what AO rays see (ANDed with the instancer's)
+    holdout: bool = False  # Holdout (the instancer's for an instance): seen pixels stay empty
 
 
 @dataclass
@@ -266,6 +272,7 @@ class _Visibility:
     """Render-visibility decisions, memoized per original object pointer."""
 
     def __init__(self, view_layer: bpy.types.ViewLayer):
+        self.view_layer = view_layer
         self.scene_objects = _layer_render_objects(view_layer.layer_collection)
         self._collection_memo: dict[int, frozenset[int]] = {}
         self._node_memo: dict[int, tuple[frozenset, frozenset, frozenset]] = {}
@@ -341,10 +348,11 @@ def ray_flags(*objs) -> tuple[bool, bool]:
     return all(ob.visible_camera for ob in objs), all(ob.visible_shadow for ob in objs)
 
 
-def unapplied_object_settings(ob) -> list[str]:
-    """The settings of a rendered object that the preview ignores: a holdout is shaded like any
-    surface."""
-    return ["Holdout"] if getattr(ob, "is_holdout", False) else []
+def unapplied_object_settings(ob, view_layer) -> list[str]:
+    """The settings of a rendered object that the preview ignores: Indirect Only, which changes what
+    Cycles shows where the object is seen directly (measured: those pixels kept alpha 1 but their AO
+    changed); the preview shows it like any surface."""
+    return ["Indirect Only"] if ob.indirect_only_get(view_layer=view_layer) else []
 
 
 def _instancer_hides_self(orig: bpy.types.Object, evaluated: bpy.types.Object) -> bool:
@@ -467,7 +475,7 @@ class _EntryReader:
     def __init__(self, vis: _Visibility):
         self.vis = vis
         self.geometries = _GeometryReader()
-        self._verdicts: dict[tuple[int, int], tuple[str, str | None, bool, bool] | None] = {}
+        self._verdicts: dict[tuple[int, int], tuple[str, str | None, bool, bool, bool] | None] = {}
         self._warned: set[str] = set()
 
     def read(self, inst) -> Instance | None:
@@ -481,7 +489,7 @@ class _EntryReader:
         verdict = self._verdict(ob, parent)
         if verdict is None:
             return None
-        name, instancer, camera, shadow = verdict
+        name, instancer, camera, shadow, holdout = verdict
         key = self.geometries.get(mesh, name)
         if key is None:
             return None
@@ -493,25 +501,28 @@ class _EntryReader:
             is_instance=parent is not None,
             camera=camera,
             shadow=shadow,
+            holdout=holdout,
         )
 
-    def _verdict(self, ob, parent) -> tuple[str, str | None, bool, bool] | None:
-        """(object name, instancer name, camera, shadow) when visible, else None; memoized."""
+    def _verdict(self, ob, parent) -> tuple[str, str | None, bool, bool, bool] | None:
+        """(object name, instancer name, camera, shadow, holdout) when visible, else None; memoized."""
         orig = ob.original
         memo_key = (orig.as_pointer(), parent.as_pointer() if parent else 0)
         if memo_key not in self._verdicts:
             flags = ray_flags(orig) if parent is None else ray_flags(orig, parent.original)
             visible = any(flags) and _entry_visible(self.vis, parent, ob)
             instancer = parent.original.name if parent is not None else None
-            self._verdicts[memo_key] = (orig.name, instancer, *flags) if visible else None
+            owner = orig if parent is None else parent.original  # Cycles reads holdout from the instancer
+            holdout = visible and owner.holdout_get(view_layer=self.vis.view_layer)
+            self._verdicts[memo_key] = (orig.name, instancer, *flags, holdout) if visible else None
             if visible:
-                self._warn_unapplied(orig)
+                self._warn_unapplied(owner)
         return self._verdicts[memo_key]
 
     def _warn_unapplied(self, orig) -> None:
         """Once per object: the settings of a rendered object that Cycles applies and the preview
         does not (unapplied_object_settings), so its image differs there."""
-        unapplied = unapplied_object_settings(orig)
+        unapplied = unapplied_object_settings(orig, self.vis.view_layer)
         if unapplied and orig.name not in self._warned:
             self._warned.add(orig.name)
             self.geometries.warnings.append(f"object '{orig.name}': {', '.join(unapplied)} not applied by the preview")

@@ -200,15 +200,15 @@ class FrameJob:
 
     def _lazy_visibility(self, core, extracted: ExtractedScene, visibility: np.ndarray):
         """(visibility, warnings): a lazy build traces the scene as one tree, which cannot tell objects'
-        ray visibility apart, so when it differs between objects it is not applied (every instance
-        stops every ray) and each object it would have changed is named."""
+        ray visibility or holdout apart, so when they differ between objects they are not applied (every
+        instance stops every ray, none is a holdout) and each object they would have changed is named."""
         if not self.config.build_options.get("lazy") or len(set(visibility.tolist())) <= 1:
             return visibility, []
         names = sorted({f"object '{i.name}'" if i.instancer in (None, i.name) else
                         f"object '{i.name}' instanced by '{i.instancer}'"
-                        for i in extracted.instances if not (i.camera and i.shadow)})
+                        for i in extracted.instances if not (i.camera and i.shadow) or i.holdout})
         return np.full_like(visibility, core.ALL_RAYS), [
-            f"{name}: Ray Visibility not applied with Lazy Build on (the scene is traced as one tree)"
+            f"{name}: Ray Visibility and Holdout not applied with Lazy Build on (the scene is traced as one tree)"
             for name in names]
 
     def _build_and_start(self, core, instances, origin, reuse, camera, lights, width, height) -> None:

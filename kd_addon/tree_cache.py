@@ -61,8 +61,8 @@ def clear() -> None:
 
 
 def mesh_inputs(core, extracted: ExtractedScene):
-    """(MeshInputs, mesh_of (I,), matrices (I, 4, 4), visibility (I,) core ray-visibility bits) for
-    core.SceneBuilder.build."""
+    """(MeshInputs, mesh_of (I,), matrices (I, 4, 4), visibility (I,) core ray-visibility and holdout bits)
+    for core.SceneBuilder.build."""
     owners: dict[int, tuple] = {}
     for inst in extracted.instances:
         owners.setdefault(inst.geometry_key, (inst.name, inst.instancer))
@@ -76,8 +76,8 @@ def mesh_inputs(core, extracted: ExtractedScene):
         meshes.append(core.MeshInput((*base, seen[base]), geom.vertices, geom.triangles, geometry_fingerprint(geom)))
     mesh_of = np.array([order[i.geometry_key] for i in extracted.instances], np.int64)
     matrices = np.stack([i.matrix_world for i in extracted.instances]) if extracted.instances else np.zeros((0, 4, 4))
-    visibility = np.array([core.CAMERA_RAYS * i.camera | core.SHADOW_RAYS * i.shadow for i in extracted.instances],
-                          np.uint8)
+    visibility = np.array([core.CAMERA_RAYS * i.camera | core.SHADOW_RAYS * i.shadow | core.HOLDOUT * i.holdout
+                           for i in extracted.instances], np.uint8)
     return meshes, mesh_of, matrices, visibility
 
 

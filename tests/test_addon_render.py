@@ -164,8 +164,29 @@ def test_object_ray_visibility_is_applied_and_changes_the_next_frame(addon):  # 
     scene.kd_preview.lazy = True
     lazy, warnings = ao()
     np.testing.assert_array_equal(lazy, plain)  # the instance is out of view
-    assert warnings == [f"object '{name}': Ray Visibility not applied with Lazy Build on (the scene is traced as one "
-                        "tree)" for name in ("Box", "Member' instanced by 'FarInstancer")]
+    assert warnings == [f"object '{name}': Ray Visibility and Holdout not applied with Lazy Build on (the scene is "
+                        "traced as one tree)" for name in ("Box", "Member' instanced by 'FarInstancer")]
+
+
+def test_holdout_leaves_its_pixels_empty_and_still_occludes(addon):  # noqa: F811
+    """Cycles' Holdout: the cube's pixels are empty (alpha 0), the ground beside it is still occluded by
+    it, and turning the holdout off renders the cube again (the last image is not reused)."""
+    scene = half_plane_scene()
+    box = bpy.data.objects["Box"]
+
+    def render():
+        return pipeline.render_frame(scene, bpy.context.evaluated_depsgraph_get(), make_config(scene.kd_preview))
+
+    box.is_holdout = True
+    cutout = render()
+    row = cutout.image[16]
+    assert (row[column_of(-2.0)] == 0.0).all() and row[column_of(-3.5), 3] == 1.0
+    assert row[column_of(-2.6), 0] < 0.9 and row[column_of(-3.8), 0] == 1.0  # the ground beside it is occluded
+    assert not cutout.warnings
+    box.is_holdout = False
+    shown = render()
+    assert shown.image[16, column_of(-2.0), 3] == 1.0 and shown.image[16, column_of(-2.0), 0] == 1.0
+    np.testing.assert_array_equal(shown.image[16, column_of(-2.6)], row[column_of(-2.6)])
 
 
 def test_errors_leave_the_previous_image_and_report(addon):  # noqa: F811

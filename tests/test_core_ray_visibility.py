@@ -1,6 +1,6 @@
 """Per-instance ray visibility (core/ray_visibility.py): camera rays meet only instances visible to the
-camera, AO and shadow rays only instances that cast shadows, in every layout, through soups, queries,
-renders and pixel reuse.
+camera, AO and shadow rays only instances that cast shadows, and a holdout's pixels stay empty, in every
+layout, through soups, queries, renders and pixel reuse.
 
 References: a flat tree or a brute-force tracer over only the triangles a ray kind may meet, and a full
 render for frames continued from the last one."""
@@ -14,7 +14,7 @@ from tests.test_core_pixel_reuse import GROUND, camera as reuse_camera, cube, mo
 from tests.test_core_two_level import _blob, _random_matrix, _rays
 from tests.test_render_reference import boxes_on_floor, brute_force_ao
 
-CAMERA, SHADOW, ALL = core.CAMERA_RAYS, core.SHADOW_RAYS, core.ALL_RAYS
+CAMERA, SHADOW, ALL, HOLDOUT = core.CAMERA_RAYS, core.SHADOW_RAYS, core.ALL_RAYS, core.HOLDOUT
 
 
 @pytest.mark.parametrize("layout", ["auto", "flat", "two_level"])
@@ -107,6 +107,30 @@ def test_converged_ao_with_ray_visibility_matches_brute_force(layout):
     assert (np.abs(everything - img).max(axis=2) > 0.2).sum() >= 10  # the visibility really changed the image
 
 
+@pytest.mark.parametrize("layout", ["auto", "flat", "two_level"])
+def test_holdout_pixels_are_empty_and_the_holdout_still_occludes(layout):
+    """Blender's Holdout as Cycles applies it: pixels whose camera ray first meets the holdout box are
+    empty (alpha 0, value 0), and the box still occludes the floor's AO; a holdout hidden from the camera
+    empties nothing. Against the brute-force tracer with the holdout seen by camera rays only to empty
+    its pixels."""
+    indexed, parts = _objects_on_floor()
+    camera = look_at((1.8, -2.2, 1.6), (0.0, 0.2, 0.2), fov=0.9)
+    size = 20
+    visibility = np.array([ALL, ALL | HOLDOUT, SHADOW | HOLDOUT, ALL], np.uint8)
+    scene = core.build_scene(indexed, np.arange(4), np.eye(4)[None].repeat(4, 0), layout=layout,
+                             visibility=visibility)
+    reference, hit = brute_force_ao(np.concatenate([parts[0], parts[3]]), camera, size, 0.8,
+                                    occluders=np.concatenate(parts), holdouts=parts[1])
+    img = core.render_preview(scene, camera, size, size, samples=512, ao_distance=0.8)
+    np.testing.assert_array_equal(np.flatnonzero(hit_mask(img).ravel()), hit)
+    assert (img[~hit_mask(img)] == 0.0).all()
+    diff = np.abs(img[..., 0] - reference)[hit_mask(img)]
+    assert diff.mean() < 0.01 and diff.max() < 0.08, (diff.mean(), diff.max())
+    _, seen_all = brute_force_ao(np.concatenate([parts[0], parts[1], parts[3]]), camera, size, 0.8, strata=1)
+    assert len(seen_all) - len(hit) >= 20  # the holdout box's pixels really were emptied
+    assert (reference.ravel()[hit] < 0.95).sum() >= 20  # ... and it still occludes the floor around it
+
+
 @pytest.mark.parametrize("visibility, seen, value", [(ALL, "roof", 1.0), (CAMERA, "roof", 1.0),
                                                      (SHADOW, "floor", 0.0), (0, "floor", 1.0)])
 def test_shadow_of_a_roof_follows_its_ray_visibility(visibility, seen, value):
@@ -125,7 +149,7 @@ def test_shadow_of_a_roof_follows_its_ray_visibility(visibility, seen, value):
 
 @pytest.mark.parametrize("layout", ["auto", "flat", "two_level"])
 def test_frames_that_toggle_visibility_continue_exactly(layout):
-    """Pixel reuse: an object switching its camera or shadow rays off and on is a change (its box is
+    """Pixel reuse: an object switching its camera or shadow rays or its holdout off and on is a change (its box is
     retraced); every frame continued from the last equals its full render, and the toggles show."""
     meshes = [MeshInput("ground", *GROUND, 0), MeshInput("a", *cube(0.8), 0), MeshInput("b", *cube(0.5), 0)]
     matrices = np.stack([np.eye(4), moved(-2, 0, 1), moved(2.5, 1, 0.6)])
@@ -133,22 +157,22 @@ def test_frames_that_toggle_visibility_continue_exactly(layout):
     lights = [core.Light.sun((0.3, 0.2, -1), angle=0.1)]
     settings = dict(mode="ao+shadow", samples=4, ao_distance=2.0, lights=lights, seed=3)
     builder, state, images, kept = SceneBuilder(layout), None, [], []
-    for vis_a in (ALL, CAMERA, SHADOW, SHADOW, ALL):
+    for vis_a in (ALL, CAMERA, SHADOW, SHADOW, ALL, ALL | HOLDOUT, ALL | HOLDOUT, ALL):
         scene = builder.build(meshes, [0, 1, 2], matrices, visibility=[ALL, vis_a, ALL])[0]
         continued = render(scene, cam, state, **settings)
         full = render(scene, cam, **settings)
         np.testing.assert_array_equal(continued.image(), full.image())
         images.append(full.image())
-        kept.append(continued.pixels_reused / continued.hit_pixels)
+        kept.append(continued.pixels_reused / max(continued.hit_pixels, 1))
         state = continued.pixel_state()
-    assert kept[3] == 1.0 and 0.3 < min(kept[1:]) < 1.0  # a repeat keeps all; a toggle retraces near a
-    for k in (0, 1, 3):  # every toggle shows (frames 2 and 3 are the same)
+    assert kept[3] == kept[6] == 1.0 and 0.3 < min(kept[1:]) < 1.0  # a repeat keeps all; a toggle retraces
+    for k in (0, 1, 3, 4, 6):  # every toggle shows (frames 2 and 3, 5 and 6 are the same)
         assert (np.abs(images[k] - images[k + 1]).max(axis=2) > 0.2).sum() >= 5
 
 
 def test_bad_visibility_and_ray_masks_are_named():
     mesh = (np.eye(3), np.array([[0, 1, 2]]))
-    for bad, words in [([4], "instance 0 has visibility 4"), ([-1], "instance 0 has visibility -1"),
+    for bad, words in [([8], "instance 0 has visibility 8"), ([-1], "instance 0 has visibility -1"),
                        ([1.5], "must hold integers"), ([1, 2], "shape (1,)")]:
         with pytest.raises(ValueError, match=words.replace("(", r"\(").replace(")", r"\)")):
             core.build_scene([mesh], [0], np.eye(4)[None], visibility=bad)

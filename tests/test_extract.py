@@ -284,10 +284,9 @@ def test_viewport_hidden_and_non_triangle_objects_are_named(scene):
 
 def test_ray_visibility_flags_are_read_and_anded_with_the_instancer(scene):
     """Each instance carries Ray Visibility > Camera and > Shadow, ANDed with its instancer's as Cycles
-    does; a holdout, which the preview shades like any surface, is named once."""
+    does."""
     scenes.add_cube("Plain")
     scenes.add_cube("NoShadow").visible_shadow = False
-    scenes.add_cube("Hole").is_holdout = True
     source = scenes.new_collection("Src", exclude=True)
     scenes.add_cube("Unseen", collection=source).visible_camera = False
     scenes.add_cube("Member", collection=source)
@@ -296,10 +295,33 @@ def test_ray_visibility_flags_are_read_and_anded_with_the_instancer(scene):
     bpy.data.objects["Inst2"].visible_shadow = False
     result = extract_scene()
     flags = sorted((i.name, i.instancer, i.camera, i.shadow) for i in result.instances)
-    assert flags == [("Hole", None, True, True), ("Member", "Inst0", True, True), ("Member", "Inst1", True, True),
+    assert flags == [("Member", "Inst0", True, True), ("Member", "Inst1", True, True),
                      ("Member", "Inst2", True, False), ("NoShadow", None, True, False), ("Plain", None, True, True),
                      ("Unseen", "Inst0", False, True), ("Unseen", "Inst1", False, True)]  # Inst2's: no rays
-    assert result.warnings == ["object 'Hole': Holdout not applied by the preview"]
+    assert result.warnings == []
+
+
+def test_holdout_is_read_from_the_object_or_its_instancer_and_indirect_only_is_named(scene):
+    """Holdout as Cycles reads it (measured with Cycles, see extract.py): an object's own flag or its
+    holdout collection; for an instance only the top-level instancer's, so a holdout member of an
+    instanced collection is not one. Indirect Only, not applied, is named once."""
+    scenes.add_cube("Plain")
+    scenes.add_cube("Hole").is_holdout = True
+    masked = scenes.new_collection("Masked")
+    bpy.context.view_layer.layer_collection.children["Masked"].holdout = True
+    scenes.add_cube("InMasked", collection=masked)
+    indirect = scenes.new_collection("Indirect")
+    bpy.context.view_layer.layer_collection.children["Indirect"].indirect_only = True
+    scenes.add_cube("Bounce", collection=indirect)
+    source = scenes.new_collection("Src", exclude=True)
+    scenes.add_cube("Member", collection=source).is_holdout = True
+    scenes.add_collection_instance("Shown", source, location=(0.0, 5.0, 0.0))
+    scenes.add_collection_instance("Cutout", source, location=(3.0, 5.0, 0.0)).is_holdout = True
+    result = extract_scene()
+    holdouts = sorted((i.name, i.instancer, i.holdout) for i in result.instances)
+    assert holdouts == [("Bounce", None, False), ("Hole", None, True), ("InMasked", None, True),
+                        ("Member", "Cutout", True), ("Member", "Shown", False), ("Plain", None, False)]
+    assert result.warnings == ["object 'Bounce': Indirect Only not applied by the preview"]
 
 
 def test_non_finite_vertices_left_out_with_warning(scene):

@@ -22,14 +22,15 @@ def boxes_on_floor():
     return np.concatenate(tris)
 
 
-def brute_force_ao(tris, camera, size, ao_distance, strata=24, occluders=None):
+def brute_force_ao(tris, camera, size, ao_distance, strata=24, occluders=None, holdouts=None):
     """AO per pixel by stratified midpoint quadrature of the cosine-weighted hemisphere, every ray
     tested against every triangle (Moller-Trumbore): no tree, no sampler, no code shared with core.
-    Camera rays see `tris`; AO rays meet `occluders` (default: `tris`)."""
+    Camera rays see `tris` and `holdouts`, a pixel whose closest hit is a holdout is empty; AO rays
+    meet `occluders` (default: `tris`)."""
     occluders = tris if occluders is None else occluders
     o, d, tmin, tmax = camera.rays(size, size)
-    t, prim = moller_trumbore(tris, o, d, tmin, tmax)
-    hit = np.flatnonzero(prim >= 0)
+    t, prim = moller_trumbore(tris if holdouts is None else np.concatenate([tris, holdouts]), o, d, tmin, tmax)
+    hit = np.flatnonzero((prim >= 0) & (prim < len(tris)))
     p = o[hit] + t[hit, None] * d[hit]
     tri = tris[prim[hit]].astype(np.float32).astype(np.float64)
     n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
