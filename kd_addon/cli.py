@@ -102,6 +102,8 @@ def build_parser(prog: str = COMMAND_ID) -> argparse.ArgumentParser:
 
 def load_scene(args) -> bpy.types.Scene:
     """Open the requested .blend, or keep the open file, or build the demo; return the scene."""
+    if args.blend and args.demo:
+        raise PreviewError(f"give a .blend file or --demo, not both (got {args.blend} and --demo)")
     if args.blend:
         path = Path(args.blend)
         if not path.is_file():
@@ -213,7 +215,8 @@ def _print_totals(job) -> None:
     t = job.totals
     print(f"total: {t['frames']} frames, {t['triangles']:,} triangles, extract {t['extract_ms']:.0f} ms, "
           f"build {t['build_ms']:.0f} ms, trace {t['trace_ms']:.0f} ms, {t['mrays_per_s']:.2f} Mrays/s; "
-          f"mean frame after the first {t['mean_total_ms_after_first']:.0f} ms  (* = includes kernel compile/load)")
+          + (f"mean frame after the first {t['mean_total_ms_after_first']:.0f} ms" if t['frames'] > 1 else
+             f"frame {t['mean_total_ms_after_first']:.0f} ms") + "  (* = includes kernel compile/load)")
     print(f"reuse: {t['objects_rebuilt']} kd-trees built, {t['objects_reused']} kept, {t['images_reused']} of "
           f"{t['frames']} images reused" + (" (--rebuild-all)" if job.config.settings.rebuild_all else ""))
     print(f"report: {job.report_path}")

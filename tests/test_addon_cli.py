@@ -49,13 +49,16 @@ def test_cli_renders_the_demo(tmp_path, capsys):
     out = tmp_path / "demo"
     assert cli.execute(["render", "--frames", "1-2", "--out", str(out), *SMALL]) == 0
     printed = capsys.readouterr().out
-    assert "frame  triangles" in printed and "report:" in printed
+    assert "frame  triangles" in printed and "report:" in printed and "mean frame after the first" in printed
     assert sorted(p.name for p in out.iterdir()) == ["frame_0001.png", "frame_0002.png", "report.json"]
     report = json.loads((out / "report.json").read_text())
     assert report["resolution"] == [48, 27] and report["settings"]["samples"] == 2
     assert report["totals"]["frames"] == 2
     image = bpy.data.images.load(str(out / "frame_0002.png"))
     assert tuple(image.size) == (48, 27)
+    assert cli.execute(["render", "--frames", "1-1", "--out", str(tmp_path / "one"), *SMALL]) == 0
+    printed = capsys.readouterr().out
+    assert "; frame " in printed and "after the first" not in printed  # one frame has no "after the first"
 
 
 def test_cli_renders_a_saved_blend_with_its_frame_range(tmp_path):
@@ -120,6 +123,7 @@ def test_cli_takes_the_files_saved_settings_and_options_override_them(tmp_path, 
     (["render", "--out", "X", "--resolution", "0"], 1, "resolution_percentage must be an integer from 1 to 100"),
     (["render", "--out", "X", "--mode", "normals"], 1, "mode must be one of ao, shadow, ao+shadow"),
     (["render", "missing.blend", "--out", "X"], 1, "no such .blend file: missing.blend"),
+    (["render", "scene.blend", "--demo", "--out", "X"], 1, "give a .blend file or --demo, not both"),
     (["render", "--frames", "1"], 2, "the following arguments are required: --out"),
     (["render", "--out", "X", "--samples", "many"], 2, "argument --samples: invalid int value"),
     (["paint", "--out", "X"], 2, "invalid choice: 'paint'"),
