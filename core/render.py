@@ -100,7 +100,7 @@ class PreviewRender:
         zero = np.zeros(len(pixels), np.int64)
         self._start(pixels, depths, points, normals, starts, np.zeros((len(pixels), 3)), np.zeros(len(pixels)), zero,
                     zero.copy(), np.arange(len(pixels), dtype=np.int64), self._memo_rows(len(pixels)))
-        self.known, self.boxes = np.zeros(len(pixels), np.bool_), np.zeros((0, 6))
+        self.known, self.boxes = np.zeros(len(pixels), np.int64), np.zeros((0, 6))
 
     def _memo_rows(self, n):
         """(n, B) zero visibility bits: one per ray of every sample (render_kernels.py), none when
@@ -164,8 +164,9 @@ class PreviewRender:
                     np.concatenate([prev.ray_counts[clean], np.zeros(fresh, np.int64)]),
                     np.arange(len(clean), len(clean) + fresh, dtype=np.int64),
                     np.concatenate([prev.memo[order], self._memo_rows(len(new[0]))]))
-        self.known = np.concatenate([np.zeros(len(clean), np.bool_), np.ones(len(dirty), np.bool_),
-                                     np.zeros(len(new[0]), np.bool_)])
+        # last frame's bits that hold traced outcomes: its samples' (render_kernels.py, ray memo)
+        self.known = np.concatenate([np.zeros(len(clean), np.int64), prev.counts[dirty] * (1 + len(self.lights)),
+                                     np.zeros(len(new[0]), np.int64)])
         self.boxes = boxes
         self._rays_before = int(prev.ray_counts[clean].sum())
         self.pixels_reused = len(clean)

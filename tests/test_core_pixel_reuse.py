@@ -12,6 +12,7 @@ from core.pixel_reuse import MAX_BOXES, prepared_boxes, segments_touch, surface_
 from core.render_kernels import MEMO_BITS
 from core.scene_builder import MeshInput, SceneBuilder
 from core.shading import cosine_direction, offset_origin, sample_light
+from tests.render_scenes import look_at
 
 SIZE = (48, 36)
 
@@ -157,6 +158,32 @@ def test_more_samples_than_memo_bits_still_continue_exactly():
     second = render(scene, local, first.pixel_state(), **settings)
     assert second.pixels_reused > 0 and second.memo_reused.sum() == 0
     np.testing.assert_array_equal(second.image(), render(scene, local, **settings).image())
+
+
+@pytest.mark.parametrize("layout", ["two_level", "flat"])
+def test_pixels_that_stopped_early_and_now_need_more_samples_continue_exactly(layout):
+    """With an error target, a pixel whose AO rays were all blocked stopped after ~20 samples last frame;
+    once one of its two roofs is gone it needs all 48 this frame. Last frame's visibility bits exist only
+    for the samples it took: the rays towards the roof that stayed must be traced from sample ~20 on,
+    not read from the memo (which would count them as escaping). (The random animations above never
+    stop early: at 8 samples the standard-error floor keeps every pixel above 0.05.)"""
+    def slab(x0, x1, z0, z1):
+        v = np.array([[x, y, z] for x in (x0, x1) for y in (-6, 6) for z in (z0, z1)], float)
+        return v, cube()[1]
+    meshes = [MeshInput("ground", *GROUND, 0), MeshInput("left", *slab(-6, 0, 0.5, 0.6), 0),
+              MeshInput("right", *slab(0, 6, 0.5, 0.6), 0)]
+    cam = look_at((-0.5, -9.0, 0.25), (-0.5, 0.0, 0.1), fov=0.5)
+    settings = dict(samples=48, ao_distance=3.0, error_target=0.05, min_samples=4)
+    builder = SceneBuilder(layout)
+    first = render(builder.build(meshes, [0, 1, 2], np.stack([np.eye(4)] * 3))[0], cam, **settings)
+    scene = builder.build(meshes, [0, 1, 2], np.stack([np.eye(4), np.eye(4), moved(50, 0, 0)]))[0]
+    second = render(scene, cam, first.pixel_state(), **settings)
+    full = render(scene, cam, **settings)
+    np.testing.assert_array_equal(second.image(), full.image())
+    np.testing.assert_array_equal(second.sample_counts(), full.sample_counts())
+    before, after = first.sample_counts(), full.sample_counts()
+    more = (before > 0) & (before < after)
+    assert more.sum() >= 20 and second.memo_reused.sum() > 0  # the case: early stops now sampled further
 
 
 def test_unchanged_frame_traces_nothing():
