@@ -88,16 +88,20 @@ class SequenceJob:
         return f"Frame {frame} ({len(self.results) + 1}/{len(self.frames)}): {inner}"
 
     def tick(self) -> bool:
-        """Next short piece of work; True once every frame is written and the report saved."""
-        if self.job is None:
-            frame = self.frames[len(self.results)]
-            self.scene.frame_set(frame)
-            self.job = FrameJob(self.scene, self.depsgraph_for(self.scene), self.config)
-        if self.job.tick():
-            self._write(self.job.result())
-            self.job = None
-            if self.done:
-                self._write_report()
+        """Next short piece of work; True once every frame is written and the report saved. An error
+        names the frame it stopped at, as the frames' warnings do."""
+        frame = self.frames[min(len(self.results), len(self.frames) - 1)]
+        try:
+            if self.job is None:
+                self.scene.frame_set(frame)
+                self.job = FrameJob(self.scene, self.depsgraph_for(self.scene), self.config)
+            if self.job.tick():
+                self._write(self.job.result())
+                self.job = None
+                if self.done:
+                    self._write_report()
+        except PreviewError as error:
+            raise PreviewError(f"frame {frame}: {error}") from None
         return self.done
 
     def _write(self, result: FrameResult) -> None:

@@ -50,7 +50,7 @@ def test_memory_limit_exits_nonzero_before_rendering(tmp_path, capsys):
     assert cli_render(tmp_path, blend, "--resolution", "100", "--memory-limit", "1") == 1
     geometry, pixels = memory_limit.frame_bytes(2, 400, 300, "binned")
     err = capsys.readouterr().err
-    assert f"this frame needs about {(geometry + pixels) / 2**20:,.0f} MiB (2 triangles" in err
+    assert f"frame 1: this frame needs about {(geometry + pixels) / 2**20:,.0f} MiB (2 triangles" in err
     assert "400x300 pixels" in err and "above the memory limit of 1 MiB" in err and "raise the memory limit" in err
     assert not (tmp_path / "out" / "frame_0001.png").exists()
     assert cli_render(tmp_path, blend, "--resolution", "100", "--memory-limit", "64") == 0  # fits: renders
