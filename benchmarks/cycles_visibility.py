@@ -29,7 +29,7 @@ sys.path.insert(0, str(HERE))
 
 from cycles_ao import read_exr, render_cycles  # noqa: E402
 
-BUILD = r'''
+SETUP = r'''
 import sys, bpy
 from mathutils import Vector
 bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
@@ -37,23 +37,28 @@ sc = bpy.context.scene
 sc.render.resolution_x, sc.render.resolution_y, sc.render.resolution_percentage = {w}, {h}, 100
 sc.frame_start = sc.frame_end = 1
 bpy.ops.mesh.primitive_plane_add(size=12)
-bpy.ops.mesh.primitive_cube_add(size=1.5, location=(0, 0, 0.77)); cube = bpy.context.object
-bpy.ops.mesh.primitive_uv_sphere_add(radius=0.7, location=(1.6, 0.4, 0.7)); sphere = bpy.context.object
-bpy.ops.mesh.primitive_cylinder_add(radius=0.4, depth=2.0, location=(-1.2, 1.2, 1.0))
-bpy.ops.mesh.primitive_cube_add(size=1, location=(-0.3, -1.6, 0.5), rotation=(0, 0, 0.6))
-source = bpy.data.collections.new("Source"); sc.collection.children.link(source)
-bpy.ops.mesh.primitive_cone_add(radius1=0.5, depth=1.2); cone = bpy.context.object
-for c in cone.users_collection:
-    c.objects.unlink(cone)
-source.objects.link(cone)
-bpy.context.view_layer.layer_collection.children["Source"].exclude = True
-instancer = bpy.data.objects.new("ConeInstance", None)
-instancer.instance_type, instancer.instance_collection = "COLLECTION", source
-sc.collection.objects.link(instancer); instancer.location = (2.0, -2.0, 0.6)
-if {flags}:
-    cube.visible_camera = False
-    sphere.visible_shadow = False
-    instancer.visible_camera = False
+
+
+def move_to_collection(ob, name):
+    """Move ob into a new collection of the scene; return that collection's layer collection."""
+    coll = bpy.data.collections.new(name)
+    sc.collection.children.link(coll)
+    for c in ob.users_collection:
+        c.objects.unlink(ob)
+    coll.objects.link(ob)
+    return bpy.context.view_layer.layer_collection.children[name]
+
+
+def collection_instance(ob, name, location):
+    """An empty instancing a new excluded collection "Source" that holds only ob."""
+    move_to_collection(ob, "Source").exclude = True
+    instancer = bpy.data.objects.new(name, None)
+    instancer.instance_type, instancer.instance_collection = "COLLECTION", bpy.data.collections["Source"]
+    sc.collection.objects.link(instancer)
+    instancer.location = location
+    return instancer
+'''
+FINISH = r'''
 cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera")); sc.collection.objects.link(cam)
 cam.data.lens = 35
 cam.location = (7, -7, 5)
@@ -61,27 +66,23 @@ cam.rotation_euler = (Vector((0, 0, 0.5)) - cam.location).to_track_quat("-Z", "Y
 sc.camera = cam
 bpy.ops.wm.save_as_mainfile(filepath=sys.argv[-1])
 '''
-
-
+VISIBILITY_BUILD = r'''
+bpy.ops.mesh.primitive_cube_add(size=1.5, location=(0, 0, 0.77)); cube = bpy.context.object
+bpy.ops.mesh.primitive_uv_sphere_add(radius=0.7, location=(1.6, 0.4, 0.7)); sphere = bpy.context.object
+bpy.ops.mesh.primitive_cylinder_add(radius=0.4, depth=2.0, location=(-1.2, 1.2, 1.0))
+bpy.ops.mesh.primitive_cube_add(size=1, location=(-0.3, -1.6, 0.5), rotation=(0, 0, 0.6))
+bpy.ops.mesh.primitive_cone_add(radius1=0.5, depth=1.2)
+instancer = collection_instance(bpy.context.object, "ConeInstance", (2.0, -2.0, 0.6))
+if sys.argv[-2] == "flags":
+    cube.visible_camera = False
+    sphere.visible_shadow = False
+    instancer.visible_camera = False
+'''
 HOLDOUT_BUILD = r'''
-import sys, bpy
-from mathutils import Vector
 variant = sys.argv[-2]
-bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
-sc = bpy.context.scene
-sc.render.resolution_x, sc.render.resolution_y, sc.render.resolution_percentage = {w}, {h}, 100
-sc.frame_start = sc.frame_end = 1
-bpy.ops.mesh.primitive_plane_add(size=12)
 bpy.ops.mesh.primitive_cylinder_add(radius=0.4, depth=1.4, location=(0.8, -2.2, 0.72)); post = bpy.context.object
-source = bpy.data.collections.new("Source"); sc.collection.children.link(source)
 bpy.ops.mesh.primitive_cube_add(size=1.5); cube = bpy.context.object
-for c in cube.users_collection:
-    c.objects.unlink(cube)
-source.objects.link(cube)
-bpy.context.view_layer.layer_collection.children["Source"].exclude = True
-instancer = bpy.data.objects.new("CubeInstance", None)
-instancer.instance_type, instancer.instance_collection = "COLLECTION", source
-sc.collection.objects.link(instancer); instancer.location = (0, 0, 0.77)
+instancer = collection_instance(cube, "CubeInstance", (0, 0, 0.77))
 bpy.ops.mesh.primitive_uv_sphere_add(radius=0.4, location=(0, 0, -50)); sphere = bpy.context.object
 bpy.ops.mesh.primitive_plane_add(size=3, location=(2.2, 0.5, 0.4)); carrier = bpy.context.object
 tree = bpy.data.node_groups.new("Spheres", "GeometryNodeTree")
@@ -105,24 +106,15 @@ elif variant == "node_carrier":
 elif variant == "object":
     post.is_holdout = True
 elif variant == "collection":
-    masked = bpy.data.collections.new("Masked"); sc.collection.children.link(masked)
-    for c in post.users_collection:
-        c.objects.unlink(post)
-    masked.objects.link(post)
-    bpy.context.view_layer.layer_collection.children["Masked"].holdout = True
-cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera")); sc.collection.objects.link(cam)
-cam.data.lens = 35
-cam.location = (7, -7, 5)
-cam.rotation_euler = (Vector((0, 0, 0.5)) - cam.location).to_track_quat("-Z", "Y").to_euler()
-sc.camera = cam
-bpy.ops.wm.save_as_mainfile(filepath=sys.argv[-1])
+    move_to_collection(post, "Masked").holdout = True
 '''
 HOLDOUT_VARIANTS = ("none", "member", "instancer", "node_source", "node_carrier", "object", "collection")
 
 
-def make_blend(path, size, flags):
-    code = BUILD.format(w=size[0], h=size[1], flags=flags)
-    subprocess.run([sys.executable, "-c", code, str(path)], check=True, capture_output=True)
+def make_blend(path, size, body, variant):
+    """Save the scene SETUP + body + FINISH builds, with `variant` as its argument, to path."""
+    code = (SETUP + body + FINISH).format(w=size[0], h=size[1])
+    subprocess.run([sys.executable, "-c", code, variant, str(path)], check=True, capture_output=True)
 
 
 def preview(blend, out, samples):
@@ -160,21 +152,19 @@ def main():
         images = {}
         for flags in (True, False):
             name = "visibility" if flags else "all_visible"
-            blend = out / f"{name}.blend"
-            make_blend(blend, args.size, flags)
-            figures, images[flags] = compare(blend, out / name, args.size, args.samples)
-            print(f"{name:12} " + "  ".join(f"{k} {v:.4f}" if isinstance(v, float) else f"{k} {v}"
-                                            for k, v in figures.items()))
+            make_blend(out / f"{name}.blend", args.size, VISIBILITY_BUILD, "flags" if flags else "none")
+            figures, images[flags] = compare(out / f"{name}.blend", out / name, args.size, args.samples)
+            print_figures(f"{name:12}", figures)
         change = rmse(images[True], images[False], np.ones_like(images[True], bool))
         print(f"Cycles, flags on against all visible: RMSE {change:.4f} (how much the flags change the image)")
         for variant in HOLDOUT_VARIANTS:
-            blend = out / f"holdout_{variant}.blend"
-            subprocess.run([sys.executable, "-c", HOLDOUT_BUILD.format(w=args.size[0], h=args.size[1]), variant,
-                            str(blend)], check=True, capture_output=True)
-            figures, _ = compare(blend, out / f"holdout_{variant}", args.size, args.samples)
-            print(f"holdout {variant:12} " + "  ".join(f"{k} {v:.4f}" if isinstance(v, float) else f"{k} {v}"
-                                                    for k, v in figures.items()))
+            make_blend(out / f"holdout_{variant}.blend", args.size, HOLDOUT_BUILD, variant)
+            figures, _ = compare(out / f"holdout_{variant}.blend", out / f"holdout_{variant}", args.size, args.samples)
+            print_figures(f"holdout {variant:12}", figures)
 
+
+def print_figures(label, figures):
+    print(f"{label} " + "  ".join(f"{k} {v:.4f}" if isinstance(v, float) else f"{k} {v}" for k, v in figures.items()))
 
 if __name__ == "__main__":
     main()
