@@ -23,7 +23,8 @@ import numpy as np
 from numba import njit, prange
 
 from .array_views import rows, unowned
-from .instance_traversal import new_scratch, trace_scene, triangle_reach, unowned_scene, world_normal
+from .instance_traversal import (new_scratch, onto_triangle_plane, trace_scene, triangle_reach, unowned_scene,
+                                 world_normal)
 from .layout import NO_HIT
 from .lights import NO_SHADOW
 from .pixel_reuse import segment_meets_any
@@ -192,6 +193,7 @@ def surface_frames(scene, origins, directions, t, inst, prim, hit_index, points,
         r = hit_index[a]
         for k in range(3):
             points[a, k] = origins[r, k] + t[r] * directions[r, k]
+        onto_triangle_plane(scene, inst[r], prim[r], points[a])
         world_normal(scene, inst[r], prim[r], normals[a])
         facing = normals[a, 0] * directions[r, 0] + normals[a, 1] * directions[r, 1] + normals[a, 2] * directions[r, 2]
         if facing > 0.0:

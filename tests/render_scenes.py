@@ -38,3 +38,12 @@ def look_at(position, target, fov=0.8):
 
 def hit_mask(image):
     return image[..., 3] > 0.5
+
+
+def box(center, half):
+    """The 12 outward-facing triangles of an axis-aligned box center +- half."""
+    c, h = np.asarray(center, np.float64), np.asarray(half, np.float64)
+    corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], np.float64) * h + c
+    faces = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1], [2, 3, 7], [2, 7, 6],
+                      [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])
+    return corners[faces]

@@ -4,7 +4,7 @@ import pytest
 
 import core
 from core.camera import tiled_pixels
-from tests.render_scenes import floor, hit_mask, look_at, look_down, quad
+from tests.render_scenes import box, floor, hit_mask, look_at, look_down, quad
 
 
 def render(tris, camera, size=32, **settings):
@@ -326,3 +326,22 @@ def test_huge_triangles_seen_up_close_have_no_acne(half, view):
     gap = core.build_kdtree(np.concatenate([floor(0.0, half=half), floor(h, half=half), far]))
     ao = core.render_preview(gap, camera, 16, 16, samples=256, ao_distance=r)
     assert ao[..., 0].mean() == pytest.approx((h / r) ** 2, abs=0.01)
+
+
+@pytest.mark.parametrize("length", [1e3, 1e5, 1e6])
+@pytest.mark.parametrize("layout", ["flat", "two_level"])
+def test_long_thin_box_is_fully_unoccluded(length, layout):
+    """Nothing can occlude a convex object's own surface, so a lone box has AO exactly 1. A box
+    `length` long and 0.7 wide: its hit points, computed as o + t d, carried t's error of about
+    eps length^2 / width and sat below their face by more than the offset, so AO rays started inside
+    the box (outside QA: dark speckles from length 3e4 on, in the world-space tree). "flat" puts the
+    long triangles in world space; "two_level" keeps a unit cube under a scaling matrix. At 1e7 the
+    float64 triangle test's own t error (~0.03) puts a few camera hits on the wrong face: its limit."""
+    matrix = np.diag([length, 0.35, 0.35, 1.0])
+    matrix[:3, 3] = (-2.0, -2.0, 0.35)
+    unit = box((0, 0, 0), (1, 1, 1)).reshape(-1, 3)
+    scene = core.build_scene([(unit, np.arange(36).reshape(-1, 3))], [0], matrix[None], layout=layout)
+    img = core.render_preview(scene, look_at((8, -8, 6), (0, 0, 0.5), fov=0.8), 64, 48, samples=32,
+                              ao_distance=1.0)
+    assert hit_mask(img).sum() > 300
+    assert (img[..., :3][hit_mask(img)] == 1.0).all()
