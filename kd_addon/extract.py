@@ -388,12 +388,12 @@ def collection_visible(vis: _Visibility, parent, orig: bpy.types.Object) -> bool
 
 
 class _GeometryReader:
-    """Reads each evaluated mesh once; remembers rejects so they warn once."""
+    """Reads each evaluated mesh once; a rejected mesh warns once, naming every object that uses it."""
 
     def __init__(self):
         self.geometries: dict[int, MeshGeometry] = {}
         self.rejected: set[int] = set()
-        self.warnings: list[str] = []
+        self.non_finite: dict[int, tuple[str, set[str]]] = {}  # key -> (mesh name, its objects)
 
     def get(self, mesh: bpy.types.Mesh, object_name: str) -> int | None:
         """Geometry key for `mesh`, or None when it has no usable triangles."""
@@ -401,18 +401,30 @@ class _GeometryReader:
         if key in self.geometries:
             return key
         if key in self.rejected:
+            if key in self.non_finite:
+                self.non_finite[key][1].add(object_name)
             return None
         verts, tris = read_mesh(mesh)
         if len(tris) and not np.isfinite(verts).all():  # 0.5 ms per 1M verts
-            self.warnings.append(
-                f"object '{object_name}' has non-finite vertex coordinates; left out"
-            )
+            self.non_finite[key] = (mesh.name, {object_name})
             tris = tris[:0]
         if len(tris) == 0:
             self.rejected.add(key)
             return None
         self.geometries[key] = MeshGeometry(key, mesh.name, verts, tris)
         return key
+
+    @property
+    def warnings(self) -> list[str]:
+        out = []
+        for mesh_name, users in self.non_finite.values():
+            names = ", ".join(f"'{n}'" for n in sorted(users))
+            if len(users) == 1:
+                out.append(f"object {names} has non-finite vertex coordinates; left out")
+            else:
+                out.append(f"objects {names} (sharing mesh '{mesh_name}') have non-finite vertex coordinates; "
+                           "left out")
+        return out
 
 
 def extract_scene(depsgraph: bpy.types.Depsgraph | None = None) -> ExtractedScene:
@@ -430,7 +442,7 @@ def extract_scene(depsgraph: bpy.types.Depsgraph | None = None) -> ExtractedScen
     return ExtractedScene(
         geometries=walker.geometries.geometries,
         instances=instances,
-        warnings=walker.geometries.warnings + left_out_warnings(depsgraph, vis),
+        warnings=walker.geometries.warnings + walker.warnings + left_out_warnings(depsgraph, vis),
         extract_ms=(time.perf_counter() - t0) * 1e3,
         frame=depsgraph.scene.frame_current,
     )
@@ -477,6 +489,7 @@ class _EntryReader:
         self.geometries = _GeometryReader()
         self._verdicts: dict[tuple[int, int], tuple[str, str | None, bool, bool, bool] | None] = {}
         self._warned: set[str] = set()
+        self.warnings: list[str] = []  # settings the preview does not apply, one per object
 
     def read(self, inst) -> Instance | None:
         """Record for one entry, or None to skip it. Copies everything out at
@@ -525,4 +538,4 @@ class _EntryReader:
         unapplied = unapplied_object_settings(orig, self.vis.view_layer)
         if unapplied and orig.name not in self._warned:
             self._warned.add(orig.name)
-            self.geometries.warnings.append(f"object '{orig.name}': {', '.join(unapplied)} not applied by the preview")
+            self.warnings.append(f"object '{orig.name}': {', '.join(unapplied)} not applied by the preview")

@@ -333,6 +333,18 @@ def test_non_finite_vertices_left_out_with_warning(scene):
     assert result.warnings == ["object 'Broken' has non-finite vertex coordinates; left out"]
 
 
+def test_a_shared_non_finite_mesh_warns_once_naming_every_user(scene):
+    verts = [(0, 0, 0), (1, 0, 0), (float("inf"), 1, 0)]
+    first = scenes.add_mesh("Broken", verts, [(0, 1, 2)])
+    for name in ("Twin", "Triplet"):
+        scenes.link(bpy.data.objects.new(name, first.data))
+    scenes.add_cube("Good")
+    result = extract_scene()
+    assert result.object_names == ["Good"]
+    assert result.warnings == ["objects 'Broken', 'Triplet', 'Twin' (sharing mesh 'Broken') have non-finite "
+                               "vertex coordinates; left out"]
+
+
 # --- record layout and helpers ------------------------------------------------
 
 
