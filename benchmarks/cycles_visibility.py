@@ -1,4 +1,4 @@
-"""Per-object Ray Visibility and Holdout against Cycles' AO pass: the preview's image of a scene whose
+"""Per-object Ray Visibility, Holdout and Indirect Only against Cycles' AO pass: the preview's image of a scene whose
 objects have camera or shadow rays off, or are holdouts, compared with Cycles' on the same .blend.
 
 Usage: .venv/bin/python benchmarks/cycles_visibility.py [--size 160 120] [--samples 64] [--out DIR]
@@ -13,8 +13,10 @@ seed-to-seed RMSE (the noise floor), plus the same for the scene with every flag
 much the flags change the image. Then the holdout scenes (HOLDOUT_BUILD): a ground plane, a cube
 seen through a collection instance and spheres instanced by geometry nodes, each with no holdout, a
 holdout member of the instanced collection, a holdout instancer, a holdout node source object, a
-holdout node carrier, a holdout plain object and a plain object in a holdout collection. Cycles reads
-holdout from the object itself or, for an instance, from its top-level instancer only.
+holdout node carrier, a holdout plain object and a plain object in a holdout collection; and the
+same scene with the plain object, the collection instancer or the node carrier in an Indirect Only
+collection, and a holdout in one. Cycles reads holdout and Indirect Only
+from the object itself or, for an instance, from its top-level instancer only.
 """
 import argparse
 import subprocess
@@ -107,8 +109,18 @@ elif variant == "object":
     post.is_holdout = True
 elif variant == "collection":
     move_to_collection(post, "Masked").holdout = True
+elif variant == "indirect_object":
+    move_to_collection(post, "Indirect").indirect_only = True
+elif variant == "indirect_instancer":
+    move_to_collection(instancer, "Indirect").indirect_only = True
+elif variant == "indirect_carrier":
+    move_to_collection(carrier, "Indirect").indirect_only = True
+elif variant == "indirect_holdout":
+    move_to_collection(post, "Indirect").indirect_only = True
+    post.is_holdout = True
 '''
-HOLDOUT_VARIANTS = ("none", "member", "instancer", "node_source", "node_carrier", "object", "collection")
+HOLDOUT_VARIANTS = ("none", "member", "instancer", "node_source", "node_carrier", "object", "collection",
+                    "indirect_object", "indirect_instancer", "indirect_carrier", "indirect_holdout")
 
 
 def make_blend(path, size, body, variant):
@@ -160,7 +172,7 @@ def main():
         for variant in HOLDOUT_VARIANTS:
             make_blend(out / f"holdout_{variant}.blend", args.size, HOLDOUT_BUILD, variant)
             figures, _ = compare(out / f"holdout_{variant}.blend", out / f"holdout_{variant}", args.size, args.samples)
-            print_figures(f"holdout {variant:12}", figures)
+            print_figures(f"holdout {variant:18}", figures)
 
 
 def print_figures(label, figures):

@@ -49,8 +49,11 @@ Render visibility (the viewport depsgraph also holds render-hidden objects)
       top-level instancer only, as Cycles does (measured: a holdout member of an
       instanced collection, or a holdout source object of geometry-nodes
       instances, changed nothing; a holdout instancer made all its instances
-      holdouts). Indirect Only (a Cycles collection setting) is not applied and
-      is named in the warnings.
+      holdouts). Indirect Only (a collection setting, ``indirect_only_get``) is
+      read the same way and turns camera rays off, unless the object is a
+      holdout: Cycles' AO pass and alpha were bit-identical to camera rays off
+      for an object, a collection instancer and a geometry-nodes carrier, and
+      to the holdout alone for a holdout in an Indirect Only collection.
     * Limitation (the preview follows the viewport here): objects the viewport
       does not show -- eye icon (``hide_set``), ``hide_viewport``, collections
       disabled in viewports -- are not yielded by the viewport depsgraph, so
@@ -348,13 +351,6 @@ def ray_flags(*objs) -> tuple[bool, bool]:
     return all(ob.visible_camera for ob in objs), all(ob.visible_shadow for ob in objs)
 
 
-def unapplied_object_settings(ob, view_layer) -> list[str]:
-    """The settings of a rendered object that the preview ignores: Indirect Only, which changes what
-    Cycles shows where the object is seen directly (measured: those pixels kept alpha 1 but their AO
-    changed); the preview shows it like any surface."""
-    return ["Indirect Only"] if ob.indirect_only_get(view_layer=view_layer) else []
-
-
 def _instancer_hides_self(orig: bpy.types.Object, evaluated: bpy.types.Object) -> bool:
     """Particle / vertex / face / collection instancers may hide themselves."""
     if orig.show_instancer_for_render:
@@ -442,7 +438,7 @@ def extract_scene(depsgraph: bpy.types.Depsgraph | None = None) -> ExtractedScen
     return ExtractedScene(
         geometries=walker.geometries.geometries,
         instances=instances,
-        warnings=walker.geometries.warnings + walker.warnings + left_out_warnings(depsgraph, vis),
+        warnings=walker.geometries.warnings + left_out_warnings(depsgraph, vis),
         extract_ms=(time.perf_counter() - t0) * 1e3,
         frame=depsgraph.scene.frame_current,
     )
@@ -488,8 +484,6 @@ class _EntryReader:
         self.vis = vis
         self.geometries = _GeometryReader()
         self._verdicts: dict[tuple[int, int], tuple[str, str | None, bool, bool, bool] | None] = {}
-        self._warned: set[str] = set()
-        self.warnings: list[str] = []  # settings the preview does not apply, one per object
 
     def read(self, inst) -> Instance | None:
         """Record for one entry, or None to skip it. Copies everything out at
@@ -522,20 +516,12 @@ class _EntryReader:
         orig = ob.original
         memo_key = (orig.as_pointer(), parent.as_pointer() if parent else 0)
         if memo_key not in self._verdicts:
-            flags = ray_flags(orig) if parent is None else ray_flags(orig, parent.original)
-            visible = any(flags) and _entry_visible(self.vis, parent, ob)
+            camera, shadow = ray_flags(orig) if parent is None else ray_flags(orig, parent.original)
+            owner = orig if parent is None else parent.original  # Cycles reads these from the instancer
+            holdout = owner.holdout_get(view_layer=self.vis.view_layer)
+            if not holdout and owner.indirect_only_get(view_layer=self.vis.view_layer):
+                camera = False  # Indirect Only hides from camera rays; a holdout stays a holdout
+            visible = (camera or shadow) and _entry_visible(self.vis, parent, ob)
             instancer = parent.original.name if parent is not None else None
-            owner = orig if parent is None else parent.original  # Cycles reads holdout from the instancer
-            holdout = visible and owner.holdout_get(view_layer=self.vis.view_layer)
-            self._verdicts[memo_key] = (orig.name, instancer, *flags, holdout) if visible else None
-            if visible:
-                self._warn_unapplied(owner)
+            self._verdicts[memo_key] = (orig.name, instancer, camera, shadow, holdout) if visible else None
         return self._verdicts[memo_key]
-
-    def _warn_unapplied(self, orig) -> None:
-        """Once per object: the settings of a rendered object that Cycles applies and the preview
-        does not (unapplied_object_settings), so its image differs there."""
-        unapplied = unapplied_object_settings(orig, self.vis.view_layer)
-        if unapplied and orig.name not in self._warned:
-            self._warned.add(orig.name)
-            self.warnings.append(f"object '{orig.name}': {', '.join(unapplied)} not applied by the preview")

@@ -69,11 +69,12 @@ def new_collection(name, *, parent=None, exclude=False):
     return coll
 
 
-def add_collection_instance(name, collection, *, location=(0, 0, 0)):
-    """Empty that instances `collection` at `location`."""
-    obj = add_empty(name, location=location)
+def add_collection_instance(name, source, *, location=(0, 0, 0), collection=None):
+    """Empty that instances collection `source` at `location`, linked into `collection` (default the
+    scene's)."""
+    obj = add_empty(name, location=location, collection=collection)
     obj.instance_type = "COLLECTION"
-    obj.instance_collection = collection
+    obj.instance_collection = source
     return obj
 
 

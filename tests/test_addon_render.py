@@ -138,9 +138,9 @@ def test_light_settings_the_preview_does_not_apply_are_named(addon):  # noqa: F8
 
 
 def test_object_ray_visibility_is_applied_and_changes_the_next_frame(addon):  # noqa: F811
-    """Cycles' Ray Visibility: with camera rays off the cube is not seen but still occludes the ground
-    (inside its footprint, under its top and between its walls, AO is well below 1, where its open
-    top is 1); with shadow rays off it is seen but the
+    """Cycles' Ray Visibility: with camera rays off (or in an Indirect Only collection) the cube is not
+    seen but still occludes the ground (inside its footprint, under its top and between its walls, AO
+    is well below 1, where its open top is 1); with shadow rays off it is seen but the
     ground beside it is open. Each toggle renders anew (the last image is not reused), and a lazy
     build, one tree that cannot tell objects apart, names the cube instead."""
     scene = half_plane_scene()
@@ -153,7 +153,20 @@ def test_object_ray_visibility_is_applied_and_changes_the_next_frame(addon):  # 
     plain, _ = ao()
     box.visible_camera = False
     unseen, _ = ao()
-    box.visible_camera, box.visible_shadow = True, False
+    box.visible_camera = True
+    homes = list(box.users_collection)
+    indirect = scenes.new_collection("Indirect")
+    bpy.context.view_layer.layer_collection.children["Indirect"].indirect_only = True
+    for home in homes:
+        home.objects.unlink(box)
+    indirect.objects.link(box)
+    indirect_only, warnings = ao()  # Cycles: the same image as camera rays off (extract.py)
+    np.testing.assert_array_equal(indirect_only, unseen)
+    assert not warnings
+    indirect.objects.unlink(box)
+    for home in homes:
+        home.objects.link(box)
+    box.visible_shadow = False
     no_shadow, warnings = ao()
     assert plain[column_of(-2.0)] == 1.0 and unseen[column_of(-2.0)] < 0.6 and no_shadow[column_of(-2.0)] == 1.0
     assert plain[column_of(-2.6)] < 0.9 and unseen[column_of(-2.6)] < 0.9 and no_shadow[column_of(-2.6)] == 1.0

@@ -301,10 +301,11 @@ def test_ray_visibility_flags_are_read_and_anded_with_the_instancer(scene):
     assert result.warnings == []
 
 
-def test_holdout_is_read_from_the_object_or_its_instancer_and_indirect_only_is_named(scene):
-    """Holdout as Cycles reads it (measured with Cycles, see extract.py): an object's own flag or its
-    holdout collection; for an instance only the top-level instancer's, so a holdout member of an
-    instanced collection is not one. Indirect Only, not applied, is named once."""
+def test_holdout_and_indirect_only_are_read_from_the_object_or_its_instancer(scene):
+    """Holdout and Indirect Only as Cycles reads them (measured with Cycles, see extract.py): an
+    object's own flag or its collection's; for an instance only the top-level instancer's, so a
+    holdout member of an instanced collection is not one. Indirect Only turns camera rays off,
+    except on a holdout; with shadow rays off too the object is left out."""
     scenes.add_cube("Plain")
     scenes.add_cube("Hole").is_holdout = True
     masked = scenes.new_collection("Masked")
@@ -313,15 +314,20 @@ def test_holdout_is_read_from_the_object_or_its_instancer_and_indirect_only_is_n
     indirect = scenes.new_collection("Indirect")
     bpy.context.view_layer.layer_collection.children["Indirect"].indirect_only = True
     scenes.add_cube("Bounce", collection=indirect)
+    scenes.add_cube("HeldBounce", collection=indirect).is_holdout = True
+    scenes.add_cube("Gone", collection=indirect).visible_shadow = False
     source = scenes.new_collection("Src", exclude=True)
     scenes.add_cube("Member", collection=source).is_holdout = True
     scenes.add_collection_instance("Shown", source, location=(0.0, 5.0, 0.0))
     scenes.add_collection_instance("Cutout", source, location=(3.0, 5.0, 0.0)).is_holdout = True
+    scenes.add_collection_instance("Bounced", source, location=(6.0, 5.0, 0.0), collection=indirect)
     result = extract_scene()
-    holdouts = sorted((i.name, i.instancer, i.holdout) for i in result.instances)
-    assert holdouts == [("Bounce", None, False), ("Hole", None, True), ("InMasked", None, True),
-                        ("Member", "Cutout", True), ("Member", "Shown", False), ("Plain", None, False)]
-    assert result.warnings == ["object 'Bounce': Indirect Only not applied by the preview"]
+    flags = sorted((i.name, i.instancer, i.holdout, i.camera, i.shadow) for i in result.instances)
+    assert flags == [("Bounce", None, False, False, True), ("HeldBounce", None, True, True, True),
+                     ("Hole", None, True, True, True), ("InMasked", None, True, True, True),
+                     ("Member", "Bounced", False, False, True), ("Member", "Cutout", True, True, True),
+                     ("Member", "Shown", False, True, True), ("Plain", None, False, True, True)]
+    assert result.warnings == []
 
 
 def test_non_finite_vertices_left_out_with_warning(scene):
