@@ -53,7 +53,8 @@ class PreviewRender:
     identity matrix, so both take the same kernels (the overhead is measured in the README).
 
     Settings: mode ("ao", "shadow", "ao+shadow"), samples (per pixel), ao_distance, lights (core.Light),
-    seed, sampler ("sobol" or "random"), error_target (None: off), min_samples, ambient, threads.
+    seed (any integer, taken modulo 2^32), sampler ("sobol" or "random"), error_target (None: off),
+    min_samples, ambient, threads.
 
     previous: the last frame's `pixel_state()`. With the same camera, lights and settings, and a scene
     from the same SceneBuilder (whose instance signature says what changed), pixels whose rays cannot

@@ -121,6 +121,7 @@ class SceneBuilder:
                 shape = np.shape(a)
                 if not (len(shape) == 2 and shape[1] == 3) and not (name == "triangles" and np.size(a) == 0):
                     raise ValueError(f"mesh {m.key!r}: {name} must have shape (N, 3), got {shape}")
+            _check_finite(m)
         self._track_changes(meshes, mesh_of, o2w, visibility)
         bounds = _bounds(meshes)
         met = stops_rays(visibility)  # an instance no ray meets is left out altogether
@@ -267,6 +268,25 @@ def _gather(mesh):
     if tris.size and (tris.min() < 0 or tris.max() >= len(verts)):
         raise ValueError(f"mesh {mesh.key!r}: triangle indices must be in [0, {len(verts)})")
     return verts[tris]
+
+
+def _check_finite(mesh):
+    """Name a mesh's first triangle with a NaN or inf vertex (or its first such vertex, if no triangle
+    uses one) before anything merges it: in a soup the NaN spread to the merged meshes' common centre,
+    and the error named another triangle, all NaN (outside QA)."""
+    verts = np.asarray(mesh.vertices)
+    finite = np.isfinite(verts).all(axis=1)
+    if finite.all():
+        return
+    tris = np.asarray(mesh.triangles).reshape(-1, 3)
+    if tris.size and tris.dtype.kind in "iu" and tris.min() >= 0 and tris.max() < len(verts):
+        uses_bad = ~finite[tris].all(axis=1)
+        if uses_bad.any():
+            t = int(np.flatnonzero(uses_bad)[0])
+            raise ValueError(f"mesh {mesh.key!r}: triangle {t} has a non-finite vertex coordinate (NaN or inf): "
+                             f"{verts[tris[t]].tolist()}")
+    v = int(np.flatnonzero(~finite)[0])
+    raise ValueError(f"mesh {mesh.key!r}: vertex {v} is not finite: {verts[v].tolist()}")
 
 
 def _bounds(meshes):

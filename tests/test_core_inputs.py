@@ -216,3 +216,17 @@ def test_progressive_calls_name_bad_arguments(tree):
     with pytest.raises(ValueError, match="denoise must be True or False"):
         render.image(denoise="yes")
     assert render.step(2) == 2 and render.samples_done == 2
+
+
+@pytest.mark.parametrize("layout", ["auto", "flat", "two_level"])
+def test_a_non_finite_vertex_names_its_mesh_and_triangle_in_every_layout(layout):
+    """Found by outside QA: in a soup the NaN spread to the merged meshes and the error named
+    triangle 0 of the soup, all NaN."""
+    good, bad = _box_mesh(), _box_mesh()
+    bad[0][16, 2] = np.nan  # vertex 16: triangle 5's second vertex
+    with pytest.raises(ValueError, match=r"mesh 1: triangle 5 has a non-finite vertex coordinate \(NaN or inf\): "
+                                         r"\[\[.*\], \[.*, nan\], \[.*\]\]"):
+        core.build_scene([good, bad], [0, 1], np.stack([np.eye(4)] * 2), layout=layout)
+    unused = (np.concatenate([good[0], [[np.inf, 0.0, 0.0]]]), good[1])
+    with pytest.raises(ValueError, match=r"mesh 1: vertex 60 is not finite: \[inf, 0.0, 0.0\]"):
+        core.build_scene([good, unused], [0, 1], np.stack([np.eye(4)] * 2), layout=layout)
