@@ -154,20 +154,23 @@ def _trace_block(scene, origins, directions, tmin, tmax, any_hit, ray_mask, star
 
 
 @njit(cache=True, inline="always")
-def world_normal(scene, inst, prim, out):
-    """Unit geometric normal of an instance's triangle in world space: the object-space normal times
-    the inverse transpose of the object-to-world matrix, i.e. the transposed world-to-object matrix.
-    A mirroring matrix flips its side; callers turn it to face the ray anyway."""
-    tris = scene[16]
-    tri = tris[scene[10][scene[7][inst]] + prim]
-    w2o = rows(scene[6], inst, inst + 1)[0]
+def _object_normal(tri):
+    """The unnormalised object-space normal e1 x e2 of a float32 triangle, in float64."""
     e1x, e1y, e1z = (np.float64(tri[1, 0]) - tri[0, 0], np.float64(tri[1, 1]) - tri[0, 1],
                      np.float64(tri[1, 2]) - tri[0, 2])
     e2x, e2y, e2z = (np.float64(tri[2, 0]) - tri[0, 0], np.float64(tri[2, 1]) - tri[0, 1],
                      np.float64(tri[2, 2]) - tri[0, 2])
-    nx = e1y * e2z - e1z * e2y
-    ny = e1z * e2x - e1x * e2z
-    nz = e1x * e2y - e1y * e2x
+    return e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
+
+
+@njit(cache=True, inline="always")
+def world_normal(scene, inst, prim, out):
+    """Unit geometric normal of an instance's triangle in world space: the object-space normal times
+    the inverse transpose of the object-to-world matrix, i.e. the transposed world-to-object matrix.
+    A mirroring matrix flips its side; callers turn it to face the ray anyway."""
+    tri = scene[16][scene[10][scene[7][inst]] + prim]
+    w2o = rows(scene[6], inst, inst + 1)[0]
+    nx, ny, nz = _object_normal(tri)
     for k in range(3):
         out[k] = w2o[0, k] * nx + w2o[1, k] * ny + w2o[2, k] * nz
     norm = np.sqrt(out[0] * out[0] + out[1] * out[1] + out[2] * out[2])
@@ -227,11 +230,7 @@ def onto_triangle_plane(scene, inst, prim, p):
     tri = scene[16][scene[10][scene[7][inst]] + prim]
     a = rows(scene[6], inst, inst + 1)[0]
     qx, qy, qz = _object_point(a, p)
-    e1x, e1y, e1z = (np.float64(tri[1, 0]) - tri[0, 0], np.float64(tri[1, 1]) - tri[0, 1],
-                     np.float64(tri[1, 2]) - tri[0, 2])
-    e2x, e2y, e2z = (np.float64(tri[2, 0]) - tri[0, 0], np.float64(tri[2, 1]) - tri[0, 1],
-                     np.float64(tri[2, 2]) - tri[0, 2])
-    nx, ny, nz = e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
+    nx, ny, nz = _object_normal(tri)
     nn = nx * nx + ny * ny + nz * nz
     if nn == 0.0:  # a degenerate triangle is never hit; nothing to project onto
         return

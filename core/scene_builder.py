@@ -117,11 +117,7 @@ class SceneBuilder:
         if len(set(keys)) != len(keys):
             raise ValueError("mesh keys must be unique within a frame")
         for m in meshes:
-            for name, a in (("vertices", m.vertices), ("triangles", m.triangles)):
-                shape = np.shape(a)
-                if not (len(shape) == 2 and shape[1] == 3) and not (name == "triangles" and np.size(a) == 0):
-                    raise ValueError(f"mesh {m.key!r}: {name} must have shape (N, 3), got {shape}")
-            _check_finite(m)
+            _check_mesh(m)
         self._track_changes(meshes, mesh_of, o2w, visibility)
         bounds = _bounds(meshes)
         met = stops_rays(visibility)  # an instance no ray meets is left out altogether
@@ -260,31 +256,32 @@ def _checked_origin(origin):
 
 
 def _gather(mesh):
-    """(T, 3, 3) float32 object-space triangles of a MeshInput, with its indices checked."""
-    tris = np.asarray(mesh.triangles)
+    """(T, 3, 3) float32 object-space triangles of a MeshInput checked by _check_mesh."""
+    return np.asarray(mesh.vertices, np.float32)[np.asarray(mesh.triangles)]
+
+
+def _check_mesh(mesh):
+    """A ValueError naming the mesh for wrong shapes, non-integer or out-of-range indices, and the first
+    triangle with a NaN or inf vertex (or the first such vertex, if no triangle uses one). All before
+    anything merges the mesh: in a soup a NaN spread to the merged meshes' common centre, and the error
+    named another triangle, all NaN (outside QA)."""
+    for name, a in (("vertices", mesh.vertices), ("triangles", mesh.triangles)):
+        shape = np.shape(a)
+        if not (len(shape) == 2 and shape[1] == 3) and not (name == "triangles" and np.size(a) == 0):
+            raise ValueError(f"mesh {mesh.key!r}: {name} must have shape (N, 3), got {shape}")
+    tris, verts = np.asarray(mesh.triangles), np.asarray(mesh.vertices)
     if tris.size and tris.dtype.kind not in "iu":
         raise ValueError(f"mesh {mesh.key!r}: triangles must be integer vertex indices, got dtype {tris.dtype}")
-    verts = np.asarray(mesh.vertices, np.float32)
     if tris.size and (tris.min() < 0 or tris.max() >= len(verts)):
         raise ValueError(f"mesh {mesh.key!r}: triangle indices must be in [0, {len(verts)})")
-    return verts[tris]
-
-
-def _check_finite(mesh):
-    """Name a mesh's first triangle with a NaN or inf vertex (or its first such vertex, if no triangle
-    uses one) before anything merges it: in a soup the NaN spread to the merged meshes' common centre,
-    and the error named another triangle, all NaN (outside QA)."""
-    verts = np.asarray(mesh.vertices)
-    finite = np.isfinite(verts).all(axis=1)
-    if finite.all():
+    if np.isfinite(verts).all():
         return
-    tris = np.asarray(mesh.triangles).reshape(-1, 3)
-    if tris.size and tris.dtype.kind in "iu" and tris.min() >= 0 and tris.max() < len(verts):
-        uses_bad = ~finite[tris].all(axis=1)
-        if uses_bad.any():
-            t = int(np.flatnonzero(uses_bad)[0])
-            raise ValueError(f"mesh {mesh.key!r}: triangle {t} has a non-finite vertex coordinate (NaN or inf): "
-                             f"{verts[tris[t]].tolist()}")
+    finite = np.isfinite(verts).all(axis=1)
+    uses_bad = ~finite[tris.reshape(-1, 3).astype(np.intp, copy=False)].all(axis=1)
+    if uses_bad.any():
+        t = int(np.flatnonzero(uses_bad)[0])
+        raise ValueError(f"mesh {mesh.key!r}: triangle {t} has a non-finite vertex coordinate (NaN or inf): "
+                         f"{verts[tris[t]].tolist()}")
     v = int(np.flatnonzero(~finite)[0])
     raise ValueError(f"mesh {mesh.key!r}: vertex {v} is not finite: {verts[v].tolist()}")
 
