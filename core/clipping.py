@@ -31,15 +31,26 @@ def clip_triangle(tri, box, scratch_a, scratch_b, out):
             poly[i, k] = tri[i, k]
     n = 3
     for axis in range(3):
-        n = _clip_plane(poly, n, axis, box[axis], 1.0, other)
-        poly, other = other, poly
-        if n == 0:
-            return False
-        n = _clip_plane(poly, n, axis, box[axis + 3], -1.0, other)
-        poly, other = other, poly
-        if n == 0:
-            return False
+        for side in range(2):  # the box's low plane, then its high one
+            plane, sign = box[axis + 3 * side], 1.0 - 2.0 * side
+            if _inside_plane(tri, axis, plane, sign):
+                continue  # the whole triangle is on the kept side: the clip would copy the polygon
+            n = _clip_plane(poly, n, axis, plane, sign, other)
+            poly, other = other, poly
+            if n == 0:
+                return False
     _polygon_box(poly, n, box, out)
+    return True
+
+
+@njit(cache=True, inline="always")
+def _inside_plane(tri, axis, plane, sign):
+    """Does the whole triangle lie on the kept side of the plane (as _clip_plane measures it)?
+    A straddler is usually small against its node, so most of the six planes cut nothing. Skipping
+    them leaves the polygon as the copy would, and the tree bit-identical (checked on suzanne-251k)."""
+    for i in range(3):
+        if sign * (np.float64(tri[i, axis]) - plane) < 0.0:
+            return False
     return True
 
 

@@ -118,32 +118,50 @@ def snap_to_boundaries(boxes, start, end, node_box, params, cost, axis, pos):
     binned optimum follows Hunt, Mark and Stoll 2006 (sampled SAH, refined near its minimum). Planar
     references lying on a candidate go to the cheaper side (planar_left), as in the exact sweep."""
     step = (np.float64(node_box[axis + 3]) - node_box[axis]) / params.bins
-    below, above = pos - step, pos + step
-    for i in range(start, end):  # nearest boundaries strictly below and above pos, within one bin
-        for v in (boxes[i, axis], boxes[i, axis + 3]):
-            if below < v < pos:
-                below = v
-            elif pos < v < above:
-                above = v
-    c_lo, c_hi = np.float32(below), np.float32(above)
-    counts = np.zeros((2, 3), np.int64)  # per candidate: left, right, planar on it
-    for i in range(start, end):  # one pass counts both candidates
-        lo, hi = boxes[i, axis], boxes[i, axis + 3]
-        for j, c in enumerate((c_lo, c_hi)):
-            if lo == hi == c:
-                counts[j, 2] += 1
-            else:
-                counts[j, 0] += lo < c
-                counts[j, 1] += hi > c
+    near = _nearest_boundaries(boxes, start, end, axis, pos, step)
     best = (cost, axis, pos, False)
     inv_area = 1.0 / half_area(node_box)
-    for j, c in enumerate((c_lo, c_hi)):
+    for c, n_left, n_right, n_planar in near:
+        c = np.float32(c)
         if not (valid_position(node_box, axis, c) and pos - step < c < pos + step):
             continue
-        n_left, n_right, n_planar = counts[j, 0], counts[j, 1], counts[j, 2]
         for planar_left in (True, False):
             c_cost = split_cost(node_box, inv_area, axis, c, n_left + n_planar * planar_left,
                                 n_right + n_planar * (not planar_left), params)
             if c_cost < best[0]:
                 best = (c_cost, axis, c, planar_left)
     return best
+
+
+@njit(cache=True)
+def _nearest_boundaries(boxes, start, end, axis, pos, step):
+    """The box boundaries nearest to pos strictly below and above it within one bin, each with the
+    references left of it, right of it and lying in it: ((below, left, right, planar), (above, ...)).
+
+    One pass, where there were two (one to find them, one to count at them): it counts exactly at
+    pos and, for the running nearest boundary on each side, the references that begin, end and lie
+    there. No boundary falls strictly between the nearest one and
+    pos, so the counts at it follow from those at pos. Where no boundary lies within the bin, the
+    candidate is the bin's edge, which snap_to_boundaries rejects or which no boundary reaches."""
+    below, above = pos - step, pos + step
+    left_of_pos = right_of_pos = begin_at_pos = end_at_pos = 0
+    begin_below = end_below = planar_below = begin_above = end_above = planar_above = 0
+    for i in range(start, end):
+        lo, hi = boxes[i, axis], boxes[i, axis + 3]
+        left_of_pos += lo < pos
+        right_of_pos += hi > pos
+        begin_at_pos += lo == pos
+        end_at_pos += hi == pos
+        for v in (lo, hi):
+            if below < v < pos:
+                below, begin_below, end_below, planar_below = v, 0, 0, 0
+            elif pos < v < above:
+                above, begin_above, end_above, planar_above = v, 0, 0, 0
+        begin_below += lo == below
+        end_below += hi == below
+        planar_below += lo == hi == below
+        begin_above += lo == above
+        end_above += hi == above
+        planar_above += lo == hi == above
+    return ((below, left_of_pos - begin_below, right_of_pos + end_at_pos, planar_below),
+            (above, left_of_pos + begin_at_pos, right_of_pos - end_above, planar_above))

@@ -176,3 +176,29 @@ def test_snapping_splits_height_fields_on_their_vertex_lines():
     directions[:50, :2] = 0.0  # straight down, along the vertex lines' planes
     origins[:50, :2] = rng.integers(-40, 41, (50, 2)) / 8.0  # exactly on vertex lines
     assert_same_as_brute(snapped, tris.astype(np.float64), origins, directions)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_snap_candidates_and_their_counts_match_a_brute_force_count(seed):
+    """The one-pass search for the box boundaries nearest the binned plane (split_binned) finds the
+    same planes and the same left / right / planar counts as counting at each plane directly, with
+    many ties and planar boxes (values on a coarse grid)."""
+    from core.split_binned import _nearest_boundaries
+
+    rng = np.random.default_rng(seed)
+    lo = rng.integers(0, 40, 500) / 8.0
+    hi = lo + rng.integers(0, 6, 500) / 8.0 * (rng.random(500) < 0.7)  # 30% planar
+    boxes = np.zeros((500, 6), np.float32)
+    boxes[:, 1], boxes[:, 4] = lo, hi
+    for pos, step in [(np.float32(2.5), 0.3), (np.float32(2.55), 0.2), (np.float32(0.0), 0.5),
+                      (np.float32(5.0), 0.05), (np.float32(3.1), 1.0)]:
+        below, above = _nearest_boundaries(boxes, 0, 500, 1, pos, step)
+        values = np.concatenate([lo, hi]).astype(np.float32)
+        under, over = values[(values > pos - step) & (values < pos)], values[(values > pos) & (values < pos + step)]
+        for (c, left, right, planar), found in ((below, under.max(initial=-np.inf)), (above, over.min(initial=np.inf))):
+            if not np.isfinite(found):
+                continue  # no boundary within the bin: the candidate is the bin edge, never taken
+            assert c == found
+            c = np.float32(c)
+            lo32, hi32 = boxes[:, 1], boxes[:, 4]
+            assert (left, right, planar) == ((lo32 < c).sum(), (hi32 > c).sum(), ((lo32 == c) & (hi32 == c)).sum())
