@@ -55,7 +55,7 @@ def _initial_references(tris):
 
 
 def _build_arrays(tris, prims, boxes, bounds, opts, threads, timings):
-    params = opts.params(len(prims))
+    params = opts.params(len(prims), bounds)
     t = perf_counter()
     top_nodes, tasks = build_top_levels(tris, prims, boxes, bounds, params, opts.top, threads)
     del prims, boxes

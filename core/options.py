@@ -60,6 +60,12 @@ class BuildOptions:
         speculative building, trading some unneeded building for fewer suspend/build/retrace rounds.
     memory_limit: bytes; a build whose estimated peak memory (memory.py) is above this raises
         memory.MemoryLimitError (a ValueError) before allocating anything. None: no limit.
+    rays: how many rays the tree will answer (for a render: hit pixels x samples x rays a sample,
+        e.g. width x height x 2 for camera rays plus one shadow ray). None: as many as it takes, no
+        build term. Given, a node is split only when the rays expected to enter it save more than the
+        split costs to build (sah.beats_leaf): time to image rather than traversal speed decides where
+        the tree stops, as seed 003 §3.5 tunes its termination for. Few rays a triangle, a shallower
+        tree; many, the same tree as None.
     """
 
     builder: str = "binned"
@@ -80,6 +86,7 @@ class BuildOptions:
     lazy_subtree_size: int = 4096
     lazy_speculative: bool = False
     memory_limit: Optional[int] = None
+    rays: Optional[int] = None
 
     def __post_init__(self):
         _check_choice("builder", self.builder, BUILDERS)
@@ -93,6 +100,8 @@ class BuildOptions:
             _check_int("threads", self.threads, 1, 1024)
         if self.memory_limit is not None:
             _check_int("memory_limit", self.memory_limit, 1, 1 << 62)  # None, not 0, means no limit
+        if self.rays is not None:
+            _check_int("rays", self.rays, 1, 1 << 62)
         _check_float("traversal_cost", self.traversal_cost, 0.0, None)
         _check_float("intersection_cost", self.intersection_cost, 0.0, None, low_open=True)
         _check_float("empty_bonus", self.empty_bonus, 0.0, 1.0, high_open=True)
@@ -108,8 +117,9 @@ class BuildOptions:
             return self.max_depth
         return min(DEPTH_LIMIT, int(1.2 * log2(max(n_triangles, 1)) + 2))
 
-    def params(self, n_triangles):
-        """The numbers the Numba kernels need, as a `BuildParams` tuple."""
+    def params(self, n_triangles, bounds=None):
+        """The numbers the Numba kernels need, as a `BuildParams` tuple (`bounds`: the root box, which
+        the `rays` term needs)."""
         return BuildParams(
             builder=BUILDERS.index(self.builder),
             bins=self.bins,
@@ -124,6 +134,7 @@ class BuildOptions:
             clip=self.clip,
             skip=self.skip,
             defer_size=self.lazy_subtree_size if self.lazy else 0,
+            rays_per_area=_rays_per_area(self.rays, bounds),
         )
 
     def as_dict(self):
@@ -146,6 +157,16 @@ class BuildParams(NamedTuple):
     clip: bool
     skip: bool
     defer_size: int  # build_subtree defers nodes of at most this many references (0: none, eager)
+    rays_per_area: float  # BuildOptions.rays / the root's half area: rays entering a node per unit of
+    # its half area, as the SAH assumes (0: no build term)
+
+
+def _rays_per_area(rays, bounds):
+    if rays is None or bounds is None:
+        return 0.0
+    e = np.asarray(bounds[3:], np.float64) - np.asarray(bounds[:3], np.float64)
+    area = e[0] * e[1] + e[1] * e[2] + e[2] * e[0]
+    return float(rays / area) if area > 0.0 and np.isfinite(area) else 0.0
 
 
 BINNED, EXACT, MEDIAN = 0, 1, 2

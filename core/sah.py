@@ -3,11 +3,12 @@
 Cost of splitting a node with box B at `pos` on `axis` into children L and R (seed 001 eq. 5; pbrt):
     C = Ct + Ci * (1 - bonus) * (A(L) * nL + A(R) * nR) / A(B)
 where bonus is `empty_bonus` when one child is empty and 0 otherwise. A leaf costs Ci * n. A node is
-split only when the best C < cost_ratio * Ci * n (seed 003 §3.5 uses cost_ratio 0.9).
+split only when the best C < cost_ratio * Ci * n (seed 003 §3.5 uses cost_ratio 0.9) and, when the build
+is told how many rays the tree will answer, when the split saves them more than it costs to build.
 """
 from numba import njit
 
-from .geometry import half_area_cut
+from .geometry import half_area, half_area_cut
 
 
 @njit(cache=True, inline="always")
@@ -26,10 +27,27 @@ def cost_of_areas(area_left, area_right, inv_area, n_left, n_right, params):
     return params.traversal_cost + params.intersection_cost * (1.0 - bonus) * weighted
 
 
+# Building a split costs about this many traversal steps per reference of the node, measured on
+# suzanne-251k (README, *Time to image*): the build's time per reference and level against the
+# traversal's time per SAH unit.
+BUILD_COST_PER_REFERENCE = 4.0
+
+
 @njit(cache=True, inline="always")
-def beats_leaf(cost, n, params):
-    """True when a split of this cost is worth more than keeping `n` references in a leaf."""
-    return cost < params.cost_ratio * params.intersection_cost * n
+def beats_leaf(cost, n, node_box, params):
+    """True when a split of this cost is worth more than keeping `n` references in a leaf. With a
+    ray count (params.rays_per_area > 0) it must also pay for itself: the rays expected to enter the
+    node (rays x its area / the root's) times the cost it saves each of them must exceed the build
+    work, BUILD_COST_PER_REFERENCE traversal steps per reference (seed 003 §3.5 terminates for time
+    to image). Only the node's own split is weighed, both ways: the subtree below it saves and costs
+    more, roughly in proportion."""
+    leaf = params.intersection_cost * n
+    if not cost < params.cost_ratio * leaf:
+        return False
+    if params.rays_per_area == 0.0:
+        return True
+    rays = params.rays_per_area * half_area(node_box)
+    return (leaf - cost) * rays > BUILD_COST_PER_REFERENCE * params.traversal_cost * n
 
 
 @njit(cache=True, inline="always")

@@ -27,6 +27,6 @@ def choose_split(boxes, start, end, node_box, depth, params, min_bins, max_bins,
         cost, axis, pos, planar_left = exact_split(boxes, start, end, node_box, params, scratch)
     else:
         cost, axis, pos, planar_left = binned_split(boxes, start, end, node_box, params, min_bins, max_bins)
-    if axis < 0 or not beats_leaf(cost, n, params):
+    if axis < 0 or not beats_leaf(cost, n, node_box, params):
         return NO_SPLIT, np.float32(0.0), False
     return axis, pos, planar_left

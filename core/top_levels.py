@@ -107,7 +107,7 @@ def _top_split(task, params, strategy, threads, nchunks):
     else:
         cost, axis, pos = median_split(task.boxes, 0, n, task.box, params)
         planar_left = False
-    if axis < 0 or not beats_leaf(cost, n, params):
+    if axis < 0 or not beats_leaf(cost, n, task.box, params):
         return -1, 0.0, False
     return axis, pos, planar_left
 

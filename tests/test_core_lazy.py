@@ -9,7 +9,8 @@ from tests.meshes import degenerate_mix, icosphere, lattice, mesh_triangles, ran
 from tests.render_scenes import floor, look_at, quad
 
 BUILDERS = [pytest.param({}, id="binned"), pytest.param({"builder": "exact"}, id="exact"),
-            pytest.param({"builder": "median"}, id="median")]
+            pytest.param({"builder": "median"}, id="median"),
+            pytest.param({"rays": 20_000}, id="binned-rays")]  # a ray count ends subtrees sooner
 SMALL = 16  # deferred subtrees of at most this many references, so small test scenes defer many
 
 

@@ -140,6 +140,9 @@ def test_default_max_depth_follows_seed_003():
     ({"threads": 0}, "threads"),
     ({"clip": "yes"}, "clip"),
     ({"top": "random"}, "top"),
+    ({"rays": 0}, "rays"),
+    ({"rays": 2.5}, "rays"),
+    ({"rays": True}, "rays"),
 ])
 def test_bad_options_are_named(bad, message):
     with pytest.raises(ValueError, match=message):
@@ -202,3 +205,22 @@ def test_snap_candidates_and_their_counts_match_a_brute_force_count(seed):
             c = np.float32(c)
             lo32, hi32 = boxes[:, 1], boxes[:, 4]
             assert (left, right, planar) == ((lo32 < c).sum(), (hi32 > c).sum(), ((lo32 == c) & (hi32 == c)).sum())
+
+
+def test_a_ray_count_trims_the_tree_and_answers_stay_exact():
+    """Told how many rays it will answer, the builder stops where a split would cost more to build
+    than it saves them (sah.beats_leaf): fewer rays, fewer nodes; rays beyond any build cost, the
+    default tree exactly; every tree answers like brute force."""
+    tris = random_soup(np.random.default_rng(11), 3000).astype(np.float32)
+    default = core.build_kdtree(tris)
+    many = core.build_kdtree(tris, rays=10**15)
+    for name in ("axis", "split", "child", "count", "leaf_prims"):
+        assert np.array_equal(getattr(many, name), getattr(default, name)), name
+    nodes = [len(core.build_kdtree(tris, rays=r).axis) for r in (10**6, 10**4, 10**2)]
+    assert len(default.axis) >= nodes[0] >= nodes[1] >= nodes[2]
+    assert nodes[2] < len(default.axis) / 4  # a hundred rays do not pay for a deep tree
+    rng = np.random.default_rng(3)
+    origins = rng.uniform(-2, 2, (500, 3))
+    directions = rng.normal(size=(500, 3))
+    for rays in (10**4, 10**2):
+        assert_same_as_brute(core.build_kdtree(tris, rays=rays), tris.astype(np.float64), origins, directions)
