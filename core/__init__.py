@@ -11,12 +11,14 @@ Public API:
     PreviewRender(tree, camera, width, height, ..., previous=None)   progressive: step(), image(), done;
         pixel_state() -> PixelState: continue the next frame from it (previous=), keeping the pixels
         whose rays cannot reach what changed (scenes from a SceneBuilder)
+    frame_ray_count(width, height, mode, samples, lights) -> int: the most rays a render traces (for the
+        build option rays, which trims a tree that serves few rays: see BuildOptions)
     memory.build_bytes / memory.render_bytes: peak-memory estimates; MemoryLimitError
 Two-level scenes (a kd-tree per mesh in object space under a top-level tree over instances):
     build_two_level(mesh_trees, mesh_of, matrices, visibility=None, **options) -> TwoLevelScene
     build_scene(meshes, mesh_of, matrices, origin=None, layout="auto", visibility=None, **options)
-    SceneBuilder(layout="auto", **options).build(MeshInputs, mesh_of, matrices, origin, reuse, visibility)
-        -> (scene, report)
+    SceneBuilder(layout="auto", **options).build(MeshInputs, mesh_of, matrices, origin, reuse, visibility,
+        rays) -> (scene, report); rays: the frame's ray count, for the trees of deforming meshes
     intersect_scene / occluded_scene (scene or tree, origins, directions, ..., ray_mask=ALL_RAYS)
         -> SceneHits / (R,) bool
     Per-instance ray visibility (Blender's Ray Visibility, as Cycles applies it): visibility bits
@@ -33,7 +35,7 @@ from .build import build_kdtree
 from .camera import Camera
 from .denoise import denoise_pixels
 from .lights import Light
-from .render import PreviewRender, render_preview
+from .render import PreviewRender, frame_ray_count, render_preview
 from .kdtree import KdTree
 from .memory import MemoryLimitError
 from .options import BuildOptions
@@ -46,6 +48,7 @@ from .two_level import TwoLevelScene, build_two_level
 
 __all__ = ["denoise_pixels",
            "build_kdtree", "intersect", "occluded", "KdTree", "Hits", "BuildOptions", "Camera", "Light",
-           "render_preview", "PreviewRender", "TwoLevelScene", "build_two_level", "build_scene", "SceneBuilder",
+           "render_preview", "PreviewRender", "frame_ray_count", "TwoLevelScene", "build_two_level", "build_scene",
+           "SceneBuilder",
            "MeshInput", "BuildReport", "SceneHits", "intersect_scene", "occluded_scene", "MemoryLimitError",
            "PixelState", "CAMERA_RAYS", "SHADOW_RAYS", "ALL_RAYS", "HOLDOUT"]

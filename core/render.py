@@ -294,6 +294,16 @@ def render_preview(tree, camera, width, height, denoise=False, **settings):
     return render.image(denoise)
 
 
+def frame_ray_count(width, height, mode="ao", samples=16, lights=()):
+    """The most rays a render traces: one camera ray a pixel, and for every sample one AO ray (modes
+    with "ao") and one shadow ray a light (modes with "shadow"). What BuildOptions.rays and
+    SceneBuilder.build(rays=...) take for a tree that serves one frame."""
+    if mode not in MODES:
+        raise ValueError(f"mode must be one of {sorted(MODES)}, got {mode!r}")
+    per_sample = ("ao" in mode) + len(lights) * ("shadow" in mode)
+    return int(width) * int(height) * (1 + per_sample * int(samples))
+
+
 def _check_settings(tree, camera, width, height, mode, samples, ao_distance, seed, sampler, error_target,
                     min_samples, ambient, threads):
     if not isinstance(tree, (KdTree, TwoLevelScene)):

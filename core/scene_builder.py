@@ -4,7 +4,10 @@ The caller names each mesh with a key that is stable across frames (e.g. an obje
 fingerprint that changes whenever its geometry does (e.g. a CRC of its vertex and index bytes). Then:
 - a mesh with the same key and fingerprint as last frame keeps its object-space tree, however its
   instances moved; only the top level, built over instance boxes, is rebuilt;
-- a mesh whose fingerprint changed (it deforms) is rebuilt, and from then on counts as dynamic;
+- a mesh whose fingerprint changed (it deforms) is rebuilt, and from then on counts as dynamic; given
+  the frame's ray count (`build(rays=...)`), its later trees are built for that many rays
+  (BuildOptions.rays), since each serves one frame; every other tree may serve many and is built
+  without it;
 - the soup (scene_policy.py: small or overlapping static objects merged into one flat tree per
   visibility) is kept
   while its members' keys, fingerprints and matrices are unchanged. Its triangles are stored relative
@@ -101,13 +104,15 @@ class SceneBuilder:
         self._fingerprints = {}  # key -> fingerprint seen last frame
         self._placements = {}  # key of a single-use mesh -> its matrix and visibility last frame
         self._dynamic = set()  # keys that changed or moved in an earlier frame
+        self._deforming = set()  # keys whose geometry changed in an earlier frame: rebuilt every frame
         self._soups = {}  # visibility -> (signature, KdTree, anchor)
 
-    def build(self, meshes, mesh_of, matrices, origin=None, reuse=True, visibility=None):
+    def build(self, meshes, mesh_of, matrices, origin=None, reuse=True, visibility=None, rays=None):
         """(TwoLevelScene, BuildReport) for one frame. meshes: list of MeshInput; mesh_of (I,) index
         into meshes per instance; matrices (I, 4, 4) object-to-world; origin (3,) subtracted from
         every position (float64) before anything is rounded; visibility (I,) ray_visibility bits per
-        instance (None: every instance stops every ray)."""
+        instance (None: every instance stops every ray); rays: this frame's ray count (e.g.
+        render.frame_ray_count), for the trees of deforming meshes (module docstring), or None."""
         start = perf_counter()
         mesh_of, o2w = check_placement(len(meshes), mesh_of, matrices)
         mesh_of = mesh_of.astype(np.int64)
@@ -118,6 +123,8 @@ class SceneBuilder:
             raise ValueError("mesh keys must be unique within a frame")
         for m in meshes:
             _check_mesh(m)
+        if rays is not None:
+            make_options({"rays": rays})  # a bad count is named before anything is built
         self._track_changes(meshes, mesh_of, o2w, visibility)
         bounds = _bounds(meshes)
         met = stops_rays(visibility)  # an instance no ray meets is left out altogether
@@ -129,7 +136,7 @@ class SceneBuilder:
             raise ValueError("a lazy build has to be the scene's one tree, so the instances merged into it must stop "
                              f"the same rays: got visibilities {sorted(set(visibility[soup].tolist()))}")
         own = ~soup & met
-        trees, new_mesh_of, rebuilt, reused = self._mesh_trees(meshes, mesh_of, own, reuse)
+        trees, new_mesh_of, rebuilt, reused = self._mesh_trees(meshes, mesh_of, own, reuse, rays)
         shifted = o2w[own].copy()
         shifted[:, :3, 3] -= origin
         scene_visibility = [visibility[own]]
@@ -174,6 +181,7 @@ class SceneBuilder:
             before = self._fingerprints.get(m.key)
             if before is not None and before != m.fingerprint:
                 self._dynamic.add(m.key)
+                self._deforming.add(m.key)
             self._fingerprints[m.key] = m.fingerprint
         for inst in np.flatnonzero(uses[mesh_of] == 1):
             key = meshes[mesh_of[inst]].key
@@ -182,9 +190,10 @@ class SceneBuilder:
                 self._dynamic.add(key)
             self._placements[key] = (o2w[inst], visibility[inst])
 
-    def _mesh_trees(self, meshes, mesh_of, instanced, reuse):
+    def _mesh_trees(self, meshes, mesh_of, instanced, reuse, rays):
         """Object-space trees of the meshes instanced this frame, kept or built; (trees, new mesh_of for
-        the instanced instances, built count, kept count)."""
+        the instanced instances, built count, kept count). A deforming mesh's tree is built for `rays`
+        rays, unless the builder's own options give a count."""
         used = np.unique(mesh_of[instanced])
         index = np.full(len(meshes), -1, np.int64)
         index[used] = np.arange(len(used))
@@ -193,7 +202,10 @@ class SceneBuilder:
             m = meshes[i]
             cached = self._trees.get(m.key)
             if not (reuse and cached is not None and cached[0] == m.fingerprint):
-                cached = (m.fingerprint, build_kdtree(_gather(m), **self.options))
+                options = self.options
+                if rays is not None and options["rays"] is None and m.key in self._deforming:
+                    options = {**options, "rays": rays}
+                cached = (m.fingerprint, build_kdtree(_gather(m), **options))
                 self._trees[m.key] = cached
                 rebuilt += 1
             trees.append(cached[1])
@@ -219,6 +231,7 @@ class SceneBuilder:
             for key in [k for k in table if k not in present]:
                 del table[key]
         self._dynamic &= present
+        self._deforming &= present
 
 
 def _anchor(stacked, before):

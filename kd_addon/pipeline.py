@@ -214,7 +214,9 @@ class FrameJob:
     def _build_and_start(self, core, instances, origin, reuse, camera, lights, width, height) -> None:
         """On the worker, holding KERNEL_LOCK: the scene, then the renderer (whose constructor traces
         the camera rays)."""
-        scene, report = self._build(*instances, origin, reuse)
+        options = self.config.render_options
+        rays = core.frame_ray_count(width, height, options.get("mode", "ao"), options.get("samples", 16), lights)
+        scene, report = self._build(*instances, origin, reuse, rays)
         self._info.update(tree_stats=scene.stats(), objects_rebuilt=report.meshes_rebuilt,
                           objects_reused=report.meshes_reused)
         self._start_tracing(core, scene, camera, lights, width, height, self._state.pixels if reuse else None)
@@ -280,11 +282,12 @@ class FrameJob:
         self._timings["extract_ms"] = _ms_since(t0)
         return extracted
 
-    def _build(self, meshes, mesh_of, matrices, visibility, origin: np.ndarray, reuse: bool):
-        """On the worker, holding KERNEL_LOCK."""
+    def _build(self, meshes, mesh_of, matrices, visibility, origin: np.ndarray, reuse: bool, rays: int):
+        """On the worker, holding KERNEL_LOCK. `rays`: the frame's ray count, for the trees of deforming
+        meshes (core.SceneBuilder)."""
         t0 = time.perf_counter()
         scene, report = self._state.builder.build(meshes, mesh_of, matrices, origin=origin, reuse=reuse,
-                                                  visibility=visibility)
+                                                  visibility=visibility, rays=rays)
         self._timings["build_ms"] = _ms_since(t0)
         return scene, report
 

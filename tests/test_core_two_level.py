@@ -253,3 +253,31 @@ def test_builder_soup_leaves_dynamic_objects_out():
     assert reports[1].soup_objects == 2 and reports[1].soup_rebuilt  # the changed one left the soup
     assert reports[2].soup_objects == 2 and not reports[2].soup_rebuilt
     assert (reports[2].meshes_rebuilt, reports[2].meshes_reused) == (1, 2)
+
+
+def test_builder_builds_only_deforming_meshes_for_the_frames_rays():
+    """Given the frame's ray count, a mesh seen deforming (rebuilt every frame) gets a tree trimmed
+    for it; static, rigidly moving and shared meshes keep full trees (they serve many frames); every
+    scene still answers like the flat tree. (Trees read from the builder's cache.)"""
+    builder = core.SceneBuilder(layout="two_level")
+    o, d = _rays(np.random.default_rng(5), 2000, spread=30.0)
+    for frame in range(3):
+        meshes, mesh_of, mats = _frame_inputs(0, frame)
+        scene, _ = builder.build(meshes, mesh_of, mats, rays=100)
+        _assert_matches_flat(scene, _world([m.vertices[m.triangles] for m in meshes], mesh_of, mats), o, d)
+        nodes = {key: len(tree.axis) for key, (_, tree) in builder._trees.items()}
+        full = {m.key: len(core.build_kdtree(m.vertices[m.triangles]).axis) for m in meshes}
+        for key in ("static", "mover", "shared"):
+            assert nodes[key] == full[key]
+        assert (nodes["wave"] < full["wave"] / 2) == (frame >= 1)  # deforming from frame 1 on
+    with pytest.raises(ValueError, match="rays"):
+        builder.build(meshes, mesh_of, mats, rays=0)
+
+
+def test_frame_ray_count_counts_camera_ao_and_shadow_rays():
+    lights = [core.Light.point((0, 0, 1))] * 3
+    assert core.frame_ray_count(4, 3, "ao", 16) == 12 * (1 + 16)
+    assert core.frame_ray_count(4, 3, "shadow", 2, lights) == 12 * (1 + 2 * 3)
+    assert core.frame_ray_count(4, 3, "ao+shadow", 5, lights) == 12 * (1 + 5 * 4)
+    with pytest.raises(ValueError, match="mode"):
+        core.frame_ray_count(4, 3, "occlusion", 1)
