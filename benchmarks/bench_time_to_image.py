@@ -3,8 +3,8 @@
 Usage: python benchmarks/bench_time_to_image.py [--scene suzanne-251k] [--samples 1] [--mode shadow]
                                                [--runs 11] [CONFIG_JSON ...]
 
-Each CONFIG_JSON is a dict of build options (default: '{}' and '{"rays": W*H*2}'); "rays": "frame" stands
-for the frame's ray count W*H*(1 + rays a sample * samples), with one point light. Per setting: median build time,
+Each CONFIG_JSON is a dict of build options (default: '{}' and '{"rays": "frame"}'); "rays": "frame" stands
+for the frame's ray count (core.frame_ray_count), with one point light. Per setting: median build time,
 median render time, median time to image, and the median of the per-run ratios to the first setting
 (the runs alternate their order, so drifts of a shared machine fall on every setting alike).
 """
@@ -36,8 +36,7 @@ def main():
     scene = load_scene(args.scene)
     camera = core.Camera(scene.camera_matrix, scene.camera_fov)
     lights = [core.Light.point((2.0, -3.0, 4.0))]
-    per_sample = ("ao" in args.mode) + len(lights) * ("shadow" in args.mode)  # rays a sample
-    frame_rays = WIDTH * HEIGHT * (1 + per_sample * args.samples)  # and one camera ray a pixel
+    frame_rays = core.frame_ray_count(WIDTH, HEIGHT, args.mode, args.samples, lights)
     configs = []
     for text in args.configs:
         config = json.loads(text)
@@ -46,10 +45,8 @@ def main():
         configs.append(config)
     render = dict(samples=args.samples, mode=args.mode, lights=lights)
     t = time.perf_counter()
-    warm = core.build_kdtree(scene.triangles[:2000])
-    core.render_preview(warm, camera, 8, 8, **render)
-    for config in configs:
-        core.build_kdtree(scene.triangles[:2000], **config)
+    for config in configs:  # the whole scene: its parallel top levels use kernels a small one does not
+        core.render_preview(core.build_kdtree(scene.triangles, **config), camera, 8, 8, **render)
     print(f"JIT compile / cache load: {time.perf_counter() - t:.2f} s (excluded); {args.scene}, {WIDTH}x{HEIGHT}, "
           f"{args.samples} spp {args.mode}, frame ray count {frame_rays:,}")
     builds, totals = [[] for _ in configs], [[] for _ in configs]

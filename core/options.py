@@ -60,9 +60,9 @@ class BuildOptions:
         speculative building, trading some unneeded building for fewer suspend/build/retrace rounds.
     memory_limit: bytes; a build whose estimated peak memory (memory.py) is above this raises
         memory.MemoryLimitError (a ValueError) before allocating anything. None: no limit.
-    rays: how many rays the tree will answer (for a render: hit pixels x samples x rays a sample,
-        e.g. width x height x 2 for camera rays plus one shadow ray). None: as many as it takes, no
-        build term. Given, a node is split only when the rays expected to enter it save more than the
+    rays: how many rays the tree will answer (for one render: core.frame_ray_count, e.g. width x
+        height x 2 for camera rays plus one shadow ray a pixel). None: as many as it takes, no build
+        term. Given, a node is split only when the rays expected to enter it save more than the
         split costs to build (sah.beats_leaf): time to image rather than traversal speed decides where
         the tree stops, as seed 003 §3.5 tunes its termination for. Few rays a triangle, a shallower
         tree; many, the same tree as None.

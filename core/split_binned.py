@@ -140,9 +140,9 @@ def _nearest_boundaries(boxes, start, end, axis, pos, step):
 
     One pass, where there were two (one to find them, one to count at them): it counts exactly at
     pos and, for the running nearest boundary on each side, the references that begin, end and lie
-    there. No boundary falls strictly between the nearest one and
-    pos, so the counts at it follow from those at pos. Where no boundary lies within the bin, the
-    candidate is the bin's edge, which snap_to_boundaries rejects or which no boundary reaches."""
+    there. No boundary falls strictly between the nearest one and pos, so the counts at it follow
+    from those at pos. Where no boundary lies within the bin, the candidate is the bin's edge, which
+    snap_to_boundaries rejects or which no boundary reaches."""
     below, above = pos - step, pos + step
     left_of_pos = right_of_pos = begin_at_pos = end_at_pos = 0
     begin_below = end_below = planar_below = begin_above = end_above = planar_above = 0
