@@ -13,6 +13,7 @@ BUILDERS = [
     pytest.param({"skip": True, "top": "clustering"}, id="binned-skip-clustering"),
     pytest.param({"builder": "exact"}, id="exact"),
     pytest.param({"builder": "median"}, id="median"),
+    pytest.param({"rays": 1000}, id="binned-rays1000"),  # a tree trimmed for few rays (sah.beats_leaf)
 ]
 
 
