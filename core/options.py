@@ -9,6 +9,8 @@ from typing import NamedTuple, Optional
 
 import numpy as np
 
+from .geometry import half_area
+
 BUILDERS = ("binned", "exact", "median")
 TOP_STRATEGIES = ("sah", "clustering")
 
@@ -164,8 +166,7 @@ class BuildParams(NamedTuple):
 def _rays_per_area(rays, bounds):
     if rays is None or bounds is None:
         return 0.0
-    e = np.asarray(bounds[3:], np.float64) - np.asarray(bounds[:3], np.float64)
-    area = e[0] * e[1] + e[1] * e[2] + e[2] * e[0]
+    area = half_area(np.asarray(bounds, np.float64))
     return float(rays / area) if area > 0.0 and np.isfinite(area) else 0.0
 
 

@@ -215,7 +215,7 @@ class FrameJob:
         """On the worker, holding KERNEL_LOCK: the scene, then the renderer (whose constructor traces
         the camera rays)."""
         options = self.config.render_options
-        rays = core.frame_ray_count(width, height, options.get("mode", "ao"), options.get("samples", 16), lights)
+        rays = core.frame_ray_count(width, height, options["mode"], options["samples"], lights)
         scene, report = self._build(*instances, origin, reuse, rays)
         self._info.update(tree_stats=scene.stats(), objects_rebuilt=report.meshes_rebuilt,
                           objects_reused=report.meshes_reused)
