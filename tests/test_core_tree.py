@@ -6,6 +6,7 @@ import pytest
 
 import core
 from core.layout import LEAF
+from core.options import REFINE_RAYS_PER_TRIANGLE
 from tests.core_helpers import BUILDERS, assert_same_as_brute
 from tests.meshes import degenerate_mix, lattice, random_soup
 
@@ -224,3 +225,42 @@ def test_a_ray_count_trims_the_tree_and_answers_stay_exact():
     directions = rng.normal(size=(500, 3))
     for rays in (10**4, 10**2):
         assert_same_as_brute(core.build_kdtree(tris, rays=rays), tris.astype(np.float64), origins, directions)
+
+
+def _wavy_grid(cells, rng):
+    """A jittered, gently waved grid over the unit square: triangles cut by many split planes."""
+    g = np.linspace(0.0, 1.0, cells + 1)
+    x, y = np.meshgrid(g, g, indexing="ij")
+    x = x + rng.uniform(-0.3, 0.3, x.shape) / cells
+    y = y + rng.uniform(-0.3, 0.3, y.shape) / cells
+    p = np.stack([x, y, 0.02 * np.sin(5 * x) * np.cos(3 * y)], axis=-1)
+    p00, p10, p01, p11 = p[:-1, :-1], p[1:, :-1], p[:-1, 1:], p[1:, 1:]
+    return np.concatenate([np.stack([p00, p10, p11], -2).reshape(-1, 3, 3),
+                           np.stack([p00, p11, p01], -2).reshape(-1, 3, 3)]).astype(np.float32)
+
+
+def test_a_tree_for_few_rays_a_triangle_neither_clips_nor_snaps():
+    """Clipping straddlers and snapping planes to box boundaries pay for their build work only when
+    the tree serves many rays (options.REFINE_RAYS_PER_TRIANGLE): told fewer rays a triangle, the
+    tree is the one built with clip and snap off; told that many, the one with them on, which on
+    this grid differs. Every tree answers like brute force."""
+    tris = _wavy_grid(64, np.random.default_rng(5))
+    names = ("axis", "split", "child", "count", "leaf_prims")
+
+    def same(a, b):
+        return all(np.array_equal(getattr(a, n), getattr(b, n)) for n in names)
+
+    enough = REFINE_RAYS_PER_TRIANGLE * len(tris)
+    few, plain = core.build_kdtree(tris, rays=enough - 1), core.build_kdtree(tris, rays=enough - 1, clip=False,
+                                                                             snap=False)
+    many, many_plain = core.build_kdtree(tris, rays=enough), core.build_kdtree(tris, rays=enough, clip=False,
+                                                                               snap=False)
+    assert same(few, plain)
+    assert not same(many, many_plain)
+    assert not same(core.build_kdtree(tris, rays=enough, clip=False), many)
+    assert not same(core.build_kdtree(tris, rays=enough, snap=False), many)
+    rng = np.random.default_rng(8)
+    origins = np.column_stack([rng.uniform(0, 1, (400, 2)), np.full(400, 1.0)])
+    directions = np.column_stack([rng.normal(0, 0.3, (400, 2)), np.full(400, -1.0)])
+    for tree in (few, many):
+        assert_same_as_brute(tree, tris.astype(np.float64), origins, directions)
