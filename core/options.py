@@ -13,16 +13,18 @@ from .geometry import half_area
 
 BUILDERS = ("binned", "exact", "median")
 TOP_STRATEGIES = ("sah", "clustering")
+SPLIT_AXES = ("all", "longest")
 
 # The traversal stack has one slot per level, so the depth is capped where the stack ends.
 DEPTH_LIMIT = 60
 
 
-# Clipping straddlers and snapping planes to box boundaries refine splits at extra build work per
-# reference. Time to image with both off, against on (rays given, 640 x 480, README *Choices*):
-# 0.91x at 0.6 rays a triangle, 0.94x at 2.4, 1.00x at 6.1, 1.08x at 21. A per-node rule (rays
-# entering the node per reference, as beats_leaf estimates them) still lost 4-7% at 21: AO rays start
-# on the surface, and the deep nodes there see more rays than rays from outside would.
+# Clipping straddlers, snapping planes to box boundaries and searching all three axes refine splits
+# at extra build work per reference. Time to image with clip and snap off, against on (rays given,
+# 640 x 480, README *Choices*): 0.91x at 0.6 rays a triangle, 0.94x at 2.4, 1.00x at 6.1, 1.08x at 21.
+# A per-node rule (rays entering the node per reference, as beats_leaf estimates them) still lost
+# 4-7% at 21: AO rays start on the surface, and the deep nodes there see more rays than rays from
+# outside would. Searching only the longest axis as well: 0.77-0.93x more at 0.6-2.4.
 REFINE_RAYS_PER_TRIANGLE = 4
 
 
@@ -42,6 +44,9 @@ class BuildOptions:
         bin boundary and keeps the cheapest plane (split_binned.snap_to_boundaries): grids and height
         fields stop paying for planes between their vertex lines (README: a wave-modified grid went
         from 7.6 to 1.1 references a triangle and built ~5x faster; suzanne-251k's SAH cost -7%).
+    split_axes: "all" (the binned SAH searches x, y and z) or "longest" (below the parallel top levels,
+        only the node's longest axis, as fast BVH builders bin (Wald 2007, "On fast construction of
+        SAH-based bounding volume hierarchies"): a third of the binning for somewhat worse splits).
     leaf_size: nodes with at most this many references become leaves without trying a split.
     max_depth: None means 1.2*log2(N) + 2 (seed 003 §3.5), capped at 60.
     traversal_cost, intersection_cost: SAH constants (cost of one traversal step and of one
@@ -76,13 +81,15 @@ class BuildOptions:
         split costs to build (sah.beats_leaf): time to image rather than traversal speed decides where
         the tree stops, as seed 003 §3.5 tunes its termination for. Few rays a triangle, a shallower
         tree; many, the same tree as None. Fewer than REFINE_RAYS_PER_TRIANGLE rays a triangle also
-        turn `clip` and `snap` off: their build work per reference is repaid only by many rays.
+        turn `clip` and `snap` off and set `split_axes` to "longest": their build work per reference
+        is repaid only by many rays.
     """
 
     builder: str = "binned"
     bins: int = 32
     exact_below: int = 0
     snap: bool = True
+    split_axes: str = "all"
     leaf_size: int = 2
     max_depth: Optional[int] = None
     traversal_cost: float = 1.0
@@ -102,6 +109,7 @@ class BuildOptions:
     def __post_init__(self):
         _check_choice("builder", self.builder, BUILDERS)
         _check_choice("top", self.top, TOP_STRATEGIES)
+        _check_choice("split_axes", self.split_axes, SPLIT_AXES)
         _check_int("bins", self.bins, 2, 4096)
         _check_int("exact_below", self.exact_below, 0, 1 << 30)
         _check_int("leaf_size", self.leaf_size, 1, 1 << 20)
@@ -137,6 +145,7 @@ class BuildOptions:
             bins=self.bins,
             exact_below=self.exact_below,
             snap=self.snap and refine,
+            longest_axis_only=self.split_axes == "longest" or not refine,
             leaf_size=self.leaf_size,
             max_depth=self.depth_for(n_triangles),
             traversal_cost=float(self.traversal_cost),
@@ -160,6 +169,7 @@ class BuildParams(NamedTuple):
     bins: int
     exact_below: int
     snap: bool
+    longest_axis_only: bool  # split_axes "longest", or few rays a triangle
     leaf_size: int
     max_depth: int
     traversal_cost: float

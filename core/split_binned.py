@@ -31,6 +31,21 @@ def bin_references(boxes, start, end, stride, node_box, min_bins, max_bins):
         max_bins[2, _bin(boxes[i, 5], lo2, s2, top)] += 1
 
 
+@njit(cache=True)
+def bin_longest_axis(boxes, start, end, stride, node_box, min_bins, max_bins):
+    """bin_references on the node's longest axis only (BuildOptions.split_axes "longest"); the other
+    axes' counters stay zero, which best_binned_split takes as "not binned". Returns the axis."""
+    e0, e1, e2 = node_box[3] - node_box[0], node_box[4] - node_box[1], node_box[5] - node_box[2]
+    axis = 0 if (e0 >= e1 and e0 >= e2) else (1 if e1 >= e2 else 2)
+    top = min_bins.shape[1] - 1
+    lo = node_box[axis]
+    scale = _bin_scale(node_box, axis, top + 1)
+    for i in range(start, end, stride):
+        min_bins[axis, _bin(boxes[i, axis], lo, scale, top)] += 1
+        max_bins[axis, _bin(boxes[i, axis + 3], lo, scale, top)] += 1
+    return axis
+
+
 @njit(cache=True, inline="always")
 def _bin_scale(node_box, axis, nbins):
     extent = np.float64(node_box[axis + 3]) - node_box[axis]
@@ -58,10 +73,12 @@ def best_binned_split(min_bins, max_bins, weight, node_box, params):
     e = extents(node_box)
     best_cost, best_axis, best_pos = np.inf, -1, np.float32(0.0)
     for axis in range(3):
+        n_right = max_bins[axis].sum()
+        if n_right == 0:
+            continue  # an axis bin_longest_axis did not bin (every binned reference ends in a bin)
         lo, hi = np.float64(node_box[axis]), np.float64(node_box[axis + 3])
         step = (hi - lo) / nbins
         n_left = 0
-        n_right = max_bins[axis].sum()
         for k in range(1, nbins):
             n_left += min_bins[axis, k - 1]
             n_right -= max_bins[axis, k - 1]
@@ -101,7 +118,10 @@ def binned_split(boxes, start, end, node_box, params, min_bins, max_bins):
     min_bins[:] = 0
     max_bins[:] = 0
     stride = skip_stride(end - start, params)
-    bin_references(boxes, start, end, stride, node_box, min_bins, max_bins)
+    if params.longest_axis_only:
+        bin_longest_axis(boxes, start, end, stride, node_box, min_bins, max_bins)
+    else:
+        bin_references(boxes, start, end, stride, node_box, min_bins, max_bins)
     cost, axis, pos = best_binned_split(min_bins, max_bins, stride, node_box, params)
     if axis < 0 or stride != 1 or not params.snap:
         return cost, axis, pos, False

@@ -14,6 +14,7 @@ BUILDERS = [
     pytest.param({"builder": "exact"}, id="exact"),
     pytest.param({"builder": "median"}, id="median"),
     pytest.param({"rays": 1000}, id="binned-rays1000"),  # a tree trimmed for few rays (sah.beats_leaf)
+    pytest.param({"split_axes": "longest", "threads": 1}, id="binned-longest-axis"),
 ]
 
 

@@ -141,6 +141,7 @@ def test_default_max_depth_follows_seed_003():
     ({"threads": 0}, "threads"),
     ({"clip": "yes"}, "clip"),
     ({"top": "random"}, "top"),
+    ({"split_axes": "x"}, "split_axes"),
     ({"rays": 0}, "rays"),
     ({"rays": 2.5}, "rays"),
     ({"rays": True}, "rays"),
@@ -239,11 +240,12 @@ def _wavy_grid(cells, rng):
                            np.stack([p00, p11, p01], -2).reshape(-1, 3, 3)]).astype(np.float32)
 
 
-def test_a_tree_for_few_rays_a_triangle_neither_clips_nor_snaps():
-    """Clipping straddlers and snapping planes to box boundaries pay for their build work only when
-    the tree serves many rays (options.REFINE_RAYS_PER_TRIANGLE): told fewer rays a triangle, the
-    tree is the one built with clip and snap off; told that many, the one with them on, which on
-    this grid differs. Every tree answers like brute force."""
+def test_a_tree_for_few_rays_a_triangle_neither_clips_nor_snaps_and_bins_one_axis():
+    """Clipping straddlers, snapping planes to box boundaries and searching all three axes pay for
+    their build work only when the tree serves many rays (options.REFINE_RAYS_PER_TRIANGLE): told
+    fewer rays a triangle, the tree is the one built with clip and snap off and split_axes "longest";
+    told that many, the one with them on, which on this grid differs in each of the three. Every
+    tree answers like brute force."""
     tris = _wavy_grid(64, np.random.default_rng(5))
     names = ("axis", "split", "child", "count", "leaf_prims")
 
@@ -251,16 +253,31 @@ def test_a_tree_for_few_rays_a_triangle_neither_clips_nor_snaps():
         return all(np.array_equal(getattr(a, n), getattr(b, n)) for n in names)
 
     enough = REFINE_RAYS_PER_TRIANGLE * len(tris)
-    few, plain = core.build_kdtree(tris, rays=enough - 1), core.build_kdtree(tris, rays=enough - 1, clip=False,
-                                                                             snap=False)
-    many, many_plain = core.build_kdtree(tris, rays=enough), core.build_kdtree(tris, rays=enough, clip=False,
-                                                                               snap=False)
-    assert same(few, plain)
+    plain = dict(clip=False, snap=False, split_axes="longest")
+    few, few_plain = core.build_kdtree(tris, rays=enough - 1), core.build_kdtree(tris, rays=enough - 1, **plain)
+    many, many_plain = core.build_kdtree(tris, rays=enough), core.build_kdtree(tris, rays=enough, **plain)
+    assert same(few, few_plain)
     assert not same(many, many_plain)
-    assert not same(core.build_kdtree(tris, rays=enough, clip=False), many)
-    assert not same(core.build_kdtree(tris, rays=enough, snap=False), many)
+    for one_off in ({"clip": False}, {"snap": False}, {"split_axes": "longest"}):
+        assert not same(core.build_kdtree(tris, rays=enough, **one_off), many), one_off
     rng = np.random.default_rng(8)
     origins = np.column_stack([rng.uniform(0, 1, (400, 2)), np.full(400, 1.0)])
     directions = np.column_stack([rng.normal(0, 0.3, (400, 2)), np.full(400, -1.0)])
     for tree in (few, many):
         assert_same_as_brute(tree, tris.astype(np.float64), origins, directions)
+
+
+def test_split_axes_longest_splits_every_node_on_its_longest_axis():
+    """With split_axes "longest" the binned SAH searches only the node's longest axis (the first of
+    equal ones), checked on every inner node's box rebuilt from the root (one thread: no parallel top
+    levels, which search all three); with "all" some node of the same soup splits another axis."""
+    tris = random_soup(np.random.default_rng(4), 3000)
+    for split_axes, expect_longest in (("longest", True), ("all", False)):
+        tree = core.build_kdtree(tris, split_axes=split_axes, threads=1)
+        boxes, _ = node_boxes(tree)
+        inner = [node for node in boxes if tree.axis[node] != LEAF]
+        # the builder's extents, in float32 as it computes them
+        longest = [int(np.argmax(np.float32(boxes[k][3:]) - np.float32(boxes[k][:3]))) for k in inner]
+        on_longest = np.array([tree.axis[k] for k in inner]) == np.array(longest)
+        assert len(inner) > 100
+        assert on_longest.all() if expect_longest else not on_longest.all(), split_axes
