@@ -16,8 +16,8 @@ from numba.extending import intrinsic
 @intrinsic
 def _element_pointer(typingctx, array_type, index_type):
     """Pointer to element `index` of a C-contiguous array's flat data."""
-    if not isinstance(array_type, types.Array) or not isinstance(index_type, types.Integer):
-        return None
+    if not isinstance(array_type, types.Array) or array_type.layout != "C" or not isinstance(index_type, types.Integer):
+        return None  # a typing error: a view of a non-C-contiguous array would read the wrong memory
     sig = types.CPointer(array_type.dtype)(array_type, index_type)
 
     def codegen(context, builder, signature, args):

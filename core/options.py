@@ -24,7 +24,7 @@ DEPTH_LIMIT = 60
 # 640 x 480, README *Choices*): 0.91x at 0.6 rays a triangle, 0.94x at 2.4, 1.00x at 6.1, 1.08x at 21.
 # A per-node rule (rays entering the node per reference, as beats_leaf estimates them) still lost
 # 4-7% at 21: AO rays start on the surface, and the deep nodes there see more rays than rays from
-# outside would. Searching only the longest axis as well: 0.77-0.93x more at 0.6-2.4.
+# outside would. Searching the longest axis first as well: 0.80-0.95x more at 0.6-3.7.
 REFINE_RAYS_PER_TRIANGLE = 4
 
 
@@ -45,8 +45,10 @@ class BuildOptions:
         fields stop paying for planes between their vertex lines (README: a wave-modified grid went
         from 7.6 to 1.1 references a triangle and built ~5x faster; suzanne-251k's SAH cost -7%).
     split_axes: "all" (the binned SAH searches x, y and z) or "longest" (below the parallel top levels,
-        only the node's longest axis, as fast BVH builders bin (Wald 2007, "On fast construction of
-        SAH-based bounding volume hierarchies"): a third of the binning for somewhat worse splits).
+        the node's longest axis, as fast BVH builders bin (Wald 2007, "On fast construction of
+        SAH-based bounding volume hierarchies"), and the other two only where it offers no plane
+        better than a leaf: a third of the binning in most nodes, for somewhat worse splits). Nodes
+        of at most exact_below references take the exact sweep over all three either way.
     leaf_size: nodes with at most this many references become leaves without trying a split.
     max_depth: None means 1.2*log2(N) + 2 (seed 003 §3.5), capped at 60.
     traversal_cost, intersection_cost: SAH constants (cost of one traversal step and of one
@@ -81,8 +83,9 @@ class BuildOptions:
         split costs to build (sah.beats_leaf): time to image rather than traversal speed decides where
         the tree stops, as seed 003 §3.5 tunes its termination for. Few rays a triangle, a shallower
         tree; many, the same tree as None. Fewer than REFINE_RAYS_PER_TRIANGLE rays a triangle also
-        turn `clip` and `snap` off and set `split_axes` to "longest": their build work per reference
-        is repaid only by many rays.
+        turn `clip` and `snap` off and set `split_axes` to "longest", whatever they were given as:
+        their build work per reference is repaid only by many rays. (KdTree.options keeps the
+        options as given; BuildOptions.params says what the build used.)
     """
 
     builder: str = "binned"

@@ -34,6 +34,12 @@ BUILD_COST_PER_REFERENCE = 4.0
 
 
 @njit(cache=True, inline="always")
+def improves_on_leaf(cost, n, params):
+    """The SAH's own test: a split of this cost is cheaper than cost_ratio times a leaf of n."""
+    return cost < params.cost_ratio * params.intersection_cost * n
+
+
+@njit(cache=True, inline="always")
 def beats_leaf(cost, n, node_box, params):
     """True when a split of this cost is worth more than keeping `n` references in a leaf. With a
     ray count (params.rays_per_area > 0) it must also pay for itself: the rays expected to enter the
@@ -41,9 +47,9 @@ def beats_leaf(cost, n, node_box, params):
     work, BUILD_COST_PER_REFERENCE traversal steps per reference (seed 003 §3.5 terminates for time
     to image). Only the node's own split is weighed, both ways: the subtree below it saves and costs
     more, roughly in proportion."""
-    leaf = params.intersection_cost * n
-    if not cost < params.cost_ratio * leaf:
+    if not improves_on_leaf(cost, n, params):
         return False
+    leaf = params.intersection_cost * n
     if params.rays_per_area == 0.0:
         return True
     rays = params.rays_per_area * half_area(node_box)

@@ -11,7 +11,7 @@ import numpy as np
 from numba import njit
 
 from .geometry import cut_half_area, extents, half_area
-from .sah import cost_of_areas, split_cost, valid_position
+from .sah import cost_of_areas, improves_on_leaf, split_cost, valid_position
 
 
 @njit(cache=True)
@@ -114,18 +114,29 @@ def skip_stride(n, params):
 @njit(cache=True)
 def binned_split(boxes, start, end, node_box, params, min_bins, max_bins):
     """Bin the node's references and return the best binned split (cost, axis, position, planar_left),
-    refined to the nearest box boundaries when every reference was binned (`snap_to_boundaries`)."""
-    min_bins[:] = 0
-    max_bins[:] = 0
+    refined to the nearest box boundaries when every reference was binned (`snap_to_boundaries`).
+    With params.longest_axis_only, the node's longest axis first, and all three only when it offers
+    no plane better than a leaf: triangles running the cell's length (a cylinder along it) leave the
+    longest axis nothing to split, and without this the whole mesh became one leaf (outside review)."""
     stride = skip_stride(end - start, params)
+    cost, axis, pos = np.inf, -1, np.float32(0.0)
     if params.longest_axis_only:
+        _clear(min_bins, max_bins)
         bin_longest_axis(boxes, start, end, stride, node_box, min_bins, max_bins)
-    else:
+        cost, axis, pos = best_binned_split(min_bins, max_bins, stride, node_box, params)
+    if axis < 0 or not improves_on_leaf(cost, end - start, params):
+        _clear(min_bins, max_bins)
         bin_references(boxes, start, end, stride, node_box, min_bins, max_bins)
-    cost, axis, pos = best_binned_split(min_bins, max_bins, stride, node_box, params)
+        cost, axis, pos = best_binned_split(min_bins, max_bins, stride, node_box, params)
     if axis < 0 or stride != 1 or not params.snap:
         return cost, axis, pos, False
     return snap_to_boundaries(boxes, start, end, node_box, params, cost, axis, pos)
+
+
+@njit(cache=True, inline="always")
+def _clear(min_bins, max_bins):
+    min_bins[:] = 0
+    max_bins[:] = 0
 
 
 @njit(cache=True)

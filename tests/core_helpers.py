@@ -13,7 +13,8 @@ BUILDERS = [
     pytest.param({"skip": True, "top": "clustering"}, id="binned-skip-clustering"),
     pytest.param({"builder": "exact"}, id="exact"),
     pytest.param({"builder": "median"}, id="median"),
-    pytest.param({"rays": 1000}, id="binned-rays1000"),  # a tree trimmed for few rays (sah.beats_leaf)
+    pytest.param({"rays": 1000}, id="binned-rays1000"),  # trimmed for few rays (sah.beats_leaf), unrefined
+    pytest.param({"rays": 100_000}, id="binned-rays1e5"),  # trimmed, but enough rays to clip and snap
     pytest.param({"split_axes": "longest", "threads": 1}, id="binned-longest-axis"),
 ]
 

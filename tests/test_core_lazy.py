@@ -10,7 +10,8 @@ from tests.render_scenes import floor, look_at, quad
 
 BUILDERS = [pytest.param({}, id="binned"), pytest.param({"builder": "exact"}, id="exact"),
             pytest.param({"builder": "median"}, id="median"),
-            pytest.param({"rays": 20_000}, id="binned-rays")]  # a ray count ends subtrees sooner
+            pytest.param({"rays": 20_000}, id="binned-rays"),  # a ray count ends subtrees sooner
+            pytest.param({"rays": 1000}, id="binned-few-rays")]  # ... and, few a triangle, refines less
 SMALL = 16  # deferred subtrees of at most this many references, so small test scenes defer many
 
 
