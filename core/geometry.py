@@ -63,6 +63,16 @@ def extents(box):
 
 
 @njit(cache=True, inline="always")
+def longest_axis(box):
+    """The axis of the box's largest extent (in the box's own precision), the first of equal ones."""
+    axis = 0
+    for k in range(1, 3):
+        if box[k + 3] - box[k] > box[axis + 3] - box[axis]:
+            axis = k
+    return axis
+
+
+@njit(cache=True, inline="always")
 def half_area(box):
     """Half the surface area of a box: the SAH only ever uses ratios of it."""
     ex, ey, ez = extents(box)

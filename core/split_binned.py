@@ -10,7 +10,7 @@ made the builder cut "empty" slivers that were not empty until it ran out of dep
 import numpy as np
 from numba import njit
 
-from .geometry import cut_half_area, extents, half_area
+from .geometry import cut_half_area, extents, half_area, longest_axis
 from .sah import cost_of_areas, improves_on_leaf, split_cost, valid_position
 
 
@@ -34,16 +34,14 @@ def bin_references(boxes, start, end, stride, node_box, min_bins, max_bins):
 @njit(cache=True)
 def bin_longest_axis(boxes, start, end, stride, node_box, min_bins, max_bins):
     """bin_references on the node's longest axis only (BuildOptions.split_axes "longest"); the other
-    axes' counters stay zero, which best_binned_split takes as "not binned". Returns the axis."""
-    e0, e1, e2 = node_box[3] - node_box[0], node_box[4] - node_box[1], node_box[5] - node_box[2]
-    axis = 0 if (e0 >= e1 and e0 >= e2) else (1 if e1 >= e2 else 2)
+    axes' counters stay zero, which best_binned_split takes as "not binned"."""
+    axis = longest_axis(node_box)
     top = min_bins.shape[1] - 1
     lo = node_box[axis]
     scale = _bin_scale(node_box, axis, top + 1)
     for i in range(start, end, stride):
         min_bins[axis, _bin(boxes[i, axis], lo, scale, top)] += 1
         max_bins[axis, _bin(boxes[i, axis + 3], lo, scale, top)] += 1
-    return axis
 
 
 @njit(cache=True, inline="always")

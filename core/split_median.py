@@ -6,17 +6,14 @@ same termination rule (cost ratio, leaf size, depth) decides when to stop.
 import numpy as np
 from numba import njit
 
-from .geometry import half_area
+from .geometry import half_area, longest_axis
 from .sah import split_cost, valid_position
 
 
 @njit(cache=True)
 def median_split(boxes, start, end, node_box, params):
     """(cost, axis, position) of the spatial median of the longest axis; axis -1 if it is flat."""
-    axis = 0
-    for k in range(1, 3):
-        if node_box[k + 3] - node_box[k] > node_box[axis + 3] - node_box[axis]:
-            axis = k
+    axis = longest_axis(node_box)
     pos = np.float32(0.5 * (np.float64(node_box[axis]) + node_box[axis + 3]))
     if not valid_position(node_box, axis, pos):
         return np.inf, -1, pos
