@@ -202,19 +202,41 @@ def _world_vector(a, ux, uy, uz):
 
 
 @njit(cache=True, inline="always")
-def triangle_reach(scene, inst, prim, p):
-    """The largest world-space coordinate difference between point p and a vertex of an instance's
-    triangle. The triangle test works on vertex-minus-origin differences, so its t carries rounding
-    of this size: on a floor 1e4 wide seen 1e-3 across, an AO ray offset by p's magnitude alone hit
-    the floor it left at t ~ 1e-12 (outside QA)."""
+def _row_magnitude(a, k, p):
+    """The magnitude of the terms of object coordinate k of world point p (what its rounding scales with)."""
+    return abs(a[k, 0] * p[0]) + abs(a[k, 1] * p[1]) + abs(a[k, 2] * p[2]) + abs(a[k, 3])
+
+
+@njit(cache=True, inline="always")
+def surface_error_scale(scene, inst, prim, p, n):
+    """A magnitude whose float64 rounding bounds how far hit point p, once moved onto its triangle's
+    plane (onto_triangle_plane), may lie off that plane along unit normal n, and the rounding the
+    triangle test's t carries near it: the largest of
+    - sum |n_k| |p_k|: p's world coordinates round to their own ulps, seen along the normal;
+    - the same for the object-space point a p + a_t that the projection works on, as a world distance
+      (an object-space offset along the object normal n_o is |a^T n_o| / |n_o| times shorter in world);
+    - the triangle's reach from p (largest world coordinate difference to a vertex): the triangle test
+      works on vertex-minus-origin differences (on a floor 1e4 wide seen 1e-3 across, an AO ray offset
+      by p's magnitude alone hit the floor it left at t ~ 1e-12, outside QA).
+    Not max |p_k|: a floor at z = 0 but x = 5e5 would lift ray starts by 5e5 roundings' worth and
+    carry them through a roof 1e-4 above (outside QA), where its height's ulps are what count. Nor the
+    camera ray's |o| and t |d|: their error moves p along the ray, which the projection takes out."""
     tri = scene[16][scene[10][scene[7][inst]] + prim]
     a = rows(scene[6], inst, inst + 1)[0]
+    world = abs(n[0] * p[0]) + abs(n[1] * p[1]) + abs(n[2] * p[2])
+    nx, ny, nz = _object_normal(tri)
+    along = (abs(nx) * _row_magnitude(a, 0, p) + abs(ny) * _row_magnitude(a, 1, p)
+             + abs(nz) * _row_magnitude(a, 2, p))
+    wx, wy, wz = (a[0, 0] * nx + a[1, 0] * ny + a[2, 0] * nz, a[0, 1] * nx + a[1, 1] * ny + a[2, 1] * nz,
+                  a[0, 2] * nx + a[1, 2] * ny + a[2, 2] * nz)
+    length = np.sqrt(wx * wx + wy * wy + wz * wz)
+    objectspace = along / length if length > 0.0 else 0.0
     px, py, pz = _object_point(a, p)
     reach = 0.0
     for i in range(3):
         x, y, z = _world_vector(a, tri[i, 0] - px, tri[i, 1] - py, tri[i, 2] - pz)
         reach = max(reach, abs(x), abs(y), abs(z))
-    return reach
+    return max(world, objectspace, reach)
 
 
 @njit(cache=True, inline="always")

@@ -23,14 +23,14 @@ import numpy as np
 from numba import njit, prange
 
 from .array_views import rows, unowned
-from .instance_traversal import (new_scratch, onto_triangle_plane, trace_scene, triangle_reach, unowned_scene,
+from .instance_traversal import (new_scratch, onto_triangle_plane, surface_error_scale, trace_scene, unowned_scene,
                                  world_normal)
 from .layout import NO_HIT
 from .lights import NO_SHADOW
 from .pixel_reuse import segment_meets_any
 from .ray_visibility import SHADOW_RAYS
 from .sampling import pixel_seed, sample_2d
-from .shading import TRIANGLE_REACH_WEIGHT, cosine_direction, hit_error_scale, offset_origin, sample_light
+from .shading import cosine_direction, offset_origin, sample_light
 from .traversal import block_range, interleaved_blocks
 
 AO, SHADOW, AO_SHADOW = 1, 2, 3
@@ -199,9 +199,8 @@ def surface_frames(scene, origins, directions, t, inst, prim, hit_index, points,
         if facing > 0.0:
             for k in range(3):
                 normals[a, k] = -normals[a, k]
-        scale = max(hit_error_scale(origins[r], directions[r], t[r], points[a]),
-                    TRIANGLE_REACH_WEIGHT * triangle_reach(scene, inst[r], prim[r], points[a]))
-        offset_origin(points[a], normals[a], scale, starts[a])
+        offset_origin(points[a], normals[a], surface_error_scale(scene, inst[r], prim[r], points[a], normals[a]),
+                      starts[a])
 
 
 @njit(cache=True, parallel=True)

@@ -7,36 +7,22 @@ from .lights import AREA, SPOT, SPOT_INV_LEN_Z, SUN
 TWO_PI = 2.0 * np.pi
 
 
-OFFSET_RELATIVE = 2.0 ** -32  # offset / error scale of the hit point: ~2e6 times float64's rounding
-# The triangle test's t carries a few float64 roundings (2^-52) of the vertex-minus-origin differences
-# (instance_traversal.triangle_reach), so the hit triangle's reach enters the error scale at 2^-8 of
-# it: an offset of 2^-40 of the reach, 4096 roundings. At 2^-32 of it, a floor 1e5 wide moved ray
-# starts 2e-5 up, and AO in a 5e-4 gap under a ceiling came out 0.227 instead of 0.25.
-TRIANGLE_REACH_WEIGHT = 2.0 ** -8
-
-
-@njit(cache=True, inline="always")
-def hit_error_scale(o, d, t, p):
-    """A bound on the magnitudes that enter p = o + t d (max |p|, |o| and t |d| components): the
-    float64 rounding error of a hit point computed so is a few ulps of this, never of |p| alone, which
-    vanishes near the origin while a far camera's ray still carries its own magnitude's error."""
-    scale = 0.0
-    for k in range(3):
-        scale = max(scale, abs(p[k]), abs(o[k]), abs(t * d[k]))
-    return scale
+OFFSET_RELATIVE = 2.0 ** -40  # ray start offset / the hit point's error scale: 8192 float64 roundings
 
 
 @njit(cache=True, inline="always")
 def offset_origin(p, n, error_scale, out):
-    """Move a hit point off its surface along the normal by OFFSET_RELATIVE times its error scale.
+    """Move a hit point off its surface along the normal by OFFSET_RELATIVE times its error scale
+    (instance_traversal.surface_error_scale: the magnitudes whose rounding puts the point off its plane).
 
     Wachter and Binder, "A Fast and Robust Method for Avoiding Self-Intersection" (Ray Tracing Gems,
     ch. 6): offset by a bound on the hit point's error, so that the offset scales with the point's
     magnitude. Their 256 float32 ulps (2^-15 relative) bound a float32 hit point; ours are computed in
     float64 on float32 vertices, so that offset was ~2^29 times too large, and at 1e4 units from the
-    origin (0.3 units) it carried shadow and AO rays through a roof 0.2 above a floor. 2^-32 of the
-    error scale still clears the surface by ~2e6 float64 roundings at any magnitude, and keeps thin
-    gaps and corners closed (at scale 1e-3 too, where the old absolute floor 2^-16 showed).
+    origin (0.3 units) it carried shadow and AO rays through a roof 0.2 above a floor. 2^-40 of the
+    error scale clears the surface by 8192 float64 roundings at any magnitude; an absolute floor (2^-16
+    once) biased AO between planes at scale 1e-3. 2^-32 of max |p_k| (once) lifted starts on a floor at
+    x = 5e5 by 1.2e-4, through a roof 1e-4 above it (outside QA).
     """
     step = error_scale * OFFSET_RELATIVE
     for k in range(3):

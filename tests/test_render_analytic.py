@@ -298,6 +298,44 @@ def test_nothing_leaks_under_a_thin_roof_far_from_the_origin(offset):
     assert ao[..., 0].mean() == pytest.approx((h / r) ** 2, abs=0.01)
 
 
+@pytest.mark.parametrize("center", [(0.0, 0.0), (5e5, 0.0), (3e5, 4e6)])
+def test_a_hair_thin_gap_far_out_in_x_and_y_stays_closed(center):
+    """A floor at z = 0 with a roof 1e-4 above it, far from the origin in x and y only (georeferenced
+    coordinates), in a flat world-space tree. z stays near 0, so float32 holds the gap exactly, and
+    what puts a hit point off its plane is the rounding of its z, not of its x: ray starts offset by
+    2^-32 of max |p_k| rose 1.2e-4 at x = 5e5, above the roof (outside QA: fully lit, AO 1). Shadow 0
+    under a sun; AO (h/r)^2 with r = 1e-3."""
+    h, r = float(np.float32(1e-4)), 1e-3
+    tris = np.concatenate([floor(0.0, half=50.0, center=center), floor(h, half=50.0, center=center)])
+    m = np.eye(4)
+    m[:3, 3] = (center[0], center[1], h / 2)
+    camera = core.Camera(m, ortho_scale=1.0)
+    tree = core.build_kdtree(tris)
+    shadow = core.render_preview(tree, camera, 12, 12, mode="shadow", samples=4, lights=[core.Light.sun((0.1, 0.2, -1.0))])
+    ao = core.render_preview(tree, camera, 16, 16, samples=256, ao_distance=r)
+    assert hit_mask(shadow).all() and (shadow[..., :3] == 0.0).all()
+    assert ao[..., 0].mean() == pytest.approx((h / r) ** 2, abs=0.002)
+
+
+def test_a_thin_gap_under_a_rotated_scaled_instance_stays_closed():
+    """The same gap inside an instance that is rotated, scaled unevenly and moved 1e5 away: the
+    projection onto the triangle's plane works in object space, whose rounding the ray start's offset
+    must also cover, seen along the world normal."""
+    h, r = 0.05, 0.1
+    mesh = np.concatenate([floor(0.0, half=2.0), floor(h, half=2.0)]).reshape(-1, 3)
+    c, s = np.cos(0.7), np.sin(0.7)
+    matrix = np.array([[3.0 * c, -0.5 * s, 0.0, 1e5], [3.0 * s, 0.5 * c, 0.0, -2e5], [0.0, 0.0, 0.01, 10.0],
+                       [0.0, 0.0, 0.0, 1.0]])
+    scene = core.build_scene([(mesh, np.arange(len(mesh)).reshape(-1, 3))], [0], matrix[None], layout="two_level")
+    m = np.eye(4)
+    m[:3, 3] = matrix[:3, 3] + (0.0, 0.0, 0.01 * h / 2)
+    camera = core.Camera(m, ortho_scale=0.5)
+    ao = core.render_preview(scene, camera, 16, 16, samples=256, ao_distance=0.01 * r)
+    shadow = core.render_preview(scene, camera, 12, 12, mode="shadow", samples=4, lights=[core.Light.sun((0.1, 0.2, -1.0))])
+    assert hit_mask(ao).all() and (shadow[..., :3] == 0.0).all()
+    assert ao[..., 0].mean() == pytest.approx((h / r) ** 2, abs=0.01)
+
+
 @pytest.mark.parametrize("scale", [1.0, 1e-3, 1e-6])
 def test_ao_between_planes_is_right_at_tiny_scales(scale):
     """AO (h/r)^2 between two planes at any scale: no absolute floor on the ray offset biases it
