@@ -263,8 +263,11 @@ class FrameJob:
         it is marked as a first run too."""
         global _reuse_kernels_ready
         t0 = time.perf_counter()
-        self.renderer = core.PreviewRender(scene, camera, width, height, lights=lights, previous=previous,
-                                           **self.config.render_options)
+        try:
+            self.renderer = core.PreviewRender(scene, camera, width, height, lights=lights, previous=previous,
+                                               **self.config.render_options)
+        except ValueError as error:  # core's own checks (its MemoryLimitError is one): a message, not a traceback
+            raise PreviewError(f"the frame cannot be rendered: {error}") from None
         self._timings["trace_ms"] += _ms_since(t0)
         if previous is not None and previous.settings == self.renderer.settings and not _reuse_kernels_ready:
             self._first_run, _reuse_kernels_ready = True, True

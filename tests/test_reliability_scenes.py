@@ -16,7 +16,7 @@ from tests.addon_support import (add_quad, add_top_camera, addon, floor_scene, h
 import bpy  # noqa: E402
 import numpy as np  # noqa: E402
 
-from kd_addon import cli, memory_limit, pipeline  # noqa: E402
+from kd_addon import cli, corelib, memory_limit, pipeline  # noqa: E402
 from kd_addon.config import make_config  # noqa: E402
 from kd_addon.errors import PreviewError  # noqa: E402
 from tests import bpy_scenes as scenes  # noqa: E402
@@ -54,6 +54,25 @@ def test_memory_limit_exits_nonzero_before_rendering(tmp_path, capsys):
     assert "400x300 pixels" in err and "above the memory limit of 1 MiB" in err and "raise the memory limit" in err
     assert not (tmp_path / "out" / "frame_0001.png").exists()
     assert cli_render(tmp_path, blend, "--resolution", "100", "--memory-limit", "64") == 0  # fits: renders
+
+
+def test_a_frame_beyond_the_machines_memory_is_refused_without_a_limit(addon, tmp_path, capsys, monkeypatch):  # noqa: F811
+    """No memory limit set: a frame whose estimate is above the machine's physical memory is refused
+    with the same message before anything is built (outside QA: a 20000 x 20000 frame built its tree,
+    then core's own check escaped as a traceback). The machine is made small so the test is cheap."""
+    floor_scene(400, 300)
+    blend = tmp_path / "scene.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    core_memory = corelib.load_core().memory
+    monkeypatch.setattr(core_memory, "physical_memory", lambda: 2 ** 20)
+    assert cli_render(tmp_path, blend, "--resolution", "100") == 1
+    err = capsys.readouterr().err
+    assert "400x300 pixels" in err and "above this machine's memory of 1 MiB" in err and "Traceback" not in err
+    assert not (tmp_path / "out" / "frame_0001.png").exists()
+    with pytest.raises(PreviewError, match="above this machine's memory"):
+        render()
+    monkeypatch.setattr(core_memory, "physical_memory", lambda: None)  # unknown: nothing to check against
+    assert cli_render(tmp_path, blend, "--resolution", "100", "--samples", "1") == 0
 
 
 def test_non_finite_object_warns_on_the_command_line_and_the_rest_renders(tmp_path, capsys):
