@@ -305,6 +305,10 @@ class _Visibility:
             self._node_memo[ptr] = (members, shown, frozenset(ob.as_pointer() for ob in objects))
         return self._node_memo[ptr]
 
+    def instanced_objects(self, collection: bpy.types.Collection) -> frozenset[int]:
+        """Pointers of the objects a render of an instance of `collection` shows."""
+        return self._collection_objects(collection, set())
+
     def _collection_objects(self, coll: bpy.types.Collection, stack: set) -> frozenset[int]:
         """Render-visible objects a collection instance yields, nested ones too."""
         ptr = coll.as_pointer()
@@ -364,7 +368,18 @@ def _entry_visible(vis: _Visibility, parent, ob: bpy.types.Object) -> bool:
     orig = ob.original
     if not collection_visible(vis, parent, orig):
         return False
-    return parent is not None or not _instancer_hides_self(orig, ob)
+    return parent is not None or not (_instancer_hides_self(orig, ob) or _instanced_by_its_parent(orig))
+
+
+# Blender hides an object whose parent instances it on its vertices or faces at its own place in a
+# final render (depsgraph deg_object_hide_original: render mode, or any instance), not in the
+# viewport's depsgraph the preview reads; the instances it makes are kept. Not for metaballs.
+_INSTANCING_PARENT_TYPES = frozenset(("VERTS", "FACES"))
+
+
+def _instanced_by_its_parent(orig: bpy.types.Object) -> bool:
+    parent = orig.parent
+    return parent is not None and parent.instance_type in _INSTANCING_PARENT_TYPES and orig.type != "META"
 
 
 def collection_visible(vis: _Visibility, parent, orig: bpy.types.Object) -> bool:
@@ -438,7 +453,8 @@ def extract_scene(depsgraph: bpy.types.Depsgraph | None = None) -> ExtractedScen
     return ExtractedScene(
         geometries=walker.geometries.geometries,
         instances=instances,
-        warnings=walker.geometries.warnings + left_out_warnings(depsgraph, vis),
+        warnings=(walker.geometries.warnings + list(walker.not_triangles.values())
+                  + left_out_warnings(depsgraph, vis, walker.instanced_originals())),
         extract_ms=(time.perf_counter() - t0) * 1e3,
         frame=depsgraph.scene.frame_current,
     )
@@ -449,17 +465,32 @@ def extract_scene(depsgraph: bpy.types.Depsgraph | None = None) -> ExtractedScen
 TRIANGLE_TYPES = frozenset(("MESH", "CURVE", "SURFACE", "FONT", "META"))
 NOT_TRIANGLES = {"CURVES": "hair curves", "POINTCLOUD": "a point cloud", "VOLUME": "a volume",
                  "GREASEPENCIL": "grease pencil", "GPENCIL": "grease pencil"}
+NOT_TRIANGLE_DATA = {"Curves": "hair curves", "PointCloud": "a point cloud", "Volume": "a volume",
+                     "GreasePencil": "grease pencil", "GreasePencilv3": "grease pencil"}  # by data type
 
 
-def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility) -> list[str]:
-    """A warning per render-visible scene object a final render shows and the preview leaves out:
-    hidden in the viewport (the viewport depsgraph does not evaluate it), or not triangles."""
+def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility, instanced: set[int]) -> list[str]:
+    """A warning per render-visible thing a final render shows and the preview leaves out: scene
+    objects hidden in the viewport (the viewport depsgraph does not evaluate them) or not triangles,
+    collection instancers hidden there (their instances go with them), members of instanced
+    collections disabled in viewports (`instanced`: the original objects the depsgraph instanced),
+    and hair particles drawn as strands."""
     evaluated = {ob.original.as_pointer() for ob in depsgraph.objects}
     warnings = []
+    instancers = {}
     for ob in depsgraph.view_layer.objects:
         kind = ob.type
         if kind in TRIANGLE_TYPES and ob.as_pointer() in evaluated:
+            if len(ob.particle_systems):
+                warnings += _strand_warnings(ob, vis)
             continue  # the common case first: ~1.5 us an object
+        if ob.instance_type == "COLLECTION" and ob.instance_collection is not None and vis.scene_object(ob):
+            if ob.as_pointer() in evaluated:
+                instancers.setdefault(ob.instance_collection.as_pointer(), (ob.instance_collection, ob))
+            elif _ray_visible(ob):
+                warnings.append(f"object '{ob.name}' is hidden in the viewport (eye icon, Disable in Viewports or a "
+                                f"hidden collection): the preview leaves out the instances of collection "
+                                f"'{ob.instance_collection.name}' it makes, a final render shows them")
         if (kind in TRIANGLE_TYPES or kind in NOT_TRIANGLES) and vis.scene_object(ob) and _ray_visible(ob):
             if kind in NOT_TRIANGLES:
                 warnings.append(f"object '{ob.name}' is {NOT_TRIANGLES[kind]}, not triangles: left out of the preview")
@@ -467,7 +498,41 @@ def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility) -> list[
                 warnings.append(f"object '{ob.name}' is hidden in the viewport (eye icon, Disable in Viewports or "
                                 "a hidden collection): the preview reads the viewport's scene and leaves it out, "
                                 "a final render shows it")
+    for collection, instancer in instancers.values():
+        warnings += _hidden_member_warnings(collection, instancer, vis, instanced)
     return warnings
+
+
+def _hidden_member_warnings(collection, instancer, vis: _Visibility, instanced: set[int]) -> list[str]:
+    """Members a render of the collection's instances shows that the viewport's depsgraph did not
+    instance (the object or a collection on its path disabled in viewports)."""
+    shown = vis.instanced_objects(collection)
+    return [f"object '{ob.name}' in collection '{collection.name}' (instanced by '{instancer.name}') is disabled "
+            "in viewports: the preview leaves its instances out, a final render shows them"
+            for ob in collection.all_objects
+            if ob.type in TRIANGLE_TYPES and ob.as_pointer() in shown and ob.as_pointer() not in instanced
+            and not vis.scene_object(ob) and _ray_visible(ob, instancer)]  # scene objects are named as such
+
+
+def _strand_warnings(ob, vis: _Visibility) -> list[str]:
+    """Hair particle systems drawn as strands (Render As: Path), which Cycles renders as curves."""
+    if not (vis.scene_object(ob) and _ray_visible(ob)):
+        return []
+    shown = {m.particle_system.as_pointer() for m in ob.modifiers if m.type == "PARTICLE_SYSTEM" and m.show_render}
+    return [f"object '{ob.name}': hair particles '{system.name}' are strands, not triangles: left out of the preview"
+            for system in ob.particle_systems
+            if system.as_pointer() in shown and system.settings.type == "HAIR" and system.settings.render_type == "PATH"]
+
+
+def hidden_light_warnings(depsgraph: bpy.types.Depsgraph) -> list[str]:
+    """A warning per render-visible scene light hidden in the viewport: its depsgraph does not
+    evaluate it, so the preview cannot use it, while a final render does."""
+    vis = _Visibility(depsgraph.view_layer)
+    evaluated = {ob.original.as_pointer() for ob in depsgraph.objects}
+    return [f"light '{ob.name}' is hidden in the viewport (eye icon, Disable in Viewports or a hidden collection): "
+            "the preview leaves it out, a final render uses it"
+            for ob in depsgraph.view_layer.objects
+            if ob.type == "LIGHT" and ob.as_pointer() not in evaluated and vis.scene_object(ob)]
 
 
 class _EntryReader:
@@ -484,15 +549,17 @@ class _EntryReader:
         self.vis = vis
         self.geometries = _GeometryReader()
         self._verdicts: dict[tuple[int, int], tuple[str, str | None, bool, bool, bool] | None] = {}
+        self.not_triangles: dict[tuple[str, str | None], str] = {}
 
     def read(self, inst) -> Instance | None:
         """Record for one entry, or None to skip it. Copies everything out at
         once: ``inst.object`` is a temporary the iterator reuses."""
         ob = inst.object
         mesh = ob.data
-        if not isinstance(mesh, bpy.types.Mesh):
-            return None
         parent = inst.parent if inst.is_instance else None
+        if not isinstance(mesh, bpy.types.Mesh):
+            self._note_not_triangles(ob, parent)
+            return None
         verdict = self._verdict(ob, parent)
         if verdict is None:
             return None
@@ -510,6 +577,25 @@ class _EntryReader:
             shadow=shadow,
             holdout=holdout,
         )
+
+    def instanced_originals(self) -> set[int]:
+        """Pointers of the original objects read as instances (from the verdict memo: no extra cost
+        per entry)."""
+        return {obj for obj, parent in self._verdicts if parent}
+
+    def _note_not_triangles(self, ob, parent) -> None:
+        """Warn once per object and instancer about render-visible geometry that is not triangles
+        which an object makes (a geometry-nodes point cloud, curves, volume) or an instance brings;
+        scene objects of those types are named by left_out_warnings."""
+        kind = NOT_TRIANGLE_DATA.get(type(ob.data).__name__)
+        if kind is None or (parent is None and ob.original.type in NOT_TRIANGLES):
+            return
+        verdict = self._verdict(ob, parent)
+        if verdict is None:
+            return
+        name, instancer = verdict[0], verdict[1]
+        where = f"object '{name}'" if instancer in (None, name) else f"object '{name}' instanced by '{instancer}'"
+        self.not_triangles.setdefault((name, instancer), f"{where} makes {kind}, not triangles: left out of the preview")
 
     def _verdict(self, ob, parent) -> tuple[str, str | None, bool, bool, bool] | None:
         """(object name, instancer name, camera, shadow, holdout) when visible, else None; memoized."""

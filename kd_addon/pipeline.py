@@ -225,9 +225,13 @@ class FrameJob:
         render = self.scene.render
         width, height = frame_size(render.resolution_x, render.resolution_y, self.config.resolution_percentage)
         inputs = scene_input.read_scene(self.scene, self.depsgraph, width, height)
-        if self.config.settings.mode != "ao" and not inputs.lights:
+        if self.config.settings.mode == "ao":
+            return inputs  # lights do not change an AO image: nothing to warn about
+        if not inputs.lights:
             raise PreviewError(f"mode '{self.config.settings.mode}' needs a light, but scene '{self.scene.name}' "
-                               "has no render-visible light: add one or use mode 'ao'")
+                               + ("has no light the preview can see: " + "; ".join(inputs.hidden_lights)
+                                  if inputs.hidden_lights else "has no render-visible light: add one or use mode 'ao'"))
+        inputs.warnings += inputs.hidden_lights
         return inputs
 
     def _camera_and_lights(self, core, inputs: scene_input.SceneInputs):

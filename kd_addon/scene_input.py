@@ -21,7 +21,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .errors import PreviewError
-from .extract import _Visibility, collection_visible  # the render-visibility rules extraction uses
+from .extract import _Visibility, collection_visible, hidden_light_warnings  # extraction's visibility rules
 
 
 @dataclass(frozen=True)
@@ -69,6 +69,7 @@ class SceneInputs:
     width: int
     height: int
     warnings: list[str] = field(default_factory=list)
+    hidden_lights: list[str] = field(default_factory=list)  # a warning per light hidden in the viewport
 
 
 # --------------------------------------------------------------------------
@@ -235,4 +236,5 @@ def read_scene(scene, depsgraph, width: int, height: int) -> SceneInputs:
     else:
         warnings = []
     camera, camera_warnings = read_camera(scene, depsgraph, width, height)
-    return SceneInputs(camera, read_lights(depsgraph), width, height, warnings + camera_warnings)
+    return SceneInputs(camera, read_lights(depsgraph), width, height, warnings + camera_warnings,
+                       hidden_light_warnings(depsgraph))

@@ -219,6 +219,28 @@ def test_errors_leave_the_previous_image_and_report(addon):  # noqa: F811
     assert (preview_pixels() == before).all()
 
 
+def test_a_light_hidden_in_the_viewport_is_named(addon):  # noqa: F811
+    """The viewport's depsgraph does not evaluate a light hidden there, so the preview cannot use it
+    (a final render does): a warning names it in modes with lights, and when it was the only light
+    the error says so instead of "no render-visible light" (outside QA)."""
+    scene = half_plane_scene()
+    scene.kd_preview.mode = "shadow"
+    config = make_config(scene.kd_preview)
+    scenes.link(bpy.data.objects.new("Hidden", bpy.data.lights.new("Hidden", "SUN"))).hide_set(True)
+    result = pipeline.render_frame(scene, bpy.context.evaluated_depsgraph_get(), config)
+    assert result.lights == 1
+    assert ("light 'Hidden' is hidden in the viewport (eye icon, Disable in Viewports or a hidden collection): "
+            "the preview leaves it out, a final render uses it") in result.warnings
+    bpy.data.objects["Sun"].hide_set(True)
+    with pytest.raises(PreviewError, match="has no light the preview can see: light '") as error:
+        pipeline.render_frame(scene, bpy.context.evaluated_depsgraph_get(), config)
+    assert "light 'Hidden' is hidden in the viewport" in str(error.value)
+    assert "light 'Sun' is hidden in the viewport" in str(error.value)
+    scene.kd_preview.mode = "ao"  # lights do not matter: no warning
+    ao = pipeline.render_frame(scene, bpy.context.evaluated_depsgraph_get(), make_config(scene.kd_preview))
+    assert not any("light" in w for w in ao.warnings)
+
+
 def test_nothing_renderable_is_a_transparent_frame_with_a_warning_and_zero_size_is_named(addon):  # noqa: F811
     scene = half_plane_scene()
     for obj in ("Ground", "Box"):
