@@ -183,6 +183,8 @@ def run(args) -> int:
 def _run(args, cancelled) -> int:
     try:
         make_config(args)  # bad options fail before a file is opened
+        if not args.out.strip():
+            raise PreviewError("--out is empty: give the folder to write the frames to")
         scene = load_scene(args)
         config = make_config(saved_settings_with_overrides(scene, args))
         frames = parse_frames(args.frames or f"{scene.frame_start}-{scene.frame_end}:{max(1, scene.frame_step)}")

@@ -178,6 +178,11 @@ def test_unwritable_output_folder_is_named(tmp_path, capsys):
     assert f"could not write {blocker / 'sub' / 'frame_0001.png'}" in capsys.readouterr().err
 
 
+def test_empty_output_folder_is_named(capsys):
+    assert cli.execute(["render", "--frames", "1", "--out", " ", *SMALL]) == 1
+    assert "--out is empty: give the folder to write the frames to" in capsys.readouterr().err
+
+
 def test_help_exits_zero(capsys):
     assert cli.execute(["render", "--help"]) == 0
     assert "--frames" in capsys.readouterr().out
