@@ -70,19 +70,23 @@ class Light:
     def area(cls, matrix_world, shape="SQUARE", size=1.0, size_y=None, power=1000.0, color=(1.0, 1.0, 1.0),
              cast_shadow=True):
         """An area light in its object's XY plane, emitting along its -Z (as in Blender)."""
-        m = np.asarray(matrix_world, np.float64)
+        try:
+            m = np.asarray(matrix_world, np.float64)
+        except (TypeError, ValueError):
+            m = np.full(0, np.nan)
         if m.shape != (4, 4) or not np.isfinite(m).all():
-            raise ValueError("area light matrix_world must be a finite 4x4 matrix")
-        if shape not in AREA_SHAPES:
+            raise ValueError(f"area light matrix_world must be a finite 4x4 matrix, got {matrix_world!r}")
+        if not np.array_equal(m[3], (0.0, 0.0, 0.0, 1.0)):
+            raise ValueError(f"area light matrix_world must be affine (bottom row 0 0 0 1), got {m[3].tolist()}")
+        if not isinstance(shape, str) or shape not in AREA_SHAPES:
             raise ValueError(f"area light shape must be one of {sorted(AREA_SHAPES)}, got {shape!r}")
         for k, name in enumerate("XYZ"):  # X, Y span the light, -Z is where it emits
             if not np.linalg.norm(m[:3, k]) > 0.0:
                 raise ValueError(f"area light matrix_world has a zero {name} axis (zero scale): it has no "
                                  "extent or no direction to emit in")
-        x_axis, y_axis = m[:3, 0], m[:3, 1]
-        if np.linalg.norm(np.cross(x_axis / np.linalg.norm(x_axis), y_axis / np.linalg.norm(y_axis))) < 1e-9:
-            raise ValueError("area light matrix_world has parallel X and Y axes (a sheared or collapsed scale): "
-                             "the light has no area")
+        if _collapsed(m[:3, :3]):
+            raise ValueError("area light matrix_world has parallel axes (a sheared or collapsed scale): the "
+                             "light has no area, or emits along its own plane")
         size = _positive("area light size", size)
         size_y = size if size_y is None or shape in ("SQUARE", "DISK") else _positive("area light size_y", size_y)
         return cls(AREA, color, power, cast_shadow, matrix_world=m, shape=shape, size=size, size_y=size_y)
@@ -142,6 +146,8 @@ def _spot_frame(direction, axes):
     lengths = np.linalg.norm(a, axis=0)
     if not (lengths > 0.0).all():
         raise ValueError("spot axes have a zero-length axis (zero scale): the cone is undefined")
+    if _collapsed(a):
+        raise ValueError("spot axes are parallel (a sheared or collapsed scale): the cone is undefined")
     if np.dot(-a[:, 2] / lengths[2], direction) < 1.0 - 1e-6:
         raise ValueError("spot direction must be minus the Z axis of its axes (Blender: the light's local -Z)")
     return a[:, 0] / lengths[0] ** 2, a[:, 1] / lengths[1] ** 2, 1.0 / lengths[2]
@@ -161,10 +167,20 @@ def pack_lights(lights):
 
 
 def _vector(name, v):
-    v = np.asarray(v, np.float64).reshape(-1)
+    try:
+        v = np.asarray(v, np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be 3 finite numbers, got {v!r}") from None
     if v.shape != (3,) or not np.isfinite(v).all():
         raise ValueError(f"{name} must be 3 finite numbers, got {np.asarray(v).tolist()}")
     return v
+
+
+def _collapsed(axes):
+    """Whether the columns of a 3x3 matrix (a light's X, Y, Z axes) are (nearly) linearly dependent:
+    the determinant of the unit columns, the volume they span, is ~0."""
+    unit = axes / np.linalg.norm(axes, axis=0)
+    return abs(np.linalg.det(unit)) < 1e-9
 
 
 def _unit(name, v):
