@@ -8,6 +8,7 @@ import numbers
 import numpy as np
 
 MIN_DIRECTION = 1e-20  # largest direction component allowed below this is rejected (see as_rays)
+NEGLIGIBLE_COMPONENT = 2.0 ** -600  # a direction component below this times the largest is made 0
 
 
 def as_number(name, value):
@@ -58,7 +59,17 @@ def as_rays(origins, directions):
         bad = int(np.flatnonzero(short)[0])
         raise ValueError(f"ray {bad} has a direction too short to trace ({d[bad].tolist()}, every component "
                          f"below {MIN_DIRECTION:g}): normalise it")
-    return o, d
+    return o, without_negligible_components(d)
+
+
+def without_negligible_components(d):
+    """Directions (..., 3) with every component below NEGLIGIBLE_COMPONENT times the largest set to 0.
+    Such a component turns the ray by under 1e-180 radians, but its reciprocal overflows (a plane test
+    then computes 0 * inf) and the triangle test's shear term underflows to 0 on one triangle and not its
+    neighbour: a ray along (-5e-324, 1, 0) starting on a split plane slipped through a closed cube
+    (outside QA). A zero component is a case every step handles."""
+    negligible = np.abs(d) < NEGLIGIBLE_COMPONENT * np.abs(d).max(axis=-1, keepdims=True)
+    return np.where(negligible, 0.0, d) if negligible.any() else d
 
 
 def as_ray_limits(tmin, tmax, count):
@@ -92,7 +103,13 @@ def _as_points(name, values):
 
 
 def _as_limit(name, value, count):
-    arr = np.asarray(value, dtype=np.float64)
+    try:
+        arr = np.asarray(value)
+        if not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)):
+            raise TypeError
+        arr = arr.astype(np.float64)
+    except (TypeError, ValueError):  # None or a string would become NaN or a silently parsed number
+        raise ValueError(f"{name} must be a number or an array of numbers, got {value!r}") from None
     if arr.ndim == 0:
         return np.full(count, float(arr))
     if arr.shape != (count,):

@@ -6,7 +6,7 @@ with cast_shadow=False (Blender's "Cast Shadow" off) lights every surface facing
 """
 import numpy as np
 
-from .inputs import as_number
+from .inputs import as_number, without_negligible_components
 
 POINT, SUN, SPOT, AREA = 0, 1, 2, 3
 AREA_SHAPES = {"SQUARE": 0, "RECTANGLE": 1, "DISK": 2, "ELLIPSE": 3}
@@ -189,7 +189,7 @@ def _unit(name, v):
     if largest == 0:
         raise ValueError(f"{name} must not be the zero vector")
     v = v / largest  # first, so the norm cannot overflow (1e300 components)
-    return v / np.linalg.norm(v)
+    return without_negligible_components(v / np.linalg.norm(v))  # a shadow ray's direction (inputs.py)
 
 
 def _non_negative(name, x):

@@ -78,6 +78,10 @@ def test_ray_limits(tree):
         core.intersect(tree, o, d, tmax=np.ones(4))
     with pytest.raises(ValueError, match="tmax of ray 0 is NaN"):
         core.intersect(tree, o, d, tmax=np.array([np.nan, 1, 1]))
+    for name in ("tmin", "tmax"):  # None became NaN, and a string was parsed (outside QA)
+        for bad in (None, "0.5"):
+            with pytest.raises(ValueError, match=f"{name} must be a number or an array of numbers, got {bad!r}"):
+                core.intersect(tree, o, d, **{name: bad})
 
 
 def test_an_empty_ray_interval_misses():

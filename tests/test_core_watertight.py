@@ -79,3 +79,21 @@ def test_subdivided_cube_exact_vertices_and_edges(options):
     assert (hits.prim >= 0).all(), f"{(hits.prim < 0).sum()} rays escaped the cube"
     _, _, count = brute_watertight(tris, origins[:5000], directions[:5000])
     assert (count == 1).all(), f"hit counts {np.bincount(count)}"
+
+
+@pytest.mark.parametrize("options", BUILDERS)
+def test_negligible_direction_components_do_not_slip_through(options):
+    """Rays from split planes x = 0 and z = 0 (the subdivided cube's) with a subnormal or tiny x
+    component: 1 / d[x] overflowed, the shear term underflowed to 0 on one side of the plane only,
+    and a ray along (-5e-324, 1, 0) passed through the near face to the far one (outside QA). Such
+    components are made 0; every ray hits the near face y = -1 at t = 2, as the one-leaf tree says."""
+    cube = subdivided_cube(8)
+    tree = core.build_kdtree(cube, **options)
+    tiny = [5e-324, -5e-324, 1e-310, -1e-310, 1e-300, 2.0 ** -601]
+    d = np.array([[x, 1.0, 0.0] for x in tiny] + [[0.0, 1.0, x] for x in tiny])
+    o = np.tile([0.0, -3.0, -0.75], (len(d), 1))
+    o[len(tiny):] = (0.5, -3.0, 0.0)
+    hits = core.intersect(tree, o, d)
+    assert (hits.t == 2.0).all(), hits.t
+    np.testing.assert_array_equal(hits.prim, core.intersect(core.build_kdtree(cube, max_depth=0), o, d).prim)
+    assert core.occluded(tree, o, d, tmax=3.0).all()
