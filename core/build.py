@@ -7,7 +7,7 @@ from .geometry import triangle_boxes, union_of_boxes
 from .inputs import as_triangles
 from .kdtree import KdTree, empty_arrays
 from .lazy import DeferredSubtrees
-from .memory import check_build_memory
+from .memory import MB, MemoryLimitError, check_build_memory
 from .merge import merge_tree
 from .options import make_options
 from .subtree import build_subtrees
@@ -36,7 +36,15 @@ def build_kdtree(triangles, **options):
         if len(prims) == 0:
             arrays = empty_arrays()
         else:
-            arrays, deferred = _build_arrays(tris, prims, boxes, bounds, opts, threads, timings)
+            try:
+                arrays, deferred = _build_arrays(tris, prims, boxes, bounds, opts, threads, timings)
+            except MemoryLimitError:  # raised in a kernel, whose message cannot carry the numbers
+                raise MemoryLimitError(
+                    f"building a kd-tree over {len(tris):,} triangles outgrew memory_limit "
+                    f"({opts.memory_limit / MB:,.1f} MB) while splitting: settings that force splits "
+                    f"(cost_ratio {opts.cost_ratio:g}, leaf_size {opts.leaf_size}, max_depth "
+                    f"{opts.depth_for(len(tris))}) duplicate references at every level; lower max_depth or "
+                    "cost_ratio, or raise memory_limit") from None
     return KdTree(tris, bounds, *arrays, options=opts, build_ms=_ms_since(start), dropped=dropped,
                   timings=timings, deferred=deferred)
 

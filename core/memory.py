@@ -19,8 +19,11 @@ MARGIN = 1.25  # measured peaks vary by scene (references per triangle); the lim
 # suzanne-1m and a wavy 1M height field (1.6-4.3 references a triangle), but a *flat* subdivided plane
 # makes the binned and median builders clip it into 13-14 references a triangle: 612 B (binned) and
 # 487 B (median) per triangle. The exact sweep splits such a plane on its grid lines (1.0 reference).
-# The limit is a promise, so the estimate covers the flat plane: typical scenes need 3-6x less.
-BUILD_BYTES_PER_TRIANGLE = {"binned": 620.0, "exact": 190.0, "median": 490.0}
+# The limit is a promise, so the estimate covers the flat plane: typical scenes need 3-6x less. The
+# exact sweep's 190 B (soup-1m) was exceeded by a denser soup (100k triangles 0.05 wide in a 2-unit
+# cube, 4.5 references a triangle: 324 B of peak, 405 B with the 1.25 of the table in the README),
+# which the in-build check below found: 420 B.
+BUILD_BYTES_PER_TRIANGLE = {"binned": 620.0, "exact": 420.0, "median": 490.0}
 TRIANGLE_BYTES = 36  # (3, 3) float32: the array the tree keeps
 # Peak RSS growth of PreviewRender plus image(), per pixel, every pixel hit (the worst case): measured
 # 198 B at 960x540 and 171 B at 1920x1080, before the 24 B of each pixel's ray start were added.
@@ -56,6 +59,22 @@ def check_limit(estimate, limit, what, advice):
     if limit is not None and estimate > limit:
         raise MemoryLimitError(f"{what} needs about {_size(estimate)}, above the memory limit of "
                                f"{_size(limit)}: {advice}")
+
+
+# The promise also holds while building: options that force splits past what the SAH pays for (a huge
+# cost_ratio with leaf_size 1 and a deep max_depth) duplicate references that can never be separated
+# at every level, exponentially (outside QA: 320 triangles, 3.3M nodes and 165 MB under a 32 MiB
+# limit). So each subtree checks the bytes its pools hold after every split against its share of the
+# limit (subtree.py), halved because the merged tree is a copy of the subtrees' arrays, with a floor
+# for tiny builds whose fixed-size scratch is not what the limit is about.
+MIN_SUBTREE_BUDGET = 1 << 20
+
+
+def subtree_bytes_per_reference(memory_limit, n_references):
+    """Bytes a subtree's pools may hold per reference it starts with (0.0: no limit)."""
+    if memory_limit is None or n_references == 0:
+        return 0.0
+    return memory_limit / (2.0 * n_references)
 
 
 def _size(n_bytes):

@@ -10,6 +10,7 @@ from typing import NamedTuple, Optional
 import numpy as np
 
 from .geometry import half_area
+from .memory import subtree_bytes_per_reference
 
 BUILDERS = ("binned", "exact", "median")
 TOP_STRATEGIES = ("sah", "clustering")
@@ -76,7 +77,9 @@ class BuildOptions:
         order (the previous and next deferred subtree, usually its sibling or a cousin): seed 003 §4's
         speculative building, trading some unneeded building for fewer suspend/build/retrace rounds.
     memory_limit: bytes; a build whose estimated peak memory (memory.py) is above this raises
-        memory.MemoryLimitError (a ValueError) before allocating anything. None: no limit.
+        memory.MemoryLimitError (a ValueError) before allocating anything, and so does a build whose
+        pools outgrow their share of it while splitting (settings that force splits, such as a huge
+        cost_ratio with leaf_size 1 and a deep max_depth). None: no limit.
     rays: how many rays the tree will answer (for one render: core.frame_ray_count, e.g. width x
         height x 2 for camera rays plus one shadow ray a pixel). None: as many as it takes, no build
         term. Given, a node is split only when the rays expected to enter it save more than the
@@ -159,6 +162,7 @@ class BuildOptions:
             skip=self.skip,
             defer_size=self.lazy_subtree_size if self.lazy else 0,
             rays_per_area=_rays_per_area(self.rays, bounds),
+            bytes_per_reference=subtree_bytes_per_reference(self.memory_limit, n_triangles),
         )
 
     def as_dict(self):
@@ -184,6 +188,7 @@ class BuildParams(NamedTuple):
     defer_size: int  # build_subtree defers nodes of at most this many references (0: none, eager)
     rays_per_area: float  # BuildOptions.rays / the root's half area: rays entering a node per unit of
     # its half area, as the SAH assumes (0: no build term)
+    bytes_per_reference: float  # memory_limit's share: bytes a subtree may hold per starting reference (0: none)
 
 
 def _rays_per_area(rays, bounds):

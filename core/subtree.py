@@ -16,6 +16,7 @@ import numpy as np
 from numba import njit
 
 from .layout import LEAF, UNBUILT
+from .memory import MIN_SUBTREE_BUDGET, MemoryLimitError
 from .options import EXACT
 from .partition import new_split_scratch, partition_in_place
 from .pools import ensure_floats, ensure_ints, ensure_nodes, ensure_refs
@@ -79,6 +80,8 @@ def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, params):
         n_right, n_left = partition_in_place(tris, prims, boxes, start, end, split_axis, pos,
                                              planar_left, params.clip, split_scratch)
         axis, split, child, count = ensure_nodes(axis, split, child, count, n_nodes, n_nodes + 2)
+        if params.bytes_per_reference > 0.0:
+            _check_budget(prims, leaf_prims, axis, deferred, params.bytes_per_reference * n_refs)
         left = n_nodes
         n_nodes += 2
         axis[node], split[node], child[node], count[node] = split_axis, pos, left, 0
@@ -93,6 +96,15 @@ def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, params):
             count[:n_nodes].copy(), leaf_prims[:n_leaf_prims].copy(),
             d_node[:n_deferred].copy(), d_start[:n_deferred + 1].copy(), d_depth[:n_deferred].copy(),
             d_box[:n_deferred].copy(), d_prims[:n_deferred_refs].copy(), d_boxes[:n_deferred_refs].copy())
+
+
+@njit(cache=True, inline="always")
+def _check_budget(prims, leaf_prims, axis, deferred, budget):
+    """Raise MemoryLimitError when the pools hold more bytes than the subtree's share of memory_limit
+    (memory.py says why a build can outgrow its estimate)."""
+    held = 28 * prims.shape[0] + 4 * leaf_prims.shape[0] + 13 * axis.shape[0] + 28 * deferred[4].shape[0]
+    if held > max(budget, MIN_SUBTREE_BUDGET):
+        raise MemoryLimitError("the kd-tree outgrew memory_limit while splitting")
 
 
 @njit(cache=True)
