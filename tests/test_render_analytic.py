@@ -4,6 +4,7 @@ import pytest
 
 import core
 from core.camera import tiled_pixels
+from tests.meshes import icosphere, mesh_triangles
 from tests.render_scenes import box, floor, hit_mask, look_at, look_down, quad
 
 
@@ -334,6 +335,32 @@ def test_a_thin_gap_under_a_rotated_scaled_instance_stays_closed():
     shadow = core.render_preview(scene, camera, 12, 12, mode="shadow", samples=4, lights=[core.Light.sun((0.1, 0.2, -1.0))])
     assert hit_mask(ao).all() and (shadow[..., :3] == 0.0).all()
     assert ao[..., 0].mean() == pytest.approx((h / r) ** 2, abs=0.01)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_a_lone_convex_object_has_ao_one_under_random_transforms(seed):
+    """Nothing can occlude a convex object's own surface: AO exactly 1 on every hit pixel of a sphere
+    and a box under random instance matrices (rotation, scales 1e-2 to 1e3 per axis, 1 to 3e6 from
+    the origin), in both layouts, with the ray starts offset by surface_error_scale."""
+    rng = np.random.default_rng(seed)
+    sphere = mesh_triangles(*icosphere(3))
+    cube = box((0, 0, 0), (1, 1, 1)).reshape(-1, 3, 3) - 0.5
+    hits = 0
+    for tris in (sphere, cube):
+        q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+        m = np.eye(4)
+        m[:3, :3] = q * 10 ** rng.uniform(-2, 3, size=3)
+        m[:3, 3] = rng.normal(size=3) / np.sqrt(3) * 10 ** rng.uniform(0, 6.5)
+        size = np.abs(m[:3, :3]).sum(axis=1).max()  # the object lies within size of its centre on every axis
+        away = rng.normal(size=3)
+        camera = look_at(m[:3, 3] + away / np.linalg.norm(away) * 2.0 * np.sqrt(3) * size, m[:3, 3], fov=1.0)
+        mesh = (tris.reshape(-1, 3), np.arange(3 * len(tris)).reshape(-1, 3))
+        for layout in ("flat", "two_level"):
+            scene = core.build_scene([mesh], [0], m[None], layout=layout)
+            img = core.render_preview(scene, camera, 24, 24, samples=16, ao_distance=10 * size)
+            hits += hit_mask(img).sum()
+            assert (img[..., 0][hit_mask(img)] == 1.0).all()
+    assert hits > 0
 
 
 @pytest.mark.parametrize("scale", [1.0, 1e-3, 1e-6])
