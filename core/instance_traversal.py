@@ -213,8 +213,11 @@ def surface_error_scale(scene, inst, prim, p, n):
     plane (onto_triangle_plane), may lie off that plane along unit normal n, and the rounding the
     triangle test's t carries near it: the largest of
     - sum |n_k| |p_k|: p's world coordinates round to their own ulps, seen along the normal;
-    - the same for the object-space point a p + a_t that the projection works on, as a world distance
-      (an object-space offset along the object normal n_o is |a^T n_o| / |n_o| times shorter in world);
+    - the same for the object-space point q = a p + a_t and the projection's operands q - v0, as a
+      world distance (an object-space offset along the object normal n_o is |a^T n_o| / |n_o| times
+      shorter in world, so a shear that stretches along the normal makes it longer: on a plane
+      stretched 1e5 times along its own normal, AO rays left from under it without the q - v0 term,
+      found by an outside review);
     - the triangle's reach from p (largest world coordinate difference to a vertex): the triangle test
       works on vertex-minus-origin differences (on a floor 1e4 wide seen 1e-3 across, an AO ray offset
       by p's magnitude alone hit the floor it left at t ~ 1e-12, outside QA).
@@ -225,16 +228,17 @@ def surface_error_scale(scene, inst, prim, p, n):
     a = rows(scene[6], inst, inst + 1)[0]
     world = abs(n[0] * p[0]) + abs(n[1] * p[1]) + abs(n[2] * p[2])
     nx, ny, nz = _object_normal(tri)
-    along = (abs(nx) * _row_magnitude(a, 0, p) + abs(ny) * _row_magnitude(a, 1, p)
-             + abs(nz) * _row_magnitude(a, 2, p))
+    qx, qy, qz = _object_point(a, p)
+    along = (abs(nx) * (_row_magnitude(a, 0, p) + abs(qx - tri[0, 0]))
+             + abs(ny) * (_row_magnitude(a, 1, p) + abs(qy - tri[0, 1]))
+             + abs(nz) * (_row_magnitude(a, 2, p) + abs(qz - tri[0, 2])))
     wx, wy, wz = (a[0, 0] * nx + a[1, 0] * ny + a[2, 0] * nz, a[0, 1] * nx + a[1, 1] * ny + a[2, 1] * nz,
                   a[0, 2] * nx + a[1, 2] * ny + a[2, 2] * nz)
     length = np.sqrt(wx * wx + wy * wy + wz * wz)
     objectspace = along / length if length > 0.0 else 0.0
-    px, py, pz = _object_point(a, p)
     reach = 0.0
     for i in range(3):
-        x, y, z = _world_vector(a, tri[i, 0] - px, tri[i, 1] - py, tri[i, 2] - pz)
+        x, y, z = _world_vector(a, tri[i, 0] - qx, tri[i, 1] - qy, tri[i, 2] - qz)
         reach = max(reach, abs(x), abs(y), abs(z))
     return max(world, objectspace, reach)
 

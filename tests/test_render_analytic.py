@@ -363,6 +363,32 @@ def test_a_lone_convex_object_has_ao_one_under_random_transforms(seed):
     assert hits > 0
 
 
+@pytest.mark.parametrize("stretch", [1e5, 1e6])
+def test_a_plane_stretched_along_its_own_normal_has_no_acne(stretch):
+    """A flat surface on x + 2y + 3z = 0 (a triangle about 2 wide and a fan of 2^-33 ones around the
+    origin, every float32 vertex exactly on the plane) under an instance that stretches along the
+    plane's normal, as a child rotated under a parent scaled along one axis does: the world surface is
+    the same plane. Projecting a hit point onto its plane in object space rounds (q - v0) . n_o, which
+    the stretch magnifies along the world normal; without that term in the offset, rays started under
+    the plane and the tiny neighbours caught them (outside review: AO 0.53-0.70). AO exactly 1."""
+    n = np.array([1.0, 2.0, 3.0])
+    u = n / np.linalg.norm(n)
+    e1, e2, z, k = np.array([1.0, 1.0, -1.0]), np.array([-2.0, 1.0, 0.0]), np.zeros(3), 2.0 ** -33
+    verts = np.array([v for tri in [(e1, e2, z), (z, k * e2, -k * e1), (z, -k * e1, -k * e2), (z, -k * e2, k * e1)]
+                      for v in tri], np.float32)
+    assert (verts.astype(np.float64) @ n == 0).all()
+    matrix = np.eye(4)
+    matrix[:3, :3] += (stretch - 1.0) * np.outer(u, u)
+    scene = core.build_scene([(verts, np.arange(len(verts)).reshape(-1, 3))], [0], matrix[None], layout="two_level")
+    t1 = np.cross(u, [0.0, 0.0, 1.0])
+    t1 /= np.linalg.norm(t1)
+    cam = np.eye(4)
+    cam[:3, 0], cam[:3, 1], cam[:3, 2], cam[:3, 3] = t1, np.cross(u, t1), u, u
+    img = core.render_preview(scene, core.Camera(cam, ortho_scale=4 * k), 24, 24, samples=64, ao_distance=10.0)
+    assert hit_mask(img).sum() > 300
+    assert (img[..., 0][hit_mask(img)] == 1.0).all()
+
+
 @pytest.mark.parametrize("scale", [1.0, 1e-3, 1e-6])
 def test_ao_between_planes_is_right_at_tiny_scales(scale):
     """AO (h/r)^2 between two planes at any scale: no absolute floor on the ray offset biases it
