@@ -4,7 +4,7 @@ import functools
 import numpy as np
 from numba import njit, prange
 
-from .inputs import as_number, check_image_size
+from .inputs import as_number, check_image_size, without_negligible_components
 
 TILE = 8  # tiled_pixels: 8 x 8 = 64 rays, one traversal task (traversal.RAYS_PER_TASK)
 
@@ -71,6 +71,7 @@ class Camera:
         x = left + (np.arange(width) + 0.5) / width * (right - left)
         y = top - (np.arange(height) + 0.5) / height * (top - bottom)
         rot = self.matrix_world[:3, :3] / np.linalg.norm(self.matrix_world[:3, :3], axis=0)
+        rot = without_negligible_components(rot.T).T  # per axis, as for query rays (inputs.py says why)
         pixels = np.arange(width * height, dtype=np.int64) if pixels is None else _pixel_indices(pixels, width, height)
         n = len(pixels)
         origins, directions = np.empty((n, 3)), np.empty((n, 3))

@@ -368,7 +368,9 @@ def _entry_visible(vis: _Visibility, parent, ob: bpy.types.Object) -> bool:
     orig = ob.original
     if not collection_visible(vis, parent, orig):
         return False
-    return parent is not None or not (_instancer_hides_self(orig, ob) or _instanced_by_its_parent(orig))
+    if parent is not None:  # the instances of an instancer hidden so go with it (Blender skips its duplis)
+        return not _instanced_by_its_parent(parent.original)
+    return not (_instancer_hides_self(orig, ob) or _instanced_by_its_parent(orig))
 
 
 # Blender hides an object whose parent instances it on its vertices or faces at its own place in a

@@ -313,11 +313,13 @@ def test_a_child_of_a_vertex_or_face_instancing_parent_shows_only_as_its_instanc
     parent.show_instancer_for_render = False
     child = scenes.add_cube("Child", scale=0.2, location=(0, 0, 3))
     child.parent = parent
+    source = scenes.new_collection("Source", exclude=True)  # a collection instancer as a child: its own
+    scenes.add_cube("Unit", scale=0.1, collection=source)  # instances go with it (outside review)
+    scenes.add_collection_instance("Holder", source, location=(0, 0, 9)).parent = parent
     result = extract_scene()
-    children = [i for i in result.instances if i.name == "Child"]
-    assert len(children) == (6 if instance_type == "VERTS" else 2)
-    assert all(i.is_instance and i.instancer == "Parent" for i in children)
-    assert result.object_names == ["Child"] * len(children) and result.warnings == []
+    copies = 6 if instance_type == "VERTS" else 2
+    assert sorted(result.object_names) == ["Child"] * copies + ["Unit"] * copies and result.warnings == []
+    assert all(i.is_instance and i.instancer == "Parent" for i in result.instances)
 
 
 def test_geometry_that_is_not_triangles_inside_mesh_objects_is_named(scene):
