@@ -41,10 +41,10 @@ def build_kdtree(triangles, **options):
             except MemoryLimitError:  # raised in a kernel, whose message cannot carry the numbers
                 raise MemoryLimitError(
                     f"building a kd-tree over {len(tris):,} triangles outgrew memory_limit "
-                    f"({opts.memory_limit / MB:,.1f} MB) while splitting: settings that force splits "
-                    f"(cost_ratio {opts.cost_ratio:g}, leaf_size {opts.leaf_size}, max_depth "
-                    f"{opts.depth_for(len(tris))}) duplicate references at every level; lower max_depth or "
-                    "cost_ratio, or raise memory_limit") from None
+                    f"({opts.memory_limit / MB:,.1f} MB) while splitting: the triangles need more references "
+                    "than the estimate allows, as dense overlapping triangles and settings that force splits "
+                    f"(here cost_ratio {opts.cost_ratio:g}, leaf_size {opts.leaf_size}, max_depth "
+                    f"{opts.depth_for(len(tris))}) do; raise memory_limit, or lower max_depth or cost_ratio") from None
     return KdTree(tris, bounds, *arrays, options=opts, build_ms=_ms_since(start), dropped=dropped,
                   timings=timings, deferred=deferred)
 

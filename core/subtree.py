@@ -104,7 +104,9 @@ def _check_budget(prims, leaf_prims, axis, deferred, budget):
     (memory.py says why a build can outgrow its estimate)."""
     held = 28 * prims.shape[0] + 4 * leaf_prims.shape[0] + 13 * axis.shape[0] + 28 * deferred[4].shape[0]
     if held > max(budget, MIN_SUBTREE_BUDGET):
-        raise MemoryLimitError("the kd-tree outgrew memory_limit while splitting")
+        raise MemoryLimitError("the kd-tree outgrew memory_limit while splitting: its triangles need more "
+                               "references than the limit allows (dense overlapping triangles, or settings "
+                               "that force splits); raise memory_limit")
 
 
 @njit(cache=True)

@@ -224,9 +224,10 @@ class FrameJob:
     def _scene_inputs(self) -> scene_input.SceneInputs:
         render = self.scene.render
         width, height = frame_size(render.resolution_x, render.resolution_y, self.config.resolution_percentage)
-        inputs = scene_input.read_scene(self.scene, self.depsgraph, width, height)
-        if self.config.settings.mode == "ao":
-            return inputs  # lights do not change an AO image: nothing to warn about
+        uses_lights = self.config.settings.mode != "ao"  # lights do not change an AO image
+        inputs = scene_input.read_scene(self.scene, self.depsgraph, width, height, lights=uses_lights)
+        if not uses_lights:
+            return inputs
         if not inputs.lights:
             raise PreviewError(f"mode '{self.config.settings.mode}' needs a light, but scene '{self.scene.name}' "
                                + ("has no light the preview can see: " + "; ".join(inputs.hidden_lights)

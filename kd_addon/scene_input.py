@@ -229,12 +229,13 @@ def unapplied_light_settings(ob) -> tuple[str, ...]:
     return tuple(found)
 
 
-def read_scene(scene, depsgraph, width: int, height: int) -> SceneInputs:
-    """Camera and lights of the evaluated scene for a width x height preview."""
+def read_scene(scene, depsgraph, width: int, height: int, lights: bool = True) -> SceneInputs:
+    """Camera and lights of the evaluated scene for a width x height preview (`lights` False: an AO
+    frame, which needs none, so lights hidden in the viewport are not looked for)."""
     if scene.render.pixel_aspect_x != scene.render.pixel_aspect_y:
         warnings = ["non-square pixel aspect is ignored by the preview"]
     else:
         warnings = []
     camera, camera_warnings = read_camera(scene, depsgraph, width, height)
     return SceneInputs(camera, read_lights(depsgraph), width, height, warnings + camera_warnings,
-                       hidden_light_warnings(depsgraph))
+                       hidden_light_warnings(depsgraph) if lights else [])

@@ -57,8 +57,8 @@ def test_memory_limit_exits_nonzero_before_rendering(tmp_path, capsys):
 
 
 def test_a_frame_beyond_the_machines_memory_is_refused_without_a_limit(addon, tmp_path, capsys, monkeypatch):  # noqa: F811
-    """No memory limit set: a frame whose estimate is above the machine's physical memory is refused
-    with the same message before anything is built (outside QA: a 20000 x 20000 frame built its tree,
+    """No memory limit set: a frame whose pixel buffers are above the machine's physical memory is
+    refused with a message before anything is built (outside QA: a 20000 x 20000 frame built its tree,
     then core's own check escaped as a traceback). The machine is made small so the test is cheap."""
     floor_scene(400, 300)
     blend = tmp_path / "scene.blend"
@@ -67,7 +67,8 @@ def test_a_frame_beyond_the_machines_memory_is_refused_without_a_limit(addon, tm
     monkeypatch.setattr(core_memory, "physical_memory", lambda: 2 ** 20)
     assert cli_render(tmp_path, blend, "--resolution", "100") == 1
     err = capsys.readouterr().err
-    assert "400x300 pixels" in err and "above this machine's memory of 1 MiB" in err and "Traceback" not in err
+    assert "this frame's 400x300 pixels need about" in err and "above this machine's memory of 1 MiB" in err
+    assert "lower the resolution" in err and "Traceback" not in err
     assert not (tmp_path / "out" / "frame_0001.png").exists()
     with pytest.raises(PreviewError, match="above this machine's memory"):
         render()
