@@ -386,7 +386,7 @@ def _instanced_by_its_parent(orig: bpy.types.Object) -> bool:
 
 def collection_visible(vis: _Visibility, parent, orig: bpy.types.Object) -> bool:
     """The collection and hide_render rules of an object_instances entry (parent None: not an
-    instance), without the ray-visibility flags: all that decides whether a light is rendered."""
+    instance), without the ray-visibility flags."""
     if parent is None:
         return vis.scene_object(orig)
     parent = parent.original
@@ -497,8 +497,10 @@ def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility, instance
             if kind in NOT_TRIANGLES:
                 warnings.append(f"object '{ob.name}' is {NOT_TRIANGLES[kind]}, not triangles: left out of the preview")
             else:
+                what = ("it and the instances it makes" if ob.instance_type in _INSTANCING_PARENT_TYPES
+                        or len(ob.particle_systems) else "it")
                 warnings.append(f"object '{ob.name}' is hidden in the viewport (eye icon, Disable in Viewports or "
-                                "a hidden collection): the preview reads the viewport's scene and leaves it out, "
+                                f"a hidden collection): the preview reads the viewport's scene and leaves {what} out, "
                                 "a final render shows it")
     for collection, instancer in instancers.values():
         warnings += _hidden_member_warnings(collection, instancer, vis, instanced)

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .errors import PreviewError
-from .extract import _Visibility, collection_visible, hidden_light_warnings  # extraction's visibility rules
+from .extract import _Visibility, _entry_visible, hidden_light_warnings  # extraction's visibility rules
 
 
 @dataclass(frozen=True)
@@ -205,8 +205,8 @@ def read_lights(depsgraph) -> list[LightInput]:
         if ob.type != "LIGHT":
             continue
         parent = inst.parent if inst.is_instance else None
-        if not collection_visible(visibility, parent, ob.original):
-            continue
+        if not _entry_visible(visibility, parent, ob):  # a light is no instancer: the collection rules and
+            continue  # the vertex/face-instancing parent's
         name = ob.original.name if parent is None else f"{ob.original.name} (instanced by {parent.original.name})"
         light = light_input(name, ob.data, inst.matrix_world)
         if light is not None:

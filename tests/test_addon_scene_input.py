@@ -157,6 +157,19 @@ def test_instanced_lights_are_read_at_their_instances(scene):
     assert found == [("Lamp (instanced by A)", (11.0, 0.0, 2.0)), ("Lamp (instanced by B)", (21.0, 0.0, 2.0))]
 
 
+def test_a_light_child_of_a_vertex_instancing_parent_lights_only_from_the_instances(scene):
+    """As for meshes (extract.py): a final render hides the child at its own place and keeps the
+    copies the parent makes at its vertices."""
+    parent = scenes.add_mesh("Parent", [(1, 0, 0), (10, 0, 0)], [], edges=[(0, 1)])
+    parent.instance_type = "VERTS"
+    lamp = light_object("POINT", name="Lamp")
+    lamp.location = (0.0, 0.0, 5.0)
+    lamp.parent = parent
+    lights = scene_input.read_lights(bpy.context.evaluated_depsgraph_get())
+    found = sorted((light.name, tuple(np.round(light.keywords["position"], 6))) for light in lights)
+    assert found == [("Lamp (instanced by Parent)", (1.0, 0.0, 5.0)), ("Lamp (instanced by Parent)", (10.0, 0.0, 5.0))]
+
+
 def test_cast_shadow_and_spot_scale_reach_core(scene):
     """Blender's Cast Shadow switch and a spot's object scale (its cone is elliptical in Cycles)."""
     sun = light_object("SUN")

@@ -268,6 +268,9 @@ def test_viewport_hidden_and_non_triangle_objects_are_named(scene):
     scenes.add_cube("Shown")
     scenes.add_cube("EyeHidden", location=(3, 0, 0)).hide_set(True)
     scenes.add_cube("MonitorHidden", location=(6, 0, 0)).hide_viewport = True
+    emitter = scenes.add_cube("HiddenEmitter", location=(12, 0, 0))
+    emitter.modifiers.new("Particles", "PARTICLE_SYSTEM")
+    emitter.hide_set(True)
     quiet = scenes.add_cube("RenderHiddenToo", location=(9, 0, 0))
     quiet.hide_viewport = quiet.hide_render = True
     hair = bpy.data.objects.new("Hair", bpy.data.hair_curves.new("Hair"))
@@ -278,6 +281,8 @@ def test_viewport_hidden_and_non_triangle_objects_are_named(scene):
         "object 'EyeHidden' is hidden in the viewport (eye icon, Disable in Viewports or a hidden collection): "
         "the preview reads the viewport's scene and leaves it out, a final render shows it",
         "object 'Hair' is hair curves, not triangles: left out of the preview",
+        "object 'HiddenEmitter' is hidden in the viewport (eye icon, Disable in Viewports or a hidden collection): "
+        "the preview reads the viewport's scene and leaves it and the instances it makes out, a final render shows it",
         "object 'MonitorHidden' is hidden in the viewport (eye icon, Disable in Viewports or a hidden "
         "collection): the preview reads the viewport's scene and leaves it out, a final render shows it"]
 
