@@ -34,7 +34,7 @@ def as_triangles(triangles):
     arr = np.asarray(triangles)
     if arr.ndim != 3 or arr.shape[1:] != (3, 3):
         raise ValueError(f"triangles must have shape (N, 3, 3) (N triangles, 3 vertices, xyz), got {arr.shape}")
-    if not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)):
+    if not _is_real(arr.dtype):
         raise ValueError(f"triangles must be float32 or float64, got dtype {arr.dtype}")
     arr = np.ascontiguousarray(arr, dtype=np.float32)
     if len(arr) and not np.isfinite(arr).all():
@@ -88,11 +88,16 @@ def as_ray_limits(tmin, tmax, count):
     return lo, hi
 
 
+def _is_real(dtype):
+    """Whether an array of this dtype holds real numbers (floats or integers; not bool, complex, str, object)."""
+    return np.issubdtype(dtype, np.floating) or np.issubdtype(dtype, np.integer)
+
+
 def _as_points(name, values):
     arr = np.asarray(values)
     if arr.ndim != 2 or arr.shape[1] != 3:
         raise ValueError(f"{name} must have shape (R, 3), got {arr.shape}")
-    if not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)):
+    if not _is_real(arr.dtype):
         raise ValueError(f"{name} must be a float array, got dtype {arr.dtype}")
     arr = np.ascontiguousarray(arr, dtype=np.float64)
     finite = np.isfinite(arr).all(axis=1)
@@ -105,7 +110,7 @@ def _as_points(name, values):
 def _as_limit(name, value, count):
     try:
         arr = np.asarray(value)
-        if not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)):
+        if not _is_real(arr.dtype):
             raise TypeError
         arr = arr.astype(np.float64)
     except (TypeError, ValueError):  # None or a string would become NaN or a silently parsed number

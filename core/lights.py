@@ -22,10 +22,7 @@ class Light:
     """One light. Use the constructors `point`, `sun`, `spot`, `area`."""
 
     def __init__(self, kind, color, power, cast_shadow=True, **params):
-        try:
-            rgb = np.asarray(color, np.float64)
-        except (TypeError, ValueError):
-            rgb = np.full(0, np.nan)
+        rgb = _floats(color)
         if rgb.shape != (3,) or not np.isfinite(rgb).all() or (rgb < 0).any():
             raise ValueError(f"light color must be 3 finite non-negative numbers (r, g, b), got {color!r}")
         color = rgb
@@ -70,10 +67,7 @@ class Light:
     def area(cls, matrix_world, shape="SQUARE", size=1.0, size_y=None, power=1000.0, color=(1.0, 1.0, 1.0),
              cast_shadow=True):
         """An area light in its object's XY plane, emitting along its -Z (as in Blender)."""
-        try:
-            m = np.asarray(matrix_world, np.float64)
-        except (TypeError, ValueError):
-            m = np.full(0, np.nan)
+        m = _floats(matrix_world)
         if m.shape != (4, 4) or not np.isfinite(m).all():
             raise ValueError(f"area light matrix_world must be a finite 4x4 matrix, got {matrix_world!r}")
         if not np.array_equal(m[3], (0.0, 0.0, 0.0, 1.0)):
@@ -164,6 +158,15 @@ def pack_lights(lights):
     if not lights:
         return np.zeros((0, ROW))
     return np.stack([light.packed() for light in lights])
+
+
+def _floats(value):
+    """`value` as a float64 array, or an empty one when it is not numbers: the caller's shape check then
+    names the argument (numpy's own error would not)."""
+    try:
+        return np.asarray(value, np.float64)
+    except (TypeError, ValueError):
+        return np.full(0, np.nan)
 
 
 def _vector(name, v):
