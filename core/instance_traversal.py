@@ -19,32 +19,34 @@ from .array_views import rows, unowned
 from .layout import LEAF, NO_HIT
 from .traversal import (RAYS_PER_TASK, STACK_SIZE, _descend, _pop, block_range, clip_to_box,
                         interleaved_blocks, trace_ray)
+from .triangle_test import LEAF_CHUNK
 
 
 @njit(cache=True)
 def new_scratch():
     """Per-thread buffers: the top level's stack and inverse direction, the mesh traversal's stack and
-    inverse direction, and the object-space ray: three allocations cut into unowned views, followed
-    by the three owners that keep them alive."""
+    inverse direction, the object-space ray, and the mesh traversal's leaf flags: four allocations cut
+    into unowned views, followed by the four owners that keep them alive."""
     nodes = np.empty(2 * STACK_SIZE, np.int32)
     intervals = np.empty((2 * STACK_SIZE, 3))
     vectors = np.empty(12)
+    flags = np.empty(LEAF_CHUNK, np.uint8)
     return (rows(nodes, 0, STACK_SIZE), rows(intervals, 0, STACK_SIZE), rows(vectors, 0, 3),
             rows(nodes, STACK_SIZE, 2 * STACK_SIZE), rows(intervals, STACK_SIZE, 2 * STACK_SIZE), rows(vectors, 3, 6),
-            rows(vectors, 6, 9), rows(vectors, 9, 12), nodes, intervals, vectors)
+            rows(vectors, 6, 9), rows(vectors, 9, 12), rows(flags, 0, LEAF_CHUNK), nodes, intervals, vectors, flags)
 
 
 @njit(cache=True, inline="always")
 def unowned_scene(scene):
     """The scene tuple (two_level.TwoLevelScene.arrays: 6 top-level arrays, world-to-object matrices,
-    mesh of each instance, 10 packed mesh arrays, ray visibility of each instance) as unowned views,
+    mesh of each instance, 11 packed mesh arrays, ray visibility of each instance) as unowned views,
     made once per block of rays: with owned arrays, the code inlined per ray took and dropped
     references to them (array_views.py)."""
     s = scene
     return (unowned(s[0]), unowned(s[1]), unowned(s[2]), unowned(s[3]), unowned(s[4]), unowned(s[5]),
             unowned(s[6]), unowned(s[7]), unowned(s[8]), unowned(s[9]), unowned(s[10]), unowned(s[11]),
             unowned(s[12]), unowned(s[13]), unowned(s[14]), unowned(s[15]), unowned(s[16]), unowned(s[17]),
-            unowned(s[18]))
+            unowned(s[18]), unowned(s[19]))
 
 
 @njit(cache=True, inline="always")
@@ -55,7 +57,7 @@ def mesh_tree(scene, m):
     n0, n1 = node_start[m], node_start[m + 1]
     return (rows(scene[11], n0, n1), rows(scene[12], n0, n1), rows(scene[13], n0, n1), rows(scene[14], n0, n1),
             rows(scene[15], ref_start[m], ref_start[m + 1]), rows(scene[16], tri_start[m], tri_start[m + 1]),
-            rows(scene[17], m, m + 1)[0])
+            rows(scene[17], m, m + 1)[0], scene[18], ref_start[m])
 
 
 @njit(cache=True, inline="always")
@@ -68,12 +70,12 @@ def _to_object(w2o, o, d, o_obj, d_obj):
 @njit(cache=True, inline="always")
 def trace_instance(scene, inst, o, d, tmin, tmax, any_hit, scratch):
     """(t, prim, u, v) of the ray against one instance, in (tmin, tmax); prim -1 on a miss."""
-    stack_node, stack_t, inv, o_obj, d_obj = scratch[3], scratch[4], scratch[5], scratch[6], scratch[7]
+    stack_node, stack_t, inv, o_obj, d_obj, flags = scratch[3:9]
     _to_object(rows(scene[6], inst, inst + 1)[0], o, d, o_obj, d_obj)
     if d_obj[0] == 0.0 and d_obj[1] == 0.0 and d_obj[2] == 0.0:
         return np.inf, -1, 0.0, 0.0  # underflow of an extreme scale: nothing to trace
     return trace_ray(mesh_tree(scene, scene[7][inst]), o_obj, d_obj, tmin, tmax, any_hit, stack_node, stack_t,
-                     inv)
+                     inv, flags)
 
 
 @njit(cache=True, inline="always")
@@ -84,7 +86,7 @@ def trace_scene(scene, o, d, tmin, tmax, any_hit, ray_mask, scratch):
     there: prim is then trace_ray's suspended value (< NO_HIT) and instance the one it stopped in.
     `scratch` comes from new_scratch() and is reused across rays."""
     axis, split, child, count, items, root_box = scene[0], scene[1], scene[2], scene[3], scene[4], scene[5]
-    visibility = scene[18]
+    visibility = scene[19]
     if items.shape[0] == 1 and axis[0] == LEAF:  # one instance (a flat tree): its own tree clips the ray
         if visibility[items[0]] & ray_mask == 0:
             return np.inf, -1, -1, 0.0, 0.0

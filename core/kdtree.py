@@ -2,6 +2,7 @@
 import numpy as np
 
 from .layout import LEAF
+from .leaf_triangles import leaf_triangles
 from .tree_stats import leaf_size_histogram, walk_stats
 
 
@@ -10,17 +11,19 @@ class KdTree:
 
     Attributes: `triangles` (N, 3, 3) float32; `bounds` (6,) float32 box of the triangles in the tree;
     `axis`, `split`, `child`, `count` (per node, layout.py) and `leaf_prims` (triangle indices);
+    `leaf_triangles` (9, R) float32, the triangles copied into leaf order (leaf_triangles.py);
     `options` (the BuildOptions used); `build_ms`; `dropped` (indices of zero-area triangles, which can
     never be hit and are left out); `deferred` (lazy builds: the subtrees not built yet, lazy.py; None
     for an eager tree). Queries on a lazy tree build what they need, so its node arrays grow.
     """
 
     def __init__(self, triangles, bounds, axis, split, child, count, leaf_prims, options, build_ms,
-                 dropped, timings=None, deferred=None):
+                 dropped, timings=None, deferred=None, leaf_tris=None):
         self.triangles = triangles
         self.bounds = bounds
         self.axis, self.split, self.child, self.count = axis, split, child, count
         self.leaf_prims = leaf_prims
+        self.leaf_triangles = leaf_triangles(triangles, leaf_prims) if leaf_tris is None else leaf_tris
         self.options = options
         self.build_ms = build_ms
         self.dropped = dropped
@@ -30,8 +33,10 @@ class KdTree:
 
     @property
     def arrays(self):
-        """The tuple the traversal kernels take."""
-        return (self.axis, self.split, self.child, self.count, self.leaf_prims, self.triangles, self.bounds)
+        """The tuple the traversal kernels take (traversal.trace_ray): the node arrays, the triangles, the
+        bounds, the leaf-ordered triangles and where this tree's columns start in them (0)."""
+        return (self.axis, self.split, self.child, self.count, self.leaf_prims, self.triangles, self.bounds,
+                self.leaf_triangles, 0)
 
     @property
     def node_arrays(self):
@@ -40,6 +45,7 @@ class KdTree:
     def replace_nodes(self, node_arrays):
         """Swap in grown node arrays (a lazy tree after building deferred subtrees)."""
         self.axis, self.split, self.child, self.count, self.leaf_prims = node_arrays
+        self.leaf_triangles = leaf_triangles(self.triangles, self.leaf_prims)
         self._stats = None
 
     @property
@@ -66,7 +72,8 @@ class KdTree:
         sah, leaves, empty, depth, refs, _, _, unbuilt = walk_stats(
             self.axis, self.split, self.child, self.count, self.bounds, o.traversal_cost, o.intersection_cost)
         n = len(self.triangles)
-        nbytes = sum(a.nbytes for a in (self.axis, self.split, self.child, self.count, self.leaf_prims))
+        nbytes = sum(a.nbytes for a in (self.axis, self.split, self.child, self.count, self.leaf_prims,
+                                         self.leaf_triangles))
         return {
             "triangles": n,
             "degenerate_dropped": len(self.dropped),

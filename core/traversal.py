@@ -18,7 +18,7 @@ from numba import njit, prange
 
 from .array_views import rows, unowned
 from .layout import LEAF, suspended_prim
-from .triangle_test import intersect_triangle, ray_shear
+from .triangle_test import LEAF_CHUNK, intersect_triangle, leaf_candidates, ray_shear
 
 STACK_SIZE = 64  # > DEPTH_LIMIT + 1: one pushed node per level
 RAYS_PER_TASK = 64
@@ -49,15 +49,17 @@ def clip_to_box(box, o, d, inv, tmin, tmax):
 
 
 @njit(cache=True)
-def trace_ray(tree, o, d, tmin, tmax, any_hit, stack_node, stack_t, inv):
+def trace_ray(tree, o, d, tmin, tmax, any_hit, stack_node, stack_t, inv, flags):
     """(t, prim, u, v) of the closest hit in (tmin, tmax), or of any hit if `any_hit`; prim -1 on a miss.
 
     On a lazily built tree a ray that reaches an unbuilt subtree stops there and returns
     prim = suspended_prim(subtree) (<= -2): front to back, that subtree is exactly one the eager tree's
     traversal would enter, so the caller builds it and traces the ray again (lazy.py, seed 003 §3).
-    `stack_node`, `stack_t` and `inv` (3 floats) are the caller's scratch, reused across rays.
+    `stack_node`, `stack_t`, `inv` (3 floats) and `flags` (LEAF_CHUNK uint8) are the caller's
+    scratch, reused across rays. A leaf's triangles are screened LEAF_CHUNK at a time by their edge
+    signs (triangle_test.leaf_candidates), and only those kept get the full test.
     """
-    axis, split, child, count, leaf_prims, tris, root_box = tree
+    axis, split, child, count, leaf_prims, tris, root_box, leaf_tris, base = tree
     for k in range(3):
         inv[k] = 1.0 / d[k] if d[k] != 0.0 else 0.0
     t0, t1 = clip_to_box(root_box, o, d, inv, tmin, tmax)
@@ -75,13 +77,20 @@ def trace_ray(tree, o, d, tmin, tmax, any_hit, stack_node, stack_t, inv):
         first = child[node]
         if a != LEAF:  # UNBUILT: the one extra test, made only at leaves
             return np.inf, suspended_prim(first), 0.0, 0.0
-        for j in range(first, first + count[node]):
-            prim = leaf_prims[j]
-            t, u, v = intersect_triangle(tris[prim], o, kx, ky, kz, sx, sy, sz)
-            if tmin < t < best_t:
-                best_t, best_prim, best_u, best_v = t, prim, u, v
-                if any_hit:
-                    return best_t, best_prim, best_u, best_v
+        end = first + count[node]
+        for lo in range(first, end, LEAF_CHUNK):
+            hi = min(end, lo + LEAF_CHUNK)
+            if not leaf_candidates(leaf_tris, base + lo, base + hi, o, kx, ky, kz, sx, sy, flags):
+                continue
+            for j in range(lo, hi):
+                if flags[j - lo] == 0:
+                    continue
+                prim = leaf_prims[j]
+                t, u, v = intersect_triangle(tris[prim], o, kx, ky, kz, sx, sy, sz)
+                if tmin < t < best_t:
+                    best_t, best_prim, best_u, best_v = t, prim, u, v
+                    if any_hit:
+                        return best_t, best_prim, best_u, best_v
         if best_prim >= 0 and best_t <= t_exit:  # no slack: stopping late is safe, early is not
             break
         node, t0, t1, t_exit, sp = _pop(stack_node, stack_t, sp, best_t, best_prim >= 0)
@@ -193,12 +202,13 @@ def _trace_block(tree, origins, directions, tmin, tmax, any_hit, start, stop, ou
     unowned views (array_views.py): with owned arrays and slices, one-thread camera rays on
     suzanne-251k took 1.15-1.2x as long (the reference counts of the views, per ray)."""
     stack_node, stack_t, inv = np.empty(STACK_SIZE, np.int32), np.empty((STACK_SIZE, 3)), np.empty(3)
+    flags = np.empty(LEAF_CHUNK, np.uint8)
     views = (unowned(tree[0]), unowned(tree[1]), unowned(tree[2]), unowned(tree[3]), unowned(tree[4]),
-             unowned(tree[5]), unowned(tree[6]))
-    scratch = (unowned(stack_node), unowned(stack_t), unowned(inv))
+             unowned(tree[5]), unowned(tree[6]), unowned(tree[7]), tree[8])
+    scratch = (unowned(stack_node), unowned(stack_t), unowned(inv), unowned(flags))
     for r in range(start, stop):
         t, prim, u, v = trace_ray(views, rows(origins, r, r + 1)[0], rows(directions, r, r + 1)[0], tmin[r],
-                                  tmax[r], any_hit, scratch[0], scratch[1], scratch[2])
+                                  tmax[r], any_hit, scratch[0], scratch[1], scratch[2], scratch[3])
         out_t[r] = t
         out_prim[r] = prim
         out_u[r] = u

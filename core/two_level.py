@@ -52,7 +52,7 @@ class TwoLevelScene:
     @property
     def arrays(self):
         """The tuple the instance traversal takes (see instance_traversal.trace_scene)."""
-        return (*self.top, self.world_to_object, self.mesh_of, *self._packed, self.visibility)
+        return (*self.top, self.world_to_object, self.mesh_of, *self._packed, self.visibility)  # 20 arrays
 
     @property
     def lazy_tree(self):
@@ -248,21 +248,25 @@ def build_top_level(boxes, opts):
 
 def pack_meshes(meshes):
     """Every mesh tree's arrays concatenated, with offsets: (node_start, ref_start, tri_start, axis,
-    split, child, count, leaf_prims, triangles, mesh_bounds). Child indices and leaf offsets stay local
-    to their mesh, so `mesh_tree` hands trace_ray views that look like a stand-alone tree."""
+    split, child, count, leaf_prims, triangles, mesh_bounds, leaf_triangles). Child indices and leaf
+    offsets stay local to their mesh, so `mesh_tree` hands trace_ray views that look like a stand-alone
+    tree; leaf_triangles, (9, R) with the meshes' columns side by side, is passed whole with the mesh's
+    first column (ref_start)."""
     if len(meshes) == 1:  # the common flat case: no copy
         m = meshes[0]
         starts = [np.array([0, len(a)], np.int64) for a in (m.axis, m.leaf_prims, m.triangles)]
-        return (*starts, m.axis, m.split, m.child, m.count, m.leaf_prims, m.triangles, m.bounds[None].copy())
+        return (*starts, m.axis, m.split, m.child, m.count, m.leaf_prims, m.triangles, m.bounds[None].copy(),
+                m.leaf_triangles)
     if not meshes:
         axis, split, child, count, prims = empty_arrays()
         zero = np.zeros(1, np.int64)
         return (zero, zero, zero, axis[:0], split[:0], child[:0], count[:0], prims,
-                np.zeros((0, 3, 3), np.float32), np.zeros((0, 6), np.float32))
+                np.zeros((0, 3, 3), np.float32), np.zeros((0, 6), np.float32), np.zeros((9, 0), np.float32))
     starts = [_offsets([len(getattr(m, name)) for m in meshes]) for name in ("axis", "leaf_prims", "triangles")]
     parts = [np.concatenate([getattr(m, name) for m in meshes])
              for name in ("axis", "split", "child", "count", "leaf_prims", "triangles")]
-    return (*starts, *parts, np.stack([m.bounds for m in meshes]).astype(np.float32))
+    return (*starts, *parts, np.stack([m.bounds for m in meshes]).astype(np.float32),
+            np.concatenate([m.leaf_triangles for m in meshes], axis=1))
 
 
 def _offsets(sizes):
