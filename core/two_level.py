@@ -19,6 +19,10 @@ from .options import make_options
 from .ray_visibility import as_visibility
 from .threads import thread_count
 
+# An instance test (a matrix product, then the mesh tree's own traversal) costs the SAH this many triangle
+# tests: the top level keeps the 1.5 traversal steps it was tuned with before the triangle cost fell to
+# 0.3 (options.py; bench_two_level.py's figures in the README are for these top levels).
+INSTANCE_TEST_COST = 5.0
 SINGULAR = 1e-12  # |det| of the linear part below this times its column norms' product: not invertible
 
 
@@ -239,7 +243,8 @@ def build_top_level(boxes, opts):
     sub = np.ascontiguousarray(boxes[keep])
     bounds = np.concatenate([sub[:, :3].min(axis=0), sub[:, 3:].max(axis=0)]).astype(np.float32)
     placeholder = np.zeros((len(keep), 3, 3), np.float32)  # never read: clipping is off
-    box_opts = make_options({**opts.as_dict(), "clip": False, "lazy": False})
+    box_opts = make_options({**opts.as_dict(), "clip": False, "lazy": False,
+                             "intersection_cost": opts.intersection_cost * INSTANCE_TEST_COST})
     with thread_count(opts.threads) as threads:
         (axis, split, child, count, leaf), _ = _build_arrays(placeholder, np.arange(len(keep), dtype=np.int32),
                                                              sub, bounds, box_opts, threads, {})

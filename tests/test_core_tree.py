@@ -173,7 +173,9 @@ def test_snapping_splits_height_fields_on_their_vertex_lines():
     tris = height_field()
     snapped, binned = core.build_kdtree(tris), core.build_kdtree(tris, snap=False)
     s, b = snapped.stats(), binned.stats()
-    assert s["references_per_triangle"] < 1.3 < 2.0 < b["references_per_triangle"]
+    # 1.06 against 1.60 references a triangle (1.28 against 3.31 at the intersection cost of 1.5,
+    # whose deeper trees cut more)
+    assert s["references_per_triangle"] < 1.15 and b["references_per_triangle"] > 1.4 * s["references_per_triangle"]
     assert s["sah_cost"] < b["sah_cost"]
     rng = np.random.default_rng(0)
     origins = np.concatenate([rng.uniform(-6, 6, (400, 2)), np.full((400, 1), 2.0)], axis=1)

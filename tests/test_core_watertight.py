@@ -5,8 +5,11 @@ by several triangles must be owned by exactly one of them (the tie rule in trian
 """
 import numpy as np
 import pytest
+from numba import njit
 
 import core
+from core.leaf_triangles import leaf_triangles
+from core.triangle_test import LEAF_CHUNK, intersect_triangle, leaf_candidates, ray_shear
 from tests.core_helpers import BUILDERS
 from tests.meshes import icosphere, mesh_triangles, subdivided_cube
 from tests.oracles import brute_watertight
@@ -112,3 +115,63 @@ def test_a_camera_axis_with_a_negligible_component_does_not_slip_through(tiny, b
     m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = (1, 0, 0), (0, 0, 1), (-tiny, -1, 0), (0.0, -3.0, -0.75)
     render = core.PreviewRender(scene, core.Camera(m, ortho_scale=0.1), 3, 3, samples=1)
     assert render.depths[list(render.pixels).index(4)] == 2.0
+
+
+@njit
+def _screen_and_full_test(leaf_tris, triangles, origins, directions):
+    """(kept, full_hit, any_kept) for every ray and triangle (any_kept per ray and chunk): the leaf
+    screen's flag, whether the full test returns a finite t, and what the screen returned."""
+    n_rays, n_tris = origins.shape[0], triangles.shape[0]
+    kept = np.zeros((n_rays, n_tris), np.uint8)
+    full_hit = np.zeros((n_rays, n_tris), np.bool_)
+    flags = np.empty(LEAF_CHUNK, np.uint8)
+    any_kept = np.zeros((n_rays, (n_tris + LEAF_CHUNK - 1) // LEAF_CHUNK), np.bool_)
+    for r in range(n_rays):
+        o, d = origins[r], directions[r]
+        kx, ky, kz, sx, sy, sz = ray_shear(d)
+        for lo in range(0, n_tris, LEAF_CHUNK):
+            hi = min(n_tris, lo + LEAF_CHUNK)
+            any_kept[r, lo // LEAF_CHUNK] = leaf_candidates(leaf_tris, lo, hi, o, kx, ky, kz, sx, sy, flags)
+            for j in range(lo, hi):
+                kept[r, j] = flags[j - lo]
+                full_hit[r, j] = intersect_triangle(triangles[j], o, kx, ky, kz, sx, sy, sz)[0] < np.inf
+    return kept, full_hit, any_kept
+
+
+def test_leaf_screen_keeps_every_triangle_the_full_test_hits():
+    """The vectorised edge-sign screen (triangle_test.leaf_candidates) never drops a triangle the full
+    watertight test hits, including rays through shared vertices and edges (the tie rule decides those
+    after the screen) and rays with zero or axis-parallel direction components; it drops triangles
+    whose edge values straddle zero, most of them."""
+    rng = np.random.default_rng(3)
+    tris = subdivided_cube(4)  # grid coordinates k/2: rays pass exactly through vertices and along edges
+    leaf_tris = leaf_triangles(tris, np.arange(len(tris), dtype=np.int32))
+    n = 300
+    targets = rng.choice(np.arange(-2, 3) / 2.0, (n, 3))
+    targets[:, 0] = np.where(rng.random(n) < 0.5, targets[:, 0], rng.uniform(-1, 1, n))  # along grid lines
+    targets[np.arange(n), rng.integers(0, 3, n)] = rng.choice([-1.0, 1.0], n)
+    origins = rng.choice(np.arange(-3, 4) / 4.0, (n, 3))
+    directions = targets - origins
+    directions[(directions == 0) & (rng.random((n, 3)) < 0.5)] = -0.0  # zero components of both signs
+    directions[:6] = [[0.0, 0.0, 1.0], [0.0, -1.0, 0.0], [1.0, -0.0, 0.0], [-0.0, 0.0, -1.0], [-1.0, 0.0, 0.0],
+                      [0.0, 1.0, -0.0]]  # along the axes, from grid points: through edges and vertices
+    kept, full_hit, any_kept = _screen_and_full_test(leaf_tris, tris, origins, directions)
+    chunks = np.arange(len(tris)) // LEAF_CHUNK
+    np.testing.assert_array_equal(any_kept, np.stack([np.bincount(chunks, k) > 0 for k in kept]))
+    assert (full_hit.sum(axis=1) >= 1).all()  # every ray leaves the closed cube: the check is not vacuous
+    assert not np.any(full_hit & (kept == 0))
+    assert kept.mean() < 0.2
+
+
+def test_leaf_triangles_follow_the_leaves_also_after_lazy_growth():
+    """Column j of the leaf-ordered copy is triangle leaf_prims[j], on an eager tree and on a lazy one
+    after rays have built part of it (replace_nodes refreshes the copy)."""
+    rng = np.random.default_rng(9)
+    tris = mesh_triangles(*icosphere(3)).astype(np.float32)
+    for tree in (core.build_kdtree(tris), core.build_kdtree(tris, lazy=True, lazy_subtree_size=16)):
+        before = tree.node_count
+        core.intersect(tree, np.zeros((50, 3)), rng.normal(size=(50, 3)))
+        expected = tris[tree.leaf_prims].reshape(-1, 9).T
+        np.testing.assert_array_equal(tree.leaf_triangles, expected)
+        if tree.lazy:
+            assert tree.node_count > before  # the copy was checked after the tree grew
