@@ -44,8 +44,9 @@ class KdTree:
 
     def replace_nodes(self, node_arrays):
         """Swap in grown node arrays (a lazy tree after building deferred subtrees)."""
+        previous = (self.leaf_prims, self.leaf_triangles)
         self.axis, self.split, self.child, self.count, self.leaf_prims = node_arrays
-        self.leaf_triangles = leaf_triangles(self.triangles, self.leaf_prims)
+        self.leaf_triangles = leaf_triangles(self.triangles, self.leaf_prims, previous)
         self._stats = None
 
     @property

@@ -5,7 +5,8 @@ Node i is four parallel arrays (structure of arrays, seed 004 §4.7):
                        a lazy build deferred (seed 003 §3: built when a ray first reaches it)
     split[i]  float32  the split position (inner nodes)
     child[i]  int32    inner: index of the left child, the right child is child[i] + 1;
-                       leaf: offset of its first triangle index in `leaf_prims`;
+                       leaf: offset of its first triangle index in `leaf_prims`, and of its first
+                       column in the leaf-ordered triangle copy (leaf_triangles.py);
                        unbuilt: index of its deferred subtree (lazy.py)
     count[i]  int32    leaf: number of triangles (0 for an empty leaf); unbuilt: its references; inner: 0
 Children are allocated in pairs, so one index names both (13 bytes a node in all).

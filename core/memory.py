@@ -22,8 +22,12 @@ MARGIN = 1.25  # measured peaks vary by scene (references per triangle); the lim
 # The limit is a promise, so the estimate covers the flat plane: typical scenes need 3-6x less. The
 # exact sweep's 190 B (soup-1m) was exceeded by a denser soup (100k triangles 0.05 wide in a 2-unit
 # cube, 4.5 references a triangle: 324 B of peak, 405 B with the 1.25 of the table in the README),
-# which the in-build check below found: 420 B.
-BUILD_BYTES_PER_TRIANGLE = {"binned": 620.0, "exact": 420.0, "median": 490.0}
+# which the in-build check below found: 420 B. All of these were measured at the SAH's former
+# intersection_cost of 1.5. At today's 0.3 trees are shallower but keep a 36-byte copy of every leaf
+# reference (leaf_triangles.py): 128-190 B (binned), 163-248 (median), 132-190 (exact) on the scenes
+# above (the flat plane now 1.04 references a triangle), and on the dense soup 318 / 365 / 338 B (6.1-6.8
+# references a triangle). The exact sweep's 338 B is 423 with the 1.25 of the table in the README: 430.
+BUILD_BYTES_PER_TRIANGLE = {"binned": 620.0, "exact": 430.0, "median": 490.0}
 TRIANGLE_BYTES = 36  # (3, 3) float32: the array the tree keeps
 # Peak RSS growth of PreviewRender plus image(), per pixel, every pixel hit (the worst case): measured
 # 198 B at 960x540 and 171 B at 1920x1080, before the 24 B of each pixel's ray start were added.

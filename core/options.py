@@ -54,8 +54,8 @@ class BuildOptions:
     max_depth: None means 1.2*log2(N) + 2 (seed 003 §3.5), capped at 60.
     traversal_cost, intersection_cost: SAH constants (cost of one traversal step and of one
         ray/triangle test). 0.3 since leaves screen their triangles in a vectorised loop
-        (triangle_test.leaf_candidates): swept end to end (README *Choices*), 0.3 was best or within
-        noise of it for one shadow ray a pixel and within 5% for 16 AO samples; 1.5 before.
+        (triangle_test.leaf_candidates), swept end to end (README *Choices*): lower values helped
+        dense soups and many samples a little more but lost with few rays a triangle; 1.5 before.
     empty_bonus: fraction of the intersection cost forgiven when one child is empty, in [0, 1).
         0.2, measured: with pbrt's 0.5 the SAH spends the depth budget cutting off empty space and
         leaves of 64+ triangles at the depth limit (SAH cost 83 against 29 on suzanne-251k).

@@ -16,6 +16,7 @@ import numpy as np
 from numba import njit
 
 from .layout import LEAF, UNBUILT
+from .leaf_triangles import BYTES_PER_REFERENCE as LEAF_COPY_BYTES
 from .memory import MIN_SUBTREE_BUDGET, MemoryLimitError
 from .options import EXACT
 from .partition import new_split_scratch, partition_in_place
@@ -101,8 +102,10 @@ def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, params):
 @njit(cache=True, inline="always")
 def _check_budget(prims, leaf_prims, axis, deferred, budget):
     """Raise MemoryLimitError when the pools hold more bytes than the subtree's share of memory_limit
-    (memory.py says why a build can outgrow its estimate)."""
-    held = 28 * prims.shape[0] + 4 * leaf_prims.shape[0] + 13 * axis.shape[0] + 28 * deferred[4].shape[0]
+    (memory.py says why a build can outgrow its estimate). A leaf reference counts its index and the
+    copy of its triangle the finished tree keeps (leaf_triangles.py)."""
+    held = (28 * prims.shape[0] + (4 + LEAF_COPY_BYTES) * leaf_prims.shape[0] + 13 * axis.shape[0]
+            + 28 * deferred[4].shape[0])
     if held > max(budget, MIN_SUBTREE_BUDGET):
         raise MemoryLimitError("the kd-tree outgrew memory_limit while splitting: its triangles need more "
                                "references than the limit allows (dense overlapping triangles, or settings "

@@ -20,8 +20,8 @@ from .ray_visibility import as_visibility
 from .threads import thread_count
 
 # An instance test (a matrix product, then the mesh tree's own traversal) costs the SAH this many triangle
-# tests: the top level keeps the 1.5 traversal steps it was tuned with before the triangle cost fell to
-# 0.3 (options.py; bench_two_level.py's figures in the README are for these top levels).
+# tests: at the default intersection_cost (0.3, options.py) the top level keeps the 1.5 it was tuned with
+# before the triangle test's cost fell.
 INSTANCE_TEST_COST = 5.0
 SINGULAR = 1e-12  # |det| of the linear part below this times its column norms' product: not invertible
 

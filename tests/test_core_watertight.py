@@ -8,9 +8,10 @@ import pytest
 from numba import njit
 
 import core
+from core.layout import LEAF
 from core.leaf_triangles import leaf_triangles
 from core.triangle_test import LEAF_CHUNK, intersect_triangle, leaf_candidates, ray_shear
-from tests.core_helpers import BUILDERS
+from tests.core_helpers import BUILDERS, assert_same_as_brute
 from tests.meshes import icosphere, mesh_triangles, subdivided_cube
 from tests.oracles import brute_watertight
 
@@ -144,17 +145,18 @@ def test_leaf_screen_keeps_every_triangle_the_full_test_hits():
     after the screen) and rays with zero or axis-parallel direction components; it drops triangles
     whose edge values straddle zero, most of them."""
     rng = np.random.default_rng(3)
-    tris = subdivided_cube(4)  # grid coordinates k/2: rays pass exactly through vertices and along edges
-    leaf_tris = leaf_triangles(tris, np.arange(len(tris), dtype=np.int32))
+    tris = subdivided_cube(4).astype(np.float32)  # grid coordinates k/2: rays pass exactly through vertices
+    leaf_tris = leaf_triangles(tris, np.arange(len(tris), dtype=np.int32))   # and along edges
     n = 300
     targets = rng.choice(np.arange(-2, 3) / 2.0, (n, 3))
     targets[:, 0] = np.where(rng.random(n) < 0.5, targets[:, 0], rng.uniform(-1, 1, n))  # along grid lines
     targets[np.arange(n), rng.integers(0, 3, n)] = rng.choice([-1.0, 1.0], n)
-    origins = rng.choice(np.arange(-3, 4) / 4.0, (n, 3))
+    origins = rng.choice(np.arange(-2, 3) / 2.0, (n, 3)) * 0.5  # inside, on the grid's lines scaled by half
     directions = targets - origins
     directions[(directions == 0) & (rng.random((n, 3)) < 0.5)] = -0.0  # zero components of both signs
+    origins[:6] = 0.0
     directions[:6] = [[0.0, 0.0, 1.0], [0.0, -1.0, 0.0], [1.0, -0.0, 0.0], [-0.0, 0.0, -1.0], [-1.0, 0.0, 0.0],
-                      [0.0, 1.0, -0.0]]  # along the axes, from grid points: through edges and vertices
+                      [0.0, 1.0, -0.0]]  # along the axes from the centre: through the faces' centre vertices
     kept, full_hit, any_kept = _screen_and_full_test(leaf_tris, tris, origins, directions)
     chunks = np.arange(len(tris)) // LEAF_CHUNK
     np.testing.assert_array_equal(any_kept, np.stack([np.bincount(chunks, k) > 0 for k in kept]))
@@ -175,3 +177,46 @@ def test_leaf_triangles_follow_the_leaves_also_after_lazy_growth():
         np.testing.assert_array_equal(tree.leaf_triangles, expected)
         if tree.lazy:
             assert tree.node_count > before  # the copy was checked after the tree grew
+
+
+def exact_grid_rays(rng, n):
+    """Rays from points inside the cube of subdivided_cube(8) to its grid vertices and along its grid
+    lines, with zero direction components of both signs."""
+    g = np.arange(-4, 5) / 4.0
+    targets = rng.choice(g, (n, 3))
+    on_line = rng.random(n) < 0.5
+    targets[on_line, 0] = rng.uniform(-1, 1, on_line.sum())
+    targets[np.arange(n), rng.integers(0, 3, n)] = rng.choice([-1.0, 1.0], n)
+    origins = rng.choice(g[1:-1] / 2.0, (n, 3))
+    directions = targets - origins
+    directions[(directions == 0) & (rng.random((n, 3)) < 0.5)] = -0.0
+    return origins, directions
+
+
+def test_leaves_of_several_chunks_answer_like_brute_force():
+    """Leaves of more than LEAF_CHUNK triangles are screened a chunk at a time: hits through shared
+    vertices and edges still match brute force exactly."""
+    tris = subdivided_cube(8).astype(np.float32)  # 768 triangles
+    tree = core.build_kdtree(tris, leaf_size=400)
+    assert tree.count[tree.axis == LEAF].max() > 2 * LEAF_CHUNK  # the check below crosses chunk boundaries
+    origins, directions = exact_grid_rays(np.random.default_rng(4), 3000)
+    hits = assert_same_as_brute(tree, tris, origins, directions)
+    assert (hits.prim >= 0).all()
+
+
+def test_meshes_packed_side_by_side_answer_like_brute_force():
+    """In a two-level scene the meshes' leaf-ordered copies sit side by side, each mesh screened from
+    its own first column: the cube cut into three meshes (two of them not first) answers like brute
+    force over the whole cube, hit for hit, through the edges the meshes share."""
+    tris = subdivided_cube(8).astype(np.float32)
+    parts = [tris[:256], tris[256:512], tris[512:]]  # the faces across x, y and z
+    meshes = [core.build_kdtree(p, leaf_size=40) for p in parts]
+    scene = core.build_two_level(meshes, [2, 0, 1], np.repeat(np.eye(4)[None], 3, axis=0))
+    origins, directions = exact_grid_rays(np.random.default_rng(6), 3000)
+    directions[directions == 0] = 0.0  # the identity's product would turn -0.0 into 0.0: same rays both ways
+    hits = core.intersect_scene(scene, origins, directions)
+    t, prim, _ = brute_watertight(tris, origins, directions)
+    first = np.array([0, 256, 512])[np.array([2, 0, 1])]  # first triangle of each instance's mesh
+    assert (prim >= 0).all() and (hits.prim >= 0).all()
+    np.testing.assert_array_equal(first[hits.instance] + hits.prim, prim)
+    np.testing.assert_array_equal(hits.t, t.astype(np.float32))
