@@ -8,7 +8,7 @@ from .inputs import as_triangles
 from .kdtree import KdTree, empty_arrays
 from .lazy import DeferredSubtrees
 from .leaf_triangles import leaf_triangles
-from .memory import MB, MemoryLimitError, check_build_memory
+from .memory import MB, MemoryLimitError, check_build_memory, release_freed_memory
 from .merge import merge_tree
 from .options import make_options
 from .subtree import build_subtrees
@@ -46,6 +46,8 @@ def build_kdtree(triangles, **options):
                     "than the estimate allows, as dense overlapping triangles and settings that force splits "
                     f"(here cost_ratio {opts.cost_ratio:g}, leaf_size {opts.leaf_size}, max_depth "
                     f"{opts.depth_for(len(tris))}) do; raise memory_limit, or lower max_depth or cost_ratio") from None
+        del prims, boxes  # the initial references; the leaf copy below may take their memory
+        release_freed_memory()
         leaf_tris = leaf_triangles(tris, arrays[4])  # part of the build: the traversal reads it
     return KdTree(tris, bounds, *arrays, options=opts, build_ms=_ms_since(start), dropped=dropped,
                   timings=timings, deferred=deferred, leaf_tris=leaf_tris)

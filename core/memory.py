@@ -7,6 +7,7 @@ are the peak resident-memory growth measured per triangle and per pixel in fresh
 the build's working set (references, boxes, clipped boxes, pools, nodes) grows linearly with the
 triangle count, and the renderer's buffers (camera rays, hit points, normals, sums) with the pixel count.
 """
+import ctypes
 import os
 
 import numpy as np
@@ -24,9 +25,11 @@ MARGIN = 1.25  # measured peaks vary by scene (references per triangle); the lim
 # cube, 4.5 references a triangle: 324 B of peak, 405 B with the 1.25 of the table in the README),
 # which the in-build check below found: 420 B. All of these were measured at the SAH's former
 # intersection_cost of 1.5. At today's 0.3 trees are shallower but keep a 36-byte copy of every leaf
-# reference (leaf_triangles.py): 128-190 B (binned), 163-248 (median), 132-190 (exact) on the scenes
-# above (the flat plane now 1.04 references a triangle), and on the dense soup 318 / 365 / 338 B (6.1-6.8
-# references a triangle). The exact sweep's 338 B is 423 with the 1.25 of the table in the README: 430.
+# reference (leaf_triangles.py), made after release_freed_memory: 91-124 B (binned), 105-177 (median),
+# 96-128 (exact) on the scenes above (the flat plane now 1.04 references a triangle), and 289 / 307 /
+# 278 B on the dense soup (6.1-6.8 references a triangle). Where the C library cannot release memory
+# the copy adds to the peak: 318 / 365 / 338 B on the dense soup, 338 B being 423 with the 1.25 of the
+# table in the README: hence 430 for the exact sweep.
 BUILD_BYTES_PER_TRIANGLE = {"binned": 620.0, "exact": 430.0, "median": 490.0}
 TRIANGLE_BYTES = 36  # (3, 3) float32: the array the tree keeps
 # Peak RSS growth of PreviewRender plus image(), per pixel, every pixel hit (the worst case): measured
@@ -110,3 +113,24 @@ def check_render_memory(width, height):
     numpy would fail part-way (MemoryError) or the machine would swap."""
     check_limit(render_bytes(width, height), physical_memory(), f"a {width}x{height} render",
                 "lower the resolution")
+
+
+def _malloc_trim():
+    """glibc's malloc_trim, or None where the C library has none (macOS, Windows, musl)."""
+    try:
+        return ctypes.CDLL(None).malloc_trim
+    except (AttributeError, OSError, TypeError):
+        return None
+
+
+_MALLOC_TRIM = _malloc_trim()
+
+
+def release_freed_memory():
+    """Give the memory a build has freed back to the OS, where the C library can (glibc's
+    malloc_trim). The subtree builds' pools are freed into their worker threads' malloc arenas, which
+    keep it: the tree's leaf copy, allocated afterwards, then added its whole size to the process's
+    peak (bench_core.py's peak build memory, suzanne-251k: 187 B a triangle against 111 without the
+    copy)."""
+    if _MALLOC_TRIM is not None:
+        _MALLOC_TRIM(0)
