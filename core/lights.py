@@ -170,13 +170,10 @@ def _floats(value):
 
 
 def _vector(name, v):
-    try:
-        v = np.asarray(v, np.float64).reshape(-1)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be 3 finite numbers, got {v!r}") from None
-    if v.shape != (3,) or not np.isfinite(v).all():
-        raise ValueError(f"{name} must be 3 finite numbers, got {np.asarray(v).tolist()}")
-    return v
+    arr = _floats(v).reshape(-1)
+    if arr.shape != (3,) or not np.isfinite(arr).all():
+        raise ValueError(f"{name} must be 3 finite numbers, got {arr.tolist() if arr.size else repr(v)}")
+    return arr
 
 
 def _collapsed(axes):

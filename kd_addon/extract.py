@@ -528,10 +528,10 @@ def _strand_warnings(ob, vis: _Visibility) -> list[str]:
             if system.as_pointer() in shown and system.settings.type == "HAIR" and system.settings.render_type == "PATH"]
 
 
-def hidden_light_warnings(depsgraph: bpy.types.Depsgraph) -> list[str]:
+def hidden_light_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility) -> list[str]:
     """A warning per render-visible scene light hidden in the viewport: its depsgraph does not
-    evaluate it, so the preview cannot use it, while a final render does."""
-    vis = _Visibility(depsgraph.view_layer)
+    evaluate it, so the preview cannot use it, while a final render does. `vis`: the view layer's
+    visibility table, shared with the caller."""
     evaluated = {ob.original.as_pointer() for ob in depsgraph.objects}
     return [f"light '{ob.name}' is hidden in the viewport (eye icon, Disable in Viewports or a hidden collection): "
             "the preview leaves it out, a final render uses it"

@@ -195,10 +195,11 @@ def read_camera(scene, depsgraph, width: int, height: int) -> tuple[CameraInput,
     return camera_input(evaluated.data, evaluated.matrix_world, width, height)
 
 
-def read_lights(depsgraph) -> list[LightInput]:
+def read_lights(depsgraph, visibility: _Visibility | None = None) -> list[LightInput]:
     """Render-visible scene lights, instanced ones too (a light in an instanced collection lights the
-    scene in Cycles): the render-visibility rules of meshes (extract.py), from object_instances."""
-    visibility = _Visibility(depsgraph.view_layer)
+    scene in Cycles): the render-visibility rules of meshes (extract.py), from object_instances.
+    `visibility`: the view layer's visibility table when the caller has one."""
+    visibility = _Visibility(depsgraph.view_layer) if visibility is None else visibility
     lights = []
     for inst in depsgraph.object_instances:
         ob = inst.object
@@ -237,5 +238,6 @@ def read_scene(scene, depsgraph, width: int, height: int, lights: bool = True) -
     else:
         warnings = []
     camera, camera_warnings = read_camera(scene, depsgraph, width, height)
-    return SceneInputs(camera, read_lights(depsgraph), width, height, warnings + camera_warnings,
-                       hidden_light_warnings(depsgraph) if lights else [])
+    visibility = _Visibility(depsgraph.view_layer)  # one table for the lights read and the hidden ones
+    return SceneInputs(camera, read_lights(depsgraph, visibility), width, height, warnings + camera_warnings,
+                       hidden_light_warnings(depsgraph, visibility) if lights else [])
