@@ -88,33 +88,45 @@ def _sample_pixel(scene, points, normals, starts, pixels, i, first, count, mode,
     """All of one pixel's new samples. Returns NO_HIT, or the suspended prim of a ray that reached an
     unbuilt subtree, after restoring the pixel's sums.
 
+    A sample's rays (its AO ray, then one per light) go through one loop with one inlined traversal.
+    (A non-inlined call to it measured 4-10% slower in the seed 000 setting: it passes ~40 arrays.)
+
     The pixel's point, normal and ray start (and each light's row below) are unowned views (array_views.py):
     a slice would update its parent's shared reference count, from both threads, on every ray."""
     point, normal, origin = rows(points, i, i + 1)[0], rows(normals, i, i + 1)[0], rows(starts, i, i + 1)[0]
     ps = pixel_seed(pixels[i], seed)
     reused = memo[3]
     before = (sums[i, 0], sums[i, 1], sums[i, 2], sq_sums[i], rays[i], reused[i])
-    uses = 1 + lights.shape[0]
+    n_lights = lights.shape[0]
+    uses = 1 + n_lights
+    first_use = USE_AO if mode != SHADOW else USE_AO + 1
+    last_use = USE_AO + 1 if mode == AO else uses
     for s in range(first, first + count):
         ao = 1.0
-        if mode != SHADOW:
-            prim = _ao_ray(scene, origin, normal, ao_distance, sampler, ps, s, dim1, direction, scratch, memo, i,
-                           s * uses, rays)
+        lr = lg = lb = 0.0
+        for use in range(first_use, last_use):
+            tmax, weight = _ray_of_use(use, lights, point, normal, ao_distance, sampler, ps, s, dim1, direction)
+            if weight <= 0.0:
+                continue  # behind the surface or outside the light: no ray needed
+            prim = -1  # a light that casts no shadow reaches every surface facing it: no ray either
+            if use == USE_AO or lights[use - 1, NO_SHADOW] == 0.0:
+                prim = _visibility(scene, origin, direction, tmax, scratch, memo, i, s * uses + use, rays)
             if prim < NO_HIT:
                 return _restore(sums, sq_sums, rays, reused, i, before, prim)
-            ao = 1.0 if prim < 0 else 0.0
+            if use == USE_AO:
+                ao = 1.0 if prim < 0 else 0.0
+            elif prim < 0:
+                w = weight / n_lights
+                lr += w * lights[use - 1, 21]
+                lg += w * lights[use - 1, 22]
+                lb += w * lights[use - 1, 23]
         r = g = b = ao
-        if mode != AO:
-            lr, lg, lb, prim = _light_samples(scene, point, origin, normal, lights, sampler, ps, s, dim1, direction,
-                                              scratch, memo, i, s * uses + 1, rays)
-            if prim < NO_HIT:
-                return _restore(sums, sq_sums, rays, reused, i, before, prim)
-            if mode == SHADOW:
-                r, g, b = lr, lg, lb
-            else:
-                r = ao * (ambient + (1.0 - ambient) * lr)
-                g = ao * (ambient + (1.0 - ambient) * lg)
-                b = ao * (ambient + (1.0 - ambient) * lb)
+        if mode == SHADOW:
+            r, g, b = lr, lg, lb
+        elif mode == AO_SHADOW:
+            r = ao * (ambient + (1.0 - ambient) * lr)
+            g = ao * (ambient + (1.0 - ambient) * lg)
+            b = ao * (ambient + (1.0 - ambient) * lb)
         sums[i, 0] += r
         sums[i, 1] += g
         sums[i, 2] += b
@@ -122,6 +134,23 @@ def _sample_pixel(scene, points, normals, starts, pixels, i, first, count, mode,
         sq_sums[i] += grey * grey
     counts[i] += count
     return NO_HIT
+
+
+@njit(cache=True, inline="always")
+def _ray_of_use(use, lights, point, normal, ao_distance, sampler, ps, s, dim1, direction):
+    """The ray of one use of sample s: its direction (into `direction`), its tmax and its weight.
+    USE_AO: a cosine-weighted direction about the normal within ao_distance, weight 1. Light k (use
+    1 + k): a direction to a sampled point of the light and the distance to it, weight
+    max(0, N.L) * mask (spot cone, area light's front side); weight 0 needs no ray."""
+    u1, u2 = sample_2d(sampler, ps, s, use, dim1)
+    if use == USE_AO:
+        cosine_direction(normal, u1, u2, direction)
+        return ao_distance, 1.0
+    dist, mask = sample_light(rows(lights, use - 1, use)[0], point, u1, u2, direction)
+    cos_nl = normal[0] * direction[0] + normal[1] * direction[1] + normal[2] * direction[2]
+    if mask <= 0.0 or cos_nl <= 0.0:
+        return dist, 0.0
+    return dist, cos_nl * mask
 
 
 @njit(cache=True, inline="always")
@@ -148,41 +177,6 @@ def _visibility(scene, origin, direction, tmax, scratch, memo, i, bit, rays):
         mask = np.uint8(1 << (bit & 7))
         bits[i, bit >> 3] = bits[i, bit >> 3] | mask if prim >= 0 else bits[i, bit >> 3] & ~mask
     return prim
-
-
-@njit(cache=True, inline="always")
-def _ao_ray(scene, origin, normal, ao_distance, sampler, ps, s, dim1, direction, scratch, memo, i, bit, rays):
-    """The any-hit prim of a cosine-weighted ray from the surface within ao_distance (< 0: escapes)."""
-    u1, u2 = sample_2d(sampler, ps, s, USE_AO, dim1)
-    cosine_direction(normal, u1, u2, direction)
-    return _visibility(scene, origin, direction, ao_distance, scratch, memo, i, bit, rays)
-
-
-@njit(cache=True, inline="always")
-def _light_samples(scene, point, origin, normal, lights, sampler, ps, s, dim1, direction, scratch, memo, i, bit,
-                   rays):
-    """Mean over lights of colour * visibility * max(0, N.L) * mask, and NO_HIT or the suspended prim
-    of a ray that reached an unbuilt subtree (the rest is then void). Light k's ray is bit + k."""
-    r = g = b = 0.0
-    n_lights = lights.shape[0]
-    for k in range(n_lights):
-        u1, u2 = sample_2d(sampler, ps, s, 1 + k, dim1)
-        light = rows(lights, k, k + 1)[0]
-        dist, mask = sample_light(light, point, u1, u2, direction)
-        cos_nl = normal[0] * direction[0] + normal[1] * direction[1] + normal[2] * direction[2]
-        if mask <= 0.0 or cos_nl <= 0.0:
-            continue  # behind the surface or outside the light: no ray needed
-        prim = -1  # a light that casts no shadow reaches every surface facing it: no ray either
-        if light[NO_SHADOW] == 0.0:
-            prim = _visibility(scene, origin, direction, dist, scratch, memo, i, bit + k, rays)
-        if prim < NO_HIT:
-            return r, g, b, prim
-        if prim < 0:
-            w = cos_nl * mask / n_lights
-            r += w * light[21]
-            g += w * light[22]
-            b += w * light[23]
-    return r, g, b, NO_HIT
 
 
 @njit(cache=True, parallel=True)
