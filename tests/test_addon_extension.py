@@ -3,7 +3,7 @@ enable, render and uninstall it in a separate bpy process with its own Blender u
 
 Slow by nature: the first run downloads ~60 MB of wheels into build/wheels_cache/, and the
 installed copy of core compiles its kernels from scratch (its Numba cache lives in the fresh user
-folder, as in a real install), ~1 minute on two cores.
+folder, as in a real install): 1-3.5 minutes on two cores, the suite's slowest test.
 """
 
 from __future__ import annotations
