@@ -15,7 +15,7 @@ AREA_SHAPES = {"SQUARE": 0, "RECTANGLE": 1, "DISK": 2, "ELLIPSE": 3}
 # axis_u(3), axis_v(3) (area: half extents; spot: its frame's X and Y over their squared lengths),
 # spot_inv_len_z, no_shadow, (unused), shape, color(3)
 ROW = 24
-SPOT_INV_LEN_Z, NO_SHADOW = 17, 18
+SPOT_INV_LEN_Z, NO_SHADOW, COLOR = 17, 18, 21
 
 
 class Light:
@@ -101,7 +101,7 @@ class Light:
         row = np.zeros(ROW)
         p = self.params
         row[0] = self.kind
-        row[21:24] = self.color
+        row[COLOR:COLOR + 3] = self.color
         row[NO_SHADOW] = 0.0 if self.cast_shadow else 1.0
         if self.kind in (POINT, SPOT):
             row[1:4], row[7] = p["position"], p["radius"]

@@ -26,7 +26,7 @@ from .array_views import rows, unowned
 from .instance_traversal import (new_scratch, onto_triangle_plane, surface_error_scale, trace_scene, unowned_scene,
                                  world_normal)
 from .layout import NO_HIT
-from .lights import NO_SHADOW
+from .lights import COLOR, NO_SHADOW
 from .pixel_reuse import segment_meets_any
 from .ray_visibility import SHADOW_RAYS
 from .sampling import pixel_seed, sample_2d
@@ -117,9 +117,9 @@ def _sample_pixel(scene, points, normals, starts, pixels, i, first, count, mode,
                 ao = 1.0 if prim < 0 else 0.0
             elif prim < 0:
                 w = weight / n_lights
-                lr += w * lights[use - 1, 21]
-                lg += w * lights[use - 1, 22]
-                lb += w * lights[use - 1, 23]
+                lr += w * lights[use - 1, COLOR]
+                lg += w * lights[use - 1, COLOR + 1]
+                lb += w * lights[use - 1, COLOR + 2]
         r = g = b = ao
         if mode == SHADOW:
             r, g, b = lr, lg, lb
