@@ -29,6 +29,9 @@ def check_image_size(width, height):
             raise ValueError(f"{name} must be an integer in [1, 32768], got {v!r}")
 
 
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+
 def as_triangles(triangles):
     """Triangles as a C-contiguous (N, 3, 3) float32 array of finite vertex positions."""
     arr = np.asarray(triangles)
@@ -36,10 +39,15 @@ def as_triangles(triangles):
         raise ValueError(f"triangles must have shape (N, 3, 3) (N triangles, 3 vertices, xyz), got {arr.shape}")
     if not _is_real(arr.dtype):
         raise ValueError(f"triangles must be float32 or float64, got dtype {arr.dtype}")
-    arr = np.ascontiguousarray(arr, dtype=np.float32)
     if len(arr) and not np.isfinite(arr).all():
         bad = int(np.flatnonzero(~np.isfinite(arr).reshape(len(arr), 9).all(axis=1))[0])
         raise ValueError(f"triangle {bad} has a non-finite vertex coordinate (NaN or inf): {arr[bad].tolist()}")
+    if arr.dtype != np.float32 and len(arr) and np.abs(arr).max() > FLOAT32_MAX:
+        # checked before the cast, which would turn the value into inf (and warn) and name it so
+        bad = int(np.flatnonzero((np.abs(arr) > FLOAT32_MAX).reshape(len(arr), 9).any(axis=1))[0])
+        raise ValueError(f"triangle {bad} has a vertex coordinate beyond float32's range (+-{FLOAT32_MAX:.4g}), "
+                         f"in which triangles are stored: {arr[bad].tolist()}")
+    arr = np.ascontiguousarray(arr, dtype=np.float32)
     return arr
 
 

@@ -1,4 +1,6 @@
 """Bad input: clear errors naming the first bad index or the expected shape, never a crash."""
+import warnings
+
 import numpy as np
 import pytest
 
@@ -244,3 +246,20 @@ def test_a_non_finite_vertex_names_its_mesh_and_triangle_in_every_layout(layout)
     unused = (np.concatenate([good[0], [[np.inf, 0.0, 0.0]]]), good[1])
     with pytest.raises(ValueError, match=r"mesh 1: vertex 60 is not finite: \[inf, 0.0, 0.0\]"):
         core.build_scene([good, unused], [0, 1], np.stack([np.eye(4)] * 2), layout=layout)
+
+
+def test_a_vertex_beyond_float32_range_is_named_as_such():
+    """Found by outside QA: a finite float64 vertex of 1e39 was cast to float32 first, which warned and
+    made it inf, and the error then called it "non-finite (NaN or inf)"."""
+    tris = np.random.default_rng(2).normal(size=(4, 3, 3))
+    tris[2, 1, 0] = 1e39
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no numpy overflow warning on the way
+        with pytest.raises(ValueError, match=r"triangle 2 has a vertex coordinate beyond float32's range "
+                                             r"\(\+-3\.403e\+38\).*1e\+39"):
+            core.build_kdtree(tris)
+        vertices, triangles = _box_mesh()
+        vertices[7, 2] = -2e38 * 10
+        for layout in ("flat", "two_level"):
+            with pytest.raises(ValueError, match=r"mesh 0: vertex 7 is beyond float32's range"):
+                core.build_scene([(vertices, triangles)], [0], np.eye(4)[None], layout=layout)
