@@ -31,8 +31,13 @@ Render visibility (the viewport depsgraph also holds render-hidden objects)
       collection for a final render. Geometry-nodes and particle instances
       ignore the source object's ``hide_render`` (hiding the source is the usual
       workflow and Cycles still renders the copies), except for members of a
-      collection a Collection Info node instances whole (node_instances.py):
-      those follow the collection-instance rule, as in Cycles.
+      collection that a Collection Info node instances whole or as a child
+      collection it separates, or that particles render (*Render As:
+      Collection*, whole or picked; node_instances.py): those follow the
+      collection-instance rule, as in Cycles. Particles that pick one member
+      each pick among the render-visible members in a render, among the
+      viewport-enabled ones in the viewport: where the two differ the preview
+      cannot reproduce the render's pick, and a warning says so.
     * An object that instances things (particles, vertex/face/collection
       instancing) is left out itself when ``show_instancer_for_render`` is off.
       Not handled: that flag on a geometry-nodes object whose output holds
@@ -81,7 +86,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
-from .node_instances import node_references
+from .node_instances import node_references, particle_references
 
 # --------------------------------------------------------------------------
 # Records
@@ -286,7 +291,8 @@ class _Visibility:
 
     def in_instanced_collection(self, instancer: bpy.types.Object, orig) -> bool:
         """Whether a collection-instancer, or a geometry-nodes object instancing collections through
-        Collection Info (node_instances.py), would instance `orig` in a render."""
+        Collection Info or an emitter whose particles render collections (node_instances.py), would
+        instance `orig` in a render."""
         if instancer.instance_type == "COLLECTION" and instancer.instance_collection is not None:
             objs = self._collection_objects(instancer.instance_collection, set())
             return orig.as_pointer() in objs
@@ -296,10 +302,14 @@ class _Visibility:
 
     def _node_instanced(self, instancer: bpy.types.Object) -> tuple[frozenset, frozenset, frozenset]:
         """Pointers of (every member, the render-visible members) of the collections `instancer`'s
-        geometry nodes instance whole, and of the objects they name directly; memoized."""
+        geometry nodes or particles expand like a collection instance, and of the objects they
+        instance directly; memoized."""
         ptr = instancer.as_pointer()
         if ptr not in self._node_memo:
             collections, objects = node_references(instancer)
+            if len(instancer.particle_systems):
+                particle_collections, particle_objects = particle_references(instancer)
+                collections, objects = collections + particle_collections, objects + particle_objects
             members = frozenset(ob.as_pointer() for c in collections for ob in c.all_objects)
             shown = frozenset().union(*(self._collection_objects(c, set()) for c in collections))
             self._node_memo[ptr] = (members, shown, frozenset(ob.as_pointer() for ob in objects))
@@ -484,7 +494,7 @@ def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility, instance
         kind = ob.type
         if kind in TRIANGLE_TYPES and ob.as_pointer() in evaluated:
             if len(ob.particle_systems):
-                warnings += _strand_warnings(ob, vis)
+                warnings += _strand_warnings(ob, vis) + _pick_warnings(ob, vis)
             continue  # the common case first: ~1.5 us an object
         if ob.instance_type == "COLLECTION" and ob.instance_collection is not None and vis.scene_object(ob):
             if ob.as_pointer() in evaluated:
@@ -526,6 +536,40 @@ def _strand_warnings(ob, vis: _Visibility) -> list[str]:
     return [f"object '{ob.name}': hair particles '{system.name}' are strands, not triangles: left out of the preview"
             for system in ob.particle_systems
             if system.as_pointer() in shown and system.settings.type == "HAIR" and system.settings.render_type == "PATH"]
+
+
+def _pick_warnings(ob, vis: _Visibility) -> list[str]:
+    """Particle systems that render one member of a collection per particle (Whole Collection off):
+    a final render picks among the render-visible members, the viewport among the viewport-enabled
+    ones, so where the two sets differ the preview's particle-to-object assignment is not a final
+    render's (the render-hidden members' particles are left out, see _Visibility)."""
+    if not (vis.scene_object(ob) and _ray_visible(ob)):
+        return []
+    shown = {m.particle_system.as_pointer() for m in ob.modifiers if m.type == "PARTICLE_SYSTEM" and m.show_render}
+    out = []
+    for system in ob.particle_systems:
+        settings = system.settings
+        coll = settings.instance_collection
+        if (system.as_pointer() in shown and settings.render_type == "COLLECTION" and coll is not None
+                and not settings.use_whole_collection
+                and _pick_candidates(coll, "hide_render") != _pick_candidates(coll, "hide_viewport")):
+            out.append(f"object '{ob.name}': particle system '{system.name}' gives each particle one object of "
+                       f"collection '{coll.name}', which a final render picks among the render-visible members "
+                       "only: the preview's particle-to-object assignment differs from a final render's (it leaves "
+                       "the render-hidden members' particles out)")
+    return out
+
+
+def _pick_candidates(coll: bpy.types.Collection, hidden: str) -> set[int]:
+    """Pointers of the objects of `coll` and of its child collections that have the flag `hidden`
+    ("hide_render" or "hide_viewport") off, as has every collection on their path: the members
+    Blender picks particle instances from, in a render or in the viewport."""
+    if getattr(coll, hidden):
+        return set()
+    out = {ob.as_pointer() for ob in coll.objects if not getattr(ob, hidden)}
+    for child in coll.children:
+        out |= _pick_candidates(child, hidden)
+    return out
 
 
 def hidden_light_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility) -> list[str]:

@@ -269,3 +269,51 @@ def add_wavy_sheet(name, cells, *, location):
     obj = bpy.data.objects.new(name, mesh)
     obj.location = location
     return link(obj)
+
+
+def add_particle_emitter(name, *, count, collection=None, obj=None, whole_collection=True, location=(0, 0, 0),
+                         size=10.0):
+    """A size x size quad at `location` (z up) emitting `count` particles at frame 1, without physics,
+    rendered as `obj` or as `collection` (whole, or one member per particle); the emitter itself is
+    not rendered."""
+    half = size / 2
+    emitter = add_mesh(name, [(-half, -half, 0), (half, -half, 0), (half, half, 0), (-half, half, 0)],
+                       [(0, 1, 2, 3)], location=location)
+    emitter.modifiers.new("Particles", "PARTICLE_SYSTEM")
+    settings = emitter.particle_systems[0].settings
+    settings.count, settings.frame_start, settings.frame_end = count, 1, 1
+    settings.physics_type, settings.particle_size = "NO", 1.0
+    if collection is not None:
+        settings.render_type, settings.instance_collection = "COLLECTION", collection
+        settings.use_whole_collection = whole_collection
+    else:
+        settings.render_type, settings.instance_object = "OBJECT", obj
+    emitter.show_instancer_for_render = False
+    return emitter
+
+
+def add_collection_points_host(name, collection, *, count, separate_children=True, location=(0, 0, 0)):
+    """Empty-mesh object whose geometry nodes put the output of a Collection Info node on `count`
+    points 3 apart along x (Instance on Points, picking instance i modulo the number of children on
+    point i when `separate_children`), unrealized."""
+    def info(nodes):
+        node = nodes.new("GeometryNodeCollectionInfo")
+        node.inputs["Collection"].default_value = collection
+        node.inputs["Separate Children"].default_value = separate_children
+        return node
+
+    group = bpy.data.node_groups.new(f"{name}Points", "GeometryNodeTree")
+    group.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    group.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    nodes, links = group.nodes, group.links
+    nodes.new("NodeGroupInput")
+    out = nodes.new("NodeGroupOutput")
+    on_points = nodes.new("GeometryNodeInstanceOnPoints")
+    on_points.inputs["Pick Instance"].default_value = separate_children
+    points = _node(nodes, "GeometryNodeMeshLine", Count=count, Offset=(3.0, 0.0, 0.0))
+    links.new(points.outputs["Mesh"], on_points.inputs["Points"])
+    links.new(info(nodes).outputs[0], on_points.inputs["Instance"])
+    links.new(on_points.outputs["Instances"], out.inputs[0])
+    obj = add_mesh(name, [], [], location=location)
+    obj.modifiers.new("GN", "NODES").node_group = group
+    return obj

@@ -239,8 +239,10 @@ def test_render_hidden_and_non_renderable_objects_left_out(scene):
 def test_collection_info_instances_follow_the_collection_rule(scene, via_modifier_input):
     """Measured with Cycles (README): a collection that a Collection Info node instances whole is
     expanded like a collection instance in a render, so its render-hidden members (own flag or a
-    hidden child collection) are not rendered; with Separate Children on they are, and so is a
-    hidden object that an Object Info node names."""
+    hidden child collection) are not rendered; with Separate Children on a child object is an object
+    reference and is rendered, a child collection is expanded like a collection instance and its
+    render-hidden members are not (QA: the preview drew them), and a hidden object that an Object
+    Info node names is rendered."""
     source = scenes.new_collection("Src", exclude=True)
     scenes.add_cube("Shown", collection=source)
     scenes.add_cube("Hidden", collection=source).hide_render = True
@@ -256,8 +258,87 @@ def test_collection_info_instances_follow_the_collection_rule(scene, via_modifie
     for inst in result.instances:
         by_host.setdefault(inst.instancer, []).append(inst.name)
     assert sorted(by_host["Whole"]) == ["Shown"]
-    assert sorted(by_host["Separate"]) == ["Hidden", "InHiddenChild", "Shown"]
+    assert sorted(by_host["Separate"]) == ["Hidden", "Shown"]
     assert by_host["Named"] == ["Hidden"]
+    assert result.warnings == []
+
+
+def _instances_by_host(result: ExtractedScene) -> dict[str | None, list[str]]:
+    by_host: dict[str | None, list[str]] = {}
+    for inst in result.instances:
+        by_host.setdefault(inst.instancer, []).append(inst.name)
+    return by_host
+
+
+def _mixed_collection():
+    """Excluded collection 'Src': 'Shown', a render-hidden 'Hidden', a render-hidden child collection
+    holding 'InHiddenChild', and a visible child collection holding a render-hidden
+    'HiddenInVisChild' and 'VisInVisChild'. A final render of its collection instances shows
+    'Shown' and 'VisInVisChild' only."""
+    source = scenes.new_collection("Src", exclude=True)
+    scenes.add_cube("Shown", scale=0.2, collection=source)
+    scenes.add_cube("Hidden", scale=0.2, collection=source).hide_render = True
+    hidden_child = scenes.new_collection("HiddenChild", parent=source)
+    hidden_child.hide_render = True
+    scenes.add_cube("InHiddenChild", scale=0.2, collection=hidden_child)
+    visible_child = scenes.new_collection("VisibleChild", parent=source)
+    scenes.add_cube("HiddenInVisChild", scale=0.2, collection=visible_child).hide_render = True
+    scenes.add_cube("VisInVisChild", scale=0.2, collection=visible_child)
+    return source
+
+
+def test_particles_rendering_a_whole_collection_follow_the_collection_rule(scene):
+    """Measured with Cycles (QA part_whole.blend and /tmp checks): particles rendering a collection
+    whole expand it like a collection instance, leaving out its render-hidden members (own flag, a
+    hidden child collection, a hidden member of a visible child collection); the preview drew them.
+    Particles rendering one render-hidden object still show it, as before."""
+    source = _mixed_collection()
+    pebble = scenes.add_cube("Pebble", scale=0.1, location=(50, 0, 0))
+    pebble.hide_render = True
+    scenes.add_particle_emitter("Whole", count=3, collection=source)
+    scenes.add_particle_emitter("Single", count=2, obj=pebble, location=(20, 0, 0))
+    result = extract_scene()
+    by_host = _instances_by_host(result)
+    assert sorted(by_host) == ["Single", "Whole"]
+    assert sorted(by_host["Whole"]) == ["Shown"] * 3 + ["VisInVisChild"] * 3
+    assert by_host["Single"] == ["Pebble"] * 2
+    assert result.warnings == []
+
+
+def test_particles_picking_collection_members_leave_render_hidden_ones_out_and_warn(scene):
+    """With Whole Collection off each particle gets one member: the viewport picks among all the
+    members it shows, a final render among the render-visible ones only (QA part_pick.blend: the
+    preview drew render-hidden spheres where Cycles drew cubes on other particles). The preview
+    cannot reproduce the render's pick: it leaves the render-hidden members out and says so. A pick
+    among members that are all render-visible is the render's and stays quiet."""
+    source = _mixed_collection()
+    scenes.add_particle_emitter("Picker", count=40, collection=source, whole_collection=False)
+    plain = scenes.new_collection("Plain", exclude=True)
+    scenes.add_cube("Left", scale=0.2, collection=plain)
+    scenes.add_cube("Right", scale=0.2, offset=(1, 0, 0), collection=plain)
+    scenes.add_particle_emitter("Quiet", count=10, collection=plain, whole_collection=False, location=(30, 0, 0))
+    result = extract_scene()
+    by_host = _instances_by_host(result)
+    assert by_host["Picker"] and set(by_host["Picker"]) <= {"Shown", "VisInVisChild"}
+    assert len(by_host["Picker"]) < 40  # the viewport gave the other particles render-hidden members
+    assert len(by_host["Quiet"]) == 10 and set(by_host["Quiet"]) <= {"Left", "Right"}
+    assert result.warnings == [
+        "object 'Picker': particle system 'Particles' gives each particle one object of collection 'Src', which a "
+        "final render picks among the render-visible members only: the preview's particle-to-object assignment "
+        "differs from a final render's (it leaves the render-hidden members' particles out)"]
+
+
+def test_separated_child_collections_on_points_follow_the_collection_rule(scene):
+    """Collection Info with Separate Children on, picked by Instance on Points (point i gets child i
+    modulo 4): a final render expands a child collection like a collection instance, leaving out a
+    render-hidden child collection and a render-hidden member of a visible one (QA
+    gn_sep_child.blend, Cycles), while a render-hidden child object, an object reference, is drawn.
+    The pick is over the unfiltered children in both, so the points keep their objects."""
+    _mixed_collection()
+    scenes.add_collection_points_host("Points", bpy.data.collections["Src"], count=8)
+    result = extract_scene()
+    assert sorted(result.object_names) == ["Hidden"] * 2 + ["Shown"] * 2 + ["VisInVisChild"] * 2
+    assert {i.instancer for i in result.instances} == {"Points"}
     assert result.warnings == []
 
 
