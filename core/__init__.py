@@ -26,6 +26,9 @@ Two-level scenes (a kd-tree per mesh in object space under a top-level tree over
     rays only those that cast shadows. | HOLDOUT (Blender's Holdout): a pixel whose camera ray hits the
     instance stays empty (alpha 0); the instance still occludes and shadows.
     A TwoLevelScene renders wherever a KdTree does.
+First-render compile on two cores (an empty Numba cache):
+    with rendering_kernels_alongside(): <build>   a helper process compiles the rendering kernels
+        meanwhile (parallel_compile.py); KD_PREVIEW_COMPILE_HELPER=0 turns it off
 Denoising (edge-avoiding à-trous, variance-guided; the raw estimate stays the default):
     render_preview(..., denoise=True) / PreviewRender.image(denoise=True) -> (H, W, 4) float32
     denoise_pixels(width, height, pixels, points, normals, sums, sq_sums, counts) -> (H, W, 4) float32
@@ -39,6 +42,7 @@ from .render import PreviewRender, frame_ray_count, render_preview
 from .kdtree import KdTree
 from .memory import MemoryLimitError
 from .options import BuildOptions
+from .parallel_compile import rendering_kernels_alongside
 from .pixel_reuse import PixelState
 from .queries import Hits, intersect, occluded
 from .ray_visibility import ALL_RAYS, CAMERA_RAYS, HOLDOUT, SHADOW_RAYS
@@ -51,4 +55,4 @@ __all__ = ["denoise_pixels",
            "render_preview", "PreviewRender", "frame_ray_count", "TwoLevelScene", "build_two_level", "build_scene",
            "SceneBuilder",
            "MeshInput", "BuildReport", "SceneHits", "intersect_scene", "occluded_scene", "MemoryLimitError",
-           "PixelState", "CAMERA_RAYS", "SHADOW_RAYS", "ALL_RAYS", "HOLDOUT"]
+           "PixelState", "rendering_kernels_alongside", "CAMERA_RAYS", "SHADOW_RAYS", "ALL_RAYS", "HOLDOUT"]

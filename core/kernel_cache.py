@@ -12,8 +12,19 @@ Numba has no public hook for that, so `register` puts a locator in front of Numb
 kernel in a registered folder it keeps the location Numba would choose (NUMBA_CACHE_DIR,
 `__pycache__` or the user cache) and adds the digest of core's sources to the stamp. A stamp
 mismatch makes Numba discard that cache index and compile afresh. Kernels elsewhere are untouched.
+
+Several processes may compile core's kernels into one cache at once: the first-render helper
+(parallel_compile.py) beside a build, two Blender sessions, CI runs. Numba writes each file
+atomically (a temporary name, then a rename), but it adds an overload to a function's index by
+reading the index, adding the entry and writing it back, then writing the entry's data file
+(`IndexDataCacheFile.save`). Two writers of one index could lose an entry, or both pick the same
+data file name for different signatures, so that one key's entry loads the other's machine code.
+`register` therefore also wraps that save, for the cache folders of registered kernels only, in an
+exclusive lock on a file in the folder (`locked_cache_folder`), which makes the read-add-write one step.
 """
 import functools
+import os
+from contextlib import contextmanager
 from pathlib import Path
 
 from numba.core import caching
@@ -22,6 +33,8 @@ from .sources_digest import sources_digest
 
 CORE_FOLDER = Path(__file__).resolve().parent
 _sources_of = {}  # registered kernel folder -> the folder whose sources stamp its kernels
+_locked_folders = set()  # cache folders of registered kernels, whose index saves take the lock
+LOCK_NAME = "kd_preview_index.lock"
 
 
 @functools.lru_cache(maxsize=None)
@@ -36,6 +49,7 @@ class SourcesDigestLocator(caching._CacheLocator):
     def __init__(self, usual, sources: Path):
         self._usual = usual
         self._sources = sources
+        _locked_folders.add(os.path.normpath(usual.get_cache_path()))
 
     def ensure_cache_path(self):
         self._usual.ensure_cache_path()
@@ -62,6 +76,49 @@ class SourcesDigestLocator(caching._CacheLocator):
         return None
 
 
+@contextmanager
+def locked_cache_folder(folder):
+    """Hold an exclusive lock on `folder`/LOCK_NAME (blocking; released on exit or process death).
+    Where the lock cannot be taken, it proceeds unlocked: Numba's own behaviour, not a failed compile."""
+    try:
+        handle = open(os.path.join(folder, LOCK_NAME), "a+b")
+    except OSError:
+        yield
+        return
+    with handle:
+        try:
+            _lock(handle, True)
+        except OSError:
+            yield
+            return
+        try:
+            yield
+        finally:
+            _lock(handle, False)
+
+
+def _lock(handle, take):
+    if os.name == "nt":
+        import msvcrt
+        handle.seek(0)
+        msvcrt.locking(handle.fileno(), msvcrt.LK_LOCK if take else msvcrt.LK_UNLCK, 1)
+    else:
+        import fcntl
+        fcntl.flock(handle.fileno(), fcntl.LOCK_EX if take else fcntl.LOCK_UN)
+
+
+def _save_under_lock(numba_save):
+    @functools.wraps(numba_save)
+    def save(self, key, data):
+        if os.path.normpath(self._cache_path) not in _locked_folders:
+            return numba_save(self, key, data)
+        with locked_cache_folder(self._cache_path):
+            return numba_save(self, key, data)
+
+    save.kd_preview_lock = True
+    return save
+
+
 def register(folder=CORE_FOLDER, sources=CORE_FOLDER) -> None:
     """Key the cached kernels of `folder` (core's, or e.g. a test's that inline core's functions)
     by the `*.py` files of `sources` too. Must run before the folder's kernels are decorated:
@@ -69,6 +126,8 @@ def register(folder=CORE_FOLDER, sources=CORE_FOLDER) -> None:
     _sources_of[Path(folder).resolve()] = Path(sources).resolve()
     if SourcesDigestLocator not in caching.CacheImpl._locator_classes:
         caching.CacheImpl._locator_classes.insert(0, SourcesDigestLocator)
+    if not getattr(caching.IndexDataCacheFile.save, "kd_preview_lock", False):
+        caching.IndexDataCacheFile.save = _save_under_lock(caching.IndexDataCacheFile.save)
 
 
 register()

@@ -49,5 +49,8 @@ def test_extension_builds_installs_renders_and_uninstalls(tmp_path):
     assert facts["numba_cache_dir"] == str(user_folder / "numba_cache" / f"core-{corelib.source_digest()}")
     assert facts["size"] == [96, 54] and 0.02 < facts["hit_fraction"] < 0.6
     assert facts["last_run"]["triangles"] == 12 and facts["last_run"]["lights"] == 1
+    # an empty cache: the rendering kernels compiled in a helper process that imported the installed core
+    # under its extension name beside the build (core/parallel_compile.py), and it succeeded
+    assert facts["last_run"]["compile_helper"] == "finished"
     assert facts["enabled_after_uninstall"] is False and facts["files_after_uninstall"] is False
     assert facts["scene_prop_after_uninstall"] is False

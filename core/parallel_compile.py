@@ -1,0 +1,181 @@
+"""A first render's JIT compile on two cores: a helper process compiles the rendering kernels into
+Numba's on-disk cache while this process builds the tree (compiling the builder's kernels).
+
+Why: with an empty cache a first render compiles every kernel, one at a time, in one process: 136 s
+on a 2-core 2.4 GHz host (`benchmarks/bench_compile.py`), 92 s of it the rendering kernels (camera
+rays, surface frames, the sampling kernel, the denoiser) and 44 s the builder's. Both sets go to the
+same cache (cache=True), so a second process can compile one set while this one compiles the other;
+the render then loads what the helper wrote.
+
+Why the two sets must not share a function: Numba's cache index of a function is rewritten whole by
+each writer (numba.core.caching.IndexDataCacheFile.save: read the index, add the entry, write it
+back), so two processes adding overloads of one function at once could lose or mismatch an entry.
+The helper therefore renders a tree made by hand (one leaf: no builder kernel runs), and the one
+builder step that rendering a tree takes, wrapping it as a one-instance scene (two_level.as_two_level,
+the top level's kernels), is compiled here before the helper starts, so the helper only loads it.
+Nothing the builder runs is a rendering kernel; tests/test_parallel_compile.py checks, with Numba's
+compile events, that the helper and a build compile disjoint sets of core's functions.
+
+Pixel-reuse kernels (a frame continued from the one before) are not in the helper's set: they need a
+SceneBuilder's signature, i.e. the builder; they compile on the first continued frame, as before.
+"""
+import os
+import subprocess
+import sys
+import tempfile
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+
+from .camera import Camera
+from .kdtree import KdTree
+from .layout import LEAF
+from .lights import Light
+from .options import BuildOptions
+from .render import render_preview
+from .render_kernels import add_samples
+from .two_level import as_two_level
+
+CORE_FOLDER = Path(__file__).resolve().parent
+
+
+def rendering_kernels_cached() -> bool:
+    """Whether Numba's cache already holds the sampling kernel for these sources (then a helper would
+    only load kernels, which this process does as fast). Reads the kernel's cache index (internal API;
+    numba is pinned, as for kernel_cache.py): an index whose stamp does not match reads as empty."""
+    cache = getattr(add_samples, "_cache", None)
+    try:
+        return bool(cache._cache_file._load_index())
+    except (AttributeError, OSError, EOFError, ValueError):
+        return False
+
+
+def hand_made_tree() -> KdTree:
+    """A two-triangle square in z = 0 as a one-leaf tree, with the node arrays' real dtypes (layout.py),
+    made without any builder kernel."""
+    tris = np.array([[[-1, -1, 0], [1, -1, 0], [1, 1, 0]], [[-1, -1, 0], [1, 1, 0], [-1, 1, 0]]], np.float32)
+    flat = tris.reshape(-1, 3)
+    bounds = np.concatenate([flat.min(axis=0), flat.max(axis=0)]).astype(np.float32)
+    return KdTree(tris, bounds, np.array([LEAF], np.int8), np.zeros(1, np.float32), np.zeros(1, np.int32),
+                  np.array([2], np.int32), np.arange(2, dtype=np.int32), BuildOptions(), 0.0,
+                  np.zeros(0, np.int32))
+
+
+def compile_scene_wrapping() -> None:
+    """The builder kernels a render of a KdTree runs (the one-instance top level), compiled here."""
+    as_two_level(hand_made_tree())
+
+
+def compile_rendering_kernels() -> None:
+    """What the helper runs: a 4 x 4 render of the hand-made tree that takes every rendering kernel's
+    path (camera rays that hit and miss, AO and shadow rays, the denoiser). Modes, sample counts and
+    resolutions are runtime values, so one render compiles what every render uses."""
+    camera = Camera(np.array([[1.0, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 3], [0, 0, 0, 1]]), 0.9)
+    render_preview(as_two_level(hand_made_tree()), camera, 4, 4, mode="ao+shadow", samples=2,
+                   lights=[Light.point((0.0, 0.0, 2.0))], denoise=True)
+
+
+HELPER_SWITCH = "KD_PREVIEW_COMPILE_HELPER"  # "0": no helper process (e.g. where spawning one is not allowed)
+HELPER_TIMEOUT = 900.0  # seconds: a guard against a helper that never ends, far above its 1.5-4 minutes
+
+
+@contextmanager
+def rendering_kernels_alongside():
+    """Compile the rendering kernels in a helper process while the `with` block runs (a build), when
+    the cache does not hold them yet (and HELPER_SWITCH is not "0"); on leaving, wait for the helper (at most HELPER_TIMEOUT), or end
+    it at once if the block raised. Either way no helper runs afterwards, so this process may then
+    compile anything without two writers on one cache index."""
+    helper = None
+    if os.environ.get(HELPER_SWITCH, "1") != "0" and not rendering_kernels_cached():
+        compile_scene_wrapping()
+        try:
+            helper = RenderingKernelsHelper()
+        except (OSError, ValueError, subprocess.SubprocessError):
+            helper = None  # no interpreter to start (an embedded Python): this process compiles it all
+    try:
+        yield helper
+    except BaseException:
+        if helper is not None:
+            helper.stop()
+        raise
+    if helper is not None:
+        helper.wait(HELPER_TIMEOUT)
+        helper.stop()
+
+
+class RenderingKernelsHelper:
+    """The helper process; start it once compile_scene_wrapping() has run here.
+
+    The helper imports core under this process's module name (in Blender an extension's core is
+    `bl_ext.<repo>.<id>.core`): Numba files cached kernels by source file, but a kernel's pickled
+    environment names its module. Parent packages are stubbed in the helper, so the add-on's
+    `__init__` (which imports bpy) does not run there. It inherits sys.path and the Numba cache folder,
+    runs one thread, and its error output is kept for `outcome`: a helper that fails costs nothing
+    but its time, since this process then compiles whatever is missing itself.
+    """
+
+    def __init__(self):
+        self._errors = tempfile.TemporaryFile()  # the helper's stderr: its last line names a failure
+        env = dict(os.environ, NUMBA_NUM_THREADS="1",
+                   PYTHONPATH=os.pathsep.join(p for p in sys.path if p and os.path.isdir(p)))
+        cache_dir = _numba_cache_dir()
+        if cache_dir:
+            env["NUMBA_CACHE_DIR"] = cache_dir
+        self.process = subprocess.Popen(
+            [sys.executable, "-c", _HELPER_CODE, __package__, str(CORE_FOLDER)], env=env,
+            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=self._errors,
+            creationflags=getattr(subprocess, "CREATE_NO_WINDOW", 0))  # Windows: no console window
+
+        self.stopped = False
+
+    def wait(self, timeout=None) -> bool:
+        """Wait for the helper (at most `timeout` seconds); True when it finished and succeeded."""
+        try:
+            return self.process.wait(timeout) == 0
+        except subprocess.TimeoutExpired:
+            return False
+
+    def stop(self) -> None:
+        """End the helper if it still runs. What it saved stays valid: Numba writes each cache file to
+        a temporary name and renames it, and an index entry whose data is missing reads as a miss."""
+        if self.process.poll() is None:
+            self.process.kill()
+            self.process.wait()
+            self.stopped = True
+
+    @property
+    def outcome(self) -> str:
+        """"running", "finished", "stopped" (ended here: the block raised, or HELPER_TIMEOUT) or
+        "failed (exit code N)"; the add-on reports it with the frame that started the helper."""
+        code = self.process.poll()
+        if code is None:
+            return "running"
+        if self.stopped:
+            return "stopped"
+        if code == 0:
+            return "finished"
+        self._errors.seek(0)
+        lines = self._errors.read().decode(errors="replace").strip().splitlines()
+        return f"failed (exit code {code}" + (f": {lines[-1]})" if lines else ")")
+
+
+def _numba_cache_dir() -> str:
+    from numba.core.config import CACHE_DIR  # the value configured at run time (kd_addon/corelib.py)
+    return CACHE_DIR
+
+
+# The helper's whole program (argv: core's module name, its folder): stub core's parent packages, so
+# that `bl_ext.<repo>.<id>.core` imports without the add-on's __init__, then compile.
+_HELPER_CODE = """
+import importlib, sys, types
+from pathlib import Path
+name, parent = sys.argv[1], Path(sys.argv[2]).parent
+parts = name.split(".")
+for depth in range(len(parts) - 1, 0, -1):
+    stub = types.ModuleType(".".join(parts[:depth]))
+    stub.__path__ = [str(parent)]
+    sys.modules.setdefault(stub.__name__, stub)
+    parent = parent.parent
+importlib.import_module(name + ".parallel_compile").compile_rendering_kernels()
+"""
