@@ -7,14 +7,15 @@ rays, surface frames, the sampling kernel, the denoiser) and 44 s the builder's.
 same cache (cache=True), so a second process can compile one set while this one compiles the other;
 the render then loads what the helper wrote.
 
-Why the two sets must not share a function: Numba's cache index of a function is rewritten whole by
+Why the two sets do not share a function: Numba's cache index of a function is rewritten whole by
 each writer (numba.core.caching.IndexDataCacheFile.save: read the index, add the entry, write it
 back), so two processes adding overloads of one function at once could lose or mismatch an entry.
-The helper therefore renders a tree made by hand (one leaf: no builder kernel runs), and the one
-builder step that rendering a tree takes, wrapping it as a one-instance scene (two_level.as_two_level,
-the top level's kernels), is compiled here before the helper starts, so the helper only loads it.
-Nothing the builder runs is a rendering kernel; tests/test_parallel_compile.py checks, with Numba's
-compile events, that the helper and a build compile disjoint sets of core's functions.
+kernel_cache.py serializes those saves with a file lock, and the sets are kept apart as well: the
+helper renders a tree made by hand (one leaf: no builder kernel runs), and the one builder step that
+rendering a tree takes, wrapping it as a one-instance scene (two_level.as_two_level, the top level's
+kernels), is compiled here before the helper starts, so the helper only loads it. Nothing the builder
+runs is a rendering kernel: Numba's compile events, recorded for each side on a cold cache, showed
+only Numba's own uncached library functions in both.
 
 Pixel-reuse kernels (a frame continued from the one before) are not in the helper's set: they need a
 SceneBuilder's signature, i.e. the builder; they compile on the first continued frame, as before.
@@ -83,9 +84,9 @@ HELPER_TIMEOUT = 900.0  # seconds: a guard against a helper that never ends, far
 @contextmanager
 def rendering_kernels_alongside():
     """Compile the rendering kernels in a helper process while the `with` block runs (a build), when
-    the cache does not hold them yet (and HELPER_SWITCH is not "0"); on leaving, wait for the helper (at most HELPER_TIMEOUT), or end
-    it at once if the block raised. Either way no helper runs afterwards, so this process may then
-    compile anything without two writers on one cache index."""
+    the cache does not hold them yet and HELPER_SWITCH is not "0"; yields the helper or None. On
+    leaving, wait for the helper (at most HELPER_TIMEOUT), or end it at once if the block raised:
+    either way no helper runs afterwards."""
     helper = None
     if os.environ.get(HELPER_SWITCH, "1") != "0" and not rendering_kernels_cached():
         compile_scene_wrapping()
@@ -117,6 +118,7 @@ class RenderingKernelsHelper:
 
     def __init__(self):
         self._errors = tempfile.TemporaryFile()  # the helper's stderr: its last line names a failure
+        self.stopped = False
         env = dict(os.environ, NUMBA_NUM_THREADS="1",
                    PYTHONPATH=os.pathsep.join(p for p in sys.path if p and os.path.isdir(p)))
         cache_dir = _numba_cache_dir()
@@ -126,8 +128,6 @@ class RenderingKernelsHelper:
             [sys.executable, "-c", _HELPER_CODE, __package__, str(CORE_FOLDER)], env=env,
             stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=self._errors,
             creationflags=getattr(subprocess, "CREATE_NO_WINDOW", 0))  # Windows: no console window
-
-        self.stopped = False
 
     def wait(self, timeout=None) -> bool:
         """Wait for the helper (at most `timeout` seconds); True when it finished and succeeded."""

@@ -233,10 +233,11 @@ def unapplied_light_settings(ob) -> tuple[str, ...]:
 def read_scene(scene, depsgraph, width: int, height: int, lights: bool = True) -> SceneInputs:
     """Camera and lights of the evaluated scene for a width x height preview (`lights` False: an AO
     frame, which needs none, so lights hidden in the viewport are not looked for)."""
+    warnings = []
     if scene.render.pixel_aspect_x != scene.render.pixel_aspect_y:
-        warnings = ["non-square pixel aspect is ignored by the preview"]
-    else:
-        warnings = []
+        warnings.append("non-square pixel aspect is ignored by the preview")
+    if scene.render.use_border:  # outside QA: a final render crops or blanks outside the region
+        warnings.append("the Render Region (Output > Format) is ignored by the preview: it renders the whole frame")
     camera, camera_warnings = read_camera(scene, depsgraph, width, height)
     visibility = _Visibility(depsgraph.view_layer)  # one table for the lights read and the hidden ones
     return SceneInputs(camera, read_lights(depsgraph, visibility), width, height, warnings + camera_warnings,

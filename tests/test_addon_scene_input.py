@@ -202,3 +202,15 @@ def test_read_scene_uses_the_evaluated_camera(scene):
     inputs = scene_input.read_scene(scene, bpy.context.evaluated_depsgraph_get(), 100, 50)
     assert math.tan(inputs.camera.fov / 2) == pytest.approx(18 / 100, rel=1e-6)
     assert inputs.lights == [] and inputs.warnings == []
+
+
+def test_settings_the_preview_does_not_apply_are_named(scene):
+    """A render region and non-square pixels change a final render but not the preview: each is named."""
+    add_top_camera(location=(0, 0, 5), lens=50.0)
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    assert scene_input.read_scene(scene, depsgraph, 100, 50).warnings == []
+    scene.render.use_border = True
+    scene.render.pixel_aspect_x = 2.0
+    assert scene_input.read_scene(scene, bpy.context.evaluated_depsgraph_get(), 100, 50).warnings == [
+        "non-square pixel aspect is ignored by the preview",
+        "the Render Region (Output > Format) is ignored by the preview: it renders the whole frame"]
