@@ -117,9 +117,10 @@ def add_shape_key_plane(name="Keyed", *, lift=2.0, value_at_frame=((1, 0.0), (10
     return obj
 
 
-def instances_on_points_group(name, make_points, make_instance):
-    """Geometry-nodes tree: an instance of the mesh `make_instance(nodes)` on every point of the mesh
-    `make_points(nodes)` (both return a node with a "Mesh" output). The input geometry is dropped."""
+def instances_on_points_group(name, make_points, make_instance, pick_instance=False):
+    """Geometry-nodes tree: the output of `make_instance(nodes)` (its "Mesh" output, else its first) on
+    every point of the mesh `make_points(nodes)` (a node with a "Mesh" output), picking instance i
+    modulo their count on point i when `pick_instance`. The input geometry is dropped."""
     group = bpy.data.node_groups.new(name, "GeometryNodeTree")
     group.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
     group.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
@@ -127,8 +128,10 @@ def instances_on_points_group(name, make_points, make_instance):
     nodes.new("NodeGroupInput")
     out = nodes.new("NodeGroupOutput")
     on_points = nodes.new("GeometryNodeInstanceOnPoints")
+    on_points.inputs["Pick Instance"].default_value = pick_instance
     links.new(make_points(nodes).outputs["Mesh"], on_points.inputs["Points"])
-    links.new(make_instance(nodes).outputs["Mesh"], on_points.inputs["Instance"])
+    instance = make_instance(nodes)
+    links.new(instance.outputs.get("Mesh") or instance.outputs[0], on_points.inputs["Instance"])
     links.new(on_points.outputs["Instances"], out.inputs[0])
     return group
 
@@ -302,18 +305,10 @@ def add_collection_points_host(name, collection, *, count, separate_children=Tru
         node.inputs["Separate Children"].default_value = separate_children
         return node
 
-    group = bpy.data.node_groups.new(f"{name}Points", "GeometryNodeTree")
-    group.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
-    group.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
-    nodes, links = group.nodes, group.links
-    nodes.new("NodeGroupInput")
-    out = nodes.new("NodeGroupOutput")
-    on_points = nodes.new("GeometryNodeInstanceOnPoints")
-    on_points.inputs["Pick Instance"].default_value = separate_children
-    points = _node(nodes, "GeometryNodeMeshLine", Count=count, Offset=(3.0, 0.0, 0.0))
-    links.new(points.outputs["Mesh"], on_points.inputs["Points"])
-    links.new(info(nodes).outputs[0], on_points.inputs["Instance"])
-    links.new(on_points.outputs["Instances"], out.inputs[0])
+    def line(nodes):
+        return _node(nodes, "GeometryNodeMeshLine", Count=count, Offset=(3.0, 0.0, 0.0))
+
+    group = instances_on_points_group(f"{name}Points", line, info, pick_instance=separate_children)
     obj = add_mesh(name, [], [], location=location)
     obj.modifiers.new("GN", "NODES").node_group = group
     return obj
