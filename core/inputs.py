@@ -32,6 +32,15 @@ def check_image_size(width, height):
 FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 
+def first_row_beyond_float32(rows):
+    """Index of the first row of the finite (N, k) array `rows` holding a value beyond float32's range, or
+    -1. Checked before the cast to float32, which would make such a value inf (with a numpy warning)."""
+    if rows.dtype == np.float32 or rows.size == 0:
+        return -1
+    beyond = (np.abs(rows) > FLOAT32_MAX).any(axis=1)
+    return int(np.argmax(beyond)) if beyond.any() else -1
+
+
 def as_triangles(triangles):
     """Triangles as a C-contiguous (N, 3, 3) float32 array of finite vertex positions."""
     arr = np.asarray(triangles)
@@ -42,9 +51,8 @@ def as_triangles(triangles):
     if len(arr) and not np.isfinite(arr).all():
         bad = int(np.flatnonzero(~np.isfinite(arr).reshape(len(arr), 9).all(axis=1))[0])
         raise ValueError(f"triangle {bad} has a non-finite vertex coordinate (NaN or inf): {arr[bad].tolist()}")
-    if arr.dtype != np.float32 and len(arr) and np.abs(arr).max() > FLOAT32_MAX:
-        # checked before the cast, which would turn the value into inf (and warn) and name it so
-        bad = int(np.flatnonzero((np.abs(arr) > FLOAT32_MAX).reshape(len(arr), 9).any(axis=1))[0])
+    bad = first_row_beyond_float32(arr.reshape(len(arr), 9))
+    if bad >= 0:
         raise ValueError(f"triangle {bad} has a vertex coordinate beyond float32's range (+-{FLOAT32_MAX:.4g}), "
                          f"in which triangles are stored: {arr[bad].tolist()}")
     arr = np.ascontiguousarray(arr, dtype=np.float32)

@@ -30,7 +30,7 @@ from typing import Hashable, NamedTuple
 import numpy as np
 
 from .build import build_kdtree
-from .inputs import FLOAT32_MAX
+from .inputs import FLOAT32_MAX, first_row_beyond_float32
 from .instance_signature import instance_signature, mesh_digest
 from .options import make_options
 from .ray_visibility import ALL_RAYS, as_visibility, stops_rays
@@ -289,8 +289,8 @@ def _check_mesh(mesh):
     if tris.size and (tris.min() < 0 or tris.max() >= len(verts)):
         raise ValueError(f"mesh {mesh.key!r}: triangle indices must be in [0, {len(verts)})")
     if np.isfinite(verts).all():
-        if verts.dtype != np.float32 and verts.size and np.abs(verts).max() > FLOAT32_MAX:
-            v = int(np.flatnonzero((np.abs(verts) > FLOAT32_MAX).any(axis=1))[0])
+        v = first_row_beyond_float32(verts)
+        if v >= 0:
             raise ValueError(f"mesh {mesh.key!r}: vertex {v} is beyond float32's range (+-{FLOAT32_MAX:.4g}), in "
                              f"which meshes are stored: {verts[v].tolist()}")
         return
