@@ -18,7 +18,7 @@ from numba import njit, prange
 
 from .array_views import rows, unowned
 from .layout import LEAF, suspended_prim
-from .triangle_test import LEAF_CHUNK, intersect_triangle, leaf_candidates, ray_shear
+from .triangle_test import LEAF_CHUNK, intersect_leaf_triangle, leaf_candidates, ray_shear
 
 STACK_SIZE = 64  # > DEPTH_LIMIT + 1: one pushed node per level
 RAYS_PER_TASK = 64
@@ -57,9 +57,9 @@ def trace_ray(tree, o, d, tmin, tmax, any_hit, stack_node, stack_t, inv, flags):
     traversal would enter, so the caller builds it and traces the ray again (lazy.py, seed 003 §3).
     `stack_node`, `stack_t`, `inv` (3 floats) and `flags` (LEAF_CHUNK uint8) are the caller's
     scratch, reused across rays. A leaf's triangles are screened LEAF_CHUNK at a time by their edge
-    signs (triangle_test.leaf_candidates), and only those kept get the full test.
+    signs (triangle_test.leaf_candidates), and only those kept get the full test, on the same copy.
     """
-    axis, split, child, count, leaf_prims, tris, root_box, leaf_tris, base = tree
+    axis, split, child, count, leaf_prims, _, root_box, leaf_tris, base = tree
     for k in range(3):
         inv[k] = 1.0 / d[k] if d[k] != 0.0 else 0.0
     t0, t1 = clip_to_box(root_box, o, d, inv, tmin, tmax)
@@ -85,10 +85,9 @@ def trace_ray(tree, o, d, tmin, tmax, any_hit, stack_node, stack_t, inv, flags):
             for j in range(lo, hi):
                 if flags[j - lo] == 0:
                     continue
-                prim = leaf_prims[j]
-                t, u, v = intersect_triangle(tris[prim], o, kx, ky, kz, sx, sy, sz)
+                t, u, v = intersect_leaf_triangle(leaf_tris, base + j, o, kx, ky, kz, sx, sy, sz)
                 if tmin < t < best_t:
-                    best_t, best_prim, best_u, best_v = t, prim, u, v
+                    best_t, best_prim, best_u, best_v = t, leaf_prims[j], u, v
                     if any_hit:
                         return best_t, best_prim, best_u, best_v
         if best_prim >= 0 and best_t <= t_exit:  # no slack: stopping late is safe, early is not

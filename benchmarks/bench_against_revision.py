@@ -1,0 +1,128 @@
+"""Paired A/B of core against a git revision's core, in one process: the honest way to see a few percent
+on a shared, noisy machine.
+
+Usage: python benchmarks/bench_against_revision.py [--base HEAD] [--scene suzanne-251k] [--pairs 21]
+                                                   [--threads N]
+
+The base revision's `core/` is exported (`git archive`) into a temporary folder as the package
+`core_base`, so both versions run side by side, each with its own Numba cache. Seed 000's setting
+(640 x 480, rays told to the build, one point light): per pair, in alternating order, each version
+builds its tree, traces the camera rays (closest hit), traces the hit points' shadow rays (any hit)
+and renders the image (`render_preview`, shadow mode, 1 sample). Printed: medians per version and the
+median of the per-pair ratios (this tree / base), plus whether both versions gave the same hits, tree
+and image. JIT compile is excluded and printed on its own line.
+"""
+import argparse
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+sys.path[:0] = [str(HERE), str(ROOT)]
+
+import core  # noqa: E402
+from core.camera import tiled_pixels  # noqa: E402
+from scenes import load_scene  # noqa: E402
+
+WIDTH, HEIGHT = 640, 480
+LIGHT = (2.0, -3.0, 4.0)
+
+
+def export_base(revision, folder):
+    """The revision's core/ as package core_base under `folder`."""
+    target = Path(folder) / "core_base"
+    target.mkdir()
+    archive = subprocess.run(["git", "-C", str(ROOT), "archive", revision, "core"], check=True,
+                             capture_output=True).stdout
+    subprocess.run(["tar", "-x", "--strip-components=1", "-C", str(target)], input=archive, check=True)
+    sys.path.insert(0, str(folder))
+    import core_base  # noqa: PLC0415
+    return core_base
+
+
+def shadow_rays(hits, origins, directions):
+    """Rays from the camera hits towards the light, started a little off the surface."""
+    seen = hits.prim >= 0
+    points = origins[seen] + hits.t[seen, None] * directions[seen]
+    towards = np.asarray(LIGHT) - points
+    distance = np.linalg.norm(towards, axis=1)
+    towards /= distance[:, None]
+    return points + 1e-4 * towards, towards, distance
+
+
+def one_pair(version, triangles, camera_rays, rays, frame_rays):
+    """Times (ms) of build, camera rays, shadow rays and render for one version, and its results."""
+    origins, directions, tmin, tmax = camera_rays
+    times = []
+    t = time.perf_counter()
+    tree = version.build_kdtree(triangles, rays=frame_rays)
+    times.append(time.perf_counter() - t)
+    t = time.perf_counter()
+    hits = version.intersect(tree, origins, directions, tmin, tmax)
+    times.append(time.perf_counter() - t)
+    t = time.perf_counter()
+    blocked = version.occluded(tree, *rays[:2], 0.0, rays[2])
+    times.append(time.perf_counter() - t)
+    camera, light = rays[3]
+    t = time.perf_counter()
+    image = version.render_preview(tree, version.Camera(*camera), WIDTH, HEIGHT, mode="shadow", samples=1,
+                                   lights=[version.Light.point(light)])
+    times.append(time.perf_counter() - t)
+    return np.array(times) * 1e3, (tree.node_arrays, hits, blocked, image)
+
+
+def same(a, b):
+    (nodes_a, hits_a, blocked_a, image_a), (nodes_b, hits_b, blocked_b, image_b) = a, b
+    return {"tree": all(np.array_equal(x, y) for x, y in zip(nodes_a, nodes_b)),
+            "hits": all(np.array_equal(x, y) for x, y in zip(hits_a, hits_b)),
+            "shadow rays": np.array_equal(blocked_a, blocked_b), "image": np.array_equal(image_a, image_b)}
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--base", default="HEAD", help="git revision to compare against (default HEAD)")
+    ap.add_argument("--scene", default="suzanne-251k")
+    ap.add_argument("--pairs", type=int, default=21)
+    ap.add_argument("--threads", type=int, default=None, help="Numba threads (default: all)")
+    args = ap.parse_args()
+    if args.threads:
+        import numba  # noqa: PLC0415
+        numba.set_num_threads(args.threads)
+    scene = load_scene(args.scene)
+    camera = core.Camera(scene.camera_matrix, scene.camera_fov)
+    camera_rays = camera.rays(WIDTH, HEIGHT, tiled_pixels(WIDTH, HEIGHT))
+    frame_rays = core.frame_ray_count(WIDTH, HEIGHT, "shadow", 1, [core.Light.point(LIGHT)])
+    with tempfile.TemporaryDirectory() as folder:
+        base = export_base(args.base, folder)
+        versions = {"this tree": core, f"base {args.base}": base}
+        hits = core.intersect(core.build_kdtree(scene.triangles, rays=frame_rays), *camera_rays)
+        rays = (*shadow_rays(hits, camera_rays[0], camera_rays[1]),
+                ((scene.camera_matrix, scene.camera_fov), LIGHT))
+        t = time.perf_counter()
+        results = {name: one_pair(v, scene.triangles, camera_rays, rays, frame_rays)[1] for name, v in versions.items()}
+        print(f"JIT compile / cache load of both versions: {time.perf_counter() - t:.1f} s (excluded); {args.scene}, "
+              f"{WIDTH}x{HEIGHT}, {len(rays[2]):,} shadow rays, {args.pairs} pairs")
+        print("identical results:", same(*results.values()))
+        times = {name: [] for name in versions}
+        for pair in range(args.pairs):
+            order = list(versions.items()) if pair % 2 == 0 else list(versions.items())[::-1]
+            for name, version in order:
+                times[name].append(one_pair(version, scene.triangles, camera_rays, rays, frame_rays)[0])
+    mine, theirs = (np.array(t) for t in times.values())
+    ratios = np.median(mine / theirs, axis=0)
+    for name, t in times.items():
+        m = np.median(np.array(t), axis=0)
+        print(f"{name:>16}: build {m[0]:6.1f} ms  camera rays {m[1]:6.1f} ms  shadow rays {m[2]:6.1f} ms  "
+              f"render {m[3]:6.1f} ms  build+render {np.median(np.array(t)[:, 0] + np.array(t)[:, 3]):6.1f} ms")
+    print(f"{'ratio (paired)':>16}: build {ratios[0]:6.3f}     camera rays {ratios[1]:6.3f}     shadow rays "
+          f"{ratios[2]:6.3f}     render {ratios[3]:6.3f}     build+render "
+          f"{np.median((mine[:, 0] + mine[:, 3]) / (theirs[:, 0] + theirs[:, 3])):6.3f}")
+
+
+if __name__ == "__main__":
+    main()
