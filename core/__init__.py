@@ -27,8 +27,8 @@ Two-level scenes (a kd-tree per mesh in object space under a top-level tree over
     instance stays empty (alpha 0); the instance still occludes and shadows.
     A TwoLevelScene renders wherever a KdTree does.
 First-render compile on two cores (an empty Numba cache):
-    with rendering_kernels_alongside(): <build>   a helper process compiles the rendering kernels
-        meanwhile (parallel_compile.py); KD_PREVIEW_COMPILE_HELPER=0 turns it off
+    with rendering_kernels_alongside(denoise=False): <build>   a helper process compiles the rendering
+        kernels meanwhile (parallel_compile.py); KD_PREVIEW_COMPILE_HELPER=0 turns it off
 Denoising (edge-avoiding à-trous, variance-guided; the raw estimate stays the default):
     render_preview(..., denoise=True) / PreviewRender.image(denoise=True) -> (H, W, 4) float32
     denoise_pixels(width, height, pixels, points, normals, sums, sq_sums, counts) -> (H, W, 4) float32

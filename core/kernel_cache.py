@@ -21,9 +21,16 @@ reading the index, adding the entry and writing it back, then writing the entry'
 data file name for different signatures, so that one key's entry loads the other's machine code.
 `register` therefore also wraps that save, for the cache folders of registered kernels only, in an
 exclusive lock on a file in the folder (`locked_cache_folder`), which makes the read-add-write one step.
+
+A helper process must write core's kernels exactly where this process reads them. Re-deriving the
+folder from the environment is not enough: Numba picks a kernel's folder when it is decorated, but
+re-reads NUMBA_CACHE_DIR before every compile, so a variable set after core's import (a test module
+did) pointed a helper at another cache, where it compiled while this process compiled again.
+CORE_CACHE_FOLDER_VARIABLE, set for the helper (parallel_compile.py), names core's folder outright.
 """
 import functools
 import os
+import tempfile
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -35,6 +42,7 @@ CORE_FOLDER = Path(__file__).resolve().parent
 _sources_of = {}  # registered kernel folder -> the folder whose sources stamp its kernels
 _locked_folders = set()  # cache folders of registered kernels, whose index saves take the lock
 LOCK_NAME = "kd_preview_index.lock"
+CORE_CACHE_FOLDER_VARIABLE = "KD_PREVIEW_CORE_KERNEL_CACHE"  # a helper's cache folder for core's kernels
 
 
 @functools.lru_cache(maxsize=None)
@@ -46,16 +54,21 @@ def folder_digest(folder: Path) -> str:
 class SourcesDigestLocator(caching._CacheLocator):
     """Numba's usual locator for the kernel's file, with the sources' digest added to its stamp."""
 
-    def __init__(self, usual, sources: Path):
+    def __init__(self, usual, sources: Path, folder=None):
         self._usual = usual
         self._sources = sources
-        _locked_folders.add(os.path.normpath(usual.get_cache_path()))
+        self._folder = folder or usual.get_cache_path()
+        _locked_folders.add(os.path.normpath(self._folder))
 
     def ensure_cache_path(self):
-        self._usual.ensure_cache_path()
+        if self._folder == self._usual.get_cache_path():
+            self._usual.ensure_cache_path()
+        else:  # as Numba's own: the folder must exist and take files
+            os.makedirs(self._folder, exist_ok=True)
+            tempfile.TemporaryFile(dir=self._folder).close()
 
     def get_cache_path(self):
-        return self._usual.get_cache_path()
+        return self._folder
 
     def get_source_stamp(self):
         return self._usual.get_source_stamp(), folder_digest(self._sources)
@@ -65,14 +78,16 @@ class SourcesDigestLocator(caching._CacheLocator):
 
     @classmethod
     def from_function(cls, py_func, py_file):
-        sources = _sources_of.get(Path(py_file).resolve().parent)
+        kernel_folder = Path(py_file).resolve().parent
+        sources = _sources_of.get(kernel_folder)
         if sources is None:
             return None
+        folder = os.environ.get(CORE_CACHE_FOLDER_VARIABLE) if kernel_folder == CORE_FOLDER else None
         for usual_class in caching.CacheImpl._locator_classes:
             if usual_class is not cls:
                 usual = usual_class.from_function(py_func, py_file)
                 if usual is not None:
-                    return cls(usual, sources)
+                    return cls(usual, sources, folder)
         return None
 
 
@@ -117,6 +132,11 @@ def _save_under_lock(numba_save):
 
     save.kd_preview_lock = True
     return save
+
+
+def core_cache_folder(kernel) -> str:
+    """The folder a core kernel (a Numba dispatcher) caches into in this process."""
+    return kernel._cache._cache_path
 
 
 def register(folder=CORE_FOLDER, sources=CORE_FOLDER) -> None:

@@ -1,23 +1,30 @@
 """A first render's JIT compile on two cores: a helper process compiles the rendering kernels into
-Numba's on-disk cache while this process builds the tree (compiling the builder's kernels).
+Numba's on-disk cache while this process builds the tree (compiling the builder's kernels) and then
+makes the camera pass's hit frames (compiling surface_frames).
 
-Why: with an empty cache a first render compiles every kernel, one at a time, in one process: 136 s
-on a 2-core 2.4 GHz host (`benchmarks/bench_compile.py`), 92 s of it the rendering kernels (camera
-rays, surface frames, the sampling kernel, the denoiser) and 44 s the builder's. Both sets go to the
-same cache (cache=True), so a second process can compile one set while this one compiles the other;
-the render then loads what the helper wrote.
+Why: with an empty cache a first render compiles every kernel, one at a time, in one process: 126-138 s
+for the demo's first frame on a 2-core host (`benchmarks/bench_compile.py --helper off`), ~43 s of it
+the builder's kernels, ~47 s the sampling kernel (`add_samples` with its inlined traversal, sampler
+and light sampling), ~27 s the camera rays' traversal and ~8-11 s surface_frames. All go to the same
+cache (cache=True), so a second process can compile one set while this one compiles the others; the
+render then loads what the helper wrote. The split: the helper traces the camera rays first (so this
+process loads their kernels once its build is done), then compiles the sampling kernel, the image and
+the denoiser if the render will filter; this process compiles the builder's kernels and surface_frames.
+Measured (`bench_compile.py --helper both --runs 2`, idle host): first frame 77 s against 138 s in one
+process; this process compiled 52-54 s of it. The helper used to render everything, surface frames
+included, and this process then waited ~45 s for it (98 s).
 
-Why the two sets do not share a function: Numba's cache index of a function is rewritten whole by
-each writer (numba.core.caching.IndexDataCacheFile.save: read the index, add the entry, write it
-back), so two processes adding overloads of one function at once could lose or mismatch an entry.
-kernel_cache.py serializes those saves with a file lock, and the sets are kept apart as well: the
-helper renders a tree made by hand (one leaf: no builder kernel runs), and the one builder step that
-rendering a tree takes, wrapping it as a one-instance scene (two_level.as_two_level, the top level's
-kernels), is compiled here before the helper starts, so the helper only loads it. Nothing the builder
-runs is a rendering kernel: Numba's compile events, recorded for each side on a cold cache, showed
-only Numba's own uncached library functions in both.
+Both processes may compile one function: when this process reaches the camera pass before the
+helper has saved its kernels (a build whose kernels were cached already), it compiles them as well.
+Numba's cache index of a function is rewritten whole by each writer
+(numba.core.caching.IndexDataCacheFile.save: read the index, add the entry, write it back), so two
+processes adding overloads at once could lose or mismatch an entry; kernel_cache.py serializes those
+saves with a file lock. The helper traces a tree made by hand (one leaf: no builder kernel runs), and
+the one builder step that rendering a tree takes, wrapping it as a one-instance scene
+(two_level.as_two_level, the top level's kernels), is compiled here before the helper starts, so the
+helper only loads it.
 
-Pixel-reuse kernels (a frame continued from the one before) are not in the helper's set: they need a
+Pixel-reuse kernels (a frame continued from the one before) are not in either set: they need a
 SceneBuilder's signature, i.e. the builder; they compile on the first continued frame, as before.
 """
 import os
@@ -31,10 +38,11 @@ import numpy as np
 
 from .camera import Camera
 from .kdtree import KdTree
+from .kernel_cache import CORE_CACHE_FOLDER_VARIABLE, core_cache_folder
 from .layout import LEAF
 from .lights import Light
 from .options import BuildOptions
-from .render import render_preview
+from .render import PreviewRender
 from .render_kernels import add_samples
 from .two_level import as_two_level
 
@@ -68,13 +76,46 @@ def compile_scene_wrapping() -> None:
     as_two_level(hand_made_tree())
 
 
-def compile_rendering_kernels() -> None:
-    """What the helper runs: a 4 x 4 render of the hand-made tree that takes every rendering kernel's
-    path (camera rays that hit and miss, AO and shadow rays, the denoiser). Modes, sample counts and
-    resolutions are runtime values, so one render compiles what every render uses."""
-    camera = Camera(np.array([[1.0, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 3], [0, 0, 0, 1]]), 0.9)
-    render_preview(as_two_level(hand_made_tree()), camera, 4, 4, mode="ao+shadow", samples=2,
-                   lights=[Light.point((0.0, 0.0, 2.0))], denoise=True)
+HAND_MADE_CAMERA = np.array([[1.0, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 3], [0, 0, 0, 1]])  # 3 above the square
+HAND_MADE_RENDER = dict(mode="ao+shadow", samples=2)  # modes and sample counts are runtime values
+
+
+def _hand_made_lights():
+    return [Light.point((0.0, 0.0, 2.0))]
+
+
+def compile_camera_pass() -> None:
+    """The camera pass, run here after the build: a PreviewRender's constructor traces the camera rays
+    (whose kernels the helper compiled first, so this loads them) and makes the hit frames
+    (surface_frames, compiled here), and samples nothing."""
+    PreviewRender(as_two_level(hand_made_tree()), Camera(HAND_MADE_CAMERA, 0.9), 4, 4, lights=_hand_made_lights(),
+                  **HAND_MADE_RENDER)
+
+
+class _SamplingOnly(PreviewRender):
+    """A render that traces its camera rays but makes up their hit frames (every pixel sees the square's
+    centre from above), so surface_frames does not compile here. The arrays have the real pass's types
+    (int64 pixel indices, float64 depths and (M, 3) frames, all C-contiguous and writable): Numba
+    compiles one version per type signature, and the real render must find this one in the cache."""
+
+    def _camera_hits(self, traced):
+        self._camera_rays(traced)
+        pixels = traced[np.arange(len(traced), dtype=np.int64)]
+        points, normals = np.zeros((len(pixels), 3)), np.zeros((len(pixels), 3))
+        normals[:, 2] = 1.0
+        starts = points + 1e-6 * normals
+        return pixels, np.full(len(pixels), 3.0), points, normals, starts
+
+
+def compile_rendering_kernels(denoise=False) -> None:
+    """What the helper runs, in this order: the camera rays and their traversal (which this process
+    then loads, once its build is done), AO and shadow samples of the hand-made tree (AO rays that hit
+    and miss, shadow rays), the image, and the denoiser if asked. Resolutions, modes and sample counts
+    are runtime values, so this compiles what every render uses but the surface frames."""
+    render = _SamplingOnly(as_two_level(hand_made_tree()), Camera(HAND_MADE_CAMERA, 0.9), 4, 4,
+                           lights=_hand_made_lights(), **HAND_MADE_RENDER)
+    render.step(render.target_samples)
+    render.image(denoise=denoise)
 
 
 HELPER_SWITCH = "KD_PREVIEW_COMPILE_HELPER"  # "0": no helper process (e.g. where spawning one is not allowed)
@@ -82,16 +123,18 @@ HELPER_TIMEOUT = 900.0  # seconds: a guard against a helper that never ends, far
 
 
 @contextmanager
-def rendering_kernels_alongside():
-    """Compile the rendering kernels in a helper process while the `with` block runs (a build), when
-    the cache does not hold them yet and HELPER_SWITCH is not "0"; yields the helper or None. On
-    leaving, wait for the helper (at most HELPER_TIMEOUT), or end it at once if the block raised:
-    either way no helper runs afterwards."""
+def rendering_kernels_alongside(denoise=False):
+    """Compile the rendering kernels in a helper process while the `with` block runs (a build), when the
+    cache does not hold the sampling kernel yet and HELPER_SWITCH is not "0" (`denoise`: the render
+    will filter its image, so the helper compiles the denoiser too); yields the helper or None. On
+    leaving, run the camera pass here (its hit frames compile here, its rays' kernels load what the
+    helper wrote), then wait for the helper (at most HELPER_TIMEOUT); if the block raised, end the
+    helper at once. Either way no helper runs afterwards."""
     helper = None
     if os.environ.get(HELPER_SWITCH, "1") != "0" and not rendering_kernels_cached():
         compile_scene_wrapping()
         try:
-            helper = RenderingKernelsHelper()
+            helper = RenderingKernelsHelper(denoise)
         except (OSError, ValueError, subprocess.SubprocessError):
             helper = None  # no interpreter to start (an embedded Python): this process compiles it all
     try:
@@ -101,8 +144,11 @@ def rendering_kernels_alongside():
             helper.stop()
         raise
     if helper is not None:
-        helper.wait(HELPER_TIMEOUT)
-        helper.stop()
+        try:
+            compile_camera_pass()
+        finally:
+            helper.wait(HELPER_TIMEOUT)
+            helper.stop()
 
 
 class RenderingKernelsHelper:
@@ -111,21 +157,20 @@ class RenderingKernelsHelper:
     The helper imports core under this process's module name (in Blender an extension's core is
     `bl_ext.<repo>.<id>.core`): Numba files cached kernels by source file, but a kernel's pickled
     environment names its module. Parent packages are stubbed in the helper, so the add-on's
-    `__init__` (which imports bpy) does not run there. It inherits sys.path and the Numba cache folder,
-    runs one thread, and its error output is kept for `outcome`: a helper that fails costs nothing
-    but its time, since this process then compiles whatever is missing itself.
+    `__init__` (which imports bpy) does not run there. It inherits sys.path, writes core's kernels to
+    the folder this process reads them from (kernel_cache.CORE_CACHE_FOLDER_VARIABLE), runs one
+    thread, and its error output is kept for `outcome`: a helper that fails costs nothing but its
+    time, since this process then compiles whatever is missing itself.
     """
 
-    def __init__(self):
+    def __init__(self, denoise=False):
         self._errors = tempfile.TemporaryFile()  # the helper's stderr: its last line names a failure
         self.stopped = False
         env = dict(os.environ, NUMBA_NUM_THREADS="1",
                    PYTHONPATH=os.pathsep.join(p for p in sys.path if p and os.path.isdir(p)))
-        cache_dir = _numba_cache_dir()
-        if cache_dir:
-            env["NUMBA_CACHE_DIR"] = cache_dir
+        env[CORE_CACHE_FOLDER_VARIABLE] = core_cache_folder(add_samples)  # where this process reads
         self.process = subprocess.Popen(
-            [sys.executable, "-c", _HELPER_CODE, __package__, str(CORE_FOLDER)], env=env,
+            [sys.executable, "-c", _HELPER_CODE, __package__, str(CORE_FOLDER), "1" if denoise else "0"], env=env,
             stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=self._errors,
             creationflags=getattr(subprocess, "CREATE_NO_WINDOW", 0))  # Windows: no console window
 
@@ -160,13 +205,9 @@ class RenderingKernelsHelper:
         return f"failed (exit code {code}" + (f": {lines[-1]})" if lines else ")")
 
 
-def _numba_cache_dir() -> str:
-    from numba.core.config import CACHE_DIR  # the value configured at run time (kd_addon/corelib.py)
-    return CACHE_DIR
-
-
-# The helper's whole program (argv: core's module name, its folder): stub core's parent packages, so
-# that `bl_ext.<repo>.<id>.core` imports without the add-on's __init__, then compile.
+# The helper's whole program (argv: core's module name, its folder, "1" to compile the denoiser): stub
+# core's parent packages, so that `bl_ext.<repo>.<id>.core` imports without the add-on's __init__, then
+# compile.
 _HELPER_CODE = """
 import importlib, sys, types
 from pathlib import Path
@@ -177,5 +218,5 @@ for depth in range(len(parts) - 1, 0, -1):
     stub.__path__ = [str(parent)]
     sys.modules.setdefault(stub.__name__, stub)
     parent = parent.parent
-importlib.import_module(name + ".parallel_compile").compile_rendering_kernels()
+importlib.import_module(name + ".parallel_compile").compile_rendering_kernels(sys.argv[3] == "1")
 """

@@ -218,11 +218,13 @@ class FrameJob:
         the camera rays)."""
         options = self.config.render_options
         rays = core.frame_ray_count(width, height, options["mode"], options["samples"], lights)
-        # A process's first frame: with an empty kernel cache a helper process compiles the rendering
-        # kernels while this one builds (core/parallel_compile.py); the block ends once it is done, and
-        # the build's time includes that wait.
+        # A process's first frame: with an empty kernel cache a helper process compiles the sampling
+        # kernel while this one builds and then compiles the camera pass (core/parallel_compile.py); the
+        # block ends once both are done, and the build's time includes that.
         t0 = time.perf_counter()
-        with core.rendering_kernels_alongside() if self._first_run else contextlib.nullcontext() as helper:
+        alongside = (core.rendering_kernels_alongside(self.config.denoise) if self._first_run
+                     else contextlib.nullcontext())
+        with alongside as helper:
             scene, report = self._build(*instances, origin, reuse, rays)
         self._timings["build_ms"] = _ms_since(t0)
         if helper is not None:

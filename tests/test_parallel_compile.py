@@ -76,8 +76,8 @@ FAKE_CORE = """
 import sys
 from pathlib import Path
 
-def compile_rendering_kernels():
-    Path(sys.argv[2], "ran.txt").write_text(__name__)
+def compile_rendering_kernels(denoise):
+    Path(sys.argv[2], "ran.txt").write_text(f"{__name__} denoise={denoise}")
 """
 
 
@@ -91,23 +91,29 @@ def test_the_helper_imports_core_under_an_extension_package_name(tmp_path):
     for parent in core_folder.parents[:3]:
         (parent / "__init__.py").write_text("raise ImportError('a parent package ran')\n")
     name = "bl_ext.user_default.kd_preview.core"
-    run = subprocess.run([sys.executable, "-c", parallel_compile._HELPER_CODE, name, str(core_folder)],
-                         capture_output=True, text=True, cwd=tmp_path)
-    assert run.returncode == 0, run.stderr
-    assert (core_folder / "ran.txt").read_text() == f"{name}.parallel_compile"
+    for flag, denoise in (("1", True), ("0", False)):
+        run = subprocess.run([sys.executable, "-c", parallel_compile._HELPER_CODE, name, str(core_folder), flag],
+                             capture_output=True, text=True, cwd=tmp_path)
+        assert run.returncode == 0, run.stderr
+        assert (core_folder / "ran.txt").read_text() == f"{name}.parallel_compile denoise={denoise}"
 
 
-def test_the_helper_renders_with_the_rendering_kernels_and_exits_cleanly():
+def test_the_helper_renders_with_the_rendering_kernels_and_exits_cleanly(tmp_path, monkeypatch):
     """The helper's program, started as the first render starts it (here on this run's cache, so it
-    mostly loads kernels): it renders the hand-made tree and exits with status 0."""
+    mostly loads kernels): it renders the hand-made tree and exits with status 0. It uses this
+    process's cache folder even when NUMBA_CACHE_DIR, set after core's kernels were decorated, names
+    another (Numba re-reads it before every compile, a test module set it): it writes nothing there."""
+    elsewhere = tmp_path / "elsewhere"
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(elsewhere))
     parallel_compile.compile_scene_wrapping()
     helper = parallel_compile.RenderingKernelsHelper()
     try:
         helper.wait(600)
     finally:
         helper.stop()
-    assert helper.outcome == "finished"
+    assert helper.outcome == "finished", helper.outcome
     assert parallel_compile.rendering_kernels_cached()
+    assert not list(elsewhere.rglob("render_kernels*")), "the helper compiled into NUMBA_CACHE_DIR"
 
 
 def test_no_helper_when_the_kernels_are_cached_or_it_is_switched_off(monkeypatch):
@@ -129,6 +135,38 @@ def test_a_failing_block_ends_the_helper_at_once(monkeypatch):
             assert helper is not None
             raise ValueError("bad build")
     assert helper.process.poll() is not None
+
+
+def test_the_two_sides_compile_what_a_real_render_runs():
+    """The helper's made-up camera hits and the camera pass run here must give the kernels the real
+    render's argument types: otherwise a first frame would compile its kernels again after the wait.
+    After both sides ran in this process, renders of a built tree and of a two-level scene (raw and
+    denoised, every mode) add no compiled version to any rendering kernel."""
+    import numpy as np
+
+    import core
+    from core import camera as camera_module
+    from core import denoise, instance_traversal, render_kernels
+
+    parallel_compile.compile_rendering_kernels(denoise=True)
+    parallel_compile.compile_camera_pass()
+    kernels = [render_kernels.add_samples, render_kernels.surface_frames, render_kernels.assemble_image,
+               camera_module._pixel_rays, instance_traversal.trace_scene_rays]
+    kernels += [k for k in vars(denoise).values() if hasattr(k, "signatures")]
+    before = {k: len(k.signatures) for k in kernels}
+    assert all(before[k] > 0 for k in kernels[:5]), "a side did not run a rendering kernel"
+    tris = np.array([[[-1, -1, 0], [1, -1, 0], [0, 1, 0]], [[-1, -1, 0.5], [1, -1, 0.5], [0, 1, 0.5]]], np.float32)
+    vertices, faces = tris.reshape(-1, 3), np.arange(6, dtype=np.int32).reshape(2, 3)
+    scenes = [core.build_kdtree(tris), core.build_scene([(vertices, faces)], [0, 0], np.stack([np.eye(4)] * 2))]
+    camera = core.Camera(np.array([[1.0, 0, 0, 0.2], [0, 1, 0, 0.1], [0, 0, 1, 3], [0, 0, 0, 1]]), 0.9)
+    for scene in scenes:
+        for mode in ("ao", "shadow", "ao+shadow"):
+            render = core.PreviewRender(scene, camera, 9, 7, mode=mode, samples=2,
+                                        lights=[core.Light.point((0.0, 0.0, 2.0))])
+            render.step(2)
+            assert render.image()[..., 3].sum() > 0
+            render.image(denoise=True)
+    assert {k: len(k.signatures) for k in kernels} == before
 
 
 def test_the_hand_made_tree_renders_like_a_built_one():
