@@ -484,9 +484,9 @@ NOT_TRIANGLE_DATA = {"Curves": "hair curves", "PointCloud": "a point cloud", "Vo
 def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility, instanced: set[int]) -> list[str]:
     """A warning per render-visible thing a final render shows and the preview leaves out: scene
     objects hidden in the viewport (the viewport depsgraph does not evaluate them) or not triangles,
-    collection instancers hidden there (their instances go with them), members of instanced
-    collections disabled in viewports (`instanced`: the original objects the depsgraph instanced),
-    and hair particles drawn as strands."""
+    collection instancers hidden there (their instances go with them), members of collections that
+    instancers or particles render whole, disabled in viewports (`instanced`: the original objects the
+    depsgraph instanced), and hair particles drawn as strands."""
     evaluated = {ob.original.as_pointer() for ob in depsgraph.objects}
     warnings = []
     instancers = {}
@@ -495,6 +495,8 @@ def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility, instance
         if kind in TRIANGLE_TYPES and ob.as_pointer() in evaluated:
             if len(ob.particle_systems):
                 warnings += _strand_warnings(ob, vis) + _pick_warnings(ob, vis)
+                for collection in _whole_collection_particles(ob, vis):
+                    instancers.setdefault(collection.as_pointer(), (collection, ob))
             continue  # the common case first: ~1.5 us an object
         if ob.instance_type == "COLLECTION" and ob.instance_collection is not None and vis.scene_object(ob):
             if ob.as_pointer() in evaluated:
@@ -532,7 +534,7 @@ def _strand_warnings(ob, vis: _Visibility) -> list[str]:
     """Hair particle systems drawn as strands (Render As: Path), which Cycles renders as curves."""
     if not (vis.scene_object(ob) and _ray_visible(ob)):
         return []
-    shown = {m.particle_system.as_pointer() for m in ob.modifiers if m.type == "PARTICLE_SYSTEM" and m.show_render}
+    shown = _render_shown_systems(ob)
     return [f"object '{ob.name}': hair particles '{system.name}' are strands, not triangles: left out of the preview"
             for system in ob.particle_systems
             if system.as_pointer() in shown and system.settings.type == "HAIR" and system.settings.render_type == "PATH"]
@@ -545,7 +547,7 @@ def _pick_warnings(ob, vis: _Visibility) -> list[str]:
     render's (the render-hidden members' particles are left out, see _Visibility)."""
     if not (vis.scene_object(ob) and _ray_visible(ob)):
         return []
-    shown = {m.particle_system.as_pointer() for m in ob.modifiers if m.type == "PARTICLE_SYSTEM" and m.show_render}
+    shown = _render_shown_systems(ob)
     out = []
     for system in ob.particle_systems:
         settings = system.settings
@@ -558,6 +560,23 @@ def _pick_warnings(ob, vis: _Visibility) -> list[str]:
                        "only: the preview's particle-to-object assignment differs from a final render's (it leaves "
                        "the render-hidden members' particles out)")
     return out
+
+
+def _whole_collection_particles(ob, vis: _Visibility) -> list:
+    """The collections ob's render-shown particle systems render whole (Render As: Collection, Whole
+    Collection on): their members follow the collection-instance rule, so a member disabled in
+    viewports is left out of the preview as a collection instance's is (_hidden_member_warnings)."""
+    if not (vis.scene_object(ob) and _ray_visible(ob)):
+        return []
+    shown = _render_shown_systems(ob)
+    return [system.settings.instance_collection for system in ob.particle_systems
+            if system.as_pointer() in shown and system.settings.render_type == "COLLECTION"
+            and system.settings.instance_collection is not None and system.settings.use_whole_collection]
+
+
+def _render_shown_systems(ob) -> set[int]:
+    """Pointers of ob's particle systems whose modifier is shown in renders."""
+    return {m.particle_system.as_pointer() for m in ob.modifiers if m.type == "PARTICLE_SYSTEM" and m.show_render}
 
 
 def _pick_candidates(coll: bpy.types.Collection, hidden: str) -> set[int]:

@@ -388,6 +388,23 @@ def test_hidden_instancers_and_viewport_disabled_members_are_named(scene):
         "leaves its instances out, a final render shows them"]
 
 
+def test_viewport_disabled_members_of_whole_collection_particles_are_named(scene):
+    """Particles rendering a collection whole expand it like a collection instance, so a member
+    disabled in viewports (render-visible) is not instanced by the viewport's depsgraph: a final render
+    shows it on every particle, the preview does not, so it names the member and the emitter."""
+    source = scenes.new_collection("Source", exclude=True)
+    scenes.add_cube("Unit", scale=0.1, collection=source)
+    scenes.add_cube("Member", scale=0.1, location=(0.3, 0, 0), collection=source).hide_viewport = True
+    gone = scenes.add_cube("RenderHidden", scale=0.1, location=(0.6, 0, 0), collection=source)
+    gone.hide_viewport = gone.hide_render = True  # no render shows it: quiet
+    scenes.add_particle_emitter("Whole", count=3, collection=source)
+    result = extract_scene()
+    assert _instances_by_host(result) == {"Whole": ["Unit"] * 3}
+    assert result.warnings == [
+        "object 'Member' in collection 'Source' (instanced by 'Whole') is disabled in viewports: the preview "
+        "leaves its instances out, a final render shows them"]
+
+
 @pytest.mark.parametrize("instance_type", ["VERTS", "FACES"])
 def test_a_child_of_a_vertex_or_face_instancing_parent_shows_only_as_its_instances(scene, instance_type):
     """Blender hides such a child at its own place in a final render (the viewport shows it there):
