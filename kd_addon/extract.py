@@ -485,8 +485,8 @@ def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility, instance
     """A warning per render-visible thing a final render shows and the preview leaves out: scene
     objects hidden in the viewport (the viewport depsgraph does not evaluate them) or not triangles,
     collection instancers hidden there (their instances go with them), members of collections that
-    instancers or particles render whole, disabled in viewports (`instanced`: the original objects the
-    depsgraph instanced), and hair particles drawn as strands."""
+    instancers, geometry nodes or particles render whole, disabled in viewports (`instanced`: the
+    original objects the depsgraph instanced), and hair particles drawn as strands."""
     evaluated = {ob.original.as_pointer() for ob in depsgraph.objects}
     warnings = []
     instancers = {}
@@ -495,8 +495,8 @@ def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility, instance
         if kind in TRIANGLE_TYPES and ob.as_pointer() in evaluated:
             if len(ob.particle_systems):
                 warnings += _strand_warnings(ob, vis) + _pick_warnings(ob, vis)
-                for collection in _whole_collection_particles(ob, vis):
-                    instancers.setdefault(collection.as_pointer(), (collection, ob))
+            for collection in _collections_rendered_whole(ob, vis):
+                instancers.setdefault(collection.as_pointer(), (collection, ob))
             continue  # the common case first: ~1.5 us an object
         if ob.instance_type == "COLLECTION" and ob.instance_collection is not None and vis.scene_object(ob):
             if ob.as_pointer() in evaluated:
@@ -562,16 +562,22 @@ def _pick_warnings(ob, vis: _Visibility) -> list[str]:
     return out
 
 
-def _whole_collection_particles(ob, vis: _Visibility) -> list:
-    """The collections ob's render-shown particle systems render whole (Render As: Collection, Whole
-    Collection on): their members follow the collection-instance rule, so a member disabled in
-    viewports is left out of the preview as a collection instance's is (_hidden_member_warnings)."""
-    if not (vis.scene_object(ob) and _ray_visible(ob)):
+def _collections_rendered_whole(ob, vis: _Visibility) -> list:
+    """The collections ob renders whole through geometry nodes (Collection Info, node_instances.py) or
+    render-shown particle systems (Render As: Collection, Whole Collection on): their members follow
+    the collection-instance rule, so a member disabled in viewports is left out of the preview as a
+    collection instance's is (_hidden_member_warnings). Measured with Cycles (bpy 5.0.1): a final
+    render shows such a member in all three ways, and a child collection disabled in viewports that
+    Separate Children instances."""
+    nodes = any(m.type == "NODES" for m in ob.modifiers)
+    if not (nodes or len(ob.particle_systems)) or not (vis.scene_object(ob) and _ray_visible(ob)):
         return []
+    collections = node_references(ob)[0] if nodes else []
     shown = _render_shown_systems(ob)
-    return [system.settings.instance_collection for system in ob.particle_systems
-            if system.as_pointer() in shown and system.settings.render_type == "COLLECTION"
-            and system.settings.instance_collection is not None and system.settings.use_whole_collection]
+    return collections + [system.settings.instance_collection for system in ob.particle_systems
+                          if system.as_pointer() in shown and system.settings.render_type == "COLLECTION"
+                          and system.settings.instance_collection is not None
+                          and system.settings.use_whole_collection]
 
 
 def _render_shown_systems(ob) -> set[int]:

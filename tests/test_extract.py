@@ -388,21 +388,34 @@ def test_hidden_instancers_and_viewport_disabled_members_are_named(scene):
         "leaves its instances out, a final render shows them"]
 
 
-def test_viewport_disabled_members_of_whole_collection_particles_are_named(scene):
-    """Particles rendering a collection whole expand it like a collection instance, so a member
-    disabled in viewports (render-visible) is not instanced by the viewport's depsgraph: a final render
-    shows it on every particle, the preview does not, so it names the member and the emitter."""
+@pytest.mark.parametrize("host", ["particles", "collection info", "separate children"])
+def test_viewport_disabled_members_of_collections_rendered_whole_are_named(scene, host):
+    """Particles and Collection Info nodes rendering a collection whole expand it like a collection
+    instance, and so does Separate Children for a child collection: a member (or child collection)
+    disabled in viewports but render-visible is not instanced by the viewport's depsgraph, while a
+    final render shows it (checked with Cycles), so the preview names it and the host. A child object
+    that Separate Children instances directly shows in the viewport too: no warning for it."""
     source = scenes.new_collection("Source", exclude=True)
     scenes.add_cube("Unit", scale=0.1, collection=source)
     scenes.add_cube("Member", scale=0.1, location=(0.3, 0, 0), collection=source).hide_viewport = True
     gone = scenes.add_cube("RenderHidden", scale=0.1, location=(0.6, 0, 0), collection=source)
     gone.hide_viewport = gone.hide_render = True  # no render shows it: quiet
-    scenes.add_particle_emitter("Whole", count=3, collection=source)
+    child = scenes.new_collection("Child", parent=source)
+    scenes.add_cube("InChild", scale=0.1, location=(0.9, 0, 0), collection=child)
+    child.hide_viewport = True
+    if host == "particles":
+        scenes.add_particle_emitter("Host", count=3, collection=source)
+    else:
+        scenes.add_info_node_host("Host", source, separate_children=host == "separate children")
     result = extract_scene()
-    assert _instances_by_host(result) == {"Whole": ["Unit"] * 3}
-    assert result.warnings == [
-        "object 'Member' in collection 'Source' (instanced by 'Whole') is disabled in viewports: the preview "
-        "leaves its instances out, a final render shows them"]
+    member = ("object 'Member' in collection 'Source' (instanced by 'Host') is disabled in viewports: the preview "
+              "leaves its instances out, a final render shows them")
+    if host == "separate children":  # the child collection is the instanced one
+        assert sorted(_instances_by_host(result)["Host"]) == ["Member", "RenderHidden", "Unit"]  # as Cycles
+        assert result.warnings == [member.replace("'Member' in collection 'Source'", "'InChild' in collection 'Child'")]
+    else:
+        assert set(_instances_by_host(result)["Host"]) == {"Unit"}
+        assert sorted(result.warnings) == [member.replace("'Member'", "'InChild'"), member]
 
 
 @pytest.mark.parametrize("instance_type", ["VERTS", "FACES"])
