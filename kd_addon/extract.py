@@ -496,11 +496,11 @@ def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility, instance
             if len(ob.particle_systems):
                 warnings += _strand_warnings(ob, vis) + _pick_warnings(ob, vis)
             for collection in _collections_rendered_whole(ob, vis):
-                instancers.setdefault(collection.as_pointer(), (collection, ob))
+                instancers.setdefault(collection.as_pointer(), (collection, []))[1].append(ob)
             continue  # the common case first: ~1.5 us an object
         if ob.instance_type == "COLLECTION" and ob.instance_collection is not None and vis.scene_object(ob):
             if ob.as_pointer() in evaluated:
-                instancers.setdefault(ob.instance_collection.as_pointer(), (ob.instance_collection, ob))
+                instancers.setdefault(ob.instance_collection.as_pointer(), (ob.instance_collection, []))[1].append(ob)
             elif _ray_visible(ob):
                 warnings.append(f"object '{ob.name}' is hidden in the viewport (eye icon, Disable in Viewports or a "
                                 f"hidden collection): the preview leaves out the instances of collection "
@@ -514,20 +514,26 @@ def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility, instance
                 warnings.append(f"object '{ob.name}' is hidden in the viewport (eye icon, Disable in Viewports or "
                                 f"a hidden collection): the preview reads the viewport's scene and leaves {what} out, "
                                 "a final render shows it")
-    for collection, instancer in instancers.values():
-        warnings += _hidden_member_warnings(collection, instancer, vis, instanced)
+    for collection, hosts in instancers.values():
+        warnings += _hidden_member_warnings(collection, hosts, vis, instanced)
     return warnings
 
 
-def _hidden_member_warnings(collection, instancer, vis: _Visibility, instanced: set[int]) -> list[str]:
+def _hidden_member_warnings(collection, hosts: list, vis: _Visibility, instanced: set[int]) -> list[str]:
     """Members a render of the collection's instances shows that the viewport's depsgraph did not
-    instance (the object or a collection on its path disabled in viewports)."""
+    instance (the object or a collection on its path disabled in viewports), one warning each, naming
+    the first of `hosts` (the objects instancing the collection) whose instances of it rays can see."""
     shown = vis.instanced_objects(collection)
-    return [f"object '{ob.name}' in collection '{collection.name}' (instanced by '{instancer.name}') is disabled "
-            "in viewports: the preview leaves its instances out, a final render shows them"
-            for ob in collection.all_objects
-            if ob.type in TRIANGLE_TYPES and ob.as_pointer() in shown and ob.as_pointer() not in instanced
-            and not vis.scene_object(ob) and _ray_visible(ob, instancer)]  # scene objects are named as such
+    out = []
+    for ob in collection.all_objects:
+        if (ob.type not in TRIANGLE_TYPES or ob.as_pointer() not in shown or ob.as_pointer() in instanced
+                or vis.scene_object(ob)):  # scene objects are named as such
+            continue
+        host = next((h for h in hosts if _ray_visible(ob, h)), None)
+        if host is not None:
+            out.append(f"object '{ob.name}' in collection '{collection.name}' (instanced by '{host.name}') is "
+                       "disabled in viewports: the preview leaves its instances out, a final render shows them")
+    return out
 
 
 def _strand_warnings(ob, vis: _Visibility) -> list[str]:

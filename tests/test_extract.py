@@ -388,6 +388,20 @@ def test_hidden_instancers_and_viewport_disabled_members_are_named(scene):
         "leaves its instances out, a final render shows them"]
 
 
+def test_a_viewport_disabled_member_is_named_when_any_instancer_shows_it(scene):
+    """Two instancers of one collection, the first invisible to camera and shadow rays: the member a
+    render shows through the second is named once, with that instancer (the first alone hid it)."""
+    source = scenes.new_collection("Source", exclude=True)
+    scenes.add_cube("Unit", collection=source)
+    scenes.add_cube("Member", location=(2, 0, 0), collection=source).hide_viewport = True
+    ghost = scenes.add_collection_instance("Ghost", source)
+    ghost.visible_camera = ghost.visible_shadow = False
+    scenes.add_collection_instance("Seen", source, location=(0, 9, 0))
+    assert extract_scene().warnings == [
+        "object 'Member' in collection 'Source' (instanced by 'Seen') is disabled in viewports: the preview "
+        "leaves its instances out, a final render shows them"]
+
+
 @pytest.mark.parametrize("host", ["particles", "collection info", "separate children"])
 def test_viewport_disabled_members_of_collections_rendered_whole_are_named(scene, host):
     """Particles and Collection Info nodes rendering a collection whole expand it like a collection
