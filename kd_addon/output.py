@@ -63,7 +63,7 @@ def show_in_image_editor(image: bpy.types.Image) -> None:
 
 
 def save_frame(image: np.ndarray, path: Path, file_format: str) -> Path:
-    """Save a finished frame as PNG (8-bit sRGB, as Blender converts a linear float image)
+    """Save a finished frame as PNG (16-bit sRGB RGBA: Blender writes a float image's PNG that deep)
     or OPEN_EXR (linear float RGBA) without changing the preview image's own file path."""
     target = store_preview(image)
     path.parent.mkdir(parents=True, exist_ok=True)
