@@ -202,7 +202,7 @@ def five_million(builder, runs):
 def main():
     if len(sys.argv) > 1 and sys.argv[1] == "--child":
         return run_child(sys.argv[2:])
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--calibrate", action="store_true")
     ap.add_argument("--scenes", default="soup-1m,suzanne-1m,grid-1m,flat-grid-1m,dense-soup-100k")
     ap.add_argument("--builders", default="binned,median,exact")

@@ -70,7 +70,7 @@ def deforming_scene(cells, frames, seed=7):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--loops", type=int, default=10)
     ap.add_argument("--frames", type=int, default=24)
     ap.add_argument("--cells", type=int, default=160, help="sheet subdivisions (2 cells^2 triangles)")

@@ -153,7 +153,7 @@ def compare(blend, out, size, samples):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--size", type=int, nargs=2, default=(160, 120))
     ap.add_argument("--samples", type=int, default=64)
     ap.add_argument("--out", default=None, help="folder for the .blend files and frames (default: a temporary one)")
