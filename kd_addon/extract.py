@@ -521,19 +521,35 @@ def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility, instance
 
 def _hidden_member_warnings(collection, hosts: list, vis: _Visibility, instanced: set[int]) -> list[str]:
     """Members a render of the collection's instances shows that the viewport's depsgraph did not
-    instance (the object or a collection on its path disabled in viewports), one warning each, naming
-    the first of `hosts` (the objects instancing the collection) whose instances of it rays can see."""
-    shown = vis.instanced_objects(collection)
+    instance (the object or a collection on its path disabled in viewports), nested collection
+    instances' members too, one warning each, naming the first of `hosts` (the objects instancing the
+    collection) whose instances of it rays can see."""
+    shown = vis.instanced_objects(collection)  # nested instances' render-visible members included
     out = []
-    for ob in collection.all_objects:
+    for ob, owner, chain in _members(collection, (), {collection.as_pointer()}):
         if (ob.type not in TRIANGLE_TYPES or ob.as_pointer() not in shown or ob.as_pointer() in instanced
                 or vis.scene_object(ob)):  # scene objects are named as such
             continue
-        host = next((h for h in hosts if _ray_visible(ob, h)), None)
+        host = next((h for h in hosts if _ray_visible(ob, *chain, h)), None)
         if host is not None:
-            out.append(f"object '{ob.name}' in collection '{collection.name}' (instanced by '{host.name}') is "
+            through = "".join(f" through '{inner.name}'" for inner in chain)
+            out.append(f"object '{ob.name}' in collection '{owner.name}' (instanced by '{host.name}'{through}) is "
                        "disabled in viewports: the preview leaves its instances out, a final render shows them")
     return out
+
+
+def _members(collection, chain: tuple, stack: set):
+    """(object, the collection it is a member of, the instancers inside `collection` it is nested
+    through) for every object of `collection` and of the collections its render-visible members
+    instance, outer members first; a collection already on the path is not entered again."""
+    nested = []
+    for ob in collection.all_objects:
+        yield ob, collection, chain
+        inner = ob.instance_collection if ob.instance_type == "COLLECTION" else None
+        if inner is not None and not ob.hide_render and inner.as_pointer() not in stack:
+            nested.append((ob, inner))
+    for ob, inner in nested:
+        yield from _members(inner, chain + (ob,), stack | {inner.as_pointer()})
 
 
 def _strand_warnings(ob, vis: _Visibility) -> list[str]:

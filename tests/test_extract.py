@@ -402,6 +402,24 @@ def test_a_viewport_disabled_member_is_named_when_any_instancer_shows_it(scene):
         "leaves its instances out, a final render shows them"]
 
 
+def test_viewport_disabled_members_of_nested_collection_instances_are_named(scene):
+    """A collection instanced inside an instanced collection: its member disabled in viewports is
+    rendered by a final render through both instancers, left out by the viewport's depsgraph, so the
+    preview names it with the chain of instancers."""
+    deep = scenes.new_collection("Deep", exclude=True)
+    scenes.add_cube("DeepUnit", scale=0.1, collection=deep)
+    scenes.add_cube("DeepMember", scale=0.1, location=(0.3, 0, 0), collection=deep).hide_viewport = True
+    source = scenes.new_collection("Source", exclude=True)
+    scenes.add_cube("Unit", scale=0.1, location=(0, 1, 0), collection=source)
+    scenes.add_collection_instance("Inner", deep, collection=source)
+    scenes.add_collection_instance("Top", source)
+    result = extract_scene()
+    assert sorted(_instances_by_host(result)["Top"]) == ["DeepUnit", "Unit"]
+    assert result.warnings == [
+        "object 'DeepMember' in collection 'Deep' (instanced by 'Top' through 'Inner') is disabled in viewports: "
+        "the preview leaves its instances out, a final render shows them"]
+
+
 @pytest.mark.parametrize("host", ["particles", "collection info", "separate children"])
 def test_viewport_disabled_members_of_collections_rendered_whole_are_named(scene, host):
     """Particles and Collection Info nodes rendering a collection whole expand it like a collection
