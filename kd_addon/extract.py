@@ -505,7 +505,8 @@ def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility, instance
                 warnings.append(f"object '{ob.name}' is hidden in the viewport (eye icon, Disable in Viewports or a "
                                 f"hidden collection): the preview leaves out the instances of collection "
                                 f"'{ob.instance_collection.name}' it makes, a final render shows them")
-        if (kind in TRIANGLE_TYPES or kind in NOT_TRIANGLES) and vis.scene_object(ob) and _ray_visible(ob):
+        if ((kind in TRIANGLE_TYPES or kind in NOT_TRIANGLES) and vis.scene_object(ob) and _ray_visible(ob)
+                and not _renders_nothing(ob)):
             if kind in NOT_TRIANGLES:
                 warnings.append(f"object '{ob.name}' is {NOT_TRIANGLES[kind]}, not triangles: left out of the preview")
             else:
@@ -528,7 +529,7 @@ def _hidden_member_warnings(collection, hosts: list, vis: _Visibility, instanced
     out = []
     for ob, owner, chain in _members(collection, (), {collection.as_pointer()}):
         if (ob.type not in TRIANGLE_TYPES or ob.as_pointer() not in shown or ob.as_pointer() in instanced
-                or vis.scene_object(ob)):  # scene objects are named as such
+                or vis.scene_object(ob) or _renders_nothing(ob)):  # scene objects are named as such
             continue
         host = next((h for h in hosts if _ray_visible(ob, *chain, h)), None)
         if host is not None:
@@ -536,6 +537,13 @@ def _hidden_member_warnings(collection, hosts: list, vis: _Visibility, instanced
             out.append(f"object '{ob.name}' in collection '{owner.name}' (instanced by '{host.name}'{through}) is "
                        "disabled in viewports: the preview leaves its instances out, a final render shows them")
     return out
+
+
+def _renders_nothing(ob) -> bool:
+    """A mesh without faces, modifiers (particles included) or instancing: nothing for any render to
+    show, so hiding it in the viewport loses nothing (rig widgets, guides, hook targets)."""
+    return (ob.type == "MESH" and len(ob.data.polygons) == 0 and len(ob.modifiers) == 0
+            and ob.instance_type == "NONE")
 
 
 def _members(collection, chain: tuple, stack: set):

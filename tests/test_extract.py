@@ -402,6 +402,24 @@ def test_a_viewport_disabled_member_is_named_when_any_instancer_shows_it(scene):
         "leaves its instances out, a final render shows them"]
 
 
+def test_hidden_meshes_without_faces_are_not_named(scene):
+    """A mesh with edges only (a rig widget, a guide) renders nothing anywhere: hidden in the viewport,
+    as a scene object or as an instanced member, it needs no warning. With a modifier it might render
+    something, so it is still named."""
+    widget = scenes.add_mesh("Widget", [(0, 0, 0), (1, 0, 0), (1, 1, 0)], [], edges=[(0, 1), (1, 2)])
+    widget.hide_viewport = True
+    grown = scenes.add_mesh("Grown", [(0, 0, 0), (1, 0, 0)], [], edges=[(0, 1)], location=(0, 3, 0))
+    grown.modifiers.new("Skin", "SKIN")
+    grown.hide_viewport = True
+    source = scenes.new_collection("Source", exclude=True)
+    scenes.add_cube("Unit", collection=source)
+    scenes.add_mesh("Guide", [(0, 0, 0), (1, 0, 0)], [], edges=[(0, 1)], collection=source).hide_viewport = True
+    scenes.add_collection_instance("Shown", source, location=(0, 9, 0))
+    assert extract_scene().warnings == [
+        "object 'Grown' is hidden in the viewport (eye icon, Disable in Viewports or a hidden collection): the "
+        "preview reads the viewport's scene and leaves it out, a final render shows it"]
+
+
 def test_viewport_disabled_members_of_nested_collection_instances_are_named(scene):
     """A collection instanced inside an instanced collection: its member disabled in viewports is
     rendered by a final render through both instancers, left out by the viewport's depsgraph, so the
