@@ -534,8 +534,10 @@ def _hidden_member_warnings(collection, hosts: list, vis: _Visibility, instanced
         host = next((h for h in hosts if _ray_visible(ob, *chain, h)), None)
         if host is not None:
             through = "".join(f" through '{inner.name}'" for inner in chain)
-            out.append(f"object '{ob.name}' in collection '{owner.name}' (instanced by '{host.name}'{through}) is "
-                       "disabled in viewports: the preview leaves its instances out, a final render shows them")
+            why = ("is disabled in viewports" if ob.hide_viewport else
+                   "is not instanced in the viewport (a collection or instancer on its path is disabled in viewports)")
+            out.append(f"object '{ob.name}' in collection '{owner.name}' (instanced by '{host.name}'{through}) {why}: "
+                       "the preview leaves its instances out, a final render shows them")
     return out
 
 
