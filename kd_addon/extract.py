@@ -466,7 +466,7 @@ def extract_scene(depsgraph: bpy.types.Depsgraph | None = None) -> ExtractedScen
         geometries=walker.geometries.geometries,
         instances=instances,
         warnings=(walker.geometries.warnings + list(walker.not_triangles.values())
-                  + left_out_warnings(depsgraph, vis, walker.instanced_originals())),
+                  + left_out_warnings(depsgraph, vis, walker.instanced_by)),
         extract_ms=(time.perf_counter() - t0) * 1e3,
         frame=depsgraph.scene.frame_current,
     )
@@ -481,12 +481,13 @@ NOT_TRIANGLE_DATA = {"Curves": "hair curves", "PointCloud": "a point cloud", "Vo
                      "GreasePencil": "grease pencil", "GreasePencilv3": "grease pencil"}  # by data type
 
 
-def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility, instanced: set[int]) -> list[str]:
+def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility, instanced_by: dict[int, set[int]]) -> list[str]:
     """A warning per render-visible thing a final render shows and the preview leaves out: scene
     objects hidden in the viewport (the viewport depsgraph does not evaluate them) or not triangles,
     collection instancers hidden there (their instances go with them), members of collections that
-    instancers, geometry nodes or particles render whole, disabled in viewports (`instanced`: the
-    original objects the depsgraph instanced), and hair particles drawn as strands."""
+    instancers, geometry nodes or particles render whole, disabled in viewports (`instanced_by`: the
+    original objects the depsgraph instanced, by original instancer), and hair particles drawn as
+    strands."""
     evaluated = {ob.original.as_pointer() for ob in depsgraph.objects}
     warnings = []
     instancers = {}
@@ -515,7 +516,9 @@ def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility, instance
                 warnings.append(f"object '{ob.name}' is hidden in the viewport (eye icon, Disable in Viewports or "
                                 f"a hidden collection): the preview reads the viewport's scene and leaves {what} out, "
                                 "a final render shows it")
+    instanced = set().union(*instanced_by.values())
     for collection, hosts in instancers.values():
+        hosts = [h for h in hosts if _keeps_instances(h, instanced_by)]
         warnings += _hidden_member_warnings(collection, hosts, vis, instanced)
     return warnings
 
@@ -539,6 +542,14 @@ def _hidden_member_warnings(collection, hosts: list, vis: _Visibility, instanced
             out.append(f"object '{ob.name}' in collection '{owner.name}' (instanced by '{host.name}'{through}) {why}: "
                        "the preview leaves its instances out, a final render shows them")
     return out
+
+
+def _keeps_instances(host, instanced_by: dict[int, set[int]]) -> bool:
+    """Whether the viewport's depsgraph shows `host`'s instances as instances, so that a member missing
+    from them is missing from the preview. Geometry nodes may realize them (Realize Instances): then
+    no member is ever an instance, and only a host that instanced something counts (a node tree that
+    realizes some collections and not others can still be misread)."""
+    return not any(m.type == "NODES" for m in host.modifiers) or bool(instanced_by.get(host.as_pointer()))
 
 
 def _renders_nothing(ob) -> bool:
@@ -654,6 +665,7 @@ class _EntryReader:
         self.vis = vis
         self.geometries = _GeometryReader()
         self._verdicts: dict[tuple[int, int], tuple[str, str | None, bool, bool, bool] | None] = {}
+        self.instanced_by: dict[int, set[int]] = {}  # instancer (original) -> the originals it instanced
         self.not_triangles: dict[tuple[str, str | None], str] = {}
 
     def read(self, inst) -> Instance | None:
@@ -683,11 +695,6 @@ class _EntryReader:
             holdout=holdout,
         )
 
-    def instanced_originals(self) -> set[int]:
-        """Pointers of the original objects read as instances (from the verdict memo: no extra cost
-        per entry)."""
-        return {obj for obj, parent in self._verdicts if parent}
-
     def _note_not_triangles(self, ob, parent) -> None:
         """Warn once per object and instancer about render-visible geometry that is not triangles
         which an object makes (a geometry-nodes point cloud, curves, volume) or an instance brings;
@@ -714,5 +721,7 @@ class _EntryReader:
                 camera = False  # Indirect Only hides from camera rays; a holdout stays a holdout
             visible = (camera or shadow) and _entry_visible(self.vis, parent, ob)
             instancer = parent.original.name if parent is not None else None
+            if parent is not None:  # once per (object, instancer): no extra cost per entry
+                self.instanced_by.setdefault(parent.original.as_pointer(), set()).add(orig.as_pointer())
             self._verdicts[memo_key] = (orig.name, instancer, camera, shadow, holdout) if visible else None
         return self._verdicts[memo_key]

@@ -177,10 +177,12 @@ def add_gn_instancer(name="GNHost", *, count=4, offset=(2, 0, 0), cube_size=1.0,
     return obj
 
 
-def add_info_node_host(name, target, *, separate_children=False, via_modifier_input=False, location=(0, 0, 0)):
+def add_info_node_host(name, target, *, separate_children=False, via_modifier_input=False, location=(0, 0, 0),
+                       realize=False):
     """Empty-mesh object whose geometry-nodes modifier outputs the instances of a Collection Info
-    node (`target` a collection) or an Object Info node (`target` an object), unrealized. With
-    `via_modifier_input` the target comes from a modifier input linked through a Group Input node."""
+    node (`target` a collection) or an Object Info node (`target` an object), unrealized unless
+    `realize` (a Realize Instances node). With `via_modifier_input` the target comes from a modifier
+    input linked through a Group Input node."""
     is_collection = isinstance(target, bpy.types.Collection)
     group = bpy.data.node_groups.new(f"{name}Info", "GeometryNodeTree")
     group.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
@@ -189,7 +191,12 @@ def add_info_node_host(name, target, *, separate_children=False, via_modifier_in
     port = "Collection" if is_collection else "Object"
     if is_collection:
         info.inputs["Separate Children"].default_value = separate_children
-    links.new(info.outputs[0 if is_collection else "Geometry"], nodes.new("NodeGroupOutput").inputs[0])
+    output = info.outputs[0 if is_collection else "Geometry"]
+    if realize:
+        realized = nodes.new("GeometryNodeRealizeInstances")
+        links.new(output, realized.inputs[0])
+        output = realized.outputs[0]
+    links.new(output, nodes.new("NodeGroupOutput").inputs[0])
     obj = add_mesh(name, [], [], location=location)
     mod = obj.modifiers.new("GN", "NODES")
     if via_modifier_input:

@@ -438,6 +438,18 @@ def test_viewport_disabled_members_of_nested_collection_instances_are_named(scen
         "the preview leaves its instances out, a final render shows them"]
 
 
+def test_members_of_realized_collection_info_are_not_named(scene):
+    """Realize Instances makes the members part of the host's mesh, never instances: no member may be
+    named as missing from the instances (every one was, before the host's instances were checked)."""
+    source = scenes.new_collection("Source", exclude=True)
+    scenes.add_cube("Unit", scale=0.1, collection=source)
+    scenes.add_cube("Member", scale=0.1, location=(0.3, 0, 0), collection=source).hide_viewport = True
+    scenes.add_info_node_host("Host", source, realize=True)
+    result = extract_scene()
+    assert result.object_names == ["Host"] and len(triangles_of(result, "Host")) >= 12
+    assert result.warnings == []
+
+
 @pytest.mark.parametrize("host", ["particles", "collection info", "separate children"])
 def test_viewport_disabled_members_of_collections_rendered_whole_are_named(scene, host):
     """Particles and Collection Info nodes rendering a collection whole expand it like a collection
