@@ -546,10 +546,12 @@ def _hidden_member_warnings(collection, hosts: list, vis: _Visibility, instanced
 
 def _keeps_instances(host, instanced_by: dict[int, set[int]]) -> bool:
     """Whether the viewport's depsgraph shows `host`'s instances as instances, so that a member missing
-    from them is missing from the preview. Geometry nodes may realize them (Realize Instances): then
-    no member is ever an instance, and only a host that instanced something counts (a node tree that
-    realizes some collections and not others can still be misread)."""
-    return not any(m.type == "NODES" for m in host.modifiers) or bool(instanced_by.get(host.as_pointer()))
+    from them is missing from the preview. A collection instancer's always are. Geometry nodes may
+    realize them (Realize Instances), and a modifier may be shown in renders only: then no member is
+    an instance in the viewport for a reason other than its own, so a geometry-nodes host or an
+    emitter counts only once it instanced something (a host that realizes some collections and not
+    others can still be misread)."""
+    return host.instance_type == "COLLECTION" or bool(instanced_by.get(host.as_pointer()))
 
 
 def _renders_nothing(ob) -> bool:

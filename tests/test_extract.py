@@ -440,7 +440,8 @@ def test_viewport_disabled_members_of_nested_collection_instances_are_named(scen
 
 def test_members_of_realized_collection_info_are_not_named(scene):
     """Realize Instances makes the members part of the host's mesh, never instances: no member may be
-    named as missing from the instances (every one was, before the host's instances were checked)."""
+    named as missing from the instances (every one was, before the host's instances were checked).
+    Nor when particles are shown in renders only."""
     source = scenes.new_collection("Source", exclude=True)
     scenes.add_cube("Unit", scale=0.1, collection=source)
     scenes.add_cube("Member", scale=0.1, location=(0.3, 0, 0), collection=source).hide_viewport = True
@@ -448,6 +449,9 @@ def test_members_of_realized_collection_info_are_not_named(scene):
     result = extract_scene()
     assert result.object_names == ["Host"] and len(triangles_of(result, "Host")) >= 12
     assert result.warnings == []
+    emitter = scenes.add_particle_emitter("Emitter", count=3, collection=source, location=(9, 0, 0))
+    emitter.modifiers[0].show_viewport = False  # particles in renders only: no member is the reason
+    assert extract_scene().warnings == []
 
 
 @pytest.mark.parametrize("host", ["particles", "collection info", "separate children"])
