@@ -518,7 +518,8 @@ def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility, instance
                                 "a final render shows it")
     instanced = set().union(*instanced_by.values())
     for collection, hosts in instancers.values():
-        hosts = [h for h in hosts if _keeps_instances(h, instanced_by)]
+        members = {ob.as_pointer() for ob, _, _ in _members(collection, (), {collection.as_pointer()})}
+        hosts = [h for h in hosts if _shows_instances_of(h, members, instanced_by)]
         warnings += _hidden_member_warnings(collection, hosts, vis, instanced)
     return warnings
 
@@ -544,14 +545,15 @@ def _hidden_member_warnings(collection, hosts: list, vis: _Visibility, instanced
     return out
 
 
-def _keeps_instances(host, instanced_by: dict[int, set[int]]) -> bool:
-    """Whether the viewport's depsgraph shows `host`'s instances as instances, so that a member missing
-    from them is missing from the preview. A collection instancer's always are. Geometry nodes may
-    realize them (Realize Instances), and a modifier may be shown in renders only: then no member is
-    an instance in the viewport for a reason other than its own, so a geometry-nodes host or an
-    emitter counts only once it instanced something (a host that realizes some collections and not
-    others can still be misread)."""
-    return host.instance_type == "COLLECTION" or bool(instanced_by.get(host.as_pointer()))
+def _shows_instances_of(host, members: set[int], instanced_by: dict[int, set[int]]) -> bool:
+    """Whether the viewport's depsgraph shows `host`'s instances of a collection (`members`: pointers
+    of its objects, nested ones too) as instances, so that a member missing from them is missing from
+    the preview. A collection instancer's always are. A geometry-nodes host or an emitter counts only
+    once it instanced one of the members: its nodes may realize the instances (Realize Instances) or
+    not use the Collection Info node at all, and its modifier may be shown in renders only; then no
+    member is an instance for a reason other than its own. (A collection all of whose members are
+    disabled in viewports is then not named: better a missing warning than a wrong one.)"""
+    return host.instance_type == "COLLECTION" or not instanced_by.get(host.as_pointer(), set()).isdisjoint(members)
 
 
 def _renders_nothing(ob) -> bool:

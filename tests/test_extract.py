@@ -460,7 +460,9 @@ def test_viewport_disabled_members_of_collections_rendered_whole_are_named(scene
     instance, and so does Separate Children for a child collection: a member (or child collection)
     disabled in viewports but render-visible is not instanced by the viewport's depsgraph, while a
     final render shows it (checked with Cycles), so the preview names it and the host. A child object
-    that Separate Children instances directly shows in the viewport too: no warning for it."""
+    that Separate Children instances directly shows in the viewport too: no warning for it. A
+    geometry-nodes host or emitter is trusted only for collections it instanced a member of, so a
+    child collection that is disabled whole ('Child') goes unnamed when it is the instanced one."""
     source = scenes.new_collection("Source", exclude=True)
     scenes.add_cube("Unit", scale=0.1, collection=source)
     scenes.add_cube("Member", scale=0.1, location=(0.3, 0, 0), collection=source).hide_viewport = True
@@ -469,6 +471,9 @@ def test_viewport_disabled_members_of_collections_rendered_whole_are_named(scene
     child = scenes.new_collection("Child", parent=source)
     scenes.add_cube("InChild", scale=0.1, location=(0.9, 0, 0), collection=child)
     child.hide_viewport = True
+    second = scenes.new_collection("Second", parent=source)
+    scenes.add_cube("SecondUnit", scale=0.1, location=(1.2, 0, 0), collection=second)
+    scenes.add_cube("SecondMember", scale=0.1, location=(1.5, 0, 0), collection=second).hide_viewport = True
     if host == "particles":
         scenes.add_particle_emitter("Host", count=3, collection=source)
     else:
@@ -476,15 +481,30 @@ def test_viewport_disabled_members_of_collections_rendered_whole_are_named(scene
     result = extract_scene()
     member = ("object 'Member' in collection 'Source' (instanced by 'Host') is disabled in viewports: the preview "
               "leaves its instances out, a final render shows them")
+    second_member = member.replace("'Member'", "'SecondMember'")
     in_child = member.replace("'Member'", "'InChild'").replace(
         "is disabled in viewports", "is not instanced in the viewport (a collection or instancer on its path is "
         "disabled in viewports)")  # its collection is the disabled one
-    if host == "separate children":  # the child collection is the instanced one
-        assert sorted(_instances_by_host(result)["Host"]) == ["Member", "RenderHidden", "Unit"]  # as Cycles
-        assert result.warnings == [in_child.replace("collection 'Source'", "collection 'Child'")]
+    if host == "separate children":  # the child collections are the instanced ones
+        assert sorted(_instances_by_host(result)["Host"]) == ["Member", "RenderHidden", "SecondUnit", "Unit"]
+        assert result.warnings == [second_member.replace("collection 'Source'", "collection 'Second'")]
     else:
-        assert set(_instances_by_host(result)["Host"]) == {"Unit"}
-        assert sorted(result.warnings) == [in_child, member]
+        assert set(_instances_by_host(result)["Host"]) == {"Unit", "SecondUnit"}
+        assert sorted(result.warnings) == [in_child, member, second_member]
+
+
+def test_a_collection_info_node_the_output_does_not_use_names_nothing(scene):
+    """A Collection Info node left unconnected instances nothing: its collection's members are not
+    missing instances, even though the host instances another collection."""
+    used, unused = scenes.new_collection("Used", exclude=True), scenes.new_collection("Unused", exclude=True)
+    scenes.add_cube("UsedUnit", scale=0.1, collection=used)
+    scenes.add_cube("Idle", scale=0.1, collection=unused)
+    host = scenes.add_info_node_host("Host", used)
+    spare = host.modifiers[0].node_group.nodes.new("GeometryNodeCollectionInfo")
+    spare.inputs["Collection"].default_value = unused
+    result = extract_scene()
+    assert _instances_by_host(result) == {"Host": ["UsedUnit"]}
+    assert result.warnings == []
 
 
 @pytest.mark.parametrize("instance_type", ["VERTS", "FACES"])
