@@ -32,21 +32,18 @@ import subprocess
 import sys
 import tempfile
 from contextlib import contextmanager
-from pathlib import Path
 
 import numpy as np
 
 from .camera import Camera
 from .kdtree import KdTree
-from .kernel_cache import CORE_CACHE_FOLDER_VARIABLE, core_cache_folder
+from .kernel_cache import CORE_CACHE_FOLDER_VARIABLE, CORE_FOLDER, core_cache_folder
 from .layout import LEAF
 from .lights import Light
 from .options import BuildOptions
 from .render import PreviewRender
 from .render_kernels import add_samples
 from .two_level import as_two_level
-
-CORE_FOLDER = Path(__file__).resolve().parent
 
 
 def rendering_kernels_cached() -> bool:
@@ -76,20 +73,19 @@ def compile_scene_wrapping() -> None:
     as_two_level(hand_made_tree())
 
 
-HAND_MADE_CAMERA = np.array([[1.0, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 3], [0, 0, 0, 1]])  # 3 above the square
-HAND_MADE_RENDER = dict(mode="ao+shadow", samples=2)  # modes and sample counts are runtime values
-
-
-def _hand_made_lights():
-    return [Light.point((0.0, 0.0, 2.0))]
+def _hand_made_render(render_class):
+    """A 4 x 4 ao+shadow render of the hand-made tree seen from 3 above, two samples a pixel (modes,
+    sizes and sample counts are runtime values: one render compiles what every render uses)."""
+    camera = Camera(np.array([[1.0, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 3], [0, 0, 0, 1]]), 0.9)
+    return render_class(as_two_level(hand_made_tree()), camera, 4, 4, mode="ao+shadow", samples=2,
+                        lights=[Light.point((0.0, 0.0, 2.0))])
 
 
 def compile_camera_pass() -> None:
     """The camera pass, run here after the build: a PreviewRender's constructor traces the camera rays
     (whose kernels the helper compiled first, so this loads them) and makes the hit frames
     (surface_frames, compiled here), and samples nothing."""
-    PreviewRender(as_two_level(hand_made_tree()), Camera(HAND_MADE_CAMERA, 0.9), 4, 4, lights=_hand_made_lights(),
-                  **HAND_MADE_RENDER)
+    _hand_made_render(PreviewRender)
 
 
 class _SamplingOnly(PreviewRender):
@@ -100,7 +96,7 @@ class _SamplingOnly(PreviewRender):
 
     def _camera_hits(self, traced):
         self._camera_rays(traced)
-        pixels = traced[np.arange(len(traced), dtype=np.int64)]
+        pixels = traced.copy()
         points, normals = np.zeros((len(pixels), 3)), np.zeros((len(pixels), 3))
         normals[:, 2] = 1.0
         starts = points + 1e-6 * normals
@@ -112,8 +108,7 @@ def compile_rendering_kernels(denoise=False) -> None:
     then loads, once its build is done), AO and shadow samples of the hand-made tree (AO rays that hit
     and miss, shadow rays), the image, and the denoiser if asked. Resolutions, modes and sample counts
     are runtime values, so this compiles what every render uses but the surface frames."""
-    render = _SamplingOnly(as_two_level(hand_made_tree()), Camera(HAND_MADE_CAMERA, 0.9), 4, 4,
-                           lights=_hand_made_lights(), **HAND_MADE_RENDER)
+    render = _hand_made_render(_SamplingOnly)
     render.step(render.target_samples)
     render.image(denoise=denoise)
 

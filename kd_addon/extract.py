@@ -518,20 +518,23 @@ def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility, instance
                                 "a final render shows it")
     instanced = set().union(*instanced_by.values())
     for collection, hosts in instancers.values():
-        members = {ob.as_pointer() for ob, _, _ in _members(collection, (), {collection.as_pointer()})}
-        hosts = [h for h in hosts if _shows_instances_of(h, members, instanced_by)]
-        warnings += _hidden_member_warnings(collection, hosts, vis, instanced)
+        members = list(_members(collection, (), {collection.as_pointer()}))
+        pointers = {ob.as_pointer() for ob, _, _ in members}
+        hosts = [h for h in hosts if _shows_instances_of(h, pointers, instanced_by)]
+        if hosts:
+            warnings += _hidden_member_warnings(collection, members, hosts, vis, instanced)
     return warnings
 
 
-def _hidden_member_warnings(collection, hosts: list, vis: _Visibility, instanced: set[int]) -> list[str]:
-    """Members a render of the collection's instances shows that the viewport's depsgraph did not
-    instance (the object or a collection on its path disabled in viewports), nested collection
-    instances' members too, one warning each, naming the first of `hosts` (the objects instancing the
-    collection) whose instances of it rays can see."""
+def _hidden_member_warnings(collection, members: list, hosts: list, vis: _Visibility,
+                            instanced: set[int]) -> list[str]:
+    """Members (`_members` of the collection: nested collection instances' too) a render of the
+    collection's instances shows that the viewport's depsgraph did not instance (the object or a
+    collection on its path disabled in viewports), one warning each, naming the first of `hosts` (the
+    objects instancing the collection) whose instances of it rays can see."""
     shown = vis.instanced_objects(collection)  # nested instances' render-visible members included
     out = []
-    for ob, owner, chain in _members(collection, (), {collection.as_pointer()}):
+    for ob, owner, chain in members:
         if (ob.type not in TRIANGLE_TYPES or ob.as_pointer() not in shown or ob.as_pointer() in instanced
                 or vis.scene_object(ob) or _renders_nothing(ob)):  # scene objects are named as such
             continue
