@@ -84,20 +84,23 @@ def trace_scene(scene, o, d, tmin, tmax, any_hit, ray_mask, scratch):
     the instances whose visibility shares a bit with `ray_mask` (the ray's kind, ray_visibility.py);
     instance and prim are -1 on a miss. A ray that reaches an unbuilt subtree of a lazy mesh tree stops
     there: prim is then trace_ray's suspended value (< NO_HIT) and instance the one it stopped in.
-    `scratch` comes from new_scratch() and is reused across rays."""
+    `scratch` comes from new_scratch() and is reused across rays.
+
+    trace_instance is called from one place only, the top leaf loop, because trace_ray is inlined
+    there (traversal.py says why): a flat tree, one instance in a one-leaf top, goes through that loop
+    too, only without the top's clip, which its own tree makes."""
     axis, split, child, count, items, root_box = scene[0], scene[1], scene[2], scene[3], scene[4], scene[5]
     visibility = scene[19]
-    if items.shape[0] == 1 and axis[0] == LEAF:  # one instance (a flat tree): its own tree clips the ray
-        if visibility[items[0]] & ray_mask == 0:
-            return np.inf, -1, -1, 0.0, 0.0
-        t, prim, u, v = trace_instance(scene, items[0], o, d, tmin, tmax, any_hit, scratch)
-        return t, items[0] if prim >= 0 or prim < NO_HIT else -1, prim, u, v
-    stack_node, stack_t, inv = scratch[0], scratch[1], scratch[2]
-    for k in range(3):
-        inv[k] = 1.0 / d[k] if d[k] != 0.0 else 0.0
-    t0, t1 = clip_to_box(root_box, o, d, inv, tmin, tmax)
-    if t0 > t1 or items.shape[0] == 0:
+    if items.shape[0] == 0:
         return np.inf, -1, -1, 0.0, 0.0
+    stack_node, stack_t, inv = scratch[0], scratch[1], scratch[2]
+    t0, t1 = tmin, tmax
+    if not (items.shape[0] == 1 and axis[0] == LEAF):
+        for k in range(3):
+            inv[k] = 1.0 / d[k] if d[k] != 0.0 else 0.0
+        t0, t1 = clip_to_box(root_box, o, d, inv, tmin, tmax)
+        if t0 > t1:
+            return np.inf, -1, -1, 0.0, 0.0
     best_t, best_inst, best_prim, best_u, best_v = tmax, -1, -1, 0.0, 0.0
     node, sp, t_exit = 0, 0, t1
     while True:

@@ -48,7 +48,7 @@ def clip_to_box(box, o, d, inv, tmin, tmax):
     return t0, t1
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def trace_ray(tree, o, d, tmin, tmax, any_hit, stack_node, stack_t, inv, flags):
     """(t, prim, u, v) of the closest hit in (tmin, tmax), or of any hit if `any_hit`; prim -1 on a miss.
 
@@ -58,6 +58,13 @@ def trace_ray(tree, o, d, tmin, tmax, any_hit, stack_node, stack_t, inv, flags):
     `stack_node`, `stack_t`, `inv` (3 floats) and `flags` (LEAF_CHUNK uint8) are the caller's
     scratch, reused across rays. A leaf's triangles are screened LEAF_CHUNK at a time by their edge
     signs (triangle_test.leaf_candidates), and only those kept get the full test, on the same copy.
+
+    Inlined into its three callers (the flat kernel below, instance_traversal.trace_scene, and through
+    it the renderer's sampling kernel). Called, it cost a call per ray whose machine code begins with
+    13 reference-count calls (NRT_incref, one per array argument; unowned views make them no-ops, but
+    not free). Paired in one process against the called version (seed 000's setting, results
+    identical): camera rays 0.83x, shadow rays 0.85x, render 0.87x. The price is compile time: the
+    sampling kernel compiles in ~82 s instead of 39 s (parallel_compile.py).
     """
     axis, split, child, count, leaf_prims, _, root_box, leaf_tris, base = tree
     for k in range(3):
