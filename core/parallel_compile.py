@@ -1,21 +1,23 @@
 """A first render's JIT compile on two cores: a helper process compiles the rendering kernels into
 Numba's on-disk cache while this process builds the tree (compiling the builder's kernels) and then
-makes the camera pass's hit frames (compiling surface_frames).
+makes the camera pass (compiling the camera rays' traversal and surface_frames).
 
-Why: with an empty cache a first render compiles every kernel, one at a time, in one process: 126-138 s
-for the demo's first frame on a 2-core host (`benchmarks/bench_compile.py --helper off`), ~43 s of it
-the builder's kernels, ~47 s the sampling kernel (`add_samples` with its inlined traversal, sampler
-and light sampling), ~27 s the camera rays' traversal and ~8-11 s surface_frames. All go to the same
-cache (cache=True), so a second process can compile one set while this one compiles the others; the
-render then loads what the helper wrote. The split: the helper traces the camera rays first (so this
-process loads their kernels once its build is done), then compiles the sampling kernel, the image and
-the denoiser if the render will filter; this process compiles the builder's kernels and surface_frames.
-Measured (`bench_compile.py --helper both --runs 2`, idle host): first frame 77 s against 138 s in one
-process; this process compiled 52-54 s of it. The helper used to render everything, surface frames
-included, and this process then waited ~45 s for it (98 s).
+Why: with an empty cache a first render compiles every kernel, one at a time, in one process: 180-187 s
+for the demo's first frame on a 2-core AVX2 host (`benchmarks/bench_compile.py --helper off`,
+2026-11-26), ~45 s of it the builder's kernels, ~82 s the sampling kernel (`add_samples` with its
+inlined traversal, sampler and light sampling), ~30 s the camera rays' traversal and ~8-11 s
+surface_frames. All go to the same cache (cache=True), so a second process can compile one set while
+this one compiles the others; the render then loads what the helper wrote. The split: the helper
+compiles the sampling kernel, the image and the denoiser if the render will filter; this process
+compiles the builder's kernels, then the camera pass (the camera rays' traversal and surface_frames).
+Measured (`bench_compile.py --helper on`, idle host, 2026-11-26): first frame 85.6 s against 186.6 s
+in one process; this process compiled 85 s of it. Since the traversal is inlined into its callers
+(traversal.trace_ray) the sampling kernel takes twice as long to compile (39 s before), and the
+earlier split, in which the helper also traced the camera rays, made the first frame wait 117 s for
+it. Before that split, the helper rendered everything, surface frames included (98 s against 138 s).
 
-Both processes may compile one function: when this process reaches the camera pass before the
-helper has saved its kernels (a build whose kernels were cached already), it compiles them as well.
+The two sets do not overlap, but both processes may still compile one function: any kernel this
+process needs before the helper has saved it, it compiles as well.
 Numba's cache index of a function is rewritten whole by each writer
 (numba.core.caching.IndexDataCacheFile.save: read the index, add the entry, write it back), so two
 processes adding overloads at once could lose or mismatch an entry; kernel_cache.py serializes those
@@ -83,19 +85,18 @@ def _hand_made_render(render_class):
 
 def compile_camera_pass() -> None:
     """The camera pass, run here after the build: a PreviewRender's constructor traces the camera rays
-    (whose kernels the helper compiled first, so this loads them) and makes the hit frames
-    (surface_frames, compiled here), and samples nothing."""
+    and makes their hit frames (surface_frames), compiling both here, and samples nothing."""
     _hand_made_render(PreviewRender)
 
 
 class _SamplingOnly(PreviewRender):
-    """A render that traces its camera rays but makes up their hit frames (every pixel sees the square's
-    centre from above), so surface_frames does not compile here. The arrays have the real pass's types
-    (int64 pixel indices, float64 depths and (M, 3) frames, all C-contiguous and writable): Numba
-    compiles one version per type signature, and the real render must find this one in the cache."""
+    """A render that makes up its camera hits (every pixel sees the square's centre from above) without
+    tracing camera rays, so neither their traversal nor surface_frames compiles in the helper. The arrays
+    have the real pass's types (int64 pixel indices, float64 depths and (M, 3) frames, all C-contiguous
+    and writable): Numba compiles one version per type signature, and the real render must find this
+    one in the cache."""
 
     def _camera_hits(self, traced):
-        self._camera_rays(traced)
         pixels = traced.copy()
         points, normals = np.zeros((len(pixels), 3)), np.zeros((len(pixels), 3))
         normals[:, 2] = 1.0
@@ -104,10 +105,9 @@ class _SamplingOnly(PreviewRender):
 
 
 def compile_rendering_kernels(denoise=False) -> None:
-    """What the helper runs, in this order: the camera rays and their traversal (which this process
-    then loads, once its build is done), AO and shadow samples of the hand-made tree (AO rays that hit
-    and miss, shadow rays), the image, and the denoiser if asked. Resolutions, modes and sample counts
-    are runtime values, so this compiles what every render uses but the surface frames."""
+    """What the helper runs: AO and shadow samples of the hand-made tree (AO rays that hit and miss,
+    shadow rays), the image, and the denoiser if asked. Resolutions, modes and sample counts are
+    runtime values, so this compiles what every render uses but the camera pass."""
     render = _hand_made_render(_SamplingOnly)
     render.step(render.target_samples)
     render.image(denoise=denoise)
