@@ -66,6 +66,7 @@ def child(top, render_args):
             print(f"COMPILE {s:7.1f} s  {name}")
 
     atexit.register(report)
+    sys.path.insert(0, str(ROOT))  # this checkout's kd_addon and core, not an editable install's
     sys.argv = ["kd_addon", *render_args]
     runpy.run_module("kd_addon", run_name="__main__")
 
