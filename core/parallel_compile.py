@@ -122,9 +122,9 @@ def rendering_kernels_alongside(denoise=False):
     """Compile the rendering kernels in a helper process while the `with` block runs (a build), when the
     cache does not hold the sampling kernel yet and HELPER_SWITCH is not "0" (`denoise`: the render
     will filter its image, so the helper compiles the denoiser too); yields the helper or None. On
-    leaving, run the camera pass here (its hit frames compile here, its rays' kernels load what the
-    helper wrote), then wait for the helper (at most HELPER_TIMEOUT); if the block raised, end the
-    helper at once. Either way no helper runs afterwards."""
+    leaving, run the camera pass here (compiling its rays' traversal and hit frames), then wait for
+    the helper (at most HELPER_TIMEOUT); if the block raised, end the helper at once. Either way no
+    helper runs afterwards."""
     helper = None
     if os.environ.get(HELPER_SWITCH, "1") != "0" and not rendering_kernels_cached():
         compile_scene_wrapping()

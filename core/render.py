@@ -112,7 +112,9 @@ class PreviewRender:
     def _camera_hits(self, traced):
         """(pixels, depths, points, normals, ray starts) of the camera rays through pixels `traced` that hit,
         in the order of `traced` (tiled_pixels' order keeps camera and later rays coherent)."""
-        origins, directions, t, inst, prim = self._camera_rays(traced)
+        origins, directions, tmin, tmax = self.camera.rays(self.width, self.height, traced)
+        t, inst, prim, _, _ = trace_valid_rays(self.scene, origins, directions, tmin, tmax, False, self.threads,
+                                               CAMERA_RAYS)
         seen = prim >= 0
         seen[seen] = (self.scene.visibility[inst[seen]] & HOLDOUT) == 0  # a holdout leaves its pixels empty
         hit = np.flatnonzero(seen).astype(np.int64)
@@ -120,13 +122,6 @@ class PreviewRender:
         with thread_count(self.threads):
             surface_frames(self.scene.arrays, origins, directions, t, inst, prim, hit, points, normals, starts)
         return traced[hit], t[hit], points, normals, starts
-
-    def _camera_rays(self, traced):
-        """(origins, directions, t, inst, prim) of the camera rays through pixels `traced`, traced."""
-        origins, directions, tmin, tmax = self.camera.rays(self.width, self.height, traced)
-        t, inst, prim, _, _ = trace_valid_rays(self.scene, origins, directions, tmin, tmax, False, self.threads,
-                                               CAMERA_RAYS)
-        return origins, directions, t, inst, prim
 
     def _start(self, pixels, depths, points, normals, starts, sums, sq_sums, counts, ray_counts, active, memo):
         self.pixels, self.depths, self.points, self.normals, self.starts = pixels, depths, points, normals, starts
