@@ -13,9 +13,9 @@ AREA_SHAPES = {"SQUARE": 0, "RECTANGLE": 1, "DISK": 2, "ELLIPSE": 3}
 
 # Packed row: kind, position(3), direction(3), radius, cos_half_angle, spot_cos, spot_smooth,
 # axis_u(3), axis_v(3) (area: half extents; spot: its frame's X and Y over their squared lengths),
-# spot_inv_len_z, no_shadow, (unused), shape, color(3)
+# spot_inv_len_z, no_shadow, delta, shape, color(3)
 ROW = 24
-SPOT_INV_LEN_Z, NO_SHADOW, COLOR = 17, 18, 21
+SPOT_INV_LEN_Z, NO_SHADOW, DELTA, COLOR = 17, 18, 19, 21
 
 
 class Light:
@@ -119,11 +119,20 @@ class Light:
             row[11:14] = m[:3, 0] * p["size"] / 2.0
             row[14:17] = m[:3, 1] * p["size_y"] / 2.0
             row[20] = AREA_SHAPES[p["shape"]]
+        row[DELTA] = 1.0 if _has_no_extent(self.kind, row) else 0.0
         return row
 
     def __repr__(self):
         names = {POINT: "point", SUN: "sun", SPOT: "spot", AREA: "area"}
         return f"Light.{names[self.kind]}(power={self.power}, color={self.color.tolist()})"
+
+
+def _has_no_extent(kind, row):
+    """A point or spot light of radius 0, or a sun whose half angle's cosine rounds to 1: every sample
+    of it is the same ray (shading.sample_light ignores its sample numbers), so none are drawn."""
+    if kind in (POINT, SPOT):
+        return row[7] <= 0.0
+    return kind == SUN and row[8] == 1.0
 
 
 def _spot_frame(direction, axes):

@@ -4,6 +4,7 @@ import pytest
 
 import core
 from core.camera import tiled_pixels
+from core.lights import DELTA
 from tests.meshes import icosphere, mesh_triangles
 from tests.render_scenes import box, floor, hit_mask, look_at, look_down, quad
 
@@ -158,6 +159,30 @@ def test_light_without_shadows_lights_the_occluded_floor(make):
     assert r.rays_traced == r.camera_rays
     open_floor = render(floor(0.0), camera, size=16, samples=4, mode="shadow", lights=[make()])
     np.testing.assert_array_equal(r.image(), open_floor)
+
+
+@pytest.mark.parametrize("light, no_extent", [
+    (core.Light.point((0.5, 0.0, 3.0)), True), (core.Light.point((0.5, 0.0, 3.0), radius=0.3), False),
+    (core.Light.sun((0.3, 0.0, -1.0)), True), (core.Light.sun((0.3, 0.0, -1.0), angle=1e-9), True),
+    (core.Light.sun((0.3, 0.0, -1.0), angle=0.2), False),
+    (core.Light.spot((0.5, 0, 3.0), (0, 0, -1.0), spot_size=3.0), True),
+    (core.Light.spot((0.5, 0, 3.0), (0, 0, -1.0), spot_size=3.0, radius=0.3), False),
+    (core.Light.area(moved_up(3.0), size=1.0), False)])
+def test_a_light_without_extent_draws_no_sample_numbers_and_loses_nothing(light, no_extent):
+    """Points and spots of radius 0 and suns whose half angle's cosine rounds to 1 are flagged: their
+    shadow rays skip the sampler. The flag must be set exactly where the sample numbers do not move
+    the ray: the same render with the flag cleared (every sample drawn) is bit-identical."""
+    tris = np.concatenate([floor(0.0), floor(1.0, half=0.3)])
+    camera = look_down((0.0, 0.0, 0.5), fov=1.2)
+    tree = core.build_kdtree(tris)
+    flagged, drawn = (core.PreviewRender(tree, camera, 24, 24, samples=8, mode="ao+shadow", lights=[light])
+                      for _ in range(2))
+    assert flagged.lights[0, DELTA] == float(no_extent)
+    drawn.lights[:, DELTA] = 0.0
+    flagged.step(8)
+    drawn.step(8)
+    np.testing.assert_array_equal(flagged.image(), drawn.image())
+    assert 0.0 < flagged.image()[..., 0][hit_mask(flagged.image())].mean() < 1.0  # lit and shadowed pixels
 
 
 def test_background_is_transparent_and_alpha_marks_hits():
