@@ -33,7 +33,7 @@ from .inputs import as_number, check_image_size
 from .kdtree import KdTree
 from .lazy import resolve_suspended
 from .instance_signature import changed_boxes
-from .lights import pack_lights
+from .lights import DELTA, pack_lights
 from .memory import check_render_memory
 from .pixel_reuse import PixelState, prepared_boxes, segments_touch, settings_key, surface_rays_touch
 from .ray_visibility import CAMERA_RAYS, HOLDOUT
@@ -128,6 +128,7 @@ class PreviewRender:
         self.sums, self.sq_sums, self.counts, self.ray_counts = sums, sq_sums, counts, ray_counts
         self.active, self.memo = active, memo
         self.memo_reused = np.zeros(len(pixels), np.int64)
+        self.repeated = np.zeros(len(pixels), np.int64)  # rays of lights without extent (render_kernels.py)
 
     def _changed_boxes(self, previous):
         """Where geometry changed since `previous` (a PixelState), or None when its pixels cannot be
@@ -225,7 +226,7 @@ class PreviewRender:
             add_samples(self.scene.arrays, self.points, self.normals, self.starts, self.pixels, active,
                         self.samples_done, batch, MODES[self.mode], self.ao_distance, self.ambient, self.lights,
                         self.sampler, self.seed, SOBOL_DIM1, self.sums, self.sq_sums, self.counts, self.ray_counts,
-                        status, (self.memo, self.known, self.boxes, self.memo_reused))
+                        status, (self.memo, self.known, self.boxes, self.memo_reused, self.repeated))
             return status
 
         with thread_count(self.threads):
@@ -253,7 +254,10 @@ class PreviewRender:
         var = np.maximum(var, q * (1.0 - q))
         converged = np.sqrt(var / n) < self.error_target
         if converged.any():
-            rays_per_sample = self.ray_counts[self.active[converged]] / n[converged]
+            stopped, n_stopped = self.active[converged], n[converged]
+            # lights without extent traced their ray at sample 0 only and would repeat it (render_kernels.py)
+            hard = self.repeated[stopped] / np.maximum(n_stopped - 1.0, 1.0)
+            rays_per_sample = (self.ray_counts[stopped] - hard) / n_stopped
             remaining = self.target_samples - self.samples_done
             self.rays_saved += int(np.rint(rays_per_sample * remaining).sum())
             self.converged_pixels += int(converged.sum())
@@ -296,12 +300,17 @@ def render_preview(tree, camera, width, height, denoise=False, **settings):
 
 def frame_ray_count(width, height, mode="ao", samples=16, lights=()):
     """The most rays a render traces: one camera ray a pixel, and for every sample one AO ray (modes
-    with "ao") and one shadow ray a light (modes with "shadow"). What BuildOptions.rays and
-    SceneBuilder.build(rays=...) take for a tree that serves one frame."""
+    with "ao") and one shadow ray a light (modes with "shadow"), except that a light without extent
+    takes one ray a pixel when its samples repeat it (render_kernels.py, repeated rays). What
+    BuildOptions.rays and SceneBuilder.build(rays=...) take for a tree that serves one frame."""
     if mode not in MODES:
         raise ValueError(f"mode must be one of {sorted(MODES)}, got {mode!r}")
-    per_sample = ("ao" in mode) + len(lights) * ("shadow" in mode)
-    return int(width) * int(height) * (1 + per_sample * int(samples))
+    rows, samples = pack_lights(lights), int(samples)
+    hard = int((rows[:, DELTA] != 0.0).sum()) if "shadow" in mode else 0
+    soft = len(rows) * ("shadow" in mode) - hard
+    repeats = samples * (1 + len(rows)) <= MEMO_BITS  # the memo holds sample 0's bit (PreviewRender._memo_rows)
+    per_pixel = 1 + (("ao" in mode) + soft) * samples + hard * (1 if repeats else samples)
+    return int(width) * int(height) * per_pixel
 
 
 def _check_settings(tree, camera, width, height, mode, samples, ao_distance, seed, sampler, error_target,

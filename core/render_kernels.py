@@ -18,6 +18,11 @@ meet a changed box, and traces only the others: the same bit, hence the same sum
 many of its bits last frame traced: with an error target a pixel may have stopped after fewer samples
 than this frame gives it, and the bits of samples it never took hold nothing (outside QA found frames
 continued with an error target differing from full renders by up to 0.34 before this count).
+
+Repeated rays: a light without extent (lights.DELTA) gives every sample of a pixel the same shadow ray,
+so with the memo on, samples after the first take sample 0's bit instead of tracing it again (counted
+in `repeated`, not in `rays`). In shadow mode with hard lights that is one shadow ray a light per pixel
+instead of one a sample. Without the memo (too many bits) every sample traces its ray, as before.
 """
 import numpy as np
 from numba import njit, prange
@@ -50,8 +55,9 @@ def add_samples(scene, points, normals, starts, pixels, active, first, count, mo
     sums (M, 3) and sq_sums (M,) (of the sample's grey value) accumulate; counts[i] += count;
     rays[i] counts the rays of pixel i's samples. status[a] is NO_HIT when pixel active[a] got its
     samples, or the suspended prim of the unbuilt subtree that stopped it (lazy trees; sums untouched).
-    memo = (bits (M, B) uint8, known (M,) int64, boxes (K, 6), reused (M,) int64): see the module
-    docstring; reused[i] counts the rays whose bit was taken from last frame.
+    memo = (bits (M, B) uint8, known (M,) int64, boxes (K, 6), reused (M,) int64, repeated (M,) int64):
+    see the module docstring; reused[i] counts the rays whose bit was taken from last frame, repeated[i]
+    the rays of lights without extent that took sample 0's bit (not counted in rays[i]).
     """
     n = active.shape[0]
     iterations, per_band = interleaved_blocks(n, PIXELS_PER_TASK)  # balances image regions (traversal.py)
@@ -70,7 +76,7 @@ def _sample_pixels(scene, points, normals, starts, pixels, active, start, stop, 
     as unowned views (array_views.py): with the owned arrays a one-sample shadow step took 1.5x as long
     as tracing the same rays alone."""
     scene = unowned_scene(scene)
-    memo = (unowned(memo[0]), unowned(memo[1]), unowned(memo[2]), unowned(memo[3]))
+    memo = (unowned(memo[0]), unowned(memo[1]), unowned(memo[2]), unowned(memo[3]), unowned(memo[4]))
     points, normals, starts = unowned(points), unowned(normals), unowned(starts)
     pixels, lights = unowned(pixels), unowned(lights)
     sums, sq_sums, counts, rays = unowned(sums), unowned(sq_sums), unowned(counts), unowned(rays)
@@ -95,8 +101,7 @@ def _sample_pixel(scene, points, normals, starts, pixels, i, first, count, mode,
     a slice would update its parent's shared reference count, from both threads, on every ray."""
     point, normal, origin = rows(points, i, i + 1)[0], rows(normals, i, i + 1)[0], rows(starts, i, i + 1)[0]
     ps = pixel_seed(pixels[i], seed)
-    reused = memo[3]
-    before = (sums[i, 0], sums[i, 1], sums[i, 2], sq_sums[i], rays[i], reused[i])
+    before = (sums[i, 0], sums[i, 1], sums[i, 2], sq_sums[i], rays[i], memo[3][i], memo[4][i])
     n_lights = lights.shape[0]
     uses = 1 + n_lights
     first_use = USE_AO if mode != SHADOW else USE_AO + 1
@@ -109,10 +114,12 @@ def _sample_pixel(scene, points, normals, starts, pixels, i, first, count, mode,
             if weight <= 0.0:
                 continue  # behind the surface or outside the light: no ray needed
             prim = -1  # a light that casts no shadow reaches every surface facing it: no ray either
-            if use == USE_AO or lights[use - 1, NO_SHADOW] == 0.0:
+            if use != USE_AO and lights[use - 1, NO_SHADOW] == 0.0 and _repeats(lights, use, s, memo):
+                prim = _repeated_visibility(memo, i, use, s * uses + use)
+            elif use == USE_AO or lights[use - 1, NO_SHADOW] == 0.0:
                 prim = _visibility(scene, origin, direction, tmax, scratch, memo, i, s * uses + use, rays)
             if prim < NO_HIT:
-                return _restore(sums, sq_sums, rays, reused, i, before, prim)
+                return _restore(sums, sq_sums, rays, memo, i, before, prim)
             if use == USE_AO:
                 ao = 1.0 if prim < 0 else 0.0
             elif prim < 0:
@@ -159,10 +166,30 @@ def _ray_of_use(use, lights, point, normal, ao_distance, sampler, ps, s, dim1, d
 
 
 @njit(cache=True, inline="always")
-def _restore(sums, sq_sums, rays, reused, i, before, prim):
-    """Put pixel i's sums back as they were before the batch; pass on the suspended prim."""
-    sums[i, 0], sums[i, 1], sums[i, 2], sq_sums[i], rays[i], reused[i] = before
+def _restore(sums, sq_sums, rays, memo, i, before, prim):
+    """Put pixel i's sums and counts back as they were before the batch; pass on the suspended prim."""
+    sums[i, 0], sums[i, 1], sums[i, 2], sq_sums[i], rays[i], memo[3][i], memo[4][i] = before
     return prim
+
+
+@njit(cache=True, inline="always")
+def _repeats(lights, use, s, memo):
+    """Whether sample s's ray to light use - 1 repeats sample 0's, whose bit the memo holds: a light
+    without extent, a later sample, and a memo row (samples are taken in order from 0 in every frame,
+    so sample 0's bit is this frame's by then, traced or kept from last frame)."""
+    return s > 0 and lights[use - 1, DELTA] != 0.0 and memo[0].shape[1] > 0
+
+
+@njit(cache=True, inline="always")
+def _repeated_visibility(memo, i, use, bit):
+    """Sample 0's visibility bit for this use, copied into `bit` (every ray keeps its bit, memo rule);
+    returns the any-hit prim's sign: 0 occluded, -1 clear."""
+    bits, repeated = memo[0], memo[4]
+    repeated[i] += 1
+    occluded = bits[i, use >> 3] & (1 << (use & 7)) != 0
+    mask = np.uint8(1 << (bit & 7))
+    bits[i, bit >> 3] = bits[i, bit >> 3] | mask if occluded else bits[i, bit >> 3] & ~mask
+    return 0 if occluded else -1
 
 
 @njit(cache=True, inline="always")
@@ -171,7 +198,7 @@ def _visibility(scene, origin, direction, tmax, scratch, memo, i, bit, rays):
     last frame's bit when pixel i traced it last frame (bit < known[i]) and the ray cannot meet a
     changed box (counted in reused[i]), else traced; rays[i] counts both. The bit is kept for the next
     frame either way."""
-    bits, known, boxes, reused = memo
+    bits, known, boxes, reused, _ = memo
     kept = bit < 8 * bits.shape[1]
     rays[i] += 1
     if kept and bit < known[i] and not segment_meets_any(origin, direction, 0.0, tmax, boxes):

@@ -275,9 +275,13 @@ def test_builder_builds_only_deforming_meshes_for_the_frames_rays():
 
 
 def test_frame_ray_count_counts_camera_ao_and_shadow_rays():
-    lights = [core.Light.point((0, 0, 1))] * 3
+    soft = [core.Light.point((0, 0, 1), radius=0.1)] * 3
     assert core.frame_ray_count(4, 3, "ao", 16) == 12 * (1 + 16)
-    assert core.frame_ray_count(4, 3, "shadow", 2, lights) == 12 * (1 + 2 * 3)
-    assert core.frame_ray_count(4, 3, "ao+shadow", 5, lights) == 12 * (1 + 5 * 4)
+    assert core.frame_ray_count(4, 3, "shadow", 2, soft) == 12 * (1 + 2 * 3)
+    assert core.frame_ray_count(4, 3, "ao+shadow", 5, soft) == 12 * (1 + 5 * 4)
+    hard = [core.Light.point((0, 0, 1)), core.Light.sun((0, 0, -1))]  # one ray a pixel each
+    assert core.frame_ray_count(4, 3, "ao+shadow", 5, soft + hard) == 12 * (1 + 5 * 4 + 2)
+    assert core.frame_ray_count(4, 3, "ao", 5, hard) == 12 * (1 + 5)
+    assert core.frame_ray_count(4, 3, "shadow", 200, hard) == 12 * (1 + 200 * 2)  # too many bits to repeat
     with pytest.raises(ValueError, match="mode"):
         core.frame_ray_count(4, 3, "occlusion", 1)

@@ -185,6 +185,36 @@ def test_a_light_without_extent_draws_no_sample_numbers_and_loses_nothing(light,
     assert 0.0 < flagged.image()[..., 0][hit_mask(flagged.image())].mean() < 1.0  # lit and shadowed pixels
 
 
+def test_a_hard_light_is_traced_once_a_pixel_and_its_samples_repeat_it():
+    """A light without extent gives every sample the same shadow ray: sample 0 traces it, later
+    samples repeat its bit, whether the samples come one step at a time (as the add-on takes them) or
+    in one batch. The image is bit-identical to tracing every sample (the flag cleared); the count of
+    rays is one shadow ray a pixel, which frame_ray_count tells the builder; an error target's saved
+    rays still add up to the full render's."""
+    tris = np.concatenate([floor(0.0), floor(1.0, half=0.3)])
+    camera = look_down((0.0, 0.0, 0.5), fov=1.2)
+    tree = core.build_kdtree(tris)
+    hard = core.Light.point((0.5, 0.0, 3.0))
+    settings = dict(samples=8, mode="ao+shadow", lights=[hard], ao_distance=0.3)
+    stepped, drawn = (core.PreviewRender(tree, camera, 24, 24, **settings) for _ in range(2))
+    drawn.lights[:, DELTA] = 0.0
+    for _ in range(8):
+        stepped.step(1)
+    drawn.step(8)
+    np.testing.assert_array_equal(stepped.image(), drawn.image())
+    pixels = 24 * 24
+    assert hit_mask(stepped.image()).all()  # every pixel hits the floor, which faces the light
+    assert drawn.rays_traced == pixels * (1 + 8 * 2)
+    assert stepped.rays_traced == pixels * (1 + 8 + 1) == core.frame_ray_count(24, 24, **{
+        k: settings[k] for k in ("mode", "samples", "lights")})
+    full = core.PreviewRender(tree, camera, 24, 24, **{**settings, "samples": 64})
+    full.step(64)
+    capped = core.PreviewRender(tree, camera, 24, 24, **{**settings, "samples": 64}, error_target=0.05)
+    capped.step(64)
+    assert capped.rays_saved > 0
+    assert capped.rays_traced + capped.rays_saved == full.rays_traced
+
+
 def test_background_is_transparent_and_alpha_marks_hits():
     tris = quad((0, 0, 0), (0.5, 0, 0), (0, 0.5, 0))
     camera = look_down((0.0, 0.0, 2.0), fov=1.0)
