@@ -114,10 +114,11 @@ def _sample_pixel(scene, points, normals, starts, pixels, i, first, count, mode,
             if weight <= 0.0:
                 continue  # behind the surface or outside the light: no ray needed
             prim = -1  # a light that casts no shadow reaches every surface facing it: no ray either
-            if use != USE_AO and lights[use - 1, NO_SHADOW] == 0.0 and _repeats(lights, use, s, memo):
-                prim = _repeated_visibility(memo, i, use, s * uses + use)
-            elif use == USE_AO or lights[use - 1, NO_SHADOW] == 0.0:
-                prim = _visibility(scene, origin, direction, tmax, scratch, memo, i, s * uses + use, rays)
+            if use == USE_AO or lights[use - 1, NO_SHADOW] == 0.0:
+                if _repeats(lights, use, s, memo):
+                    prim = _repeated_visibility(memo, i, use, s * uses + use)
+                else:
+                    prim = _visibility(scene, origin, direction, tmax, scratch, memo, i, s * uses + use, rays)
             if prim < NO_HIT:
                 return _restore(sums, sq_sums, rays, memo, i, before, prim)
             if use == USE_AO:
@@ -174,10 +175,10 @@ def _restore(sums, sq_sums, rays, memo, i, before, prim):
 
 @njit(cache=True, inline="always")
 def _repeats(lights, use, s, memo):
-    """Whether sample s's ray to light use - 1 repeats sample 0's, whose bit the memo holds: a light
-    without extent, a later sample, and a memo row (samples are taken in order from 0 in every frame,
-    so sample 0's bit is this frame's by then, traced or kept from last frame)."""
-    return s > 0 and lights[use - 1, DELTA] != 0.0 and memo[0].shape[1] > 0
+    """Whether sample s's ray of this use repeats sample 0's, whose bit the memo holds: a light without
+    extent, a later sample, and a memo row (samples are taken in order from 0 in every frame, so sample
+    0's bit is this frame's by then, traced or kept from last frame)."""
+    return use != USE_AO and s > 0 and lights[use - 1, DELTA] != 0.0 and memo[0].shape[1] > 0
 
 
 @njit(cache=True, inline="always")
