@@ -157,7 +157,8 @@ def _ray_of_use(use, lights, point, normal, ao_distance, sampler, ps, s, dim1, d
     light = rows(lights, use - 1, use)[0]
     # A light without extent ignores its sample numbers (lights.DELTA), so none are drawn: Owen-scrambled
     # Sobol costs three nested scrambles a ray. Seed 000's shadow step alone (add_samples, 201,371
-    # shadow rays), two runs each way: 241-248 ms on one thread before, 181-225 after.
+    # shadow rays), paired in one process against the code before, 15 pairs: 0.948x on two threads
+    # (126 against 138 ms), 0.965x on one.
     u1, u2 = (0.0, 0.0) if light[DELTA] != 0.0 else sample_2d(sampler, ps, s, use, dim1)
     dist, mask = sample_light(light, point, u1, u2, direction)
     cos_nl = normal[0] * direction[0] + normal[1] * direction[1] + normal[2] * direction[2]
