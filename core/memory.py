@@ -34,9 +34,10 @@ BUILD_BYTES_PER_TRIANGLE = {"binned": 620.0, "exact": 430.0, "median": 490.0}
 TRIANGLE_BYTES = 36  # (3, 3) float32: the array the tree keeps
 # Peak RSS growth of PreviewRender plus image(), per pixel, every pixel hit (the worst case): measured
 # 198 B at 960x540 and 171 B at 1920x1080, before the 24 B of each pixel's ray start were added.
-# Plus, computed rather than measured, the ray memo of pixel reuse: up to 64 bytes of visibility bits,
-# a flag and a counter per pixel (render_kernels.MEMO_BITS).
-RENDER_BYTES_PER_PIXEL = 200.0 + 24.0 + 73.0
+# Plus, computed rather than measured, the ray memo of pixel reuse: up to 64 bytes of visibility bits
+# (render_kernels.MEMO_BITS), and three int64 counts per pixel: the bits known from last frame, the rays
+# reused from it and the rays of lights without extent repeated from sample 0.
+RENDER_BYTES_PER_PIXEL = 200.0 + 24.0 + 64.0 + 3 * 8.0
 # The last frame's pixel state kept for pixel reuse (render.PreviewRender.pixel_state): pixel index,
 # depth, point, normal, ray start, sums, squared sums, sample and ray counts (float64 / int64) and up to
 # 64 bytes of visibility bits per hit pixel.

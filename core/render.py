@@ -255,7 +255,8 @@ class PreviewRender:
         converged = np.sqrt(var / n) < self.error_target
         if converged.any():
             stopped, n_stopped = self.active[converged], n[converged]
-            # lights without extent traced their ray at sample 0 only and would repeat it (render_kernels.py)
+            # lights without extent traced their ray at sample 0 only and would repeat it (render_kernels.py);
+            # without the memo nothing repeats, repeated is 0 and so is `hard`
             hard = self.repeated[stopped] / np.maximum(n_stopped - 1.0, 1.0)
             rays_per_sample = (self.ray_counts[stopped] - hard) / n_stopped
             remaining = self.target_samples - self.samples_done

@@ -177,8 +177,9 @@ def _restore(sums, sq_sums, rays, memo, i, before, prim):
 @njit(cache=True, inline="always")
 def _repeats(lights, use, s, memo):
     """Whether sample s's ray of this use repeats sample 0's, whose bit the memo holds: a light without
-    extent, a later sample, and a memo row (samples are taken in order from 0 in every frame, so sample
-    0's bit is this frame's by then, traced or kept from last frame)."""
+    extent, a later sample, and a memo row. Sample 0's bit is this frame's by then, traced or kept from
+    last frame: every frame samples its pixels in order from 0 (PreviewRender._continue restarts the
+    pixels it does not keep at sample 0), and a lazy tree's redo repeats the same batch."""
     return use != USE_AO and s > 0 and lights[use - 1, DELTA] != 0.0 and memo[0].shape[1] > 0
 
 
