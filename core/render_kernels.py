@@ -187,11 +187,9 @@ def _repeats(lights, use, s, memo):
 def _repeated_visibility(memo, i, use, bit):
     """Sample 0's visibility bit for this use, copied into `bit` (every ray keeps its bit, memo rule);
     returns the any-hit prim's sign: 0 occluded, -1 clear."""
-    bits, repeated = memo[0], memo[4]
-    repeated[i] += 1
-    occluded = bits[i, use >> 3] & (1 << (use & 7)) != 0
-    mask = np.uint8(1 << (bit & 7))
-    bits[i, bit >> 3] = bits[i, bit >> 3] | mask if occluded else bits[i, bit >> 3] & ~mask
+    memo[4][i] += 1
+    occluded = _memo_bit(memo[0], i, use)
+    _keep_memo_bit(memo[0], i, bit, occluded)
     return 0 if occluded else -1
 
 
@@ -206,12 +204,24 @@ def _visibility(scene, origin, direction, tmax, scratch, memo, i, bit, rays):
     rays[i] += 1
     if kept and bit < known[i] and not segment_meets_any(origin, direction, 0.0, tmax, boxes):
         reused[i] += 1
-        return 0 if bits[i, bit >> 3] & (1 << (bit & 7)) else -1
+        return 0 if _memo_bit(bits, i, bit) else -1
     _, _, prim, _, _ = trace_scene(scene, origin, direction, 0.0, tmax, True, SHADOW_RAYS, scratch)
     if kept and prim >= NO_HIT:
-        mask = np.uint8(1 << (bit & 7))
-        bits[i, bit >> 3] = bits[i, bit >> 3] | mask if prim >= 0 else bits[i, bit >> 3] & ~mask
+        _keep_memo_bit(bits, i, bit, prim >= 0)
     return prim
+
+
+@njit(cache=True, inline="always")
+def _memo_bit(bits, i, bit):
+    """Whether pixel i's memo holds `bit` set (the ray was occluded)."""
+    return bits[i, bit >> 3] & (1 << (bit & 7)) != 0
+
+
+@njit(cache=True, inline="always")
+def _keep_memo_bit(bits, i, bit, occluded):
+    """Set or clear pixel i's memo `bit`."""
+    mask = np.uint8(1 << (bit & 7))
+    bits[i, bit >> 3] = bits[i, bit >> 3] | mask if occluded else bits[i, bit >> 3] & ~mask
 
 
 @njit(cache=True, parallel=True)
