@@ -18,12 +18,18 @@ does, as reliably as in the whole case: the child collections count as instanced
 objects as instanced directly. Instance on Points picks among the unfiltered children, in the
 viewport and in a render alike, so leaving those members out reproduces the render exactly.
 
-The collection is read from the socket's value, or, in the modifier's own node tree, from the
-modifier input a Group Input link (through reroutes) feeds it. Object Info objects are collected
-too: an object instanced directly keeps being rendered even if it is also a hidden member of such a
-collection. Anything the reading cannot resolve (a collection computed by other nodes, or fed through
-a nested group's inputs, a linked *Separate Children*) is left out, which keeps the preview's earlier
-behaviour: the instance is shown.
+The collection is read from the socket's value, or, where a Group Input link (through reroutes)
+feeds it, from what feeds that group input: the modifier's input in the modifier's own node tree, the
+calling Group node's socket in a nested group (a reusable "scatter" group with a Collection input), as
+far up as it goes. Object Info objects are collected too: an object instanced directly keeps being
+rendered even if it is also a hidden member of such a collection. Anything the reading cannot resolve
+(a collection computed by other nodes, a linked *Separate Children*) is left out, which keeps the
+preview's earlier behaviour: the instance is shown.
+
+Only nodes whose output reaches the tree's active Group Output count, through links that are not
+muted and, across a muted node, only its pass-through (internal) links, as Blender evaluates them: a
+Collection Info node left in the tree unconnected instances nothing, and must not make the members of
+its collection count as instanced whole when the object instances them some other way.
 
 Particle systems that render a collection (*Render As: Collection*) expand it the same way in a
 render, whole or picking one member per particle (measured with Cycles: a hide_render member, a member
@@ -49,7 +55,7 @@ def node_references(ob: bpy.types.Object) -> tuple[list[bpy.types.Collection], l
     objects: list[bpy.types.Object] = []
     for mod in ob.modifiers:
         if mod.type == "NODES" and mod.node_group is not None:
-            _walk(mod.node_group, mod, {mod.node_group.as_pointer()}, collections, objects)
+            _walk(mod.node_group, _modifier_inputs(mod), set(), collections, objects)
     return collections, objects
 
 
@@ -67,18 +73,20 @@ def particle_references(ob: bpy.types.Object) -> tuple[list[bpy.types.Collection
     return collections, objects
 
 
-def _walk(tree, mod, seen: set[int], collections: list, objects: list) -> None:
-    """Collect from `tree` and the groups it uses; `mod` resolves Group Input links (None below the
-    modifier's own tree, whose group inputs are not the modifier's)."""
-    for node in tree.nodes:
+def _walk(tree, group_inputs, path: set[int], collections: list, objects: list) -> None:
+    """Collect from the nodes of `tree` that reach its output, and from the groups they call.
+    `group_inputs(identifier)`: the value the caller feeds the tree's group input `identifier`, None
+    when unknown. `path`: the groups being walked (Blender forbids recursion; this guards anyway)."""
+    path = path | {tree.as_pointer()}
+    for node in _nodes_reaching_output(tree):
         if node.mute:
             continue
         kind = node.bl_idname
         if kind == "GeometryNodeCollectionInfo":
             separate = node.inputs.get("Separate Children")
-            if separate is not None and separate.is_linked:
+            if separate is not None and _upstream(separate) is not None:
                 continue  # unknown which way the node instances: keep the instances shown
-            found = _socket_value(node.inputs.get("Collection"), mod)
+            found = _socket_value(node.inputs.get("Collection"), group_inputs)
             if not isinstance(found, bpy.types.Collection):
                 continue
             if separate is not None and separate.default_value:  # one reference per child
@@ -87,32 +95,67 @@ def _walk(tree, mod, seen: set[int], collections: list, objects: list) -> None:
             else:
                 collections.append(found)
         elif kind == "GeometryNodeObjectInfo":
-            found = _socket_value(node.inputs.get("Object"), mod)
+            found = _socket_value(node.inputs.get("Object"), group_inputs)
             if isinstance(found, bpy.types.Object):
                 objects.append(found)
-        elif kind == "GeometryNodeGroup" and node.node_tree is not None:
-            ptr = node.node_tree.as_pointer()
-            if ptr not in seen:
-                seen.add(ptr)
-                _walk(node.node_tree, None, seen, collections, objects)
+        elif kind == "GeometryNodeGroup" and node.node_tree is not None and node.node_tree.as_pointer() not in path:
+            _walk(node.node_tree, _group_node_inputs(node, group_inputs), path, collections, objects)
 
 
-def _socket_value(socket, mod):
-    """The ID an input socket holds: its own value when unlinked, else the modifier input that a
-    Group Input link feeds it (only where `mod` is given); None when it cannot be read."""
+def _nodes_reaching_output(tree) -> list:
+    """The nodes of `tree` whose output reaches its active Group Output, following links that are not
+    muted, and across a muted node only its internal (pass-through) links."""
+    found: dict[int, object] = {}
+    stack = [node for node in tree.nodes if node.bl_idname == "NodeGroupOutput" and node.is_active_output]
+    while stack:
+        node = stack.pop()
+        if node.as_pointer() in found:
+            continue
+        found[node.as_pointer()] = node
+        inputs = [link.from_socket for link in node.internal_links] if node.mute else node.inputs
+        stack.extend(link.from_node for socket in inputs for link in socket.links if not link.is_muted)
+    return list(found.values())
+
+
+def _modifier_inputs(mod):
+    """group_inputs for the modifier's own node tree: the modifier's input values."""
+    def value(identifier):
+        try:
+            return mod[identifier]
+        except KeyError:
+            return None
+    return value
+
+
+def _group_node_inputs(node, group_inputs):
+    """group_inputs for the tree a Group node calls: the value of the node's own input socket."""
+    def value(identifier):
+        socket = next((s for s in node.inputs if s.identifier == identifier), None)
+        return _socket_value(socket, group_inputs)
+    return value
+
+
+def _upstream(socket):
+    """The output socket feeding `socket` through reroutes and links that are not muted (a reroute's
+    own when the chain ends there, unfed), or None when nothing does: then the socket's value counts."""
+    links = [link for link in socket.links if not link.is_muted]
+    source = None
+    while links:
+        source = links[0].from_socket
+        if source.node.bl_idname != "NodeReroute":
+            break
+        links = [link for link in source.node.inputs[0].links if not link.is_muted]
+    return source
+
+
+def _socket_value(socket, group_inputs):
+    """The ID an input socket holds: its own value when nothing feeds it, what the caller feeds the
+    group input that does (`group_inputs`), else None: it cannot be read."""
     if socket is None:
         return None
-    if not socket.is_linked:
+    source = _upstream(socket)
+    if source is None:
         return getattr(socket, "default_value", None)
-    link = socket.links[0]
-    while link.from_node.bl_idname == "NodeReroute":
-        upstream = link.from_node.inputs[0]
-        if not upstream.is_linked:
-            return None
-        link = upstream.links[0]
-    if mod is None or link.from_node.bl_idname != "NodeGroupInput":
-        return None
-    try:
-        return mod[link.from_socket.identifier]
-    except KeyError:
-        return None
+    if source.node.bl_idname != "NodeGroupInput":
+        return None  # computed by other nodes, or an unfed reroute
+    return group_inputs(source.identifier)

@@ -213,6 +213,34 @@ def add_info_node_host(name, target, *, separate_children=False, via_modifier_in
     return obj
 
 
+def add_nested_info_host(name, collection, *, via_modifier_input=False, location=(0, 0, 0)):
+    """Empty-mesh object whose geometry nodes call a reusable group ("Scatter": its Collection input
+    into a Collection Info node, out unrealized) with `collection`, set on the Group node's socket,
+    or with `via_modifier_input`, fed to it from the modifier's own input."""
+    scatter = bpy.data.node_groups.new(f"{name}Scatter", "GeometryNodeTree")
+    scatter.interface.new_socket("Coll", in_out="INPUT", socket_type="NodeSocketCollection")
+    scatter.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    info = scatter.nodes.new("GeometryNodeCollectionInfo")
+    scatter.links.new(scatter.nodes.new("NodeGroupInput").outputs["Coll"], info.inputs["Collection"])
+    scatter.links.new(info.outputs[0], scatter.nodes.new("NodeGroupOutput").inputs[0])
+    group = bpy.data.node_groups.new(f"{name}Tree", "GeometryNodeTree")
+    group.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    call = group.nodes.new("GeometryNodeGroup")
+    call.node_tree = scatter
+    group.links.new(call.outputs[0], group.nodes.new("NodeGroupOutput").inputs[0])
+    obj = add_mesh(name, [], [], location=location)
+    mod = obj.modifiers.new("GN", "NODES")
+    if via_modifier_input:
+        item = group.interface.new_socket("Coll", in_out="INPUT", socket_type="NodeSocketCollection")
+        group.links.new(group.nodes.new("NodeGroupInput").outputs["Coll"], call.inputs["Coll"])
+        mod.node_group = group
+        mod[item.identifier] = collection
+    else:
+        call.inputs["Coll"].default_value = collection
+        mod.node_group = group
+    return obj
+
+
 def add_bevel_curve(name="Tube", *, length=4.0, radius=0.5, location=(0, 0, 0)):
     """Straight poly curve from x=0 to x=length beveled into an open tube of
     the given radius around the x axis."""

@@ -507,6 +507,57 @@ def test_a_collection_info_node_the_output_does_not_use_names_nothing(scene):
     assert result.warnings == []
 
 
+@pytest.mark.parametrize("spare_link", ["none", "muted"])
+def test_a_collection_info_node_that_reaches_no_output_does_not_hide_its_members(scene, spare_link):
+    """Measured with Cycles (bpy 5.0.1, `benchmarks/cycles_node_references.py`): a host instances a
+    render-hidden object through an Object Info node whose object a Switch node computes (which the
+    reading cannot resolve, so it is shown as the viewport yields it), and holds a Collection Info
+    node naming a collection with that object, unconnected or linked to the output through a muted
+    link only. Cycles renders the object; the preview left it out, as if the collection were
+    instanced whole, and warned that the collection's other member was missing."""
+    source = scenes.new_collection("Src", exclude=True)
+    scenes.add_cube("Shown", scale=0.2, collection=source)
+    hidden = scenes.add_cube("Hidden", scale=0.2, collection=source)
+    hidden.hide_render = True
+    elsewhere = scenes.add_cube("Elsewhere", scale=0.1, location=(0, 0, -50))
+    host = scenes.add_mesh("Host", [], [])
+    tree = bpy.data.node_groups.new("HostTree", "GeometryNodeTree")
+    tree.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    nodes, links = tree.nodes, tree.links
+    switch = nodes.new("GeometryNodeSwitch")
+    switch.input_type = "OBJECT"
+    switch.inputs["False"].default_value, switch.inputs["True"].default_value = hidden, elsewhere
+    info = nodes.new("GeometryNodeObjectInfo")
+    info.transform_space = "RELATIVE"
+    info.inputs["As Instance"].default_value = True
+    links.new(switch.outputs[0], info.inputs["Object"])
+    join = nodes.new("GeometryNodeJoinGeometry")
+    links.new(info.outputs["Geometry"], join.inputs[0])
+    links.new(join.outputs[0], nodes.new("NodeGroupOutput").inputs[0])
+    spare = nodes.new("GeometryNodeCollectionInfo")
+    spare.inputs["Collection"].default_value = source
+    if spare_link == "muted":
+        links.new(spare.outputs[0], join.inputs[0]).is_muted = True
+    host.modifiers.new("GN", "NODES").node_group = tree
+    result = extract_scene()
+    assert _instances_by_host(result) == {"Host": ["Hidden"], None: ["Elsewhere"]}
+    assert result.warnings == []
+
+
+@pytest.mark.parametrize("via_modifier_input", [False, True])
+def test_a_collection_fed_to_a_nested_group_follows_the_collection_rule(scene, via_modifier_input):
+    """Measured with Cycles (bpy 5.0.1, `benchmarks/cycles_node_references.py`): a reusable group whose
+    Collection input feeds a Collection Info node, called with a collection set on the Group node's
+    socket or passed down from the modifier's input, instances it like a collection instance: its
+    render-hidden member is not rendered. The preview read only the modifier's own tree's inputs and
+    drew the hidden member."""
+    source = _mixed_collection()
+    scenes.add_nested_info_host("Host", source, via_modifier_input=via_modifier_input)
+    result = extract_scene()
+    assert sorted(_instances_by_host(result)["Host"]) == ["Shown", "VisInVisChild"]
+    assert result.warnings == []
+
+
 @pytest.mark.parametrize("instance_type", ["VERTS", "FACES"])
 def test_a_child_of_a_vertex_or_face_instancing_parent_shows_only_as_its_instances(scene, instance_type):
     """Blender hides such a child at its own place in a final render (the viewport shows it there):
