@@ -39,6 +39,10 @@ def parse_frames(text: str) -> list[int]:
 
 
 _RANGE = re.compile(r"^(-?\d+)(?:-(-?\d+))?(?::(\d+))?$")
+# Blender's frame limits (Scene.frame_current's hard range, MINAFRAME and MAXFRAME): frame_set clamps a
+# frame beyond them silently, which rendered the last frame again under the requested frame's name
+# (outside QA).
+FIRST_FRAME, LAST_FRAME = -1048574, 1048574
 
 
 def _parse_range(part: str) -> list[int]:
@@ -50,7 +54,15 @@ def _parse_range(part: str) -> list[int]:
     stride = int(match.group(3) or 1)
     if last < first or stride < 1:
         raise PreviewError(f"bad frame range {part!r}: the end is before the start or the step is below 1")
+    check_frames_in_range((first, last))
     return list(range(first, last + 1, stride))
+
+
+def check_frames_in_range(frames) -> None:
+    """PreviewError naming the first frame Blender cannot go to (beyond FIRST_FRAME..LAST_FRAME)."""
+    for frame in frames:
+        if not FIRST_FRAME <= frame <= LAST_FRAME:
+            raise PreviewError(f"frame {frame} is outside Blender's frame range ({FIRST_FRAME} to {LAST_FRAME})")
 
 
 class SequenceJob:
@@ -62,6 +74,7 @@ class SequenceJob:
         after each frame is written."""
         if not frames:
             raise PreviewError("no frames to render")
+        check_frames_in_range(frames)
         self.scene, self.config, self.frames = scene, config, list(frames)
         self.out_dir, self.depsgraph_for, self.on_frame = Path(out_dir), depsgraph_for, on_frame
         self.results: list[FrameResult] = []

@@ -112,3 +112,13 @@ def test_parse_frames(text, frames):
 def test_bad_frame_ranges_are_named(text):
     with pytest.raises(PreviewError, match="bad frame range"):
         parse_frames(text)
+
+
+@pytest.mark.parametrize("text, named", [("1048573-1048576", 1048576), ("2000000", 2000000), ("-1048580", -1048580),
+                                          ("1-200000000000", 200000000000), ("5,-1048575-0", -1048575)])
+def test_frames_blender_cannot_go_to_are_named_before_any_list_is_made(text, named):
+    """Blender's frame_set clamps frames beyond +-1048574 silently: the preview rendered the last frame
+    again under each requested name, and a huge range was listed in full first (outside QA)."""
+    with pytest.raises(PreviewError, match=f"frame {named} is outside Blender's frame range"):
+        parse_frames(text)
+    assert parse_frames("1048570-1048574:4") == [1048570, 1048574] and parse_frames("-1048574") == [-1048574]
