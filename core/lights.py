@@ -11,11 +11,12 @@ from .inputs import as_number, without_negligible_components
 POINT, SUN, SPOT, AREA = 0, 1, 2, 3
 AREA_SHAPES = {"SQUARE": 0, "RECTANGLE": 1, "DISK": 2, "ELLIPSE": 3}
 
-# Packed row: kind, position(3), direction(3), radius, cos_half_angle, spot_cos, spot_smooth,
-# axis_u(3), axis_v(3) (area: half extents; spot: its frame's X and Y over their squared lengths),
-# spot_inv_len_z, no_shadow, delta, shape, color(3)
+# Packed row: kind, position(3), direction(3), radius, cos_half_angle, spot_cos (area: tan of half its
+# spread), spot_smooth, axis_u(3), axis_v(3) (area: half extents; spot: its frame's X and Y over their
+# squared lengths), spot_inv_len_z, no_shadow, delta, shape, color(3)
 ROW = 24
-SPOT_INV_LEN_Z, NO_SHADOW, DELTA, COLOR = 17, 18, 19, 21
+AREA_TAN_HALF_SPREAD, SPOT_INV_LEN_Z, NO_SHADOW, DELTA, COLOR = 9, 17, 18, 19, 21
+FULL_SPREAD = np.pi + 1e-6  # Blender's 180 degrees, a float32 pi, is a little above float64's
 
 
 class Light:
@@ -65,8 +66,10 @@ class Light:
 
     @classmethod
     def area(cls, matrix_world, shape="SQUARE", size=1.0, size_y=None, power=1000.0, color=(1.0, 1.0, 1.0),
-             cast_shadow=True):
-        """An area light in its object's XY plane, emitting along its -Z (as in Blender)."""
+             cast_shadow=True, spread=np.pi):
+        """An area light in its object's XY plane, emitting along its -Z (as in Blender). `spread`
+        (radians, 0 to pi): Blender's Spread, the cone its light leaves each point in (see
+        shading._light_mask)."""
         m = _floats(matrix_world)
         if m.shape != (4, 4) or not np.isfinite(m).all():
             raise ValueError(f"area light matrix_world must be a finite 4x4 matrix, got {matrix_world!r}")
@@ -83,7 +86,11 @@ class Light:
                              "light has no area, or emits along its own plane")
         size = _positive("area light size", size)
         size_y = size if size_y is None or shape in ("SQUARE", "DISK") else _positive("area light size_y", size_y)
-        return cls(AREA, color, power, cast_shadow, matrix_world=m, shape=shape, size=size, size_y=size_y)
+        spread = _non_negative("area light spread", spread)
+        if spread > FULL_SPREAD:
+            raise ValueError(f"area light spread must be at most pi (180 degrees), got {spread}")
+        return cls(AREA, color, power, cast_shadow, matrix_world=m, shape=shape, size=size, size_y=size_y,
+                   spread=min(spread, np.pi))
 
     def translated(self, offset):
         """The same light in a frame whose origin is at `offset`."""
@@ -119,6 +126,7 @@ class Light:
             row[11:14] = m[:3, 0] * p["size"] / 2.0
             row[14:17] = m[:3, 1] * p["size_y"] / 2.0
             row[20] = AREA_SHAPES[p["shape"]]
+            row[AREA_TAN_HALF_SPREAD] = np.inf if p["spread"] >= np.pi else np.tan(p["spread"] / 2.0)
         row[DELTA] = 1.0 if _has_no_extent(self.kind, row) else 0.0
         return row
 

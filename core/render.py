@@ -5,8 +5,9 @@ Value of a pixel whose camera ray hits (geometric normal N turned to face the ca
   `ao_distance`: AO = (1/pi) * integral of V(w) * cos(theta) dw, estimated with cosine-weighted rays.
 - "shadow": S = (1/L) * sum over the L lights of colour_l * V_l * max(0, N.L_l) * mask_l, with L_l
   sampled over the light's extent (radius, sun angle, area shape) and mask_l the spot cone (Cycles'
-  smoothstep blend) or the area light's front side. No distance falloff and no power: every light gets
-  the same weight, so S is in [0, 1] and shows where each light reaches, whatever its units.
+  smoothstep blend) or the area light's front side within its spread (shading._light_mask). No
+  distance falloff and no power: every light gets the same weight, so S is in [0, 1] for colours in
+  [0, 1] and shows where each light reaches, whatever its units.
 - "ao+shadow": AO * (ambient + (1 - ambient) * S), ambient 0.25 by default: shadows from the lights
   over an occlusion-darkened ambient term.
 Background pixels are 0 with alpha 0; hit pixels have alpha 1. Row 0 is the top row.

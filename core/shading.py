@@ -2,7 +2,7 @@
 import numpy as np
 from numba import njit
 
-from .lights import AREA, SPOT, SPOT_INV_LEN_Z, SUN
+from .lights import AREA, AREA_TAN_HALF_SPREAD, SPOT, SPOT_INV_LEN_Z, SUN
 
 TWO_PI = 2.0 * np.pi
 
@@ -79,7 +79,10 @@ def sample_light(light, p, u1, u2, out_dir):
 def _light_mask(light, kind, to_light):
     """Spot cone with Cycles' smoothstep blend, measured in the light object's frame (lights.py,
     _spot_frame: a non-uniform scale makes it elliptical); area lights emit only to their front (-Z)
-    side."""
+    side, and with a Spread below 180 degrees only into a cone around their normal, weighted as
+    Cycles' soft-box grid weights it (area_light_spread_attenuation: tan(spread/2) - tan(a) for light
+    leaving at angle a from the normal), divided by its value along the normal so the mask stays in
+    [0, 1]. Cycles' Spread of 0 keeps a direction within 0.05 degrees of the normal."""
     cos_a = -(to_light[0] * light[4] + to_light[1] * light[5] + to_light[2] * light[6])
     if kind == SPOT:
         x = to_light[0] * light[11] + to_light[1] * light[12] + to_light[2] * light[13]
@@ -95,8 +98,21 @@ def _light_mask(light, kind, to_light):
             return x * x * (3.0 - 2.0 * x)
         return 1.0
     if kind == AREA:
-        return 1.0 if cos_a > 0.0 else 0.0
+        return _spread_mask(cos_a, light[AREA_TAN_HALF_SPREAD])
     return 1.0
+
+
+@njit(cache=True, inline="always")
+def _spread_mask(cos_a, tan_half_spread):
+    """The area light's mask for light leaving it at angle a from its normal (_light_mask)."""
+    if cos_a <= 0.0:
+        return 0.0
+    if tan_half_spread == np.inf:
+        return 1.0
+    if tan_half_spread == 0.0:
+        return 1.0 if cos_a > 0.9999997 else 0.0
+    tan_a = np.sqrt(max(0.0, 1.0 - cos_a * cos_a)) / cos_a
+    return max(0.0, 1.0 - tan_a / tan_half_spread)
 
 
 @njit(cache=True, inline="always")

@@ -388,6 +388,10 @@ def _usable_light(core, light: scene_input.LightInput):
     power = light.keywords.get("power", light.keywords.get("strength"))
     if not power > 0.0:
         raise ValueError(f"its power is {power:g}, so it emits no light")
+    if not max(light.keywords["color"]) > 0.0:
+        raise ValueError("its colour is black, so it emits no light")
+    if light.portal:
+        raise ValueError("it is a Cycles light portal, which emits no light")
     return getattr(core.Light, light.kind)(**light.keywords)
 
 

@@ -58,6 +58,7 @@ class LightInput:
     kind: str  # "point", "sun", "spot" or "area"
     keywords: dict
     unapplied: tuple[str, ...] = ()  # the light's settings that change Cycles' image but not the preview's
+    portal: bool = False  # a Cycles light portal: an area light that only guides the world's light, emitting none
 
 
 @dataclass
@@ -158,10 +159,20 @@ def light_direction(matrix_world) -> np.ndarray:
     return d / norm if norm > 0.0 else d
 
 
+def light_color(data) -> tuple[float, float, float]:
+    """The light's colour as Cycles emits it: its Color times its blackbody Temperature's colour when
+    *Temperature* is on (Blender 4.5+; measured with Cycles, bpy 5.0.1: a 2000 K sun lit a grey floor
+    (1, 0.261, 0.014) against temperature_color's (1, 0.257, 0.008); ignored, it was white)."""
+    color = np.array(data.color, np.float64)
+    if getattr(data, "use_temperature", False):
+        color = color * np.array(data.temperature_color, np.float64)
+    return tuple(float(c) for c in color)
+
+
 def light_input(name: str, data, matrix_world) -> LightInput | None:
     """LightInput from a bpy Light datablock; None for a type the preview does not know."""
     m = np.array(matrix_world, dtype=np.float64).reshape(4, 4)
-    position, color = m[:3, 3].copy(), tuple(float(c) for c in data.color)
+    position, color = m[:3, 3].copy(), light_color(data)
     if data.type == "POINT":
         kw = dict(position=position, radius=float(data.shadow_soft_size), power=float(data.energy))
     elif data.type == "SUN":
@@ -172,12 +183,14 @@ def light_input(name: str, data, matrix_world) -> LightInput | None:
                   axes=m[:3, :3].copy())
     elif data.type == "AREA":
         size_y = float(data.size_y) if data.shape in ("RECTANGLE", "ELLIPSE") else None
-        kw = dict(matrix_world=m, shape=data.shape, size=float(data.size), size_y=size_y, power=float(data.energy))
+        kw = dict(matrix_world=m, shape=data.shape, size=float(data.size), size_y=size_y, power=float(data.energy),
+                  spread=float(data.spread))
     else:
         return None
     kw["color"] = color
     kw["cast_shadow"] = bool(getattr(data, "use_shadow", True))
-    return LightInput(name, data.type.lower(), kw)
+    portal = data.type == "AREA" and bool(getattr(getattr(data, "cycles", None), "is_portal", False))
+    return LightInput(name, data.type.lower(), kw, portal=portal)
 
 
 # --------------------------------------------------------------------------
@@ -217,8 +230,9 @@ def read_lights(depsgraph, visibility: _Visibility | None = None) -> list[LightI
 
 def unapplied_light_settings(ob) -> tuple[str, ...]:
     """What Cycles would apply and the preview does not, named so a warning can say so: light and
-    shadow linking (Blender 4.0+: which objects the light lights, which block it) and the light's
-    Diffuse ray visibility (off: it lights no diffuse surface, which is all the preview shades)."""
+    shadow linking (Blender 4.0+: which objects the light lights, which block it), the light's
+    Diffuse ray visibility (off: it lights no diffuse surface, which is all the preview shades) and
+    its shader nodes (an Emission node's colour, strength or textures; the preview reads Color)."""
     found = []
     linking = getattr(ob, "light_linking", None)
     for attribute, what in (("receiver_collection", "light linking"), ("blocker_collection", "shadow linking")):
@@ -227,6 +241,8 @@ def unapplied_light_settings(ob) -> tuple[str, ...]:
             found.append(f"{what} (collection '{collection.name}')")
     if not getattr(ob, "visible_diffuse", True):
         found.append("Ray Visibility > Diffuse off")
+    if getattr(ob.data, "use_nodes", False) and getattr(ob.data, "node_tree", None) is not None:
+        found.append("its shader nodes")
     return tuple(found)
 
 

@@ -86,19 +86,24 @@ def test_modes_with_lights(addon):  # noqa: F811
 
 
 def test_lights_blender_accepts_but_that_emit_nothing_are_left_out_by_name(addon):  # noqa: F811
-    """Negative power, zero area size, a zero-scale area light: Blender takes them all. Mode ao ignores
-    lights; the shadow modes leave such lights out with a warning that names each, and stop (naming
-    them) only when no light is left. A sun of Blender's largest angle (180 degrees) is usable."""
+    """Negative power, zero area size, a zero-scale area light, a black light, a Cycles light portal
+    (outside QA: both lit the floor and halved the real light's share of S, where Cycles' image is the
+    sun's alone): Blender takes them all. Mode ao ignores lights; the shadow modes leave such lights
+    out with a warning that names each, and stop (naming them) only when no light is left. A sun of
+    Blender's largest angle (180 degrees) is usable."""
     scene = half_plane_scene()
     bpy.data.objects["Sun"].data.angle = math.pi
     bad = {}
-    for name, kind in (("Negative", "POINT"), ("Flat", "AREA"), ("Squashed", "AREA")):
+    for name, kind in (("Negative", "POINT"), ("Flat", "AREA"), ("Squashed", "AREA"), ("Black", "POINT"),
+                       ("Portal", "AREA")):
         light = bpy.data.lights.new(name, kind)
         bad[name] = scenes.link(bpy.data.objects.new(name, light))
         bad[name].location = (-2.0, 0.0, 3.0)
     bad["Negative"].data.energy = -100.0
     bad["Flat"].data.size = 0.0
     bad["Squashed"].scale = (1.0, 1.0, 0.0)
+    bad["Black"].data.color = (0.0, 0.0, 0.0)
+    bad["Portal"].data.cycles.is_portal = True
 
     def frame(mode):
         scene.kd_preview.mode = mode
@@ -106,17 +111,18 @@ def test_lights_blender_accepts_but_that_emit_nothing_are_left_out_by_name(addon
 
     assert not frame("ao").warnings
     result = frame("shadow")
-    assert result.lights == 4 and result.image[16, column_of(-3.9), 0] > 0.3  # the sun still lights
+    assert result.lights == 6 and result.image[16, column_of(-3.9), 0] > 0.3  # the sun still lights
     left_out = sorted(w for w in result.warnings if "left out" in w)
-    assert [w.split("'")[1] for w in left_out] == ["Flat", "Negative", "Squashed"]
-    assert "power is -100" in left_out[1] and "zero Z axis" in left_out[2]
+    assert [w.split("'")[1] for w in left_out] == ["Black", "Flat", "Negative", "Portal", "Squashed"]
+    assert "colour is black" in left_out[0] and "power is -100" in left_out[2]
+    assert "light portal" in left_out[3] and "zero Z axis" in left_out[4]
     bpy.data.objects.remove(bpy.data.objects["Sun"])
     with pytest.raises(PreviewError, match="no light of scene 'Scene' can be used: light 'Negative'"):
         frame("ao+shadow")
 
 
 def test_light_settings_the_preview_does_not_apply_are_named(addon):  # noqa: F811
-    """Light and shadow linking and a light's Diffuse ray visibility change Cycles' image; the preview
+    """Light and shadow linking, a light's Diffuse ray visibility and its shader nodes change Cycles' image; the preview
     lights and shadows every object regardless, so the shadow modes say so, naming light and setting."""
     scene = half_plane_scene()
     sun = bpy.data.objects["Sun"]
@@ -125,6 +131,7 @@ def test_light_settings_the_preview_does_not_apply_are_named(addon):  # noqa: F8
     sun.light_linking.blocker_collection = linked
     rim = scenes.link(bpy.data.objects.new("Rim", bpy.data.lights.new("Rim", "POINT")))
     rim.location, rim.visible_diffuse = (0.0, 0.0, 3.0), False
+    rim.data.use_nodes = True
 
     def frame(mode):
         scene.kd_preview.mode = mode
@@ -133,6 +140,7 @@ def test_light_settings_the_preview_does_not_apply_are_named(addon):  # noqa: F8
     assert not frame("ao").warnings
     assert sorted(frame("shadow").warnings) == [
         "light 'Rim': Ray Visibility > Diffuse off not applied by the preview",
+        "light 'Rim': its shader nodes not applied by the preview",
         "light 'Sun': light linking (collection 'Hero') not applied by the preview",
         "light 'Sun': shadow linking (collection 'Hero') not applied by the preview"]
 

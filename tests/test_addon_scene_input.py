@@ -110,12 +110,13 @@ def test_lights_convert_with_analytic_directions(scene):
     sun.scale = (3.0, 3.0, 3.0)  # scale must not change the unit direction
     spot = light_object("SPOT", energy=900.0, spot_size=0.8, spot_blend=0.3, shadow_soft_size=0.0)
     spot.location = (0, 0, 5)
-    area = light_object("AREA", energy=50.0, shape="RECTANGLE", size=2.0, size_y=0.5)
+    area = light_object("AREA", energy=50.0, shape="RECTANGLE", size=2.0, size_y=0.5, spread=math.radians(30))
     area.location = (4, 0, 2)
     disk = light_object("AREA", name="Disk", shape="DISK", size=1.5)
+    warm = light_object("POINT", name="Warm", color=(0.5, 1.0, 1.0), use_temperature=True, temperature=2000.0)
     depsgraph = bpy.context.evaluated_depsgraph_get()
     lights = {light.name: light for light in scene_input.read_lights(depsgraph)}
-    assert set(lights) == {"Point", "Sun", "Spot", "Area", "Disk"}
+    assert set(lights) == {"Point", "Sun", "Spot", "Area", "Disk", "Warm"}
     p = lights["Point"].keywords
     assert lights["Point"].kind == "point" and p["radius"] == pytest.approx(0.4) and p["power"] == 250.0
     np.testing.assert_allclose(p["position"], (1, 2, 3))
@@ -128,8 +129,15 @@ def test_lights_convert_with_analytic_directions(scene):
     assert (sp["spot_size"], sp["spot_blend"]) == (pytest.approx(0.8), pytest.approx(0.3))
     a = lights["Area"].keywords
     assert (a["shape"], a["size"], a["size_y"], a["power"]) == ("RECTANGLE", 2.0, 0.5, 50.0)
+    assert a["spread"] == pytest.approx(math.radians(30))
     np.testing.assert_allclose(a["matrix_world"][:3, 3], (4, 0, 2))
     assert lights["Disk"].keywords["size_y"] is None
+    assert lights["Disk"].keywords["spread"] == pytest.approx(math.pi)  # Blender's default: 180 degrees
+    # Temperature on: Color times the blackbody's colour (measured with Cycles, scene_input.light_color)
+    np.testing.assert_allclose(lights["Warm"].keywords["color"], np.array(warm.data.temperature_color) * (0.5, 1, 1),
+                               rtol=1e-6)
+    red, green, blue = lights["Warm"].keywords["color"]
+    assert red > green > 10 * blue  # a 2000 K light is orange, even with its Color bluish
 
 
 def test_render_hidden_lights_are_left_out(scene):

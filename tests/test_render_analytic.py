@@ -330,6 +330,35 @@ def test_sun_of_blenders_largest_angle_lights_a_floor_by_half():
         core.Light.sun((0.0, 0.0, -1.0), angle=3.2)
 
 
+@pytest.mark.parametrize("spread_degrees", [10.0, 60.0, 120.0])
+def test_an_area_lights_spread_narrows_it_as_cycles_soft_box_does(spread_degrees):
+    """A tiny area light at height h over a bare floor, Spread s: light leaving it at angle a from
+    its normal is weighted max(0, 1 - tan a / tan(s/2)) (Cycles' soft-box grid, normalised to 1 along
+    the normal), so a floor point at distance r from its foot gets N.L times that, a = atan(r / h).
+    With Spread 180 degrees (the default) it is N.L alone. (Outside QA: a 10-degree spread lit the
+    whole floor, where Cycles lights a spot.)"""
+    h, spread = 2.0, np.radians(spread_degrees)
+    tree = core.build_kdtree(floor(0.0))
+    camera = look_down((0.0, 0.0, 3.0), fov=1.6)
+    size = 32
+    o, d, _, _ = camera.rays(size, size)
+    p = o + 3.0 * d
+    tan_a = np.hypot(p[:, 0], p[:, 1]) / h
+    n_dot_l = 1.0 / np.sqrt(1.0 + tan_a * tan_a)
+    for angle, weight in [(spread, np.maximum(0.0, 1.0 - tan_a / np.tan(spread / 2.0))), (np.pi, 1.0)]:
+        light = core.Light.area(moved_up(h), size=1e-4, spread=angle)
+        img = core.render_preview(tree, camera, size, size, samples=4, mode="shadow", lights=[light])
+        np.testing.assert_allclose(img[..., 0].ravel(), n_dot_l * weight, atol=2e-4)
+    assert (img[..., 0] > 0).all()  # at 180 degrees every floor point is lit
+
+
+def test_an_area_lights_spread_is_checked():
+    for bad in (-0.1, 3.2, np.nan):
+        with pytest.raises(ValueError, match="area light spread"):
+            core.Light.area(np.eye(4), size=1.0, spread=bad)
+    core.Light.area(np.eye(4), size=1.0, spread=float(np.float32(np.pi)))  # Blender's 180 degrees
+
+
 def test_area_light_with_a_zero_scale_axis_is_named():
     for axis in range(3):
         m = np.eye(4)
