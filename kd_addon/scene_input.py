@@ -161,8 +161,8 @@ def light_direction(matrix_world) -> np.ndarray:
 
 def light_color(data) -> tuple[float, float, float]:
     """The light's colour as Cycles emits it: its Color times its blackbody Temperature's colour when
-    *Temperature* is on (Blender 4.5+; measured with Cycles, bpy 5.0.1: a 2000 K sun lit a grey floor
-    (1, 0.261, 0.014) against temperature_color's (1, 0.257, 0.008); ignored, it was white)."""
+    *Temperature* is on (Blender 4.5+). `benchmarks/cycles_lights.py`: a 2000 K sun's floor has G/R and
+    B/R 0.257 and 0.008 in the preview against Cycles' 0.265 and 0.018 (bpy 5.0.1; white if ignored)."""
     color = np.array(data.color, np.float64)
     if getattr(data, "use_temperature", False):
         color = color * np.array(data.temperature_color, np.float64)
