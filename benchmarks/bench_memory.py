@@ -58,6 +58,14 @@ def dense_soup(n=100_000):
     return rng.uniform(-1.0, 1.0, (n, 1, 3)) + rng.normal(0.0, 0.05, (n, 3, 3))
 
 
+def flat_cards(n=200_000, seed=0):
+    """n triangles ~0.05 across over a sqrt(n / 50,000)-wide square (the density of bench_duplication's
+    50,000 cards in a unit square), all in z = 0: the duplication budget's case."""
+    rng = np.random.default_rng(seed)
+    width = np.sqrt(n / 50_000)
+    return (rng.random((n, 1, 3)) * width + 0.05 * rng.standard_normal((n, 3, 3))) * [1, 1, 0]
+
+
 def scene_file(name):
     """The scene's triangles as data/<name>.npy (written once)."""
     path = DATA / f"{name}.npy"
@@ -67,7 +75,7 @@ def scene_file(name):
                   "flat-grid-1m": lambda: wavy_grid(1_000_000, amplitude=0.0),
                   "soup-1m": lambda: load_scene("soup-1m").triangles,
                   "suzanne-1m": lambda: load_scene("suzanne-1m").triangles,
-                  "dense-soup-100k": dense_soup}
+                  "dense-soup-100k": dense_soup, "flat-cards-200k": flat_cards}
         DATA.mkdir(exist_ok=True)
         np.save(path, np.ascontiguousarray(makers[name](), dtype=np.float32))
     return path

@@ -36,7 +36,8 @@ class DeferredSubtrees:
     """The subtrees a lazy build left for later, and what has been built of them since.
 
     Subtree k is node `node[k]` of the tree (axis UNBUILT, child k) with references
-    prims/boxes[start[k]:start[k+1]], box `box[k]` and depth `depth[k]`. Plain arrays: it pickles.
+    prims/boxes[start[k]:start[k+1]], box `box[k]`, depth `depth[k]` and room `room[k]` (subtree.py).
+    Plain arrays: it pickles.
     """
 
     def __init__(self, subtrees, axis, child, params, speculative):
@@ -47,6 +48,7 @@ class DeferredSubtrees:
         self.box = np.concatenate([p[3] for p in parts])
         self.prims = np.concatenate([p[4] for p in parts])
         self.boxes = np.concatenate([p[5] for p in parts])
+        self.room = np.concatenate([p[6] for p in parts])
         unbuilt = np.flatnonzero(axis == UNBUILT)
         self.node = np.empty(len(sizes), np.int64)
         self.node[child[unbuilt]] = unbuilt
@@ -82,7 +84,8 @@ class DeferredSubtrees:
 
     def tasks(self, ids):
         return [Task(int(self.node[k]), self.prims[self.start[k]:self.start[k + 1]],
-                     self.boxes[self.start[k]:self.start[k + 1]], self.box[k], int(self.depth[k]))
+                     self.boxes[self.start[k]:self.start[k + 1]], self.box[k], int(self.depth[k]),
+                     float(self.room[k]))
                 for k in ids]
 
 

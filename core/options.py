@@ -82,6 +82,16 @@ class BuildOptions:
         memory.MemoryLimitError (a ValueError) before allocating anything, and so does a build whose
         pools outgrow their share of it while splitting (settings that force splits, such as a huge
         cost_ratio with leaf_size 1 and a deep max_depth). None: no limit.
+    duplication_budget: how many references, per triangle it starts with, the tree may make by
+        splitting straddling triangles into both children, spent evenly along every path: a node's
+        room starts at this value at the root, each split divides it by that split's duplication
+        (n_left + n_right) / n, and a node whose room is below 1 becomes a leaf. Leaves then hold
+        at most twice this many references a triangle. The SAH weighs only tracing: where triangles
+        lie flat in one plane and overlap densely (cards on a floor at z = 0), a flat node's children
+        share its area exactly, so every split pays and the build went on to max_depth (outside QA:
+        50,000 such triangles made 1,246 references a triangle, 3.5 GB, 36 s). With 16 the ordinary
+        scenes of benchmarks/bench_duplication.py build the trees they build without it; where it
+        binds, tracing pays (README, *Choices*). None: no budget.
     rays: how many rays the tree will answer (for one render: core.frame_ray_count, e.g. width x
         height x 2 for camera rays plus one shadow ray a pixel). None: as many as it takes, no build
         term. Given, a node is split only when the rays expected to enter it save more than the
@@ -112,6 +122,7 @@ class BuildOptions:
     lazy_subtree_size: int = 4096
     lazy_speculative: bool = False
     memory_limit: Optional[int] = None
+    duplication_budget: Optional[float] = 16.0
     rays: Optional[int] = None
 
     def __post_init__(self):
@@ -123,6 +134,8 @@ class BuildOptions:
         _check_int("leaf_size", self.leaf_size, 1, 1 << 20)
         if self.max_depth is not None:
             _check_int("max_depth", self.max_depth, 0, DEPTH_LIMIT)
+        if self.duplication_budget is not None:
+            _check_float("duplication_budget", self.duplication_budget, 1.0, None)
         if self.threads is not None:
             _check_int("threads", self.threads, 1, 1024)
         if self.memory_limit is not None:
@@ -165,6 +178,7 @@ class BuildOptions:
             defer_size=self.lazy_subtree_size if self.lazy else 0,
             rays_per_area=_rays_per_area(self.rays, bounds),
             bytes_per_reference=subtree_bytes_per_reference(self.memory_limit, n_triangles),
+            duplication_budget=np.inf if self.duplication_budget is None else float(self.duplication_budget),
         )
 
     def as_dict(self):
@@ -191,6 +205,7 @@ class BuildParams(NamedTuple):
     rays_per_area: float  # BuildOptions.rays / the root's half area: rays entering a node per unit of
     # its half area, as the SAH assumes (0: no build term)
     bytes_per_reference: float  # memory_limit's share: bytes a subtree may hold per starting reference (0: none)
+    duplication_budget: float  # the root's room (BuildOptions.duplication_budget; inf: none)
 
 
 def _rays_per_area(rays, bounds):

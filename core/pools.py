@@ -56,6 +56,16 @@ def ensure_ints(values, used, need):
 
 
 @njit(cache=True)
+def ensure_doubles(values, used, need):
+    """A float64 array with room for `need` entries, keeping the first `used`."""
+    if need <= values.shape[0]:
+        return values
+    out = np.empty(new_capacity(values.shape[0], need), np.float64)
+    out[:used] = values[:used]
+    return out
+
+
+@njit(cache=True)
 def ensure_floats(values, need):
     """A float32 scratch buffer of at least `need` entries (contents not kept)."""
     if need <= values.shape[0]:

@@ -7,8 +7,14 @@ right siblings plus the current node and never needs per-node allocation.
 
 A lazy build (params.defer_size > 0, seed 003 §3) stops at nodes of at most defer_size references:
 such a node is marked UNBUILT and its references are copied out. Building it later with build_subtree
-from those references (in the same order), its box and its depth gives exactly the subtree the eager
-build makes there, because a node's split choice and partition depend on nothing else.
+from those references (in the same order), its box, its depth and its room gives exactly the subtree
+the eager build makes there, because a node's split choice and partition depend on nothing else.
+
+A node's room is its share of params.duplication_budget (options.py): the root's is the budget, each
+split divides it by the split's duplication (n_left + n_right) / n for both children, and a node with
+room below 1 becomes a leaf. The children's budgets (room x references) then add up to the parent's,
+so leaves hold at most twice the budget's references (a leaf made for lack of room holds no more than
+its parent, which had room), however the SAH judges the splits.
 """
 from concurrent.futures import ThreadPoolExecutor
 
@@ -20,23 +26,25 @@ from .leaf_triangles import BYTES_PER_REFERENCE as LEAF_COPY_BYTES
 from .memory import MIN_SUBTREE_BUDGET, MemoryLimitError
 from .options import EXACT
 from .partition import new_split_scratch, partition_in_place
-from .pools import ensure_floats, ensure_ints, ensure_nodes, ensure_refs
+from .pools import ensure_doubles, ensure_floats, ensure_ints, ensure_nodes, ensure_refs
 from .split_choice import NO_SPLIT, choose_split
 
 
 @njit(cache=True, nogil=True)
-def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, params):
-    """Build the subtree over the first `n_refs` references of (prims, boxes) inside `root_box`.
+def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, root_room, params):
+    """Build the subtree over the first `n_refs` references of (prims, boxes) inside `root_box`, its
+    root at depth `root_depth` with room `root_room` (module docstring).
 
     Returns the node arrays (axis, split, child, count; see layout.py) with local indices, node 0 being
     the subtree's root, and the leaf triangle indices; then the deferred subtrees (none unless
-    params.defer_size > 0): (d_node, d_start, d_depth, d_box, d_prims, d_boxes), deferred subtree k
-    being local node d_node[k] (whose child is k) with references d_prims/d_boxes[d_start[k]:d_start[k+1]].
+    params.defer_size > 0): (d_node, d_start, d_depth, d_box, d_prims, d_boxes, d_room), deferred subtree
+    k being local node d_node[k] (whose child is k) with references d_prims/d_boxes[d_start[k]:d_start[k+1]].
     """
     stack_size = params.max_depth - root_depth + 2
     stack_node = np.empty(stack_size, np.int32)
     stack_range = np.empty((stack_size, 2), np.int64)
     stack_depth = np.empty(stack_size, np.int32)
+    stack_room = np.empty(stack_size, np.float64)
     stack_box = np.empty((stack_size, 6), np.float32)
     box = np.empty(6, np.float32)
     min_bins = np.zeros((3, params.bins), np.int64)
@@ -51,27 +59,31 @@ def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, params):
     leaf_prims = np.empty(max(16, n_refs + n_refs // 2), np.int32)
     n_nodes, n_leaf_prims = 1, 0
     deferred = (np.empty(0, np.int32), np.zeros(1, np.int32), np.empty(0, np.int32),
-                np.empty((0, 6), np.float32), np.empty(0, np.int32), np.empty((0, 6), np.float32))
+                np.empty((0, 6), np.float32), np.empty(0, np.int32), np.empty((0, 6), np.float32),
+                np.empty(0, np.float64))
     n_deferred = 0
 
     stack_node[0], stack_range[0, 0], stack_range[0, 1], stack_depth[0] = 0, 0, n_refs, root_depth
-    stack_box[0] = root_box
+    stack_box[0], stack_room[0] = root_box, root_room
     sp = 1
     while sp > 0:
         sp -= 1
         node, start, end, depth = stack_node[sp], stack_range[sp, 0], stack_range[sp, 1], stack_depth[sp]
+        room = stack_room[sp]
         box[:] = stack_box[sp]
         n = end - start
-        if params.leaf_size < n <= params.defer_size:
-            deferred = _defer(deferred, n_deferred, node, prims, boxes, start, end, box, depth)
+        if room >= 1.0 and params.leaf_size < n <= params.defer_size:
+            deferred = _defer(deferred, n_deferred, node, prims, boxes, start, end, box, depth, room)
             axis[node], split[node], child[node], count[node] = UNBUILT, 0.0, n_deferred, n
             n_deferred += 1
             continue
         prims, boxes = ensure_refs(prims, boxes, end, start + 2 * n + 1)
         if params.builder == EXACT or n <= params.exact_below:
             scratch = ensure_floats(scratch, 3 * n)
-        split_axis, pos, planar_left = choose_split(boxes, start, end, box, depth, params, min_bins,
-                                                    max_bins, scratch)
+        split_axis, pos, planar_left = NO_SPLIT, np.float32(0.0), False
+        if room >= 1.0:  # else no room left for more references (module docstring)
+            split_axis, pos, planar_left = choose_split(boxes, start, end, box, depth, params, min_bins,
+                                                        max_bins, scratch)
         if split_axis == NO_SPLIT:
             leaf_prims = ensure_ints(leaf_prims, n_leaf_prims, n_leaf_prims + n)
             leaf_prims[n_leaf_prims:n_leaf_prims + n] = prims[start:end]
@@ -86,17 +98,25 @@ def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, params):
         left = n_nodes
         n_nodes += 2
         axis[node], split[node], child[node], count[node] = split_axis, pos, left, 0
+        stack_room[sp] = stack_room[sp + 1] = child_room(room, n, n_left + n_right)
         # Right child first on the stack so the left one (on top of the pool) is built first.
         sp = _push(stack_node, stack_range, stack_depth, stack_box, sp, left + 1, start, start + n_right,
                    depth + 1, box, split_axis, pos, False)
         sp = _push(stack_node, stack_range, stack_depth, stack_box, sp, left, start + n_right,
                    start + n_right + n_left, depth + 1, box, split_axis, pos, True)
-    d_node, d_start, d_depth, d_box, d_prims, d_boxes = deferred
+    d_node, d_start, d_depth, d_box, d_prims, d_boxes, d_room = deferred
     n_deferred_refs = d_start[n_deferred]
     return (axis[:n_nodes].copy(), split[:n_nodes].copy(), child[:n_nodes].copy(),
             count[:n_nodes].copy(), leaf_prims[:n_leaf_prims].copy(),
             d_node[:n_deferred].copy(), d_start[:n_deferred + 1].copy(), d_depth[:n_deferred].copy(),
-            d_box[:n_deferred].copy(), d_prims[:n_deferred_refs].copy(), d_boxes[:n_deferred_refs].copy())
+            d_box[:n_deferred].copy(), d_prims[:n_deferred_refs].copy(), d_boxes[:n_deferred_refs].copy(),
+            d_room[:n_deferred].copy())
+
+
+@njit(cache=True, inline="always")
+def child_room(room, n, n_children):
+    """Each child's room after a split of n references into n_children (module docstring)."""
+    return room * n / max(n_children, 1)
 
 
 @njit(cache=True, inline="always")
@@ -113,21 +133,22 @@ def _check_budget(prims, leaf_prims, axis, deferred, budget):
 
 
 @njit(cache=True)
-def _defer(deferred, k, node, prims, boxes, start, end, box, depth):
+def _defer(deferred, k, node, prims, boxes, start, end, box, depth, room):
     """Record node `node` as deferred subtree k: copy its references (the pool range is reused)."""
-    d_node, d_start, d_depth, d_box, d_prims, d_boxes = deferred
+    d_node, d_start, d_depth, d_box, d_prims, d_boxes, d_room = deferred
     d_node, d_box = ensure_refs(d_node, d_box, k, k + 1)
     d_start = ensure_ints(d_start, k + 1, k + 2)
     d_depth = ensure_ints(d_depth, k, k + 1)
+    d_room = ensure_doubles(d_room, k, k + 1)
     used = d_start[k]
     n = end - start
     d_prims, d_boxes = ensure_refs(d_prims, d_boxes, used, used + n)
     d_prims[used:used + n] = prims[start:end]
     d_boxes[used:used + n] = boxes[start:end]
-    d_node[k], d_depth[k] = node, depth
+    d_node[k], d_depth[k], d_room[k] = node, depth, room
     d_box[k] = box
     d_start[k + 1] = used + n
-    return d_node, d_start, d_depth, d_box, d_prims, d_boxes
+    return d_node, d_start, d_depth, d_box, d_prims, d_boxes, d_room
 
 
 @njit(cache=True, inline="always")
@@ -150,7 +171,8 @@ def build_subtrees(tris, tasks, params, threads):
     """Build every task's subtree (top_levels.Task), largest first, on `threads` threads (the kernel
     releases the GIL). Returns build_subtree's tuples in task order."""
     def build(task):
-        return build_subtree(tris, task.prims, task.boxes, len(task.prims), task.box, task.depth, params)
+        return build_subtree(tris, task.prims, task.boxes, len(task.prims), task.box, task.depth, task.room,
+                             params)
 
     if threads == 1 or len(tasks) == 1:
         return [build(task) for task in tasks]

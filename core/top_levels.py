@@ -21,6 +21,7 @@ from numba import njit, prange
 from .options import BINNED, EXACT
 from .partition import BOTH, LEFT, RIGHT, new_split_scratch, side_of, split_reference
 from .sah import beats_leaf
+from .subtree import child_room
 from .split_binned import best_binned_split, bin_references, skip_stride
 from .split_exact import exact_split
 from .split_median import median_split
@@ -40,10 +41,11 @@ class TopNode:
 
 
 class Task:
-    """A subtree to build: its slot in the top levels, its references, box and depth."""
+    """A subtree to build: its slot in the top levels, its references, box, depth and room (its share
+    of the duplication budget, subtree.py)."""
 
-    def __init__(self, slot, prims, boxes, box, depth):
-        self.slot, self.prims, self.boxes, self.box, self.depth = slot, prims, boxes, box, depth
+    def __init__(self, slot, prims, boxes, box, depth, room):
+        self.slot, self.prims, self.boxes, self.box, self.depth, self.room = slot, prims, boxes, box, depth, room
 
     @property
     def size(self):
@@ -58,10 +60,10 @@ def build_top_levels(tris, prims, boxes, root_box, params, strategy, threads):
     nodes = [TopNode()]
     if threads == 1 or len(prims) < PARALLEL_MIN_REFS:
         nodes[0].task = 0
-        return nodes, [Task(0, prims, boxes, root_box, 0)]
+        return nodes, [Task(0, prims, boxes, root_box, 0, params.duplication_budget)]
     target = TASKS_PER_THREAD * threads
     nchunks = CHUNKS_PER_THREAD * threads
-    open_nodes = [(-len(prims), 0, Task(0, prims, boxes, root_box, 0))]
+    open_nodes = [(-len(prims), 0, Task(0, prims, boxes, root_box, 0, params.duplication_budget))]
     tasks = []
     while open_nodes and len(open_nodes) + len(tasks) < target:
         _, _, task = heapq.heappop(open_nodes)
@@ -74,10 +76,11 @@ def build_top_levels(tris, prims, boxes, root_box, params, strategy, threads):
         nodes.extend((TopNode(), TopNode()))
         lp, lb, rp, rb = partition_parallel(tris, task.prims, task.boxes, axis, pos, planar_left,
                                             params.clip, nchunks)
+        room = child_room(task.room, len(task.prims), len(lp) + len(rp))
         for slot, p, b, is_left in ((node.left, lp, lb, True), (node.left + 1, rp, rb, False)):
             child_box = task.box.copy()
             child_box[axis + 3 if is_left else axis] = pos
-            child = Task(slot, p, b, child_box, task.depth + 1)
+            child = Task(slot, p, b, child_box, task.depth + 1, room)
             if len(p) < PARALLEL_MIN_REFS:
                 tasks.append(child)
             else:
@@ -91,7 +94,7 @@ def build_top_levels(tris, prims, boxes, root_box, params, strategy, threads):
 def _top_split(task, params, strategy, threads, nchunks):
     """(axis, pos, planar_left) for a top node, axis -1 to leave it to its subtree build."""
     n = len(task.prims)
-    if task.depth >= params.max_depth or n <= params.leaf_size:
+    if task.depth >= params.max_depth or n <= params.leaf_size or task.room < 1.0:
         return -1, 0.0, False
     if params.builder == BINNED:
         nbins = 512 * threads if strategy == "clustering" else params.bins

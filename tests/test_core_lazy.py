@@ -13,7 +13,9 @@ BUILDERS = [pytest.param({}, id="binned"), pytest.param({"builder": "exact"}, id
             pytest.param({"rays": 20_000}, id="binned-rays"),  # a ray count ends subtrees sooner
             # ... and, few a triangle, refines less; at the SAH's former intersection cost, whose deeper trees
             # still split these small scenes into subtrees for so few rays
-            pytest.param({"rays": 1000, "intersection_cost": 1.5}, id="binned-few-rays")]
+            pytest.param({"rays": 1000, "intersection_cost": 1.5}, id="binned-few-rays"),
+            # a budget that binds: deferred subtrees must carry their room (subtree.py)
+            pytest.param({"duplication_budget": 2.0}, id="binned-tight-budget")]
 SMALL = 16  # deferred subtrees of at most this many references, so small test scenes defer many
 
 
