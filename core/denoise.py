@@ -62,6 +62,24 @@ ROWS_PER_TASK = 2
 _FAST = {"contract", "afn", "arcp", "nsz"}
 
 
+def _check_pixels(n, pixels, points, normals, sums, sq_sums, counts):
+    """ValueError naming the argument: pixel indices must be integers in [0, n) (a negative one would
+    wrap around to another pixel), counts non-negative, and every array one row per pixel."""
+    pixels = np.asarray(pixels)
+    if pixels.ndim != 1 or (pixels.size and pixels.dtype.kind not in "iu"):
+        raise ValueError(f"pixels must be a 1-D array of integer pixel indices, got shape {pixels.shape}, "
+                         f"dtype {pixels.dtype}")
+    if pixels.size and (pixels.min() < 0 or pixels.max() >= n):
+        raise ValueError(f"pixels must be in [0, {n}) (width x height), got {pixels.min()} to {pixels.max()}")
+    m = len(pixels)
+    for name, a, tail in (("points", points, (3,)), ("normals", normals, (3,)), ("sums", sums, (3,)),
+                          ("sq_sums", sq_sums, ()), ("counts", counts, ())):
+        if np.shape(a) != (m, *tail):
+            raise ValueError(f"{name} must have shape {(m, *tail)} (one row per pixel), got {np.shape(a)}")
+    if m and np.asarray(counts).min() < 0:
+        raise ValueError("counts must be >= 0 (samples taken per pixel)")
+
+
 def denoise_pixels(width, height, pixels, points, normals, sums, sq_sums, counts, *, iterations=ITERATIONS,
                    sigma_luminance=SIGMA_LUMINANCE, sigma_normal=SIGMA_NORMAL, sigma_plane=SIGMA_PLANE,
                    variance_decay=0.0, threads=None):
@@ -74,6 +92,7 @@ def denoise_pixels(width, height, pixels, points, normals, sums, sq_sums, counts
     """
     width, height = int(width), int(height)
     n = width * height
+    _check_pixels(n, pixels, points, normals, sums, sq_sums, counts)
     valid = np.zeros(n, np.bool_)
     sampled = np.asarray(counts) > 0
     valid[pixels[sampled]] = True

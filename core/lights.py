@@ -169,7 +169,10 @@ def pack_lights(lights):
     """All lights as an (L, ROW) float64 array."""
     if isinstance(lights, Light):
         raise ValueError("lights must be a list of core.Light, got one Light: pass [light]")
-    lights = list(lights)
+    try:
+        lights = list(lights)
+    except TypeError:
+        raise ValueError(f"lights must be a list of core.Light, got {lights!r}") from None
     for i, light in enumerate(lights):
         if not isinstance(light, Light):
             raise ValueError(f"lights[{i}] is not a core.Light: {light!r}")

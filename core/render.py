@@ -305,14 +305,23 @@ def frame_ray_count(width, height, mode="ao", samples=16, lights=()):
     with "ao") and one shadow ray a light (modes with "shadow"), except that a light without extent
     takes one ray a pixel when its samples repeat it (render_kernels.py, repeated rays). What
     BuildOptions.rays and SceneBuilder.build(rays=...) take for a tree that serves one frame."""
-    if mode not in MODES:
-        raise ValueError(f"mode must be one of {sorted(MODES)}, got {mode!r}")
-    rows, samples = pack_lights(lights), int(samples)
+    check_image_size(width, height)
+    _check_mode_and_samples(mode, samples)
+    rows = pack_lights(lights)
+    if "shadow" in mode and len(rows) == 0:
+        raise ValueError(f"mode {mode!r} needs at least one light")
     hard = int((rows[:, DELTA] != 0.0).sum()) if "shadow" in mode else 0
     soft = len(rows) * ("shadow" in mode) - hard
     repeats = samples * (1 + len(rows)) <= MEMO_BITS  # the memo holds sample 0's bit (PreviewRender._memo_rows)
     per_pixel = 1 + (("ao" in mode) + soft) * samples + hard * (1 if repeats else samples)
     return int(width) * int(height) * per_pixel
+
+
+def _check_mode_and_samples(mode, samples):
+    if mode not in MODES:
+        raise ValueError(f"mode must be one of {sorted(MODES)}, got {mode!r}")
+    if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or samples < 1:
+        raise ValueError(f"samples must be an integer >= 1, got {samples!r}")
 
 
 def _check_settings(tree, camera, width, height, mode, samples, ao_distance, seed, sampler, error_target,
@@ -322,10 +331,7 @@ def _check_settings(tree, camera, width, height, mode, samples, ao_distance, see
     if not isinstance(camera, Camera):
         raise ValueError(f"camera must be a core.Camera, got {type(camera).__name__}")
     check_image_size(width, height)
-    if mode not in MODES:
-        raise ValueError(f"mode must be one of {sorted(MODES)}, got {mode!r}")
-    if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or samples < 1:
-        raise ValueError(f"samples must be an integer >= 1, got {samples!r}")
+    _check_mode_and_samples(mode, samples)
     if not (np.isfinite(as_number("ao_distance", ao_distance)) and ao_distance >= 0):
         raise ValueError(f"ao_distance must be finite and >= 0, got {ao_distance!r}")
     if sampler not in SAMPLERS:

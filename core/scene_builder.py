@@ -119,8 +119,16 @@ class SceneBuilder:
         mesh_of = mesh_of.astype(np.int64)
         visibility = as_visibility(visibility, len(mesh_of))
         origin = _checked_origin(origin)
+        for i, m in enumerate(meshes):
+            if not isinstance(m, MeshInput):
+                raise ValueError(f"meshes[{i}] must be a core.MeshInput (build_scene also takes (vertices, "
+                                 f"triangles) pairs), got {type(m).__name__}")
         keys = [m.key for m in meshes]
-        if len(set(keys)) != len(keys):
+        try:
+            unique = len(set(keys)) == len(keys)
+        except TypeError:
+            raise ValueError(f"mesh keys must be hashable, got {[k for k in keys if not _hashable(k)][0]!r}") from None
+        if not unique:
             raise ValueError("mesh keys must be unique within a frame")
         for m in meshes:
             _check_mesh(m)
@@ -128,6 +136,7 @@ class SceneBuilder:
             make_options({"rays": rays})  # a bad count is named before anything is built
         self._track_changes(meshes, mesh_of, o2w, visibility)
         bounds = _bounds(meshes)
+        _check_world_extent(bounds, mesh_of, o2w, origin)
         met = stops_rays(visibility)  # an instance no ray meets is left out altogether
         shown = np.flatnonzero(met)
         soup = np.zeros(len(mesh_of), bool)
@@ -302,6 +311,30 @@ def _check_mesh(mesh):
                          f"{verts[tris[t]].tolist()}")
     v = int(np.flatnonzero(~finite)[0])
     raise ValueError(f"mesh {mesh.key!r}: vertex {v} is not finite: {verts[v].tolist()}")
+
+
+def _hashable(key):
+    try:
+        hash(key)
+    except TypeError:
+        return False
+    return True
+
+
+def _check_world_extent(bounds, mesh_of, o2w, origin):
+    """A ValueError naming the first instance whose matrix carries its mesh beyond float32's range
+    (measured from `origin`): its world triangles (a soup's, or the top level's boxes) would be inf.
+    Outside QA: an instance moved 1e39 away was taken silently by one layout and blamed on another
+    instance's triangle by the other."""
+    lo, hi = bounds[mesh_of, :3].astype(np.float64), bounds[mesh_of, 3:].astype(np.float64)
+    corners = np.stack([np.where([(c >> k) & 1 for k in range(3)], hi, lo) for c in range(8)], axis=1)
+    world = np.einsum("ijk,imk->imj", o2w[:, :3, :3], corners) + (o2w[:, :3, 3] - origin)[:, None, :]
+    with np.errstate(invalid="ignore"):
+        beyond = (lo <= hi).all(axis=1) & ~(np.abs(world) <= FLOAT32_MAX).all(axis=(1, 2))
+    if beyond.any():
+        i = int(np.flatnonzero(beyond)[0])
+        raise ValueError(f"instance {i} (mesh {int(mesh_of[i])}): its matrix places the mesh beyond float32's range "
+                         f"(|coordinate| > {FLOAT32_MAX:.3g} from the scene origin): move it or the origin closer")
 
 
 def _bounds(meshes):

@@ -71,14 +71,17 @@ def test_memory_limit_within_bounds_builds_the_same_tree():
 def test_memory_limit_holds_while_splitting_past_the_sah():
     """Forced splits (cost_ratio 100, leaf_size 1, a deep max_depth) duplicate the references that
     meet at a sphere's vertices at every level: 320 triangles made 3.3M nodes and 165 MB under a
-    32 MiB limit (outside QA). The subtree's pools are checked after every split, so the build stops
-    with the settings named; with the default cost ratio the same limit builds."""
+    32 MiB limit (outside QA). Without the duplication budget the subtree's pools are checked after
+    every split, so the build stops with the settings named; with the default budget (at most 32
+    references a triangle) or the default cost ratio the same limit builds."""
     tris = mesh_triangles(*icosphere(2))
     limit = 4 << 20
+    forced = dict(leaf_size=1, cost_ratio=100.0, max_depth=40, memory_limit=limit)
     with pytest.raises(core.MemoryLimitError, match=r"outgrew memory_limit \(4.0 MB\) while splitting: .*cost_ratio "
                                                     r"100, leaf_size 1, max_depth 40"):
-        core.build_kdtree(tris, leaf_size=1, cost_ratio=100.0, max_depth=40, memory_limit=limit)
-    tree = core.build_kdtree(tris, leaf_size=1, max_depth=40, memory_limit=limit)
+        core.build_kdtree(tris, duplication_budget=None, **forced)
+    assert core.build_kdtree(tris, **forced).stats()["references_per_triangle"] <= 32
+    tree = core.build_kdtree(tris, leaf_size=1, max_depth=40, memory_limit=limit, duplication_budget=None)
     assert tree.stats()["nodes"] < 10_000
 
 
