@@ -46,21 +46,12 @@ def ensure_nodes(axis, split, child, count, used, need):
 
 
 @njit(cache=True)
-def ensure_ints(values, used, need):
-    """An int32 array with room for `need` entries, keeping the first `used`."""
+def ensure_array(values, used, need):
+    """A 1-D array of the same dtype (int32 indices, float64 rooms) with room for `need` entries,
+    keeping the first `used`; Numba compiles it once per dtype."""
     if need <= values.shape[0]:
         return values
-    out = np.empty(new_capacity(values.shape[0], need), np.int32)
-    out[:used] = values[:used]
-    return out
-
-
-@njit(cache=True)
-def ensure_doubles(values, used, need):
-    """A float64 array with room for `need` entries, keeping the first `used`."""
-    if need <= values.shape[0]:
-        return values
-    out = np.empty(new_capacity(values.shape[0], need), np.float64)
+    out = np.empty(new_capacity(values.shape[0], need), values.dtype)
     out[:used] = values[:used]
     return out
 

@@ -26,7 +26,7 @@ from .leaf_triangles import BYTES_PER_REFERENCE as LEAF_COPY_BYTES
 from .memory import MIN_SUBTREE_BUDGET, MemoryLimitError
 from .options import EXACT
 from .partition import new_split_scratch, partition_in_place
-from .pools import ensure_doubles, ensure_floats, ensure_ints, ensure_nodes, ensure_refs
+from .pools import ensure_array, ensure_floats, ensure_nodes, ensure_refs
 from .split_choice import NO_SPLIT, choose_split
 
 
@@ -85,7 +85,7 @@ def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, root_room, p
             split_axis, pos, planar_left = choose_split(boxes, start, end, box, depth, params, min_bins,
                                                         max_bins, scratch)
         if split_axis == NO_SPLIT:
-            leaf_prims = ensure_ints(leaf_prims, n_leaf_prims, n_leaf_prims + n)
+            leaf_prims = ensure_array(leaf_prims, n_leaf_prims, n_leaf_prims + n)
             leaf_prims[n_leaf_prims:n_leaf_prims + n] = prims[start:end]
             axis[node], split[node], child[node], count[node] = LEAF, 0.0, n_leaf_prims, n
             n_leaf_prims += n
@@ -137,9 +137,9 @@ def _defer(deferred, k, node, prims, boxes, start, end, box, depth, room):
     """Record node `node` as deferred subtree k: copy its references (the pool range is reused)."""
     d_node, d_start, d_depth, d_box, d_prims, d_boxes, d_room = deferred
     d_node, d_box = ensure_refs(d_node, d_box, k, k + 1)
-    d_start = ensure_ints(d_start, k + 1, k + 2)
-    d_depth = ensure_ints(d_depth, k, k + 1)
-    d_room = ensure_doubles(d_room, k, k + 1)
+    d_start = ensure_array(d_start, k + 1, k + 2)
+    d_depth = ensure_array(d_depth, k, k + 1)
+    d_room = ensure_array(d_room, k, k + 1)
     used = d_start[k]
     n = end - start
     d_prims, d_boxes = ensure_refs(d_prims, d_boxes, used, used + n)
