@@ -62,9 +62,10 @@ ROWS_PER_TASK = 2
 _FAST = {"contract", "afn", "arcp", "nsz"}
 
 
-def _check_pixels(n, pixels, points, normals, sums, sq_sums, counts):
-    """ValueError naming the argument: pixel indices must be integers in [0, n) (a negative one would
-    wrap around to another pixel), counts non-negative, and every array one row per pixel."""
+def _checked_pixels(n, pixels, points, normals, sums, sq_sums, counts):
+    """The pixel indices as an integer array, or a ValueError naming the argument: they must be
+    integers in [0, n) (a negative one would wrap around to another pixel), counts non-negative, and
+    every array one row per pixel."""
     pixels = np.asarray(pixels)
     if pixels.ndim != 1 or (pixels.size and pixels.dtype.kind not in "iu"):
         raise ValueError(f"pixels must be a 1-D array of integer pixel indices, got shape {pixels.shape}, "
@@ -78,6 +79,7 @@ def _check_pixels(n, pixels, points, normals, sums, sq_sums, counts):
             raise ValueError(f"{name} must have shape {(m, *tail)} (one row per pixel), got {np.shape(a)}")
     if m and np.asarray(counts).min() < 0:
         raise ValueError("counts must be >= 0 (samples taken per pixel)")
+    return pixels.astype(np.int64, copy=False)
 
 
 def denoise_pixels(width, height, pixels, points, normals, sums, sq_sums, counts, *, iterations=ITERATIONS,
@@ -92,7 +94,7 @@ def denoise_pixels(width, height, pixels, points, normals, sums, sq_sums, counts
     """
     width, height = int(width), int(height)
     n = width * height
-    _check_pixels(n, pixels, points, normals, sums, sq_sums, counts)
+    pixels = _checked_pixels(n, pixels, points, normals, sums, sq_sums, counts)
     valid = np.zeros(n, np.bool_)
     sampled = np.asarray(counts) > 0
     valid[pixels[sampled]] = True

@@ -134,10 +134,10 @@ class SceneBuilder:
             _check_mesh(m)
         if rays is not None:
             make_options({"rays": rays})  # a bad count is named before anything is built
-        self._track_changes(meshes, mesh_of, o2w, visibility)
         bounds = _bounds(meshes)
-        _check_world_extent(bounds, mesh_of, o2w, origin)
         met = stops_rays(visibility)  # an instance no ray meets is left out altogether
+        _check_world_extent(bounds, mesh_of, o2w, origin, met)
+        self._track_changes(meshes, mesh_of, o2w, visibility)
         shown = np.flatnonzero(met)
         soup = np.zeros(len(mesh_of), bool)
         soup[shown] = plan_soup(self.layout, np.array([len(m.triangles) for m in meshes], np.int64), bounds,
@@ -321,16 +321,16 @@ def _hashable(key):
     return True
 
 
-def _check_world_extent(bounds, mesh_of, o2w, origin):
-    """A ValueError naming the first instance whose matrix carries its mesh beyond float32's range
-    (measured from `origin`): its world triangles (a soup's, or the top level's boxes) would be inf.
-    Outside QA: an instance moved 1e39 away was taken silently by one layout and blamed on another
-    instance's triangle by the other."""
+def _check_world_extent(bounds, mesh_of, o2w, origin, met):
+    """A ValueError naming the first instance rays meet (`met`) whose matrix carries its mesh beyond
+    float32's range (measured from `origin`): its world triangles (a soup's, or the top level's boxes)
+    would be inf. Outside QA: an instance moved 1e39 away was taken silently by one layout and blamed
+    on another instance's triangle by the other."""
     lo, hi = bounds[mesh_of, :3].astype(np.float64), bounds[mesh_of, 3:].astype(np.float64)
     corners = np.stack([np.where([(c >> k) & 1 for k in range(3)], hi, lo) for c in range(8)], axis=1)
     world = np.einsum("ijk,imk->imj", o2w[:, :3, :3], corners) + (o2w[:, :3, 3] - origin)[:, None, :]
     with np.errstate(invalid="ignore"):
-        beyond = (lo <= hi).all(axis=1) & ~(np.abs(world) <= FLOAT32_MAX).all(axis=(1, 2))
+        beyond = met & (lo <= hi).all(axis=1) & ~(np.abs(world) <= FLOAT32_MAX).all(axis=(1, 2))
     if beyond.any():
         i = int(np.flatnonzero(beyond)[0])
         raise ValueError(f"instance {i} (mesh {int(mesh_of[i])}): its matrix places the mesh beyond float32's range "

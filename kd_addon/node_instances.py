@@ -53,10 +53,16 @@ def node_references(ob: bpy.types.Object) -> tuple[list[bpy.types.Collection], l
     geometry-nodes modifiers of `ob` (an original object)."""
     collections: list[bpy.types.Collection] = []
     objects: list[bpy.types.Object] = []
+    walked: set = set()
     for mod in ob.modifiers:
         if mod.type == "NODES" and mod.node_group is not None:
-            _walk(mod.node_group, _modifier_inputs(mod), set(), collections, objects)
-    return collections, objects
+            _walk(mod.node_group, _modifier_inputs(mod), set(), walked, collections, objects)
+    return _unique(collections), _unique(objects)
+
+
+def _unique(ids: list) -> list:
+    """The IDs in first-seen order, each once."""
+    return list({id_.as_pointer(): id_ for id_ in ids}.values())
 
 
 def particle_references(ob: bpy.types.Object) -> tuple[list[bpy.types.Collection], list[bpy.types.Object]]:
@@ -73,10 +79,16 @@ def particle_references(ob: bpy.types.Object) -> tuple[list[bpy.types.Collection
     return collections, objects
 
 
-def _walk(tree, group_inputs, path: set[int], collections: list, objects: list) -> None:
+def _walk(tree, group_inputs, path: set[int], walked: set, collections: list, objects: list) -> None:
     """Collect from the nodes of `tree` that reach its output, and from the groups they call.
     `group_inputs(identifier)`: the value the caller feeds the tree's group input `identifier`, None
-    when unknown. `path`: the groups being walked (Blender forbids recursion; this guards anyway)."""
+    when unknown. `path`: the groups being walked (Blender forbids recursion; this guards anyway).
+    `walked`: the (tree, input values) already walked: a group called many times with the same inputs
+    is read once (a review found a group chain called 4 ways a level read 4^depth times)."""
+    key = (tree.as_pointer(), _input_values(tree, group_inputs))
+    if key in walked:
+        return
+    walked.add(key)
     path = path | {tree.as_pointer()}
     for node in _nodes_reaching_output(tree):
         if node.mute:
@@ -99,7 +111,19 @@ def _walk(tree, group_inputs, path: set[int], collections: list, objects: list) 
             if isinstance(found, bpy.types.Object):
                 objects.append(found)
         elif kind == "GeometryNodeGroup" and node.node_tree is not None and node.node_tree.as_pointer() not in path:
-            _walk(node.node_tree, _group_node_inputs(node, group_inputs), path, collections, objects)
+            _walk(node.node_tree, _group_node_inputs(node, group_inputs), path, walked, collections, objects)
+
+
+def _input_values(tree, group_inputs) -> tuple:
+    """What the caller feeds the tree's ID inputs (collections, objects), as pointers: the part of the
+    inputs the walk's result depends on."""
+    values = []
+    for item in tree.interface.items_tree:
+        if getattr(item, "in_out", None) == "INPUT" and item.socket_type in ("NodeSocketCollection",
+                                                                             "NodeSocketObject"):
+            value = group_inputs(item.identifier)
+            values.append((item.identifier, value.as_pointer() if value is not None else 0))
+    return tuple(values)
 
 
 def _nodes_reaching_output(tree) -> list:

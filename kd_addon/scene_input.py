@@ -161,11 +161,15 @@ def light_direction(matrix_world) -> np.ndarray:
 
 def light_color(data) -> tuple[float, float, float]:
     """The light's colour as Cycles emits it: its Color times its blackbody Temperature's colour when
-    *Temperature* is on (Blender 4.5+). `benchmarks/cycles_lights.py`: a 2000 K sun's floor has G/R and
-    B/R 0.257 and 0.008 in the preview against Cycles' 0.265 and 0.018 (bpy 5.0.1; white if ignored)."""
+    *Temperature* is on (Blender 4.5+), that colour's largest channel scaled to 1 (Blender normalises
+    it to luminance 1, so a channel reaches 2.5 at 2000 K and S would leave [0, 1] and shift hue when
+    displayed; the preview has no power weighting anyway). `benchmarks/cycles_lights.py`: a 2000 K
+    sun's floor has G/R and B/R 0.257 and 0.008 in the preview against Cycles' 0.265 and 0.018 (bpy
+    5.0.1; white if ignored)."""
     color = np.array(data.color, np.float64)
     if getattr(data, "use_temperature", False):
-        color = color * np.array(data.temperature_color, np.float64)
+        tint = np.array(data.temperature_color, np.float64)
+        color = color * tint / tint.max() if tint.max() > 0.0 else color * 0.0
     return tuple(float(c) for c in color)
 
 

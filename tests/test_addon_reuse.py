@@ -88,6 +88,13 @@ def test_image_reused_only_when_nothing_changed(addon):  # noqa: F811
     assert render(scene, 12).image_reused
     assert not render(scene, 12, rebuild_all=True).image_reused
     assert render(scene, 12, rebuild_all=False, output_format="OPEN_EXR").image_reused  # no effect on pixels
+    window = scenes.link(bpy.data.objects.new("Window", bpy.data.lights.new("Window", "AREA")))
+    window.location = (0.0, 0.0, 3.0)
+    assert not render(scene, 12).image_reused
+    window.data.cycles.is_portal = True  # review: the key left the portal flag out, and the last image came back
+    window.data.update_tag()
+    portal = render(scene, 12)
+    assert not portal.image_reused and any("light 'Window' left out" in w for w in portal.warnings)
 
 
 def test_cli_rebuild_all_flag_and_report_columns(addon, tmp_path, capsys):  # noqa: F811

@@ -295,6 +295,12 @@ def test_denoise_pixels_names_bad_inputs(pixels, counts, word):
     with pytest.raises(ValueError, match=word):
         core.denoise_pixels(*denoise_inputs(pixels, counts))
     assert core.denoise_pixels(*denoise_inputs([0, 3]))[..., 3].tolist() == [[1.0, 0.0], [0.0, 1.0]]
+    listed = list(denoise_inputs([0, 3]))
+    listed[2] = [0, 3]  # a list of indices, as numpy takes them
+    np.testing.assert_array_equal(core.denoise_pixels(*listed), core.denoise_pixels(*denoise_inputs([0, 3])))
+    empty = list(denoise_inputs([], counts=()))
+    empty[2] = np.zeros(0)  # no hit pixels, whatever the empty array's dtype
+    assert not core.denoise_pixels(*empty).any()
 
 
 def test_scene_builder_inputs_that_are_not_mesh_inputs_or_hashable_keys_are_named():
@@ -316,3 +322,5 @@ def test_an_instance_placed_beyond_float32s_range_is_named(layout):
     with pytest.raises(ValueError, match=r"instance 1 \(mesh 0\): its matrix places the mesh beyond float32's range"):
         core.build_scene([(v, f)], np.array([0, 0]), np.stack([np.eye(4), far]), layout=layout)
     core.build_scene([(v, f)], np.array([0]), far[None], origin=(1e39, 0, 0), layout=layout)
+    core.build_scene([(v, f)], np.array([0, 0]), np.stack([np.eye(4), far]), layout=layout,
+                     visibility=np.array([3, 0], np.uint8))  # an instance no ray meets is left out

@@ -725,3 +725,35 @@ def test_fingerprint_tracks_geometry_changes(scene):
         (geom,) = extract_scene().geometries.values()
         prints.setdefault(frame, set()).add(geometry_fingerprint(geom))
     assert len(prints[1]) == 1 and prints[1] != prints[10]
+
+
+def test_a_group_called_many_times_with_the_same_inputs_is_read_once(scene, monkeypatch):
+    """A review found a chain of groups, each calling the next four times, read 4^depth times (23 s at
+    depth 7). Each (group, inputs) pair is read once, and the collection is named once."""
+    from kd_addon import node_instances
+
+    source = scenes.new_collection("Src", exclude=True)
+    scenes.add_cube("Unit", scale=0.1, collection=source)
+    host = scenes.add_nested_info_host("Host", source)
+    inner = host.modifiers[0].node_group.nodes[0].node_tree  # the Scatter group, called with Src
+    for level in range(6):  # each new level calls the one below four times and joins them
+        group = bpy.data.node_groups.new(f"Level{level}", "GeometryNodeTree")
+        group.interface.new_socket("Coll", in_out="INPUT", socket_type="NodeSocketCollection")
+        group.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+        join = group.nodes.new("GeometryNodeJoinGeometry")
+        feed = group.nodes.new("NodeGroupInput").outputs["Coll"]
+        for _ in range(4):
+            call = group.nodes.new("GeometryNodeGroup")
+            call.node_tree = inner
+            group.links.new(feed, call.inputs["Coll"])
+            group.links.new(call.outputs[0], join.inputs[0])
+        group.links.new(join.outputs[0], group.nodes.new("NodeGroupOutput").inputs[0])
+        inner = group
+    host.modifiers[0].node_group.nodes[0].node_tree = inner
+    host.modifiers[0].node_group.nodes[0].inputs["Coll"].default_value = source
+    reads = []
+    original = node_instances._nodes_reaching_output
+    monkeypatch.setattr(node_instances, "_nodes_reaching_output", lambda tree: reads.append(tree.name) or original(tree))
+    collections, objects = node_instances.node_references(host)
+    assert [c.name for c in collections] == ["Src"] and objects == []
+    assert sorted(reads) == sorted(["HostTree", "HostScatter"] + [f"Level{level}" for level in range(6)])
