@@ -1,8 +1,9 @@
 """`python -m kd_addon render [scene.blend] --frames 1-24 --out DIR [...]` with the bpy module (see cli.py)."""
 
+import os
 import sys
 
-from . import early_interrupt
+from . import background, early_interrupt
 
 try:
     from .cli import main
@@ -14,4 +15,8 @@ try:
 except KeyboardInterrupt:
     print("kdpreview: interrupted", file=sys.stderr)
     code = 130
+if background.abandoned_work_running():
+    sys.stdout.flush()  # a cancelled kernel call still runs: skip the interpreter's teardown, which the
+    sys.stderr.flush()  # bpy 4.2 module crashes in beside it (background.py)
+    os._exit(code)
 sys.exit(code)

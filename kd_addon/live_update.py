@@ -18,7 +18,7 @@ from . import output
 from .config import make_config
 from .errors import PreviewError
 from .pipeline import claim, job_running, release, render_frame
-from .properties import run_state
+from .properties import run_state, set_last_run
 
 
 @bpy.app.handlers.persistent
@@ -37,7 +37,7 @@ def kd_preview_frame_change(scene, depsgraph=None):
     finally:
         release(token)
     output.store_preview(result.image)
-    state.set_last_run(result.summary())
+    set_last_run(state, result.summary())
     state.status = f"Live: frame {result.frame}, {result.total_ms:.0f} ms"
 
 

@@ -20,7 +20,7 @@ from . import output
 from .config import make_config
 from .errors import Cancelled, PreviewError
 from .pipeline import FrameJob, claim, release, run_job
-from .properties import run_state
+from .properties import run_state, set_last_run
 from .sequence import SequenceJob
 
 TICK_SECONDS = 0.01  # timer interval
@@ -187,7 +187,7 @@ class KDPREVIEW_OT_render(_JobOperator, bpy.types.Operator):
         result = job.result()
         output.store_preview(result.image)
         summary = result.summary()
-        run_state(context).set_last_run(summary)
+        set_last_run(run_state(context), summary)
         return (f"KD Preview: {result.width}x{result.height}, {result.triangles:,} triangles, "
                 f"{result.total_ms:.0f} ms ({result.mrays_per_s:.1f} Mrays/s)")
 
@@ -214,7 +214,7 @@ class KDPREVIEW_OT_render_animation(_JobOperator, bpy.types.Operator):
     def finish(self, context, job) -> str:
         last = job.results[-1].summary()
         last["animation"] = {"frames": len(job.results), "report": str(job.report_path)}
-        run_state(context).set_last_run(last)
+        set_last_run(run_state(context), last)
         return f"KD Preview: {len(job.results)} frames written to {job.out_dir}"
 
 

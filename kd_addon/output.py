@@ -70,11 +70,24 @@ def save_frame(image: np.ndarray, path: Path, file_format: str) -> Path:
     if file_format == "OPEN_EXR":
         _save_linear_exr(target, path)
     else:
-        target.file_format = file_format
-        target.save(filepath=str(path), save_copy=True)
+        _save_png(image, path)
     if not path.is_file():
         raise OSError(f"Blender did not write {path}")
     return path
+
+
+def _save_png(image: np.ndarray, path: Path) -> None:
+    """Image.save() of a scratch image holding the frame: Blender 4.2 has no save_copy, and its save()
+    turns the image it writes into a file image at that path (the preview image would be replaced by a
+    new one at the next frame, and image editors would show the file instead)."""
+    height, width = image.shape[:2]
+    scratch = bpy.data.images.new("KD Preview PNG", width, height, alpha=True, float_buffer=True)
+    try:
+        scratch.pixels.foreach_set(blender_pixels(image))
+        scratch.file_format = "PNG"
+        scratch.save(filepath=str(path))
+    finally:
+        bpy.data.images.remove(scratch)
 
 
 def _save_linear_exr(target: bpy.types.Image, path: Path) -> None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import bpy
 
-from .properties import run_state
+from .properties import last_run_of, run_state
 
 # (label, key in the last-run summary, format) in display order.
 RUN_ROWS = (
@@ -118,7 +118,7 @@ class KDPREVIEW_PT_last_run(_SubPanel, bpy.types.Panel):
     bl_label = "Last Run"
 
     def draw(self, context):
-        last = run_state(context).last_run_dict()
+        last = last_run_of(run_state(context))
         layout = self.layout
         if not last:
             layout.label(text="No run yet")

@@ -80,15 +80,20 @@ class KDPreviewRunState(bpy.types.PropertyGroup):
     status: StringProperty(name="Status", default="")
     progress: FloatProperty(name="Progress", default=0.0, min=0.0, max=1.0, subtype="FACTOR")
     last_run: StringProperty(name="Last Run", description="JSON summary of the last finished run", default="")
+    # No methods here: the bpy 4.2 module crashes at exit (SIGSEGV) once a PropertyGroup with a Python
+    # method has been registered, even after unregistering it (the command line registers this group).
 
-    def set_last_run(self, summary: dict) -> None:
-        self.last_run = json.dumps(summary)
 
-    def last_run_dict(self) -> dict:
-        try:
-            return json.loads(self.last_run) if self.last_run else {}
-        except ValueError:
-            return {}
+def set_last_run(state: KDPreviewRunState, summary: dict) -> None:
+    state.last_run = json.dumps(summary)
+
+
+def last_run_of(state: KDPreviewRunState) -> dict:
+    """The last finished run's summary ({} before the first, or if the stored text is not JSON)."""
+    try:
+        return json.loads(state.last_run) if state.last_run else {}
+    except ValueError:
+        return {}
 
 
 CLASSES = (KDPreviewSettings, KDPreviewRunState)

@@ -107,7 +107,7 @@ def test_panels_draw_settings_status_and_last_run():
         context = bpy.context
         state = context.window_manager.kd_preview_state
         assert draw_texts(panel.KDPREVIEW_PT_last_run, context) == ["No run yet"]
-        state.set_last_run({"frame": 1, "width": 64, "height": 32, "triangles": 1234, "objects": 3, "lights": 1,
+        properties.set_last_run(state, {"frame": 1, "width": 64, "height": 32, "triangles": 1234, "objects": 3, "lights": 1,
                             "extract_ms": 1.5, "build_ms": 2.5, "trace_ms": 30.0, "total_ms": 35.0,
                             "rays": 99999, "mrays_per_s": 3.3, "first_run": True, "warnings": ["camera shift"],
                             "tree": {"nodes": 7, "leaves": 4, "empty_leaves": 1, "max_depth": 3,
