@@ -8,7 +8,8 @@ and Cycles renders its Diffuse Direct pass (no bounces). Printed per variant: th
 each lights (above 1% of its brightest pixel; the preview's S has no power weighting, Cycles' has, so
 masks and ratios are compared, not values) and the pixels only one of them lights; for the coloured
 light, the G/R and B/R ratios of the floor's mean colour. The variants: a 1 m area light 5 m up with
-Spread 180, 60, 20 and 10 degrees; a 2000 K sun (Temperature on, Color white and bluish); a sun plus
+Spread 180, 60, 20 and 10 degrees; a 2000 K sun (Temperature on, Color white and bluish); a sun whose
+nodes are an Emission node of Color (0.2, 0.6, 1.0) and Strength 3 (Color white and orange); a sun plus
 an area light that is a Cycles portal (emits nothing: the floor is uniform in both).
 """
 import argparse
@@ -34,11 +35,13 @@ VARIANTS = {
     "area, spread 10": dict(spread=10.0),
     "sun 2000 K, white": dict(temperature=2000.0, color=(1.0, 1.0, 1.0)),
     "sun 2000 K, bluish": dict(temperature=2000.0, color=(0.4, 0.7, 1.0)),
+    "sun Emission node": dict(emission=((0.2, 0.6, 1.0), 3.0)),
+    "sun Emission, orange": dict(emission=((0.2, 0.6, 1.0), 3.0), color=(1.0, 0.5, 0.25)),
     "sun + portal": dict(portal=True),
 }
 
 
-def build(path, size, spread=None, temperature=None, color=(1.0, 1.0, 1.0), portal=False):
+def build(path, size, spread=None, temperature=None, color=(1.0, 1.0, 1.0), portal=False, emission=None):
     """Save the variant's scene (see the module docstring) to `path`."""
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
@@ -52,9 +55,14 @@ def build(path, size, spread=None, temperature=None, color=(1.0, 1.0, 1.0), port
     scene.camera = camera
     scene.world = bpy.data.worlds.new("Black")
     scene.world.color = (0.0, 0.0, 0.0)
-    if temperature is not None or portal:
+    if temperature is not None or portal or emission is not None:
         sun = bpy.data.lights.new("Sun", "SUN")
         sun.color = color
+        if emission is not None:  # Blender's default light tree: Emission -> Light Output
+            sun.use_nodes = True
+            node = next(n for n in sun.node_tree.nodes if n.type == "EMISSION")
+            node.inputs["Color"].default_value = (*emission[0], 1.0)
+            node.inputs["Strength"].default_value = emission[1]
         if temperature is not None:
             sun.use_temperature, sun.temperature = True, temperature
         sun_object = bpy.data.objects.new("Sun", sun)

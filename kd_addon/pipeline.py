@@ -388,6 +388,8 @@ def _usable_light(core, light: scene_input.LightInput):
     power = light.keywords.get("power", light.keywords.get("strength"))
     if not power > 0.0:
         raise ValueError(f"its power is {power:g}, so it emits no light")
+    if not light.emission_strength > 0.0:
+        raise ValueError(f"its Emission node's Strength is {light.emission_strength:g}, so it emits no light")
     if not max(light.keywords["color"]) > 0.0:
         raise ValueError("its colour is black, so it emits no light")
     if light.portal:

@@ -21,6 +21,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .errors import PreviewError
+from .light_nodes import NO_NODES, Emission, plain_emission
 from .extract import _Visibility, _entry_visible, hidden_light_warnings  # extraction's visibility rules
 
 
@@ -59,6 +60,7 @@ class LightInput:
     keywords: dict
     unapplied: tuple[str, ...] = ()  # the light's settings that change Cycles' image but not the preview's
     portal: bool = False  # a Cycles light portal: an area light that only guides the world's light, emitting none
+    emission_strength: float = 1.0  # its nodes' Emission Strength (light_nodes.py): 0 or below emits nothing
 
 
 @dataclass
@@ -159,14 +161,17 @@ def light_direction(matrix_world) -> np.ndarray:
     return d / norm if norm > 0.0 else d
 
 
-def light_color(data) -> tuple[float, float, float]:
-    """The light's colour as Cycles emits it: its Color times its blackbody Temperature's colour when
+def light_color(data, emission: Emission | None = NO_NODES) -> tuple[float, float, float]:
+    """The light's colour as Cycles emits it: its Color times its nodes' Emission Color (`emission`,
+    light_nodes.py; None: nodes the preview does not apply) times its blackbody Temperature's colour when
     *Temperature* is on (Blender 4.5+), that colour's largest channel scaled to 1 (Blender normalises
     it to luminance 1, so a channel reaches 2.5 at 2000 K and S would leave [0, 1] and shift hue when
     displayed; the preview has no power weighting anyway). `benchmarks/cycles_lights.py`: a 2000 K
     sun's floor has G/R and B/R 0.257 and 0.008 in the preview against Cycles' 0.265 and 0.018 (bpy
     5.0.1; white if ignored)."""
     color = np.array(data.color, np.float64)
+    if emission is not None:
+        color = color * emission.color
     if getattr(data, "use_temperature", False):
         tint = np.array(data.temperature_color, np.float64)
         color = color * tint / tint.max() if tint.max() > 0.0 else color * 0.0
@@ -176,7 +181,8 @@ def light_color(data) -> tuple[float, float, float]:
 def light_input(name: str, data, matrix_world) -> LightInput | None:
     """LightInput from a bpy Light datablock; None for a type the preview does not know."""
     m = np.array(matrix_world, dtype=np.float64).reshape(4, 4)
-    position, color = m[:3, 3].copy(), light_color(data)
+    emission = plain_emission(data)
+    position, color = m[:3, 3].copy(), light_color(data, emission)
     if data.type == "POINT":
         kw = dict(position=position, radius=float(data.shadow_soft_size), power=float(data.energy))
     elif data.type == "SUN":
@@ -194,7 +200,8 @@ def light_input(name: str, data, matrix_world) -> LightInput | None:
     kw["color"] = color
     kw["cast_shadow"] = bool(getattr(data, "use_shadow", True))
     portal = data.type == "AREA" and bool(getattr(getattr(data, "cycles", None), "is_portal", False))
-    return LightInput(name, data.type.lower(), kw, portal=portal)
+    return LightInput(name, data.type.lower(), kw, portal=portal,
+                      emission_strength=1.0 if emission is None else emission.strength)
 
 
 # --------------------------------------------------------------------------
@@ -236,7 +243,7 @@ def unapplied_light_settings(ob) -> tuple[str, ...]:
     """What Cycles would apply and the preview does not, named so a warning can say so: light and
     shadow linking (Blender 4.0+: which objects the light lights, which block it), the light's
     Diffuse ray visibility (off: it lights no diffuse surface, which is all the preview shades) and
-    its shader nodes (an Emission node's colour, strength or textures; the preview reads Color)."""
+    its shader nodes unless they are a plain Emission node (light_nodes.py)."""
     found = []
     linking = getattr(ob, "light_linking", None)
     for attribute, what in (("receiver_collection", "light linking"), ("blocker_collection", "shadow linking")):
@@ -245,8 +252,8 @@ def unapplied_light_settings(ob) -> tuple[str, ...]:
             found.append(f"{what} (collection '{collection.name}')")
     if not getattr(ob, "visible_diffuse", True):
         found.append("Ray Visibility > Diffuse off")
-    if getattr(ob.data, "use_nodes", False) and getattr(ob.data, "node_tree", None) is not None:
-        found.append("its shader nodes")
+    if plain_emission(ob.data) is None:
+        found.append("its shader nodes (only an Emission node's own Color and Strength are applied)")
     return tuple(found)
 
 

@@ -95,7 +95,7 @@ def test_lights_blender_accepts_but_that_emit_nothing_are_left_out_by_name(addon
     bpy.data.objects["Sun"].data.angle = math.pi
     bad = {}
     for name, kind in (("Negative", "POINT"), ("Flat", "AREA"), ("Squashed", "AREA"), ("Black", "POINT"),
-                       ("Portal", "AREA")):
+                       ("Portal", "AREA"), ("Unlit", "SPOT")):
         light = bpy.data.lights.new(name, kind)
         bad[name] = scenes.link(bpy.data.objects.new(name, light))
         bad[name].location = (-2.0, 0.0, 3.0)
@@ -104,6 +104,8 @@ def test_lights_blender_accepts_but_that_emit_nothing_are_left_out_by_name(addon
     bad["Squashed"].scale = (1.0, 1.0, 0.0)
     bad["Black"].data.color = (0.0, 0.0, 0.0)
     bad["Portal"].data.cycles.is_portal = True
+    bad["Unlit"].data.use_nodes = True
+    next(n for n in bad["Unlit"].data.node_tree.nodes if n.type == "EMISSION").inputs["Strength"].default_value = 0.0
 
     def frame(mode):
         scene.kd_preview.mode = mode
@@ -111,11 +113,12 @@ def test_lights_blender_accepts_but_that_emit_nothing_are_left_out_by_name(addon
 
     assert not frame("ao").warnings
     result = frame("shadow")
-    assert result.lights == 6 and result.image[16, column_of(-3.9), 0] > 0.3  # the sun still lights
+    assert result.lights == 7 and result.image[16, column_of(-3.9), 0] > 0.3  # the sun still lights
     left_out = sorted(w for w in result.warnings if "left out" in w)
-    assert [w.split("'")[1] for w in left_out] == ["Black", "Flat", "Negative", "Portal", "Squashed"]
+    assert [w.split("'")[1] for w in left_out] == ["Black", "Flat", "Negative", "Portal", "Squashed", "Unlit"]
     assert "colour is black" in left_out[0] and "power is -100" in left_out[2]
     assert "light portal" in left_out[3] and "zero Z axis" in left_out[4]
+    assert "Emission node's Strength is 0" in left_out[5]
     bpy.data.objects.remove(bpy.data.objects["Sun"])
     with pytest.raises(PreviewError, match="no light of scene 'Scene' can be used: light 'Negative'"):
         frame("ao+shadow")
@@ -123,7 +126,8 @@ def test_lights_blender_accepts_but_that_emit_nothing_are_left_out_by_name(addon
 
 def test_light_settings_the_preview_does_not_apply_are_named(addon):  # noqa: F811
     """Light and shadow linking, a light's Diffuse ray visibility and its shader nodes change Cycles' image; the preview
-    lights and shadows every object regardless, so the shadow modes say so, naming light and setting."""
+    lights and shadows every object regardless, so the shadow modes say so, naming light and setting. Nodes the
+    preview applies (Blender's default Emission tree) are not named."""
     scene = half_plane_scene()
     sun = bpy.data.objects["Sun"]
     linked = scenes.new_collection("Hero")
@@ -131,7 +135,12 @@ def test_light_settings_the_preview_does_not_apply_are_named(addon):  # noqa: F8
     sun.light_linking.blocker_collection = linked
     rim = scenes.link(bpy.data.objects.new("Rim", bpy.data.lights.new("Rim", "POINT")))
     rim.location, rim.visible_diffuse = (0.0, 0.0, 3.0), False
-    rim.data.use_nodes = True
+    rim.data.use_nodes = True  # a Blackbody node feeds the Emission node's Color: not applied
+    nodes = rim.data.node_tree.nodes
+    emission = next(n for n in nodes if n.type == "EMISSION")
+    rim.data.node_tree.links.new(nodes.new("ShaderNodeBlackbody").outputs[0], emission.inputs["Color"])
+    fill = scenes.link(bpy.data.objects.new("Fill", bpy.data.lights.new("Fill", "POINT")))
+    fill.location, fill.data.use_nodes = (1.0, 0.0, 3.0), True  # Blender's default tree: applied, no warning
 
     def frame(mode):
         scene.kd_preview.mode = mode
@@ -140,7 +149,8 @@ def test_light_settings_the_preview_does_not_apply_are_named(addon):  # noqa: F8
     assert not frame("ao").warnings
     assert sorted(frame("shadow").warnings) == [
         "light 'Rim': Ray Visibility > Diffuse off not applied by the preview",
-        "light 'Rim': its shader nodes not applied by the preview",
+        "light 'Rim': its shader nodes (only an Emission node's own Color and Strength are applied) not applied "
+        "by the preview",
         "light 'Sun': light linking (collection 'Hero') not applied by the preview",
         "light 'Sun': shadow linking (collection 'Hero') not applied by the preview"]
 

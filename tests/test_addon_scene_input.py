@@ -94,6 +94,9 @@ def test_no_scene_camera_is_named(scene):
         scene_input.read_camera(scene, bpy.context.evaluated_depsgraph_get(), 10, 10)
 
 
+HAS_TEMPERATURE = "use_temperature" in bpy.types.Light.bl_rna.properties  # Blender 4.5+
+
+
 def light_object(kind, name=None, **data):
     name = name or kind.title()
     obj = scenes.link(bpy.data.objects.new(name, bpy.data.lights.new(name, kind)))
@@ -113,7 +116,9 @@ def test_lights_convert_with_analytic_directions(scene):
     area = light_object("AREA", energy=50.0, shape="RECTANGLE", size=2.0, size_y=0.5, spread=math.radians(30))
     area.location = (4, 0, 2)
     disk = light_object("AREA", name="Disk", shape="DISK", size=1.5)
-    warm = light_object("POINT", name="Warm", color=(0.5, 1.0, 1.0), use_temperature=True, temperature=2000.0)
+    warm = light_object("POINT", name="Warm", color=(0.5, 1.0, 1.0))
+    if HAS_TEMPERATURE:
+        warm.data.use_temperature, warm.data.temperature = True, 2000.0
     depsgraph = bpy.context.evaluated_depsgraph_get()
     lights = {light.name: light for light in scene_input.read_lights(depsgraph)}
     assert set(lights) == {"Point", "Sun", "Spot", "Area", "Disk", "Warm"}
@@ -133,11 +138,63 @@ def test_lights_convert_with_analytic_directions(scene):
     np.testing.assert_allclose(a["matrix_world"][:3, 3], (4, 0, 2))
     assert lights["Disk"].keywords["size_y"] is None
     assert lights["Disk"].keywords["spread"] == pytest.approx(math.pi)  # Blender's default: 180 degrees
+    if not HAS_TEMPERATURE:  # Blender before 4.5: Color alone
+        assert lights["Warm"].keywords["color"] == pytest.approx((0.5, 1.0, 1.0))
+        return
     # Temperature on: Color times the blackbody's colour, its largest channel 1 (scene_input.light_color)
     tint = np.array(warm.data.temperature_color)
     np.testing.assert_allclose(lights["Warm"].keywords["color"], tint / tint.max() * (0.5, 1, 1), rtol=1e-6)
     red, green, blue = lights["Warm"].keywords["color"]
     assert red > green > 10 * blue  # a 2000 K light is orange, even with its Color bluish
+
+
+def emission_node(light_object_):
+    light_object_.data.use_nodes = True
+    return next(n for n in light_object_.data.node_tree.nodes if n.type == "EMISSION")
+
+
+def test_a_lights_plain_emission_node_is_applied_and_other_nodes_are_named(scene):
+    """As Cycles emits a light with nodes: its Color times a plain Emission node's Color, its power times
+    the node's Strength (light_nodes.py). Blender's default tree changes nothing; a linked input, a muted
+    Emission node or link, another shader or an unconnected output is not applied and named."""
+    plain = light_object("POINT", name="Plain", color=(1.0, 0.5, 0.25))
+    emission_node(plain)
+    tinted = light_object("SPOT", name="Tinted", color=(1.0, 0.5, 0.25))
+    node = emission_node(tinted)
+    node.inputs["Color"].default_value, node.inputs["Strength"].default_value = (0.5, 1.0, 0.2, 1.0), 4.0
+    eevee_only = light_object("SUN", name="EeveeOnly")  # an EEVEE-only output does not count for Cycles
+    emission_node(eevee_only).inputs["Color"].default_value = (0.0, 1.0, 0.0, 1.0)
+    tree = eevee_only.data.node_tree
+    for output in [n for n in tree.nodes if n.type == "OUTPUT_LIGHT"]:
+        output.target = "CYCLES"
+    eevee = tree.nodes.new("ShaderNodeOutputLight")
+    eevee.target = "EEVEE"
+    eevee.is_active_output = True
+    unapplied = {}
+    for name in ("Textured", "MutedNode", "MutedLink", "Unplugged", "Diffuse"):
+        unapplied[name] = light_object("POINT", name=name)
+        node = emission_node(unapplied[name])
+        links, nodes = unapplied[name].data.node_tree.links, unapplied[name].data.node_tree.nodes
+        if name == "Textured":
+            links.new(nodes.new("ShaderNodeTexNoise").outputs["Color"], node.inputs["Color"])
+        elif name == "MutedNode":
+            node.mute = True
+        elif name == "MutedLink":
+            node.outputs[0].links[0].is_muted = True
+        elif name == "Unplugged":
+            links.remove(node.outputs[0].links[0])
+        else:
+            output = next(n for n in nodes if n.type == "OUTPUT_LIGHT")
+            links.new(nodes.new("ShaderNodeBsdfDiffuse").outputs[0], output.inputs[0])
+    lights = {light.name: light for light in scene_input.read_lights(bpy.context.evaluated_depsgraph_get())}
+    assert lights["Plain"].keywords["color"] == pytest.approx((1.0, 0.5, 0.25))
+    assert lights["Plain"].emission_strength == 1.0 and not lights["Plain"].unapplied
+    assert lights["Tinted"].keywords["color"] == pytest.approx((0.5, 0.5, 0.05))
+    assert lights["Tinted"].emission_strength == 4.0 and not lights["Tinted"].unapplied
+    assert lights["EeveeOnly"].keywords["color"] == pytest.approx((0.0, 1.0, 0.0))
+    for name in unapplied:
+        assert lights[name].keywords["color"] == pytest.approx((1.0, 1.0, 1.0)), name  # its Color alone
+        assert any("shader nodes" in what for what in lights[name].unapplied), name
 
 
 def test_render_hidden_lights_are_left_out(scene):
