@@ -54,7 +54,11 @@ def build(path, size, spread=None, temperature=None, color=(1.0, 1.0, 1.0), port
     scene.collection.objects.link(camera)
     scene.camera = camera
     scene.world = bpy.data.worlds.new("Black")
-    scene.world.color = (0.0, 0.0, 0.0)
+    scene.world.color = (0.0, 0.0, 0.0)  # what a world without nodes emits (Blender 4.2)
+    if scene.world.node_tree is not None:  # bpy 5.0's new world has a Background node of grey 0.05, which
+        for node in scene.world.node_tree.nodes:  # lit the floor by 0.04 in every channel
+            if node.type == "BACKGROUND":
+                node.inputs["Strength"].default_value = 0.0
     if temperature is not None or portal or emission is not None:
         sun = bpy.data.lights.new("Sun", "SUN")
         sun.color = color

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+
 @dataclass(frozen=True)
 class Emission:
     """What a plain Emission node adds to a light: its colour (RGB) and its Strength."""
@@ -42,4 +43,3 @@ def plain_emission(light) -> Emission | None:
     if color.is_linked or strength.is_linked:
         return None
     return Emission(tuple(float(c) for c in color.default_value[:3]), float(strength.default_value))
-
