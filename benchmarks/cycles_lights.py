@@ -93,7 +93,8 @@ def preview(blend, out, samples):
 
 
 def cycles(blend, out, samples):
-    """Cycles' (H, W, 3) Diffuse Direct light of the same file (no bounces)."""
+    """Cycles' (H, W, 3) Diffuse Direct pass of the same file (no bounces; not denoised: Cycles
+    denoises the Combined pass only), read from a multilayer EXR."""
     bpy.ops.wm.open_mainfile(filepath=str(blend))
     scene = bpy.context.scene
     scene.render.engine = "CYCLES"
@@ -101,14 +102,14 @@ def cycles(blend, out, samples):
     bpy.context.view_layer.use_pass_diffuse_direct = True
     bpy.ops.render.render()
     settings = scene.render.image_settings
-    settings.file_format, settings.color_depth = "OPEN_EXR", "32"
+    if hasattr(settings, "media_type"):  # Blender 5.0: multilayer is a media type first
+        settings.media_type = "MULTI_LAYER_IMAGE"
+    settings.file_format, settings.color_depth = "OPEN_EXR_MULTILAYER", "32"
     path = out / "cycles.exr"
     bpy.data.images["Render Result"].save_render(str(path), scene=scene)
-    image = bpy.data.images.load(str(path))
-    width, height = image.size
-    pixels = np.array(image.pixels[:], np.float32).reshape(height, width, image.channels)[::-1, :, :3]
-    bpy.data.images.remove(image)
-    return pixels
+    channels, _ = read_exr(str(path))
+    layer = next(name[:-2] for name in channels if name.endswith("Diffuse Direct.R"))
+    return np.stack([channels[f"{layer}.{c}"] for c in "RGB"], axis=-1)
 
 
 def lit(image):

@@ -167,8 +167,8 @@ def light_color(data, emission: Emission | None = NO_NODES) -> tuple[float, floa
     *Temperature* is on (Blender 4.5+), that colour's largest channel scaled to 1 (Blender normalises
     it to luminance 1, so a channel reaches 2.5 at 2000 K and S would leave [0, 1] and shift hue when
     displayed; the preview has no power weighting anyway). `benchmarks/cycles_lights.py`: a 2000 K
-    sun's floor has G/R and B/R 0.257 and 0.008 in the preview against Cycles' 0.265 and 0.018 (bpy
-    5.0.1; white if ignored)."""
+    sun's floor has G/R and B/R 0.257 and 0.008 in the preview and in Cycles (bpy 5.0.1; white if
+    ignored)."""
     color = np.array(data.color, np.float64)
     if emission is not None:
         color = color * emission.color
