@@ -164,6 +164,7 @@ class RenderingKernelsHelper:
         env = dict(os.environ, NUMBA_NUM_THREADS="1",
                    PYTHONPATH=os.pathsep.join(p for p in sys.path if p and os.path.isdir(p)))
         env[CORE_CACHE_FOLDER_VARIABLE] = core_cache_folder(add_samples)  # where this process reads
+        env["KD_PREVIEW_HELPER_PARENT"] = str(os.getpid())  # the helper ends when this process is gone
         self.process = subprocess.Popen(
             [sys.executable, "-c", _HELPER_CODE, __package__, str(CORE_FOLDER), "1" if denoise else "0"], env=env,
             stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=self._errors,
@@ -202,10 +203,20 @@ class RenderingKernelsHelper:
 
 # The helper's whole program (argv: core's module name, its folder, "1" to compile the denoiser): stub
 # core's parent packages, so that `bl_ext.<repo>.<id>.core` imports without the add-on's __init__, then
-# compile.
+# compile. On POSIX a thread ends it once its parent is gone (reparented: getppid changes), so a
+# parent that could not stop it (it ended with os._exit, or crashed) does not leave it compiling.
 _HELPER_CODE = """
-import importlib, sys, types
+import importlib, os, sys, threading, time, types
 from pathlib import Path
+
+def _end_when_orphaned(parent_pid):
+    while os.getppid() == parent_pid:
+        time.sleep(0.5)
+    os._exit(1)
+
+if os.name != "nt":  # a parent that ended without stopping the helper (os._exit after Ctrl-C, a crash)
+    parent_pid = int(os.environ.get("KD_PREVIEW_HELPER_PARENT", os.getppid()))
+    threading.Thread(target=_end_when_orphaned, args=(parent_pid,), daemon=True).start()
 name, parent = sys.argv[1], Path(sys.argv[2]).parent
 parts = name.split(".")
 for depth in range(len(parts) - 1, 0, -1):

@@ -98,6 +98,65 @@ def test_the_helper_imports_core_under_an_extension_package_name(tmp_path):
         assert (core_folder / "ran.txt").read_text() == f"{name}.parallel_compile denoise={denoise}"
 
 
+SLOW_FAKE_CORE = """
+import os, sys, time
+from pathlib import Path
+
+def compile_rendering_kernels(denoise):
+    Path(sys.argv[2], "helper.pid").write_text(str(os.getpid()))
+    time.sleep(300)
+"""
+
+PARENT = """
+import os, subprocess, sys, time
+from pathlib import Path
+code, name, folder = Path(sys.argv[1]).read_text(), sys.argv[2], Path(sys.argv[3])
+helper = subprocess.Popen([sys.executable, "-c", code, name, str(folder), "0"], stdout=subprocess.DEVNULL,
+                          stderr=subprocess.DEVNULL, env=dict(os.environ, KD_PREVIEW_HELPER_PARENT=str(os.getpid())))
+while not (folder / "helper.pid").exists():
+    time.sleep(0.1)
+time.sleep(2.0)
+print("alive" if helper.poll() is None else "ended", flush=True)
+os._exit(0)  # as `python -m kd_addon` ends after Ctrl-C: the helper is never stopped
+"""
+
+
+@pytest.mark.skipif(os.name == "nt", reason="the helper watches its parent's pid (POSIX getppid)")
+def test_the_helper_ends_when_its_parent_is_gone(tmp_path):
+    """Outside QA: Ctrl-C during a first run's compile left the helper compiling for ~70 s after the
+    command line had exited. The helper lives while its parent does and ends within a second or two
+    once the parent is gone without stopping it."""
+    core_folder = tmp_path / "pkg" / "core"
+    core_folder.mkdir(parents=True)
+    for folder in (core_folder, core_folder.parent):
+        (folder / "__init__.py").write_text("")
+    (core_folder / "parallel_compile.py").write_text(SLOW_FAKE_CORE)
+    (tmp_path / "helper.py").write_text(parallel_compile._HELPER_CODE)
+    parent = subprocess.run([sys.executable, "-c", PARENT, str(tmp_path / "helper.py"), "pkg.core", str(core_folder)],
+                            capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert parent.stdout.strip() == "alive", parent.stderr
+    pid = int((core_folder / "helper.pid").read_text())
+    deadline = time.monotonic() + 15.0
+    while _running(pid) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert not _running(pid), "the helper outlived its parent"
+
+
+def _running(pid: int) -> bool:
+    """True while process `pid` exists and is not a zombie (an orphan's exit may wait for a reaper)."""
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except FileNotFoundError:
+        return False
+    except OSError:  # no /proc (macOS): ask the kernel
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return False
+        return True
+    return state != "Z"
+
+
 def test_the_helper_renders_with_the_rendering_kernels_and_exits_cleanly(tmp_path, monkeypatch):
     """The helper's program, started as the first render starts it (here on this run's cache, so it
     mostly loads kernels): it renders the hand-made tree and exits with status 0. It uses this
