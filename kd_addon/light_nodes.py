@@ -3,10 +3,13 @@
 A light with *Use Nodes* on emits what its node tree's Light Output receives. Blender's default tree,
 and what most artists make of it, is one Emission node with a constant Color and Strength feeding the
 output: Cycles then emits the light's Color times that Color, and its power times that Strength. The
-preview applies such a tree (the colour multiplies in, a Strength of 0 or below leaves the light out as
-emitting nothing; a positive Strength is a power, which the preview does not weight, see the README's
-shadow formula). Anything else (a texture or Blackbody node feeding the Emission node, another shader,
-a group, nothing connected) is named as not applied, so the user knows the preview's light differs.
+preview applies such a tree, through reroutes too (the colour multiplies in; a positive Strength is a
+power, which the preview does not weight, see the README's shadow formula). Trees from which Cycles
+emits nothing are told apart with the reason (a Strength of 0 or below, nothing connected to the
+output, a muted link or Emission node, no output Cycles renders), so the light is left out by name.
+Anything else (a texture, Blackbody or RGB node feeding the Emission node, another shader, a group,
+a muted output, which Blender versions evaluate differently) is named as not applied, so the user
+knows the preview's light differs from Cycles'.
 """
 from __future__ import annotations
 
@@ -15,31 +18,56 @@ from dataclasses import dataclass
 
 @dataclass(frozen=True)
 class Emission:
-    """What a plain Emission node adds to a light: its colour (RGB) and its Strength."""
+    """What a light's nodes make of its emission: a colour (RGB) multiplying the light's Color, or
+    `nothing`, the reason Cycles emits no light from them ("" when it does)."""
 
     color: tuple[float, float, float] = (1.0, 1.0, 1.0)
-    strength: float = 1.0
+    nothing: str = ""
 
 
 NO_NODES = Emission()
 
 
 def plain_emission(light) -> Emission | None:
-    """The light's emission when its nodes are off (NO_NODES) or are a plain Emission node with
-    unconnected Color and Strength feeding the active Light Output; None for any other tree."""
+    """The light's emission when its nodes are off (NO_NODES), are a plain Emission node with
+    unconnected Color and Strength feeding the Light Output Cycles renders, or certainly emit nothing
+    (`nothing` says why); None for any other tree."""
     tree = getattr(light, "node_tree", None)
     if not getattr(light, "use_nodes", False) or tree is None:
         return NO_NODES
     output = tree.get_output_node("CYCLES")  # the Light Output Cycles renders (active, Cycles or All)
-    if output is None or output.mute:
+    if output is None:
+        return Emission(nothing="its nodes have no Light Output that Cycles renders")
+    if output.mute:
         return None
-    links = list(output.inputs[0].links)  # the Surface socket
-    if len(links) != 1 or links[0].is_muted or not links[0].is_valid:
+    node = _source_node(output.inputs[0])  # the Surface socket
+    if isinstance(node, str):
+        return Emission(nothing=node)
+    if node is None or node.type != "EMISSION":
         return None
-    node = links[0].from_node
-    if node.type != "EMISSION" or node.mute:
-        return None
+    if node.mute:
+        return Emission(nothing=f"its Emission node '{node.name}' is muted")
     color, strength = node.inputs["Color"], node.inputs["Strength"]
     if color.is_linked or strength.is_linked:
         return None
-    return Emission(tuple(float(c) for c in color.default_value[:3]), float(strength.default_value))
+    if not strength.default_value > 0.0:
+        return Emission(nothing=f"its Emission node's Strength is {strength.default_value:g}")
+    return Emission(tuple(float(c) for c in color.default_value[:3]))
+
+
+def _source_node(socket):
+    """The node feeding `socket` through unmuted reroutes; a str saying why nothing reaches it (no
+    link, a muted one); None when the link is not one Blender evaluates (invalid)."""
+    for _ in range(256):  # reroute chains are short; a loop would be an invalid tree
+        links = list(socket.links)
+        if not links:
+            return "nothing is connected to its Light Output"
+        link = links[0]
+        if link.is_muted:
+            return "a link feeding its Light Output is muted"
+        if not link.is_valid:
+            return None
+        if link.from_node.type != "REROUTE" or link.from_node.mute:
+            return link.from_node
+        socket = link.from_node.inputs[0]
+    return None

@@ -251,7 +251,9 @@ class FrameJob:
         """Camera and lights moved by the same offset as the triangles. Mode "ao" uses no lights, so
         their settings cannot stop it; otherwise a light Blender accepts but that emits nothing or that
         core cannot use (zero power, size or scale) is left out with a warning naming it, and a light
-        used with settings the preview does not apply (light linking) gets a warning naming them."""
+        used with settings the preview does not apply (light linking) gets a warning naming them. When
+        every light is left out, the frame renders with S = 0 (black in mode shadow, AO times the ambient
+        term in ao+shadow) and a warning: a light may emit again later in the animation."""
         offset = inputs.camera.position
         try:
             camera = core.Camera(**inputs.camera.keywords()).translated(offset)
@@ -268,9 +270,11 @@ class FrameJob:
                 continue
             unapplied += [f"light '{light.name}': {what} not applied by the preview" for what in light.unapplied]
         self._info["warnings"] += left_out + unapplied
-        if not lights:
-            raise PreviewError(f"mode '{self.config.settings.mode}' needs a light, but no light of scene "
-                               f"'{self.scene.name}' can be used: " + "; ".join(left_out))
+        self._info["lights"] = len(lights)
+        if not lights:  # the scene's lights all emit nothing on this frame (a Strength animated to 0, say):
+            self._info["warnings"].append(  # S is 0, as Cycles' image is black; core takes no empty list
+                f"no light of scene '{self.scene.name}' emits on this frame: the shadow term is 0")
+            lights = [core.Light.sun((0.0, 0.0, -1.0), color=(0.0, 0.0, 0.0), cast_shadow=False)]
         return camera, lights
 
     def _start_tracing(self, core, scene, camera, lights, width, height, previous) -> None:
@@ -388,8 +392,8 @@ def _usable_light(core, light: scene_input.LightInput):
     power = light.keywords.get("power", light.keywords.get("strength"))
     if not power > 0.0:
         raise ValueError(f"its power is {power:g}, so it emits no light")
-    if not light.emission_strength > 0.0:
-        raise ValueError(f"its Emission node's Strength is {light.emission_strength:g}, so it emits no light")
+    if light.emits_nothing:
+        raise ValueError(f"{light.emits_nothing}, so it emits no light")
     if not max(light.keywords["color"]) > 0.0:
         raise ValueError("its colour is black, so it emits no light")
     if light.portal:

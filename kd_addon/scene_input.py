@@ -60,7 +60,7 @@ class LightInput:
     keywords: dict
     unapplied: tuple[str, ...] = ()  # the light's settings that change Cycles' image but not the preview's
     portal: bool = False  # a Cycles light portal: an area light that only guides the world's light, emitting none
-    emission_strength: float = 1.0  # its nodes' Emission Strength (light_nodes.py): 0 or below emits nothing
+    emits_nothing: str = ""  # why its nodes emit no light in Cycles (light_nodes.py), "" when they emit
 
 
 @dataclass
@@ -162,20 +162,23 @@ def light_direction(matrix_world) -> np.ndarray:
 
 
 def light_color(data, emission: Emission | None = NO_NODES) -> tuple[float, float, float]:
-    """The light's colour as Cycles emits it: its Color times its nodes' Emission Color (`emission`,
-    light_nodes.py; None: nodes the preview does not apply) times its blackbody Temperature's colour when
-    *Temperature* is on (Blender 4.5+), that colour's largest channel scaled to 1 (Blender normalises
-    it to luminance 1, so a channel reaches 2.5 at 2000 K and S would leave [0, 1] and shift hue when
-    displayed; the preview has no power weighting anyway). `benchmarks/cycles_lights.py`: a 2000 K
-    sun's floor has G/R and B/R 0.257 and 0.008 in the preview and in Cycles (bpy 5.0.1; white if
-    ignored)."""
+    """The light's colour as Cycles emits it, its largest channel at most 1: its Color times its nodes'
+    Emission Color (`emission`, light_nodes.py; None: nodes the preview does not apply) times its
+    blackbody Temperature's colour when *Temperature* is on (Blender 4.5+; Blender normalises that to
+    luminance 1, so a channel reaches 2.5 at 2000 K: its largest channel is scaled to 1 here). A colour
+    above 1 (an Emission Color or a Color typed above 1) is a power, which the preview does not weight:
+    scaled down to 1 it keeps its hue, where S would otherwise leave [0, 1] and clip to another hue
+    when displayed.
+    `benchmarks/cycles_lights.py`: a 2000 K sun's floor has G/R and B/R 0.257 and 0.008 in the
+    preview and in Cycles (bpy 5.0.1; white if ignored)."""
     color = np.array(data.color, np.float64)
     if emission is not None:
         color = color * emission.color
-    if getattr(data, "use_temperature", False):
+    if getattr(data, "use_temperature", False):  # the tint's largest channel 1: a hue, as Color is
         tint = np.array(data.temperature_color, np.float64)
         color = color * tint / tint.max() if tint.max() > 0.0 else color * 0.0
-    return tuple(float(c) for c in color)
+    peak = color.max()
+    return tuple(float(c) for c in (color / peak if peak > 1.0 else color))
 
 
 def light_input(name: str, data, matrix_world) -> LightInput | None:
@@ -200,8 +203,7 @@ def light_input(name: str, data, matrix_world) -> LightInput | None:
     kw["color"] = color
     kw["cast_shadow"] = bool(getattr(data, "use_shadow", True))
     portal = data.type == "AREA" and bool(getattr(getattr(data, "cycles", None), "is_portal", False))
-    return LightInput(name, data.type.lower(), kw, portal=portal,
-                      emission_strength=1.0 if emission is None else emission.strength)
+    return LightInput(name, data.type.lower(), kw, portal=portal, emits_nothing=emission.nothing if emission else "")
 
 
 # --------------------------------------------------------------------------

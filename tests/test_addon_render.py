@@ -113,15 +113,44 @@ def test_lights_blender_accepts_but_that_emit_nothing_are_left_out_by_name(addon
 
     assert not frame("ao").warnings
     result = frame("shadow")
-    assert result.lights == 7 and result.image[16, column_of(-3.9), 0] > 0.3  # the sun still lights
+    assert result.lights == 1 and result.image[16, column_of(-3.9), 0] > 0.3  # the sun alone lights
     left_out = sorted(w for w in result.warnings if "left out" in w)
     assert [w.split("'")[1] for w in left_out] == ["Black", "Flat", "Negative", "Portal", "Squashed", "Unlit"]
     assert "colour is black" in left_out[0] and "power is -100" in left_out[2]
     assert "light portal" in left_out[3] and "zero Z axis" in left_out[4]
     assert "Emission node's Strength is 0" in left_out[5]
-    bpy.data.objects.remove(bpy.data.objects["Sun"])
-    with pytest.raises(PreviewError, match="no light of scene 'Scene' can be used: light 'Negative'"):
-        frame("ao+shadow")
+    ao = frame("ao").image
+    bpy.data.objects.remove(bpy.data.objects["Sun"])  # no light emits: S = 0, as Cycles' image is black
+    for mode, rgb in (("shadow", np.zeros_like(ao[..., :3])), ("ao+shadow", 0.25 * ao[..., :3])):  # core's ambient
+        result = frame(mode)
+        assert result.lights == 0 and "no light of scene 'Scene' emits on this frame" in result.warnings[-1]
+        assert len([w for w in result.warnings if "left out" in w]) == 6
+        np.testing.assert_array_equal(result.image[..., 3], ao[..., 3])
+        np.testing.assert_allclose(result.image[..., :3], rgb, atol=1e-6)
+
+
+def test_a_scenes_only_light_dimmed_to_nothing_darkens_that_frame_alone(addon):  # noqa: F811
+    """Outside QA: a sun whose Emission Strength is animated 1 -> 0 -> 1 stopped the whole animation at
+    frame 2 ("needs a light"). Frame 2 now renders black with a warning (Cycles' image is black too),
+    and frame 3, lit again, renders anew and equals frame 1 (frame 2's image is not reused)."""
+    scene = half_plane_scene()
+    scene.kd_preview.mode = "shadow"
+    sun = bpy.data.objects["Sun"]
+    sun.data.use_nodes = True
+    strength = next(n for n in sun.data.node_tree.nodes if n.type == "EMISSION").inputs["Strength"]
+
+    def frame(value):
+        strength.default_value = value
+        return pipeline.render_frame(scene, bpy.context.evaluated_depsgraph_get(), make_config(scene.kd_preview))
+
+    lit, dark, lit_again = frame(1.0), frame(0.0), frame(1.0)
+    assert lit.image[16, column_of(-3.9), 0] > 0.5 and not lit.warnings and lit.lights == 1
+    assert dark.lights == 0 and not dark.image[..., :3].any()
+    np.testing.assert_array_equal(dark.image[..., 3], lit.image[..., 3])
+    assert dark.warnings == ["light 'Sun' left out: its Emission node's Strength is 0, so it emits no light",
+                             "no light of scene 'Scene' emits on this frame: the shadow term is 0"]
+    assert not dark.image_reused and not lit_again.image_reused
+    np.testing.assert_array_equal(lit_again.image, lit.image)
 
 
 def test_light_settings_the_preview_does_not_apply_are_named(addon):  # noqa: F811

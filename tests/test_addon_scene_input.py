@@ -153,47 +153,84 @@ def emission_node(light_object_):
     return next(n for n in light_object_.data.node_tree.nodes if n.type == "EMISSION")
 
 
+def node_light(name, change=None, color=(1.0, 1.0, 1.0)):
+    """A point light with Blender's default node tree (Emission -> Light Output), then change(node,
+    nodes, links) applied to it."""
+    ob = light_object("POINT", name=name, color=color)
+    node = emission_node(ob)
+    if change is not None:
+        change(node, ob.data.node_tree.nodes, ob.data.node_tree.links)
+    return ob
+
+
+def set_inputs(color=None, strength=None):
+    def change(node, nodes, links):
+        if color is not None:
+            node.inputs["Color"].default_value = (*color, 1.0)
+        if strength is not None:
+            node.inputs["Strength"].default_value = strength
+    return change
+
+
+def through_reroute(node, nodes, links):
+    output = next(n for n in nodes if n.type == "OUTPUT_LIGHT")
+    reroute = nodes.new("NodeReroute")
+    links.new(node.outputs[0], reroute.inputs[0])
+    links.new(reroute.outputs[0], output.inputs[0])
+    node.inputs["Color"].default_value = (0.0, 0.5, 1.0, 1.0)
+
+
+def cycles_output_beside_an_active_eevee_one(node, nodes, links):
+    node.inputs["Color"].default_value = (0.0, 1.0, 0.0, 1.0)
+    eevee = nodes.new("ShaderNodeOutputLight")  # active, but Cycles renders the other (target All)
+    eevee.target, eevee.is_active_output = "EEVEE", True
+
+
+def only_an_eevee_output(node, nodes, links):
+    next(n for n in nodes if n.type == "OUTPUT_LIGHT").target = "EEVEE"
+
+
+def diffuse_into_the_output(node, nodes, links):
+    output = next(n for n in nodes if n.type == "OUTPUT_LIGHT")
+    links.new(nodes.new("ShaderNodeBsdfDiffuse").outputs[0], output.inputs[0])
+
+
 def test_a_lights_plain_emission_node_is_applied_and_other_nodes_are_named(scene):
-    """As Cycles emits a light with nodes: its Color times a plain Emission node's Color, its power times
-    the node's Strength (light_nodes.py). Blender's default tree changes nothing; a linked input, a muted
-    Emission node or link, another shader or an unconnected output is not applied and named."""
-    plain = light_object("POINT", name="Plain", color=(1.0, 0.5, 0.25))
-    emission_node(plain)
-    tinted = light_object("SPOT", name="Tinted", color=(1.0, 0.5, 0.25))
-    node = emission_node(tinted)
-    node.inputs["Color"].default_value, node.inputs["Strength"].default_value = (0.5, 1.0, 0.2, 1.0), 4.0
-    eevee_only = light_object("SUN", name="EeveeOnly")  # an EEVEE-only output does not count for Cycles
-    emission_node(eevee_only).inputs["Color"].default_value = (0.0, 1.0, 0.0, 1.0)
-    tree = eevee_only.data.node_tree
-    for output in [n for n in tree.nodes if n.type == "OUTPUT_LIGHT"]:
-        output.target = "CYCLES"
-    eevee = tree.nodes.new("ShaderNodeOutputLight")
-    eevee.target = "EEVEE"
-    eevee.is_active_output = True
-    unapplied = {}
-    for name in ("Textured", "MutedNode", "MutedLink", "Unplugged", "Diffuse"):
-        unapplied[name] = light_object("POINT", name=name)
-        node = emission_node(unapplied[name])
-        links, nodes = unapplied[name].data.node_tree.links, unapplied[name].data.node_tree.nodes
-        if name == "Textured":
-            links.new(nodes.new("ShaderNodeTexNoise").outputs["Color"], node.inputs["Color"])
-        elif name == "MutedNode":
-            node.mute = True
-        elif name == "MutedLink":
-            node.outputs[0].links[0].is_muted = True
-        elif name == "Unplugged":
-            links.remove(node.outputs[0].links[0])
-        else:
-            output = next(n for n in nodes if n.type == "OUTPUT_LIGHT")
-            links.new(nodes.new("ShaderNodeBsdfDiffuse").outputs[0], output.inputs[0])
+    """As Cycles emits a light with nodes (light_nodes.py): its Color times a plain Emission node's
+    Color, through reroutes too; Blender's default tree changes nothing; a colour above 1 is scaled to
+    1, keeping its hue. Trees Cycles emits nothing from carry the reason (the light is then left out);
+    others (a linked input, another shader) are not applied and named, the light keeping its Color."""
+    applied = {"Plain": (node_light("Plain", color=(1.0, 0.5, 0.25)), (1.0, 0.5, 0.25)),
+               "Tinted": (node_light("Tinted", set_inputs((0.5, 1.0, 0.2), 4.0), (1.0, 0.5, 0.25)),
+                          (0.5, 0.5, 0.05)),
+               "Bright": (node_light("Bright", set_inputs((4.0, 2.0, 1.0))), (1.0, 0.5, 0.25)),
+               "Rerouted": (node_light("Rerouted", through_reroute), (0.0, 0.5, 1.0)),
+               "CyclesOutput": (node_light("CyclesOutput", cycles_output_beside_an_active_eevee_one),
+                                (0.0, 1.0, 0.0))}
+    dark = {"StrengthZero": (set_inputs(strength=0.0), "Strength is 0"),
+            "Negative": (set_inputs(strength=-2.0), "Strength is -2"),
+            "MutedNode": (lambda node, nodes, links: setattr(node, "mute", True), "is muted"),
+            "MutedLink": (lambda node, nodes, links: setattr(node.outputs[0].links[0], "is_muted", True),
+                          "link feeding its Light Output is muted"),
+            "Unplugged": (lambda node, nodes, links: links.remove(node.outputs[0].links[0]),
+                          "nothing is connected to its Light Output"),
+            "EeveeOnly": (only_an_eevee_output, "no Light Output that Cycles renders")}
+    for name, (change, _) in dark.items():
+        node_light(name, change)
+    unapplied = {"Textured": lambda node, nodes, links: links.new(nodes.new("ShaderNodeTexNoise").outputs["Color"],
+                                                                  node.inputs["Color"]),
+                 "Diffuse": diffuse_into_the_output}
+    for name, change in unapplied.items():
+        node_light(name, change, color=(0.5, 0.5, 1.0))
     lights = {light.name: light for light in scene_input.read_lights(bpy.context.evaluated_depsgraph_get())}
-    assert lights["Plain"].keywords["color"] == pytest.approx((1.0, 0.5, 0.25))
-    assert lights["Plain"].emission_strength == 1.0 and not lights["Plain"].unapplied
-    assert lights["Tinted"].keywords["color"] == pytest.approx((0.5, 0.5, 0.05))
-    assert lights["Tinted"].emission_strength == 4.0 and not lights["Tinted"].unapplied
-    assert lights["EeveeOnly"].keywords["color"] == pytest.approx((0.0, 1.0, 0.0))
+    for name, (_, color) in applied.items():
+        assert lights[name].keywords["color"] == pytest.approx(color), name
+        assert not lights[name].unapplied and not lights[name].emits_nothing, name
+    for name, (_, reason) in dark.items():
+        assert reason in lights[name].emits_nothing and not lights[name].unapplied, name
     for name in unapplied:
-        assert lights[name].keywords["color"] == pytest.approx((1.0, 1.0, 1.0)), name  # its Color alone
+        assert lights[name].keywords["color"] == pytest.approx((0.5, 0.5, 1.0)), name  # its Color alone
+        assert not lights[name].emits_nothing, name
         assert any("shader nodes" in what for what in lights[name].unapplied), name
 
 
