@@ -21,8 +21,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .errors import PreviewError
-from .light_nodes import NO_NODES, Emission, plain_emission
 from .extract import _Visibility, _entry_visible, hidden_light_warnings  # extraction's visibility rules
+from .light_nodes import NO_NODES, Emission, plain_emission
 
 
 @dataclass(frozen=True)
@@ -203,7 +203,8 @@ def light_input(name: str, data, matrix_world) -> LightInput | None:
     kw["color"] = color
     kw["cast_shadow"] = bool(getattr(data, "use_shadow", True))
     portal = data.type == "AREA" and bool(getattr(getattr(data, "cycles", None), "is_portal", False))
-    return LightInput(name, data.type.lower(), kw, portal=portal, emits_nothing=emission.nothing if emission else "")
+    nothing = emission.nothing if emission is not None else ""
+    return LightInput(name, data.type.lower(), kw, portal=portal, emits_nothing=nothing)
 
 
 # --------------------------------------------------------------------------
