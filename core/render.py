@@ -74,9 +74,7 @@ class PreviewRender:
         self.tree, self.camera, self.width, self.height = tree, camera, int(width), int(height)
         self.scene = as_two_level(tree)
         self.mode, self.target_samples, self.ao_distance = mode, int(samples), float(ao_distance)
-        self.lights = pack_lights(lights)
-        if mode != "ao" and len(self.lights) == 0:
-            raise ValueError(f"mode {mode!r} needs at least one light")
+        self.lights = _packed_lights(mode, lights)
         self.seed, self.sampler = int(seed) & 0xFFFFFFFF, SAMPLERS.index(sampler)
         self.error_target, self.min_samples, self.ambient = error_target, int(min_samples), float(ambient)
         self.threads = threads
@@ -307,14 +305,20 @@ def frame_ray_count(width, height, mode="ao", samples=16, lights=()):
     BuildOptions.rays and SceneBuilder.build(rays=...) take for a tree that serves one frame."""
     check_image_size(width, height)
     _check_mode_and_samples(mode, samples)
-    rows = pack_lights(lights)
-    if "shadow" in mode and len(rows) == 0:
-        raise ValueError(f"mode {mode!r} needs at least one light")
+    rows = _packed_lights(mode, lights)
     hard = int((rows[:, DELTA] != 0.0).sum()) if "shadow" in mode else 0
     soft = len(rows) * ("shadow" in mode) - hard
     repeats = samples * (1 + len(rows)) <= MEMO_BITS  # the memo holds sample 0's bit (PreviewRender._memo_rows)
     per_pixel = 1 + (("ao" in mode) + soft) * samples + hard * (1 if repeats else samples)
     return int(width) * int(height) * per_pixel
+
+
+def _packed_lights(mode, lights):
+    """pack_lights(lights); a ValueError when a mode with shadows gets none."""
+    rows = pack_lights(lights)
+    if mode != "ao" and len(rows) == 0:
+        raise ValueError(f"mode {mode!r} needs at least one light")
+    return rows
 
 
 def _check_mode_and_samples(mode, samples):

@@ -203,8 +203,10 @@ def light_input(name: str, data, matrix_world) -> LightInput | None:
     kw["color"] = color
     kw["cast_shadow"] = bool(getattr(data, "use_shadow", True))
     portal = data.type == "AREA" and bool(getattr(getattr(data, "cycles", None), "is_portal", False))
-    nothing = emission.nothing if emission is not None else ""
-    return LightInput(name, data.type.lower(), kw, portal=portal, emits_nothing=nothing)
+    if emission is None:  # nodes the preview does not apply (light_nodes.py)
+        return LightInput(name, data.type.lower(), kw, portal=portal,
+                          unapplied=("its shader nodes (only an Emission node's own Color and Strength are applied)",))
+    return LightInput(name, data.type.lower(), kw, portal=portal, emits_nothing=emission.nothing)
 
 
 # --------------------------------------------------------------------------
@@ -238,15 +240,15 @@ def read_lights(depsgraph, visibility: _Visibility | None = None) -> list[LightI
         name = ob.original.name if parent is None else f"{ob.original.name} (instanced by {parent.original.name})"
         light = light_input(name, ob.data, inst.matrix_world)
         if light is not None:
-            lights.append(replace(light, unapplied=unapplied_light_settings(ob)))
+            lights.append(replace(light, unapplied=unapplied_light_settings(ob) + light.unapplied))
     return lights
 
 
 def unapplied_light_settings(ob) -> tuple[str, ...]:
-    """What Cycles would apply and the preview does not, named so a warning can say so: light and
-    shadow linking (Blender 4.0+: which objects the light lights, which block it), the light's
-    Diffuse ray visibility (off: it lights no diffuse surface, which is all the preview shades) and
-    its shader nodes unless they are a plain Emission node (light_nodes.py)."""
+    """What Cycles would apply and the preview does not, named so a warning can say so: the object's
+    light and shadow linking (Blender 4.0+: which objects the light lights, which block it) and its
+    Diffuse ray visibility (off: it lights no diffuse surface, which is all the preview shades). The
+    light's own shader nodes are named by light_input."""
     found = []
     linking = getattr(ob, "light_linking", None)
     for attribute, what in (("receiver_collection", "light linking"), ("blocker_collection", "shadow linking")):
@@ -255,8 +257,6 @@ def unapplied_light_settings(ob) -> tuple[str, ...]:
             found.append(f"{what} (collection '{collection.name}')")
     if not getattr(ob, "visible_diffuse", True):
         found.append("Ray Visibility > Diffuse off")
-    if plain_emission(ob.data) is None:
-        found.append("its shader nodes (only an Emission node's own Color and Strength are applied)")
     return tuple(found)
 
 
