@@ -1,15 +1,15 @@
 """A light's shader nodes, read where the preview can apply them exactly.
 
-A light with *Use Nodes* on emits what its node tree's Light Output receives. Blender's default tree,
-and what most artists make of it, is one Emission node with a constant Color and Strength feeding the
-output: Cycles then emits the light's Color times that Color, and its power times that Strength. The
-preview applies such a tree, through reroutes too (the colour multiplies in; a positive Strength is a
-power, which the preview does not weight, see the README's shadow formula). Trees from which Cycles
-emits nothing are told apart with the reason (a Strength of 0 or below, nothing connected to the
-output, a muted link or Emission node, no output Cycles renders), so the light is left out by name.
-Anything else (a texture, Blackbody or RGB node feeding the Emission node, another shader, a group,
-a muted output, which Blender versions evaluate differently) is named as not applied, so the user
-knows the preview's light differs from Cycles'.
+A light with *Use Nodes* on (every light, since Blender 5.1) emits what its node tree's Light Output
+receives. Blender's default tree, and what most artists make of it, is one Emission node with a
+constant Color and Strength feeding the output: Cycles then emits the light's Color times that Color,
+and its power times that Strength. The preview applies such a tree, through reroutes too (the colour
+multiplies in; a positive Strength is a power, which the preview does not weight, see the README's
+shadow formula). Trees from which Cycles emits nothing are told apart with the reason (a Strength of 0
+or below, nothing connected to the output, a muted link or Emission node, no output Cycles renders), so
+the light is left out by name. Anything else (a texture, Blackbody or RGB node feeding the Emission
+node, another shader, a group, a muted output, which Blender versions evaluate differently) is named as
+not applied, so the user knows the preview's light differs from Cycles'.
 """
 from __future__ import annotations
 
@@ -33,7 +33,7 @@ def plain_emission(light) -> Emission | None:
     unconnected Color and Strength feeding the Light Output Cycles renders, or certainly emit nothing
     (`nothing` says why); None for any other tree."""
     tree = getattr(light, "node_tree", None)
-    if not getattr(light, "use_nodes", False) or tree is None:
+    if tree is None or not _uses_nodes(light):
         return NO_NODES
     output = tree.get_output_node("CYCLES")  # the Light Output Cycles renders (active, Cycles or All)
     if output is None:
@@ -53,6 +53,16 @@ def plain_emission(light) -> Emission | None:
     if not strength.default_value > 0.0:
         return Emission(nothing=f"its Emission node's Strength is {strength.default_value:g}")
     return Emission(tuple(float(c) for c in color.default_value[:3]))
+
+
+def _uses_nodes(light) -> bool:
+    """Whether Cycles renders the light's node tree. Up to Blender 5.0 only with Use Nodes on; 5.1
+    deprecated Use Nodes (every light has a tree, always used; the property reads True and warns) and
+    6.0 removes it, so a deprecated or missing property means the tree is used."""
+    prop = light.bl_rna.properties.get("use_nodes")
+    if prop is None or getattr(prop, "is_deprecated", False):
+        return True
+    return bool(light.use_nodes)
 
 
 def _source_node(socket):

@@ -142,11 +142,17 @@ def _nodes_reaching_output(tree) -> list:
 
 
 def _modifier_inputs(mod):
-    """group_inputs for the modifier's own node tree: the modifier's input values."""
+    """group_inputs for the modifier's own node tree: the modifier's input values. Up to Blender 5.1
+    they are ID properties of the modifier named by the socket identifier; 5.2 keeps them as RNA
+    properties, `mod.properties.inputs.<identifier>.value`, and `mod[identifier]` raises TypeError."""
+    inputs = getattr(getattr(mod, "properties", None), "inputs", None)
+
     def value(identifier):
+        if inputs is not None:
+            return getattr(getattr(inputs, identifier, None), "value", None)
         try:
             return mod[identifier]
-        except KeyError:
+        except (KeyError, TypeError):
             return None
     return value
 

@@ -204,13 +204,32 @@ def add_info_node_host(name, target, *, separate_children=False, via_modifier_in
                                           socket_type="NodeSocketCollection" if is_collection else "NodeSocketObject")
         links.new(nodes.new("NodeGroupInput").outputs[port], info.inputs[port])
         mod.node_group = group
-        mod[item.identifier] = target
+        set_modifier_input(mod, item.identifier, target)
     else:
         info.inputs[port].default_value = target
         mod.node_group = group
     if not is_collection:
         info.inputs["As Instance"].default_value = True
     return obj
+
+
+def light_nodes_on(data):
+    """The light's node tree, on as Cycles renders it: Use Nodes turned on up to Blender 5.0; from 5.1
+    every light has a tree, always used, and Use Nodes is deprecated (setting it warns)."""
+    prop = data.bl_rna.properties.get("use_nodes")
+    if prop is not None and not getattr(prop, "is_deprecated", False):
+        data.use_nodes = True
+    return data.node_tree
+
+
+def set_modifier_input(mod, identifier, value):
+    """Set a geometry nodes modifier's input: an ID property up to Blender 5.1, an RNA property
+    (`mod.properties.inputs.<identifier>.value`) from 5.2 on."""
+    inputs = getattr(getattr(mod, "properties", None), "inputs", None)
+    if inputs is not None:
+        getattr(inputs, identifier).value = value
+    else:
+        mod[identifier] = value
 
 
 def add_nested_info_host(name, collection, *, via_modifier_input=False, location=(0, 0, 0)):
@@ -234,7 +253,7 @@ def add_nested_info_host(name, collection, *, via_modifier_input=False, location
         item = group.interface.new_socket("Coll", in_out="INPUT", socket_type="NodeSocketCollection")
         group.links.new(group.nodes.new("NodeGroupInput").outputs["Coll"], call.inputs["Coll"])
         mod.node_group = group
-        mod[item.identifier] = collection
+        set_modifier_input(mod, item.identifier, collection)
     else:
         call.inputs["Coll"].default_value = collection
         mod.node_group = group

@@ -104,7 +104,7 @@ def test_lights_blender_accepts_but_that_emit_nothing_are_left_out_by_name(addon
     bad["Squashed"].scale = (1.0, 1.0, 0.0)
     bad["Black"].data.color = (0.0, 0.0, 0.0)
     bad["Portal"].data.cycles.is_portal = True
-    bad["Unlit"].data.use_nodes = True
+    scenes.light_nodes_on(bad["Unlit"].data)
     next(n for n in bad["Unlit"].data.node_tree.nodes if n.type == "EMISSION").inputs["Strength"].default_value = 0.0
 
     def frame(mode):
@@ -136,7 +136,7 @@ def test_a_scenes_only_light_dimmed_to_nothing_darkens_that_frame_alone(addon): 
     scene = half_plane_scene()
     scene.kd_preview.mode = "shadow"
     sun = bpy.data.objects["Sun"]
-    sun.data.use_nodes = True
+    scenes.light_nodes_on(sun.data)
     strength = next(n for n in sun.data.node_tree.nodes if n.type == "EMISSION").inputs["Strength"]
 
     def frame(value):
@@ -164,12 +164,13 @@ def test_light_settings_the_preview_does_not_apply_are_named(addon):  # noqa: F8
     sun.light_linking.blocker_collection = linked
     rim = scenes.link(bpy.data.objects.new("Rim", bpy.data.lights.new("Rim", "POINT")))
     rim.location, rim.visible_diffuse = (0.0, 0.0, 3.0), False
-    rim.data.use_nodes = True  # a Blackbody node feeds the Emission node's Color: not applied
+    scenes.light_nodes_on(rim.data)  # a Blackbody node feeds the Emission node's Color: not applied
     nodes = rim.data.node_tree.nodes
     emission = next(n for n in nodes if n.type == "EMISSION")
     rim.data.node_tree.links.new(nodes.new("ShaderNodeBlackbody").outputs[0], emission.inputs["Color"])
     fill = scenes.link(bpy.data.objects.new("Fill", bpy.data.lights.new("Fill", "POINT")))
-    fill.location, fill.data.use_nodes = (1.0, 0.0, 3.0), True  # Blender's default tree: applied, no warning
+    fill.location = (1.0, 0.0, 3.0)
+    scenes.light_nodes_on(fill.data)  # Blender's default tree: applied, no warning
 
     def frame(mode):
         scene.kd_preview.mode = mode

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 from types import SimpleNamespace
 
 import pytest
@@ -149,8 +150,7 @@ def test_lights_convert_with_analytic_directions(scene):
 
 
 def emission_node(light_object_):
-    light_object_.data.use_nodes = True
-    return next(n for n in light_object_.data.node_tree.nodes if n.type == "EMISSION")
+    return next(n for n in scenes.light_nodes_on(light_object_.data).nodes if n.type == "EMISSION")
 
 
 def node_light(name, change=None, color=(1.0, 1.0, 1.0)):
@@ -232,6 +232,20 @@ def test_a_lights_plain_emission_node_is_applied_and_other_nodes_are_named(scene
         assert lights[name].keywords["color"] == pytest.approx((0.5, 0.5, 1.0)), name  # its Color alone
         assert not lights[name].emits_nothing, name
         assert any("shader nodes" in what for what in lights[name].unapplied), name
+
+
+def test_reading_lights_uses_nothing_blender_deprecates(scene):
+    """Blender 5.1 deprecated a light's Use Nodes (every light's tree is used; 6.0 removes it): the add-on
+    reads the tree without touching the property there, so a deprecation warning on 5.1 and later
+    means a light read that breaks on 6.0. On 5.0 and before it reads Use Nodes and still warns of
+    nothing."""
+    for kind in ("POINT", "SUN", "SPOT", "AREA"):
+        emission_node(light_object(kind, name=kind.title()))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        lights = scene_input.read_lights(bpy.context.evaluated_depsgraph_get())
+    assert len(lights) == 4
+    assert [str(w.message) for w in caught if issubclass(w.category, DeprecationWarning)] == []
 
 
 def test_render_hidden_lights_are_left_out(scene):
