@@ -37,7 +37,7 @@ def as_visibility(visibility, n_instances):
                          f"{raw.dtype}")
     bad = np.flatnonzero((raw < 0) | (raw > ALL_BITS))
     if len(bad):
-        raise ValueError(f"instance {int(bad[0])} has visibility {raw[bad[0]]!r}: it must be a combination of "
+        raise ValueError(f"instance {int(bad[0])} has visibility {int(raw[bad[0]])}: it must be a combination of "
                          f"CAMERA_RAYS ({CAMERA_RAYS}), SHADOW_RAYS ({SHADOW_RAYS}) and HOLDOUT ({HOLDOUT}), "
                          f"in [0, {ALL_BITS}]")
     return raw.astype(np.uint8)
