@@ -1,19 +1,14 @@
 #!/usr/bin/env bash
 # Create (or reuse) the project's virtual environment in .venv and install KD Preview with its
-# development dependencies. Needs Python 3.11 (bpy 5.0.1 is built for it).
+# development dependencies. Needs Python 3.11 (bpy 5.0.1, Blender 4.2 to 5.0) or 3.13 (bpy 5.3.0,
+# Blender 5.1 and later): the bpy module exists for no other. 3.11 first, as CI runs it.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-PY=${PYTHON:-}
+source scripts/find_python.sh
+PY=${PYTHON:-$(find_python 3.11)}
+PY=${PY:-$(find_python 3.13)}
 if [ -z "$PY" ]; then
-  for candidate in python3.11 python3 python; do
-    if command -v "$candidate" >/dev/null 2>&1 && "$candidate" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))'; then
-      PY=$candidate
-      break
-    fi
-  done
-fi
-if [ -z "$PY" ]; then
-  echo "KD Preview needs Python 3.11 (the bpy 5.0.1 wheel is built for it); set PYTHON=/path/to/python3.11" >&2
+  echo "KD Preview needs Python 3.11 or 3.13 (the bpy module is built for those); set PYTHON=/path/to/python3.11" >&2
   exit 1
 fi
 if [ ! -x .venv/bin/python ]; then

@@ -240,20 +240,30 @@ def check_manifest(manifest: dict, platforms: list[str]) -> list[Wheel]:
                for w in wheels if w.dist in FORBIDDEN_DISTS]
     errors += ["{} installs on no known platform".format(w.filename) for w in wheels if not w.platforms]
     for platform in declared:
-        errors += platform_wheel_errors(platform, [w.path for w in wheels])
+        errors += platform_wheel_errors(platform, [w.path for w in wheels], python_versions(wheels))
     if errors:
         raise BuildError("manifest check failed:\n  " + "\n  ".join(errors))
     return wheels
 
 
-def platform_wheel_errors(platform: str, filenames: list[str]) -> list[str]:
-    """Errors for a platform unless exactly one wheel of each required distribution installs on it."""
+def python_versions(wheels: list[Wheel]) -> list[str]:
+    """The Python versions ("3.11", ...) the wheels are built for: the Blender versions served (Blender
+    4.2 to 5.0 bundle Python 3.11, 5.1 and later 3.13)."""
+    return sorted({w.python_version for w in wheels})
+
+
+def platform_wheel_errors(platform: str, filenames: list[str], versions: list[str]) -> list[str]:
+    """Errors for a platform unless, for each of the Python versions, exactly one wheel of each required
+    distribution installs on it (Blender installs the wheels matching its own platform and Python)."""
     errors = []
     wheels = [parse_wheel(f) for f in filenames]
-    for dist in REQUIRED_DISTS:
-        found = [w.filename for w in wheels if w.dist == dist and platform in w.platforms]
-        if len(found) != 1:
-            errors.append("platform {} needs exactly one {} wheel, found {}".format(platform, dist, found or "none"))
+    for version in versions or [None]:  # no wheels at all: one error per distribution
+        for dist in REQUIRED_DISTS:
+            found = [w.filename for w in wheels
+                     if w.dist == dist and platform in w.platforms and version in (None, w.python_version)]
+            if len(found) != 1:
+                errors.append("platform {} needs exactly one {} wheel{}, found {}".format(
+                    platform, dist, " for Python " + version if version else "", found or "none"))
     return errors
 
 
@@ -275,8 +285,9 @@ def zip_name(manifest: dict, platform: str) -> str:
     return "{}-{}-{}.zip".format(manifest["id"], manifest["version"], platform.replace("-", "_"))
 
 
-def check_zip(path: Path, platform: str) -> None:
-    """Fail unless the zip holds the add-on files and exactly its platform's numba and llvmlite wheels."""
+def check_zip(path: Path, platform: str, versions: list[str]) -> None:
+    """Fail unless the zip holds the add-on files and exactly its platform's numba and llvmlite wheels,
+    one of each for each Python version."""
     if not path.is_file():
         raise BuildError("expected zip was not built: {}".format(path))
     with zipfile.ZipFile(path) as zf:
@@ -284,7 +295,7 @@ def check_zip(path: Path, platform: str) -> None:
     missing = [f for f in REQUIRED_ZIP_FILES if f not in names]
     wheel_names = [os.path.basename(n) for n in names if n.endswith(".whl")]
     foreign = [w for w in wheel_names if platform not in parse_wheel(w).platforms | {"any"}]
-    errors = ["missing {}".format(f) for f in missing] + platform_wheel_errors(platform, wheel_names)
+    errors = ["missing {}".format(f) for f in missing] + platform_wheel_errors(platform, wheel_names, versions)
     errors += ["holds a wheel for another platform: {}".format(w) for w in foreign]
     if errors:
         raise BuildError("{} is broken:\n  {}".format(path.name, "\n  ".join(errors)))
@@ -315,8 +326,9 @@ def build_zips(manifest: dict, platforms: list[str], stage: Path, out: Path,
     run_blender_ext(blender_ext, ["build", "--source-dir", str(stage), "--output-dir", str(out),
                                   "--split-platforms", "--valid-tags", str(tags)])
     zips = [out / zip_name(manifest, p) for p in platforms]
+    versions = python_versions([parse_wheel(p) for p in manifest.get("wheels") or []])
     for path, platform in zip(zips, platforms):
-        check_zip(path, platform)
+        check_zip(path, platform, versions)
         run_blender_ext(blender_ext, ["validate", "--valid-tags", str(tags), str(path)])
     return zips
 

@@ -1,0 +1,75 @@
+"""tools/build_extension.py's own manifest checks: every platform needs one numba and one llvmlite wheel
+for each Python version the manifest's wheels serve (Blender 4.2-5.0: 3.11; 5.1 and later: 3.13).
+A platform missing one would install on a Blender of that Python with no numba, and fail at enable."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+_spec = importlib.util.spec_from_file_location("_kdp_build_extension", REPO / "tools" / "build_extension.py")
+build_extension = sys.modules[_spec.name] = importlib.util.module_from_spec(_spec)  # dataclasses look it up
+_spec.loader.exec_module(build_extension)
+
+LINUX = "manylinux_2_27_x86_64.manylinux_2_28_x86_64"
+
+
+def wheel(dist, python, platform=LINUX):
+    version = {"numba": "0.68.1", "llvmlite": "0.50.0"}[dist]
+    return f"./wheels/{dist}-{version}-{python}-{python}-{platform}.whl"
+
+
+def manifest(wheels, platforms=("linux-x64",)):
+    return {"platforms": list(platforms), "wheels": wheels}
+
+
+def errors_of(m):
+    try:
+        build_extension.check_manifest(m, m["platforms"])
+    except build_extension.BuildError as ex:
+        return str(ex)
+    return ""
+
+
+def test_the_repository_manifest_serves_python_3_11_and_3_13_on_every_platform():
+    m = build_extension.load_manifest(REPO / "blender_manifest.toml")
+    wheels = build_extension.check_manifest(m, m["platforms"])  # raises on any problem
+    assert build_extension.python_versions(wheels) == ["3.11", "3.13"]
+
+
+def test_both_pythons_on_one_platform_pass():
+    m = manifest([wheel(d, py) for d in ("numba", "llvmlite") for py in ("cp311", "cp313")])
+    assert errors_of(m) == ""
+
+
+def test_a_platform_missing_one_pythons_wheel_is_named():
+    m = manifest([wheel("numba", "cp311"), wheel("llvmlite", "cp311"), wheel("numba", "cp313")])
+    message = errors_of(m)
+    assert "platform linux-x64 needs exactly one llvmlite wheel for Python 3.13, found none" in message
+    assert "3.11" not in message.split("found")[0]
+
+
+def test_a_platform_missing_a_python_the_others_have_is_named():
+    mac = "macosx_12_0_arm64"
+    m = manifest([wheel(d, py) for d in ("numba", "llvmlite") for py in ("cp311", "cp313")]
+                 + [wheel(d, "cp311", mac) for d in ("numba", "llvmlite")], platforms=("linux-x64", "macos-arm64"))
+    message = errors_of(m)
+    assert "platform macos-arm64 needs exactly one numba wheel for Python 3.13, found none" in message
+    assert "platform macos-arm64 needs exactly one llvmlite wheel for Python 3.13, found none" in message
+    assert "linux-x64" not in message
+
+
+def test_two_wheels_of_one_python_are_named():
+    m = manifest([wheel("numba", "cp311"), wheel("numba", "cp311").replace("0.68.1", "0.68.0"),
+                  wheel("llvmlite", "cp311")])
+    assert "needs exactly one numba wheel for Python 3.11, found [" in errors_of(m)
+
+
+@pytest.mark.parametrize("wheels", [[], [wheel("numba", "cp311")]])
+def test_no_wheels_or_no_llvmlite_is_named(wheels):
+    message = errors_of(manifest(wheels))
+    assert "platform linux-x64 needs exactly one llvmlite wheel" in message
