@@ -87,23 +87,26 @@ class _JobOperator:
         return {"RUNNING_MODAL"}
 
     def modal(self, context, event):
-        if event.type == "ESC":
-            return self._end_modal(context, Cancelled("cancelled"))
-        if event.type != "TIMER" or event.timer is not self._timer:
-            return {"PASS_THROUGH"}
-        if not self._started:  # let the status ("Compiling kernels…") draw before blocking work
-            self._started = True
-            return {"RUNNING_MODAL"}
+        """Tick the job on timer events. Blender's Event does not say which timer fired, so any
+        window timer ticks it (a tick is budgeted, so a foreign timer costs at most TICK_BUDGET), and
+        every event is passed on, so other modal operators get their own timers and input."""
         try:
+            if event.type == "ESC":
+                return self._end_modal(context, Cancelled("cancelled"))
+            if event.type != "TIMER":
+                return {"PASS_THROUGH"}
+            if not self._started:  # let the status ("Compiling kernels…") draw before blocking work
+                self._started = True
+                return {"PASS_THROUGH"}
             if self._tick_for(TICK_BUDGET):
                 return self._end_modal(context, None)
         except PreviewError as error:
             return self._end_modal(context, error)
-        except Exception as error:  # keep Blender usable: stop the timer, then show the bug
+        except Exception as error:  # keep Blender usable: stop the timer, release the job, then show the bug
             self._end_modal(context, error)
             raise
         self._show(context, self._job.progress, self._job.status)
-        return {"RUNNING_MODAL"}
+        return {"PASS_THROUGH"}
 
     def cancel(self, context):
         """Blender calls this when the modal operator is killed (e.g. the file is closed)."""

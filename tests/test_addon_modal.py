@@ -2,9 +2,12 @@
 
 In background mode Blender never delivers timer events and refuses modal
 handlers, so the test feeds TIMER / ESC events to the operator's own
-invoke/modal methods. The only stand-in is the window manager's
-`modal_handler_add` (recorded instead of called); timers, progress and the
-run state are Blender's real ones.
+invoke/modal methods. The stand-ins are the window manager's
+`modal_handler_add` (recorded instead of called) and the events, which carry
+exactly the properties of Blender's real Event (an outside run in Blender's
+GUI found the operator reading `event.timer`, which no Event has, while the
+events here had one); timers, progress and the run state are Blender's real
+ones.
 """
 
 from __future__ import annotations
@@ -63,13 +66,29 @@ def modal(addon, monkeypatch):  # noqa: F811
     return make_context()
 
 
+EVENT_PROPERTIES = {p.identifier for p in bpy.types.Event.bl_rna.properties}
+
+
+def event(kind):
+    """A stand-in for the bpy.types.Event Blender passes to modal(): the real Event's properties and no
+    other (reading another raises AttributeError, as on the real one)."""
+    return SimpleNamespace(**({name: None for name in EVENT_PROPERTIES} | {"type": kind, "value": "PRESS"}))
+
+
+def test_the_event_stand_in_is_blenders_event():
+    assert {"type", "value", "mouse_x", "shift"} <= EVENT_PROPERTIES and "timer" not in EVENT_PROPERTIES
+    with pytest.raises(AttributeError):
+        event("TIMER").timer
+
+
 def timer_events(op, context, limit=500):
-    """Feed timer events until the operator leaves modal; return (result, statuses seen)."""
+    """Feed timer events until the operator leaves modal; return (result, statuses seen). While it
+    runs it passes every event on (other modal operators' timers included)."""
     statuses = []
     for _ in range(limit):
-        result = op.modal(context, SimpleNamespace(type="TIMER", timer=op._timer))
+        result = op.modal(context, event("TIMER"))
         statuses.append(context.window_manager.kd_preview_state.status)
-        if result != {"RUNNING_MODAL"}:
+        if result != {"PASS_THROUGH"}:
             return result, statuses
     raise AssertionError("the modal operator never finished")
 
@@ -81,7 +100,7 @@ def test_modal_render_ticks_to_the_end(modal):
     assert modal.window_manager.modal_handlers == [op] and op._timer is not None
     state = modal.window_manager.kd_preview_state
     assert state.running and pipeline.job_running()
-    assert op.modal(modal, SimpleNamespace(type="MOUSEMOVE", timer=None)) == {"PASS_THROUGH"}
+    assert op.modal(modal, event("MOUSEMOVE")) == {"PASS_THROUGH"}
     result, statuses = timer_events(op, modal)
     assert result == {"FINISHED"} and op._timer is None and not state.running and not pipeline.job_running()
     assert any(s.startswith("Tracing: ") for s in statuses)
@@ -98,8 +117,8 @@ def test_esc_cancels_and_keeps_the_previous_image(modal):
     op = driver(KDPREVIEW_OT_render)
     op.invoke(modal, None)
     for _ in range(4):  # first event only shows the status, then build, then two trace steps
-        assert op.modal(modal, SimpleNamespace(type="TIMER", timer=op._timer)) == {"RUNNING_MODAL"}
-    assert op.modal(modal, SimpleNamespace(type="ESC", timer=None)) == {"CANCELLED"}
+        assert op.modal(modal, event("TIMER")) == {"PASS_THROUGH"}
+    assert op.modal(modal, event("ESC")) == {"CANCELLED"}
     state = modal.window_manager.kd_preview_state
     assert state.status.startswith("Cancelled") and not state.running and not pipeline.job_running()
     assert op._timer is None
@@ -113,8 +132,8 @@ def test_esc_during_animation_restores_the_frame(modal, tmp_path):
     op = driver(KDPREVIEW_OT_render_animation)
     op.invoke(modal, None)
     while not (tmp_path / "frame_0001.png").exists():
-        assert op.modal(modal, SimpleNamespace(type="TIMER", timer=op._timer)) == {"RUNNING_MODAL"}
-    assert op.modal(modal, SimpleNamespace(type="ESC", timer=None)) == {"CANCELLED"}
+        assert op.modal(modal, event("TIMER")) == {"PASS_THROUGH"}
+    assert op.modal(modal, event("ESC")) == {"CANCELLED"}
     assert scene.frame_current == 7
     assert sorted(p.name for p in tmp_path.iterdir()) == ["frame_0001.png", "report.json"]
     report = json.loads((tmp_path / "report.json").read_text())  # the frames written, marked incomplete
@@ -143,3 +162,23 @@ def test_modal_failure_is_reported_and_released(modal):
     result, _ = timer_events(op, modal)
     assert result == {"CANCELLED"} and op._timer is None and not pipeline.job_running()
     assert op.reports == [({"ERROR"}, op.reports[0][1])] and "needs a light" in op.reports[0][1]
+
+
+def test_a_bug_inside_a_modal_tick_ends_the_run_and_the_next_render_works(modal, monkeypatch):
+    """An unexpected exception in a tick is shown (raised to Blender) but must not leave the add-on
+    claimed: before, an error at the top of modal() left 'running' set, the progress frozen and
+    every later render refused as 'already running' until Blender restarted."""
+    half_plane_scene()
+    op = driver(KDPREVIEW_OT_render)
+    op.invoke(modal, None)
+    op.modal(modal, event("TIMER"))  # shows the status
+
+    def broken_tick():
+        raise RuntimeError("a bug")
+    monkeypatch.setattr(op._job, "tick", broken_tick)
+    with pytest.raises(RuntimeError, match="a bug"):
+        op.modal(modal, event("TIMER"))
+    state = modal.window_manager.kd_preview_state
+    assert op._timer is None and not state.running and not pipeline.job_running()
+    assert state.status == "Error: a bug"
+    assert bpy.ops.kdpreview.render() == {"FINISHED"}
