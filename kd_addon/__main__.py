@@ -1,6 +1,5 @@
 """`python -m kd_addon render [scene.blend] --frames 1-24 --out DIR [...]` with the bpy module (see cli.py)."""
 
-import os
 import sys
 
 from . import background, early_interrupt
@@ -15,8 +14,5 @@ try:
 except KeyboardInterrupt:
     print("kdpreview: interrupted", file=sys.stderr)
     code = 130
-if background.abandoned_work_running():
-    sys.stdout.flush()  # a cancelled kernel call still runs: skip the interpreter's teardown, which the
-    sys.stderr.flush()  # bpy 4.2 module crashes in beside it (background.py)
-    os._exit(code)
+background.exit_now_if_abandoned(code)
 sys.exit(code)

@@ -20,12 +20,15 @@ Measured: exiting while a daemon worker was inside a 1M-triangle build ended
 cleanly with the intended exit code in 5 of 5 runs, with Numba's workqueue
 layer and with the tbb layer bpy brings, with the bpy 5.0 module; the bpy 4.2
 module's interpreter teardown crashes beside the running worker (SIGSEGV
-instead of exit code 130), so `python -m kd_addon` ends with os._exit when
-abandoned_work_running() (__main__.py).
+instead of exit code 130), and so did a real Blender 5.2 exiting during a first
+run's compile (LLVM), so both command lines end with os._exit then
+(exit_now_if_abandoned).
 """
 
 from __future__ import annotations
 
+import os
+import sys
 import threading
 import weakref
 
@@ -35,6 +38,16 @@ _calls: weakref.WeakSet = weakref.WeakSet()  # every BackgroundCall not yet coll
 def abandoned_work_running() -> bool:
     """True while a worker still runs a kernel call nobody waits for any more (after a cancel)."""
     return any(not call.finished for call in list(_calls))
+
+
+def exit_now_if_abandoned(code: int) -> None:
+    """End the process with `code` at once, skipping the interpreter's (and Blender's) teardown, if a
+    cancelled kernel call still runs: the bpy 4.2 module crashed in that teardown beside the worker,
+    and Blender 5.2 itself crashed in LLVM when it exited during a first run's compile."""
+    if abandoned_work_running():
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
 
 
 class BackgroundCall:

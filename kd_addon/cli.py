@@ -26,7 +26,7 @@ from types import SimpleNamespace
 
 import bpy
 
-from . import demo_scene, properties
+from . import background, demo_scene, properties
 from .config import DEFAULTS, OUTPUT_FORMATS, SETTING_NAMES, make_config
 from .errors import Cancelled, PreviewError
 from .pipeline import claim, release, run_job
@@ -150,28 +150,33 @@ def _print_row(result, path) -> None:
 
 @contextmanager
 def interrupt_flag():
-    """An Event that Ctrl-C (SIGINT) sets, for the job loop to poll, while SIGINT still raises
+    """An Event that Ctrl-C (SIGINT) sets, for the job loop to poll, while the first SIGINT also raises
     KeyboardInterrupt at once. Why both: an exception raised while Blender runs Python on our behalf
     (a handler or driver during frame_set, say) is printed and cleared by Blender, and the render
-    would go on; the flag survives that and stops the job at its next tick. Outside the main thread
-    (where signal handlers cannot be set), or when SIGINT's handler was not installed from Python (an
-    embedding program's own, which Python could not put back), the flag is never set and Ctrl-C
-    behaves as before."""
+    would go on; the flag survives that and stops the job at its next tick. Later SIGINTs only set the
+    flag, so a second Ctrl-C cannot break the cleanup that writes the report.
+
+    Inside Blender (`blender -b --command kdpreview`) SIGINT's handler is Blender's own, in C (Python
+    sees None): it only prints "Sent an internal break event" and the render went on to exit 0, and a
+    second Ctrl-C killed Blender mid-frame (outside QA on a real Blender 5.2.2). Python cannot put a C
+    handler back, so there SIGINT is ignored after the run: Blender exits right after the command, and
+    a Ctrl-C repeated into its teardown must not turn exit 130 into a kill. Outside the main thread,
+    where signal handlers cannot be set, the flag is never set."""
     flag = threading.Event()
 
     def on_sigint(signum, frame):
-        flag.set()
-        raise KeyboardInterrupt
-
-    previous = signal.getsignal(signal.SIGINT)
-    if previous is None or threading.current_thread() is not threading.main_thread():
+        if not flag.is_set():
+            flag.set()
+            raise KeyboardInterrupt
+    if threading.current_thread() is not threading.main_thread():
         yield flag
         return
+    previous = signal.getsignal(signal.SIGINT)
     signal.signal(signal.SIGINT, on_sigint)
     try:
         yield flag
     finally:
-        signal.signal(signal.SIGINT, previous)
+        signal.signal(signal.SIGINT, signal.SIG_IGN if previous is None else previous)
 
 
 def run(args) -> int:
@@ -241,10 +246,18 @@ def main(argv: list[str] | None = None) -> int:
     return execute(sys.argv[1:] if argv is None else argv, prog="python -m kd_addon")
 
 
+def blender_command(argv: list[str]) -> int:
+    """`blender -b [scene.blend] --command kdpreview ...`: execute, then end at once if a cancelled
+    kernel call still runs (background.exit_now_if_abandoned)."""
+    code = execute(argv)
+    background.exit_now_if_abandoned(code)
+    return code
+
+
 def register():
     global _handle
     unregister()
-    _handle = bpy.utils.register_cli_command(COMMAND_ID, execute)
+    _handle = bpy.utils.register_cli_command(COMMAND_ID, blender_command)
 
 
 def unregister():

@@ -36,6 +36,16 @@ def addon():
     kd_addon.unregister()
 
 
+EVENT_PROPERTIES = {p.identifier for p in bpy.types.Event.bl_rna.properties}
+
+
+def event(kind):
+    """A stand-in for the bpy.types.Event Blender passes to an operator's modal(): the real Event's
+    properties and no other (reading another raises AttributeError, as on the real one)."""
+    from types import SimpleNamespace
+    return SimpleNamespace(**({name: None for name in EVENT_PROPERTIES} | {"type": kind, "value": "PRESS"}))
+
+
 def exr_channels(path):
     """{channel: (H, W) float32, row 0 = top} of an EXR, read with OpenImageIO (or the benchmark's own
     numpy reader), not with Blender, whose loading could hide a colour transform its saving applied."""

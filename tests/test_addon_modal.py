@@ -17,7 +17,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from tests.addon_support import addon, half_plane_scene, preview_pixels  # noqa: F401
+from tests.addon_support import EVENT_PROPERTIES, addon, event, half_plane_scene, preview_pixels  # noqa: F401
 
 import bpy  # noqa: E402
 
@@ -64,15 +64,6 @@ def modal(addon, monkeypatch):  # noqa: F811
     monkeypatch.setattr(operators, "modal_possible", lambda context: True)
     monkeypatch.setattr(operators, "TICK_BUDGET", 0.0)  # one job tick per timer event
     return make_context()
-
-
-EVENT_PROPERTIES = {p.identifier for p in bpy.types.Event.bl_rna.properties}
-
-
-def event(kind):
-    """A stand-in for the bpy.types.Event Blender passes to modal(): the real Event's properties and no
-    other (reading another raises AttributeError, as on the real one)."""
-    return SimpleNamespace(**({name: None for name in EVENT_PROPERTIES} | {"type": kind, "value": "PRESS"}))
 
 
 def test_the_event_stand_in_is_blenders_event():
