@@ -1,6 +1,7 @@
 """tools/build_extension.py's own manifest checks: every platform needs one numba and one llvmlite wheel
-for each Python version the manifest's wheels serve (Blender 4.2-5.0: 3.11; 5.1 and later: 3.13).
-A platform missing one would install on a Blender of that Python with no numba, and fail at enable."""
+for each Python of Blender's official builds (4.2-5.0: 3.11; 5.1 and later: 3.13) and for any other
+Python it carries wheels for. A platform missing one would install on a Blender of that Python with
+no numba, and fail at the first render."""
 
 from __future__ import annotations
 
@@ -35,10 +36,20 @@ def errors_of(m):
     return ""
 
 
-def test_the_repository_manifest_serves_python_3_11_and_3_13_on_every_platform():
+def test_the_repository_manifest_serves_python_3_11_and_3_13_everywhere_and_3_14_on_linux():
     m = build_extension.load_manifest(REPO / "blender_manifest.toml")
     wheels = build_extension.check_manifest(m, m["platforms"])  # raises on any problem
-    assert build_extension.python_versions(wheels) == ["3.11", "3.13"]
+    for platform in m["platforms"]:
+        mine = [w for w in wheels if platform in w.platforms]
+        expected = ["3.11", "3.13", "3.14"] if platform == "linux-x64" else ["3.11", "3.13"]
+        assert build_extension.python_versions(mine) == expected, platform
+
+
+def test_an_extra_python_on_one_platform_must_be_complete():
+    both = [wheel(d, py) for d in ("numba", "llvmlite") for py in ("cp311", "cp313")]
+    assert errors_of(manifest(both + [wheel("numba", "cp314"), wheel("llvmlite", "cp314")])) == ""
+    message = errors_of(manifest(both + [wheel("numba", "cp314")]))
+    assert "platform linux-x64 needs exactly one llvmlite wheel for Python 3.14, found none" in message
 
 
 def test_both_pythons_on_one_platform_pass():
@@ -53,7 +64,7 @@ def test_a_platform_missing_one_pythons_wheel_is_named():
     assert "3.11" not in message.split("found")[0]
 
 
-def test_a_platform_missing_a_python_the_others_have_is_named():
+def test_a_platform_missing_an_official_blender_python_is_named():
     mac = "macosx_12_0_arm64"
     m = manifest([wheel(d, py) for d in ("numba", "llvmlite") for py in ("cp311", "cp313")]
                  + [wheel(d, "cp311", mac) for d in ("numba", "llvmlite")], platforms=("linux-x64", "macos-arm64"))
@@ -72,4 +83,5 @@ def test_two_wheels_of_one_python_are_named():
 @pytest.mark.parametrize("wheels", [[], [wheel("numba", "cp311")]])
 def test_no_wheels_or_no_llvmlite_is_named(wheels):
     message = errors_of(manifest(wheels))
-    assert "platform linux-x64 needs exactly one llvmlite wheel" in message
+    assert "platform linux-x64 needs exactly one llvmlite wheel for Python 3.11, found none" in message
+    assert "platform linux-x64 needs exactly one llvmlite wheel for Python 3.13, found none" in message

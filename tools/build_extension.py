@@ -33,6 +33,10 @@ from pathlib import Path
 REPO_ROOT = Path(__file__).resolve().parents[1]
 MANIFEST = "blender_manifest.toml"
 REQUIRED_DISTS = ("numba", "llvmlite")
+# The Pythons of Blender's official builds: 4.2 to 5.0 bundle 3.11, 5.1 and later 3.13. Every platform
+# needs wheels for both; a platform may carry more (linux-x64: 3.14, which Linux distributions' own
+# Blender packages use, Debian's 5.2.2 among them).
+BLENDER_PYTHONS = ("3.11", "3.13")
 FORBIDDEN_DISTS = ("numpy",)  # Blender ships its own numpy; bundling one breaks bpy.
 REQUIRED_ZIP_FILES = ("__init__.py", MANIFEST)
 OS_PREFIXES = (("manylinux", "linux"), ("musllinux", "linux"), ("linux", "linux"),
@@ -240,30 +244,29 @@ def check_manifest(manifest: dict, platforms: list[str]) -> list[Wheel]:
                for w in wheels if w.dist in FORBIDDEN_DISTS]
     errors += ["{} installs on no known platform".format(w.filename) for w in wheels if not w.platforms]
     for platform in declared:
-        errors += platform_wheel_errors(platform, [w.path for w in wheels], python_versions(wheels))
+        errors += platform_wheel_errors(platform, [w.path for w in wheels])
     if errors:
         raise BuildError("manifest check failed:\n  " + "\n  ".join(errors))
     return wheels
 
 
 def python_versions(wheels: list[Wheel]) -> list[str]:
-    """The Python versions ("3.11", ...) the wheels are built for: the Blender versions served (Blender
-    4.2 to 5.0 bundle Python 3.11, 5.1 and later 3.13)."""
+    """The Python versions ("3.11", ...) the wheels are built for."""
     return sorted({w.python_version for w in wheels})
 
 
-def platform_wheel_errors(platform: str, filenames: list[str], versions: list[str]) -> list[str]:
-    """Errors for a platform unless, for each of the Python versions, exactly one wheel of each required
-    distribution installs on it (Blender installs the wheels matching its own platform and Python)."""
+def platform_wheel_errors(platform: str, filenames: list[str]) -> list[str]:
+    """Errors for a platform unless, for each official Blender Python (BLENDER_PYTHONS) and any other
+    Python it has wheels for, exactly one wheel of each required distribution installs on it (Blender
+    installs the wheels matching its own platform and Python)."""
     errors = []
-    wheels = [parse_wheel(f) for f in filenames]
-    for version in versions or [None]:  # no wheels at all: one error per distribution
+    wheels = [w for w in map(parse_wheel, filenames) if platform in w.platforms]
+    for version in sorted(set(BLENDER_PYTHONS) | set(python_versions(wheels))):
         for dist in REQUIRED_DISTS:
-            found = [w.filename for w in wheels
-                     if w.dist == dist and platform in w.platforms and version in (None, w.python_version)]
+            found = [w.filename for w in wheels if w.dist == dist and w.python_version == version]
             if len(found) != 1:
-                errors.append("platform {} needs exactly one {} wheel{}, found {}".format(
-                    platform, dist, " for Python " + version if version else "", found or "none"))
+                errors.append("platform {} needs exactly one {} wheel for Python {}, found {}".format(
+                    platform, dist, version, found or "none"))
     return errors
 
 
@@ -285,7 +288,7 @@ def zip_name(manifest: dict, platform: str) -> str:
     return "{}-{}-{}.zip".format(manifest["id"], manifest["version"], platform.replace("-", "_"))
 
 
-def check_zip(path: Path, platform: str, versions: list[str]) -> None:
+def check_zip(path: Path, platform: str) -> None:
     """Fail unless the zip holds the add-on files and exactly its platform's numba and llvmlite wheels,
     one of each for each Python version."""
     if not path.is_file():
@@ -295,7 +298,7 @@ def check_zip(path: Path, platform: str, versions: list[str]) -> None:
     missing = [f for f in REQUIRED_ZIP_FILES if f not in names]
     wheel_names = [os.path.basename(n) for n in names if n.endswith(".whl")]
     foreign = [w for w in wheel_names if platform not in parse_wheel(w).platforms | {"any"}]
-    errors = ["missing {}".format(f) for f in missing] + platform_wheel_errors(platform, wheel_names, versions)
+    errors = ["missing {}".format(f) for f in missing] + platform_wheel_errors(platform, wheel_names)
     errors += ["holds a wheel for another platform: {}".format(w) for w in foreign]
     if errors:
         raise BuildError("{} is broken:\n  {}".format(path.name, "\n  ".join(errors)))
@@ -326,9 +329,8 @@ def build_zips(manifest: dict, platforms: list[str], stage: Path, out: Path,
     run_blender_ext(blender_ext, ["build", "--source-dir", str(stage), "--output-dir", str(out),
                                   "--split-platforms", "--valid-tags", str(tags)])
     zips = [out / zip_name(manifest, p) for p in platforms]
-    versions = python_versions([parse_wheel(p) for p in manifest.get("wheels") or []])
     for path, platform in zip(zips, platforms):
-        check_zip(path, platform, versions)
+        check_zip(path, platform)
         run_blender_ext(blender_ext, ["validate", "--valid-tags", str(tags), str(path)])
     return zips
 
