@@ -125,6 +125,26 @@ def test_panels_draw_settings_status_and_last_run():
         kd_addon.unregister()
 
 
+def test_a_long_status_is_wrapped_to_the_sidebar_not_cut():
+    """Blender's labels do not wrap: the sidebar cut a finished status and would cut an error's
+    naming of the object at fault. Lines fit the region's width (40 characters without a region)."""
+    scenes.reset()
+    kd_addon.register()
+    try:
+        state = bpy.context.window_manager.kd_preview_state
+        state.running = False
+        state.status = ("Error: object 'Very Long Object Name.001' has a non-finite vertex coordinate (NaN or "
+                        "inf) in triangle 12345: fix the mesh or hide the object from renders")
+        narrow = SimpleNamespace(region=SimpleNamespace(width=210), preferences=bpy.context.preferences,
+                                 scene=bpy.context.scene, window_manager=bpy.context.window_manager)
+        for context, chars in ((bpy.context, 40), (narrow, 210 // 7)):
+            lines = draw_texts(panel.KDPREVIEW_PT_panel, context)
+            lines = lines[next(i for i, t in enumerate(lines) if t.startswith("Error")):]
+            assert len(lines) > 1 and max(map(len, lines)) <= chars and " ".join(lines) == state.status
+    finally:
+        kd_addon.unregister()
+
+
 def test_cli_command_registration_round_trip():
     cli.register()
     first = cli._handle
