@@ -153,25 +153,26 @@ def interrupt_flag():
     """An Event that Ctrl-C (SIGINT) sets, for the job loop to poll, while the first SIGINT also raises
     KeyboardInterrupt at once. Why both: an exception raised while Blender runs Python on our behalf
     (a handler or driver during frame_set, say) is printed and cleared by Blender, and the render
-    would go on; the flag survives that and stops the job at its next tick. Later SIGINTs only set the
-    flag, so a second Ctrl-C cannot break the cleanup that writes the report.
+    would go on; the flag survives that and stops the job at its next tick. Later SIGINTs are ignored,
+    so a second Ctrl-C cannot break the cleanup that writes the report.
 
     Inside Blender (`blender -b --command kdpreview`) SIGINT's handler is Blender's own, in C (Python
     sees None): it only prints "Sent an internal break event" and the render went on to exit 0, and a
     second Ctrl-C killed Blender mid-frame (outside QA on a real Blender 5.2.2). Python cannot put a C
     handler back, so there SIGINT is ignored after the run: Blender exits right after the command, and
     a Ctrl-C repeated into its teardown must not turn exit 130 into a kill. Outside the main thread,
-    where signal handlers cannot be set, the flag is never set."""
+    where signal handlers cannot be set, and in Blender's UI, the flag is never set."""
     flag = threading.Event()
 
     def on_sigint(signum, frame):
         if not flag.is_set():
             flag.set()
             raise KeyboardInterrupt
-    if threading.current_thread() is not threading.main_thread():
-        yield flag
-        return
+
     previous = signal.getsignal(signal.SIGINT)
+    if threading.current_thread() is not threading.main_thread() or (previous is None and not bpy.app.background):
+        yield flag  # (Blender's UI keeps its own handler: it does not exit after this call)
+        return
     signal.signal(signal.SIGINT, on_sigint)
     try:
         yield flag
