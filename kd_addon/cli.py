@@ -187,6 +187,7 @@ def run(args) -> int:
 
 
 def _run(args, cancelled) -> int:
+    job = None
     try:
         make_config(args)  # bad options fail before a file is opened
         if not args.out.strip():
@@ -198,13 +199,15 @@ def _run(args, cancelled) -> int:
                           on_frame=_print_row)
         print(f"KD Preview: scene '{scene.name}', {len(frames)} frame(s), mode {config.settings.mode}, "
               f"{config.settings.samples} samples, {config.resolution_percentage}% resolution -> {args.out}")
-        print(HEADER)
+        print(HEADER, flush=True)  # piped, it would wait for the first frame: minutes on a first run
         _run_claimed(job, cancelled)
     except PreviewError as error:
         print(f"{COMMAND_ID}: error: {error}", file=sys.stderr)
         return 1
     except (Cancelled, KeyboardInterrupt):
-        print(f"{COMMAND_ID}: interrupted; frames already written are kept", file=sys.stderr)
+        written = len(job.results) if job is not None else 0
+        print(f"{COMMAND_ID}: interrupted; " + (f"the {written} frame(s) already written are kept" if written
+                                                else "no frame was written"), file=sys.stderr)
         return 130
     _print_totals(job)
     return 0

@@ -146,7 +146,13 @@ def load_core():
     return importlib.import_module(name)
 
 
+WARM_KERNEL = "render_kernels.add_samples"  # the renderer's sampling kernel, the longest to compile
+
+
 def cache_is_warm() -> bool:
-    """Whether the cache folder already holds compiled kernels (so the first run only loads them)."""
+    """Whether the cache folder already holds the sampling kernel compiled for this Python (so the
+    first run only loads kernels). Any index file was not enough: the first appears seconds into a
+    compile of minutes, and the panel said "Loading compiled kernels" for four minutes (outside QA)."""
     folder = numba_cache_dir()
-    return folder.is_dir() and any(folder.rglob("*.nbi"))
+    python = f"py{sys.version_info[0]}{sys.version_info[1]}"
+    return folder.is_dir() and any(folder.rglob(f"{WARM_KERNEL}-*.{python}.nbi"))

@@ -150,6 +150,7 @@ class _JobOperator:
                 message = self.finish(context, job)
                 state.status, state.progress = message, 1.0
                 self.report({"INFO"}, message)
+                redraw_panels(context)  # else the panel shows the progress bar until the mouse moves over it
                 return {"FINISHED"}
         except PreviewError as late_error:
             error = late_error
@@ -191,8 +192,9 @@ class KDPREVIEW_OT_render(_JobOperator, bpy.types.Operator):
         output.store_preview(result.image)
         summary = result.summary()
         set_last_run(run_state(context), summary)
+        speed = "last image reused" if result.image_reused else f"{result.mrays_per_s:.2f} Mrays/s"
         return (f"KD Preview: {result.width}x{result.height}, {result.triangles:,} triangles, "
-                f"{result.total_ms:.0f} ms ({result.mrays_per_s:.1f} Mrays/s)")
+                f"{result.total_ms:.0f} ms ({speed})")
 
 
 class KDPREVIEW_OT_render_animation(_JobOperator, bpy.types.Operator):

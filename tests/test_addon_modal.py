@@ -84,8 +84,11 @@ def timer_events(op, context, limit=500):
     raise AssertionError("the modal operator never finished")
 
 
-def test_modal_render_ticks_to_the_end(modal):
+def test_modal_render_ticks_to_the_end(modal, monkeypatch):
     half_plane_scene()
+    redraws = []  # the run state at each panel redraw: the last must show the run finished
+    monkeypatch.setattr(operators, "redraw_panels",
+                        lambda context: redraws.append(context.window_manager.kd_preview_state.running))
     op = driver(KDPREVIEW_OT_render)
     assert op.invoke(modal, None) == {"RUNNING_MODAL"}
     assert modal.window_manager.modal_handlers == [op] and op._timer is not None
@@ -94,6 +97,7 @@ def test_modal_render_ticks_to_the_end(modal):
     assert op.modal(modal, event("MOUSEMOVE")) == {"PASS_THROUGH"}
     result, statuses = timer_events(op, modal)
     assert result == {"FINISHED"} and op._timer is None and not state.running and not pipeline.job_running()
+    assert redraws[0] is True and redraws[-1] is False  # else the panel stays stale after success
     assert any(s.startswith("Tracing: ") for s in statuses)
     assert preview_pixels()[:, :32, 3].min() == 1.0
     assert json.loads(state.last_run)["samples"] == 8

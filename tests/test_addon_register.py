@@ -157,6 +157,26 @@ def test_cli_command_registration_round_trip():
         bpy.utils.unregister_cli_command(first)
 
 
+def test_the_cache_is_warm_only_once_the_sampling_kernel_is_compiled_for_this_python(tmp_path, monkeypatch):
+    """The first run's status says "Loading" only when the longest kernel is cached for this Python:
+    the first index file appears seconds into a compile of minutes (outside QA)."""
+    import sys
+
+    import core.render_kernels
+
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    folder = corelib.numba_cache_dir() / "core_0123"
+    folder.mkdir(parents=True)
+    module, function = corelib.WARM_KERNEL.split(".")
+    assert module == "render_kernels" and hasattr(core.render_kernels, function)
+    python = f"py{sys.version_info[0]}{sys.version_info[1]}"
+    (folder / f"pools.ensure_refs-12.{python}.nbi").touch()
+    (folder / f"{corelib.WARM_KERNEL}-43.py30.nbi").touch()  # another Python's
+    assert not corelib.cache_is_warm()
+    (folder / f"{corelib.WARM_KERNEL}-43.{python}.nbi").touch()
+    assert corelib.cache_is_warm()
+
+
 def test_numba_cache_folder_follows_the_core_sources(tmp_path):
     """Numba checks a cached kernel against its own file only, so a changed callee in another file
     would leave a stale caller: the cache folder is named by a digest of every core source file."""
