@@ -6,6 +6,9 @@ Usage: python tests/blender_sigint_like.py render --out DIR ... (the kdpreview a
 import ctypes
 import signal
 import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository: kd_addon need not be installed
 
 libc = ctypes.CDLL(None)
 libc.signal.argtypes, libc.signal.restype = [ctypes.c_int, ctypes.c_void_p], ctypes.c_void_p
