@@ -132,6 +132,31 @@ def test_live_update_never_stacks_even_across_a_module_reload():
     assert our_handlers() == []
 
 
+def interrupt(proc, *, rows=0, pause=0.0, signals=1):
+    """Wait for a command line's table header and `rows` frame rows, then `pause` seconds; send SIGINT
+    `signals` times 50 ms apart. Returns (exit code, seconds from the first SIGINT to the exit, stderr)."""
+    try:
+        while "frame  triangles" not in proc.stdout.readline():  # the header: the frame starts now
+            assert proc.poll() is None, proc.stderr.read()
+        for _ in range(rows):
+            proc.stdout.readline()
+        time.sleep(pause)
+        proc.send_signal(signal.SIGINT)
+        sent = time.perf_counter()
+        for _ in range(signals - 1):
+            time.sleep(0.05)
+            proc.send_signal(signal.SIGINT)
+        try:  # communicate, not wait: a child blocked writing to a full pipe would never exit
+            _, err = proc.communicate(timeout=60)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            _, err = proc.communicate()
+            pytest.fail(f"no exit 60 s after SIGINT; the child's stderr:\n{err[-4000:]}")
+        return proc.returncode, time.perf_counter() - sent, err
+    finally:
+        proc.kill()
+
+
 def test_ctrl_c_on_the_command_line_exits_at_once_mid_render(tmp_path):
     """SIGINT while the worker builds or traces a 1M-triangle frame: exit code 130 and the message at
     once, without waiting for the abandoned kernel work."""
@@ -143,22 +168,8 @@ def test_ctrl_c_on_the_command_line_exits_at_once_mid_render(tmp_path):
     proc = subprocess.Popen([PYTHON, "-m", "kd_addon", "render", str(blend), "--out", str(tmp_path / "out"),
                              "--frames", "1", "--resolution", "100", "--samples", "4096"],
                             cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        while "frame  triangles" not in proc.stdout.readline():  # the header: the frame starts now
-            assert proc.poll() is None, proc.stderr.read()
-        time.sleep(1.0)  # importing core and reading the scene, then kernel work on the worker
-        proc.send_signal(signal.SIGINT)
-        sent = time.perf_counter()
-        try:  # communicate, not wait: a child blocked writing to a full pipe would never exit
-            _, err = proc.communicate(timeout=60)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            _, err = proc.communicate()
-            pytest.fail(f"no exit 60 s after SIGINT; the child's stderr:\n{err[-4000:]}")
-        seconds = time.perf_counter() - sent
-    finally:
-        proc.kill()
-    assert proc.returncode == 130 and seconds < LOOSE_SECONDS, (proc.returncode, seconds, err[-4000:])
+    code, seconds, err = interrupt(proc, pause=1.0)  # importing core and reading the scene, then kernel work
+    assert code == 130 and seconds < LOOSE_SECONDS, (code, seconds, err[-4000:])
     assert "interrupted; no frame was written" in err
     assert not (tmp_path / "out" / "frame_0001.png").exists()
 
@@ -172,24 +183,8 @@ def test_ctrl_c_stops_blenders_command_whose_sigint_handler_python_cannot_see(tm
     proc = subprocess.Popen([PYTHON, str(REPO / "tests" / "blender_sigint_like.py"), "render", "--demo",
                              "--out", str(out), "--frames", "1-200", "--resolution", "10", "--samples", "64"],
                             cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        while "frame  triangles" not in proc.stdout.readline():
-            assert proc.poll() is None, proc.stderr.read()
-        proc.stdout.readline()  # frame 1's row: the animation is under way
-        proc.send_signal(signal.SIGINT)
-        sent = time.perf_counter()
-        time.sleep(0.05)
-        proc.send_signal(signal.SIGINT)
-        try:
-            _, err = proc.communicate(timeout=60)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            _, err = proc.communicate()
-            pytest.fail(f"no exit 60 s after SIGINT; the child's stderr:\n{err[-4000:]}")
-        seconds = time.perf_counter() - sent
-    finally:
-        proc.kill()
-    assert proc.returncode == 130 and seconds < LOOSE_SECONDS, (proc.returncode, seconds, err[-4000:])
+    code, seconds, err = interrupt(proc, rows=1, signals=2)  # after frame 1's row: the animation is under way
+    assert code == 130 and seconds < LOOSE_SECONDS, (code, seconds, err[-4000:])
     assert "Traceback" not in err
     report = json.loads((out / "report.json").read_text())
     written = sorted(p.name for p in out.glob("frame_*.png"))
