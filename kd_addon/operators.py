@@ -19,12 +19,13 @@ import bpy
 from . import output
 from .config import make_config
 from .errors import Cancelled, PreviewError
-from .pipeline import FrameJob, claim, release, run_job
+from .pipeline import FrameJob, claim, release, release_any, run_job
 from .properties import run_state, set_last_run
 from .sequence import SequenceJob
 
 TICK_SECONDS = 0.01  # timer interval
 TICK_BUDGET = 0.05  # seconds of work per timer event before handing control back to Blender
+_running = None  # the operator running modal, so that disabling the add-on can end it (unregister)
 
 
 def modal_possible(context) -> bool:
@@ -82,6 +83,8 @@ class _JobOperator:
         wm = context.window_manager
         self._timer = wm.event_timer_add(TICK_SECONDS, window=context.window)
         wm.modal_handler_add(self)
+        global _running
+        _running = self
         wm.progress_begin(0, 100)
         self._show(context, 0.0, job.status)
         return {"RUNNING_MODAL"}
@@ -141,6 +144,9 @@ class _JobOperator:
         return job
 
     def _end(self, context, job, error):
+        global _running
+        if _running is self:
+            _running = None
         release(job)
         state = run_state(context)
         state.running = False
@@ -233,7 +239,31 @@ def output_folder(path: str) -> Path:
     return Path(bpy.path.abspath(path))
 
 
+def end_running_operator() -> None:
+    """End a modal run as Esc would. Disabling the add-on unregisters the operator, and Blender then
+    drops its modal handler without calling cancel(), so the job stayed claimed and the panel
+    "running": every later render said "already running" until Blender restarted (outside QA)."""
+    global _running
+    op, _running = _running, None
+    if op is not None:
+        try:
+            op._end_modal(bpy.context, Cancelled("cancelled"))
+        except ReferenceError:  # Blender already freed the operator: its claim and state go below
+            pass
+    release_any()
+    try:  # the run state is stored in the window manager, so it outlives the add-on
+        for wm in bpy.data.window_managers:
+            wm.kd_preview_state.running = False
+    except AttributeError:  # bpy.data is restricted while Blender starts up
+        pass
+
+
 CLASSES = (KDPREVIEW_OT_render, KDPREVIEW_OT_render_animation)
 
 # Registers in order and unregisters in reverse.
-register, unregister = bpy.utils.register_classes_factory(CLASSES)
+register, _unregister_classes = bpy.utils.register_classes_factory(CLASSES)
+
+
+def unregister():
+    end_running_operator()
+    _unregister_classes()

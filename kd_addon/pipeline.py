@@ -370,6 +370,13 @@ def release(job) -> None:
         _active_job = None
 
 
+def release_any() -> None:
+    """End whichever job holds the claim: the add-on is being disabled, and no claim may outlive it
+    (a kernel call it abandoned still holds the kernel lock, which the next job waits for)."""
+    global _active_job
+    _active_job = None
+
+
 def job_running() -> bool:
     return _active_job is not None
 

@@ -21,6 +21,8 @@ from tests.addon_support import EVENT_PROPERTIES, addon, event, half_plane_scene
 
 import bpy  # noqa: E402
 
+import kd_addon  # noqa: E402
+
 from kd_addon import operators, pipeline  # noqa: E402
 from kd_addon.operators import KDPREVIEW_OT_render, KDPREVIEW_OT_render_animation, _JobOperator  # noqa: E402
 
@@ -176,4 +178,21 @@ def test_a_bug_inside_a_modal_tick_ends_the_run_and_the_next_render_works(modal,
     state = modal.window_manager.kd_preview_state
     assert op._timer is None and not state.running and not pipeline.job_running()
     assert state.status == "Error: a bug"
+    assert bpy.ops.kdpreview.render() == {"FINISHED"}
+
+
+def test_disabling_the_addon_mid_render_ends_the_run(modal):
+    """Blender drops an unregistered operator's modal handler without calling cancel(): the job stayed
+    claimed, and after re-enabling every render said "already running" until a restart (outside QA
+    in Blender 5.2.2). Disabling now ends the run as Esc would."""
+    half_plane_scene()
+    op = driver(KDPREVIEW_OT_render)
+    op.invoke(modal, None)
+    for _ in range(3):  # the status, then the build, then a trace step
+        assert op.modal(modal, event("TIMER")) == {"PASS_THROUGH"}
+    assert pipeline.job_running() and modal.window_manager.kd_preview_state.running
+    kd_addon.unregister()
+    kd_addon.register()
+    assert not pipeline.job_running() and not bpy.context.window_manager.kd_preview_state.running
+    assert op._timer is None
     assert bpy.ops.kdpreview.render() == {"FINISHED"}
