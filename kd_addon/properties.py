@@ -17,6 +17,12 @@ from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, Po
 from .config import DEFAULTS, MAX_DEPTH, MAX_SAMPLES
 
 
+# "//" paths are relative to the .blend: said so where Blender knows the option (4.5 on; 4.2 refuses
+# it), else setting one warns 'does not support blend relative "//" prefix' (outside QA, Blender 5.2).
+PATH_OPTIONS = {"ANIMATABLE"} | ({"PATH_SUPPORTS_BLEND_RELATIVE"} if "is_path_supports_blend_relative" in
+                                bpy.types.Property.bl_rna.properties else set())
+
+
 class KDPreviewSettings(bpy.types.PropertyGroup):
     """KD Preview render settings of a scene."""
 
@@ -66,9 +72,9 @@ class KDPreviewSettings(bpy.types.PropertyGroup):
                                           "unchanged objects' trees and unchanged images (for comparisons)",
                               default=DEFAULTS.rebuild_all)
     output_format: EnumProperty(name="Format", default=DEFAULTS.output_format,
-                                items=[("PNG", "PNG", "8-bit sRGB PNG"), ("OPEN_EXR", "OpenEXR", "Linear float EXR")])
+                                items=[("PNG", "PNG", "16-bit sRGB PNG"), ("OPEN_EXR", "OpenEXR", "Linear float EXR")])
     output_dir: StringProperty(name="Output Folder", description="Where Render Animation writes frames and report.json",
-                               default="//kd_preview/", subtype="DIR_PATH")
+                               default="//kd_preview/", subtype="DIR_PATH", options=PATH_OPTIONS)
     live_update: BoolProperty(name="Live Update", description="Re-render the preview whenever the frame changes",
                               default=False)
 

@@ -190,3 +190,21 @@ def test_numba_cache_folder_follows_the_core_sources(tmp_path):
     versioned = corelib._versioned(tmp_path / "cache")
     assert versioned.parent == tmp_path / "cache" and versioned.name == f"core-{corelib.source_digest()}"
     assert corelib._versioned(versioned) == versioned  # a child process inheriting the folder keeps it
+
+
+def test_a_blend_relative_output_folder_sets_without_a_warning():
+    """The default output folder is "//kd_preview/"; where Blender knows blend-relative paths (4.5 on)
+    setting one warned 'does not support blend relative "//" prefix' (outside QA, Blender 5.2)."""
+    import warnings
+
+    scenes.reset()
+    kd_addon.register()
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            bpy.context.scene.kd_preview.output_dir = "//elsewhere/"
+        assert bpy.context.scene.kd_preview.output_dir == "//elsewhere/"
+        if "is_path_supports_blend_relative" in bpy.types.Property.bl_rna.properties:
+            assert [str(w.message) for w in caught] == []
+    finally:
+        kd_addon.unregister()
