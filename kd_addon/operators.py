@@ -150,17 +150,16 @@ class _JobOperator:
         release(job)
         state = run_state(context)
         state.running = False
+        redraw_panels(context)  # on every outcome (a tag: the panel draws the final status later)
         try:
             self.cleanup(job)
             if error is None:
                 message = self.finish(context, job)
                 state.status, state.progress = message, 1.0
                 self.report({"INFO"}, message)
-                redraw_panels(context)  # else the panel shows the progress bar until the mouse moves over it
                 return {"FINISHED"}
         except PreviewError as late_error:
             error = late_error
-        redraw_panels(context)
         if isinstance(error, Cancelled):
             state.status = "Cancelled: the previous preview is unchanged"
             self.report({"WARNING"}, state.status)

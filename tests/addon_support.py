@@ -13,6 +13,7 @@ import subprocess
 import sys
 import tempfile
 from pathlib import Path
+from types import SimpleNamespace
 
 os.environ.setdefault("NUMBA_CACHE_DIR", os.path.join(tempfile.gettempdir(), "kd_preview_test_numba_cache"))
 
@@ -42,7 +43,6 @@ EVENT_PROPERTIES = {p.identifier for p in bpy.types.Event.bl_rna.properties}
 def event(kind):
     """A stand-in for the bpy.types.Event Blender passes to an operator's modal(): the real Event's
     properties and no other (reading another raises AttributeError, as on the real one)."""
-    from types import SimpleNamespace
     return SimpleNamespace(**({name: None for name in EVENT_PROPERTIES} | {"type": kind, "value": "PRESS"}))
 
 
