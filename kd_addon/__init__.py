@@ -12,10 +12,10 @@ from . import early_interrupt
 if sys.argv[:1] == ["-m"]:  # `python -m kd_addon`, while Python locates __main__ (documented for -m)
     early_interrupt.install()
 
-from . import cli, live_update, operators, panel, properties, tree_cache  # noqa: E402
+from . import cli, image_keeping, live_update, operators, panel, properties, tree_cache  # noqa: E402
 
 # Registration order: settings before the operators and panel that use them.
-MODULES = (properties, operators, panel, live_update, cli)
+MODULES = (properties, operators, panel, live_update, image_keeping, cli)
 
 
 def register():

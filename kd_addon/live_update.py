@@ -1,8 +1,7 @@
 """Optional re-render on frame change (scene.kd_preview.live_update, off by default).
 
 The handler is persistent (it survives loading another file) and registered
-at most once: register/unregister match it by module and name, so even a
-copy left behind by a reloaded module is removed rather than stacked.
+at most once (app_handlers.py).
 It renders synchronously, which makes playback wait for each frame; that is
 the point of the option. It stays out while an operator renders (that
 operator's own frame_set calls would otherwise re-render every frame twice)
@@ -14,7 +13,7 @@ from __future__ import annotations
 
 import bpy
 
-from . import output
+from . import app_handlers, output
 from .config import make_config
 from .errors import PreviewError
 from .pipeline import claim, job_running, release, render_frame
@@ -41,21 +40,9 @@ def kd_preview_frame_change(scene, depsgraph=None):
     state.status = f"Live: frame {result.frame}, {result.total_ms:.0f} ms"
 
 
-def _ours(handler) -> bool:
-    return getattr(handler, "__name__", "") == kd_preview_frame_change.__name__ and \
-        getattr(handler, "__module__", "") == __name__
-
-
-def remove_handlers() -> None:
-    handlers = bpy.app.handlers.frame_change_post
-    for handler in [h for h in handlers if _ours(h)]:
-        handlers.remove(handler)
-
-
 def register():
-    remove_handlers()
-    bpy.app.handlers.frame_change_post.append(kd_preview_frame_change)
+    app_handlers.install("frame_change_post", kd_preview_frame_change)
 
 
 def unregister():
-    remove_handlers()
+    app_handlers.remove("frame_change_post", kd_preview_frame_change)

@@ -1,7 +1,8 @@
 """Getting a finished frame into Blender: the "KD Preview" image, image editors, and files.
 
 Only called with a complete frame, never with a partial one, so a cancelled
-or failed run leaves the previous preview untouched.
+or failed run leaves the previous preview untouched. The last frame stored is
+remembered, so image_keeping.py can write it back where Blender's undo loses it.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ import numpy as np
 
 IMAGE_NAME = "KD Preview"
 IMAGE_TAG = "kd_preview_image"  # custom property marking the image this add-on owns
+_last_frame: np.ndarray | None = None  # the last frame stored in this file and session
 
 
 def preview_image(width: int, height: int) -> bpy.types.Image:
@@ -22,17 +24,27 @@ def preview_image(width: int, height: int) -> bpy.types.Image:
     the image carrying IMAGE_TAG (or an untagged float "KD Preview" from an earlier version, adopted);
     a user's own image of that name is never touched: ours then gets Blender's next free name.
     """
-    image = next((im for im in bpy.data.images if im.get(IMAGE_TAG)), None)
+    image = tagged_image()
     if image is None:
         named = bpy.data.images.get(IMAGE_NAME)
         if named is not None and named.source == "GENERATED" and named.is_float:
             image = named
-    if image is None or image.source != "GENERATED" or not image.is_float:
+    if image is None or not _writable(image):
         image = bpy.data.images.new(IMAGE_NAME, width, height, alpha=True, float_buffer=True)
     elif tuple(image.size) != (width, height):
         image.scale(width, height)
     image[IMAGE_TAG] = True
     return image
+
+
+def tagged_image() -> bpy.types.Image | None:
+    return next((im for im in bpy.data.images if im.get(IMAGE_TAG)), None)
+
+
+def _writable(image: bpy.types.Image) -> bool:
+    """A float image whose pixels live in memory (generated) or in the .blend (packed on save by
+    image_keeping.py): one unpacked to a file is the user's now."""
+    return image.is_float and (image.source == "GENERATED" or image.packed_file is not None)
 
 
 def blender_pixels(image: np.ndarray) -> np.ndarray:
@@ -41,23 +53,50 @@ def blender_pixels(image: np.ndarray) -> np.ndarray:
 
 
 def store_preview(image: np.ndarray) -> bpy.types.Image:
-    """Write a finished frame into the preview image and show it in an image editor."""
-    height, width = image.shape[:2]
-    target = preview_image(width, height)
-    target.pixels.foreach_set(blender_pixels(image))
-    target.update()
+    """Write a finished frame into the preview image and show it in an image editor.
+
+    The frame is remembered (not copied: callers pass a finished frame and never change it)."""
+    global _last_frame
+    target = _write(image)
+    _last_frame = image
     show_in_image_editor(target)
     return target
 
 
-def show_in_image_editor(image: bpy.types.Image) -> None:
-    """Redraw editors showing the preview; if none does, switch the first image editor to it."""
+def restore_last_frame() -> bpy.types.Image | None:
+    """Write the last stored frame back into the preview image (re-created if it is gone), shown
+    only in an image editor showing nothing: the user's choice of image stays. None before any."""
+    if _last_frame is None:
+        return None
+    target = _write(_last_frame)
+    show_in_image_editor(target, take_busy_editor=False)
+    return target
+
+
+def forget_last_frame() -> None:
+    global _last_frame
+    _last_frame = None
+
+
+def _write(image: np.ndarray) -> bpy.types.Image:
+    height, width = image.shape[:2]
+    target = preview_image(width, height)
+    target.pixels.foreach_set(blender_pixels(image))
+    target.update()
+    return target
+
+
+def show_in_image_editor(image: bpy.types.Image, *, take_busy_editor: bool = True) -> None:
+    """Redraw editors showing the preview; if none does, switch an image editor showing nothing to
+    it, else (take_busy_editor) the first image editor."""
     editors = [area for window in bpy.context.window_manager.windows
                for area in window.screen.areas if area.type == "IMAGE_EDITOR"]
     showing = [area for area in editors if area.spaces.active.image == image]
-    if not showing and editors:
-        editors[0].spaces.active.image = image
-        showing = editors[:1]
+    if not showing:
+        showing = [area for area in editors if area.spaces.active.image is None][:1]
+        showing = showing or (editors[:1] if take_busy_editor else [])
+        for area in showing:
+            area.spaces.active.image = image
     for area in showing:
         area.tag_redraw()
 

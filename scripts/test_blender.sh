@@ -31,7 +31,5 @@ fi
 "$venv/bin/python" -m pip install --quiet --upgrade pip
 "$venv/bin/python" -m pip install --quiet "bpy==$version" "numba==0.68.1" "llvmlite==0.50.0" "pytest==9.2.0"
 "$venv/bin/python" -m pip install --quiet --no-deps "numpy==$numpy"  # last: the bpy wheels take any numpy
-exec "$venv/bin/python" -m pytest -p no:cacheprovider \
-  tests/test_addon_cli.py tests/test_addon_config.py tests/test_addon_extension.py tests/test_addon_modal.py \
-  tests/test_addon_register.py tests/test_addon_render.py tests/test_addon_reuse.py tests/test_addon_scene_input.py \
+exec "$venv/bin/python" -m pytest -p no:cacheprovider tests/test_addon_*.py \
   tests/test_extract.py tests/test_reliability_cancel.py tests/test_reliability_scenes.py "$@"

@@ -22,8 +22,12 @@ def registered_names():
     return {cls.__name__ for cls in CLASSES if cls.is_registered}
 
 
+HANDLER_KINDS = ("frame_change_post", "undo_post", "redo_post", "save_pre", "load_post")
+
+
 def our_handlers():
-    return [h for h in bpy.app.handlers.frame_change_post if getattr(h, "__module__", "").endswith("live_update")]
+    return [h for kind in HANDLER_KINDS for h in getattr(bpy.app.handlers, kind)
+            if getattr(h, "__module__", "").startswith("kd_addon.")]
 
 
 def test_register_unregister_twice_leaves_nothing():
@@ -33,7 +37,7 @@ def test_register_unregister_twice_leaves_nothing():
         assert registered_names() == {cls.__name__ for cls in CLASSES}
         assert hasattr(bpy.types.Scene, "kd_preview") and hasattr(bpy.types.WindowManager, "kd_preview_state")
         assert hasattr(bpy.ops.kdpreview, "render") and bpy.ops.kdpreview.render.poll() is not None
-        assert len(our_handlers()) == 1 and cli._handle is not None
+        assert len(our_handlers()) == len(HANDLER_KINDS) and cli._handle is not None
         kd_addon.unregister()
         assert registered_names() == set()
         assert not hasattr(bpy.types.Scene, "kd_preview")
@@ -46,7 +50,7 @@ def test_handler_never_stacks():
     live_update.register()
     live_update.register()
     try:
-        assert len(our_handlers()) == 1
+        assert [h.__name__ for h in our_handlers()] == ["kd_preview_frame_change"]
     finally:
         live_update.unregister()
     assert our_handlers() == []

@@ -1,0 +1,132 @@
+"""The preview image keeps its pixels through undo, redo, and saving and reopening the .blend.
+
+Without image_keeping.py, bpy 5.0 regenerates the image black on redo, removes it when undo goes
+back past the first render, and a reopened file holds a black image: each test fails that way.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tests.addon_support import addon, half_plane_scene, preview_pixels  # noqa: F401
+
+import bpy  # noqa: E402
+
+from kd_addon import image_keeping, output  # noqa: E402
+from kd_addon.output import IMAGE_NAME, IMAGE_TAG  # noqa: E402
+
+
+def image_editor() -> bpy.types.Area:
+    area = bpy.context.window.screen.areas[0]
+    area.type = "IMAGE_EDITOR"
+    return area
+
+
+def rendered() -> np.ndarray:
+    assert bpy.ops.kdpreview.render() == {"FINISHED"}
+    return preview_pixels()
+
+
+def push_undo(message: str) -> None:
+    bpy.ops.ed.undo_push(message=message)
+
+
+def test_undo_past_the_first_render_and_redo_keep_the_last_frame(addon):  # noqa: F811
+    scene = half_plane_scene()
+    area = image_editor()
+    push_undo("before any render")
+    first = rendered()
+    push_undo("rendered")
+    scene.objects["Box"].location.x = -1.0  # another frame: the image must follow the last render
+    push_undo("moved")
+    last = rendered()
+    assert np.abs(last - first).max() > 0.1
+    push_undo("rendered again")
+    for _ in range(3):
+        assert bpy.ops.ed.undo() == {"FINISHED"}
+        assert np.array_equal(preview_pixels(), last)  # undo's image: regenerated, or gone at step 1
+    assert bpy.context.scene.objects["Box"].location.x != -1.0  # undo itself did its work (scene re-read)
+    assert area.spaces.active.image == bpy.data.images[IMAGE_NAME]  # the editor shows it again
+    for _ in range(3):
+        assert bpy.ops.ed.redo() == {"FINISHED"}
+        assert np.array_equal(preview_pixels(), last)
+    assert len([im for im in bpy.data.images if im.get(IMAGE_TAG)]) == 1
+
+
+def test_undo_leaves_an_editor_showing_another_image_alone(addon):  # noqa: F811
+    half_plane_scene()
+    area = image_editor()
+    bpy.data.images.new("Mine", 4, 4).use_fake_user = True
+    push_undo("before any render")
+    rendered()
+    push_undo("rendered")
+    area.spaces.active.image = bpy.data.images["Mine"]
+    assert bpy.ops.ed.undo() == {"FINISHED"}  # the preview image is removed and re-created
+    assert IMAGE_NAME in bpy.data.images and area.spaces.active.image == bpy.data.images["Mine"]
+
+
+def test_a_saved_file_reopens_with_the_last_frame(addon, tmp_path):  # noqa: F811
+    scene = half_plane_scene()
+    image_editor()
+    first = rendered()
+    path = str(tmp_path / "scene.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    assert np.array_equal(preview_pixels(), first)
+    assert bpy.data.images[IMAGE_NAME].packed_file is not None
+    # The packed image is written into again (not replaced), and saved again.
+    scene = bpy.context.scene
+    scene.objects["Box"].location.x = -1.0
+    second = rendered()
+    assert np.abs(second - first).max() > 0.1
+    assert [im.name for im in bpy.data.images if im.get(IMAGE_TAG)] == [IMAGE_NAME]
+    bpy.ops.wm.save_mainfile()
+    bpy.ops.wm.open_mainfile(filepath=path)
+    assert np.array_equal(preview_pixels(), second)
+
+
+def test_an_image_no_editor_shows_is_not_packed(addon, tmp_path):  # noqa: F811
+    """The file would not keep it (no users): packing it would only cost the save its time."""
+    half_plane_scene()
+    rendered()
+    image = bpy.data.images[IMAGE_NAME]
+    assert image.users == 0
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "scene.blend"))
+    assert image.packed_file is None
+
+
+def test_an_unchanged_image_is_not_packed_again(addon, tmp_path):  # noqa: F811
+    half_plane_scene()
+    image_editor()
+    rendered()
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "scene.blend"))
+    packed = bpy.data.images[IMAGE_NAME].packed_file
+    assert packed is not None
+    bpy.ops.wm.save_mainfile()
+    assert bpy.data.images[IMAGE_NAME].packed_file == packed  # same packed data: no new EXR written
+
+
+def test_loading_a_file_forgets_the_last_frame(addon):  # noqa: F811
+    """Another file's undo must not bring this file's preview into it."""
+    half_plane_scene()
+    rendered()
+    bpy.ops.wm.read_homefile(use_empty=True)
+    push_undo("new file")
+    bpy.context.scene.name = "Renamed"
+    push_undo("renamed")
+    assert bpy.ops.ed.undo() == {"FINISHED"}
+    assert IMAGE_NAME not in bpy.data.images
+    assert output.restore_last_frame() is None
+
+
+@pytest.mark.parametrize("kind", ["undo_post", "redo_post", "save_pre", "load_post"])
+def test_handlers_are_registered_once_and_removed(addon, kind):  # noqa: F811
+    def ours():
+        return [h for h in getattr(bpy.app.handlers, kind) if h.__module__ == "kd_addon.image_keeping"]
+    assert len(ours()) == 1
+    image_keeping.register()
+    assert len(ours()) == 1
+    image_keeping.unregister()
+    assert ours() == []
+    image_keeping.register()  # for the fixture's unregister
