@@ -147,12 +147,14 @@ def load_core():
 
 
 WARM_KERNEL = "render_kernels.add_samples"  # the renderer's sampling kernel, the longest to compile
+DENOISE_KERNEL = "denoise.atrous_pass"  # the denoiser's filter, compiled on Denoise's first use
 
 
-def cache_is_warm() -> bool:
-    """Whether the cache folder already holds the sampling kernel compiled for this Python (so the
-    first run only loads kernels). Any index file was not enough: the first appears seconds into a
-    compile of minutes, and the panel said "Loading compiled kernels" for four minutes (outside QA)."""
+def cache_is_warm(kernel: str = WARM_KERNEL) -> bool:
+    """Whether the cache folder already holds `kernel` ("module.function") compiled for this Python
+    (so the first run only loads kernels). Any index file was not enough: the first appears seconds
+    into a compile of minutes, and the panel said "Loading compiled kernels" for four minutes
+    (outside QA)."""
     folder = numba_cache_dir()
     python = f"py{sys.version_info[0]}{sys.version_info[1]}"
-    return folder.is_dir() and any(folder.rglob(f"{WARM_KERNEL}-*.{python}.nbi"))
+    return folder.is_dir() and any(folder.rglob(f"{kernel}-*.{python}.nbi"))

@@ -48,9 +48,11 @@ KERNEL_LOCK = threading.Lock()
 POLL_SECONDS = 0.05  # longest a tick waits for the worker: the bound on cancel latency
 COMPILING_STATUS = "Compiling kernels (first run)…"
 LOADING_STATUS = "Loading compiled kernels (first run)…"
+DENOISE_COMPILING_STATUS = "Compiling the denoiser (first use)…"
 _kernels_ready = False  # set once a frame has traced in this process: no compile cost left
-# ... except the pixel-reuse kernels, first run by the first frame continued from the one before
+# ... except the pixel-reuse kernels, first run by the first frame continued from the one before,
 _reuse_kernels_ready = False
+_denoiser_ready = False  # ... and the denoiser's, first run by the first denoised frame
 
 
 def _ms_since(t0: float) -> float:
@@ -128,6 +130,7 @@ class FrameJob:
         self._state = None  # tree_cache.SceneState
         self._image_key = None
         self._reused_image = None
+        self._finished = None  # (image, lazy tree's stats or None, PixelState) once the worker made the image
         self._pending: BackgroundCall | None = None  # the kernel call running on the worker
 
     # -- state the operators show ------------------------------------------
@@ -136,7 +139,7 @@ class FrameJob:
     def done(self) -> bool:
         if self._pending is not None:
             return False
-        return self._reused_image is not None or (self.renderer is not None and self.renderer.done)
+        return self._reused_image is not None or self._finished is not None
 
     @property
     def progress(self) -> float:
@@ -153,6 +156,9 @@ class FrameJob:
             return LOADING_STATUS if corelib.cache_is_warm() else COMPILING_STATUS
         if self.renderer is None:
             return "Building kd-tree…" if self._pending is not None else "Reading scene…"
+        if self.renderer.done and self.config.denoise:
+            first_use = not (_denoiser_ready or corelib.cache_is_warm(corelib.DENOISE_KERNEL))
+            return DENOISE_COMPILING_STATUS if first_use else "Denoising…"
         return f"Tracing: {self.renderer.samples_done}/{self.renderer.target_samples} samples"
 
     # -- work ---------------------------------------------------------------
@@ -168,7 +174,7 @@ class FrameJob:
         elif self.renderer is None and self._reused_image is None:
             self.prepare()
         elif not self.done:
-            self.step()
+            self.step() if not self.renderer.done else self.finish()
         return self.done
 
     def prepare(self) -> None:
@@ -323,6 +329,20 @@ class FrameJob:
         self._timings["trace_ms"] += _ms_since(t0)
         _kernels_ready = True
 
+    def finish(self) -> None:
+        """The image from the samples, on the worker: denoising takes a moment, and on its first use
+        ~11 s of compiling, during which Blender's UI (and Esc) must stay responsive."""
+        self._pending = BackgroundCall(KERNEL_LOCK, self._finish_once)
+
+    def _finish_once(self) -> None:
+        global _denoiser_ready
+        t0 = time.perf_counter()
+        image = np.array(self.renderer.image(denoise=self.config.denoise), dtype=np.float32, copy=True)
+        lazy = self.renderer.scene.lazy_tree is not None  # then the stats of what the rays made it build
+        self._finished = (image, self.renderer.scene.stats() if lazy else None, self.renderer.pixel_state())
+        self._timings["other_ms"] += _ms_since(t0)
+        _denoiser_ready = _denoiser_ready or self.config.denoise
+
     def result(self) -> FrameResult:
         """The finished frame; call only once `done`. Also remembers it for image reuse."""
         if not self.done:
@@ -332,11 +352,9 @@ class FrameJob:
             return FrameResult(image=self._reused_image.copy(), extract_ms=t["extract_ms"], build_ms=0.0, trace_ms=0.0,
                                total_ms=sum(t.values()), rays=0, rays_saved=0, first_run=False,
                                pixels_reused=int((self._reused_image[..., 3] > 0).sum()), **self._info)
-        with KERNEL_LOCK:
-            image = np.array(self.renderer.image(denoise=self.config.denoise), dtype=np.float32, copy=True)
-            if self.renderer.scene.lazy_tree is not None:  # what the rays made it build, not the start
-                self._info["tree_stats"] = self.renderer.scene.stats()
-            pixels = self.renderer.pixel_state()
+        image, lazy_stats, pixels = self._finished
+        if lazy_stats is not None:
+            self._info["tree_stats"] = lazy_stats
         result = FrameResult(image=image, extract_ms=t["extract_ms"], build_ms=t["build_ms"], trace_ms=t["trace_ms"],
                              total_ms=sum(t.values()), rays=int(self.renderer.rays_traced),
                              rays_saved=int(self.renderer.rays_saved), samples=int(self.renderer.samples_done),

@@ -12,6 +12,7 @@ import json
 import os
 import signal
 import subprocess
+import threading
 import time
 from types import SimpleNamespace
 
@@ -92,6 +93,35 @@ def test_cancel_callback_during_tracing_returns_at_once(addon):  # noqa: F811
         raise AssertionError("not cancelled")
     assert returned - asked[0] < LOOSE_SECONDS and job.renderer.samples_done < 4096
     assert IMAGE_NAME not in bpy.data.images
+
+
+def test_denoising_runs_on_the_worker_and_says_so(addon, monkeypatch):  # noqa: F811
+    """Found by outside QA: Denoise's first use compiled its kernels (~11 s) inside result(), on
+    Blender's main thread, under a frozen "Tracing: 8/8 samples": Esc was not seen until it ended."""
+    scene = half_plane_scene()
+    scene.kd_preview.denoise = True
+    job = pipeline.FrameJob(scene, bpy.context.evaluated_depsgraph_get(), make_config(scene.kd_preview))
+    while job.renderer is None or not job.renderer.done or job._pending is not None:
+        job.tick()
+    release, threads = threading.Event(), []
+    image = job.renderer.image
+
+    def held_image(denoise=False):  # the denoiser, held until the main thread has checked on it
+        threads.append((threading.current_thread() is threading.main_thread(), release.wait(60)))
+        return image(denoise)
+
+    monkeypatch.setattr(job.renderer, "image", held_image)
+    monkeypatch.setattr(pipeline, "_denoiser_ready", False)
+    monkeypatch.setattr(pipeline.corelib, "cache_is_warm", lambda kernel=None: False)
+    assert job.tick() is False and not job.done  # back while the image is being made
+    assert job.status == pipeline.DENOISE_COMPILING_STATUS
+    release.set()
+    while not job.tick():
+        pass
+    assert threads == [(False, True)]  # on the worker, released by this thread
+    assert job.status == "Denoising…"  # the denoiser ran in this process: no compile left
+    result = job.result()
+    assert result.image.shape == (32, 64, 4) and (result.image[:, :32, 3] == 1.0).all()
 
 
 def test_frame_change_during_a_render_cannot_change_it(modal):  # noqa: F811
