@@ -35,7 +35,7 @@ def kd_preview_frame_change(scene, depsgraph=None):
         return
     finally:
         release(token)
-    output.store_preview(result.image)
+    output.store_preview(result.image, open_view=False)  # no windows opening during playback
     set_last_run(state, result.summary())
     state.status = f"Live: frame {result.frame}, {result.total_ms:.0f} ms"
 

@@ -52,14 +52,15 @@ def blender_pixels(image: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(image[::-1], dtype=np.float32).ravel()
 
 
-def store_preview(image: np.ndarray) -> bpy.types.Image:
-    """Write a finished frame into the preview image and show it in an image editor.
+def store_preview(image: np.ndarray, *, open_view: bool = True) -> bpy.types.Image:
+    """Write a finished frame into the preview image and show it in an image editor (with
+    `open_view`, one opened as Blender opens its render view when no window has any).
 
     The frame is remembered (not copied: callers pass a finished frame and never change it)."""
     global _last_frame
     target = _write(image)
     _last_frame = image
-    show_in_image_editor(target)
+    show_in_image_editor(target, open_view=open_view)
     return target
 
 
@@ -69,7 +70,7 @@ def restore_last_frame() -> bpy.types.Image | None:
     if _last_frame is None:
         return None
     target = _write(_last_frame)
-    show_in_image_editor(target, take_busy_editor=False)
+    show_in_image_editor(target, take_busy_editor=False, open_view=False)
     return target
 
 
@@ -86,11 +87,12 @@ def _write(image: np.ndarray) -> bpy.types.Image:
     return target
 
 
-def show_in_image_editor(image: bpy.types.Image, *, take_busy_editor: bool = True) -> None:
+def show_in_image_editor(image: bpy.types.Image, *, take_busy_editor: bool = True,
+                         open_view: bool = False) -> None:
     """Redraw editors showing the preview; if none does, switch an image editor showing nothing to
-    it, else (take_busy_editor) the first image editor."""
-    editors = [area for window in bpy.context.window_manager.windows
-               for area in window.screen.areas if area.type == "IMAGE_EDITOR"]
+    it, else (take_busy_editor) the first image editor; if there is none (the default Layout
+    workspace has none) and `open_view`, open one where Blender shows renders."""
+    editors = image_editors() or (open_render_view() if open_view else [])
     showing = [area for area in editors if area.spaces.active.image == image]
     if not showing:
         showing = [area for area in editors if area.spaces.active.image is None][:1]
@@ -99,6 +101,25 @@ def show_in_image_editor(image: bpy.types.Image, *, take_busy_editor: bool = Tru
             area.spaces.active.image = image
     for area in showing:
         area.tag_redraw()
+
+
+def image_editors() -> list:
+    return [area for window in bpy.context.window_manager.windows
+            for area in window.screen.areas if area.type == "IMAGE_EDITOR"]
+
+
+def open_render_view() -> list:
+    """Image editors opened by render.view_show, as F12 opens them (Preferences > Interface >
+    Temporary Editors > Render In: a new window, full screen, the largest area, or nowhere), showing
+    Render Result, which the caller replaces with the preview. Without a window (background mode,
+    or a handler's restricted context) nothing opens."""
+    if bpy.app.background or bpy.context.window is None:
+        return []
+    try:
+        bpy.ops.render.view_show("INVOKE_DEFAULT")
+    except RuntimeError:  # the operator's poll failed in this context
+        return []
+    return image_editors()
 
 
 def save_frame(image: np.ndarray, path: Path, file_format: str) -> Path:

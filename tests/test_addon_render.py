@@ -17,7 +17,7 @@ from tests.addon_support import addon, exr_channels, half_plane_scene, preview_p
 import bpy  # noqa: E402
 import numpy as np  # noqa: E402
 
-from kd_addon import live_update, pipeline  # noqa: E402
+from kd_addon import live_update, output, pipeline  # noqa: E402
 from kd_addon.config import make_config  # noqa: E402
 from kd_addon.errors import Cancelled, PreviewError  # noqa: E402
 from kd_addon.output import IMAGE_NAME, save_frame  # noqa: E402
@@ -403,6 +403,35 @@ def test_a_users_image_named_kd_preview_is_left_alone(addon):  # noqa: F811
     ours = [im for im in bpy.data.images if im.get("kd_preview_image")]
     assert len(ours) == 1 and ours[0].is_float and ours[0] != mine  # found again by its tag, not duplicated
     check_half_plane_image(preview_pixels(ours[0].name))
+
+
+def test_without_an_image_editor_a_render_opens_one_where_blender_shows_renders(addon, monkeypatch):  # noqa: F811
+    """Found in a real Blender: the default Layout workspace has no Image Editor, so Render showed
+    nothing. render.view_show cannot open anything in background mode (checked: it returns
+    PASS_THROUGH), so it is stood in for here by what it does with Render In: Image Editor."""
+    scene = half_plane_scene()
+    assert output.image_editors() == [] and output.open_render_view() == []  # background: nothing opens
+    opened = []
+
+    def render_view():
+        area = bpy.context.window.screen.areas[-1]
+        area.type = "IMAGE_EDITOR"
+        area.spaces.active.image = bpy.data.images.new("Render Result", 4, 4)  # what view_show shows
+        opened.append(area)
+        return output.image_editors()
+
+    monkeypatch.setattr(output, "open_render_view", render_view)
+    assert bpy.ops.kdpreview.render() == {"FINISHED"}
+    assert len(opened) == 1 and opened[0].spaces.active.image == bpy.data.images[IMAGE_NAME]
+    opened[0].spaces.active.image = None
+    scene.kd_preview.rebuild_all = True
+    assert bpy.ops.kdpreview.render() == {"FINISHED"}
+    assert len(opened) == 1 and opened[0].spaces.active.image == bpy.data.images[IMAGE_NAME]  # reused
+    opened[0].type = "VIEW_3D"
+    scene.kd_preview.live_update = True
+    scene.frame_set(2)  # live update renders, but never opens an editor during playback
+    assert json.loads(bpy.context.window_manager.kd_preview_state.last_run)["frame"] == 2
+    assert len(opened) == 1 and output.image_editors() == []
 
 
 def test_preview_image_is_resized_in_place_and_shown_in_an_image_editor(addon):  # noqa: F811
