@@ -173,8 +173,10 @@ class FrameJob:
             pending.result()  # the worker's exception, if any, is raised here
         elif self.renderer is None and self._reused_image is None:
             self.prepare()
-        elif not self.done:
-            self.step() if not self.renderer.done else self.finish()
+        elif self.renderer is not None and not self.renderer.done:
+            self.step()
+        elif self.renderer is not None and not self.done:
+            self.finish()
         return self.done
 
     def prepare(self) -> None:
