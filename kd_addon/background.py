@@ -40,6 +40,12 @@ def abandoned_work_running() -> bool:
     return any(not call.finished for call in list(_calls))
 
 
+def other_work_running(call: BackgroundCall) -> bool:
+    """True while a kernel call other than `call` still runs: a cancelled job's, which holds the lock
+    `call` waits for (one job runs at a time, so any other call is an abandoned one)."""
+    return any(other is not call and not other.finished for other in list(_calls))
+
+
 def exit_now_if_abandoned(code: int) -> None:
     """End the process with `code` at once, skipping the interpreter's (and Blender's) teardown, if a
     cancelled kernel call still runs: the bpy 4.2 module crashed in that teardown beside the worker,

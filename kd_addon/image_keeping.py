@@ -7,8 +7,10 @@ pixels (black on reopen). So:
 - after undo and redo, the last frame stored in this session is written back:
   like Render Result, the preview shows the last render whatever the undo step;
 - before a save, the image is packed into the .blend (OpenEXR, float, lossless)
-  if it changed since it was last packed and the file will keep it (an image
-  editor shows it): what Blender's own "save modified images" does on quit;
+  if it changed since it was last packed and the file will keep it (it has
+  users: an image editor shows it, or showed it since the file was opened,
+  whose user Blender keeps until then; without the pixels the file would keep a
+  black image): what Blender's own "save modified images" does on quit;
 - loading a file forgets the last frame: the new file's preview is its own.
 """
 

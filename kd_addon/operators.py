@@ -79,7 +79,7 @@ class _JobOperator:
         job = self._start(context)
         if job is None:
             return {"CANCELLED"}
-        self._job, self._started = job, False
+        self._job, self._started, self._ended = job, False, False
         wm = context.window_manager
         self._timer = wm.event_timer_add(TICK_SECONDS, window=context.window)
         wm.modal_handler_add(self)
@@ -93,6 +93,11 @@ class _JobOperator:
         """Tick the job on timer events. Blender's Event does not say which timer fired, so any
         window timer ticks it (a tick is budgeted, so a foreign timer costs at most TICK_BUDGET), and
         every event is passed on, so other modal operators get their own timers and input."""
+        if self._ended:
+            # Blender kept calling an operator that already finished: it does when the finish opened a
+            # window (render.view_show, Render In: New Window; seen in Blender 5.2). Its job is published;
+            # finishing it again would publish an old frame over a newer one and clear a new run's state.
+            return {"FINISHED", "PASS_THROUGH"}
         try:
             if event.type == "ESC":
                 return self._end_modal(context, Cancelled("cancelled"))
@@ -113,7 +118,8 @@ class _JobOperator:
 
     def cancel(self, context):
         """Blender calls this when the modal operator is killed (e.g. the file is closed)."""
-        self._end_modal(context, Cancelled("cancelled"))
+        if not self._ended:
+            self._end_modal(context, Cancelled("cancelled"))
 
     def _tick_for(self, budget: float) -> bool:
         deadline = time.perf_counter() + budget
@@ -123,6 +129,7 @@ class _JobOperator:
         return True
 
     def _end_modal(self, context, error):
+        self._ended = True
         wm = context.window_manager
         if getattr(self, "_timer", None) is not None:
             wm.event_timer_remove(self._timer)

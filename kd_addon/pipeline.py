@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import corelib, memory_limit, scene_input, tree_cache
+from . import background, corelib, memory_limit, scene_input, tree_cache
 from .background import BackgroundCall
 from .config import RenderConfig, frame_size
 from .errors import Cancelled, PreviewError
@@ -49,6 +49,7 @@ POLL_SECONDS = 0.05  # longest a tick waits for the worker: the bound on cancel 
 COMPILING_STATUS = "Compiling kernels (first run)…"
 LOADING_STATUS = "Loading compiled kernels (first run)…"
 DENOISE_COMPILING_STATUS = "Compiling the denoiser (first use)…"
+WAITING_STATUS = "Waiting for the cancelled run's last kernel call to end…"
 _kernels_ready = False  # set once a frame has traced in this process: no compile cost left
 # ... except the pixel-reuse kernels, first run by the first frame continued from the one before,
 _reuse_kernels_ready = False
@@ -152,6 +153,8 @@ class FrameJob:
 
     @property
     def status(self) -> str:
+        if self._pending is not None and background.other_work_running(self._pending):
+            return WAITING_STATUS  # a cancelled run's build or denoiser compile holds the kernel lock
         if not _kernels_ready:
             return LOADING_STATUS if corelib.cache_is_warm() else COMPILING_STATUS
         if self.renderer is None:

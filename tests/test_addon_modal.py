@@ -20,6 +20,7 @@ import pytest
 from tests.addon_support import EVENT_PROPERTIES, addon, event, half_plane_scene, preview_pixels  # noqa: F401
 
 import bpy  # noqa: E402
+import numpy as np  # noqa: E402
 
 import kd_addon  # noqa: E402
 
@@ -104,6 +105,28 @@ def test_modal_render_ticks_to_the_end(modal, monkeypatch):
     assert preview_pixels()[:, :32, 3].min() == 1.0
     assert json.loads(state.last_run)["samples"] == 8
     assert op.reports[-1][0] == {"INFO"}
+
+
+def test_an_operator_called_after_it_finished_leaves_the_next_run_alone(modal):
+    """Outside QA (Blender 5.2, Render In: New Window): the finish opened the render window inside
+    modal(), and Blender kept calling the finished operator; its next timer event published its frame
+    again, printed its report again and marked the next, running render as not running."""
+    scene = half_plane_scene()
+    first = driver(KDPREVIEW_OT_render)
+    first.invoke(modal, None)
+    assert timer_events(first, modal)[0] == {"FINISHED"}
+    reports, frame = list(first.reports), preview_pixels().copy()
+    scene.kd_preview.ao_distance = 3.0
+    second = driver(KDPREVIEW_OT_render)
+    second.invoke(modal, None)
+    second.modal(modal, event("TIMER"))
+    state = modal.window_manager.kd_preview_state
+    for kind in ("TIMER", "MOUSEMOVE", "ESC", "TIMER"):
+        assert first.modal(modal, event(kind)) == {"FINISHED", "PASS_THROUGH"}  # removed, event passed on
+    first.cancel(modal)
+    assert state.running and pipeline.job_running() and first.reports == reports
+    assert timer_events(second, modal)[0] == {"FINISHED"}
+    assert np.abs(preview_pixels() - frame).max() > 0.0  # the second render's frame (longer AO rays)
 
 
 def test_esc_cancels_and_keeps_the_previous_image(modal):

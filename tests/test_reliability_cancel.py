@@ -67,9 +67,13 @@ def test_esc_during_a_long_build_returns_at_once_and_the_next_render_is_right(mo
     # The abandoned build still holds the kernel lock; the next render waits for it, then is exact.
     # (rebuild_all: the scene is the reference's again, so it would otherwise reuse that image at once.)
     scene.kd_preview.rebuild_all = True
+    following = pipeline.FrameJob(scene, bpy.context.evaluated_depsgraph_get(), make_config(scene.kd_preview))
+    following.tick()  # reads the scene; its build waits for the abandoned one, which holds the lock
+    assert following.status == pipeline.WAITING_STATUS or job._pending.finished  # (unless that just ended)
+    pipeline.run_job(following)
+    assert (following.result().image == reference).all() and job._pending.finished
     assert bpy.ops.kdpreview.render() == {"FINISHED"}
     assert (preview_pixels() == reference).all()
-    assert job._pending.finished
 
 
 def test_cancel_callback_during_tracing_returns_at_once(addon):  # noqa: F811
