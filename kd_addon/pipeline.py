@@ -49,7 +49,7 @@ POLL_SECONDS = 0.05  # longest a tick waits for the worker: the bound on cancel 
 COMPILING_STATUS = "Compiling kernels (first run)…"
 LOADING_STATUS = "Loading compiled kernels (first run)…"
 DENOISE_COMPILING_STATUS = "Compiling the denoiser (first use)…"
-WAITING_STATUS = "Waiting for the cancelled run's last kernel call to end…"
+WAITING_STATUS = "Waiting for the cancelled run to end…"  # its kernel call: short, for the progress bar
 _kernels_ready = False  # set once a frame has traced in this process: no compile cost left
 # ... except the pixel-reuse kernels, first run by the first frame continued from the one before,
 _reuse_kernels_ready = False
