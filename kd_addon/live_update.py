@@ -1,12 +1,20 @@
-"""Optional re-render on frame change (scene.kd_preview.live_update, off by default).
+"""Optional re-render on frame change and on edits (scene.kd_preview.live_update, off by default).
 
-The handler is persistent (it survives loading another file) and registered
-at most once (app_handlers.py).
-It renders synchronously, which makes playback wait for each frame; that is
-the point of the option. It stays out while an operator renders (that
-operator's own frame_set calls would otherwise re-render every frame twice)
-and while Blender renders (the handler then runs on the render thread, where
-touching bpy.data images is unsafe).
+Frame changes: the handler renders synchronously, which makes playback wait for
+each frame; that is the point of the option. It stays out while an operator
+renders (that operator's own frame_set calls would otherwise re-render every
+frame twice) and while Blender renders (the handler then runs on the render
+thread, where touching bpy.data images is unsafe).
+
+Edits (moving, modelling, changing a light or a setting): each depsgraph update
+(re)starts a timer, so a drag renders once, when it pauses for EDIT_DELAY; the
+timer then runs the Render operator, modal, so Blender stays responsive and Esc
+cancels. While another render runs it waits for it: the edit is rendered after.
+Changes that affect nothing (a selection) cost an extraction: the last image is
+reused. The preview's own image writes produce an empty update list: ignored.
+
+Handlers are persistent (they survive loading another file) and registered at
+most once (app_handlers.py); the timer is not (loading a file drops it).
 """
 
 from __future__ import annotations
@@ -18,6 +26,8 @@ from .config import make_config
 from .errors import PreviewError
 from .pipeline import claim, job_running, release, render_frame
 from .properties import run_state, set_last_run
+
+EDIT_DELAY = 0.3  # seconds without edits before live update renders them
 
 
 @bpy.app.handlers.persistent
@@ -40,9 +50,41 @@ def kd_preview_frame_change(scene, depsgraph=None):
     state.status = f"Live: frame {result.frame}, {result.total_ms:.0f} ms"
 
 
+@bpy.app.handlers.persistent
+def kd_preview_scene_edit(scene, depsgraph=None):
+    """depsgraph_update_post: after an edit, (re)schedule one render of it when live update is on."""
+    settings = getattr(scene, "kd_preview", None)
+    if settings is None or not settings.live_update or depsgraph is None or len(depsgraph.updates) == 0:
+        return
+    if bpy.app.timers.is_registered(render_edits):
+        bpy.app.timers.unregister(render_edits)
+    bpy.app.timers.register(render_edits, first_interval=EDIT_DELAY)
+
+
+def render_edits():
+    """The timer: render the edited scene with the Render operator, in the first window (a timer has
+    no window of its own); return the delay to try again while another render runs, else None."""
+    if job_running() or bpy.app.is_job_running("RENDER"):
+        return EDIT_DELAY
+    window = next(iter(bpy.context.window_manager.windows), None)
+    settings = getattr(window.scene, "kd_preview", None) if window is not None else None
+    if settings is None or not settings.live_update:
+        return None
+    with bpy.context.temp_override(window=window):
+        bpy.ops.kdpreview.render("INVOKE_DEFAULT", open_view=False)  # as frame changes: no window opens
+    return None
+
+
+HANDLERS = (("frame_change_post", kd_preview_frame_change), ("depsgraph_update_post", kd_preview_scene_edit))
+
+
 def register():
-    app_handlers.install("frame_change_post", kd_preview_frame_change)
+    for kind, function in HANDLERS:
+        app_handlers.install(kind, function)
 
 
 def unregister():
-    app_handlers.remove("frame_change_post", kd_preview_frame_change)
+    for kind, function in HANDLERS:
+        app_handlers.remove(kind, function)
+    if bpy.app.timers.is_registered(render_edits):
+        bpy.app.timers.unregister(render_edits)

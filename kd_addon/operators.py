@@ -195,13 +195,17 @@ class KDPREVIEW_OT_render(_JobOperator, bpy.types.Operator):
     bl_label = "Render Preview"
     bl_options = {"REGISTER"}
 
+    open_view: bpy.props.BoolProperty(
+        name="Open View", default=True, options={"HIDDEN", "SKIP_SAVE"},
+        description="Open an image editor as Blender opens its render view when no window has one")
+
     def make_job(self, context):
         config = make_config(context.scene.kd_preview)
         return FrameJob(context.scene, context.evaluated_depsgraph_get(), config)
 
     def finish(self, context, job) -> str:
         result = job.result()
-        output.store_preview(result.image)
+        output.store_preview(result.image, open_view=getattr(self, "open_view", True))
         summary = result.summary()
         set_last_run(run_state(context), summary)
         speed = "last image reused" if result.image_reused else f"{result.mrays_per_s:.2f} Mrays/s"

@@ -75,7 +75,9 @@ class KDPreviewSettings(bpy.types.PropertyGroup):
                                 items=[("PNG", "PNG", "16-bit sRGB PNG"), ("OPEN_EXR", "OpenEXR", "Linear float EXR")])
     output_dir: StringProperty(name="Output Folder", description="Where Render Animation writes frames and report.json",
                                default="//kd_preview/", subtype="DIR_PATH", options=PATH_OPTIONS)
-    live_update: BoolProperty(name="Live Update", description="Re-render the preview whenever the frame changes",
+    live_update: BoolProperty(name="Live Update",
+                              description="Re-render the preview whenever the frame changes, and after edits "
+                                          "once they pause",
                               default=False)
 
 

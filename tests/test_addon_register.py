@@ -22,7 +22,7 @@ def registered_names():
     return {cls.__name__ for cls in CLASSES if cls.is_registered}
 
 
-HANDLER_KINDS = ("frame_change_post", "undo_post", "redo_post", "save_pre", "load_post")
+HANDLER_KINDS = ("frame_change_post", "depsgraph_update_post", "undo_post", "redo_post", "save_pre", "load_post")
 
 
 def our_handlers():
@@ -43,14 +43,14 @@ def test_register_unregister_twice_leaves_nothing():
         assert not hasattr(bpy.types.Scene, "kd_preview")
         assert not hasattr(bpy.types.WindowManager, "kd_preview_state")
         assert our_handlers() == [] and cli._handle is None
-        assert not bpy.app.timers.is_registered(live_update.kd_preview_frame_change)
+        assert not bpy.app.timers.is_registered(live_update.render_edits)
 
 
 def test_handler_never_stacks():
     live_update.register()
     live_update.register()
     try:
-        assert [h.__name__ for h in our_handlers()] == ["kd_preview_frame_change"]
+        assert [h.__name__ for h in our_handlers()] == ["kd_preview_frame_change", "kd_preview_scene_edit"]
     finally:
         live_update.unregister()
     assert our_handlers() == []

@@ -391,6 +391,48 @@ def test_live_update_renders_on_frame_change_only_when_enabled(addon):  # noqa: 
     assert handlers == [live_update.kd_preview_frame_change]
 
 
+def test_live_update_renders_an_edit_once_edits_pause(addon):  # noqa: F811
+    """Each depsgraph update (re)starts a timer (EDIT_DELAY); when it fires, the Render operator renders
+    the edit. Timers never fire in background mode, so the test calls the timer's function itself."""
+    timers = bpy.app.timers
+    scene = half_plane_scene()
+    scene.kd_preview.live_update = True
+    bpy.context.view_layer.update()
+    if timers.is_registered(live_update.render_edits):
+        timers.unregister(live_update.render_edits)
+    bpy.data.objects["Box"].location.x = -1.0
+    bpy.context.view_layer.update()
+    assert timers.is_registered(live_update.render_edits)  # scheduled, not rendered yet
+    assert IMAGE_NAME not in bpy.data.images
+    timers.unregister(live_update.render_edits)
+    assert live_update.render_edits() is None  # what the timer does when it fires
+    img = preview_pixels()
+    assert img[16, column_of(-1.0), 0] == pytest.approx(1.0, abs=1e-3)  # the moved box's open top
+    assert img[16, column_of(-2.0), 0] < 0.9  # where the box stood is ground beside it now
+    bpy.context.view_layer.update()  # the preview's own image write is no edit: nothing scheduled
+    assert not timers.is_registered(live_update.render_edits)
+
+
+def test_live_update_edits_wait_for_a_running_render_and_need_the_option(addon):  # noqa: F811
+    timers = bpy.app.timers
+    scene = half_plane_scene()
+    bpy.data.objects["Box"].location.x = -1.0
+    bpy.context.view_layer.update()
+    assert not timers.is_registered(live_update.render_edits)  # live update off
+    scene.kd_preview.live_update = True
+    token = object()
+    pipeline.claim(token)  # another render runs
+    try:
+        assert live_update.render_edits() == live_update.EDIT_DELAY  # tries again later
+        assert IMAGE_NAME not in bpy.data.images
+    finally:
+        pipeline.release(token)
+    assert live_update.render_edits() is None and IMAGE_NAME in bpy.data.images
+    scene.kd_preview.live_update = False
+    bpy.data.images.remove(bpy.data.images[IMAGE_NAME])
+    assert live_update.render_edits() is None and IMAGE_NAME not in bpy.data.images  # switched off since
+
+
 def test_a_users_image_named_kd_preview_is_left_alone(addon):  # noqa: F811
     """Found by outside QA: a user's own (byte) image called "KD Preview" was silently renamed."""
     half_plane_scene()
