@@ -28,6 +28,10 @@ from .pipeline import claim, job_running, release, render_frame
 from .properties import run_state, set_last_run
 
 EDIT_DELAY = 0.3  # seconds without edits before live update renders them
+# Modal tools that edit as the mouse moves (grab/rotate/scale, gizmo drags, fly/walk navigation, sculpt
+# and paint strokes, loop cut): their edit renders when they end. Without this wait a render started
+# at one slow mouse move and every later move queued another, back to back (outside QA, Blender 5.2).
+INTERACTIVE_TOOLS = {"TRANSFORM", "VIEW3D", "MESH", "SCULPT", "PAINT", "GIZMO", "GIZMOGROUP"}
 
 
 @bpy.app.handlers.persistent
@@ -64,15 +68,24 @@ def kd_preview_scene_edit(scene, depsgraph=None):
 def render_edits():
     """The timer: render the edited scene with the Render operator, in the first window (a timer has
     no window of its own); return the delay to try again while another render runs, else None."""
-    if job_running() or bpy.app.is_job_running("RENDER"):
-        return EDIT_DELAY
     window = next(iter(bpy.context.window_manager.windows), None)
     settings = getattr(window.scene, "kd_preview", None) if window is not None else None
     if settings is None or not settings.live_update:
         return None
+    if job_running() or bpy.app.is_job_running("RENDER") or \
+            interactive_tool_running([op.bl_idname for op in window.modal_operators]):
+        return EDIT_DELAY
     with bpy.context.temp_override(window=window):
         bpy.ops.kdpreview.render("INVOKE_DEFAULT", open_view=False)  # as frame changes: no window opens
     return None
+
+
+def interactive_tool_running(idnames) -> bool:
+    """Whether any of these modal operators ("TRANSFORM_OT_translate" or "transform.translate") is
+    one of INTERACTIVE_TOOLS."""
+    def group(idname: str) -> str:
+        return idname.split("_OT_")[0] if "_OT_" in idname else idname.split(".")[0].upper()
+    return any(group(idname) in INTERACTIVE_TOOLS for idname in idnames)
 
 
 HANDLERS = (("frame_change_post", kd_preview_frame_change), ("depsgraph_update_post", kd_preview_scene_edit))

@@ -413,7 +413,7 @@ def test_live_update_renders_an_edit_once_edits_pause(addon):  # noqa: F811
     assert not timers.is_registered(live_update.render_edits)
 
 
-def test_live_update_edits_wait_for_a_running_render_and_need_the_option(addon):  # noqa: F811
+def test_live_update_edits_wait_for_a_running_render_or_tool_and_need_the_option(addon, monkeypatch):  # noqa: F811
     timers = bpy.app.timers
     scene = half_plane_scene()
     bpy.data.objects["Box"].location.x = -1.0
@@ -427,6 +427,14 @@ def test_live_update_edits_wait_for_a_running_render_and_need_the_option(addon):
         assert IMAGE_NAME not in bpy.data.images
     finally:
         pipeline.release(token)
+    assert live_update.render_edits() is None and IMAGE_NAME in bpy.data.images
+    bpy.data.images.remove(bpy.data.images[IMAGE_NAME])
+    interactive = live_update.interactive_tool_running
+    assert interactive(["TRANSFORM_OT_translate"]) and interactive(["sculpt.brush_stroke"])
+    assert not interactive([]) and not interactive(["KDPREVIEW_OT_render", "WM_OT_modal_timer_operator"])
+    monkeypatch.setattr(live_update, "interactive_tool_running", lambda idnames: True)  # a grab in progress
+    assert live_update.render_edits() == live_update.EDIT_DELAY and IMAGE_NAME not in bpy.data.images
+    monkeypatch.setattr(live_update, "interactive_tool_running", interactive)
     assert live_update.render_edits() is None and IMAGE_NAME in bpy.data.images
     scene.kd_preview.live_update = False
     bpy.data.images.remove(bpy.data.images[IMAGE_NAME])
