@@ -15,14 +15,17 @@ def _same(handler, function) -> bool:
         getattr(handler, "__module__", "") == function.__module__
 
 
-def remove(kind: str, function) -> None:
-    """Remove every copy of `function` from bpy.app.handlers.<kind> (e.g. "frame_change_post")."""
-    handlers = getattr(bpy.app.handlers, kind)
-    for handler in [h for h in handlers if _same(h, function)]:
-        handlers.remove(handler)
+def remove(handlers) -> None:
+    """Remove every copy of each (kind, function) pair's function from bpy.app.handlers.<kind>
+    (kind e.g. "frame_change_post")."""
+    for kind, function in handlers:
+        registered = getattr(bpy.app.handlers, kind)
+        for handler in [h for h in registered if _same(h, function)]:
+            registered.remove(handler)
 
 
-def install(kind: str, function) -> None:
-    """Add `function` to bpy.app.handlers.<kind>, replacing any earlier copy."""
-    remove(kind, function)
-    getattr(bpy.app.handlers, kind).append(function)
+def install(handlers) -> None:
+    """Add each (kind, function) pair's function to bpy.app.handlers.<kind>, replacing earlier copies."""
+    remove(handlers)
+    for kind, function in handlers:
+        getattr(bpy.app.handlers, kind).append(function)

@@ -45,11 +45,9 @@ HANDLERS = (("undo_post", kd_preview_undo_redo), ("redo_post", kd_preview_undo_r
 
 
 def register():
-    for kind, function in HANDLERS:
-        app_handlers.install(kind, function)
+    app_handlers.install(HANDLERS)
 
 
 def unregister():
-    for kind, function in HANDLERS:
-        app_handlers.remove(kind, function)
+    app_handlers.remove(HANDLERS)
     output.forget_last_frame()

@@ -92,12 +92,10 @@ HANDLERS = (("frame_change_post", kd_preview_frame_change), ("depsgraph_update_p
 
 
 def register():
-    for kind, function in HANDLERS:
-        app_handlers.install(kind, function)
+    app_handlers.install(HANDLERS)
 
 
 def unregister():
-    for kind, function in HANDLERS:
-        app_handlers.remove(kind, function)
+    app_handlers.remove(HANDLERS)
     if bpy.app.timers.is_registered(render_edits):
         bpy.app.timers.unregister(render_edits)
