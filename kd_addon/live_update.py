@@ -75,8 +75,11 @@ def render_edits():
     if job_running() or bpy.app.is_job_running("RENDER") or \
             interactive_tool_running([op.bl_idname for op in window.modal_operators]):
         return EDIT_DELAY
-    with bpy.context.temp_override(window=window):
-        bpy.ops.kdpreview.render("INVOKE_DEFAULT", open_view=False)  # as frame changes: no window opens
+    try:
+        with bpy.context.temp_override(window=window):
+            bpy.ops.kdpreview.render("INVOKE_DEFAULT", open_view=False)  # as frame changes: no window opens
+    except RuntimeError:  # bpy.ops raises the operator's error report; the panel's status shows it
+        pass
     return None
 
 

@@ -436,6 +436,9 @@ def test_live_update_edits_wait_for_a_running_render_or_tool_and_need_the_option
     assert live_update.render_edits() == live_update.EDIT_DELAY and IMAGE_NAME not in bpy.data.images
     monkeypatch.setattr(live_update, "interactive_tool_running", interactive)
     assert live_update.render_edits() is None and IMAGE_NAME in bpy.data.images
+    bpy.data.objects.remove(bpy.data.objects["Cam"])  # an edit the preview cannot render
+    assert live_update.render_edits() is None  # no traceback from the timer: the status says why
+    assert bpy.context.window_manager.kd_preview_state.status.startswith("Error:")
     scene.kd_preview.live_update = False
     bpy.data.images.remove(bpy.data.images[IMAGE_NAME])
     assert live_update.render_edits() is None and IMAGE_NAME not in bpy.data.images  # switched off since
