@@ -13,6 +13,7 @@ ones.
 from __future__ import annotations
 
 import json
+import re
 from types import SimpleNamespace
 
 import pytest
@@ -105,6 +106,8 @@ def test_modal_render_ticks_to_the_end(modal, monkeypatch):
     assert preview_pixels()[:, :32, 3].min() == 1.0
     assert json.loads(state.last_run)["samples"] == 8
     assert op.reports[-1][0] == {"INFO"}
+    assert re.fullmatch(r"KD Preview: 64x32, .* ms \(.*\), \d+\.\d s with Blender's redraws", op.reports[-1][1])
+    assert state.status == op.reports[-1][1]
 
 
 def test_an_operator_called_after_it_finished_leaves_the_next_run_alone(modal):

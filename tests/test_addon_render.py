@@ -53,6 +53,7 @@ def test_render_operator_fills_the_preview_image(addon):  # noqa: F811
     assert (last["triangles"], last["objects"], last["lights"], last["samples"]) == (14, 2, 1, 8)
     assert last["rays"] > 64 * 32 and last["tree"]["nodes"] >= 1 and last["tree"]["sah_cost"] > 0
     assert not state.running and state.status.startswith("KD Preview: 64x32")
+    assert "redraws" not in state.status  # synchronous: no redraws between ticks to add
 
 
 def test_invoke_in_background_runs_synchronously(addon):  # noqa: F811
