@@ -35,15 +35,11 @@ import weakref
 _calls: weakref.WeakSet = weakref.WeakSet()  # every BackgroundCall not yet collected
 
 
-def abandoned_work_running() -> bool:
-    """True while a worker still runs a kernel call nobody waits for any more (after a cancel)."""
-    return any(not call.finished for call in list(_calls))
-
-
-def other_work_running(call: BackgroundCall) -> bool:
-    """True while a kernel call other than `call` still runs: a cancelled job's, which holds the lock
-    `call` waits for (one job runs at a time, so any other call is an abandoned one)."""
-    return any(other is not call and not other.finished for other in list(_calls))
+def abandoned_work_running(besides: BackgroundCall | None = None) -> bool:
+    """True while a worker still runs a kernel call nobody waits for any more (after a cancel).
+    `besides`: the call a job does wait for, not counted (one job runs at a time, so any other
+    unfinished call is an abandoned one, holding the lock that call waits for)."""
+    return any(call is not besides and not call.finished for call in list(_calls))
 
 
 def exit_now_if_abandoned(code: int) -> None:

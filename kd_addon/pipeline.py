@@ -153,7 +153,7 @@ class FrameJob:
 
     @property
     def status(self) -> str:
-        if self._pending is not None and background.other_work_running(self._pending):
+        if self._pending is not None and background.abandoned_work_running(besides=self._pending):
             return WAITING_STATUS  # a cancelled run's build or denoiser compile holds the kernel lock
         if not _kernels_ready:
             return LOADING_STATUS if corelib.cache_is_warm() else COMPILING_STATUS
