@@ -1,7 +1,7 @@
 """The preview image keeps its pixels through undo, redo, and saving and reopening the .blend.
 
 Without image_keeping.py, bpy 5.0 regenerates the image black on redo, removes it when undo goes
-back past the first render, and a reopened file holds a black image: each test fails that way.
+back past the first render, and a reopened file holds a black image: the tests of those fail that way.
 """
 
 from __future__ import annotations
