@@ -11,3 +11,7 @@ class PreviewError(Exception):
 
 class Cancelled(Exception):
     """The user cancelled (ESC, Ctrl-C or a cancel callback); nothing was written."""
+
+
+class Superseded(Cancelled):
+    """A newer edit replaced a Live Update render before it finished; nothing was written."""

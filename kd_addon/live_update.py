@@ -9,9 +9,13 @@ thread, where touching bpy.data images is unsafe).
 Edits (moving, modelling, changing a light or a setting): each depsgraph update
 (re)starts a timer, so a drag renders once, when it pauses for EDIT_DELAY; the
 timer then runs the Render operator, modal, so Blender stays responsive and Esc
-cancels. While another render runs it waits for it: the edit is rendered after.
-Changes that affect nothing (a selection) cost an extraction: the last image is
-reused. The preview's own image writes produce an empty update list: ignored.
+cancels. A Live Update render still running when the timer fires is stale if the
+edits changed its image: it is ended (nothing written) and the edited scene
+renders at once, rather than after a frame nobody wants; if they did not (a
+selection), it goes on. A render the user started (Render, Render Animation)
+is waited for: the edit renders after it. Changes that affect nothing cost an
+extraction: the last image is reused. The preview's own image writes produce an
+empty update list: ignored.
 
 Handlers are persistent (they survive loading another file) and registered at
 most once (app_handlers.py); the timer is not (loading a file drops it).
@@ -21,10 +25,10 @@ from __future__ import annotations
 
 import bpy
 
-from . import app_handlers, output
+from . import app_handlers, operators, output
 from .config import make_config
 from .errors import PreviewError
-from .pipeline import claim, job_running, release, render_frame
+from .pipeline import claim, image_key_now, job_running, release, render_frame
 from .properties import run_state, set_last_run
 
 EDIT_DELAY = 0.3  # seconds without edits before live update renders them
@@ -72,15 +76,34 @@ def render_edits():
     settings = getattr(window.scene, "kd_preview", None) if window is not None else None
     if settings is None or not settings.live_update:
         return None
-    if job_running() or bpy.app.is_job_running("RENDER") or \
-            interactive_tool_running([op.bl_idname for op in window.modal_operators]):
+    if interactive_tool_running([op.bl_idname for op in window.modal_operators]):
         return EDIT_DELAY
-    try:
-        with bpy.context.temp_override(window=window):
-            bpy.ops.kdpreview.render("INVOKE_DEFAULT", open_view=False)  # as frame changes: no window opens
-    except RuntimeError:  # bpy.ops raises the operator's error report; the panel's status shows it
-        pass
+    with bpy.context.temp_override(window=window):
+        live = operators.running_live_render()
+        if live is not None:
+            if not _made_stale(live, window.scene, settings):
+                return None  # the running render's frame is the edited scene's (a selection, say)
+            live.supersede(bpy.context)
+        elif job_running() or bpy.app.is_job_running("RENDER"):
+            return EDIT_DELAY
+        try:
+            bpy.ops.kdpreview.render("INVOKE_DEFAULT", live=True)
+        except RuntimeError:  # bpy.ops raises the operator's error report; the panel's status shows it
+            pass
     return None
+
+
+def _made_stale(live, scene, settings) -> bool:
+    """Whether the edits since a Live Update render read the scene change its image (its job's image
+    key against the scene's now; one more extraction). Not before it read the scene: it reads it as
+    edited. A scene that cannot render now counts as changed: the new render says why."""
+    key = live.frame_key()
+    if key is None:
+        return False
+    try:
+        return image_key_now(scene, bpy.context.evaluated_depsgraph_get(), make_config(settings)) != key
+    except PreviewError:
+        return True
 
 
 def interactive_tool_running(idnames) -> bool:

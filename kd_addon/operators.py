@@ -18,7 +18,7 @@ import bpy
 
 from . import output
 from .config import make_config
-from .errors import Cancelled, PreviewError
+from .errors import Cancelled, PreviewError, Superseded
 from .pipeline import FrameJob, claim, release, release_any, run_job
 from .properties import run_state, set_last_run
 from .sequence import SequenceJob
@@ -122,6 +122,17 @@ class _JobOperator:
         if not self._ended:
             self._end_modal(context, Cancelled("cancelled"))
 
+    def frame_key(self):
+        """The image key of the frame this run renders (pipeline.FrameJob.image_key); None before it
+        read the scene."""
+        return getattr(self._job, "image_key", None)
+
+    def supersede(self, context) -> None:
+        """End this run for a newer one, as Esc would (nothing written) but without the warning: a
+        newer edit made its frame stale (Live Update)."""
+        if not self._ended:
+            self._end_modal(context, Superseded("superseded"))
+
     def _tick_for(self, budget: float) -> bool:
         deadline = time.perf_counter() + budget
         while not self._job.tick():
@@ -168,6 +179,9 @@ class _JobOperator:
                 return {"FINISHED"}
         except PreviewError as late_error:
             error = late_error
+        if isinstance(error, Superseded):
+            state.status = "Live: restarting for the newer edit…"
+            return {"CANCELLED"}
         if isinstance(error, Cancelled):
             state.status = "Cancelled: the previous preview is unchanged"
             self.report({"WARNING"}, state.status)
@@ -206,6 +220,9 @@ class KDPREVIEW_OT_render(_JobOperator, bpy.types.Operator):
     open_view: bpy.props.BoolProperty(
         name="Open View", default=True, options={"HIDDEN", "SKIP_SAVE"},
         description="Open an image editor as Blender opens its render view when no window has one")
+    live: bpy.props.BoolProperty(
+        name="Live", default=False, options={"HIDDEN", "SKIP_SAVE"},
+        description="Started by Live Update: opens no image editor, and a newer edit replaces it")
 
     def make_job(self, context):
         config = make_config(context.scene.kd_preview)
@@ -213,7 +230,8 @@ class KDPREVIEW_OT_render(_JobOperator, bpy.types.Operator):
 
     def finish(self, context, job) -> str:
         result = job.result()
-        output.store_preview(result.image, open_view=getattr(self, "open_view", True))
+        live = getattr(self, "live", False)
+        output.store_preview(result.image, open_view=getattr(self, "open_view", True) and not live)
         summary = result.summary()
         set_last_run(run_state(context), summary)
         speed = "last image reused" if result.image_reused else f"{result.mrays_per_s:.2f} Mrays/s"
@@ -245,6 +263,15 @@ class KDPREVIEW_OT_render_animation(_JobOperator, bpy.types.Operator):
         last["animation"] = {"frames": len(job.results), "report": str(job.report_path)}
         set_last_run(run_state(context), last)
         return f"KD Preview: {len(job.results)} frames written to {job.out_dir}"
+
+
+def running_live_render():
+    """The modal Render run Live Update started, while it runs; else None."""
+    op = _running
+    try:
+        return op if op is not None and getattr(op, "live", False) and not op._ended else None
+    except ReferenceError:  # Blender freed it (the add-on's unregister clears the rest)
+        return None
 
 
 def output_folder(path: str) -> Path:

@@ -114,6 +114,16 @@ def _plain(value):
     return value.item() if isinstance(value, np.generic) else value
 
 
+@dataclass
+class _SceneRead:
+    """What a frame renders, read from the scene on the main thread."""
+    inputs: scene_input.SceneInputs
+    extracted: ExtractedScene
+    instances: tuple  # (meshes, mesh_of, matrices, visibility) for core.SceneBuilder.build
+    unapplied: list  # warnings: what a lazy build cannot apply
+    image_key: bytes
+
+
 class FrameJob:
     """One frame of one scene, driven by `tick()` until `done`.
 
@@ -187,29 +197,40 @@ class FrameJob:
         if nothing changed, else, on the worker, the two-level scene (reusing unchanged trees) and the
         renderer."""
         t0 = time.perf_counter()
-        inputs = self._scene_inputs()
-        extracted = self._extract()
+        read = self._read_scene()
         core = corelib.load_core()
+        inputs, extracted = read.inputs, read.extracted
         self._state = tree_cache.state_for(self.scene, core, self.config.build_options)
         reuse = not self.config.settings.rebuild_all
         memory_limit.check_frame(extracted.triangle_count, inputs.width, inputs.height, self.config,
                                  keeps_previous=reuse and self._state.pixels is not None)
-        meshes, mesh_of, matrices, visibility = tree_cache.mesh_inputs(core, extracted)
-        visibility, unapplied = self._lazy_visibility(core, extracted, visibility)
-        self._image_key = tree_cache.image_key(meshes, mesh_of, matrices, visibility, inputs.camera.keywords(),
-                                               inputs.lights, (inputs.width, inputs.height), self.config.as_dict())
+        self._image_key = read.image_key
         self._timings["other_ms"] += _ms_since(t0) - self._timings["extract_ms"]
         self._info = dict(triangles=extracted.triangle_count, objects=extracted.object_count,
                           lights=len(inputs.lights), frame=extracted.frame,
-                          warnings=inputs.warnings + extracted.warnings + unapplied)
+                          warnings=inputs.warnings + extracted.warnings + read.unapplied)
         if reuse and self._state.image is not None and self._state.image_key == self._image_key:
             self._reused_image = self._state.image
-            self._info.update(self._state.info, objects_reused=len(meshes), image_reused=True)
+            self._info.update(self._state.info, objects_reused=len(read.instances[0]), image_reused=True)
             return
         camera, lights = self._camera_and_lights(core, inputs)
-        self._pending = BackgroundCall(KERNEL_LOCK, self._build_and_start, core,
-                                       (meshes, mesh_of, matrices, visibility), inputs.camera.position, reuse, camera,
-                                       lights, inputs.width, inputs.height)
+        self._pending = BackgroundCall(KERNEL_LOCK, self._build_and_start, core, read.instances,
+                                       inputs.camera.position, reuse, camera, lights, inputs.width, inputs.height)
+
+    @property
+    def image_key(self) -> bytes | None:
+        """The key of the image this job renders (tree_cache.image_key); None until it read the scene."""
+        return self._image_key
+
+    def _read_scene(self) -> _SceneRead:
+        inputs = self._scene_inputs()
+        extracted = self._extract()
+        core = corelib.load_core()
+        meshes, mesh_of, matrices, visibility = tree_cache.mesh_inputs(core, extracted)
+        visibility, unapplied = self._lazy_visibility(core, extracted, visibility)
+        key = tree_cache.image_key(meshes, mesh_of, matrices, visibility, inputs.camera.keywords(), inputs.lights,
+                                   (inputs.width, inputs.height), self.config.as_dict())
+        return _SceneRead(inputs, extracted, (meshes, mesh_of, matrices, visibility), unapplied, key)
 
     def _lazy_visibility(self, core, extracted: ExtractedScene, visibility: np.ndarray):
         """(visibility, warnings): a lazy build traces the scene as one tree, which cannot tell objects'
@@ -429,6 +450,13 @@ def _usable_light(core, light: scene_input.LightInput):
     if light.portal:
         raise ValueError("it is a Cycles light portal, which emits no light")
     return getattr(core.Light, light.kind)(**light.keywords)
+
+
+def image_key_now(scene, depsgraph, config: RenderConfig) -> bytes:
+    """The key of the image a frame of the scene as it is now would make (FrameJob.image_key), so that
+    a Live Update render of an earlier state can be told stale. Reads the scene (main thread) and builds
+    nothing; PreviewError when the scene cannot be rendered."""
+    return FrameJob(scene, depsgraph, config)._read_scene().image_key
 
 
 def render_frame(scene, depsgraph, config: RenderConfig, *, cancel=None, progress=None) -> FrameResult:

@@ -25,7 +25,7 @@ import numpy as np  # noqa: E402
 
 import kd_addon  # noqa: E402
 
-from kd_addon import operators, pipeline  # noqa: E402
+from kd_addon import live_update, operators, pipeline  # noqa: E402
 from kd_addon.operators import KDPREVIEW_OT_render, KDPREVIEW_OT_render_animation, _JobOperator  # noqa: E402
 
 
@@ -222,3 +222,71 @@ def test_disabling_the_addon_mid_render_ends_the_run(modal):
     assert not pipeline.job_running() and not bpy.context.window_manager.kd_preview_state.running
     assert op._timer is None
     assert bpy.ops.kdpreview.render() == {"FINISHED"}
+
+
+def started_modal(operator_cls, monkeypatch, *, live=False, ticks=2):
+    """An operator run going modal, `ticks` timer events in (2: the status shown, then the scene read
+    and the build started), while the rest of the test runs as background mode does (bpy.ops
+    synchronous). `live`: as Live Update starts it."""
+    monkeypatch.setattr(operators, "TICK_BUDGET", 0.0)  # one job tick per timer event
+    context = make_context()
+    op = driver(operator_cls)
+    op.live = live
+    with monkeypatch.context() as patched:
+        patched.setattr(operators, "modal_possible", lambda context: True)
+        assert op.invoke(context, None) == {"RUNNING_MODAL"}
+    for _ in range(ticks):
+        assert op.modal(context, event("TIMER")) == {"PASS_THROUGH"}
+    return op, context
+
+
+def column_at(x: float) -> int:
+    """The half-plane scene's pixel column at world x (its view spans x in [-4, 4] over 64 columns)."""
+    return int((x + 4.0) / 8.0 * 64)
+
+
+def test_a_newer_edit_replaces_a_stale_live_render(addon, monkeypatch):  # noqa: F811
+    """Live Update: an edit that changes the image of the live render running ends it (nothing written,
+    no warning) and renders the edited scene at once. Before, the stale frame ran to its end and the
+    edit rendered after it."""
+    scene = half_plane_scene()
+    scene.kd_preview.live_update = True
+    bpy.ops.kdpreview.render()
+    before = preview_pixels().copy()
+    scene.kd_preview.ao_distance = 3.0
+    stale, context = started_modal(KDPREVIEW_OT_render, monkeypatch, live=True)
+    assert stale.frame_key() is not None and pipeline.job_running()
+    bpy.data.objects["Box"].location.x = -1.0  # the edit, made while the live render traces
+    assert live_update.render_edits() is None
+    assert stale._ended and stale._timer is None and stale.reports == []
+    assert stale.modal(context, event("TIMER")) == {"FINISHED", "PASS_THROUGH"}  # Blender then drops it
+    assert not pipeline.job_running() and not context.window_manager.kd_preview_state.running
+    image = preview_pixels()  # the edited scene, rendered by the timer (synchronously in background mode)
+    assert image[16, column_at(-1.0), 0] == pytest.approx(1.0, abs=1e-3)  # the moved box's open top
+    assert image[16, column_at(-2.0), 0] < 0.9 and before[16, column_at(-2.0), 0] == 1.0  # where it stood
+    state = context.window_manager.kd_preview_state
+    assert state.status.startswith("KD Preview: 64x32") and "last image reused" not in state.status
+    bpy.ops.kdpreview.render()  # the image is the scene's as it is now, AO Distance 3 included:
+    assert "last image reused" in state.status
+
+
+def test_an_edit_leaves_a_live_render_of_the_same_image_and_a_users_render_running(addon, monkeypatch):  # noqa: F811
+    scene = half_plane_scene()
+    scene.kd_preview.live_update = True
+    live, context = started_modal(KDPREVIEW_OT_render, monkeypatch, live=True, ticks=1)
+    bpy.data.objects["Box"].location.x = -1.0
+    bpy.context.view_layer.update()  # as Blender's event loop does before the next event
+    assert live_update.render_edits() is None and not live._ended  # not read yet: it reads the edit
+    live.modal(context, event("TIMER"))
+    assert live.frame_key() is not None
+    bpy.data.objects["Box"].select_set(True)  # an update that changes no pixel
+    bpy.context.view_layer.update()
+    assert live_update.render_edits() is None and not live._ended and pipeline.job_running()
+    assert timer_events(live, context)[0] == {"FINISHED"} and live.reports[-1][0] == {"INFO"}
+    bpy.data.images.remove(bpy.data.images["KD Preview"])
+    scene.kd_preview.ao_distance = 2.0  # else Render would reuse the last image at once
+    users, context = started_modal(KDPREVIEW_OT_render, monkeypatch)  # Render, clicked
+    bpy.data.objects["Box"].location.x = -2.0
+    bpy.context.view_layer.update()
+    assert live_update.render_edits() == live_update.EDIT_DELAY and not users._ended  # waits for it
+    assert timer_events(users, context)[0] == {"FINISHED"} and "KD Preview" in bpy.data.images
