@@ -2,9 +2,12 @@
 
 Frame changes: the handler renders synchronously, which makes playback wait for
 each frame; that is the point of the option. It stays out while an operator
-renders (that operator's own frame_set calls would otherwise re-render every
+renders (Render Animation's own frame_set calls would otherwise re-render every
 frame twice) and while Blender renders (the handler then runs on the render
-thread, where touching bpy.data images is unsafe).
+thread, where touching bpy.data images is unsafe). A frame the user moves to
+while Render renders one is left to the edit timer below: it renders after that
+run, or instead of it if Live Update started it (a frame change alone makes no
+depsgraph update list, so before, the preview stayed on the old frame).
 
 Edits (moving, modelling, changing a light or a setting): each depsgraph update
 (re)starts a timer, so a drag renders once, when it pauses for EDIT_DELAY; the
@@ -42,7 +45,13 @@ INTERACTIVE_TOOLS = {"TRANSFORM", "VIEW3D", "MESH", "SCULPT", "PAINT", "GIZMO", 
 def kd_preview_frame_change(scene, depsgraph=None):
     """frame_change_post: re-render the preview of the new frame when live update is on."""
     settings = getattr(scene, "kd_preview", None)
-    if settings is None or not settings.live_update or job_running() or bpy.app.is_job_running("RENDER"):
+    if settings is None or not settings.live_update:
+        return
+    if bpy.app.is_job_running("RENDER"):
+        return
+    if job_running():
+        if operators.running_frame_render() is not None:  # the user changed the frame during a Render run:
+            schedule_render()  # the new frame renders after it (or instead of it, if Live Update started it)
         return
     state, token = run_state(), object()
     claim(token)
@@ -64,6 +73,17 @@ def kd_preview_scene_edit(scene, depsgraph=None):
     settings = getattr(scene, "kd_preview", None)
     if settings is None or not settings.live_update or depsgraph is None or len(depsgraph.updates) == 0:
         return
+    schedule_render()
+
+
+def setting_changed(settings) -> None:
+    """properties.py's update callback: a setting changed (or Live Update was switched on)."""
+    if settings.live_update:
+        schedule_render()
+
+
+def schedule_render() -> None:
+    """(Re)start the timer that renders the scene once edits pause for EDIT_DELAY."""
     if bpy.app.timers.is_registered(render_edits):
         bpy.app.timers.unregister(render_edits)
     bpy.app.timers.register(render_edits, first_interval=EDIT_DELAY)
@@ -79,7 +99,7 @@ def render_edits():
     if interactive_tool_running([op.bl_idname for op in window.modal_operators]):
         return EDIT_DELAY
     with bpy.context.temp_override(window=window):
-        live = operators.running_live_render()
+        live = operators.running_frame_render(live=True)
         if live is not None:
             if not _made_stale(live, window.scene, settings):
                 return None  # the running render's frame is the edited scene's (a selection, say)

@@ -265,11 +265,14 @@ class KDPREVIEW_OT_render_animation(_JobOperator, bpy.types.Operator):
         return f"KD Preview: {len(job.results)} frames written to {job.out_dir}"
 
 
-def running_live_render():
-    """The modal Render run Live Update started, while it runs; else None."""
+def running_frame_render(*, live: bool = False):
+    """The modal run rendering one frame (Render, not Render Animation), while it runs; else None.
+    `live`: only one that Live Update started."""
     op = _running
     try:
-        return op if op is not None and getattr(op, "live", False) and not op._ended else None
+        if op is None or op._ended or not isinstance(op._job, FrameJob):
+            return None
+        return op if getattr(op, "live", False) or not live else None
     except ReferenceError:  # Blender freed it (the add-on's unregister clears the rest)
         return None
 

@@ -23,6 +23,15 @@ PATH_OPTIONS = {"ANIMATABLE"} | ({"PATH_SUPPORTS_BLEND_RELATIVE"} if "is_path_su
                                 bpy.types.Property.bl_rna.properties else set())
 
 
+def _setting_changed(settings, _context) -> None:
+    """A setting that changes the image (or Live Update itself) changed. From a script that makes no
+    depsgraph update (checked in Blender 5.2; the panel's edits make one), so Live Update would not
+    render it until the next edit: schedule its render here too."""
+    from . import live_update  # not at the top: live_update imports this module
+
+    live_update.setting_changed(settings)
+
+
 class KDPreviewSettings(bpy.types.PropertyGroup):
     """KD Preview render settings of a scene."""
 
@@ -30,47 +39,49 @@ class KDPreviewSettings(bpy.types.PropertyGroup):
         name="Mode", default=DEFAULTS.mode,
         items=[("ao", "Ambient Occlusion", "Occlusion within AO Distance"),
                ("shadow", "Shadows", "Direct light from the scene's lights, with shadows"),
-               ("ao+shadow", "AO + Shadows", "Both, multiplied")])
+               ("ao+shadow", "AO + Shadows", "Both, multiplied")], update=_setting_changed)
     samples: IntProperty(name="Samples", description="Samples per pixel", default=DEFAULTS.samples,
-                         min=1, max=MAX_SAMPLES, soft_max=1024)
+                         min=1, max=MAX_SAMPLES, soft_max=1024, update=_setting_changed)
     ao_distance: FloatProperty(name="AO Distance", description="Length of ambient-occlusion rays",
                                default=DEFAULTS.ao_distance, min=1e-6, soft_max=100.0, subtype="DISTANCE",
-                               unit="LENGTH")
+                               unit="LENGTH", update=_setting_changed)
     resolution_percentage: IntProperty(name="Resolution", description="Percent of the scene's render resolution",
-                                       default=DEFAULTS.resolution_percentage, min=1, max=100, subtype="PERCENTAGE")
+                                       default=DEFAULTS.resolution_percentage, min=1, max=100, subtype="PERCENTAGE",
+                                       update=_setting_changed)
     builder: EnumProperty(
         name="Builder", default=DEFAULTS.builder,
         items=[("binned", "Binned SAH", "Min-max binned SAH: fast, near-exact quality"),
                ("exact", "Exact SAH", "Full event sweep: best tree, slowest build"),
-               ("median", "Spatial Median", "Cheapest build, slower tracing")])
+               ("median", "Spatial Median", "Cheapest build, slower tracing")], update=_setting_changed)
     leaf_size: IntProperty(name="Leaf Size", description="Nodes with this many triangles or fewer become leaves",
-                           default=DEFAULTS.leaf_size, min=1, soft_max=64)
+                           default=DEFAULTS.leaf_size, min=1, soft_max=64, update=_setting_changed)
     max_depth: IntProperty(name="Max Depth", description="Tree depth limit (0 = automatic)",
-                           default=DEFAULTS.max_depth, min=0, max=MAX_DEPTH)
+                           default=DEFAULTS.max_depth, min=0, max=MAX_DEPTH, update=_setting_changed)
     bins: IntProperty(name="Bins", description="SAH bins per axis (binned builder)", default=DEFAULTS.bins,
-                      min=2, max=4096, soft_max=256)
+                      min=2, max=4096, soft_max=256, update=_setting_changed)
     threads: IntProperty(name="Threads", description="Worker threads (0 = all cores)", default=DEFAULTS.threads,
-                         min=0, max=1024)
+                         min=0, max=1024, update=_setting_changed)
     error_target: FloatProperty(name="Error Target",
                                 description="Stop sampling a pixel once its standard error is below this (0 = off)",
-                                default=DEFAULTS.error_target, min=0.0, soft_max=0.1, precision=4)
+                                default=DEFAULTS.error_target, min=0.0, soft_max=0.1, precision=4,
+                                update=_setting_changed)
     denoise: BoolProperty(name="Denoise",
                           description="Filter the finished image with an edge-avoiding à-trous denoiser guided by "
                                       "each pixel's sample variance (smooth at low sample counts; fades out as "
                                       "pixels converge)",
-                          default=DEFAULTS.denoise)
-    seed: IntProperty(name="Seed", description="Sampler seed", default=DEFAULTS.seed, min=0)
+                          default=DEFAULTS.denoise, update=_setting_changed)
+    seed: IntProperty(name="Seed", description="Sampler seed", default=DEFAULTS.seed, min=0, update=_setting_changed)
     memory_limit_mb: IntProperty(name="Memory Limit (MiB)",
                                  description="Refuse a frame whose estimated peak memory is above this (0 = no limit)",
-                                 default=DEFAULTS.memory_limit_mb, min=0, soft_max=65536)
+                                 default=DEFAULTS.memory_limit_mb, min=0, soft_max=65536, update=_setting_changed)
     lazy: BoolProperty(name="Lazy Build",
                        description="Build the kd-tree on demand, only where rays go (same image; pays when "
                                    "most of the scene is hidden)",
-                       default=DEFAULTS.lazy)
+                       default=DEFAULTS.lazy, update=_setting_changed)
     rebuild_all: BoolProperty(name="Rebuild All",
                               description="Rebuild every kd-tree and re-trace every frame instead of reusing "
                                           "unchanged objects' trees and unchanged images (for comparisons)",
-                              default=DEFAULTS.rebuild_all)
+                              default=DEFAULTS.rebuild_all, update=_setting_changed)
     output_format: EnumProperty(name="Format", default=DEFAULTS.output_format,
                                 items=[("PNG", "PNG", "16-bit sRGB PNG"), ("OPEN_EXR", "OpenEXR", "Linear float EXR")])
     output_dir: StringProperty(name="Output Folder", description="Where Render Animation writes frames and report.json",
@@ -78,7 +89,7 @@ class KDPreviewSettings(bpy.types.PropertyGroup):
     live_update: BoolProperty(name="Live Update",
                               description="Re-render the preview whenever the frame changes, and after edits "
                                           "once they pause",
-                              default=False)
+                              default=False, update=_setting_changed)
 
 
 class KDPreviewRunState(bpy.types.PropertyGroup):

@@ -290,3 +290,33 @@ def test_an_edit_leaves_a_live_render_of_the_same_image_and_a_users_render_runni
     bpy.context.view_layer.update()
     assert live_update.render_edits() == live_update.EDIT_DELAY and not users._ended  # waits for it
     assert timer_events(users, context)[0] == {"FINISHED"} and "KD Preview" in bpy.data.images
+
+
+def test_a_frame_change_during_a_render_renders_after_it_or_instead_of_a_live_one(addon, monkeypatch):  # noqa: F811
+    """Outside QA (Blender 5.2.2): moving to frame 2 while a live render of frame 1 ran left the preview
+    on frame 1 for good: the frame handler stays out while a job runs, and a frame change alone makes
+    no depsgraph update list. Now it leaves the frame to the edit timer."""
+    scene = half_plane_scene()
+    box = bpy.data.objects["Box"]
+    for frame, x in ((1, -2.0), (2, -1.0), (3, -3.0)):
+        box.location.x = x
+        box.keyframe_insert("location", index=0, frame=frame)
+    scene.frame_set(1)
+    scene.kd_preview.live_update = True
+    timers, state = bpy.app.timers, bpy.context.window_manager.kd_preview_state
+    stale, _ = started_modal(KDPREVIEW_OT_render, monkeypatch, live=True)
+    scene.frame_set(2)
+    assert timers.is_registered(live_update.render_edits) and not stale._ended
+    timers.unregister(live_update.render_edits)
+    assert live_update.render_edits() is None and stale._ended  # frame 1's render is stale: replaced
+    assert json.loads(state.last_run)["frame"] == 2
+    image = preview_pixels()
+    assert image[16, column_at(-1.0), 0] == pytest.approx(1.0, abs=1e-3) and image[16, column_at(-2.0), 0] < 0.9
+    scene.kd_preview.ao_distance = 2.0  # else Render would reuse frame 2's image at once
+    users, context = started_modal(KDPREVIEW_OT_render, monkeypatch)  # Render, clicked
+    scene.frame_set(3)
+    assert timers.is_registered(live_update.render_edits)
+    timers.unregister(live_update.render_edits)
+    assert live_update.render_edits() == live_update.EDIT_DELAY and not users._ended  # waits for it
+    assert timer_events(users, context)[0] == {"FINISHED"} and json.loads(state.last_run)["frame"] == 2
+    assert live_update.render_edits() is None and json.loads(state.last_run)["frame"] == 3

@@ -414,6 +414,28 @@ def test_live_update_renders_an_edit_once_edits_pause(addon):  # noqa: F811
     assert not timers.is_registered(live_update.render_edits)
 
 
+def test_live_update_renders_settings_set_by_a_script_and_its_own_switching_on(addon):  # noqa: F811
+    """Outside QA (Blender 5.2.2): a setting set from Python makes no depsgraph update, so Live Update
+    did not render it; nor did switching Live Update on. Settings now schedule the render themselves."""
+    timers = bpy.app.timers
+    scene = half_plane_scene()
+    if timers.is_registered(live_update.render_edits):
+        timers.unregister(live_update.render_edits)
+    scene.kd_preview.samples = 4  # Live Update off: nothing
+    assert not timers.is_registered(live_update.render_edits)
+    scene.kd_preview.live_update = True  # switching it on renders the scene as it is
+    assert timers.is_registered(live_update.render_edits)
+    timers.unregister(live_update.render_edits)
+    assert live_update.render_edits() is None
+    far_ground = (slice(None), slice(0, column_of(-3.5)))  # over 1.0 from the box
+    assert (preview_pixels()[far_ground][..., 0] == 1.0).all()  # AO Distance 1: nothing occludes it
+    scene.kd_preview.ao_distance = 3.0  # no depsgraph update (no view_layer.update() here either)
+    assert timers.is_registered(live_update.render_edits)
+    timers.unregister(live_update.render_edits)
+    assert live_update.render_edits() is None
+    assert preview_pixels()[far_ground][..., 0].mean() < 0.99  # AO Distance 3 reaches the box
+
+
 def test_live_update_edits_wait_for_a_running_render_or_tool_and_need_the_option(addon, monkeypatch):  # noqa: F811
     timers = bpy.app.timers
     scene = half_plane_scene()
