@@ -5,6 +5,7 @@ Nothing imported here touches core or numba (corelib imports them on the first
 render), so enabling the add-on is instant.
 """
 
+import atexit
 import sys
 
 from . import early_interrupt
@@ -12,18 +13,37 @@ from . import early_interrupt
 if sys.argv[:1] == ["-m"]:  # `python -m kd_addon`, while Python locates __main__ (documented for -m)
     early_interrupt.install()
 
+import bpy  # noqa: E402
+
 from . import cli, image_keeping, live_update, operators, panel, properties, tree_cache  # noqa: E402
 
 # Registration order: settings before the operators and panel that use them.
 MODULES = (properties, operators, panel, live_update, image_keeping, cli)
+_registered = False
+_exit_hook = False
 
 
 def register():
+    global _registered, _exit_hook
     for module in MODULES:
         module.register()
+    _registered = True
+    if not bpy.app.binary_path and not _exit_hook:  # the bpy module (Blender itself unregisters at quit)
+        atexit.register(_unregister_at_exit)
+        _exit_hook = True
 
 
 def unregister():
+    global _registered
     for module in reversed(MODULES):
         module.unregister()
     tree_cache.clear()  # kept trees and images go with the add-on
+    _registered = False
+
+
+def _unregister_at_exit():
+    """A script that registers the add-on with the bpy module and exits without unregistering it made
+    the bpy 4.2 module crash at exit (SIGSEGV, exit code 139, after the work was done): its teardown
+    fails on classes holding Python functions (methods, update callbacks). Unregistering first avoids it."""
+    if _registered:
+        unregister()

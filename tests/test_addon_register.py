@@ -212,3 +212,17 @@ def test_a_blend_relative_output_folder_sets_without_a_warning():
             assert [str(w.message) for w in caught] == []
     finally:
         kd_addon.unregister()
+
+
+def test_a_script_that_exits_registered_is_unregistered_at_exit():
+    """The bpy 4.2 module crashed at exit (SIGSEGV, exit code 139) when a script registered the add-on
+    and did not unregister it (its teardown fails on classes holding Python functions); the bpy module
+    now unregisters it at exit. Run with this test's own Python, so each bpy pass checks its Blender.
+    The script's own exit hook, registered first, runs last and sees the add-on unregistered."""
+    script = ("import atexit, bpy, kd_addon\n"
+              "atexit.register(lambda: print('registered at exit:', hasattr(bpy.types.Scene, 'kd_preview')))\n"
+              "kd_addon.register()\n"
+              "bpy.context.scene.kd_preview.samples = 2\n")
+    done = run_python(script, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "registered at exit: False" in done.stdout
