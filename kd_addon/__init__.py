@@ -25,16 +25,20 @@ _exit_hook = False
 
 def register():
     global _registered, _exit_hook
+    _registered = True  # before the modules: unregister() then undoes a registration that failed halfway
     for module in MODULES:
         module.register()
-    _registered = True
     if not bpy.app.binary_path and not _exit_hook:  # the bpy module (Blender itself unregisters at quit)
         atexit.register(_unregister_at_exit)
         _exit_hook = True
 
 
 def unregister():
+    """Undo register(); a second call does nothing (Blender's own exit disables add-ons enabled with
+    addon_utils after our exit hook already did)."""
     global _registered
+    if not _registered:
+        return
     for module in reversed(MODULES):
         module.unregister()
     tree_cache.clear()  # kept trees and images go with the add-on
@@ -45,5 +49,4 @@ def _unregister_at_exit():
     """A script that registers the add-on with the bpy module and exits without unregistering it made
     the bpy 4.2 module crash at exit (SIGSEGV, exit code 139, after the work was done): its teardown
     fails on classes holding Python functions (methods, update callbacks). Unregistering first avoids it."""
-    if _registered:
-        unregister()
+    unregister()

@@ -96,15 +96,15 @@ def render_edits():
     settings = getattr(window.scene, "kd_preview", None) if window is not None else None
     if settings is None or not settings.live_update:
         return None
-    if interactive_tool_running([op.bl_idname for op in window.modal_operators]):
-        return EDIT_DELAY
+    if bpy.app.is_job_running("RENDER") or interactive_tool_running([op.bl_idname for op in window.modal_operators]):
+        return EDIT_DELAY  # Blender renders (and may set frames) or a tool edits: read the scene after
     with bpy.context.temp_override(window=window):
         live = operators.running_frame_render(live=True)
         if live is not None:
             if not _made_stale(live, window.scene, settings):
                 return None  # the running render's frame is the edited scene's (a selection, say)
             live.supersede(bpy.context)
-        elif job_running() or bpy.app.is_job_running("RENDER"):
+        elif job_running():
             return EDIT_DELAY
         try:
             bpy.ops.kdpreview.render("INVOKE_DEFAULT", live=True)
@@ -116,14 +116,14 @@ def render_edits():
 def _made_stale(live, scene, settings) -> bool:
     """Whether the edits since a Live Update render read the scene change its image (its job's image
     key against the scene's now; one more extraction). Not before it read the scene: it reads it as
-    edited. A scene that cannot render now counts as changed: the new render says why."""
+    edited. A scene that cannot be read now counts as changed: the new render says why."""
     key = live.frame_key()
     if key is None:
         return False
     try:
         return image_key_now(scene, bpy.context.evaluated_depsgraph_get(), make_config(settings)) != key
-    except PreviewError:
-        return True
+    except Exception:  # not raised here: Blender would drop the timer and the edit stay unrendered;
+        return True  # the new render reads the scene again and reports it (a bug as a traceback)
 
 
 def interactive_tool_running(idnames) -> bool:

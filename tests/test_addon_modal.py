@@ -283,6 +283,8 @@ def test_an_edit_leaves_a_live_render_of_the_same_image_and_a_users_render_runni
     bpy.context.view_layer.update()
     assert live_update.render_edits() is None and not live._ended and pipeline.job_running()
     assert timer_events(live, context)[0] == {"FINISHED"} and live.reports[-1][0] == {"INFO"}
+    assert preview_pixels()[16, column_at(-1.0), 0] == pytest.approx(1.0, abs=1e-3)  # it read the moved box
+    assert preview_pixels()[16, column_at(-2.0), 0] < 0.9
     bpy.data.images.remove(bpy.data.images["KD Preview"])
     scene.kd_preview.ao_distance = 2.0  # else Render would reuse the last image at once
     users, context = started_modal(KDPREVIEW_OT_render, monkeypatch)  # Render, clicked

@@ -226,3 +226,6 @@ def test_a_script_that_exits_registered_is_unregistered_at_exit():
     done = run_python(script, timeout=300)
     assert done.returncode == 0, done.stderr[-2000:]
     assert "registered at exit: False" in done.stdout
+    # Enabled as Blender enables add-ons, Blender's own exit disables it again after our hook: no error
+    enabled = run_python("import bpy, addon_utils\naddon_utils.enable('kd_addon', default_set=True)\n", timeout=300)
+    assert enabled.returncode == 0 and "Traceback" not in enabled.stderr, enabled.stderr[-2000:]
