@@ -20,17 +20,16 @@ from . import cli, image_keeping, live_update, operators, panel, properties, tre
 # Registration order: settings before the operators and panel that use them.
 MODULES = (properties, operators, panel, live_update, image_keeping, cli)
 _registered = False
-_exit_hook = False
 
 
 def register():
-    global _registered, _exit_hook
+    global _registered
     _registered = True  # before the modules: unregister() then undoes a registration that failed halfway
     for module in MODULES:
         module.register()
-    if not bpy.app.binary_path and not _exit_hook:  # the bpy module (Blender itself unregisters at quit)
+    if not bpy.app.binary_path:  # the bpy module (Blender itself unregisters at quit)
+        atexit.unregister(_unregister_at_exit)  # once, however often the add-on is registered
         atexit.register(_unregister_at_exit)
-        _exit_hook = True
 
 
 def unregister():

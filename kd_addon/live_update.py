@@ -45,9 +45,7 @@ INTERACTIVE_TOOLS = {"TRANSFORM", "VIEW3D", "MESH", "SCULPT", "PAINT", "GIZMO", 
 def kd_preview_frame_change(scene, depsgraph=None):
     """frame_change_post: re-render the preview of the new frame when live update is on."""
     settings = getattr(scene, "kd_preview", None)
-    if settings is None or not settings.live_update:
-        return
-    if bpy.app.is_job_running("RENDER"):
+    if settings is None or not settings.live_update or bpy.app.is_job_running("RENDER"):
         return
     if job_running():
         if operators.running_frame_render() is not None:  # the user changed the frame during a Render run:
@@ -84,9 +82,13 @@ def setting_changed(settings) -> None:
 
 def schedule_render() -> None:
     """(Re)start the timer that renders the scene once edits pause for EDIT_DELAY."""
+    _stop_timer()
+    bpy.app.timers.register(render_edits, first_interval=EDIT_DELAY)
+
+
+def _stop_timer() -> None:
     if bpy.app.timers.is_registered(render_edits):
         bpy.app.timers.unregister(render_edits)
-    bpy.app.timers.register(render_edits, first_interval=EDIT_DELAY)
 
 
 def render_edits():
@@ -143,5 +145,4 @@ def register():
 
 def unregister():
     app_handlers.remove(HANDLERS)
-    if bpy.app.timers.is_registered(render_edits):
-        bpy.app.timers.unregister(render_edits)
+    _stop_timer()

@@ -217,9 +217,6 @@ class KDPREVIEW_OT_render(_JobOperator, bpy.types.Operator):
     bl_label = "Render Preview"
     bl_options = {"REGISTER"}
 
-    open_view: bpy.props.BoolProperty(
-        name="Open View", default=True, options={"HIDDEN", "SKIP_SAVE"},
-        description="Open an image editor as Blender opens its render view when no window has one")
     live: bpy.props.BoolProperty(
         name="Live", default=False, options={"HIDDEN", "SKIP_SAVE"},
         description="Started by Live Update: opens no image editor, and a newer edit replaces it")
@@ -230,8 +227,7 @@ class KDPREVIEW_OT_render(_JobOperator, bpy.types.Operator):
 
     def finish(self, context, job) -> str:
         result = job.result()
-        live = getattr(self, "live", False)
-        output.store_preview(result.image, open_view=getattr(self, "open_view", True) and not live)
+        output.store_preview(result.image, open_view=not getattr(self, "live", False))
         summary = result.summary()
         set_last_run(run_state(context), summary)
         speed = "last image reused" if result.image_reused else f"{result.mrays_per_s:.2f} Mrays/s"
