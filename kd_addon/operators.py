@@ -166,12 +166,18 @@ class _JobOperator:
         global _running
         if _running is self:
             _running = None
-        release(job)
         state = run_state(context)
-        state.running = False
-        redraw_panels(context)  # on every outcome (a tag: the panel draws the final status later)
         try:
-            self.cleanup(job)
+            try:
+                # Still claimed: Render Animation's cleanup sets the start frame again, and Live Update's
+                # frame handler, seeing no run, rendered that frame synchronously (598 ms of frozen UI in
+                # outside QA) although the preview already showed it; an edit made meanwhile is left to
+                # the edit timer, which renders it modal once the claim is released.
+                self.cleanup(job)
+            finally:
+                release(job)
+                state.running = False
+                redraw_panels(context)  # on every outcome (a tag: the panel draws the final status later)
             if error is None:
                 message = self.finish(context, job) + self._wall_time()
                 state.status, state.progress = message, 1.0

@@ -176,6 +176,27 @@ def test_modal_animation_runs_every_frame(modal, tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["frame_0001.png", "frame_0002.png", "report.json"]
 
 
+def test_live_update_leaves_the_restored_start_frame_of_an_animation_unrendered(modal, tmp_path, monkeypatch):
+    """Outside QA (Blender 5.2.2): after Render Animation with Live Update on, setting the start frame
+    again made the frame handler render it synchronously (598 ms of frozen UI), though the preview
+    already showed it: the job was released before the frame was set. The preview stays as it was."""
+    scene = half_plane_scene()
+    scene.frame_start, scene.frame_end, scene.frame_current = 1, 2, 5
+    scene.kd_preview.output_dir = str(tmp_path)
+    scene.kd_preview.live_update = True
+    bpy.ops.kdpreview.render()
+    before = preview_pixels().copy()
+    handler_renders = []
+    monkeypatch.setattr(live_update, "render_frame", lambda *args: handler_renders.append(args))
+    op = driver(KDPREVIEW_OT_render_animation)
+    op.invoke(modal, None)
+    assert timer_events(op, modal)[0] == {"FINISHED"} and scene.frame_current == 5
+    assert handler_renders == [] and not pipeline.job_running()
+    assert np.array_equal(preview_pixels(), before)
+    scene.frame_set(4)  # with no run, the handler renders a frame change as before
+    assert len(handler_renders) == 1
+
+
 def test_modal_failure_is_reported_and_released(modal):
     scene = half_plane_scene()
     scene.kd_preview.mode = "shadow"
