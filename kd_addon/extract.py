@@ -271,6 +271,20 @@ def read_mesh(mesh: bpy.types.Mesh) -> tuple[np.ndarray, np.ndarray]:
     return verts.reshape(-1, 3), tris
 
 
+def read_object_mesh(ob: bpy.types.Object, mesh: bpy.types.Mesh) -> tuple[np.ndarray, np.ndarray]:
+    """read_mesh of an evaluated object's mesh `mesh`, Edit Mode included. An object in Edit Mode
+    evaluates to a wrapper around its edit mesh that has no "position" attribute and, without
+    modifiers, no triangles: the preview lost the object being modelled, or failed (KeyError) with a
+    modifier. to_mesh() flushes the edit mesh with every layer, as Cycles does (object_to_mesh in
+    intern/cycles/blender/util.h); the copy is freed at once."""
+    if not mesh.is_editmode:
+        return read_mesh(mesh)
+    try:
+        return read_mesh(ob.to_mesh())
+    finally:
+        ob.to_mesh_clear()
+
+
 # --------------------------------------------------------------------------
 # Render visibility
 # --------------------------------------------------------------------------
@@ -418,8 +432,9 @@ class _GeometryReader:
         self.rejected: set[int] = set()
         self.non_finite: dict[int, tuple[str, set[str]]] = {}  # key -> (mesh name, its objects)
 
-    def get(self, mesh: bpy.types.Mesh, object_name: str) -> int | None:
-        """Geometry key for `mesh`, or None when it has no usable triangles."""
+    def get(self, ob: bpy.types.Object, object_name: str) -> int | None:
+        """Geometry key for the evaluated object `ob`'s mesh, or None when it has no usable triangles."""
+        mesh = ob.data
         key = mesh.as_pointer()
         if key in self.geometries:
             return key
@@ -427,7 +442,7 @@ class _GeometryReader:
             if key in self.non_finite:
                 self.non_finite[key][1].add(object_name)
             return None
-        verts, tris = read_mesh(mesh)
+        verts, tris = read_object_mesh(ob, mesh)
         if len(tris) and not np.isfinite(verts).all():  # 0.5 ms per 1M verts
             self.non_finite[key] = (mesh.name, {object_name})
             tris = tris[:0]
@@ -688,7 +703,7 @@ class _EntryReader:
         if verdict is None:
             return None
         name, instancer, camera, shadow, holdout = verdict
-        key = self.geometries.get(mesh, name)
+        key = self.geometries.get(ob, name)
         if key is None:
             return None
         return Instance(

@@ -56,6 +56,29 @@ def test_plain_cube_world_positions(scene):
     assert result.extract_ms > 0 and result.warnings == []
 
 
+def test_objects_in_edit_mode_give_their_edited_triangles(scene):
+    """Outside QA: an object in Edit Mode evaluates to a wrapper around its edit mesh; the preview read
+    no triangles from it (the object being modelled vanished) or, with a modifier, failed (KeyError:
+    no "position" attribute). The edit, not yet written back to the mesh, must show, as in Cycles."""
+    plain = scenes.add_cube("Plain", location=(0, 0, 0))
+    smooth = scenes.add_cube("Smooth", location=(5, 0, 0))
+    smooth.modifiers.new("Subdivision", "SUBSURF").levels = 1
+    for ob in (plain, smooth):
+        ob.select_set(True)
+    bpy.context.view_layer.objects.active = plain
+    bpy.ops.object.mode_set(mode="EDIT")  # both, as multi-object editing does
+    bpy.ops.mesh.select_all(action="SELECT")
+    bpy.ops.transform.translate(value=(0.0, 0.0, 1.0))  # lives in the edit meshes until Object Mode
+    assert plain.data.vertices[0].co.z == CUBE[0, 2]  # the original mesh does not have it yet
+    edited = extract_scene()
+    bpy.ops.object.mode_set(mode="OBJECT")
+    flushed = extract_scene()
+    assert edited.triangle_count == flushed.triangle_count == 12 + 48 and edited.warnings == []
+    for name in ("Plain", "Smooth"):
+        np.testing.assert_array_equal(triangles_of(edited, name), triangles_of(flushed, name))
+    np.testing.assert_allclose(sorted_points(triangles_of(edited, "Plain")), sorted_points(CUBE + (0, 0, 1)))
+
+
 def test_array_mirror_with_object_transform(scene):
     # Cube spanning x in [1,3]; Array x2 (relative offset 1) -> x in [1,5];
     # Mirror X -> x in [-5,-1] U [1,5]; 4 cubes = 48 triangles. The object is
