@@ -324,7 +324,7 @@ class _Visibility:
             if len(instancer.particle_systems):
                 particle_collections, particle_objects = particle_references(instancer)
                 collections, objects = collections + particle_collections, objects + particle_objects
-            members = frozenset(ob.as_pointer() for c in collections for ob in c.all_objects)
+            members = frozenset().union(*(_reachable_objects(c, {c.as_pointer()}) for c in collections))
             shown = frozenset().union(*(self._collection_objects(c, set()) for c in collections))
             self._node_memo[ptr] = (members, shown, frozenset(ob.as_pointer() for ob in objects))
         return self._node_memo[ptr]
@@ -353,6 +353,18 @@ class _Visibility:
         stack.discard(ptr)
         self._collection_memo[ptr] = frozenset(out)
         return self._collection_memo[ptr]
+
+
+def _reachable_objects(coll: bpy.types.Collection, stack: set) -> set[int]:
+    """Pointers of every object an instance of `coll` could bring, whatever its visibility: the
+    collection's objects, its children's, and those of the collections they instance, nested."""
+    out: set[int] = set()
+    for ob in coll.all_objects:
+        out.add(ob.as_pointer())
+        inner = ob.instance_collection if ob.instance_type == "COLLECTION" else None
+        if inner is not None and inner.as_pointer() not in stack:
+            out |= _reachable_objects(inner, stack | {inner.as_pointer()})
+    return out
 
 
 def _layer_render_objects(layer_coll: bpy.types.LayerCollection) -> set[int]:
@@ -416,7 +428,24 @@ def collection_visible(vis: _Visibility, parent, orig: bpy.types.Object) -> bool
     parent = parent.original
     if not vis.scene_object(parent):
         return False
-    return parent == orig or vis.in_instanced_collection(parent, orig)
+    if parent == orig:
+        return True
+    if parent.instance_type in _INSTANCING_PARENT_TYPES and _descends_from(orig, parent):
+        # Blender instances on vertices or faces the children that the depsgraph holds (object_dupli.cc,
+        # make_child_duplis): a render's depsgraph leaves out a child disabled in renders, the viewport's
+        # does not (Cycles showed no copies of such a child; the preview showed them all).
+        return vis.scene_object(orig)
+    return vis.in_instanced_collection(parent, orig)
+
+
+def _descends_from(orig: bpy.types.Object, ancestor: bpy.types.Object) -> bool:
+    """Whether `ancestor` is on `orig`'s parent chain (Blender's is_child for instancing children)."""
+    parent = orig.parent
+    while parent is not None:
+        if parent == ancestor:
+            return True
+        parent = parent.parent
+    return False
 
 
 # --------------------------------------------------------------------------

@@ -601,6 +601,43 @@ def test_a_child_of_a_vertex_or_face_instancing_parent_shows_only_as_its_instanc
     assert all(i.is_instance and i.instancer == "Parent" for i in result.instances)
 
 
+@pytest.mark.parametrize("instance_type", ["VERTS", "FACES"])
+def test_a_child_disabled_in_renders_is_not_instanced_on_vertices_or_faces(scene, instance_type):
+    """Outside QA against Cycles: Blender instances the children that the depsgraph holds, and a render's
+    leaves out a child disabled in renders (object_dupli.cc, make_child_duplis), so a final render shows
+    no copies of it; the viewport's depsgraph the preview reads still made them."""
+    parent = scenes.add_mesh("Parent", [(0, 0, 0), (1, 0, 0), (1, 1, 0), (4, 0, 0), (5, 0, 0), (5, 1, 0)],
+                             [(0, 1, 2), (3, 4, 5)])
+    parent.instance_type = instance_type
+    parent.show_instancer_for_render = False
+    for name, hidden in (("Shown", False), ("Hidden", True)):
+        child = scenes.add_cube(name, scale=0.2, location=(0, 0, 3))
+        child.parent, child.hide_render = parent, hidden
+    result = extract_scene()
+    copies = 6 if instance_type == "VERTS" else 2
+    assert sorted(result.object_names) == ["Shown"] * copies and result.warnings == []
+
+
+@pytest.mark.parametrize("nested_instancer_hidden", [False, True])
+def test_collection_info_follows_nested_collection_instances(scene, nested_instancer_hidden):
+    """Outside QA against Cycles: a Collection Info node instancing a collection that holds an empty
+    instancing a second collection showed the second's members disabled in renders (they were taken
+    for objects the node instances directly). A render expands the nesting as a collection instance:
+    the inner collection's render-visible members only, and none when the inner instancer is disabled
+    in renders."""
+    inner = scenes.new_collection("Inner", exclude=True)
+    scenes.add_cube("InnerShown", collection=inner)
+    scenes.add_cube("InnerHidden", collection=inner).hide_render = True
+    outer = scenes.new_collection("Outer", exclude=True)
+    scenes.add_cube("OuterShown", collection=outer)
+    nested = scenes.add_collection_instance("Nested", inner, location=(3, 0, 0), collection=outer)
+    nested.hide_render = nested_instancer_hidden
+    scenes.add_info_node_host("Carrier", outer)
+    result = extract_scene()
+    expected = ["OuterShown"] if nested_instancer_hidden else ["InnerShown", "OuterShown"]
+    assert sorted(_instances_by_host(result)["Carrier"]) == expected
+
+
 def test_geometry_that_is_not_triangles_inside_mesh_objects_is_named(scene):
     """Geometry nodes that turn a mesh into points, and hair particles drawn as strands: Cycles
     renders both, the preview cannot trace them and says so (outside QA: left out in silence)."""
