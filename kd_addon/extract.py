@@ -509,7 +509,8 @@ def extract_scene(depsgraph: bpy.types.Depsgraph | None = None) -> ExtractedScen
     return ExtractedScene(
         geometries=walker.geometries.geometries,
         instances=instances,
-        warnings=(walker.geometries.warnings + list(walker.not_triangles.values())
+        warnings=(walker.geometries.warnings + list(walker.non_finite_placements.values())
+                  + list(walker.not_triangles.values())
                   + left_out_warnings(depsgraph, vis, walker.instanced_by)),
         extract_ms=(time.perf_counter() - t0) * 1e3,
         frame=depsgraph.scene.frame_current,
@@ -718,6 +719,7 @@ class _EntryReader:
         self._verdicts: dict[tuple[int, int], tuple[str, str | None, bool, bool, bool] | None] = {}
         self.instanced_by: dict[int, set[int]] = {}  # instancer (original) -> the originals it instanced
         self.not_triangles: dict[tuple[str, str | None], str] = {}
+        self.non_finite_placements: dict[tuple[str, str | None], str] = {}  # one warning each
 
     def read(self, inst) -> Instance | None:
         """Record for one entry, or None to skip it. Copies everything out at
@@ -732,12 +734,19 @@ class _EntryReader:
         if verdict is None:
             return None
         name, instancer, camera, shadow, holdout = verdict
+        matrix = np.array(inst.matrix_world, dtype=np.float64)
+        if not np.isfinite(matrix).all():  # a NaN location or scale (a driver, a script): not placeable
+            where = f"object '{name}'" if instancer in (None, name) else f"object '{name}' instanced by '{instancer}'"
+            self.non_finite_placements.setdefault(
+                (name, instancer), f"{where} has a non-finite transform (NaN or infinite location, rotation or "
+                "scale); left out")
+            return None
         key = self.geometries.get(ob, name)
         if key is None:
             return None
         return Instance(
             geometry_key=key,
-            matrix_world=np.array(inst.matrix_world, dtype=np.float64),
+            matrix_world=matrix,
             name=name,
             instancer=instancer,
             is_instance=parent is not None,

@@ -102,9 +102,18 @@ def test_non_finite_objects_are_named_and_nothing_else_changes(addon):  # noqa: 
     verts = [(0.3 * x, 0.3 * y, 0.3 * z) for x, y, z in scenes.CUBE_VERTS]
     verts[5] = (math.inf, 0.3, -0.3)
     scenes.add_mesh("Exploded", verts, scenes.CUBE_FACES, location=(-2, 1, 1))
+    # Transforms no placement can use (outside QA: the whole frame failed with core's "instance 1 has
+    # a non-finite matrix", naming no object): a NaN location, and an instancer's NaN rotation.
+    scenes.add_cube("Lost", scale=0.3, location=(-2, 1, 1)).location.x = math.nan
+    source = scenes.new_collection("Source", exclude=True)
+    scenes.add_cube("Member", scale=0.3, collection=source)
+    scenes.add_collection_instance("Blown", source, location=(-2, 1, 1)).rotation_euler.z = math.nan
     result = render(scene)
     assert sorted(w for w in result.warnings if "non-finite" in w) == [
         "object 'Exploded' has non-finite vertex coordinates; left out",
+        "object 'Lost' has a non-finite transform (NaN or infinite location, rotation or scale); left out",
+        "object 'Member' instanced by 'Blown' has a non-finite transform (NaN or infinite location, rotation "
+        "or scale); left out",
         "object 'NaNTri' has non-finite vertex coordinates; left out"]
     assert result.triangles == reference.triangles == 14
     np.testing.assert_array_equal(result.image, reference.image)
