@@ -221,7 +221,10 @@ def read_camera(scene, depsgraph, width: int, height: int) -> tuple[CameraInput,
     if scene.camera.type != "CAMERA":
         raise PreviewError(f"the scene camera '{scene.camera.name}' is a {scene.camera.type}, not a camera object")
     evaluated = scene.camera.evaluated_get(depsgraph)
-    return camera_input(evaluated.data, evaluated.matrix_world, width, height)
+    try:
+        return camera_input(evaluated.data, evaluated.matrix_world, width, height)
+    except PreviewError as error:  # named: timeline markers may switch between several cameras
+        raise PreviewError(f"scene camera '{scene.camera.name}': {error}") from None
 
 
 def read_lights(depsgraph, visibility: _Visibility | None = None) -> list[LightInput]:

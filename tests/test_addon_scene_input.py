@@ -95,6 +95,18 @@ def test_no_scene_camera_is_named(scene):
         scene_input.read_camera(scene, bpy.context.evaluated_depsgraph_get(), 10, 10)
 
 
+def test_the_scene_camera_a_problem_is_found_in_is_named(scene):
+    """Outside QA: with timeline markers switching cameras, "panoramic cameras are not supported" did
+    not say which camera."""
+    cam = scenes.add_camera()
+    cam.name, cam.data.type, scene.camera = "Shot 2", "PANO", cam
+    with pytest.raises(PreviewError, match="^scene camera 'Shot 2': panoramic cameras are not supported"):
+        scene_input.read_camera(scene, bpy.context.evaluated_depsgraph_get(), 10, 10)
+    cam.data.type, cam.scale = "PERSP", (0.0, 1.0, 1.0)
+    with pytest.raises(PreviewError, match="^scene camera 'Shot 2': the camera's transform is degenerate"):
+        scene_input.read_camera(scene, bpy.context.evaluated_depsgraph_get(), 10, 10)
+
+
 HAS_TEMPERATURE = "use_temperature" in bpy.types.Light.bl_rna.properties  # Blender 4.5+
 
 
