@@ -293,9 +293,11 @@ def read_object_mesh(ob: bpy.types.Object, mesh: bpy.types.Mesh) -> tuple[np.nda
 class _Visibility:
     """Render-visibility decisions, memoized per original object pointer."""
 
-    def __init__(self, view_layer: bpy.types.ViewLayer):
-        self.view_layer = view_layer
-        self.scene_objects = _layer_render_objects(view_layer.layer_collection)
+    def __init__(self, depsgraph: bpy.types.Depsgraph):
+        self.view_layer = depsgraph.view_layer
+        self.scene_objects = _layer_render_objects(self.view_layer.layer_collection)
+        for background in _set_scenes(depsgraph.scene):
+            self.scene_objects |= _layer_render_objects(_render_view_layer(background).layer_collection)
         self._collection_memo: dict[int, frozenset[int]] = {}
         self._node_memo: dict[int, tuple[frozenset, frozenset, frozenset]] = {}
 
@@ -353,6 +355,24 @@ class _Visibility:
         stack.discard(ptr)
         self._collection_memo[ptr] = frozenset(out)
         return self._collection_memo[ptr]
+
+
+def _set_scenes(scene: bpy.types.Scene) -> list[bpy.types.Scene]:
+    """The chain of background scenes (Scene > Background Scene, its own, ...): a render shows their
+    objects too, as the depsgraph holds them (outside QA: left out, so Cycles showed more)."""
+    chain, seen = [], {scene.as_pointer()}
+    background = scene.background_set
+    while background is not None and background.as_pointer() not in seen:  # Blender refuses cycles; be sure
+        chain.append(background)
+        seen.add(background.as_pointer())
+        background = background.background_set
+    return chain
+
+
+def _render_view_layer(scene: bpy.types.Scene) -> bpy.types.ViewLayer:
+    """The view layer a background scene contributes (Blender's BKE_view_layer_default_render: the
+    first one enabled for rendering, else the first)."""
+    return next((layer for layer in scene.view_layers if layer.use), scene.view_layers[0])
 
 
 def _reachable_objects(coll: bpy.types.Collection, stack: set) -> set[int]:
@@ -503,7 +523,7 @@ def extract_scene(depsgraph: bpy.types.Depsgraph | None = None) -> ExtractedScen
     t0 = time.perf_counter()
     if depsgraph is None:
         depsgraph = bpy.context.evaluated_depsgraph_get()
-    vis = _Visibility(depsgraph.view_layer)
+    vis = _Visibility(depsgraph)
     walker = _EntryReader(vis)
     instances = [r for r in map(walker.read, depsgraph.object_instances) if r is not None]
     return ExtractedScene(

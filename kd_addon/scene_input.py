@@ -231,7 +231,7 @@ def read_lights(depsgraph, visibility: _Visibility | None = None) -> list[LightI
     """Render-visible scene lights, instanced ones too (a light in an instanced collection lights the
     scene in Cycles): the render-visibility rules of meshes (extract.py), from object_instances.
     `visibility`: the view layer's visibility table when the caller has one."""
-    visibility = _Visibility(depsgraph.view_layer) if visibility is None else visibility
+    visibility = _Visibility(depsgraph) if visibility is None else visibility
     lights = []
     for inst in depsgraph.object_instances:
         ob = inst.object
@@ -272,6 +272,6 @@ def read_scene(scene, depsgraph, width: int, height: int, lights: bool = True) -
     if scene.render.use_border:  # outside QA: a final render crops or blanks outside the region
         warnings.append("the Render Region (Output > Format) is ignored by the preview: it renders the whole frame")
     camera, camera_warnings = read_camera(scene, depsgraph, width, height)
-    visibility = _Visibility(depsgraph.view_layer)  # one table for the lights read and the hidden ones
+    visibility = _Visibility(depsgraph)  # one table for the lights read and the hidden ones
     return SceneInputs(camera, read_lights(depsgraph, visibility), width, height, warnings + camera_warnings,
                        hidden_light_warnings(depsgraph, visibility) if lights else [])

@@ -270,6 +270,16 @@ def test_render_hidden_lights_are_left_out(scene):
     assert names == ["Shown"]
 
 
+def test_lights_of_a_background_scene_are_read(scene):
+    """Outside QA: Cycles lights the scene with its Background Scene's sun (mean 0.77 against 0.05
+    without); the preview found no light and shadow mode failed."""
+    background = bpy.data.scenes.new("Set")
+    scene.background_set = background
+    scenes.link(bpy.data.objects.new("SetSun", bpy.data.lights.new("SetSun", "SUN")), background.collection)
+    scenes.link(bpy.data.objects.new("Off", bpy.data.lights.new("Off", "SUN")), background.collection).hide_render = True
+    assert [light.name for light in scene_input.read_lights(bpy.context.evaluated_depsgraph_get())] == ["SetSun"]
+
+
 def test_instanced_lights_are_read_at_their_instances(scene):
     """A light inside an instanced collection lights the scene in Cycles (found by outside QA: the
     preview used to ignore it): one light per render-visible instance, at the instance's place."""

@@ -638,6 +638,31 @@ def test_collection_info_follows_nested_collection_instances(scene, nested_insta
     assert sorted(_instances_by_host(result)["Carrier"]) == expected
 
 
+@pytest.mark.parametrize("first_layer_renders", [True, False])
+def test_background_scenes_are_rendered_through_their_render_view_layer(scene, first_layer_renders):
+    """Outside QA against Cycles: a render shows the objects of the scene's Background Scene (and of
+    that one's, chained) as the depsgraph holds them; the preview left them out with no warning. A
+    background scene contributes its first view layer enabled for rendering (else its first), with
+    that layer's exclusions and Disable in Renders; checked against Cycles with either layer enabled.
+    (Switching `use` after an evaluation crashed the bpy module's next one, so each case is set up
+    before the first.)"""
+    scenes.add_cube("Own")
+    first = bpy.data.scenes.new("Set")
+    scene.background_set = first
+    scenes.add_cube("InSet", location=(3, 0, 0), collection=first.collection)
+    scenes.add_cube("HiddenInSet", location=(6, 0, 0), collection=first.collection).hide_render = True
+    side = bpy.data.collections.new("Side")
+    first.collection.children.link(side)
+    scenes.add_cube("InSide", location=(9, 0, 0), collection=side)
+    second = bpy.data.scenes.new("SetOfSet")
+    first.background_set = second
+    scenes.add_cube("InSetOfSet", location=(12, 0, 0), collection=second.collection)
+    first.view_layers.new("Other").layer_collection.children["Side"].exclude = True
+    first.view_layers[0].use = first_layer_renders  # else the second layer renders, which excludes Side
+    expected = ["InSet", "InSetOfSet", "InSide", "Own"] if first_layer_renders else ["InSet", "InSetOfSet", "Own"]
+    assert sorted(extract_scene().object_names) == expected
+
+
 def test_geometry_that_is_not_triangles_inside_mesh_objects_is_named(scene):
     """Geometry nodes that turn a mesh into points, and hair particles drawn as strands: Cycles
     renders both, the preview cannot trace them and says so (outside QA: left out in silence)."""
