@@ -253,9 +253,9 @@ class KDPREVIEW_OT_render_animation(_JobOperator, bpy.types.Operator):
         settings = scene.kd_preview
         config = make_config(settings)
         frames = list(range(scene.frame_start, scene.frame_end + 1, max(1, scene.frame_step)))
-        # bpy.context, not `context`: the operator's context must not be kept beyond invoke.
+        view_layer = context.view_layer  # `context` itself must not be kept beyond invoke
         return SequenceJob(scene, config, frames, output_folder(settings.output_dir),
-                           lambda _scene: bpy.context.evaluated_depsgraph_get())
+                           lambda _scene: evaluated_depsgraph(scene, view_layer))
 
     def cleanup(self, job) -> None:
         job.close()
@@ -265,6 +265,14 @@ class KDPREVIEW_OT_render_animation(_JobOperator, bpy.types.Operator):
         last["animation"] = {"frames": len(job.results), "report": str(job.report_path)}
         set_last_run(run_state(context), last)
         return f"KD Preview: {len(job.results)} frames written to {job.out_dir}"
+
+
+def evaluated_depsgraph(scene, view_layer):
+    """The evaluated depsgraph of `scene`'s `view_layer`, whatever the context: a modal run's later
+    ticks get the window's, not the one it was invoked with (a script's temp_override of another
+    scene rendered the window scene's objects under the other's name and camera; outside QA)."""
+    with bpy.context.temp_override(scene=scene, view_layer=view_layer):
+        return bpy.context.evaluated_depsgraph_get()
 
 
 def running_frame_render(*, live: bool = False):

@@ -19,6 +19,7 @@ from types import SimpleNamespace
 import pytest
 
 from tests.addon_support import EVENT_PROPERTIES, addon, event, half_plane_scene, preview_pixels  # noqa: F401
+from tests import bpy_scenes as scenes  # noqa: E402
 
 import bpy  # noqa: E402
 import numpy as np  # noqa: E402
@@ -195,6 +196,26 @@ def test_live_update_leaves_the_restored_start_frame_of_an_animation_unrendered(
     assert np.array_equal(preview_pixels(), before)
     scene.frame_set(4)  # with no run, the handler renders a frame change as before
     assert len(handler_renders) == 1
+
+
+def test_a_modal_animation_renders_the_scene_it_was_invoked_for(modal, tmp_path):
+    """Outside QA: Render Animation invoked for another scene than the window's (a script's
+    temp_override) read the window scene's depsgraph at each later tick, so its frames showed the
+    window scene's objects under the other scene's name and camera."""
+    half_plane_scene()  # the window's scene: a ground quad and a box, 14 triangles
+    other = bpy.data.scenes.new("Other")
+    other.camera = bpy.context.scene.camera
+    other.render.resolution_x, other.render.resolution_y = 16, 8
+    scenes.link(bpy.data.objects.new("OtherQuad", bpy.data.objects["Ground"].data.copy()), other.collection)
+    other.frame_start, other.frame_end = 1, 2
+    other.kd_preview.output_dir = str(tmp_path)
+    context = SimpleNamespace(window_manager=modal.window_manager, window=modal.window, scene=other,
+                              view_layer=other.view_layers[0])
+    op = driver(KDPREVIEW_OT_render_animation)
+    op.invoke(context, None)
+    assert timer_events(op, context)[0] == {"FINISHED"}
+    report = json.loads((tmp_path / "report.json").read_text())
+    assert report["scene"] == "Other" and [f["triangles"] for f in report["frames"]] == [2, 2]
 
 
 def test_modal_failure_is_reported_and_released(modal):
