@@ -45,7 +45,8 @@ class WindowManagerProxy:
 def make_context():
     real = bpy.context
     return SimpleNamespace(window_manager=WindowManagerProxy(real.window_manager), window=real.window,
-                           scene=real.scene, evaluated_depsgraph_get=real.evaluated_depsgraph_get)
+                           scene=real.scene, view_layer=real.view_layer,
+                           evaluated_depsgraph_get=real.evaluated_depsgraph_get)
 
 
 def driver(operator_cls):
