@@ -194,7 +194,8 @@ def _run(args, cancelled) -> int:
             raise PreviewError("--out is empty: give the folder to write the frames to")
         scene = load_scene(args)
         config = make_config(saved_settings_with_overrides(scene, args))
-        frames = parse_frames(args.frames or f"{scene.frame_start}-{scene.frame_end}:{max(1, scene.frame_step)}")
+        frames = parse_frames(args.frames if args.frames is not None  # --frames "" is an error, not the default
+                              else f"{scene.frame_start}-{scene.frame_end}:{max(1, scene.frame_step)}")
         job = SequenceJob(scene, config, frames, Path(args.out), lambda _s: bpy.context.evaluated_depsgraph_get(),
                           on_frame=_print_row)
         print(f"KD Preview: scene '{scene.name}', {len(frames)} frame(s), mode {config.settings.mode}, "

@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import platform
 import re
+import tempfile
 import time
 from pathlib import Path
 
@@ -65,6 +66,34 @@ def check_frames_in_range(frames) -> None:
             raise PreviewError(f"frame {frame} is outside Blender's frame range ({FIRST_FRAME} to {LAST_FRAME})")
 
 
+def prepare_folder(folder: Path) -> list[Path]:
+    """Make `folder` (and missing parents) and check that files can be written there, before the
+    first frame renders: a folder under a file, or on a read-only disk, was found only when frame 1
+    was written, after its render (minutes on a first run: the kernels compile). Returns the folders
+    made, innermost first, for remove_empty_folders."""
+    missing = []
+    probe = folder
+    while not probe.exists() and probe != probe.parent:
+        missing.append(probe)
+        probe = probe.parent
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        tempfile.TemporaryFile(dir=folder).close()
+    except OSError as error:
+        remove_empty_folders(missing)
+        raise PreviewError(f"cannot write to the output folder {folder}: {error.strerror or error}") from None
+    return missing
+
+
+def remove_empty_folders(folders: list[Path]) -> None:
+    """Remove these folders (innermost first) while empty: a sequence that wrote nothing leaves none."""
+    for folder in folders:
+        try:
+            folder.rmdir()
+        except OSError:
+            return
+
+
 class SequenceJob:
     """Renders `frames` of `scene` into `out_dir`; drive with tick(), then call close()."""
 
@@ -80,6 +109,7 @@ class SequenceJob:
         self.results: list[FrameResult] = []
         self.files: list[Path] = []
         self.job: FrameJob | None = None
+        self._made_folders = prepare_folder(self.out_dir)
         self._start_frame = scene.frame_current
         self._t0 = time.perf_counter()
         self.report_path: Path | None = None
@@ -108,13 +138,14 @@ class SequenceJob:
             if self.job is None:
                 self.scene.frame_set(frame)
                 self.job = FrameJob(self.scene, self.depsgraph_for(self.scene), self.config)
-            if self.job.tick():
-                self._write(self.job.result())
-                self.job = None
-                if self.done:
-                    self._write_report()
+            if not self.job.tick():
+                return False
+            self._write(self.job.result())
+            self.job = None
         except PreviewError as error:
             raise PreviewError(f"frame {frame}: {error}") from None
+        if self.done:
+            self._write_report()  # its error is the sequence's, not the last frame's
         return self.done
 
     def _write(self, result: FrameResult) -> None:
@@ -137,6 +168,8 @@ class SequenceJob:
                 self._write_report()
             except PreviewError:
                 pass
+        if not self.results:
+            remove_empty_folders(self._made_folders)
         if self.scene.frame_current != self._start_frame:
             self.scene.frame_set(self._start_frame)
 

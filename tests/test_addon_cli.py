@@ -120,6 +120,7 @@ def test_cli_takes_the_files_saved_settings_and_options_override_them(tmp_path, 
 
 @pytest.mark.parametrize("args, code, message", [
     (["render", "--out", "X", "--frames", "5-2"], 1, "bad frame range '5-2'"),
+    (["render", "--out", "X", "--frames", ""], 1, "bad frame range '': no frames"),  # not the scene's range
     (["render", "--out", "X", "--resolution", "0"], 1, "resolution_percentage must be an integer from 1 to 100"),
     (["render", "--out", "X", "--mode", "normals"], 1, "mode must be one of ao, shadow, ao+shadow"),
     (["render", "missing.blend", "--out", "X"], 1, "no such .blend file: missing.blend"),
@@ -171,11 +172,21 @@ def test_frames_with_nothing_visible_are_transparent_and_the_sequence_goes_on(tm
     assert (alphas[0] == 0.0).all() and (alphas[1] == 0.0).all() and (alphas[2] == 1.0).all()
 
 
-def test_unwritable_output_folder_is_named(tmp_path, capsys):
+def test_unwritable_output_folder_is_named_before_a_frame_renders(tmp_path, capsys):
+    """Outside QA: found only when frame 1 was written, after its render (minutes on a first run)."""
     blocker = tmp_path / "a_file"
     blocker.write_text("not a folder")
     assert cli.execute(["render", "--frames", "1", "--out", str(blocker / "sub"), *SMALL]) == 1
-    assert f"could not write {blocker / 'sub' / 'frame_0001.png'}" in capsys.readouterr().err
+    out, err = capsys.readouterr()
+    assert f"error: cannot write to the output folder {blocker / 'sub'}: " in err
+    assert "KD Preview: scene" not in out  # stopped before the sequence started
+
+
+def test_report_that_cannot_be_written_is_not_blamed_on_a_frame(tmp_path, capsys):
+    (tmp_path / "seq" / "report.json").mkdir(parents=True)  # a folder where the report goes
+    assert cli.execute(["render", "--frames", "1-2", "--out", str(tmp_path / "seq"), *SMALL]) == 1
+    err = capsys.readouterr().err
+    assert f"error: could not write {tmp_path / 'seq' / 'report.json'}" in err and "frame 2:" not in err
 
 
 def test_empty_output_folder_is_named(capsys):

@@ -165,6 +165,17 @@ def test_esc_during_animation_restores_the_frame(modal, tmp_path):
     assert (report["complete"], report["frames_requested"], len(report["frames"])) == (False, 3, 1)
 
 
+def test_a_cancelled_animation_that_wrote_nothing_leaves_no_folder_it_made(modal, tmp_path):
+    scene = half_plane_scene()
+    scene.frame_start, scene.frame_end = 1, 2
+    scene.kd_preview.output_dir = str(tmp_path / "new" / "frames")
+    op = driver(KDPREVIEW_OT_render_animation)
+    op.invoke(modal, None)
+    assert (tmp_path / "new" / "frames").is_dir()  # made and checked before the first frame renders
+    assert op.modal(modal, event("ESC")) == {"CANCELLED"}
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_modal_animation_runs_every_frame(modal, tmp_path):
     scene = half_plane_scene()
     scene.frame_start, scene.frame_end = 1, 2
