@@ -17,6 +17,8 @@ BUILDERS = ("binned", "exact", "median")  # core.options.BUILDERS (a test keeps 
 OUTPUT_FORMATS = {"PNG": ".png", "OPEN_EXR": ".exr"}
 MAX_SAMPLES = 65536
 MAX_DEPTH = 60  # core.options.DEPTH_LIMIT
+MAX_LEAF_SIZE = 1 << 20  # core.options' bound
+MAX_MEMORY_LIMIT_MB = 1 << 30  # 1 EiB: any real machine's memory; the panel's fields stop at these too
 
 
 class SettingsError(PreviewError, ValueError):
@@ -147,12 +149,12 @@ def _validate(s: Settings) -> None:
     _choice("output_format", s.output_format, tuple(OUTPUT_FORMATS))
     _integer("samples", s.samples, 1, MAX_SAMPLES)
     _integer("resolution_percentage", s.resolution_percentage, 1, 100)
-    _integer("leaf_size", s.leaf_size, 1, 1 << 20)
+    _integer("leaf_size", s.leaf_size, 1, MAX_LEAF_SIZE)
     _integer("max_depth", s.max_depth, 0, MAX_DEPTH, "0 = automatic")
     _integer("bins", s.bins, 2, 4096)
     _integer("threads", s.threads, 0, 1024, "0 = all cores")
     _integer("seed", s.seed, 0, 2**31 - 1)
-    _integer("memory_limit_mb", s.memory_limit_mb, 0, 1 << 30, "0 = no limit")
+    _integer("memory_limit_mb", s.memory_limit_mb, 0, MAX_MEMORY_LIMIT_MB, "0 = no limit")
     _number("ao_distance", s.ao_distance, positive=True)
     _number("error_target", s.error_target, positive=False, note="0 = off")
     for name in ("rebuild_all", "lazy", "denoise"):

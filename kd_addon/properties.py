@@ -14,7 +14,7 @@ import json
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
-from .config import DEFAULTS, MAX_DEPTH, MAX_SAMPLES
+from .config import DEFAULTS, MAX_DEPTH, MAX_LEAF_SIZE, MAX_MEMORY_LIMIT_MB, MAX_SAMPLES
 
 
 # "//" paths are relative to the .blend: said so where Blender knows the option (4.5 on; 4.2 refuses
@@ -54,7 +54,8 @@ class KDPreviewSettings(bpy.types.PropertyGroup):
                ("exact", "Exact SAH", "Full event sweep: best tree, slowest build"),
                ("median", "Spatial Median", "Cheapest build, slower tracing")], update=_setting_changed)
     leaf_size: IntProperty(name="Leaf Size", description="Nodes with this many triangles or fewer become leaves",
-                           default=DEFAULTS.leaf_size, min=1, soft_max=64, update=_setting_changed)
+                           default=DEFAULTS.leaf_size, min=1, max=MAX_LEAF_SIZE, soft_max=64,
+                           update=_setting_changed)
     max_depth: IntProperty(name="Max Depth", description="Tree depth limit (0 = automatic)",
                            default=DEFAULTS.max_depth, min=0, max=MAX_DEPTH, update=_setting_changed)
     bins: IntProperty(name="Bins", description="SAH bins per axis (binned builder)", default=DEFAULTS.bins,
@@ -73,7 +74,8 @@ class KDPreviewSettings(bpy.types.PropertyGroup):
     seed: IntProperty(name="Seed", description="Sampler seed", default=DEFAULTS.seed, min=0, update=_setting_changed)
     memory_limit_mb: IntProperty(name="Memory Limit (MiB)",
                                  description="Refuse a frame whose estimated peak memory is above this (0 = no limit)",
-                                 default=DEFAULTS.memory_limit_mb, min=0, soft_max=65536, update=_setting_changed)
+                                 default=DEFAULTS.memory_limit_mb, min=0, max=MAX_MEMORY_LIMIT_MB,
+                                 soft_max=65536, update=_setting_changed)
     lazy: BoolProperty(name="Lazy Build",
                        description="Build the kd-tree on demand, only where rays go (same image; pays when "
                                    "most of the scene is hidden)",

@@ -94,6 +94,18 @@ def test_property_group_mirrors_settings(addon):  # noqa: F811
     assert cfg.build_options["threads"] == 3
 
 
+def test_every_integer_the_panel_accepts_is_a_valid_setting(addon):  # noqa: F811
+    """Outside QA: the panel let Leaf Size and Memory Limit take values that the render then refused."""
+    settings = bpy.context.scene.kd_preview
+    for prop in settings.bl_rna.properties:
+        if prop.type != "INT":
+            continue
+        for value in (prop.hard_min, prop.hard_max):
+            setattr(settings, prop.identifier, value)
+            make_config(settings)  # raises SettingsError naming the setting if it refuses the value
+        setattr(settings, prop.identifier, prop.default)
+
+
 def test_frame_size_floors_like_blender_and_rejects_zero():
     assert frame_size(1920, 1080, 50) == (960, 540)
     assert frame_size(1001, 11, 10) == (100, 1)
