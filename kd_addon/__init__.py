@@ -23,7 +23,10 @@ _registered = False
 
 
 def register():
+    """Register the add-on; registering it again re-registers it (a script calling register() twice got
+    Blender's "already registered" error)."""
     global _registered
+    unregister()  # nothing when not registered
     _registered = True  # before the modules: unregister() then undoes a registration that failed halfway
     for module in MODULES:
         module.register()

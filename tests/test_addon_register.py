@@ -46,6 +46,19 @@ def test_register_unregister_twice_leaves_nothing():
         assert not bpy.app.timers.is_registered(live_update.render_edits)
 
 
+def test_registering_again_re_registers():
+    scenes.reset()
+    kd_addon.register()
+    try:
+        kd_addon.register()  # outside QA: Blender's ValueError "already registered as a subclass"
+        assert registered_names() == {cls.__name__ for cls in CLASSES}
+        assert len(our_handlers()) == len(HANDLER_KINDS)
+        assert bpy.ops.kdpreview.render.poll() is not None
+    finally:
+        kd_addon.unregister()
+    assert registered_names() == set() and our_handlers() == []
+
+
 def test_handler_never_stacks():
     live_update.register()
     live_update.register()
