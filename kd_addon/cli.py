@@ -29,6 +29,8 @@ import bpy
 from . import background, demo_scene, properties
 from .config import DEFAULTS, OUTPUT_FORMATS, SETTING_NAMES, make_config
 from .errors import Cancelled, PreviewError
+from .extract import render_view_layer
+from .operators import evaluated_depsgraph
 from .pipeline import claim, release, run_job
 from .sequence import SequenceJob, parse_frames
 
@@ -71,6 +73,7 @@ def build_parser(prog: str = COMMAND_ID) -> argparse.ArgumentParser:
     render.add_argument("--frames", help="N, A-B, A-B:STEP or a comma list (default: the scene's frame range); "
                                          "negative frames need '=': --frames=-3--1")
     render.add_argument("--demo", action="store_true", help="render the built-in animated demo scene")
+    render.add_argument("--scene", help="the scene to render, by name (default: the file's current scene)")
     s = argparse.SUPPRESS
     render.add_argument("--mode", default=s, help=f"ao, shadow or ao+shadow (default {DEFAULTS.mode})")
     render.add_argument("--samples", type=int, default=s, help=f"samples per pixel (default {DEFAULTS.samples})")
@@ -116,6 +119,18 @@ def load_scene(args) -> bpy.types.Scene:
         bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
         demo_scene.build_demo_scene(bpy.context.scene)
     return bpy.context.scene
+
+
+def pick_scene(current, name: str | None):
+    """(scene, view layer) to render: the file's current scene and view layer, or the scene named
+    `name` through the view layer a render of it takes (extract.render_view_layer)."""
+    if name is None:
+        return current, bpy.context.view_layer
+    scene = bpy.data.scenes.get(name)
+    if scene is None:
+        names = ", ".join(f"'{s.name}'" for s in bpy.data.scenes)
+        raise PreviewError(f"no scene named '{name}' in the file; its scenes: {names}")
+    return scene, bpy.context.view_layer if scene == current else render_view_layer(scene)
 
 
 def saved_settings_with_overrides(scene, args) -> SimpleNamespace:
@@ -192,12 +207,12 @@ def _run(args, cancelled) -> int:
         make_config(args)  # bad options fail before a file is opened
         if not args.out.strip():
             raise PreviewError("--out is empty: give the folder to write the frames to")
-        scene = load_scene(args)
+        scene, view_layer = pick_scene(load_scene(args), args.scene)
         config = make_config(saved_settings_with_overrides(scene, args))
         frames = parse_frames(args.frames if args.frames is not None  # --frames "" is an error, not the default
                               else f"{scene.frame_start}-{scene.frame_end}:{max(1, scene.frame_step)}")
-        job = SequenceJob(scene, config, frames, Path(args.out), lambda _s: bpy.context.evaluated_depsgraph_get(),
-                          on_frame=_print_row)
+        job = SequenceJob(scene, config, frames, Path(args.out),
+                          lambda _s: evaluated_depsgraph(scene, view_layer), on_frame=_print_row)
         print(f"KD Preview: scene '{scene.name}', {len(frames)} frame(s), mode {config.settings.mode}, "
               f"{config.settings.samples} samples, {config.resolution_percentage}% resolution -> {args.out}")
         print(HEADER, flush=True)  # piped, it would wait for the first frame: minutes on a first run

@@ -297,7 +297,7 @@ class _Visibility:
         self.view_layer = depsgraph.view_layer
         self.scene_objects = _layer_render_objects(self.view_layer.layer_collection)
         for background in _set_scenes(depsgraph.scene):
-            self.scene_objects |= _layer_render_objects(_render_view_layer(background).layer_collection)
+            self.scene_objects |= _layer_render_objects(render_view_layer(background).layer_collection)
         self._collection_memo: dict[int, frozenset[int]] = {}
         self._node_memo: dict[int, tuple[frozenset, frozenset, frozenset]] = {}
 
@@ -369,9 +369,10 @@ def _set_scenes(scene: bpy.types.Scene) -> list[bpy.types.Scene]:
     return chain
 
 
-def _render_view_layer(scene: bpy.types.Scene) -> bpy.types.ViewLayer:
-    """The view layer a background scene contributes (Blender's BKE_view_layer_default_render: the
-    first one enabled for rendering, else the first)."""
+def render_view_layer(scene: bpy.types.Scene) -> bpy.types.ViewLayer:
+    """The view layer a render takes from a scene that is not the window's (a background scene, the
+    command line's --scene): Blender's BKE_view_layer_default_render, the first one enabled for
+    rendering, else the first."""
     return next((layer for layer in scene.view_layers if layer.use), scene.view_layers[0])
 
 

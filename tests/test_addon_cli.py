@@ -83,6 +83,29 @@ def test_cli_renders_a_saved_blend_with_its_frame_range(tmp_path):
     assert report["build_options"]["builder"] == "median" and report["build_options"]["threads"] == 1
 
 
+def test_cli_renders_the_scene_it_is_told_to(tmp_path, capsys):
+    """--scene picks one of the file's scenes (with its own frame range and camera) through the view
+    layer a render of it takes: its first one enabled for rendering, here the second."""
+    floor_scene(40, 30)  # the file's current scene: a floor, 2 triangles
+    other = bpy.data.scenes.new("Shot B")
+    other.camera, other.frame_start, other.frame_end = bpy.context.scene.camera, 7, 7
+    other.render.resolution_x, other.render.resolution_y = 40, 30
+    scenes.add_cube("OnlyInLayer2", collection=bpy.data.collections.new("Layer2Only"))
+    scenes.add_cube("Box", location=(0, 0, 1), collection=other.collection)
+    other.collection.children.link(bpy.data.collections["Layer2Only"])
+    other.view_layers[0].layer_collection.children["Layer2Only"].exclude = True
+    other.view_layers[0].use = False
+    other.view_layers.new("Layer 2")
+    blend = tmp_path / "two_scenes.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    out = tmp_path / "out"
+    assert cli.execute(["render", str(blend), "--scene", "Shot B", "--out", str(out), "--samples", "1"]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["scene"] == "Shot B" and [(f["frame"], f["triangles"]) for f in report["frames"]] == [(7, 24)]
+    assert cli.execute(["render", str(blend), "--scene", "Nope", "--out", str(tmp_path / "x")]) == 1
+    assert "no scene named 'Nope' in the file; its scenes: 'Scene', 'Shot B'" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("registered", [False, True])
 def test_cli_takes_the_files_saved_settings_and_options_override_them(tmp_path, registered):
     """What the panel saved in the .blend is what the command line renders, option by option overridden;
