@@ -26,7 +26,7 @@ from types import SimpleNamespace
 
 import bpy
 
-from . import background, demo_scene, properties
+from . import background, corelib, demo_scene, properties
 from .config import DEFAULTS, OUTPUT_FORMATS, SETTING_NAMES, make_config
 from .errors import Cancelled, PreviewError
 from .extract import render_view_layer
@@ -215,6 +215,9 @@ def _run(args, cancelled) -> int:
                           lambda _s: evaluated_depsgraph(scene, view_layer), on_frame=_print_row)
         print(f"KD Preview: scene '{scene.name}', {len(frames)} frame(s), mode {config.settings.mode}, "
               f"{config.settings.samples} samples, {config.resolution_percentage}% resolution -> {args.out}")
+        if not corelib.cache_is_warm():  # else a first run looks hung for minutes (outside QA)
+            print(f"First run with these sources and this Python: compiling the kernels takes a few minutes "
+                  f"before frame 1 (kept in {corelib.numba_cache_dir()})", flush=True)
         print(HEADER, flush=True)  # piped, it would wait for the first frame: minutes on a first run
         _run_claimed(job, cancelled)
     except PreviewError as error:

@@ -39,7 +39,7 @@ CORE_FOLDER = Path(__file__).resolve().parent.parent / "core"
 def extension_package(package: str | None = __package__) -> str | None:
     """The extension's 3-part package name ("bl_ext.<repo>.<id>"), or None outside one.
 
-    extension_path_user rejects any other number of parts (see notes/packaging.md).
+    extension_path_user rejects any other number of parts.
     """
     parts = (package or "").split(".")
     if len(parts) >= 3 and parts[0] == "bl_ext":

@@ -13,7 +13,7 @@ import bpy  # noqa: E402
 import numpy as np  # noqa: E402
 
 import kd_addon  # noqa: E402
-from kd_addon import cli, demo_scene  # noqa: E402
+from kd_addon import cli, corelib, demo_scene  # noqa: E402
 from tests import bpy_scenes as scenes  # noqa: E402
 
 SMALL = ["--demo", "--resolution", "5", "--samples", "2"]  # 48x27 from the demo's 960x540
@@ -210,6 +210,14 @@ def test_report_that_cannot_be_written_is_not_blamed_on_a_frame(tmp_path, capsys
     assert cli.execute(["render", "--frames", "1-2", "--out", str(tmp_path / "seq"), *SMALL]) == 1
     err = capsys.readouterr().err
     assert f"error: could not write {tmp_path / 'seq' / 'report.json'}" in err and "frame 2:" not in err
+
+
+@pytest.mark.parametrize("warm", [False, True])
+def test_a_first_run_says_that_it_compiles(tmp_path, capsys, monkeypatch, warm):
+    """Outside QA: a first run printed the table header, then nothing for minutes, and looked hung."""
+    monkeypatch.setattr(corelib, "cache_is_warm", lambda: warm)
+    assert cli.execute(["render", "--frames", "1", "--out", str(tmp_path), *SMALL]) == 0
+    assert ("compiling the kernels takes a few minutes" in capsys.readouterr().out) is not warm
 
 
 def test_empty_output_folder_is_named(capsys):
