@@ -99,6 +99,8 @@ def main():
     frame_rays = core.frame_ray_count(WIDTH, HEIGHT, "shadow", 1, [core.Light.point(LIGHT)])
     with tempfile.TemporaryDirectory() as folder:
         base = export_base(args.base, folder)
+        print("compiling or loading both versions' kernels (the base's are compiled afresh in a temporary "
+              "folder each run: minutes) ...", flush=True)
         versions = {"this tree": core, f"base {args.base}": base}
         hits = core.intersect(core.build_kdtree(scene.triangles, rays=frame_rays), *camera_rays)
         rays = (*shadow_rays(hits, camera_rays[0], camera_rays[1]),
