@@ -122,15 +122,15 @@ def load_scene(args) -> bpy.types.Scene:
 
 
 def pick_scene(current, name: str | None):
-    """(scene, view layer) to render: the file's current scene and view layer, or the scene named
+    """(scene, view layer name) to render: the file's current scene and view layer, or the scene named
     `name` through the view layer a render of it takes (extract.render_view_layer)."""
     if name is None:
-        return current, bpy.context.view_layer
+        return current, bpy.context.view_layer.name
     scene = bpy.data.scenes.get(name)
     if scene is None:
         names = ", ".join(f"'{s.name}'" for s in bpy.data.scenes)
         raise PreviewError(f"no scene named '{name}' in the file; its scenes: {names}")
-    return scene, bpy.context.view_layer if scene == current else render_view_layer(scene)
+    return scene, (bpy.context.view_layer if scene == current else render_view_layer(scene)).name
 
 
 def saved_settings_with_overrides(scene, args) -> SimpleNamespace:
@@ -207,12 +207,12 @@ def _run(args, cancelled) -> int:
         make_config(args)  # bad options fail before a file is opened
         if not args.out.strip():
             raise PreviewError("--out is empty: give the folder to write the frames to")
-        scene, view_layer = pick_scene(load_scene(args), args.scene)
+        scene, layer_name = pick_scene(load_scene(args), args.scene)
         config = make_config(saved_settings_with_overrides(scene, args))
         frames = parse_frames(args.frames if args.frames is not None  # --frames "" is an error, not the default
                               else f"{scene.frame_start}-{scene.frame_end}:{max(1, scene.frame_step)}")
         job = SequenceJob(scene, config, frames, Path(args.out),
-                          lambda _s: evaluated_depsgraph(scene, view_layer), on_frame=_print_row)
+                          lambda _s: evaluated_depsgraph(scene, layer_name), on_frame=_print_row)
         print(f"KD Preview: scene '{scene.name}', {len(frames)} frame(s), mode {config.settings.mode}, "
               f"{config.settings.samples} samples, {config.resolution_percentage}% resolution -> {args.out}")
         if not corelib.cache_is_warm():  # else a first run looks hung for minutes (outside QA)

@@ -253,9 +253,10 @@ class KDPREVIEW_OT_render_animation(_JobOperator, bpy.types.Operator):
         settings = scene.kd_preview
         config = make_config(settings)
         frames = list(range(scene.frame_start, scene.frame_end + 1, max(1, scene.frame_step)))
-        view_layer = context.view_layer  # `context` itself must not be kept beyond invoke
+        # The view layer by name: `context` must not be kept beyond invoke, and a layer may be deleted.
+        layer_name = context.view_layer.name
         return SequenceJob(scene, config, frames, output_folder(settings.output_dir),
-                           lambda _scene: evaluated_depsgraph(scene, view_layer))
+                           lambda _scene: evaluated_depsgraph(scene, layer_name))
 
     def cleanup(self, job) -> None:
         job.close()
@@ -267,10 +268,14 @@ class KDPREVIEW_OT_render_animation(_JobOperator, bpy.types.Operator):
         return f"KD Preview: {len(job.results)} frames written to {job.out_dir}"
 
 
-def evaluated_depsgraph(scene, view_layer):
-    """The evaluated depsgraph of `scene`'s `view_layer`, whatever the context: a modal run's later
-    ticks get the window's, not the one it was invoked with (a script's temp_override of another
-    scene rendered the window scene's objects under the other's name and camera; outside QA)."""
+def evaluated_depsgraph(scene, layer_name: str):
+    """The evaluated depsgraph of `scene`'s view layer `layer_name`, whatever the context: a modal run's
+    later ticks get the window's, not the one it was invoked with (a script's temp_override of another
+    scene rendered the window scene's objects under the other's name and camera; outside QA). Looked
+    up each time: a ViewLayer kept across ticks and deleted meanwhile crashed Blender (review)."""
+    view_layer = scene.view_layers.get(layer_name)
+    if view_layer is None:
+        raise PreviewError(f"view layer '{layer_name}' of scene '{scene.name}' was removed or renamed during the render")
     with bpy.context.temp_override(scene=scene, view_layer=view_layer):
         return bpy.context.evaluated_depsgraph_get()
 

@@ -9,6 +9,7 @@ put back afterwards, also on cancel or failure.
 from __future__ import annotations
 
 import json
+import os
 import platform
 import re
 import tempfile
@@ -67,8 +68,8 @@ def check_frames_in_range(frames) -> None:
 
 
 def prepare_folder(folder: Path) -> list[Path]:
-    """Make `folder` (and missing parents) and check that files can be written there, before the
-    first frame renders: a folder under a file, or on a read-only disk, was found only when frame 1
+    """Make `folder` (absolute and normalised; and missing parents) and check that files can be
+    written there, before the first frame renders: a folder under a file, or on a read-only disk, was found only when frame 1
     was written, after its render (minutes on a first run: the kernels compile). Returns the folders
     made, innermost first, for remove_empty_folders."""
     missing = []
@@ -105,11 +106,14 @@ class SequenceJob:
             raise PreviewError("no frames to render")
         check_frames_in_range(frames)
         self.scene, self.config, self.frames = scene, config, list(frames)
-        self.out_dir, self.depsgraph_for, self.on_frame = Path(out_dir), depsgraph_for, on_frame
+        # Normalised: with "a/missing/../b" every part looked missing, and a first frame that failed
+        # removed the user's empty folder b (review).
+        self.out_dir = Path(os.path.normpath(os.path.abspath(out_dir)))
+        self.depsgraph_for, self.on_frame = depsgraph_for, on_frame
         self.results: list[FrameResult] = []
         self.files: list[Path] = []
         self.job: FrameJob | None = None
-        self._made_folders = prepare_folder(self.out_dir)
+        self._made_folders: list[Path] | None = None  # at the first tick: once the job holds the claim
         self._start_frame = scene.frame_current
         self._t0 = time.perf_counter()
         self.report_path: Path | None = None
@@ -134,6 +138,8 @@ class SequenceJob:
         """Next short piece of work; True once every frame is written and the report saved. An error
         names the frame it stopped at, as the frames' warnings do."""
         frame = self.frames[min(len(self.results), len(self.frames) - 1)]
+        if self._made_folders is None:
+            self._made_folders = prepare_folder(self.out_dir)
         try:
             if self.job is None:
                 self.scene.frame_set(frame)
@@ -169,7 +175,7 @@ class SequenceJob:
             except PreviewError:
                 pass
         if not self.results:
-            remove_empty_folders(self._made_folders)
+            remove_empty_folders(self._made_folders or [])
         if self.scene.frame_current != self._start_frame:
             self.scene.frame_set(self._start_frame)
 

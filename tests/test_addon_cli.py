@@ -202,7 +202,7 @@ def test_unwritable_output_folder_is_named_before_a_frame_renders(tmp_path, caps
     assert cli.execute(["render", "--frames", "1", "--out", str(blocker / "sub"), *SMALL]) == 1
     out, err = capsys.readouterr()
     assert f"error: cannot write to the output folder {blocker / 'sub'}: " in err
-    assert "KD Preview: scene" not in out  # stopped before the sequence started
+    assert "frame 1:" not in err and out.rstrip().endswith(cli.HEADER)  # stopped before frame 1 started
 
 
 def test_report_that_cannot_be_written_is_not_blamed_on_a_frame(tmp_path, capsys):

@@ -171,9 +171,39 @@ def test_a_cancelled_animation_that_wrote_nothing_leaves_no_folder_it_made(modal
     scene.kd_preview.output_dir = str(tmp_path / "new" / "frames")
     op = driver(KDPREVIEW_OT_render_animation)
     op.invoke(modal, None)
-    assert (tmp_path / "new" / "frames").is_dir()  # made and checked before the first frame renders
+    for _ in range(2):  # the status shown, then the first tick: the folder, then frame 1's scene read
+        assert op.modal(modal, event("TIMER")) == {"PASS_THROUGH"}
+    assert (tmp_path / "new" / "frames").is_dir() and op._job.results == []  # made before frame 1 renders
     assert op.modal(modal, event("ESC")) == {"CANCELLED"}
     assert list(tmp_path.iterdir()) == []
+
+
+def test_an_animation_refused_as_already_running_makes_no_folder(modal, tmp_path):
+    scene = half_plane_scene()
+    scene.kd_preview.output_dir = str(tmp_path / "new")
+    pipeline.claim(object())  # another run holds the claim
+    try:
+        op = driver(KDPREVIEW_OT_render_animation)
+        assert op.invoke(modal, None) == {"CANCELLED"} and "already running" in op.reports[0][1]
+    finally:
+        pipeline.release_any()
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_view_layer_removed_during_an_animation_ends_it_with_a_message(modal, tmp_path):
+    """Review: a ViewLayer kept across ticks and deleted meanwhile crashed Blender (segfault)."""
+    scene = half_plane_scene()
+    scene.frame_start, scene.frame_end = 1, 2
+    scene.kd_preview.output_dir = str(tmp_path)
+    scene.view_layers.new("Spare")
+    context = make_context()
+    context.view_layer = scene.view_layers["Spare"]
+    op = driver(KDPREVIEW_OT_render_animation)
+    op.invoke(context, None)
+    scene.view_layers.remove(scene.view_layers["Spare"])
+    assert timer_events(op, context)[0] == {"CANCELLED"}
+    assert "view layer 'Spare' of scene 'Scene' was removed or renamed during the render" in op.reports[-1][1]
+    assert scene.frame_current == 1 and not pipeline.job_running()
 
 
 def test_modal_animation_runs_every_frame(modal, tmp_path):
