@@ -18,7 +18,7 @@ OUTPUT_FORMATS = {"PNG": ".png", "OPEN_EXR": ".exr"}
 MAX_SAMPLES = 65536
 MAX_DEPTH = 60  # core.options.DEPTH_LIMIT
 MAX_LEAF_SIZE = 1 << 20  # core.options' bound
-MAX_MEMORY_LIMIT_MB = 1 << 30  # 1 EiB: any real machine's memory; the panel's fields stop at these too
+MAX_MEMORY_LIMIT_MB = 1 << 30  # 1 PiB, beyond any machine's memory; the panel's fields stop at these too
 
 
 class SettingsError(PreviewError, ValueError):

@@ -275,7 +275,8 @@ def evaluated_depsgraph(scene, layer_name: str):
     up each time: a ViewLayer kept across ticks and deleted meanwhile crashed Blender (review)."""
     view_layer = scene.view_layers.get(layer_name)
     if view_layer is None:
-        raise PreviewError(f"view layer '{layer_name}' of scene '{scene.name}' was removed or renamed during the render")
+        raise PreviewError(f"view layer '{layer_name}' of scene '{scene.name}' was removed or renamed during "
+                           "the render")
     with bpy.context.temp_override(scene=scene, view_layer=view_layer):
         return bpy.context.evaluated_depsgraph_get()
 
