@@ -30,6 +30,7 @@ from __future__ import annotations
 import os
 import sys
 import threading
+import time
 import weakref
 
 _calls: weakref.WeakSet = weakref.WeakSet()  # every BackgroundCall not yet collected
@@ -40,6 +41,16 @@ def abandoned_work_running(besides: BackgroundCall | None = None) -> bool:
     `besides`: the call a job does wait for, not counted (one job runs at a time, so any other
     unfinished call is an abandoned one, holding the lock that call waits for)."""
     return any(call is not besides and not call.finished for call in list(_calls))
+
+
+def wait_for_work(timeout: float) -> bool:
+    """Wait at most `timeout` seconds for every kernel call still on a worker (a running job's or an
+    abandoned one); True once none is. See live_update.KERNEL_WAIT for why."""
+    deadline = time.perf_counter() + timeout
+    for call in list(_calls):
+        if not call.wait(max(0.0, deadline - time.perf_counter())):
+            return False
+    return True
 
 
 def exit_now_if_abandoned(code: int) -> None:

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import re
+import threading
 from types import SimpleNamespace
 
 import pytest
@@ -26,7 +27,7 @@ import numpy as np  # noqa: E402
 
 import kd_addon  # noqa: E402
 
-from kd_addon import live_update, operators, pipeline  # noqa: E402
+from kd_addon import background, live_update, operators, pipeline  # noqa: E402
 from kd_addon.operators import KDPREVIEW_OT_render, KDPREVIEW_OT_render_animation, _JobOperator  # noqa: E402
 
 
@@ -352,6 +353,23 @@ def test_a_newer_edit_replaces_a_stale_live_render(addon, monkeypatch):  # noqa:
     assert state.status.startswith("KD Preview: 64x32") and "last image reused" not in state.status
     bpy.ops.kdpreview.render()  # the image is the scene's as it is now, AO Distance 3 included:
     assert "last image reused" in state.status
+
+
+def test_the_edit_timer_reads_the_scene_only_between_kernel_calls(addon, monkeypatch):  # noqa: F811
+    """The bpy module crashed (SIGSEGV in evaluated_depsgraph_get, ~1 run in 10, CI once) when the timer
+    evaluated the scene while the worker ran a kernel call's Python code. A call still running after
+    KERNEL_WAIT makes the timer try again later, without touching the depsgraph."""
+    scene = half_plane_scene()
+    scene.kd_preview.live_update = True
+    release = threading.Event()
+    busy = background.BackgroundCall(threading.Lock(), release.wait)  # a kernel call that has not ended
+    monkeypatch.setattr(live_update, "KERNEL_WAIT", 0.01)
+    try:
+        assert live_update.render_edits() == live_update.EDIT_DELAY and "KD Preview" not in bpy.data.images
+    finally:
+        release.set()
+    assert busy.wait(5.0)
+    assert live_update.render_edits() is None and "KD Preview" in bpy.data.images  # then it renders
 
 
 def test_an_edit_leaves_a_live_render_of_the_same_image_and_a_users_render_running(addon, monkeypatch):  # noqa: F811
