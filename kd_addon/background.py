@@ -34,6 +34,13 @@ import time
 import weakref
 
 _calls: weakref.WeakSet = weakref.WeakSet()  # every BackgroundCall not yet collected
+# Longest the main thread waits for the worker's kernel calls before it evaluates the depsgraph (the
+# edit timer then tries again later; a Render waits no longer). The bpy module crashed (SIGSEGV in the
+# main thread's evaluated_depsgraph_get, about 1 run in 10 of test_addon_modal.py, CI once) when the
+# scene was evaluated while the worker ran a call's Python code (not a kernel); the cause inside Blender
+# was not found, so the scene is read between kernel calls: ticks run on the main thread, so none starts
+# before the reader returns.
+SCENE_READ_WAIT = 0.1
 
 
 def abandoned_work_running(besides: BackgroundCall | None = None) -> bool:
@@ -45,7 +52,7 @@ def abandoned_work_running(besides: BackgroundCall | None = None) -> bool:
 
 def wait_for_work(timeout: float) -> bool:
     """Wait at most `timeout` seconds for every kernel call still on a worker (a running job's or an
-    abandoned one); True once none is. See live_update.KERNEL_WAIT for why."""
+    abandoned one); True once none is. See SCENE_READ_WAIT for why."""
     deadline = time.perf_counter() + timeout
     for call in list(_calls):
         if not call.wait(max(0.0, deadline - time.perf_counter())):

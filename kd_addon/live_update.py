@@ -35,12 +35,6 @@ from .pipeline import claim, image_key_now, job_running, release, render_frame
 from .properties import run_state, set_last_run
 
 EDIT_DELAY = 0.3  # seconds without edits before live update renders them
-# Longest the edit timer waits for a kernel call on the worker before it reads the scene (else it tries
-# again after EDIT_DELAY). The bpy module crashed (SIGSEGV in the main thread's evaluated_depsgraph_get,
-# about 1 run in 10 of test_addon_modal.py, CI once) when the scene was evaluated while the worker ran a
-# call's Python code (not a kernel); the cause inside Blender was not found, so the scene is read between
-# kernel calls only: ticks run on this thread, so none starts before the timer returns.
-KERNEL_WAIT = 0.1
 # Modal tools that edit as the mouse moves (grab/rotate/scale, gizmo drags, fly/walk navigation, sculpt
 # and paint strokes, loop cut): their edit renders when they end. Without this wait a render started
 # at one slow mouse move and every later move queued another, back to back (outside QA, Blender 5.2).
@@ -57,7 +51,7 @@ def kd_preview_frame_change(scene, depsgraph=None):
         if operators.running_frame_render() is not None:  # the user changed the frame during a Render run:
             schedule_render()  # the new frame renders after it (or instead of it, if Live Update started it)
         return
-    if not background.wait_for_work(KERNEL_WAIT):  # a cancelled run's kernel call: read the scene after it
+    if not background.wait_for_work(background.SCENE_READ_WAIT):  # a cancelled run's kernel call: read the scene after it
         schedule_render()
         return
     state, token = run_state(), object()
@@ -109,8 +103,8 @@ def render_edits():
         return None
     if bpy.app.is_job_running("RENDER") or interactive_tool_running([op.bl_idname for op in window.modal_operators]):
         return EDIT_DELAY  # Blender renders (and may set frames) or a tool edits: read the scene after
-    if not background.wait_for_work(KERNEL_WAIT):
-        return EDIT_DELAY  # a build or trace step is still on the worker (KERNEL_WAIT)
+    if not background.wait_for_work(background.SCENE_READ_WAIT):
+        return EDIT_DELAY  # a build or trace step is still on the worker (SCENE_READ_WAIT)
     with bpy.context.temp_override(window=window):
         live = operators.running_frame_render(live=True)
         if live is not None:

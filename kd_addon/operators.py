@@ -16,7 +16,7 @@ from pathlib import Path
 
 import bpy
 
-from . import output
+from . import background, output
 from .config import make_config
 from .errors import Cancelled, PreviewError, Superseded
 from .pipeline import FrameJob, claim, release, release_any, run_job
@@ -152,6 +152,7 @@ class _JobOperator:
     # -- shared ---------------------------------------------------------------
 
     def _start(self, context):
+        background.wait_for_work(background.SCENE_READ_WAIT)  # a cancelled run's call, briefly (SCENE_READ_WAIT)
         try:
             job = self.make_job(context)
             claim(job)

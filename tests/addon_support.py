@@ -22,7 +22,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import kd_addon  # noqa: E402
-from kd_addon import live_update  # noqa: E402
+from kd_addon import background  # noqa: E402
 from tests import bpy_scenes as scenes  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
@@ -32,9 +32,9 @@ PYTHON = sys.executable
 @pytest.fixture
 def addon(monkeypatch):
     """The add-on registered on a fresh empty scene; unregistered afterwards. Live Update's edit timer
-    waits for the worker's kernel call as long as it takes (live_update.KERNEL_WAIT; at its 0.1 s a
+    waits for the worker's kernel call as long as it takes (background.SCENE_READ_WAIT; at its 0.1 s a
     slow build would make the tests' direct timer calls retry instead of acting)."""
-    monkeypatch.setattr(live_update, "KERNEL_WAIT", 60.0)
+    monkeypatch.setattr(background, "SCENE_READ_WAIT", 60.0)
     scenes.reset()
     kd_addon.register()
     yield kd_addon

@@ -358,12 +358,12 @@ def test_a_newer_edit_replaces_a_stale_live_render(addon, monkeypatch):  # noqa:
 def test_the_edit_timer_reads_the_scene_only_between_kernel_calls(addon, monkeypatch):  # noqa: F811
     """The bpy module crashed (SIGSEGV in evaluated_depsgraph_get, ~1 run in 10, CI once) when the timer
     evaluated the scene while the worker ran a kernel call's Python code. A call still running after
-    KERNEL_WAIT makes the timer try again later, without touching the depsgraph."""
+    SCENE_READ_WAIT makes the timer try again later, without touching the depsgraph."""
     scene = half_plane_scene()
     scene.kd_preview.live_update = True
     release = threading.Event()
     busy = background.BackgroundCall(threading.Lock(), release.wait)  # a kernel call that has not ended
-    monkeypatch.setattr(live_update, "KERNEL_WAIT", 0.01)
+    monkeypatch.setattr(background, "SCENE_READ_WAIT", 0.01)
     try:
         assert live_update.render_edits() == live_update.EDIT_DELAY and "KD Preview" not in bpy.data.images
     finally:
