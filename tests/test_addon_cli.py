@@ -85,23 +85,23 @@ def test_cli_renders_a_saved_blend_with_its_frame_range(tmp_path):
 
 def test_cli_renders_the_scene_it_is_told_to(tmp_path, capsys):
     """--scene picks one of the file's scenes (with its own frame range and camera) through the view
-    layer a render of it takes: its first one enabled for rendering, here the second."""
+    layer a render of it takes: its first one enabled for rendering, here the second, which excludes
+    a collection the first shows."""
     floor_scene(40, 30)  # the file's current scene: a floor, 2 triangles
     other = bpy.data.scenes.new("Shot B")
     other.camera, other.frame_start, other.frame_end = bpy.context.scene.camera, 7, 7
     other.render.resolution_x, other.render.resolution_y = 40, 30
-    scenes.add_cube("OnlyInLayer2", collection=bpy.data.collections.new("Layer2Only"))
+    scenes.add_cube("NotInLayer2", collection=bpy.data.collections.new("Layer2Excludes"))
     scenes.add_cube("Box", location=(0, 0, 1), collection=other.collection)
-    other.collection.children.link(bpy.data.collections["Layer2Only"])
-    other.view_layers[0].layer_collection.children["Layer2Only"].exclude = True
+    other.collection.children.link(bpy.data.collections["Layer2Excludes"])
     other.view_layers[0].use = False
-    other.view_layers.new("Layer 2")
+    other.view_layers.new("Layer 2").layer_collection.children["Layer2Excludes"].exclude = True
     blend = tmp_path / "two_scenes.blend"
     bpy.ops.wm.save_as_mainfile(filepath=str(blend))
     out = tmp_path / "out"
     assert cli.execute(["render", str(blend), "--scene", "Shot B", "--out", str(out), "--samples", "1"]) == 0
     report = json.loads((out / "report.json").read_text())
-    assert report["scene"] == "Shot B" and [(f["frame"], f["triangles"]) for f in report["frames"]] == [(7, 24)]
+    assert report["scene"] == "Shot B" and [(f["frame"], f["triangles"]) for f in report["frames"]] == [(7, 12)]
     assert cli.execute(["render", str(blend), "--scene", "Nope", "--out", str(tmp_path / "x")]) == 1
     assert "no scene named 'Nope' in the file; its scenes: 'Scene', 'Shot B'" in capsys.readouterr().err
 
