@@ -56,6 +56,7 @@ class SourcesDigestLocator(caching._CacheLocator):
 
     def __init__(self, usual, sources: Path, folder=None):
         self._usual = usual
+        self._py_file = usual._py_file  # Numba's warning that a kernel cannot be cached names it
         self._sources = sources
         self._folder = folder or usual.get_cache_path()
         _locked_folders.add(os.path.normpath(self._folder))

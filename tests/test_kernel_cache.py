@@ -85,3 +85,33 @@ def test_the_digest_follows_every_source_file(tmp_path):
     (tmp_path / "c.py").write_text("")
     added = kernel_cache.sources_digest(tmp_path)
     assert len({before, edited, added}) == 3
+
+
+UNCACHABLE = """
+import ctypes
+
+from numba import njit
+
+_initialized = ctypes.pythonapi.Py_IsInitialized
+_initialized.argtypes, _initialized.restype = [], ctypes.c_int
+
+@njit(cache=True)
+def run():
+    return _initialized()  # a ctypes function pointer: machine code Numba cannot cache
+"""
+
+
+def test_a_registered_kernel_that_cannot_be_cached_still_runs(tmp_path):
+    """Numba warns and runs a kernel it cannot cache (its warning names the kernel's file, which it
+    reads from the locator): the digest locator must answer that too. It raised AttributeError,
+    found with NUMBA_OPT=0, under which core's triangle_boxes keeps a dynamic global."""
+    (tmp_path / "pkg").mkdir()
+    (tmp_path / "pkg" / "__init__.py").write_text("")
+    (tmp_path / "pkg" / "caller.py").write_text(UNCACHABLE)
+    script = RUN.format(root=str(tmp_path), package=str(tmp_path / "pkg"), register=True)
+    env = {"NUMBA_CACHE_DIR": str(tmp_path / "cache"), "PATH": "/usr/bin:/bin", "PYTHONDONTWRITEBYTECODE": "1"}
+    out = subprocess.run([sys.executable, "-c", script], cwd=Path(core.__file__).parent.parent, env=env,
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split()[-1] == "1"
+    assert "Cannot cache compiled function" in out.stderr and "caller.py" in out.stderr
