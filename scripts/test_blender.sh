@@ -6,6 +6,7 @@
 #          geometry nodes modifier's inputs)
 # Each gets its own venv (.venv-bpy-VERSION) and shares the main suite's Numba cache (Numba keys its
 # cache files by Python version). Usage: bash scripts/test_blender.sh VERSION [pytest arguments]
+#                                      bash scripts/test_blender.sh VERSION --setup-only
 set -euo pipefail
 cd "$(dirname "$0")/.."
 version=${1:?"usage: bash scripts/test_blender.sh 4.2.0|5.3.0 [pytest arguments]"}
@@ -28,8 +29,17 @@ if [ ! -x "$venv/bin/python" ]; then
   fi
   "$interpreter" -m venv "$venv"
 fi
-"$venv/bin/python" -m pip install --quiet --upgrade pip
-"$venv/bin/python" -m pip install --quiet "bpy==$version" "numba==0.68.1" "llvmlite==0.50.0" "pytest==9.2.0"
-"$venv/bin/python" -m pip install --quiet --no-deps "numpy==$numpy"  # last: the bpy wheels take any numpy
+# Installed once per version of this script (its pins): a run otherwise repeats ~15 s of pip.
+stamp="$venv/.kd_preview_installed"
+wanted=$(sha256sum "$0" | cut -d" " -f1)
+if [ "$(cat "$stamp" 2>/dev/null)" != "$wanted" ]; then
+  "$venv/bin/python" -m pip install --quiet --upgrade pip
+  "$venv/bin/python" -m pip install --quiet "bpy==$version" "numba==0.68.1" "llvmlite==0.50.0" "pytest==9.2.0"
+  "$venv/bin/python" -m pip install --quiet --no-deps "numpy==$numpy"  # last: the bpy wheels take any numpy
+  echo "$wanted" > "$stamp"
+fi
+if [ "${1:-}" = "--setup-only" ]; then
+  exit 0
+fi
 exec "$venv/bin/python" -m pytest -p no:cacheprovider tests/test_addon_*.py \
   tests/test_extract.py tests/test_reliability_cancel.py tests/test_reliability_scenes.py "$@"

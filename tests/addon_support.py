@@ -1,9 +1,5 @@
-"""Shared setup for the add-on tests (tests/test_addon_*.py).
-
-Importing this first sends Numba's cache to a folder under the system temp
-dir (unless NUMBA_CACHE_DIR is already set), so the add-on's fallback cache
-in the home folder is never written by tests and later runs start warm.
-"""
+"""Shared setup for the add-on tests (tests/test_addon_*.py). Numba's cache folder is set in
+tests/conftest.py."""
 
 from __future__ import annotations
 
@@ -11,19 +7,16 @@ import math
 import os
 import subprocess
 import sys
-import tempfile
 from pathlib import Path
 from types import SimpleNamespace
 
-os.environ.setdefault("NUMBA_CACHE_DIR", os.path.join(tempfile.gettempdir(), "kd_preview_test_numba_cache"))
+import bpy
+import numpy as np
+import pytest
 
-import bpy  # noqa: E402
-import numpy as np  # noqa: E402
-import pytest  # noqa: E402
-
-import kd_addon  # noqa: E402
-from kd_addon import background  # noqa: E402
-from tests import bpy_scenes as scenes  # noqa: E402
+import kd_addon
+from kd_addon import background
+from tests import bpy_scenes as scenes
 
 REPO = Path(__file__).resolve().parents[1]
 PYTHON = sys.executable
