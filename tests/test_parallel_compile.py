@@ -1,6 +1,7 @@
 """The first render's helper process (core/parallel_compile.py) and the lock that lets several processes
 write one kernel cache (core/kernel_cache.py)."""
 import os
+import select
 import subprocess
 import sys
 import textwrap
@@ -25,6 +26,13 @@ import sys, time
 sys.path[:0] = [{root!r}, {folder!r}]
 from core import kernel_cache
 kernel_cache.register({folder!r}, sources={folder!r})
+asking = kernel_cache.locked_cache_folder
+
+def announced(folder):  # says when the save asks for the lock, so the test need not guess
+    print("asking", flush=True)
+    return asking(folder)
+
+kernel_cache.locked_cache_folder = announced
 import probe
 probe.twice(21)
 print(time.time())
@@ -46,7 +54,9 @@ def test_a_cache_index_save_waits_for_the_lock(tmp_path):
     probe_cache.mkdir(parents=True, exist_ok=True)
     with kernel_cache.locked_cache_folder(str(probe_cache)):
         child = subprocess.Popen([sys.executable, "-c", script], env=env, stdout=subprocess.PIPE, text=True)
-        time.sleep(15)  # the child imports numba and compiles in 2-5 s, then waits at the save
+        assert select.select([child.stdout], [], [], 120)[0], "the child never reached its cache save"
+        assert child.stdout.readline().strip() == "asking"
+        time.sleep(2)  # without the lock, the save (milliseconds) and the exit would be done by now
         assert child.poll() is None, "the child finished while the lock was held"
         assert not list(probe_cache.glob("*.nbi")), "the child wrote its index while the lock was held"
         released = time.time()
