@@ -3,9 +3,10 @@
 A signature lists every instance that has something to hit, for some ray, as a row of bytes (a
 digest of its mesh's key and fingerprint, its object-to-world matrix, how its triangles were rounded:
 in object space under its own tree, or to float32 in a soup relative to the soup's anchor, and which
-rays it stops and whether it is a holdout: ray_visibility.py) with its world box, in the coordinates the scene was built in (minus `origin`, see scene_builder.py). The rounding is part of the
-row because kept pixels keep their hit points and ray starts: an unchanged object re-rounded (the
-soup re-anchored, or the object moved between the soup and a tree of its own) shifts its surface by a
+rays it stops and whether it is a holdout: ray_visibility.py) with its world box, in the coordinates
+the scene was built in (minus `origin`, see scene_builder.py). The rounding is part of the row
+because kept pixels keep their hit points and ray starts: an unchanged object re-rounded (the soup
+re-anchored, or the object moved between the soup and a tree of its own) shifts its surface by a
 float32 ulp, enough to put a kept ray start behind it, so it counts as changed. Two frames'
 signatures give the boxes where geometry may differ (`changed_boxes`): the boxes of rows present in
 only one of them, i.e. instances that moved, deformed, appeared or vanished, each at its old and its

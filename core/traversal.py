@@ -173,10 +173,11 @@ def interleaved_blocks(n, block_size):
     OpenMP layer parallel_chunksize does not change that, checked with get_thread_id). Rays and pixels
     come in image order and their cost differs by region: the first half of the seed 000 setting's hit
     pixels cost 1.4x the second (168 against 120 ms of CPU for their shadow rays), so split in halves
-    the step took ~1.17x as long as balanced. Dealt out band by band, any contiguous range of iterations takes the same share of
-    every band, whatever the thread count (which a cached kernel cannot read: get_num_threads is a
-    dynamic global). Dealt one block at a time, consecutive blocks fell in different bands and the
-    one-thread shadow step was 15% slower (cache misses), hence runs. Results do not depend on the order.
+    the step took ~1.17x as long as balanced. Dealt out band by band, any contiguous range of
+    iterations takes the same share of every band, whatever the thread count (which a cached kernel
+    cannot read: get_num_threads is a dynamic global). Dealt one block at a time, consecutive blocks
+    fell in different bands and the one-thread shadow step was 15% slower (cache misses), hence runs.
+    Results do not depend on the order.
     """
     n_blocks = (n + block_size - 1) // block_size
     per_band = (n_blocks + BANDS - 1) // BANDS

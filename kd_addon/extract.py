@@ -653,7 +653,8 @@ def _strand_warnings(ob, vis: _Visibility) -> list[str]:
     shown = _render_shown_systems(ob)
     return [f"object '{ob.name}': hair particles '{system.name}' are strands, not triangles: left out of the preview"
             for system in ob.particle_systems
-            if system.as_pointer() in shown and system.settings.type == "HAIR" and system.settings.render_type == "PATH"]
+            if system.as_pointer() in shown and system.settings.type == "HAIR"
+            and system.settings.render_type == "PATH"]
 
 
 def _pick_warnings(ob, vis: _Visibility) -> list[str]:
@@ -788,7 +789,8 @@ class _EntryReader:
             return
         name, instancer = verdict[0], verdict[1]
         where = f"object '{name}'" if instancer in (None, name) else f"object '{name}' instanced by '{instancer}'"
-        self.not_triangles.setdefault((name, instancer), f"{where} makes {kind}, not triangles: left out of the preview")
+        message = f"{where} makes {kind}, not triangles: left out of the preview"
+        self.not_triangles.setdefault((name, instancer), message)
 
     def _verdict(self, ob, parent) -> tuple[str, str | None, bool, bool, bool] | None:
         """(object name, instancer name, camera, shadow, holdout) when visible, else None; memoized."""

@@ -51,7 +51,8 @@ def kd_preview_frame_change(scene, depsgraph=None):
         if operators.running_frame_render() is not None:  # the user changed the frame during a Render run:
             schedule_render()  # the new frame renders after it (or instead of it, if Live Update started it)
         return
-    if not background.wait_for_work(background.SCENE_READ_WAIT):  # a cancelled run's kernel call: read the scene after it
+    # a cancelled run's kernel call: read the scene after it
+    if not background.wait_for_work(background.SCENE_READ_WAIT):
         schedule_render()
         return
     state, token = run_state(), object()

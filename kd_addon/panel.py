@@ -148,7 +148,8 @@ class KDPREVIEW_PT_last_run(_SubPanel, bpy.types.Panel):
         tree = last.get("tree", {})
         _rows(layout.box(), tree, TREE_ROWS + (LAZY_ROWS if tree.get("lazy") else ()))
         if "animation" in last:
-            wrapped_label(layout, context, f"{last['animation']['frames']} frames, report: {last['animation']['report']}")
+            animation = last["animation"]
+            wrapped_label(layout, context, f"{animation['frames']} frames, report: {animation['report']}")
         for warning in last.get("warnings", []):
             wrapped_label(layout, context, warning, "ERROR")
 

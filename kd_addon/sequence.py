@@ -69,9 +69,9 @@ def check_frames_in_range(frames) -> None:
 
 def prepare_folder(folder: Path) -> list[Path]:
     """Make `folder` (absolute and normalised; and missing parents) and check that files can be
-    written there, before the first frame renders: a folder under a file, or on a read-only disk, was found only when frame 1
-    was written, after its render (minutes on a first run: the kernels compile). Returns the folders
-    made, innermost first, for remove_empty_folders."""
+    written there, before the first frame renders: a folder under a file, or on a read-only disk, was
+    found only when frame 1 was written, after its render (minutes on a first run: the kernels
+    compile). Returns the folders made, innermost first, for remove_empty_folders."""
     missing = []
     probe = folder
     while not probe.exists() and probe != probe.parent:
