@@ -557,7 +557,7 @@ def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility, instance
     evaluated = {ob.original.as_pointer() for ob in depsgraph.objects}
     warnings = []
     instancers = {}
-    for ob in depsgraph.view_layer.objects:
+    for ob in _rendered_layers_objects(depsgraph):
         kind = ob.type
         if kind in TRIANGLE_TYPES and ob.as_pointer() in evaluated:
             if len(ob.particle_systems):
@@ -721,8 +721,19 @@ def hidden_light_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility) -> l
     evaluated = {ob.original.as_pointer() for ob in depsgraph.objects}
     return [f"light '{ob.name}' is hidden in the viewport (eye icon, Disable in Viewports or a hidden collection): "
             "the preview leaves it out, a final render uses it"
-            for ob in depsgraph.view_layer.objects
+            for ob in _rendered_layers_objects(depsgraph)
             if ob.type == "LIGHT" and ob.as_pointer() not in evaluated and vis.scene_object(ob)]
+
+
+def _rendered_layers_objects(depsgraph: bpy.types.Depsgraph):
+    """The objects of the depsgraph's view layer and of its background scenes' render view layers,
+    each once: what a final render may show (an object can be in the scene and a background scene)."""
+    seen = set()
+    layers = [depsgraph.view_layer] + [render_view_layer(s) for s in _set_scenes(depsgraph.scene)]
+    for ob in (ob for layer in layers for ob in layer.objects):
+        if ob.as_pointer() not in seen:
+            seen.add(ob.as_pointer())
+            yield ob
 
 
 class _EntryReader:

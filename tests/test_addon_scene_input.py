@@ -16,6 +16,7 @@ import numpy as np  # noqa: E402
 import core  # noqa: E402
 
 from kd_addon import scene_input  # noqa: E402
+from kd_addon.extract import _Visibility, hidden_light_warnings  # noqa: E402
 from kd_addon.errors import PreviewError  # noqa: E402
 from tests import bpy_scenes as scenes  # noqa: E402
 
@@ -278,6 +279,21 @@ def test_lights_of_a_background_scene_are_read(scene):
     scenes.link(bpy.data.objects.new("SetSun", bpy.data.lights.new("SetSun", "SUN")), background.collection)
     scenes.link(bpy.data.objects.new("Off", bpy.data.lights.new("Off", "SUN")), background.collection).hide_render = True
     assert [light.name for light in scene_input.read_lights(bpy.context.evaluated_depsgraph_get())] == ["SetSun"]
+
+
+def test_a_background_scene_light_hidden_in_the_viewport_is_named(scene):
+    """As the scene's own lights (test_addon_render): a final render uses it, the preview cannot."""
+    background = bpy.data.scenes.new("Set")
+    scene.background_set = background
+    scenes.link(bpy.data.objects.new("SetSun", bpy.data.lights.new("SetSun", "SUN")), background.collection)
+    hidden = scenes.link(bpy.data.objects.new("SetLamp", bpy.data.lights.new("SetLamp", "POINT")),
+                         background.collection)
+    hidden.hide_viewport = True
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    assert [light.name for light in scene_input.read_lights(depsgraph)] == ["SetSun"]
+    assert hidden_light_warnings(depsgraph, _Visibility(depsgraph)) == [
+        "light 'SetLamp' is hidden in the viewport (eye icon, Disable in Viewports or a hidden collection): "
+        "the preview leaves it out, a final render uses it"]
 
 
 def test_instanced_lights_are_read_at_their_instances(scene):

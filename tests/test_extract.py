@@ -663,6 +663,24 @@ def test_background_scenes_are_rendered_through_their_render_view_layer(scene, f
     assert sorted(extract_scene().object_names) == expected
 
 
+def test_background_scene_objects_hidden_in_the_viewport_are_named(scene):
+    """As the scene's own: a final render shows a background scene's object disabled in viewports,
+    the viewport's depsgraph does not hold it, so the preview names what it leaves out (it said
+    nothing); an object in both scenes is named once."""
+    scenes.add_cube("Own")
+    background = bpy.data.scenes.new("Set")
+    scene.background_set = background
+    scenes.add_cube("InSet", location=(3, 0, 0), collection=background.collection)
+    scenes.add_cube("HiddenInSet", location=(6, 0, 0), collection=background.collection).hide_viewport = True
+    both = scenes.add_cube("HiddenInBoth", location=(9, 0, 0))
+    background.collection.objects.link(both)
+    both.hide_viewport = True
+    result = extract_scene()
+    assert sorted(result.object_names) == ["InSet", "Own"]
+    hidden = sorted(w.split("'")[1] for w in result.warnings if "is hidden in the viewport" in w)
+    assert hidden == ["HiddenInBoth", "HiddenInSet"]
+
+
 def test_geometry_that_is_not_triangles_inside_mesh_objects_is_named(scene):
     """Geometry nodes that turn a mesh into points, and hair particles drawn as strands: Cycles
     renders both, the preview cannot trace them and says so (outside QA: left out in silence)."""
