@@ -548,8 +548,8 @@ NOT_TRIANGLE_DATA = {"Curves": "hair curves", "PointCloud": "a point cloud", "Vo
 
 
 def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility, instanced_by: dict[int, set[int]]) -> list[str]:
-    """A warning per render-visible thing a final render shows and the preview leaves out: scene
-    objects hidden in the viewport (the viewport depsgraph does not evaluate them) or not triangles,
+    """A warning per render-visible thing a final render shows and the preview leaves out: objects of
+    the scene and its background scenes hidden in the viewport (the viewport depsgraph does not evaluate them) or not triangles,
     collection instancers hidden there (their instances go with them), members of collections that
     instancers, geometry nodes or particles render whole, disabled in viewports (`instanced_by`: the
     original objects the depsgraph instanced, by original instancer), and hair particles drawn as
@@ -715,9 +715,9 @@ def _pick_candidates(coll: bpy.types.Collection, hidden: str) -> set[int]:
 
 
 def hidden_light_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility) -> list[str]:
-    """A warning per render-visible scene light hidden in the viewport: its depsgraph does not
-    evaluate it, so the preview cannot use it, while a final render does. `vis`: the view layer's
-    visibility table, shared with the caller."""
+    """A warning per render-visible light of the scene or its background scenes hidden in the
+    viewport: its depsgraph does not evaluate it, so the preview cannot use it, while a final render
+    does. `vis`: the render-visibility table, shared with the caller."""
     evaluated = {ob.original.as_pointer() for ob in depsgraph.objects}
     return [f"light '{ob.name}' is hidden in the viewport (eye icon, Disable in Viewports or a hidden collection): "
             "the preview leaves it out, a final render uses it"

@@ -9,7 +9,7 @@
 #                                      bash scripts/test_blender.sh VERSION --setup-only
 set -euo pipefail
 cd "$(dirname "$0")/.."
-version=${1:?"usage: bash scripts/test_blender.sh 4.2.0|5.3.0 [pytest arguments]"}
+version=${1:?"usage: bash scripts/test_blender.sh 4.2.0|5.3.0 [pytest arguments | --setup-only]"}
 shift
 case "$version" in
   4.2.0) python=3.11 numpy=1.24.3 ;;
@@ -31,7 +31,7 @@ if [ ! -x "$venv/bin/python" ]; then
 fi
 # Installed once per version of this script (its pins): a run otherwise repeats ~15 s of pip.
 stamp="$venv/.kd_preview_installed"
-wanted=$(sha256sum "$0" | cut -d" " -f1)
+wanted=$("$venv/bin/python" -c "import hashlib; print(hashlib.sha256(open('scripts/test_blender.sh', 'rb').read()).hexdigest())")
 if [ "$(cat "$stamp" 2>/dev/null)" != "$wanted" ]; then
   "$venv/bin/python" -m pip install --quiet --upgrade pip
   "$venv/bin/python" -m pip install --quiet "bpy==$version" "numba==0.68.1" "llvmlite==0.50.0" "pytest==9.2.0"

@@ -13,6 +13,7 @@ import os
 import tempfile
 
 os.environ.setdefault("NUMBA_CACHE_DIR", os.path.join(tempfile.gettempdir(), "kd_preview_test_numba_cache"))
+os.environ["NUMBA_CACHE_DIR"] = os.path.abspath(os.environ["NUMBA_CACHE_DIR"])  # children run elsewhere
 
 from kd_addon import corelib  # noqa: E402  (after the variable: corelib reads it)
 

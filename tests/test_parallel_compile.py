@@ -52,15 +52,20 @@ def test_a_cache_index_save_waits_for_the_lock(tmp_path):
     # Where the child's cache files go: the same locator here, on the same file.
     probe_cache = _probe_cache_folder(folder, cache)
     probe_cache.mkdir(parents=True, exist_ok=True)
-    with kernel_cache.locked_cache_folder(str(probe_cache)):
-        child = subprocess.Popen([sys.executable, "-c", script], env=env, stdout=subprocess.PIPE, text=True)
-        assert select.select([child.stdout], [], [], 120)[0], "the child never reached its cache save"
-        assert child.stdout.readline().strip() == "asking"
-        time.sleep(2)  # without the lock, the save (milliseconds) and the exit would be done by now
-        assert child.poll() is None, "the child finished while the lock was held"
-        assert not list(probe_cache.glob("*.nbi")), "the child wrote its index while the lock was held"
-        released = time.time()
-    out, _ = child.communicate(timeout=120)
+    child = None
+    try:
+        with kernel_cache.locked_cache_folder(str(probe_cache)):
+            child = subprocess.Popen([sys.executable, "-c", script], env=env, stdout=subprocess.PIPE, text=True)
+            assert select.select([child.stdout], [], [], 120)[0], "the child never reached its cache save"
+            assert child.stdout.readline().strip() == "asking"
+            time.sleep(2)  # without the lock, the save (milliseconds) and the exit would be done by now
+            assert child.poll() is None, "the child finished while the lock was held"
+            assert not list(probe_cache.glob("*.nbi")), "the child wrote its index while the lock was held"
+            released = time.time()
+        out, _ = child.communicate(timeout=120)
+    finally:
+        if child is not None and child.poll() is None:
+            child.kill()
     assert child.returncode == 0
     assert float(out.split()[-1]) >= released
     assert len(list(probe_cache.glob("*twice*.nbi"))) == 1 and len(list(probe_cache.glob("*twice*.nbc"))) == 1
