@@ -549,11 +549,11 @@ NOT_TRIANGLE_DATA = {"Curves": "hair curves", "PointCloud": "a point cloud", "Vo
 
 def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility, instanced_by: dict[int, set[int]]) -> list[str]:
     """A warning per render-visible thing a final render shows and the preview leaves out: objects of
-    the scene and its background scenes hidden in the viewport (the viewport depsgraph does not evaluate them) or not triangles,
-    collection instancers hidden there (their instances go with them), members of collections that
-    instancers, geometry nodes or particles render whole, disabled in viewports (`instanced_by`: the
-    original objects the depsgraph instanced, by original instancer), and hair particles drawn as
-    strands."""
+    the scene and its background scenes hidden in the viewport (the viewport depsgraph does not
+    evaluate them) or not triangles, collection instancers hidden there (their instances go with
+    them), members of collections that instancers, geometry nodes or particles render whole, disabled
+    in viewports (`instanced_by`: the original objects the depsgraph instanced, by original
+    instancer), and hair particles drawn as strands."""
     evaluated = {ob.original.as_pointer() for ob in depsgraph.objects}
     warnings = []
     instancers = {}

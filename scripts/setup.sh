@@ -16,10 +16,9 @@ if [ ! -x .venv/bin/python ]; then
 fi
 # Installed once per pyproject.toml (the install is editable, so code changes need none): every demo
 # and test run repeated ~15 s of pip and its warnings (outside QA).
-stamp=.venv/.kd_preview_installed
-wanted=$(.venv/bin/python -c "import hashlib; print(hashlib.sha256(open('pyproject.toml', 'rb').read()).hexdigest())")
-if [ "$(cat "$stamp" 2>/dev/null)" != "$wanted" ]; then
+source scripts/install_stamp.sh
+if ! install_is_current .venv pyproject.toml; then
   .venv/bin/python -m pip install --quiet --upgrade pip
   .venv/bin/python -m pip install --quiet -e ".[dev]"
-  echo "$wanted" > "$stamp"
+  mark_installed .venv pyproject.toml
 fi

@@ -29,14 +29,13 @@ if [ ! -x "$venv/bin/python" ]; then
   fi
   "$interpreter" -m venv "$venv"
 fi
-# Installed once per version of this script (its pins): a run otherwise repeats ~15 s of pip.
-stamp="$venv/.kd_preview_installed"
-wanted=$("$venv/bin/python" -c "import hashlib; print(hashlib.sha256(open('scripts/test_blender.sh', 'rb').read()).hexdigest())")
-if [ "$(cat "$stamp" 2>/dev/null)" != "$wanted" ]; then
+# Installed once per version of this script (it holds the pins).
+source scripts/install_stamp.sh
+if ! install_is_current "$venv" scripts/test_blender.sh; then
   "$venv/bin/python" -m pip install --quiet --upgrade pip
   "$venv/bin/python" -m pip install --quiet "bpy==$version" "numba==0.68.1" "llvmlite==0.50.0" "pytest==9.2.0"
   "$venv/bin/python" -m pip install --quiet --no-deps "numpy==$numpy"  # last: the bpy wheels take any numpy
-  echo "$wanted" > "$stamp"
+  mark_installed "$venv" scripts/test_blender.sh
 fi
 if [ "${1:-}" = "--setup-only" ]; then
   exit 0
