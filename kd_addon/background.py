@@ -34,12 +34,14 @@ import time
 import weakref
 
 _calls: weakref.WeakSet = weakref.WeakSet()  # every BackgroundCall not yet collected
-# Longest the main thread waits for the worker's kernel calls before it evaluates the depsgraph (the
-# edit timer then tries again later; a Render waits no longer). The bpy module crashed (SIGSEGV in the
-# main thread's evaluated_depsgraph_get, about 1 run in 10 of test_addon_modal.py, CI once) when the
-# scene was evaluated while the worker ran a call's Python code (not a kernel); the cause inside Blender
-# was not found, so the scene is read between kernel calls: ticks run on the main thread, so none starts
-# before the reader returns.
+# The bpy module crashed (SIGSEGV in the main thread's evaluated_depsgraph_get, about 1 run in 10 of
+# test_addon_modal.py, CI once) when the scene was evaluated while the worker ran a call's Python code
+# (not a kernel); the cause inside Blender was not found, so the add-on reads the scene only while no
+# kernel call runs: ticks run on the main thread, so none starts before the reader returns. A job
+# (pipeline.FrameJob, sequence.SequenceJob) evaluates its depsgraph and sets frames in a tick that first
+# finds no call running (earlier ticks just wait: a Render clicked during a cancelled run's long build
+# reads the scene after it). Live Update's timer and frame handler, which must return at once, wait at
+# most SCENE_READ_WAIT seconds, then try again later.
 SCENE_READ_WAIT = 0.1
 
 

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import bpy
 
-from . import background, output
+from . import output
 from .config import make_config
 from .errors import Cancelled, PreviewError, Superseded
 from .pipeline import FrameJob, claim, release, release_any, run_job
@@ -152,7 +152,6 @@ class _JobOperator:
     # -- shared ---------------------------------------------------------------
 
     def _start(self, context):
-        background.wait_for_work(background.SCENE_READ_WAIT)  # a cancelled run's call, briefly (SCENE_READ_WAIT)
         try:
             job = self.make_job(context)
             claim(job)
@@ -229,8 +228,9 @@ class KDPREVIEW_OT_render(_JobOperator, bpy.types.Operator):
         description="Started by Live Update: opens no image editor, and a newer edit replaces it")
 
     def make_job(self, context):
-        config = make_config(context.scene.kd_preview)
-        return FrameJob(context.scene, context.evaluated_depsgraph_get(), config)
+        scene, config = context.scene, make_config(context.scene.kd_preview)
+        layer_name = context.view_layer.name  # by name, as Render Animation's (evaluated_depsgraph)
+        return FrameJob(scene, lambda: evaluated_depsgraph(scene, layer_name), config)
 
     def finish(self, context, job) -> str:
         result = job.result()

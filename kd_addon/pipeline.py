@@ -130,10 +130,16 @@ class FrameJob:
     The first tick reads the scene and builds the tree (blocking: it cannot be
     split, and on the first run it includes Numba's compile); every later tick
     adds one sample per unconverged pixel (core keeps each such call short).
+
+    `depsgraph`: the scene's evaluated depsgraph, or a function of no arguments
+    returning it, called when the job reads the scene. A job reads the scene
+    only once no cancelled run's kernel call still runs on the worker (the
+    ticks before just wait): see background.SCENE_READ_WAIT for why.
     """
 
     def __init__(self, scene, depsgraph, config: RenderConfig):
-        self.scene, self.depsgraph, self.config = scene, depsgraph, config
+        self.scene, self.config = scene, config
+        self._depsgraph = depsgraph
         self.renderer = None
         self._timings = {"extract_ms": 0.0, "build_ms": 0.0, "trace_ms": 0.0, "other_ms": 0.0}
         self._info: dict = {}
@@ -163,7 +169,7 @@ class FrameJob:
 
     @property
     def status(self) -> str:
-        if self._pending is not None and background.abandoned_work_running(besides=self._pending):
+        if background.abandoned_work_running(besides=self._pending):
             return WAITING_STATUS  # a cancelled run's build or denoiser compile holds the kernel lock
         if not _kernels_ready:
             return LOADING_STATUS if corelib.cache_is_warm() else COMPILING_STATUS
@@ -185,6 +191,8 @@ class FrameJob:
             pending, self._pending = self._pending, None
             pending.result()  # the worker's exception, if any, is raised here
         elif self.renderer is None and self._reused_image is None:
+            if not background.wait_for_work(POLL_SECONDS):
+                return False  # a cancelled run's kernel call still runs: read the scene after it
             self.prepare()
         elif self.renderer is not None and not self.renderer.done:
             self.step()
@@ -216,6 +224,13 @@ class FrameJob:
         camera, lights = self._camera_and_lights(core, inputs)
         self._pending = BackgroundCall(KERNEL_LOCK, self._build_and_start, core, read.instances,
                                        inputs.camera.position, reuse, camera, lights, inputs.width, inputs.height)
+
+    @property
+    def depsgraph(self):
+        """The evaluated depsgraph the job reads (evaluated now if it was given as a function)."""
+        if callable(self._depsgraph):
+            self._depsgraph = self._depsgraph()
+        return self._depsgraph
 
     @property
     def image_key(self) -> bytes | None:

@@ -16,10 +16,10 @@ import tempfile
 import time
 from pathlib import Path
 
-from . import output
+from . import background, output
 from .config import RenderConfig
 from .errors import PreviewError
-from .pipeline import FrameJob, FrameResult
+from .pipeline import POLL_SECONDS, WAITING_STATUS, FrameJob, FrameResult
 
 REPORT_NAME = "report.json"
 TOTAL_KEYS = ("triangles", "extract_ms", "build_ms", "trace_ms", "total_ms", "rays", "rays_saved", "rays_reused",
@@ -131,7 +131,10 @@ class SequenceJob:
     @property
     def status(self) -> str:
         frame = self.frames[min(len(self.results), len(self.frames) - 1)]
-        inner = self.job.status if self.job is not None else "Starting"
+        if self.job is not None:
+            inner = self.job.status
+        else:
+            inner = WAITING_STATUS if background.abandoned_work_running() else "Starting"
         return f"Frame {frame} ({len(self.results) + 1}/{len(self.frames)}): {inner}"
 
     def tick(self) -> bool:
@@ -142,6 +145,8 @@ class SequenceJob:
             self._made_folders = prepare_folder(self.out_dir)
         try:
             if self.job is None:
+                if not background.wait_for_work(POLL_SECONDS):
+                    return False  # a cancelled run's kernel call still runs: set the frame after it
                 self.scene.frame_set(frame)
                 self.job = FrameJob(self.scene, self.depsgraph_for(self.scene), self.config)
             if not self.job.tick():

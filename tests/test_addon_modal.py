@@ -372,6 +372,39 @@ def test_the_edit_timer_reads_the_scene_only_between_kernel_calls(addon, monkeyp
     assert live_update.render_edits() is None and "KD Preview" in bpy.data.images  # then it renders
 
 
+@pytest.mark.parametrize("operator_cls", [KDPREVIEW_OT_render, KDPREVIEW_OT_render_animation])
+def test_a_run_started_beside_a_cancelled_runs_kernel_call_reads_the_scene_after_it(modal, monkeypatch, tmp_path,
+                                                                                    operator_cls):
+    """A Render clicked while a cancelled run's build still ran evaluated the depsgraph at invoke (and
+    Render Animation set its first frame at its first tick), beside the worker's call: the crash of
+    SCENE_READ_WAIT. Now the run waits, saying so, and reads the scene once the call has ended."""
+    scene = half_plane_scene()
+    scene.frame_start, scene.frame_end = 2, 2
+    scene.kd_preview.output_dir = str(tmp_path)
+    assert scene.frame_current == 1
+    reads = []  # at each depsgraph evaluation: was a kernel call still running?
+    evaluated_depsgraph = operators.evaluated_depsgraph
+    monkeypatch.setattr(operators, "evaluated_depsgraph", lambda *args: reads.append(
+        background.abandoned_work_running()) or evaluated_depsgraph(*args))
+    context = make_context()
+    context.evaluated_depsgraph_get = lambda: reads.append(
+        background.abandoned_work_running()) or bpy.context.evaluated_depsgraph_get()
+    release = threading.Event()
+    busy = background.BackgroundCall(threading.Lock(), release.wait)  # the cancelled run's call
+    try:
+        op = driver(operator_cls)
+        assert op.invoke(context, None) == {"RUNNING_MODAL"}
+        for _ in range(4):
+            assert op.modal(context, event("TIMER")) == {"PASS_THROUGH"}
+        assert reads == [] and scene.frame_current == 1 and pipeline.job_running()
+        assert pipeline.WAITING_STATUS in context.window_manager.kd_preview_state.status
+    finally:
+        release.set()
+    assert busy.wait(5.0)
+    assert timer_events(op, context)[0] == {"FINISHED"}
+    assert reads and not any(reads) and op.reports[-1][0] == {"INFO"}
+
+
 def test_an_edit_leaves_a_live_render_of_the_same_image_and_a_users_render_running(addon, monkeypatch):  # noqa: F811
     scene = half_plane_scene()
     scene.kd_preview.live_update = True
