@@ -30,7 +30,7 @@ from . import background, corelib, demo_scene, properties
 from .config import DEFAULTS, OUTPUT_FORMATS, SETTING_NAMES, make_config
 from .errors import Cancelled, PreviewError
 from .extract import render_view_layer
-from .operators import evaluated_depsgraph
+from .operators import depsgraph_source
 from .pipeline import claim, release, run_job
 from .sequence import SequenceJob, parse_frames
 
@@ -212,7 +212,7 @@ def _run(args, cancelled) -> int:
         frames = parse_frames(args.frames if args.frames is not None  # --frames "" is an error, not the default
                               else f"{scene.frame_start}-{scene.frame_end}:{max(1, scene.frame_step)}")
         job = SequenceJob(scene, config, frames, Path(args.out),
-                          lambda _s: evaluated_depsgraph(scene, layer_name), on_frame=_print_row)
+                          depsgraph_source(scene, scene.view_layers[layer_name]), on_frame=_print_row)
         print(f"KD Preview: scene '{scene.name}', {len(frames)} frame(s), mode {config.settings.mode}, "
               f"{config.settings.samples} samples, {config.resolution_percentage}% resolution -> {args.out}")
         if not corelib.cache_is_warm():  # else a first run looks hung for minutes (outside QA)

@@ -228,9 +228,8 @@ class KDPREVIEW_OT_render(_JobOperator, bpy.types.Operator):
         description="Started by Live Update: opens no image editor, and a newer edit replaces it")
 
     def make_job(self, context):
-        scene, config = context.scene, make_config(context.scene.kd_preview)
-        layer_name = context.view_layer.name  # by name, as Render Animation's (evaluated_depsgraph)
-        return FrameJob(scene, lambda: evaluated_depsgraph(scene, layer_name), config)
+        scene = context.scene
+        return FrameJob(scene, depsgraph_source(scene, context.view_layer), make_config(scene.kd_preview))
 
     def finish(self, context, job) -> str:
         result = job.result()
@@ -254,10 +253,8 @@ class KDPREVIEW_OT_render_animation(_JobOperator, bpy.types.Operator):
         settings = scene.kd_preview
         config = make_config(settings)
         frames = list(range(scene.frame_start, scene.frame_end + 1, max(1, scene.frame_step)))
-        # The view layer by name: `context` must not be kept beyond invoke, and a layer may be deleted.
-        layer_name = context.view_layer.name
         return SequenceJob(scene, config, frames, output_folder(settings.output_dir),
-                           lambda _scene: evaluated_depsgraph(scene, layer_name))
+                           depsgraph_source(scene, context.view_layer))
 
     def cleanup(self, job) -> None:
         job.close()
@@ -269,15 +266,24 @@ class KDPREVIEW_OT_render_animation(_JobOperator, bpy.types.Operator):
         return f"KD Preview: {len(job.results)} frames written to {job.out_dir}"
 
 
-def evaluated_depsgraph(scene, layer_name: str):
-    """The evaluated depsgraph of `scene`'s view layer `layer_name`, whatever the context: a modal run's
-    later ticks get the window's, not the one it was invoked with (a script's temp_override of another
-    scene rendered the window scene's objects under the other's name and camera; outside QA). Looked
-    up each time: a ViewLayer kept across ticks and deleted meanwhile crashed Blender (review)."""
-    view_layer = scene.view_layers.get(layer_name)
+def depsgraph_source(scene, view_layer):
+    """A function returning the evaluated depsgraph of `scene`'s `view_layer` when called (any
+    arguments ignored: SequenceJob passes the scene), whatever the context then: a modal run's later
+    ticks get the window's, not the one it was invoked with (a script's temp_override of another scene
+    rendered the window scene's objects under the other's name and camera; outside QA). `context`
+    must not be kept beyond invoke, nor the ViewLayer (one kept across ticks and deleted meanwhile
+    crashed Blender; review): the layer is kept as its address and looked up at each call, so a layer
+    renamed during the render is still found."""
+    name, address = view_layer.name, view_layer.as_pointer()
+    return lambda *_scene: evaluated_depsgraph(scene, name, address)
+
+
+def evaluated_depsgraph(scene, layer_name: str, layer_address: int):
+    """The evaluated depsgraph of the view layer of `scene` at `layer_address` (ViewLayer.as_pointer(),
+    compared, never dereferenced); PreviewError naming `layer_name` when the scene no longer has it."""
+    view_layer = next((layer for layer in scene.view_layers if layer.as_pointer() == layer_address), None)
     if view_layer is None:
-        raise PreviewError(f"view layer '{layer_name}' of scene '{scene.name}' was removed or renamed during "
-                           "the render")
+        raise PreviewError(f"view layer '{layer_name}' of scene '{scene.name}' was removed during the render")
     with bpy.context.temp_override(scene=scene, view_layer=view_layer):
         return bpy.context.evaluated_depsgraph_get()
 

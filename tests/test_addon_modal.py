@@ -203,8 +203,30 @@ def test_a_view_layer_removed_during_an_animation_ends_it_with_a_message(modal, 
     op.invoke(context, None)
     scene.view_layers.remove(scene.view_layers["Spare"])
     assert timer_events(op, context)[0] == {"CANCELLED"}
-    assert "view layer 'Spare' of scene 'Scene' was removed or renamed during the render" in op.reports[-1][1]
+    assert "view layer 'Spare' of scene 'Scene' was removed during the render" in op.reports[-1][1]
     assert scene.frame_current == 1 and not pipeline.job_running()
+
+
+def test_a_view_layer_renamed_during_an_animation_is_still_rendered(modal, tmp_path):
+    """It ended the animation as "removed or renamed" (the layer was looked up by name at each frame)."""
+    scene = half_plane_scene()
+    scene.frame_start, scene.frame_end = 1, 2
+    scene.kd_preview.output_dir = str(tmp_path)
+    scene.kd_preview.rebuild_all = True  # a static scene: with reuse, frame 2 would take frame 1's image
+    extra = scenes.new_collection("Extra")
+    scenes.add_cube("ExtraBox", scale=0.5, location=(-3.0, 0.0, 0.5), collection=extra)
+    spare = scene.view_layers.new("Spare")  # renders Extra; the first layer excludes it
+    scene.view_layers[0].layer_collection.children["Extra"].exclude = True
+    context = make_context()
+    context.view_layer = spare
+    op = driver(KDPREVIEW_OT_render_animation)
+    op.invoke(context, None)
+    for _ in range(3):  # frame 1 read through "Spare"
+        assert op.modal(context, event("TIMER")) == {"PASS_THROUGH"}
+    spare.name = "Renamed"
+    assert timer_events(op, context)[0] == {"FINISHED"}
+    report = json.loads((tmp_path / "report.json").read_text())
+    assert [f["triangles"] for f in report["frames"]] == [26, 26]  # Spare's (with ExtraBox), not the first layer's
 
 
 def test_modal_animation_runs_every_frame(modal, tmp_path):
