@@ -5,10 +5,18 @@ test_addon_extension.py) with BLENDER_USER_RESOURCES pointing at an empty temp f
     BLENDER_USER_RESOURCES=/tmp/u python tests/extension_smoke.py kd_preview-0.1.0-linux_x64.zip
 
 Prints one JSON line of facts for the test to check; any failed step raises (non-zero exit).
+
+    --kernels-from DIR  before the render, copy the kernel files in DIR into the installed core's
+                        Numba folder (kernels an earlier run of this script compiled: see
+                        test_addon_extension.py)
+    --kernels-to DIR    after the render, copy the installed core's kernel files into DIR
 """
 
+import argparse
+import importlib
 import json
 import os
+import shutil
 import sys
 from pathlib import Path
 
@@ -51,6 +59,29 @@ def render_default_scene() -> dict:
     }
 
 
+def installed_kernel_folder() -> Path:
+    """The folder Numba caches the installed core's kernels in: the add-on's versioned cache folder
+    (its corelib), in it the subfolder Numba names after the kernels' source folder."""
+    from numba.core.caching import _CacheLocator  # internal; numba is pinned (core/kernel_cache.py)
+
+    corelib = importlib.import_module(MODULE + ".kd_addon.corelib")
+    core_file = Path(sys.modules[MODULE].__file__).parent / "core" / "render.py"
+    return corelib.numba_cache_dir() / _CacheLocator.get_suitable_cache_subpath(str(core_file))
+
+
+def kernel_files(folder: Path) -> dict:
+    """{name: [size, mtime_ns]} of the Numba cache files in `folder`: a kernel compiled or saved
+    again changes its entry."""
+    return {path.name: [path.stat().st_size, path.stat().st_mtime_ns]
+            for path in sorted(folder.glob("*.nb[ic]"))} if folder.is_dir() else {}
+
+
+def copy_kernel_files(source: Path, target: Path) -> None:
+    target.mkdir(parents=True, exist_ok=True)
+    for path in source.glob("*.nb[ic]"):
+        shutil.copy2(path, target / path.name)  # copy2: the times stay, so kernel_files can compare
+
+
 def toggle_and_uninstall() -> dict:
     bpy.ops.preferences.addon_disable(module=MODULE)
     assert not hasattr(bpy.types.Scene, "kd_preview") and not enabled()
@@ -63,12 +94,24 @@ def toggle_and_uninstall() -> dict:
             "scene_prop_after_uninstall": hasattr(bpy.types.Scene, "kd_preview")}
 
 
-def main(zip_path: str) -> None:
-    facts = install(zip_path)
+def main(argv: list[str]) -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("zip_path")
+    parser.add_argument("--kernels-from", type=Path)
+    parser.add_argument("--kernels-to", type=Path)
+    args = parser.parse_args(argv)
+    facts = install(args.zip_path)
+    kernels = installed_kernel_folder()
+    if args.kernels_from is not None:
+        copy_kernel_files(args.kernels_from, kernels)
+    facts["kernel_files_before"] = kernel_files(kernels)
     facts.update(render_default_scene())
+    facts["kernel_files_after"] = kernel_files(kernels)
+    if args.kernels_to is not None:
+        copy_kernel_files(kernels, args.kernels_to)
     facts.update(toggle_and_uninstall())
     print("FACTS " + json.dumps(facts))
 
 
 if __name__ == "__main__":
-    main(sys.argv[1])
+    main(sys.argv[1:])

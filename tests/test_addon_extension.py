@@ -4,13 +4,24 @@ enable, render and uninstall it in a separate bpy process with its own Blender u
 Slow by nature: the first run downloads ~60 MB of wheels into build/wheels_cache/, and the
 installed copy of core compiles its kernels from scratch (its Numba cache lives in the fresh user
 folder, as in a real install): 1-3.5 minutes on two cores, the suite's slowest test.
+
+Once per Python version and version of core's sources: the kernels that compile keep Blender's module
+name for core (`bl_ext.user_default.kd_preview.core`, which the test process's cache cannot serve), so
+the test keeps them beside the tests' Numba cache (installed_kernels_folder) and a later run (the next
+CI pass on the same Python, bpy 4.2.0; any local run) installs the extension with them in its cache,
+as after a restart of Blender, and checks that it loads every kernel and compiles none. The first run
+on a machine (CI's, on each Python) checks the compile from scratch and its helper process instead.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import sys
 import zipfile
+from pathlib import Path
+
+import numba
 
 from tests.addon_support import REPO, run_python
 
@@ -39,7 +50,10 @@ def test_extension_builds_installs_renders_and_uninstalls(tmp_path):
     assert not any(n.startswith(("tests/", "benchmarks/", "tools/", "scripts/")) for n in names)
     user = tmp_path / "user"
     env = {"BLENDER_USER_RESOURCES": str(user), "NUMBA_CACHE_DIR": None}  # None: the extension picks the folder
-    proc = run_python([str(REPO / "tests" / "extension_smoke.py"), str(path)], env=env, cwd=tmp_path)
+    kept = installed_kernels_folder()
+    warm = kept_for_this_python(kept)
+    proc = run_python([str(REPO / "tests" / "extension_smoke.py"), str(path),
+                       "--kernels-from" if warm else "--kernels-to", str(kept)], env=env, cwd=tmp_path)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     facts = json.loads(next(line for line in proc.stdout.splitlines() if line.startswith("FACTS "))[6:])
     assert facts["numba_after_enable"] is False and facts["core_after_enable"] is False
@@ -49,8 +63,27 @@ def test_extension_builds_installs_renders_and_uninstalls(tmp_path):
     assert facts["numba_cache_dir"] == str(user_folder / "numba_cache" / f"core-{corelib.source_digest()}")
     assert facts["size"] == [96, 54] and 0.02 < facts["hit_fraction"] < 0.6
     assert facts["last_run"]["triangles"] == 12 and facts["last_run"]["lights"] == 1
-    # an empty cache: the rendering kernels compiled in a helper process that imported the installed core
-    # under its extension name beside the build (core/parallel_compile.py), and it succeeded
-    assert facts["last_run"]["compile_helper"] == "finished"
+    if warm:  # every kernel loaded from the cache, none compiled or saved again, and no helper started
+        assert facts["kernel_files_before"] and facts["kernel_files_after"] == facts["kernel_files_before"]
+        assert facts["last_run"].get("compile_helper") is None
+    else:
+        # an empty cache: the rendering kernels compiled in a helper process that imported the installed
+        # core under its extension name beside the build (core/parallel_compile.py), and it succeeded
+        assert facts["kernel_files_before"] == {} and facts["last_run"]["compile_helper"] == "finished"
+        assert kept_for_this_python(kept)
     assert facts["enabled_after_uninstall"] is False and facts["files_after_uninstall"] is False
     assert facts["scene_prop_after_uninstall"] is False
+
+
+def installed_kernels_folder() -> Path:
+    """Where the installed extension's compiled kernels are kept between runs: beside the tests' Numba
+    cache (tests/conftest.py), named by core's sources and the Numba version, whose cache files a
+    later Numba would reject and compile again."""
+    return Path(os.environ["NUMBA_CACHE_DIR"]).parent / (
+        f"installed-extension-core-{corelib.source_digest()}-numba-{numba.__version__}")
+
+
+def kept_for_this_python(folder: Path) -> bool:
+    """Whether `folder` holds the sampling kernel compiled for this Python (as corelib.cache_is_warm)."""
+    python = f"py{sys.version_info[0]}{sys.version_info[1]}"
+    return any(folder.glob(f"{corelib.WARM_KERNEL}-*.{python}.nbi"))
