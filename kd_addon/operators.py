@@ -23,6 +23,9 @@ from .pipeline import FrameJob, claim, release, release_any, run_job
 from .properties import run_state, set_last_run
 from .sequence import SequenceJob
 
+# What a run reports when a bpy struct it reads raised ReferenceError: Blender freed it meanwhile.
+REMOVED_DURING_RUN = ("the scene (or a part of it the preview reads) was removed or reloaded during the render "
+                      "(deleted, an undo, a file loaded): render again")
 TICK_SECONDS = 0.01  # timer interval
 TICK_BUDGET = 0.05  # seconds of work per timer event before handing control back to Blender
 _running = None  # the operator running modal, so that disabling the add-on can end it (unregister)
@@ -66,6 +69,8 @@ class _JobOperator:
             error = failure
         except KeyboardInterrupt:
             error = Cancelled("cancelled")
+        except ReferenceError:
+            error = PreviewError(REMOVED_DURING_RUN)
         except Exception as bug:
             self._end(context, job, bug)
             raise
@@ -111,6 +116,8 @@ class _JobOperator:
                 return self._end_modal(context, None)
         except PreviewError as error:
             return self._end_modal(context, error)
+        except ReferenceError:
+            return self._end_modal(context, PreviewError(REMOVED_DURING_RUN))
         except Exception as error:  # keep Blender usable: stop the timer, release the job, then show the bug
             self._end_modal(context, error)
             raise

@@ -100,12 +100,13 @@ class SequenceJob:
 
     def __init__(self, scene, config: RenderConfig, frames: list[int], out_dir: Path, depsgraph_for, on_frame=None):
         """`depsgraph_for(scene)` returns the evaluated depsgraph after frame_set (e.g.
-        `lambda s: context.evaluated_depsgraph_get()`); `on_frame(result, path)` is called
+        operators.depsgraph_source(scene, view_layer)); `on_frame(result, path)` is called
         after each frame is written."""
         if not frames:
             raise PreviewError("no frames to render")
         check_frames_in_range(frames)
         self.scene, self.config, self.frames = scene, config, list(frames)
+        self.scene_name = scene.name  # for the report, even once the scene is gone (removed mid-run)
         # Normalised: with "a/missing/../b" every part looked missing, and a first frame that failed
         # removed the user's empty folder b (review).
         self.out_dir = Path(os.path.normpath(os.path.abspath(out_dir)))
@@ -181,12 +182,22 @@ class SequenceJob:
                 pass
         if not self.results:
             remove_empty_folders(self._made_folders or [])
-        if self.scene.frame_current != self._start_frame:
+        try:
+            if self.scene.frame_current == self._start_frame:
+                return
+        except ReferenceError:  # the scene was removed (or reloaded by an undo) during the run
+            return
+        if background.abandoned_work_running():
+            # A cancelled frame's kernel call still runs: frame_set would evaluate the scene beside it
+            # (background.SCENE_READ_WAIT). The frame alone is set; Blender evaluates it later (the UI
+            # after this event, a script at its next depsgraph read or frame_set).
+            self.scene.frame_current = self._start_frame
+        else:
             self.scene.frame_set(self._start_frame)
 
     def _write_report(self) -> None:
         self.totals = summarize(self.results, (time.perf_counter() - self._t0) * 1e3)
-        self.report_path = write_report(self.out_dir, self.scene.name, self.config, self.results, self.files,
+        self.report_path = write_report(self.out_dir, self.scene_name, self.config, self.results, self.files,
                                         self.totals, len(self.frames))
 
 

@@ -166,6 +166,36 @@ def test_esc_during_animation_restores_the_frame(modal, tmp_path):
     assert (report["complete"], report["frames_requested"], len(report["frames"])) == (False, 3, 1)
 
 
+def test_esc_during_an_animation_frames_kernel_call_restores_the_frame_without_evaluating_the_scene(modal, tmp_path):
+    """Esc while a frame's build still ran put the start frame back with frame_set, which evaluates the
+    scene beside the worker's call (the crash of background.SCENE_READ_WAIT). Now only the frame is
+    set then; the scene is evaluated at it once read, as frame_set would have."""
+    scene = half_plane_scene()
+    box = bpy.data.objects["Box"]
+    for frame, x in ((1, -2.0), (7, -1.0)):
+        box.location.x = x
+        box.keyframe_insert("location", index=0, frame=frame)
+    scene.frame_start, scene.frame_end = 1, 2
+    scene.frame_set(7)
+    scene.kd_preview.output_dir = str(tmp_path)
+    op = driver(KDPREVIEW_OT_render_animation)
+    op.invoke(modal, None)
+    while op._job.job is None or op._job.job._pending is None:  # frame 1 set, its build on the worker
+        assert op.modal(modal, event("TIMER")) == {"PASS_THROUGH"}
+    assert box.location.x == -2.0
+    release = threading.Event()
+    busy = background.BackgroundCall(threading.Lock(), release.wait)  # the frame's call, still running
+    try:
+        assert op.modal(modal, event("ESC")) == {"CANCELLED"}
+        assert scene.frame_current == 7 and box.location.x == -2.0  # set, not evaluated
+    finally:
+        release.set()
+    assert busy.wait(5.0)
+    bpy.context.evaluated_depsgraph_get()
+    assert box.location.x == -1.0  # evaluated at frame 7 once read
+    assert op.reports[-1][0] == {"WARNING"} and not pipeline.job_running()
+
+
 def test_a_cancelled_animation_that_wrote_nothing_leaves_no_folder_it_made(modal, tmp_path):
     scene = half_plane_scene()
     scene.frame_start, scene.frame_end = 1, 2
@@ -227,6 +257,26 @@ def test_a_view_layer_renamed_during_an_animation_is_still_rendered(modal, tmp_p
     assert timer_events(op, context)[0] == {"FINISHED"}
     report = json.loads((tmp_path / "report.json").read_text())
     assert [f["triangles"] for f in report["frames"]] == [26, 26]  # Spare's (with ExtraBox), not the first layer's
+
+
+def test_a_scene_removed_during_an_animation_ends_it_with_a_message(modal, tmp_path):
+    """The next frame's frame_set raised ReferenceError out of the modal handler (a traceback), and the
+    cleanup that restores the start frame raised it again. An undo, which reloads every ID, does the same."""
+    scene = half_plane_scene()
+    scene.frame_start, scene.frame_end = 1, 2
+    scene.kd_preview.output_dir = str(tmp_path)
+    scene.kd_preview.rebuild_all = True  # a static scene: with reuse, frame 2 would take frame 1's image
+    spare = bpy.data.scenes.new("Spare")  # Blender keeps at least one scene
+    op = driver(KDPREVIEW_OT_render_animation)
+    op.invoke(modal, None)
+    while not (tmp_path / "frame_0001.png").exists():
+        assert op.modal(modal, event("TIMER")) == {"PASS_THROUGH"}
+    bpy.data.scenes.remove(scene)
+    assert timer_events(op, modal)[0] == {"CANCELLED"}
+    assert op.reports[-1] == ({"ERROR"}, operators.REMOVED_DURING_RUN) and not pipeline.job_running()
+    report = json.loads((tmp_path / "report.json").read_text())  # frame 1's, marked incomplete
+    assert (report["scene"], report["complete"], len(report["frames"])) == ("Scene", False, 1)
+    assert spare.name == "Spare"
 
 
 def test_modal_animation_runs_every_frame(modal, tmp_path):

@@ -67,8 +67,9 @@ def test_esc_during_a_long_build_returns_at_once_and_the_next_render_is_right(mo
     # The abandoned build still holds the kernel lock; the next render waits for it, then is exact.
     # (rebuild_all: the scene is the reference's again, so it would otherwise reuse that image at once.)
     scene.kd_preview.rebuild_all = True
-    following = pipeline.FrameJob(scene, bpy.context.evaluated_depsgraph_get(), make_config(scene.kd_preview))
-    following.tick()  # reads the scene; its build waits for the abandoned one, which holds the lock
+    # (The depsgraph is passed as its getter: evaluating it beside the running build is what the job avoids.)
+    following = pipeline.FrameJob(scene, bpy.context.evaluated_depsgraph_get, make_config(scene.kd_preview))
+    following.tick()  # waits: the scene is read once the abandoned build has ended
     assert following.status == pipeline.WAITING_STATUS or job._pending.finished  # (unless that just ended)
     pipeline.run_job(following)
     assert (following.result().image == reference).all() and job._pending.finished
