@@ -32,6 +32,8 @@ def addon(monkeypatch):
     kd_addon.register()
     yield kd_addon
     kd_addon.unregister()
+    # A test that cancelled a run leaves its kernel call running; the next test's ticks would wait for it.
+    assert background.wait_for_work(120.0), "a cancelled kernel call still runs after 120 s"
 
 
 EVENT_PROPERTIES = {p.identifier for p in bpy.types.Event.bl_rna.properties}

@@ -59,21 +59,25 @@ def render_default_scene() -> dict:
     }
 
 
+def installed_cache_folder() -> Path:
+    """The installed add-on's versioned Numba cache folder (its corelib)."""
+    return importlib.import_module(MODULE + ".kd_addon.corelib").numba_cache_dir()
+
+
 def installed_kernel_folder() -> Path:
-    """The folder Numba caches the installed core's kernels in: the add-on's versioned cache folder
-    (its corelib), in it the subfolder Numba names after the kernels' source folder."""
+    """The folder Numba caches the installed core's kernels in: inside the add-on's cache folder, the
+    subfolder Numba names after the kernels' source folder."""
     from numba.core.caching import _CacheLocator  # internal; numba is pinned (core/kernel_cache.py)
 
-    corelib = importlib.import_module(MODULE + ".kd_addon.corelib")
     core_file = Path(sys.modules[MODULE].__file__).parent / "core" / "render.py"
-    return corelib.numba_cache_dir() / _CacheLocator.get_suitable_cache_subpath(str(core_file))
+    return installed_cache_folder() / _CacheLocator.get_suitable_cache_subpath(str(core_file))
 
 
 def kernel_files(folder: Path) -> dict:
-    """{name: [size, mtime_ns]} of the Numba cache files in `folder`: a kernel compiled or saved
-    again changes its entry."""
-    return {path.name: [path.stat().st_size, path.stat().st_mtime_ns]
-            for path in sorted(folder.glob("*.nb[ic]"))} if folder.is_dir() else {}
+    """{relative path: [size, mtime_ns]} of the Numba cache files anywhere under `folder`: a kernel
+    compiled or saved again (in any subfolder) adds or changes an entry."""
+    return {str(path.relative_to(folder)): [path.stat().st_size, path.stat().st_mtime_ns]
+            for path in sorted(folder.rglob("*.nb[ic]"))} if folder.is_dir() else {}
 
 
 def copy_kernel_files(source: Path, target: Path) -> None:
@@ -104,9 +108,9 @@ def main(argv: list[str]) -> None:
     kernels = installed_kernel_folder()
     if args.kernels_from is not None:
         copy_kernel_files(args.kernels_from, kernels)
-    facts["kernel_files_before"] = kernel_files(kernels)
+    facts["kernel_files_before"] = kernel_files(installed_cache_folder())
     facts.update(render_default_scene())
-    facts["kernel_files_after"] = kernel_files(kernels)
+    facts["kernel_files_after"] = kernel_files(installed_cache_folder())
     if args.kernels_to is not None:
         copy_kernel_files(kernels, args.kernels_to)
     facts.update(toggle_and_uninstall())

@@ -1,33 +1,39 @@
 """The extension as users get it: build the linux-x64 zip with tools/build_extension.py, then install,
 enable, render and uninstall it in a separate bpy process with its own Blender user folder.
 
-Slow by nature: the first run downloads ~60 MB of wheels into build/wheels_cache/, and the
-installed copy of core compiles its kernels from scratch (its Numba cache lives in the fresh user
-folder, as in a real install): 1-3.5 minutes on two cores, the suite's slowest test.
+Slow the first time: it downloads ~60 MB of wheels into build/wheels_cache/, and the installed copy
+of core compiles its kernels from scratch (its Numba cache lives in the fresh user folder, as in a
+real install): 1-3.5 minutes on two cores, the suite's slowest test.
 
-Once per Python version and version of core's sources: the kernels that compile keep Blender's module
-name for core (`bl_ext.user_default.kd_preview.core`, which the test process's cache cannot serve), so
-the test keeps them beside the tests' Numba cache (installed_kernels_folder) and a later run (the next
-CI pass on the same Python, bpy 4.2.0; any local run) installs the extension with them in its cache,
-as after a restart of Blender, and checks that it loads every kernel and compiles none. The first run
-on a machine (CI's, on each Python) checks the compile from scratch and its helper process instead.
-"""
+The kernels that compile are kept for later runs: they carry Blender's module name for core
+(`bl_ext.user_default.kd_preview.core`), which the test process's own cache cannot serve. After a cold
+run passes, the test keeps them beside the tests' Numba cache (installed_kernels_folder, named by the
+zip's contents, this test's smoke script, the Numba and numpy major versions and the Python), and a
+later run with the same name (the bpy 4.2.0 CI pass, on the main pass's Python 3.11; a local rerun)
+installs the extension with them in its cache, as after a restart of Blender, and checks that it
+loads every kernel and compiles none (~10 s). A first run on a machine (CI's, on each Python) checks
+the compile from scratch and its helper process instead. To force that: delete the folder.
+""""""
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
+import shutil
 import sys
 import zipfile
 from pathlib import Path
 
 import numba
+import numpy as np
 
 from tests.addon_support import REPO, run_python
 
 from kd_addon import corelib  # noqa: E402
 
 ZIP_NAME = "kd_preview-0.1.0-linux_x64.zip"
+SMOKE = REPO / "tests" / "extension_smoke.py"
 
 
 def build_zip(tmp_path):
@@ -50,10 +56,10 @@ def test_extension_builds_installs_renders_and_uninstalls(tmp_path):
     assert not any(n.startswith(("tests/", "benchmarks/", "tools/", "scripts/")) for n in names)
     user = tmp_path / "user"
     env = {"BLENDER_USER_RESOURCES": str(user), "NUMBA_CACHE_DIR": None}  # None: the extension picks the folder
-    kept = installed_kernels_folder()
+    kept, compiled = installed_kernels_folder(path), tmp_path / "compiled_kernels"
     warm = kept_for_this_python(kept)
-    proc = run_python([str(REPO / "tests" / "extension_smoke.py"), str(path),
-                       "--kernels-from" if warm else "--kernels-to", str(kept)], env=env, cwd=tmp_path)
+    proc = run_python([str(SMOKE), str(path), *(["--kernels-from", str(kept)] if warm else
+                                                ["--kernels-to", str(compiled)])], env=env, cwd=tmp_path)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     facts = json.loads(next(line for line in proc.stdout.splitlines() if line.startswith("FACTS "))[6:])
     assert facts["numba_after_enable"] is False and facts["core_after_enable"] is False
@@ -64,26 +70,49 @@ def test_extension_builds_installs_renders_and_uninstalls(tmp_path):
     assert facts["size"] == [96, 54] and 0.02 < facts["hit_fraction"] < 0.6
     assert facts["last_run"]["triangles"] == 12 and facts["last_run"]["lights"] == 1
     if warm:  # every kernel loaded from the cache, none compiled or saved again, and no helper started
-        assert facts["kernel_files_before"] and facts["kernel_files_after"] == facts["kernel_files_before"]
+        assert facts["kernel_files_before"], f"nothing was copied from {kept}"
+        assert facts["kernel_files_after"] == facts["kernel_files_before"], (
+            f"the installed extension compiled kernels the ones kept in {kept} should have served")
         assert facts["last_run"].get("compile_helper") is None
     else:
         # an empty cache: the rendering kernels compiled in a helper process that imported the installed
         # core under its extension name beside the build (core/parallel_compile.py), and it succeeded
         assert facts["kernel_files_before"] == {} and facts["last_run"]["compile_helper"] == "finished"
-        assert kept_for_this_python(kept)
     assert facts["enabled_after_uninstall"] is False and facts["files_after_uninstall"] is False
     assert facts["scene_prop_after_uninstall"] is False
+    if not warm:
+        keep_kernels(compiled, kept)  # only after a run that passed
 
 
-def installed_kernels_folder() -> Path:
+def installed_kernels_folder(zip_path: Path) -> Path:
     """Where the installed extension's compiled kernels are kept between runs: beside the tests' Numba
-    cache (tests/conftest.py), named by core's sources and the Numba version, whose cache files a
-    later Numba would reject and compile again."""
+    cache (tests/conftest.py), named by what decides which kernels compile and whether Numba accepts
+    them: the zip's contents (core, the add-on that calls it, the bundled wheels), the smoke script
+    (the settings it renders with), the Numba version (a later one rejects the files), the numpy major
+    version (Numba's typing differs between numpy 1 and 2) and the Python."""
+    digest = hashlib.sha256(SMOKE.read_bytes())
+    with zipfile.ZipFile(zip_path) as zf:
+        for info in sorted(zf.infolist(), key=lambda entry: entry.filename):
+            digest.update(info.filename.encode() + b"\0" + zf.read(info))
+    numpy_major = np.__version__.split(".")[0]
     return Path(os.environ["NUMBA_CACHE_DIR"]).parent / (
-        f"installed-extension-core-{corelib.source_digest()}-numba-{numba.__version__}")
+        f"installed-extension-{digest.hexdigest()[:16]}-numba{numba.__version__}-numpy{numpy_major}-{python_tag()}")
+
+
+def python_tag() -> str:
+    return f"py{sys.version_info[0]}{sys.version_info[1]}"
 
 
 def kept_for_this_python(folder: Path) -> bool:
     """Whether `folder` holds the sampling kernel compiled for this Python (as corelib.cache_is_warm)."""
-    python = f"py{sys.version_info[0]}{sys.version_info[1]}"
-    return any(folder.glob(f"{corelib.WARM_KERNEL}-*.{python}.nbi"))
+    return any(folder.glob(f"{corelib.WARM_KERNEL}-*.{python_tag()}.nbi"))
+
+
+def keep_kernels(compiled: Path, kept: Path) -> None:
+    """Put `compiled` in place as `kept` in one rename, so an interrupted copy never leaves a folder that
+    looks complete."""
+    partial = kept.with_name(f"{kept.name}.partial-{os.getpid()}")
+    shutil.rmtree(partial, ignore_errors=True)
+    shutil.copytree(compiled, partial)
+    shutil.rmtree(kept, ignore_errors=True)  # an incomplete one (a cold run found no sampling kernel in it)
+    os.replace(partial, kept)
