@@ -13,7 +13,7 @@ later run with the same name (the bpy 4.2.0 CI pass, on the main pass's Python 3
 installs the extension with them in its cache, as after a restart of Blender, and checks that it
 loads every kernel and compiles none (~10 s). A first run on a machine (CI's, on each Python) checks
 the compile from scratch and its helper process instead. To force that: delete the folder.
-""""""
+"""
 
 from __future__ import annotations
 
