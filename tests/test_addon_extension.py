@@ -34,6 +34,7 @@ from kd_addon import corelib  # noqa: E402
 
 ZIP_NAME = "kd_preview-0.1.0-linux_x64.zip"
 SMOKE = REPO / "tests" / "extension_smoke.py"
+ZIP_CODE = ("core/", "kd_addon/", "wheels/", "__init__.py", "blender_manifest.toml")  # what decides the kernels
 
 
 def build_zip(tmp_path):
@@ -87,13 +88,15 @@ def test_extension_builds_installs_renders_and_uninstalls(tmp_path):
 def installed_kernels_folder(zip_path: Path) -> Path:
     """Where the installed extension's compiled kernels are kept between runs: beside the tests' Numba
     cache (tests/conftest.py), named by what decides which kernels compile and whether Numba accepts
-    them: the zip's contents (core, the add-on that calls it, the bundled wheels), the smoke script
-    (the settings it renders with), the Numba version (a later one rejects the files), the numpy major
-    version (Numba's typing differs between numpy 1 and 2) and the Python."""
+    them: the zip's code (core, the add-on that calls it, the manifest, the bundled wheels; not a
+    stray file in the checkout, which the zip would carry too), the smoke script (the settings it
+    renders with), the Numba version (a later one rejects the files), the numpy major version
+    (Numba's typing differs between numpy 1 and 2) and the Python."""
     digest = hashlib.sha256(SMOKE.read_bytes())
     with zipfile.ZipFile(zip_path) as zf:
         for info in sorted(zf.infolist(), key=lambda entry: entry.filename):
-            digest.update(info.filename.encode() + b"\0" + zf.read(info))
+            if info.filename.startswith(ZIP_CODE):
+                digest.update(info.filename.encode() + b"\0" + zf.read(info))
     numpy_major = np.__version__.split(".")[0]
     return Path(os.environ["NUMBA_CACHE_DIR"]).parent / (
         f"installed-extension-{digest.hexdigest()[:16]}-numba{numba.__version__}-numpy{numpy_major}-{python_tag()}")
@@ -116,3 +119,6 @@ def keep_kernels(compiled: Path, kept: Path) -> None:
     shutil.copytree(compiled, partial)
     shutil.rmtree(kept, ignore_errors=True)  # an incomplete one (a cold run found no sampling kernel in it)
     os.replace(partial, kept)
+    for older in kept.parent.glob(f"installed-extension-*-{python_tag()}"):  # earlier builds' kernels
+        if older != kept:
+            shutil.rmtree(older, ignore_errors=True)
