@@ -23,9 +23,8 @@ from .pipeline import FrameJob, claim, release, release_any, run_job
 from .properties import run_state, set_last_run
 from .sequence import SequenceJob
 
-# What a run reports when a bpy struct it reads raised ReferenceError: Blender freed it meanwhile.
-REMOVED_DURING_RUN = ("the scene (or a part of it the preview reads) was removed or reloaded during the render "
-                      "(deleted, an undo, a file loaded): render again")
+# What a run reports when Blender freed the scene it renders (scene_removed).
+REMOVED_DURING_RUN = "the scene was removed or reloaded during the render (deleted, an undo): render again"
 TICK_SECONDS = 0.01  # timer interval
 TICK_BUDGET = 0.05  # seconds of work per timer event before handing control back to Blender
 _running = None  # the operator running modal, so that disabling the add-on can end it (unregister)
@@ -69,11 +68,11 @@ class _JobOperator:
             error = failure
         except KeyboardInterrupt:
             error = Cancelled("cancelled")
-        except ReferenceError:
-            error = PreviewError(REMOVED_DURING_RUN)
         except Exception as bug:
-            self._end(context, job, bug)
-            raise
+            if not scene_removed(job):
+                self._end(context, job, bug)
+                raise
+            error = PreviewError(REMOVED_DURING_RUN)
         return self._end(context, job, error)
 
     # -- modal ----------------------------------------------------------------
@@ -104,23 +103,24 @@ class _JobOperator:
             # window (render.view_show, Render In: New Window; seen in Blender 5.2). Its job is published;
             # finishing it again would publish an old frame over a newer one and clear a new run's state.
             return {"FINISHED", "PASS_THROUGH"}
+        if event.type == "ESC":
+            return self._end_modal(context, Cancelled("cancelled"))
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"}
+        if not self._started:  # let the status ("Compiling kernels…") draw before blocking work
+            self._started = True
+            return {"PASS_THROUGH"}
         try:
-            if event.type == "ESC":
-                return self._end_modal(context, Cancelled("cancelled"))
-            if event.type != "TIMER":
-                return {"PASS_THROUGH"}
-            if not self._started:  # let the status ("Compiling kernels…") draw before blocking work
-                self._started = True
-                return {"PASS_THROUGH"}
-            if self._tick_for(TICK_BUDGET):
-                return self._end_modal(context, None)
+            finished = self._tick_for(TICK_BUDGET)
         except PreviewError as error:
             return self._end_modal(context, error)
-        except ReferenceError:
-            return self._end_modal(context, PreviewError(REMOVED_DURING_RUN))
-        except Exception as error:  # keep Blender usable: stop the timer, release the job, then show the bug
-            self._end_modal(context, error)
+        except Exception as error:
+            if scene_removed(self._job):
+                return self._end_modal(context, PreviewError(REMOVED_DURING_RUN))
+            self._end_modal(context, error)  # keep Blender usable: stop the timer, release the job, show the bug
             raise
+        if finished:
+            return self._end_modal(context, None)
         self._show(context, self._job.progress, self._job.status)
         return {"PASS_THROUGH"}
 
@@ -271,6 +271,16 @@ class KDPREVIEW_OT_render_animation(_JobOperator, bpy.types.Operator):
         last["animation"] = {"frames": len(job.results), "report": str(job.report_path)}
         set_last_run(run_state(context), last)
         return f"KD Preview: {len(job.results)} frames written to {job.out_dir}"
+
+
+def scene_removed(job) -> bool:
+    """Whether Blender freed the scene `job` renders (deleted, or reloaded by an undo): then the run's
+    ReferenceError is that, not a bug of the add-on's."""
+    try:
+        job.scene.name
+    except ReferenceError:
+        return True
+    return False
 
 
 def depsgraph_source(scene, view_layer):

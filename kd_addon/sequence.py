@@ -106,7 +106,7 @@ class SequenceJob:
             raise PreviewError("no frames to render")
         check_frames_in_range(frames)
         self.scene, self.config, self.frames = scene, config, list(frames)
-        self.scene_name = scene.name  # for the report, even once the scene is gone (removed mid-run)
+        self._scene_name = scene.name  # the report's, should the scene be removed mid-run
         # Normalised: with "a/missing/../b" every part looked missing, and a first frame that failed
         # removed the user's empty folder b (review).
         self.out_dir = Path(os.path.normpath(os.path.abspath(out_dir)))
@@ -189,15 +189,26 @@ class SequenceJob:
             return
         if background.abandoned_work_running():
             # A cancelled frame's kernel call still runs: frame_set would evaluate the scene beside it
-            # (background.SCENE_READ_WAIT). The frame alone is set; Blender evaluates it later (the UI
-            # after this event, a script at its next depsgraph read or frame_set).
+            # (background.SCENE_READ_WAIT). The frame alone is set; Blender evaluates it later: in the
+            # UI at its next update, as after a timeline change (which it does beside running work,
+            # and which runs the frame-change handlers: with Live Update on, the preview is rendered
+            # again once the call has ended, its image reused when unchanged); in a script at the next
+            # depsgraph read or frame_set.
             self.scene.frame_current = self._start_frame
         else:
             self.scene.frame_set(self._start_frame)
 
+    def scene_name(self) -> str:
+        """The scene's name now (it may have been renamed), or its last one if it was removed."""
+        try:
+            self._scene_name = self.scene.name
+        except ReferenceError:
+            pass
+        return self._scene_name
+
     def _write_report(self) -> None:
         self.totals = summarize(self.results, (time.perf_counter() - self._t0) * 1e3)
-        self.report_path = write_report(self.out_dir, self.scene_name, self.config, self.results, self.files,
+        self.report_path = write_report(self.out_dir, self.scene_name(), self.config, self.results, self.files,
                                         self.totals, len(self.frames))
 
 

@@ -30,10 +30,16 @@ def addon(monkeypatch):
     monkeypatch.setattr(background, "SCENE_READ_WAIT", 60.0)
     scenes.reset()
     kd_addon.register()
-    yield kd_addon
-    kd_addon.unregister()
-    # A test that cancelled a run leaves its kernel call running; the next test's ticks would wait for it.
-    assert background.wait_for_work(120.0), "a cancelled kernel call still runs after 120 s"
+    try:
+        yield kd_addon
+    finally:
+        try:
+            kd_addon.unregister()
+        finally:
+            # A test that cancelled a run leaves its kernel call running; the next test's ticks would
+            # wait for it. One that never ends would make every later test wait: stop the session.
+            if not background.wait_for_work(120.0):
+                pytest.exit("a cancelled kernel call still runs 120 s after its test ended", returncode=1)
 
 
 EVENT_PROPERTIES = {p.identifier for p in bpy.types.Event.bl_rna.properties}

@@ -81,8 +81,9 @@ def test_extension_builds_installs_renders_and_uninstalls(tmp_path):
         assert facts["kernel_files_before"] == {} and facts["last_run"]["compile_helper"] == "finished"
     assert facts["enabled_after_uninstall"] is False and facts["files_after_uninstall"] is False
     assert facts["scene_prop_after_uninstall"] is False
-    if not warm:
-        keep_kernels(compiled, kept)  # only after a run that passed
+    if not warm:  # only after a run that passed, and only a set the next run will take as warm
+        assert kept_for_this_python(compiled), f"the sampling kernel is not among {sorted(compiled.iterdir())}"
+        keep_kernels(compiled, kept)
 
 
 def installed_kernels_folder(zip_path: Path) -> Path:
@@ -111,14 +112,35 @@ def kept_for_this_python(folder: Path) -> bool:
     return any(folder.glob(f"{corelib.WARM_KERNEL}-*.{python_tag()}.nbi"))
 
 
-def keep_kernels(compiled: Path, kept: Path) -> None:
+def keep_kernels(compiled: Path, kept: Path, keep_builds: int = 3) -> None:
     """Put `compiled` in place as `kept` in one rename, so an interrupted copy never leaves a folder that
-    looks complete."""
+    looks complete; then remove all but the `keep_builds` newest kept folders of the same Numba, numpy
+    and Python (other checkouts' builds stay warm too), and partial copies whose run has ended."""
     partial = kept.with_name(f"{kept.name}.partial-{os.getpid()}")
     shutil.rmtree(partial, ignore_errors=True)
     shutil.copytree(compiled, partial)
     shutil.rmtree(kept, ignore_errors=True)  # an incomplete one (a cold run found no sampling kernel in it)
-    os.replace(partial, kept)
-    for older in kept.parent.glob(f"installed-extension-*-{python_tag()}"):  # earlier builds' kernels
-        if older != kept:
-            shutil.rmtree(older, ignore_errors=True)
+    os.utime(partial)  # now: copytree gave it the compiled folder's time, and the pruning sorts by it
+    try:
+        os.replace(partial, kept)
+    except OSError:  # another run put the same build's kernels in place first
+        shutil.rmtree(partial, ignore_errors=True)
+        if not kept_for_this_python(kept):
+            raise
+    suffix = kept.name.split("-", 3)[3]  # "numba…-numpy…-py…" after "installed-extension-<digest>-"
+    builds = sorted(kept.parent.glob(f"installed-extension-*-{suffix}"), key=lambda path: path.stat().st_mtime)
+    for older in builds[:-keep_builds]:
+        shutil.rmtree(older, ignore_errors=True)
+    for leftover in kept.parent.glob("installed-extension-*.partial-*"):
+        if not process_alive(int(leftover.name.rsplit("-", 1)[1])):
+            shutil.rmtree(leftover, ignore_errors=True)
+
+
+def process_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # it exists but belongs to someone else
+        return True
+    return True
