@@ -155,6 +155,10 @@ def cache_is_warm(kernel: str = WARM_KERNEL) -> bool:
     (so the first run only loads kernels). Any index file was not enough: the first appears seconds
     into a compile of minutes, and the panel said "Loading compiled kernels" for four minutes
     (outside QA)."""
-    folder = numba_cache_dir()
+    return holds_kernel(numba_cache_dir(), kernel)
+
+
+def holds_kernel(folder: Path, kernel: str = WARM_KERNEL) -> bool:
+    """Whether the Numba cache files in `folder` (or below) include `kernel` compiled for this Python."""
     python = f"py{sys.version_info[0]}{sys.version_info[1]}"
     return folder.is_dir() and any(folder.rglob(f"{kernel}-*.{python}.nbi"))

@@ -138,8 +138,7 @@ class FrameJob:
     """
 
     def __init__(self, scene, depsgraph, config: RenderConfig):
-        self.scene, self.config = scene, config
-        self._depsgraph = depsgraph
+        self.scene, self.depsgraph, self.config = scene, depsgraph, config
         self.renderer = None
         self._timings = {"extract_ms": 0.0, "build_ms": 0.0, "trace_ms": 0.0, "other_ms": 0.0}
         self._info: dict = {}
@@ -193,6 +192,8 @@ class FrameJob:
         elif self.renderer is None and self._reused_image is None:
             if not background.wait_for_work(POLL_SECONDS):
                 return False  # a cancelled run's kernel call still runs: read the scene after it
+            if callable(self.depsgraph):
+                self.depsgraph = self.depsgraph()
             self.prepare()
         elif self.renderer is not None and not self.renderer.done:
             self.step()
@@ -224,13 +225,6 @@ class FrameJob:
         camera, lights = self._camera_and_lights(core, inputs)
         self._pending = BackgroundCall(KERNEL_LOCK, self._build_and_start, core, read.instances,
                                        inputs.camera.position, reuse, camera, lights, inputs.width, inputs.height)
-
-    @property
-    def depsgraph(self):
-        """The evaluated depsgraph the job reads (evaluated now if it was given as a function)."""
-        if callable(self._depsgraph):
-            self._depsgraph = self._depsgraph()
-        return self._depsgraph
 
     @property
     def image_key(self) -> bytes | None:

@@ -19,7 +19,7 @@ from pathlib import Path
 from . import background, output
 from .config import RenderConfig
 from .errors import PreviewError
-from .pipeline import POLL_SECONDS, WAITING_STATUS, FrameJob, FrameResult
+from .pipeline import FrameJob, FrameResult
 
 REPORT_NAME = "report.json"
 TOTAL_KEYS = ("triangles", "extract_ms", "build_ms", "trace_ms", "total_ms", "rays", "rays_saved", "rays_reused",
@@ -132,10 +132,7 @@ class SequenceJob:
     @property
     def status(self) -> str:
         frame = self.frames[min(len(self.results), len(self.frames) - 1)]
-        if self.job is not None:
-            inner = self.job.status
-        else:
-            inner = WAITING_STATUS if background.abandoned_work_running() else "Starting"
+        inner = self.job.status if self.job is not None else "Starting"
         return f"Frame {frame} ({len(self.results) + 1}/{len(self.frames)}): {inner}"
 
     def tick(self) -> bool:
@@ -145,11 +142,8 @@ class SequenceJob:
         if self._made_folders is None:
             self._made_folders = prepare_folder(self.out_dir)
         try:
-            if self.job is None:
-                if not background.wait_for_work(POLL_SECONDS):
-                    return False  # a cancelled run's kernel call still runs: set the frame after it
-                self.scene.frame_set(frame)
-                self.job = FrameJob(self.scene, self.depsgraph_for(self.scene), self.config)
+            if self.job is None:  # the frame is set when the job reads the scene (see FrameJob)
+                self.job = FrameJob(self.scene, lambda: self._evaluated_at(frame), self.config)
             if not self.job.tick():
                 return False
             self._write(self.job.result())
@@ -159,6 +153,10 @@ class SequenceJob:
         if self.done:
             self._write_report()  # its error is the sequence's, not the last frame's
         return self.done
+
+    def _evaluated_at(self, frame: int):
+        self.scene.frame_set(frame)
+        return self.depsgraph_for(self.scene)
 
     def _write(self, result: FrameResult) -> None:
         path = self.out_dir / frame_filename(self.frames[len(self.results)], self.config.file_extension)

@@ -58,7 +58,7 @@ def test_extension_builds_installs_renders_and_uninstalls(tmp_path):
     user = tmp_path / "user"
     env = {"BLENDER_USER_RESOURCES": str(user), "NUMBA_CACHE_DIR": None}  # None: the extension picks the folder
     kept, compiled = installed_kernels_folder(path), tmp_path / "compiled_kernels"
-    warm = kept_for_this_python(kept)
+    warm = corelib.holds_kernel(kept)
     proc = run_python([str(SMOKE), str(path), *(["--kernels-from", str(kept)] if warm else
                                                 ["--kernels-to", str(compiled)])], env=env, cwd=tmp_path)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
@@ -82,7 +82,7 @@ def test_extension_builds_installs_renders_and_uninstalls(tmp_path):
     assert facts["enabled_after_uninstall"] is False and facts["files_after_uninstall"] is False
     assert facts["scene_prop_after_uninstall"] is False
     if not warm:  # only after a run that passed, and only a set the next run will take as warm
-        assert kept_for_this_python(compiled), f"the sampling kernel is not among {sorted(compiled.iterdir())}"
+        assert corelib.holds_kernel(compiled), f"the sampling kernel is not among {sorted(compiled.iterdir())}"
         keep_kernels(compiled, kept)
 
 
@@ -107,11 +107,6 @@ def python_tag() -> str:
     return f"py{sys.version_info[0]}{sys.version_info[1]}"
 
 
-def kept_for_this_python(folder: Path) -> bool:
-    """Whether `folder` holds the sampling kernel compiled for this Python (as corelib.cache_is_warm)."""
-    return any(folder.glob(f"{corelib.WARM_KERNEL}-*.{python_tag()}.nbi"))
-
-
 def keep_kernels(compiled: Path, kept: Path, keep_builds: int = 3) -> None:
     """Put `compiled` in place as `kept` in one rename, so an interrupted copy never leaves a folder that
     looks complete; then remove all but the `keep_builds` newest kept folders of the same Numba, numpy
@@ -125,7 +120,7 @@ def keep_kernels(compiled: Path, kept: Path, keep_builds: int = 3) -> None:
         os.replace(partial, kept)
     except OSError:  # another run put the same build's kernels in place first
         shutil.rmtree(partial, ignore_errors=True)
-        if not kept_for_this_python(kept):
+        if not corelib.holds_kernel(kept):
             raise
     suffix = kept.name.split("-", 3)[3]  # "numba…-numpy…-py…" after "installed-extension-<digest>-"
     builds = sorted(kept.parent.glob(f"installed-extension-*-{suffix}"), key=lambda path: path.stat().st_mtime)
