@@ -24,8 +24,10 @@ class Camera:
     def __init__(self, matrix_world, fov=None, *, ortho_scale=None, clip_start=0.0, clip_end=np.inf,
                  shift=(0.0, 0.0)):
         m = np.asarray(matrix_world, np.float64)
-        if m.shape != (4, 4) or not np.isfinite(m).all():
-            raise ValueError(f"camera matrix_world must be a finite 4x4 matrix, got shape {m.shape}")
+        if m.shape != (4, 4):
+            raise ValueError(f"camera matrix_world must be a 4x4 matrix, got shape {m.shape}")
+        if not np.isfinite(m).all():
+            raise ValueError(f"camera matrix_world has a NaN or inf entry: {m.tolist()}")
         if (fov is None) == (ortho_scale is None):
             raise ValueError("camera needs exactly one of fov (perspective) or ortho_scale (orthographic)")
         if fov is not None and not 0.0 < as_number("camera fov", fov) < np.pi:

@@ -47,7 +47,8 @@ def as_triangles(triangles):
     if arr.ndim != 3 or arr.shape[1:] != (3, 3):
         raise ValueError(f"triangles must have shape (N, 3, 3) (N triangles, 3 vertices, xyz), got {arr.shape}")
     if not _is_real(arr.dtype):
-        raise ValueError(f"triangles must be float32 or float64, got dtype {arr.dtype}")
+        raise ValueError(f"triangles must be real numbers (float32 or float64; integers are taken too), got dtype "
+                         f"{arr.dtype}")
     if len(arr) and not np.isfinite(arr).all():
         bad = int(np.flatnonzero(~np.isfinite(arr).reshape(len(arr), 9).all(axis=1))[0])
         raise ValueError(f"triangle {bad} has a non-finite vertex coordinate (NaN or inf): {arr[bad].tolist()}")

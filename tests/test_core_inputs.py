@@ -30,7 +30,7 @@ def test_wrong_triangle_shape(shape):
 
 
 def test_wrong_triangle_dtype():
-    with pytest.raises(ValueError, match="float32 or float64"):
+    with pytest.raises(ValueError, match=r"triangles must be real numbers \(float32 or float64; integers are taken"):
         core.build_kdtree(np.zeros((2, 3, 3), dtype=complex))
 
 
@@ -122,6 +122,8 @@ def _box_mesh():
     (lambda t: core.build_two_level([t], [0], np.array([[[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0.5, 2]]])),
      "instance 0's matrix is not affine"),
     (lambda t: core.Camera(np.eye(4), ortho_scale=np.inf), "ortho_scale must be finite and > 0"),
+    (lambda t: core.Camera(np.eye(3), 0.5), r"camera matrix_world must be a 4x4 matrix, got shape \(3, 3\)"),
+    (lambda t: core.Camera(np.where(np.eye(4) == 1, np.nan, 0.0), 0.5), "camera matrix_world has a NaN or inf entry"),
     (lambda t: core.Camera(np.eye(4), 0.5, shift=(1e300, 0.0)), r"shift must be two numbers \(x, y\) within"),
     (lambda t: core.Camera(np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 5], [0, 0, 1, 0.0]]), 0.5),
      "must be affine"),
