@@ -11,8 +11,9 @@ fingerprint that changes whenever its geometry does (e.g. a CRC of its vertex an
 - the soup (scene_policy.py: small or overlapping static objects merged into one flat tree per
   visibility) is kept
   while its members' keys, fingerprints and matrices are unchanged. Its triangles are stored relative
-  to an anchor (its centre, kept while it stays near the soup's box: `_anchor`) and placed by a
-  translation, so a moving camera never rebuilds it;
+  to an anchor (its centre, kept while it stays near the soup's box: scene_policy.main_anchor) and placed by a
+  translation, so a moving camera never rebuilds it; members small against the soup go to zones of
+  their own, anchored near them (scene_policy.soup_zones), so that float32 keeps their shape;
 - a single-use mesh whose matrix or visibility changed counts as dynamic too (it leaves the soup);
 - instances that stop different kinds of rays (ray_visibility.py) go to different soups, one per
   visibility (holdout included), since the traversal tells kinds apart per instance, not per triangle;
@@ -34,8 +35,8 @@ from .inputs import FLOAT32_MAX, first_row_beyond_float32
 from .instance_signature import instance_signature, mesh_digest
 from .options import make_options
 from .ray_visibility import ALL_RAYS, as_visibility, stops_rays
-from .scene_policy import LAYOUTS, plan_soup
-from .two_level import build_two_level, check_placement
+from .scene_policy import LAYOUTS, plan_soup, soup_zones
+from .two_level import build_two_level, check_placement, transformed_boxes
 
 
 class MeshInput(NamedTuple):
@@ -63,7 +64,7 @@ class BuildReport(NamedTuple):
 class CallerIds(NamedTuple):
     """How the built scene's instances and triangles map back to the caller's (build() reorders them:
     instances with their own tree first, in the caller's order, then the soup instances, one per
-    visibility, whose trees hold their members' triangles one after the other). own: (J,) caller
+    visibility and zone, whose trees hold their members' triangles one after the other). own: (J,) caller
     instance of scene instance j < J; members: (K,) caller instance of soup member k, soup after soup;
     offsets: (K + 1,) member k's first triangle, counted over all soups in that order; soup_base: (S,)
     the count at soup s's first triangle."""
@@ -92,8 +93,9 @@ class SceneBuilder:
     """Builds a TwoLevelScene per frame, reusing trees across calls (see the module docstring).
 
     layout: "auto" (scene_policy.plan_soup), "two_level" (every mesh its own tree) or "flat"
-    (everything in one soup tree, one per visibility if they differ: the single-tree baseline). Other
-    keywords are BuildOptions.
+    (everything in one soup tree, one per visibility if they differ: the single-tree baseline, which
+    has no zones, so a member far from the tree's centre against its own size loses float32
+    precision there; the lazy build's layout). Other keywords are BuildOptions.
     """
 
     def __init__(self, layout="auto", **options):
@@ -106,7 +108,7 @@ class SceneBuilder:
         self._placements = {}  # key of a single-use mesh -> its matrix and visibility last frame
         self._dynamic = set()  # keys that changed or moved in an earlier frame
         self._deforming = set()  # keys whose geometry changed in an earlier frame: rebuilt every frame
-        self._soups = {}  # visibility -> (signature, KdTree, anchor)
+        self._soups = {}  # (visibility, zone) -> (signature, KdTree, anchor): _soup_zones
 
     def build(self, meshes, mesh_of, matrices, origin=None, reuse=True, visibility=None, rays=None):
         """(TwoLevelScene, BuildReport) for one frame. meshes: list of MeshInput; mesh_of (I,) index
@@ -152,12 +154,10 @@ class SceneBuilder:
         scene_visibility = [visibility[own]]
         rounding = np.zeros((len(mesh_of), 4))
         groups, soups, soup_rebuilt = [], {}, False
-        kinds = sorted(set(visibility[soup].tolist()), key=lambda k: (k != ALL_RAYS, -k))  # the usual soup first
-        for kind in kinds:
-            group = np.flatnonzero(soup & (visibility == kind))
-            soups[kind] = self._soup_tree(meshes, mesh_of, o2w, group, reuse, kind)
-            _, soup_tree, anchor = soups[kind]
-            built = soups[kind] is not self._soups.get(kind)
+        for key, group, anchor in self._soup_zones(soup, visibility, bounds, mesh_of, o2w):
+            soups[key] = self._soup_tree(meshes, mesh_of, o2w, group, reuse, key, anchor)
+            _, soup_tree, anchor = soups[key]
+            built = soups[key] is not self._soups.get(key)
             soup_rebuilt |= built
             members = len(set(mesh_of[group].tolist()))
             rebuilt, reused = (rebuilt + members, reused) if built else (rebuilt, reused + members)
@@ -166,7 +166,7 @@ class SceneBuilder:
             place = np.eye(4)
             place[:3, 3] = anchor - origin
             shifted = np.concatenate([shifted, place[None]])
-            scene_visibility.append([kind])
+            scene_visibility.append([key[0]])
             rounding[group] = (1.0, *anchor)
             groups.append(group)
         self._soups = soups
@@ -221,18 +221,33 @@ class SceneBuilder:
             trees.append(cached[1])
         return trees, index[mesh_of[instanced]], rebuilt, len(used) - rebuilt
 
-    def _soup_tree(self, meshes, mesh_of, o2w, members, reuse, kind):
-        """(signature, tree, anchor) of the soup of visibility `kind`: the members' world triangles
-        relative to an anchor near their centre; last frame's soup of that kind itself when the
-        members' keys, fingerprints and matrices are the same."""
+    def _soup_zones(self, soup, visibility, bounds, mesh_of, o2w):
+        """(key, members, anchor) of each soup tree: one per visibility (the usual one first) and, in
+        the "auto" layout, per zone of it (scene_policy.soup_zones); key (visibility, None) for the
+        main zone, (visibility, anchor) for the others."""
+        out = []
+        for kind in sorted(set(visibility[soup].tolist()), key=lambda k: (k != ALL_RAYS, -k)):
+            group = np.flatnonzero(soup & (visibility == kind))
+            boxes = transformed_boxes(bounds[mesh_of[group]], o2w[group])
+            before = self._soups.get((kind, None))
+            before = before[2] if before is not None else None
+            zones = soup_zones(boxes, before, split=self.layout == "auto")
+            for z, (rows, anchor) in enumerate(zones):
+                if len(rows):
+                    out.append(((kind, None if z == 0 else tuple(anchor.tolist())), group[rows], anchor))
+        return out
+
+    def _soup_tree(self, meshes, mesh_of, o2w, members, reuse, key, anchor):
+        """(signature, tree, anchor) of the soup `key`: the members' world triangles relative to
+        `anchor`; last frame's soup of that key itself when the members' keys, fingerprints and
+        matrices are the same (its anchor is then `anchor` too: same members, same boxes)."""
         signature = [(meshes[mesh_of[i]].key, meshes[mesh_of[i]].fingerprint, o2w[i].tobytes()) for i in members]
-        before = self._soups.get(kind)
+        before = self._soups.get(key)
         if reuse and before is not None and before[0] == signature:
             return before
         parts = [(_gather(meshes[mesh_of[i]]).astype(np.float64), o2w[i]) for i in members]
         world = [tris @ m[:3, :3].T + m[:3, 3] for tris, m in parts]
         stacked = np.concatenate(world) if world else np.zeros((0, 3, 3))
-        anchor = _anchor(stacked, before[2] if before is not None else None)
         return signature, build_kdtree((stacked - anchor).astype(np.float32), **self.options), anchor
 
     def _forget_absent(self, keys):
@@ -242,22 +257,6 @@ class SceneBuilder:
                 del table[key]
         self._dynamic &= present
         self._deforming &= present
-
-
-def _anchor(stacked, before):
-    """The point a soup's float32 triangles are relative to: the last soup's anchor `before` while it
-    lies within the new soup's box grown by the box's diagonal, else the box's centre. Re-anchoring
-    re-rounds every member, which costs kept pixels near all of them (instance_signature.py), so
-    an object leaving or joining the soup should not move it (the grown box keeps it for a flat
-    ground, whose own box a centre above it is never inside). A vertex is then at most (1 + sqrt 3)
-    diagonals from the anchor, against half of one from the centre: under 3 bits of float32."""
-    if len(stacked) == 0:
-        return np.zeros(3)
-    lo, hi = stacked.reshape(-1, 3).min(axis=0), stacked.reshape(-1, 3).max(axis=0)
-    grow = np.linalg.norm(hi - lo)
-    if before is not None and ((lo - grow <= before) & (before <= hi + grow)).all():
-        return before
-    return (lo + hi) / 2
 
 
 def _caller_ids(meshes, mesh_of, own, groups):

@@ -14,6 +14,13 @@ visits several objects' trees where one flat tree would have separated their tri
   go to the soup too;
 - an instance whose matrix cannot be inverted (zero scale) can only be flattened.
 Figures behind SMALL_OBJECT and OVERLAP_LIMIT: benchmarks/bench_two_level.py and the README.
+
+A soup stores its members' world triangles in float32 relative to an anchor, so a member loses the
+float32 precision of its distance from that anchor: a 1 cm sphere 5,000 units from the centre of a
+soup that also holds a ground 2e5 wide lost a fifth of its radius (outside review). `soup_zones`
+therefore splits a soup into zones: members near the soup's anchor against their size stay in its
+main tree, and the others go to zones anchored near them, so that no member lies more than
+PRECISION_RATIO of its own diagonals from its anchor.
 """
 import numpy as np
 
@@ -23,6 +30,9 @@ LAYOUTS = ("auto", "two_level", "flat")
 SMALL_OBJECT = 1024
 OVERLAP_LIMIT = 0.5
 OVERLAP_SAMPLE = 2048  # boxes compared against all others when there are more (seeded sample)
+# A soup member's vertices lie within this many of its own box diagonals of its soup's anchor, so float32
+# rounds them by at most 2^-24 * 4096 = 2^-12 (2.4e-4) of the member's size (its own tree: ~2^-24).
+PRECISION_RATIO = 4096.0
 
 
 def plan_soup(layout, mesh_triangles, mesh_bounds, mesh_of, o2w, dynamic):
@@ -65,3 +75,62 @@ def overlap_depth(boxes):
         covered = np.prod(inter, axis=2).sum(axis=1) - volume[chunk]  # minus the box itself
         shares.append(covered / volume[chunk])
     return float(np.concatenate(shares).mean())
+
+
+def soup_zones(boxes, before=None, split=True):
+    """The zones of one soup, as a list of (member rows, anchor), the main zone first (its rows may be
+    empty). boxes (K, 6): the members' world boxes (inverted when empty); before: the main zone's
+    anchor last frame, or None; split False: the main zone alone (the "flat" layout).
+
+    The main zone is anchored by `main_anchor` and keeps every member whose farthest box corner is
+    within PRECISION_RATIO of its diagonals of that anchor (members without extent too: they have
+    nothing to round); the anchor is found again after members leave, until none does. The rest,
+    smallest first, join the nearest zone anchor within (PRECISION_RATIO - 1/2) of their diagonals of
+    their box's centre, or else anchor a new zone at the centre of the grid cell holding theirs, of the
+    largest power-of-two size C with (sqrt(3)/2) C within that: either way no vertex is more than
+    PRECISION_RATIO diagonals from its anchor. Joining keeps neighbours of different sizes in one zone
+    (a zone is one more top-level instance for rays to visit, and overlaps the main zone); grid
+    anchors stay where they were while the member that made them stays (an anchor that moves re-rounds
+    its zone and costs its kept pixels, instance_signature.py).
+    """
+    lo, hi = boxes[:, :3], boxes[:, 3:]
+    filled = (lo <= hi).all(axis=1)
+    size = np.zeros(len(boxes))
+    size[filled] = np.linalg.norm(hi[filled] - lo[filled], axis=1)
+    main = np.ones(len(boxes), bool)
+    anchor = main_anchor(boxes[filled], before)
+    while split:  # each pass either keeps every member or removes some: a few passes
+        farthest = np.linalg.norm(np.maximum(np.abs(lo - anchor), np.abs(hi - anchor)), axis=1)
+        out = main & (size > 0) & (farthest > PRECISION_RATIO * size)
+        if not out.any():
+            break
+        main &= ~out
+        anchor = main_anchor(boxes[main & filled], before)
+    anchors, members = np.zeros((0, 3)), []
+    for row in sorted(np.flatnonzero(~main), key=lambda r: (size[r], r)):
+        centre, allowed = (lo[row] + hi[row]) / 2, (PRECISION_RATIO - 0.5) * size[row]
+        distance = np.linalg.norm(anchors - centre, axis=1)
+        if len(anchors) and distance.min() <= allowed:
+            members[int(np.argmin(distance))].append(row)
+            continue
+        cell = 2.0 ** np.floor(np.log2(allowed * 2 / np.sqrt(3.0)))
+        anchors = np.vstack([anchors, (np.floor(centre / cell) + 0.5) * cell])
+        members.append([row])
+    return [(np.flatnonzero(main), anchor)] + [(np.array(sorted(rows), np.int64), a)
+                                               for rows, a in zip(members, anchors)]
+
+
+def main_anchor(boxes, before=None):
+    """The point a soup's main zone's float32 triangles are relative to, given its members' world boxes
+    (K, 6, all filled): the last anchor `before` while it lies within the members' box grown by the
+    box's diagonal, else the box's centre. Re-anchoring re-rounds every member, which costs kept
+    pixels near all of them (instance_signature.py), so an object leaving or joining the soup should
+    not move it (the grown box keeps it for a flat ground, whose own box a centre above it is never
+    inside)."""
+    if len(boxes) == 0:
+        return np.zeros(3) if before is None else before
+    lo, hi = boxes[:, :3].min(axis=0), boxes[:, 3:].max(axis=0)
+    grow = np.linalg.norm(hi - lo)
+    if before is not None and ((lo - grow <= before) & (before <= hi + grow)).all():
+        return before
+    return (lo + hi) / 2
