@@ -11,7 +11,9 @@ scene's range. Settings are the scene's own KD Preview settings (saved with the
 the option of the same name when given. Writes DIR/frame_0001.png... and
 DIR/report.json, prints one table row per frame. Exit codes: 0 done, 1 a problem
 with the scene, files or settings (the message names it), 2 bad command-line
-usage, 130 interrupted.
+usage, 130 interrupted (Ctrl-C), 143 terminated (SIGTERM: `timeout`, `kill`, a
+render farm or container stopping the job; the frames written are kept and
+report.json says the run is incomplete, as after Ctrl-C).
 """
 
 from __future__ import annotations
@@ -165,11 +167,14 @@ def _print_row(result, path) -> None:
 
 @contextmanager
 def interrupt_flag():
-    """An Event that Ctrl-C (SIGINT) sets, for the job loop to poll, while the first SIGINT also raises
-    KeyboardInterrupt at once. Why both: an exception raised while Blender runs Python on our behalf
-    (a handler or driver during frame_set, say) is printed and cleared by Blender, and the render
-    would go on; the flag survives that and stops the job at its next tick. Later SIGINTs are ignored,
-    so a second Ctrl-C cannot break the cleanup that writes the report.
+    """An Event that Ctrl-C (SIGINT) or SIGTERM sets, for the job loop to poll, while the first such
+    signal also raises KeyboardInterrupt at once; `signum` says which one it was (the exit code). Why
+    both: an exception raised while Blender runs Python on our behalf (a handler or driver during
+    frame_set, say) is printed and cleared by Blender, and the render would go on; the flag survives
+    that and stops the job at its next tick. Later signals are ignored, so a second Ctrl-C cannot
+    break the cleanup that writes the report. SIGTERM (`timeout`, `kill`, a farm or container
+    stopping the job) killed the process at once, leaving report.json to describe an earlier run
+    (outside review); it is taken over only where Python's default is in place.
 
     Inside Blender (`blender -b --command kdpreview`) SIGINT's handler is Blender's own, in C (Python
     sees None): it only prints "Sent an internal break event" and the render went on to exit 0, and a
@@ -178,9 +183,11 @@ def interrupt_flag():
     a Ctrl-C repeated into its teardown must not turn exit 130 into a kill. Outside the main thread,
     where signal handlers cannot be set, and in Blender's UI, the flag is never set."""
     flag = threading.Event()
+    flag.signum = signal.SIGINT
 
-    def on_sigint(signum, frame):
+    def on_signal(signum, frame):
         if not flag.is_set():
+            flag.signum = signum
             flag.set()
             raise KeyboardInterrupt
 
@@ -188,17 +195,23 @@ def interrupt_flag():
     if threading.current_thread() is not threading.main_thread() or (previous is None and not bpy.app.background):
         yield flag  # (Blender's UI keeps its own handler: it does not exit after this call)
         return
-    signal.signal(signal.SIGINT, on_sigint)
+    take_sigterm = signal.getsignal(signal.SIGTERM) == signal.SIG_DFL
+    signal.signal(signal.SIGINT, on_signal)
+    if take_sigterm:
+        signal.signal(signal.SIGTERM, on_signal)
     try:
         yield flag
     finally:
         signal.signal(signal.SIGINT, signal.SIG_IGN if previous is None else previous)
+        if take_sigterm:
+            signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 def run(args) -> int:
     """Render args.frames of the chosen scene into args.out; return the exit code."""
     with interrupt_flag() as interrupted:
-        return _run(args, interrupted.is_set)
+        code = _run(args, interrupted.is_set)
+    return 128 + signal.SIGTERM if code == 130 and interrupted.signum == signal.SIGTERM else code
 
 
 def _run(args, cancelled) -> int:

@@ -7,6 +7,7 @@ remembered, so image_keeping.py can write it back where Blender's undo loses it.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import bpy
@@ -127,12 +128,19 @@ def save_frame(image: np.ndarray, path: Path, file_format: str) -> Path:
     or OPEN_EXR (linear float RGBA) without changing the preview image's own file path."""
     target = store_preview(image)
     path.parent.mkdir(parents=True, exist_ok=True)
-    if file_format == "OPEN_EXR":
-        _save_linear_exr(target, path)
-    else:
-        _save_png(image, path)
-    if not path.is_file():
-        raise OSError(f"Blender did not write {path}")
+    # Written beside it, then renamed over it: a run killed mid-write (SIGKILL, a full disk) leaves the
+    # earlier run's frame whole, never a truncated file under its name.
+    partial = path.with_name(f"{path.stem}.partial{path.suffix}")
+    try:
+        if file_format == "OPEN_EXR":
+            _save_linear_exr(target, partial)
+        else:
+            _save_png(image, partial)
+        if not partial.is_file():
+            raise OSError(f"Blender did not write {partial}")
+        os.replace(partial, path)
+    finally:
+        partial.unlink(missing_ok=True)
     return path
 
 

@@ -146,19 +146,24 @@ class SequenceJob:
                 self.job = FrameJob(self.scene, lambda: self._evaluated_at(frame), self.config)
             if not self.job.tick():
                 return False
-            self._write(self.job.result())
+            result = self.job.result()
+            path = self._write(result)
             self.job = None
         except PreviewError as error:
             raise PreviewError(f"frame {frame}: {error}") from None
-        if self.done:
-            self._write_report()  # its error is the sequence's, not the last frame's
+        # After every frame, before it is announced: the report follows the files on disk even when the
+        # run is killed outright (a killed rerun left an earlier run's report over its frames: outside
+        # review). Its error is the sequence's, not the frame's.
+        self._write_report()
+        if self.on_frame is not None:
+            self.on_frame(result, path)
         return self.done
 
     def _evaluated_at(self, frame: int):
         self.scene.frame_set(frame)
         return self.depsgraph_for(self.scene)
 
-    def _write(self, result: FrameResult) -> None:
+    def _write(self, result: FrameResult) -> Path:
         path = self.out_dir / frame_filename(self.frames[len(self.results)], self.config.file_extension)
         try:
             output.save_frame(result.image, path, self.config.settings.output_format)
@@ -166,8 +171,7 @@ class SequenceJob:
             raise PreviewError(f"could not write {path}: {error}") from None
         self.results.append(result)
         self.files.append(path)
-        if self.on_frame is not None:
-            self.on_frame(result, path)
+        return path
 
     def close(self) -> None:
         """Put the scene back on the frame it was on (call on success, cancel and failure), and when
@@ -241,8 +245,12 @@ def write_report(out_dir: Path, scene_name: str, config: RenderConfig, results: 
         "machine": {"python": platform.python_version(), "platform": platform.platform()},
     }
     path = Path(out_dir) / REPORT_NAME
+    partial = path.with_name(REPORT_NAME + ".partial")  # renamed over the report: never half a file
     try:
-        path.write_text(json.dumps(report, indent=2), encoding="utf-8")
+        partial.write_text(json.dumps(report, indent=2), encoding="utf-8")
+        os.replace(partial, path)
     except OSError as error:
         raise PreviewError(f"could not write {path}: {error}") from None
+    finally:
+        partial.unlink(missing_ok=True)
     return path

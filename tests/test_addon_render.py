@@ -350,6 +350,7 @@ def test_animation_writes_frames_and_report(addon, tmp_path):  # noqa: F811
                     "mrays_per_s", "tree", "file"):
             assert key in row, key
         assert row["total_ms"] >= row["extract_ms"] + row["build_ms"] + row["trace_ms"]
+        assert "build_ms" not in row["tree"]  # the trees' own build times, kept ones included: not this frame's
     assert report["settings"]["output_format"] == "OPEN_EXR" and report["resolution"] == [64, 32]
     assert report["totals"]["frames"] == 3 and report["totals"]["rays"] == sum(r["rays"] for r in report["frames"])
     exr = bpy.data.images.load(str(tmp_path / "seq" / "frame_0003.exr"))
@@ -372,6 +373,27 @@ def test_exr_frames_hold_the_linear_values(tmp_path):
     stored = np.stack([channels[c] for c in "RGBA"], axis=-1)
     assert np.array_equal(stored, image)
     assert [s.name for s in bpy.data.scenes] == ["Scene"]  # the scratch scene for the settings is gone
+
+
+@pytest.mark.parametrize("file_format, name", [("PNG", "f.png"), ("OPEN_EXR", "f.exr")])
+def test_a_frame_that_fails_to_save_leaves_the_earlier_file_whole(tmp_path, monkeypatch, file_format, name):
+    """Frames are written beside their name and renamed over it, so a save that fails (or a run killed)
+    halfway leaves the earlier run's file as it was, and no partial file."""
+    from kd_addon import output
+    scenes.reset()
+    image = np.full((3, 5, 4), 0.5, np.float32)
+    path = save_frame(image, tmp_path / name, file_format)
+    before = path.read_bytes()
+
+    def half_written(_image, partial, *args):
+        partial.write_bytes(before[: len(before) // 2])
+        raise OSError("disk full")
+
+    monkeypatch.setattr(output, "_save_linear_exr" if file_format == "OPEN_EXR" else "_save_png", half_written)
+    with pytest.raises(OSError, match="disk full"):
+        save_frame(np.zeros((3, 5, 4), np.float32), path, file_format)
+    assert path.read_bytes() == before
+    assert [p.name for p in tmp_path.iterdir()] == [name]
 
 
 def test_animation_needs_a_saved_file_for_relative_output(addon):  # noqa: F811

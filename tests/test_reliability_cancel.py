@@ -167,20 +167,20 @@ def test_live_update_never_stacks_even_across_a_module_reload():
     assert our_handlers() == []
 
 
-def interrupt(proc, *, rows=0, pause=0.0, signals=1):
-    """Wait for a command line's table header and `rows` frame rows, then `pause` seconds; send SIGINT
-    `signals` times 50 ms apart. Returns (exit code, seconds from the first SIGINT to the exit, stderr)."""
+def interrupt(proc, *, rows=0, pause=0.0, signals=1, signum=signal.SIGINT):
+    """Wait for a command line's table header and `rows` frame rows, then `pause` seconds; send `signum`
+    `signals` times 50 ms apart. Returns (exit code, seconds from the first signal to the exit, stderr)."""
     try:
         while "frame  triangles" not in proc.stdout.readline():  # the header: the frame starts now
             assert proc.poll() is None, proc.stderr.read()
         for _ in range(rows):
             proc.stdout.readline()
         time.sleep(pause)
-        proc.send_signal(signal.SIGINT)
+        proc.send_signal(signum)
         sent = time.perf_counter()
         for _ in range(signals - 1):
             time.sleep(0.05)
-            proc.send_signal(signal.SIGINT)
+            proc.send_signal(signum)
         try:  # communicate, not wait: a child blocked writing to a full pipe would never exit
             _, err = proc.communicate(timeout=60)
         except subprocess.TimeoutExpired:
@@ -225,6 +225,50 @@ def test_ctrl_c_stops_blenders_command_whose_sigint_handler_python_cannot_see(tm
     written = sorted(p.name for p in out.glob("frame_*.png"))
     assert report["complete"] is False and 1 <= len(report["frames"]) == len(written) < 200
     assert f"interrupted; the {len(written)} frame(s) already written are kept" in err
+
+
+def _command_line(out, frames, samples, extra=()):
+    return subprocess.Popen([PYTHON, "-m", "kd_addon", "render", "--demo", "--out", str(out), "--frames", frames,
+                             "--resolution", "10", "--samples", str(samples), *extra],
+                            cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def test_sigterm_mid_animation_ends_like_ctrl_c_with_an_incomplete_report(tmp_path):
+    """SIGTERM (`timeout`, `kill`, a farm stopping a job) killed the command line at once, so report.json
+    still described an earlier run of that folder (outside review). Now: exit 143, the frames written
+    are kept and listed in a report marked incomplete, no partial file left."""
+    out = tmp_path / "out"
+    proc = _command_line(out, "1-200", 64)
+    code, seconds, err = interrupt(proc, rows=1, signum=signal.SIGTERM)
+    assert code == 143 and seconds < LOOSE_SECONDS, (code, seconds, err[-4000:])
+    assert "Traceback" not in err
+    report = json.loads((out / "report.json").read_text())
+    written = sorted(p.name for p in out.glob("frame_*.png"))
+    assert report["complete"] is False and 1 <= len(report["frames"]) == len(written) < 200
+    assert [f["file"] for f in report["frames"]] == written
+    assert sorted(p.name for p in out.iterdir()) == written + ["report.json"]
+
+
+def test_a_killed_rerun_leaves_a_report_of_its_own_frames(tmp_path):
+    """SIGKILL cannot be handled: the report is written after every frame, so a rerun into a folder
+    that holds a finished run, killed mid-animation, leaves report.json describing the new run's
+    frames (incomplete), not the old run's (complete, other samples) over files the new run replaced."""
+    out = tmp_path / "out"
+    first = _command_line(out, "1-3", 2)
+    assert first.wait(timeout=300) == 0, first.stderr.read()
+    assert json.loads((out / "report.json").read_text())["complete"] is True
+    rerun = _command_line(out, "1-200", 48)
+    try:
+        while "frame  triangles" not in rerun.stdout.readline():
+            assert rerun.poll() is None, rerun.stderr.read()
+        rerun.stdout.readline()  # frame 1's row: it is written, and its report
+        rerun.kill()
+        rerun.communicate(timeout=60)
+    finally:
+        rerun.kill()
+    report = json.loads((out / "report.json").read_text())
+    assert report["complete"] is False and report["settings"]["samples"] == 48 and report["frames_requested"] == 200
+    assert 1 <= len(report["frames"]) < 200
 
 
 @pytest.mark.parametrize("delay", [0.3, 0.6])
