@@ -82,7 +82,8 @@ def build_parser(prog: str = COMMAND_ID) -> argparse.ArgumentParser:
     render.add_argument("--ao-distance", dest="ao_distance", type=float, default=s,
                         help=f"AO ray length (default {DEFAULTS.ao_distance})")
     render.add_argument("--resolution", dest="resolution_percentage", type=int, default=s,
-                        help=f"percent of the scene's render resolution (default {DEFAULTS.resolution_percentage})")
+                        help=f"percent of the scene's base render resolution, resolution_x/y (the scene's own %% "
+                             f"is not applied; default {DEFAULTS.resolution_percentage})")
     render.add_argument("--builder", default=s, help=f"binned, exact or median (default {DEFAULTS.builder})")
     render.add_argument("--leaf-size", dest="leaf_size", type=int, default=s,
                         help=f"(default {DEFAULTS.leaf_size})")

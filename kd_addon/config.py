@@ -32,8 +32,9 @@ class Settings:
     mode: "ao", "shadow" or "ao+shadow".
     samples: samples per pixel (AO directions / light samples).
     ao_distance: AO ray length in scene units; also how far occluders darken.
-    resolution_percentage: percent of the scene's render resolution (resolution_x/y), so a
-        preview can be much smaller than the final render without touching the scene.
+    resolution_percentage: percent of the scene's base render resolution (resolution_x/y; the
+        scene's own percentage is not applied), so a preview can be much smaller than the final
+        render without touching the scene.
     builder, leaf_size, bins: core.BuildOptions fields (defaults equal core's; a test checks).
     max_depth: kd-tree depth limit; 0 = core's automatic 1.2 log2(N) + 2.
     threads: worker threads for build and trace; 0 = every core Numba sees.

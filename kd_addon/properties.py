@@ -45,7 +45,7 @@ class KDPreviewSettings(bpy.types.PropertyGroup):
     ao_distance: FloatProperty(name="AO Distance", description="Length of ambient-occlusion rays",
                                default=DEFAULTS.ao_distance, min=1e-6, soft_max=100.0, subtype="DISTANCE",
                                unit="LENGTH", update=_setting_changed)
-    resolution_percentage: IntProperty(name="Resolution", description="Percent of the scene's render resolution",
+    resolution_percentage: IntProperty(name="Resolution", description="Percent of the scene's base render resolution (X and Y; its own % is not applied)",
                                        default=DEFAULTS.resolution_percentage, min=1, max=100, subtype="PERCENTAGE",
                                        update=_setting_changed)
     builder: EnumProperty(
