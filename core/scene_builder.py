@@ -223,15 +223,15 @@ class SceneBuilder:
 
     def _soup_zones(self, soup, visibility, bounds, mesh_of, o2w):
         """(key, members, anchor) of each soup tree: one per visibility (the usual one first) and, in
-        the "auto" layout, per zone of it (scene_policy.soup_zones); key (visibility, None) for the
-        main zone, (visibility, anchor) for the others."""
+        the "auto" layout, per zone of it (scene_policy.soup_zones; not for a lazy build, which has to
+        be one tree); key (visibility, None) for the main zone, (visibility, anchor) for the others."""
         out = []
         for kind in sorted(set(visibility[soup].tolist()), key=lambda k: (k != ALL_RAYS, -k)):
             group = np.flatnonzero(soup & (visibility == kind))
             boxes = transformed_boxes(bounds[mesh_of[group]], o2w[group])
             before = self._soups.get((kind, None))
             before = before[2] if before is not None else None
-            zones = soup_zones(boxes, before, split=self.layout == "auto")
+            zones = soup_zones(boxes, before, split=self.layout == "auto" and not self.options["lazy"])
             for z, (rows, anchor) in enumerate(zones):
                 if len(rows):
                     out.append(((kind, None if z == 0 else tuple(anchor.tolist())), group[rows], anchor))

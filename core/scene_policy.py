@@ -24,6 +24,7 @@ PRECISION_RATIO of its own diagonals from its anchor.
 """
 import numpy as np
 
+from .inputs import FLOAT32_MAX
 from .two_level import invertible, transformed_boxes
 
 LAYOUTS = ("auto", "two_level", "flat")
@@ -31,8 +32,10 @@ SMALL_OBJECT = 1024
 OVERLAP_LIMIT = 0.5
 OVERLAP_SAMPLE = 2048  # boxes compared against all others when there are more (seeded sample)
 # A soup member's vertices lie within this many of its own box diagonals of its soup's anchor, so float32
-# rounds them by at most 2^-24 * 4096 = 2^-12 (2.4e-4) of the member's size (its own tree: ~2^-24).
-PRECISION_RATIO = 4096.0
+# rounds them by at most 2^-24 * 16384 = 2^-10 (1e-3) of the member's size (its own tree: ~2^-24), under
+# a pixel until the member spans a thousand. The render pays for having zones (1.2-1.9x), the build for
+# their number: benchmarks/bench_zones.py, README "Two-level scenes".
+PRECISION_RATIO = 16384.0
 
 
 def plan_soup(layout, mesh_triangles, mesh_bounds, mesh_of, o2w, dynamic):
@@ -100,15 +103,18 @@ def soup_zones(boxes, before=None, split=True):
     main = np.ones(len(boxes), bool)
     anchor = main_anchor(boxes[filled], before)
     while split:  # each pass either keeps every member or removes some: a few passes
-        farthest = np.linalg.norm(np.maximum(np.abs(lo - anchor), np.abs(hi - anchor)), axis=1)
-        out = main & (size > 0) & (farthest > PRECISION_RATIO * size)
+        out = main & ~_near(boxes, size, anchor)
         if not out.any():
             break
         main &= ~out
         anchor = main_anchor(boxes[main & filled], before)
+    if split:  # members the final anchor is near enough for come back: next frame, with this anchor as
+        main = _near(boxes, size, anchor)  # `before`, they would stay, and the soup would be rebuilt
+        anchor = main_anchor(boxes[main & filled], anchor)  # (the same point: the box only grew)
     anchors, members = np.zeros((0, 3)), []
     for row in sorted(np.flatnonzero(~main), key=lambda r: (size[r], r)):
-        centre, allowed = (lo[row] + hi[row]) / 2, (PRECISION_RATIO - 0.5) * size[row]
+        # (capped so that a member 1e35 across still has its triangles within float32's range of the anchor)
+        centre, allowed = (lo[row] + hi[row]) / 2, min((PRECISION_RATIO - 0.5) * size[row], FLOAT32_MAX / 4)
         distance = np.linalg.norm(anchors - centre, axis=1)
         if len(anchors) and distance.min() <= allowed:
             members[int(np.argmin(distance))].append(row)
@@ -120,17 +126,25 @@ def soup_zones(boxes, before=None, split=True):
                                                for rows, a in zip(members, anchors)]
 
 
+def _near(boxes, size, anchor):
+    """(K,) bool: the member's farthest box corner is within PRECISION_RATIO of its diagonals of
+    `anchor`, or it has no extent (empty, or a point: nothing to round)."""
+    farthest = np.linalg.norm(np.maximum(np.abs(boxes[:, :3] - anchor), np.abs(boxes[:, 3:] - anchor)), axis=1)
+    return (size == 0) | (farthest <= PRECISION_RATIO * size)
+
+
 def main_anchor(boxes, before=None):
     """The point a soup's main zone's float32 triangles are relative to, given its members' world boxes
     (K, 6, all filled): the last anchor `before` while it lies within the members' box grown by the
     box's diagonal, else the box's centre. Re-anchoring re-rounds every member, which costs kept
     pixels near all of them (instance_signature.py), so an object leaving or joining the soup should
     not move it (the grown box keeps it for a flat ground, whose own box a centre above it is never
-    inside)."""
+    inside). `before` is also dropped where a vertex would lie beyond float32's range of it."""
     if len(boxes) == 0:
         return np.zeros(3) if before is None else before
     lo, hi = boxes[:, :3].min(axis=0), boxes[:, 3:].max(axis=0)
     grow = np.linalg.norm(hi - lo)
-    if before is not None and ((lo - grow <= before) & (before <= hi + grow)).all():
+    if (before is not None and ((lo - grow <= before) & (before <= hi + grow)).all()
+            and (np.maximum(before - lo, hi - before) <= FLOAT32_MAX).all()):
         return before
     return (lo + hi) / 2

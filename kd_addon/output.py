@@ -8,6 +8,7 @@ remembered, so image_keeping.py can write it back where Blender's undo loses it.
 from __future__ import annotations
 
 import os
+import time
 from pathlib import Path
 
 import bpy
@@ -130,7 +131,7 @@ def save_frame(image: np.ndarray, path: Path, file_format: str) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     # Written beside it, then renamed over it: a run killed mid-write (SIGKILL, a full disk) leaves the
     # earlier run's frame whole, never a truncated file under its name.
-    partial = path.with_name(f"{path.stem}.partial{path.suffix}")
+    partial = partial_path(path)
     try:
         if file_format == "OPEN_EXR":
             _save_linear_exr(target, partial)
@@ -138,10 +139,29 @@ def save_frame(image: np.ndarray, path: Path, file_format: str) -> Path:
             _save_png(image, partial)
         if not partial.is_file():
             raise OSError(f"Blender did not write {partial}")
-        os.replace(partial, path)
+        replace_file(partial, path)
     finally:
         partial.unlink(missing_ok=True)
     return path
+
+
+def partial_path(path: Path) -> Path:
+    """Where `path` is written before it is renamed over: hidden, with the same extension (Blender picks
+    no format by it, but viewers do), and not matching a `frame_*` pattern should a kill leave it."""
+    return path.with_name(f".{path.stem}.partial{path.suffix}")
+
+
+def replace_file(partial: Path, path: Path, attempts: int = 20) -> None:
+    """os.replace, retried for a second on PermissionError: on Windows it fails while another process
+    (an image viewer, a script reading report.json) has the target open."""
+    for attempt in range(attempts):
+        try:
+            os.replace(partial, path)
+            return
+        except PermissionError:
+            if attempt == attempts - 1:
+                raise
+            time.sleep(0.05)
 
 
 def _save_png(image: np.ndarray, path: Path) -> None:

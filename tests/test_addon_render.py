@@ -396,6 +396,35 @@ def test_a_frame_that_fails_to_save_leaves_the_earlier_file_whole(tmp_path, monk
     assert [p.name for p in tmp_path.iterdir()] == [name]
 
 
+def test_a_report_that_fails_on_the_last_frame_is_written_when_the_sequence_closes(addon, tmp_path,  # noqa: F811
+                                                                                     monkeypatch):
+    """A signal (or a full disk) while the last frame's report is written: close() writes it (review:
+    the folder held both frames and the report listed one, incomplete). Reports while the sequence
+    runs are best effort: the first frame's failing report does not stop it."""
+    from kd_addon import sequence
+    scene = half_plane_scene()
+    real = sequence.write_report
+    calls = []
+
+    def flaky(out_dir, scene_name, config, results, *rest):
+        calls.append(len(results))
+        if len(calls) <= 2:  # frame 1's report (disk full), then frame 2's (a signal)
+            raise (PreviewError("disk full") if len(calls) == 1 else KeyboardInterrupt)
+        return real(out_dir, scene_name, config, results, *rest)
+
+    monkeypatch.setattr(sequence, "write_report", flaky)
+    job = sequence.SequenceJob(scene, make_config(scene.kd_preview), [1, 2], tmp_path / "seq",
+                               lambda _scene: bpy.context.evaluated_depsgraph_get())
+    with pytest.raises(KeyboardInterrupt):
+        while not job.tick():
+            pass
+    job.close()
+    assert calls == [1, 2, 2]
+    report = json.loads((tmp_path / "seq" / "report.json").read_text())
+    assert report["complete"] is True and [f["file"] for f in report["frames"]] == ["frame_0001.png", "frame_0002.png"]
+    assert sorted(p.name for p in (tmp_path / "seq").iterdir()) == ["frame_0001.png", "frame_0002.png", "report.json"]
+
+
 def test_animation_needs_a_saved_file_for_relative_output(addon):  # noqa: F811
     half_plane_scene()
     with pytest.raises(RuntimeError, match="relative to the .blend file, which is not saved"):

@@ -175,7 +175,7 @@ def test_small_soup_members_far_from_its_centre_keep_their_shape(layout):
         error = np.where(hit_sphere, np.abs(hits.t - t_ref) * np.linalg.norm(d, axis=1), np.inf)
         worst.append(error.max() / radius)
     if layout == "auto":
-        assert max(worst) < 2e-3, worst  # measured 4e-4 (vertices within 2^-12 of the diagonal); two_level 2e-7
+        assert max(worst) < 5e-3, worst  # vertices within 2^-10 of the diagonal (1.7e-3 radii); two_level: 2e-7
     else:  # the single-tree baseline has no zones: the scene does show the rounding (measured: 1.1 radii)
         assert max(worst) > 1e-2, worst
 
@@ -216,6 +216,39 @@ def test_soup_zones_bound_each_members_distance_to_its_anchor():
     assert len(soup_zones(boxes, split=False)) == 1
     ordinary = np.concatenate([centre[:50] / 1e3, centre[:50] / 1e3 + rng.uniform(0.05, 5, (50, 3))], axis=1)
     assert len(soup_zones(ordinary)) == 1 and len(soup_zones(ordinary)[0][0]) == 50
+
+
+def test_soup_zones_of_an_unchanged_soup_are_the_same_next_frame():
+    """Given its own main anchor as last frame's, a soup gets the same zones, members and anchors: else an
+    unchanged scene rebuilt soups on its second frame and lost kept pixels (review: 3 of 300 random
+    soups, whose main zone had shed members its final anchor was near enough for)."""
+    rng = np.random.default_rng(0)
+    for _ in range(300):
+        n, scale = int(rng.integers(1, 60)), 10.0 ** rng.uniform(-2, 7)
+        size, centre = 10.0 ** rng.uniform(-4, 4, n), rng.uniform(-scale, scale, (n, 3))
+        boxes = np.concatenate([centre - size[:, None] / 2, centre + size[:, None] / 2], axis=1)
+        zones = soup_zones(boxes)
+        again = soup_zones(boxes, zones[0][1])
+        assert [r.tolist() for r, _ in again] == [r.tolist() for r, _ in zones]
+        assert all(np.array_equal(a, b) for (_, a), (_, b) in zip(again, zones))
+
+
+def test_zones_stay_within_float32_and_lazy_builds_stay_one_tree():
+    """A main anchor kept from last frame is dropped where a new member would lie beyond float32's range
+    of it (the build failed naming a triangle); a lazy build, which has to be one tree, gets no zones."""
+    quad = np.array([[0, 1, 2], [0, 2, 3]])
+    a = core.MeshInput("a", np.array([[-3.4e38, 0, 0], [-3.3e38, 0, 0], [-3.3e38, 1e37, 0], [-3.4e38, 1e37, 0]],
+                                     np.float32), quad, 0)
+    b = core.MeshInput("b", np.array([[3.3e38, 0, 0], [3.4e38, 0, 0], [3.4e38, 1e37, 0], [3.3e38, 1e37, 0]],
+                                     np.float32), quad, 0)
+    builder = core.SceneBuilder()
+    builder.build([a], [0], np.eye(4)[None])
+    scene, _ = builder.build([a, b], [0, 1], np.stack([np.eye(4)] * 2))
+    hits = core.intersect_scene(scene, np.array([[3.35e38, 1e36, 1.0], [-3.35e38, 1e36, 1.0]]), [[0, 0, -1.0]] * 2)
+    assert hits.instance.tolist() == [1, 0] and np.allclose(hits.t, 1.0)
+    meshes, mats = _ground_and_small_spheres()
+    scene = core.build_scene(meshes, np.arange(len(meshes)), mats, lazy=True)
+    assert scene.stats()["instances"] == 1 and scene.lazy_tree is not None
 
 
 def test_degenerate_inputs():

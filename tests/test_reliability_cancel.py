@@ -268,7 +268,8 @@ def test_a_killed_rerun_leaves_a_report_of_its_own_frames(tmp_path):
         rerun.kill()
     report = json.loads((out / "report.json").read_text())
     assert report["complete"] is False and report["settings"]["samples"] == 48 and report["frames_requested"] == 200
-    assert 1 <= len(report["frames"]) < 200
+    assert 1 <= len(report["frames"]) < 200 and all((out / f["file"]).is_file() for f in report["frames"])
+    assert not [p.name for p in out.glob("frame_*") if "partial" in p.name]  # one a kill leaves mid-write is hidden
 
 
 @pytest.mark.parametrize("delay", [0.3, 0.6])
