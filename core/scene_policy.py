@@ -83,18 +83,20 @@ def overlap_depth(boxes):
 def soup_zones(boxes, before=None, split=True):
     """The zones of one soup, as a list of (member rows, anchor), the main zone first (its rows may be
     empty). boxes (K, 6): the members' world boxes (inverted when empty); before: the main zone's
-    anchor last frame, or None; split False: the main zone alone (the "flat" layout).
+    anchor last frame, or None; split False: the main zone alone (the "flat" layout, lazy builds).
 
     The main zone is anchored by `main_anchor` and keeps every member whose farthest box corner is
     within PRECISION_RATIO of its diagonals of that anchor (members without extent too: they have
-    nothing to round); the anchor is found again after members leave, until none does. The rest,
-    smallest first, join the nearest zone anchor within (PRECISION_RATIO - 1/2) of their diagonals of
-    their box's centre, or else anchor a new zone at the centre of the grid cell holding theirs, of the
-    largest power-of-two size C with (sqrt(3)/2) C within that: either way no vertex is more than
-    PRECISION_RATIO diagonals from its anchor. Joining keeps neighbours of different sizes in one zone
-    (a zone is one more top-level instance for rays to visit, and overlaps the main zone); grid
-    anchors stay where they were while the member that made them stays (an anchor that moves re-rounds
-    its zone and costs its kept pixels, instance_signature.py).
+    nothing to round); the anchor is found again after members leave, until none does, and then every
+    member it is near enough for is in, so that next frame, given it as `before`, the zone is the same.
+    The rest, smallest first, join the nearest zone anchor within (PRECISION_RATIO - 1/2) of their
+    diagonals of their box's centre, or else anchor a new zone at the centre of the grid cell holding
+    theirs, of the largest power-of-two size C with (sqrt(3)/2) C within that: either way no vertex is
+    more than PRECISION_RATIO diagonals from its anchor. Joining keeps neighbours of different sizes in
+    one zone (a zone is one more top-level instance for rays to visit, and overlaps the main zone).
+    Zones depend on this frame's boxes alone, so an unchanged soup keeps them; a smaller member
+    arriving nearby can move a larger one to its new zone, which re-rounds that member (its kept
+    pixels are traced again: instance_signature.py).
     """
     lo, hi = boxes[:, :3], boxes[:, 3:]
     filled = (lo <= hi).all(axis=1)
