@@ -137,8 +137,11 @@ class SceneBuilder:
         if rays is not None:
             make_options({"rays": rays})  # a bad count is named before anything is built
         bounds = _bounds(meshes)
+        with np.errstate(invalid="ignore"):  # an empty mesh's inverted box gives NaN: an empty box to soup_zones
+            world_boxes = transformed_boxes(bounds[mesh_of], o2w)
         met = stops_rays(visibility)  # an instance no ray meets is left out altogether
-        _check_world_extent(bounds, mesh_of, o2w, origin, met)
+        filled = (bounds[mesh_of, :3] <= bounds[mesh_of, 3:]).all(axis=1)
+        _check_world_extent(world_boxes, mesh_of, origin, met & filled)
         self._track_changes(meshes, mesh_of, o2w, visibility)
         shown = np.flatnonzero(met)
         soup = np.zeros(len(mesh_of), bool)
@@ -154,7 +157,7 @@ class SceneBuilder:
         scene_visibility = [visibility[own]]
         rounding = np.zeros((len(mesh_of), 4))
         groups, soups, soup_rebuilt = [], {}, False
-        for key, group, anchor in self._soup_zones(soup, visibility, bounds, mesh_of, o2w):
+        for key, group, anchor in self._soup_zones(soup, visibility, world_boxes):
             soups[key] = self._soup_tree(meshes, mesh_of, o2w, group, reuse, key, anchor)
             _, soup_tree, anchor = soups[key]
             built = soups[key] is not self._soups.get(key)
@@ -221,14 +224,14 @@ class SceneBuilder:
             trees.append(cached[1])
         return trees, index[mesh_of[instanced]], rebuilt, len(used) - rebuilt
 
-    def _soup_zones(self, soup, visibility, bounds, mesh_of, o2w):
+    def _soup_zones(self, soup, visibility, world_boxes):
         """(key, members, anchor) of each soup tree: one per visibility (the usual one first) and, in
         the "auto" layout, per zone of it (scene_policy.soup_zones; not for a lazy build, which has to
         be one tree); key (visibility, None) for the main zone, (visibility, anchor) for the others."""
         out = []
         for kind in sorted(set(visibility[soup].tolist()), key=lambda k: (k != ALL_RAYS, -k)):
             group = np.flatnonzero(soup & (visibility == kind))
-            boxes = transformed_boxes(bounds[mesh_of[group]], o2w[group])
+            boxes = world_boxes[group]
             before = self._soups.get((kind, None))
             before = before[2] if before is not None else None
             zones = soup_zones(boxes, before, split=self.layout == "auto" and not self.options["lazy"])
@@ -320,16 +323,15 @@ def _hashable(key):
     return True
 
 
-def _check_world_extent(bounds, mesh_of, o2w, origin, met):
-    """A ValueError naming the first instance rays meet (`met`) whose matrix carries its mesh beyond
-    float32's range (measured from `origin`): its world triangles (a soup's, or the top level's boxes)
-    would be inf. Outside QA: an instance moved 1e39 away was taken silently by one layout and blamed
-    on another instance's triangle by the other."""
-    lo, hi = bounds[mesh_of, :3].astype(np.float64), bounds[mesh_of, 3:].astype(np.float64)
-    corners = np.stack([np.where([(c >> k) & 1 for k in range(3)], hi, lo) for c in range(8)], axis=1)
-    world = np.einsum("ijk,imk->imj", o2w[:, :3, :3], corners) + (o2w[:, :3, 3] - origin)[:, None, :]
+def _check_world_extent(world_boxes, mesh_of, origin, checked):
+    """A ValueError naming the first `checked` instance (rays meet it, its mesh is not empty) whose
+    matrix carries its mesh beyond float32's range (measured from `origin`): its world triangles (a
+    soup's, or the top level's boxes) would be inf. world_boxes (I, 6): the instances' world boxes.
+    Outside QA: an instance moved 1e39 away was taken silently by one layout and blamed on another
+    instance's triangle by the other."""
+    shifted = world_boxes - np.concatenate([origin, origin])
     with np.errstate(invalid="ignore"):
-        beyond = met & (lo <= hi).all(axis=1) & ~(np.abs(world) <= FLOAT32_MAX).all(axis=(1, 2))
+        beyond = checked & ~(np.abs(shifted) <= FLOAT32_MAX).all(axis=1)
     if beyond.any():
         i = int(np.flatnonzero(beyond)[0])
         raise ValueError(f"instance {i} (mesh {int(mesh_of[i])}): its matrix places the mesh beyond float32's range "
