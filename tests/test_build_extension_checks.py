@@ -85,3 +85,23 @@ def test_no_wheels_or_no_llvmlite_is_named(wheels):
     message = errors_of(manifest(wheels))
     assert "platform linux-x64 needs exactly one llvmlite wheel for Python 3.11, found none" in message
     assert "platform linux-x64 needs exactly one llvmlite wheel for Python 3.13, found none" in message
+
+
+def test_a_wheel_appears_in_the_cache_only_whole(tmp_path, monkeypatch):
+    """Two builds at once (CI runs the extension test on two Pythons together) share the wheel cache:
+    pip writes its file in place, so the other build could have staged a half-written wheel. The
+    download goes to a private folder and is renamed into the cache."""
+    cache = tmp_path / "cache"
+    target = build_extension.parse_wheel(wheel("numba", "cp311"))
+    seen_during_download = []
+
+    def fake_download(w, dest):
+        (dest / w.filename).write_bytes(b"half")
+        seen_during_download.append(sorted(p.name for p in cache.iterdir() if p.is_file()))
+        (dest / w.filename).write_bytes(b"whole wheel")
+
+    monkeypatch.setattr(build_extension, "pip_download", fake_download)
+    build_extension.fetch_wheels([target], cache)
+    assert seen_during_download == [[]]  # nothing under the wheel's name while it was being written
+    assert (cache / target.filename).read_bytes() == b"whole wheel"
+    assert sorted(p.name for p in cache.iterdir()) == [target.filename]  # the private folder is gone

@@ -25,6 +25,7 @@ import re
 import shutil
 import subprocess
 import sys
+import tempfile
 import tomllib
 import zipfile
 from dataclasses import dataclass
@@ -169,17 +170,22 @@ def pip_download(wheel: Wheel, cache: Path) -> None:
 
 
 def fetch_wheels(wheels: list[Wheel], cache: Path) -> None:
-    """Make sure every wheel is in the cache, downloading the missing ones."""
+    """Make sure every wheel is in the cache, downloading the missing ones. Each is downloaded into a
+    private temporary folder and renamed into the cache, so a build running at the same time (CI runs
+    the test suite on two Blenders' Pythons at once) sees a wheel whole or not at all: pip writes its
+    file in place, and the other build would have staged a half-written wheel."""
     cache.mkdir(parents=True, exist_ok=True)
     for wheel in wheels:
         if (cache / wheel.filename).is_file():
             print("cached:     {}".format(wheel.filename))
             continue
         print("downloading {} ...".format(wheel.filename), flush=True)
-        pip_download(wheel, cache)
-        if not (cache / wheel.filename).is_file():
-            raise BuildError("pip saved a different file than the manifest lists ({}): fix the manifest's "
-                             "wheel names, see {}".format(wheel.filename, cache))
+        with tempfile.TemporaryDirectory(dir=cache, prefix=".download-") as private:
+            pip_download(wheel, Path(private))
+            if not (Path(private) / wheel.filename).is_file():
+                raise BuildError("pip saved a different file than the manifest lists ({}): fix the manifest's "
+                                 "wheel names, see {}".format(wheel.filename, sorted(os.listdir(private))))
+            os.replace(Path(private) / wheel.filename, cache / wheel.filename)
 
 
 # -----------------------------------------------------------------------------
