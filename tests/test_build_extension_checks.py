@@ -88,7 +88,7 @@ def test_no_wheels_or_no_llvmlite_is_named(wheels):
 
 
 def test_a_wheel_appears_in_the_cache_only_whole(tmp_path, monkeypatch):
-    """Two builds at once (CI runs the extension test on two Pythons together) share the wheel cache:
+    """Two builds at once (test runs on two Blenders' Pythons, a build beside the tests) share the cache:
     pip writes its file in place, so the other build could have staged a half-written wheel. The
     download goes to a private folder and is renamed into the cache."""
     cache = tmp_path / "cache"

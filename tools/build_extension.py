@@ -171,9 +171,9 @@ def pip_download(wheel: Wheel, cache: Path) -> None:
 
 def fetch_wheels(wheels: list[Wheel], cache: Path) -> None:
     """Make sure every wheel is in the cache, downloading the missing ones. Each is downloaded into a
-    private temporary folder and renamed into the cache, so a build running at the same time (CI runs
-    the test suite on two Blenders' Pythons at once) sees a wheel whole or not at all: pip writes its
-    file in place, and the other build would have staged a half-written wheel."""
+    private temporary folder and renamed into the cache, so a build running at the same time (a test
+    run on another Blender's Python, or a user's build beside the tests) sees a wheel whole or not at
+    all: pip writes its file in place, and the other build could stage a half-written wheel."""
     cache.mkdir(parents=True, exist_ok=True)
     for wheel in wheels:
         if (cache / wheel.filename).is_file():
