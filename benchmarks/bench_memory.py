@@ -36,7 +36,7 @@ RENDER = dict(width=960, height=540, samples=16, ao_distance=0.5)
 
 def wavy_grid(n, amplitude=0.05):
     """About n triangles of a displaced height field over [0, 1]^2 (a regular, open surface); amplitude 0
-    gives a flat subdivided plane, the worst case of the binned builder (see README *Reliability*)."""
+    gives a flat subdivided plane, the worst case of the binned builder (see docs/reliability.md)."""
     k = int(np.sqrt(n / 2))
     x, y = np.meshgrid(np.linspace(0, 1, k + 1), np.linspace(0, 1, k + 1), indexing="ij")
     p = np.stack([x, y, amplitude * np.sin(25 * x) * np.cos(25 * y)], -1).astype(np.float32)
@@ -53,7 +53,7 @@ def five_suzannes():
 
 def dense_soup(n=100_000):
     """n random triangles 0.05 wide in a 2-unit cube: 4.5-6.7 references a triangle, the scene that set
-    the exact builder's estimate (README *Reliability*)."""
+    the exact builder's estimate (docs/reliability.md)."""
     rng = np.random.default_rng(0)
     return rng.uniform(-1.0, 1.0, (n, 1, 3)) + rng.normal(0.0, 0.05, (n, 3, 3))
 

@@ -3,7 +3,7 @@
 Why: a scene too big for the machine should fail with a message naming the estimate, the limit and what
 to change, not get the process killed by the out-of-memory killer half-way through a build. The figures
 are the peak resident-memory growth measured per triangle and per pixel in fresh processes
-(`benchmarks/bench_memory.py --calibrate`, numbers in README *Reliability*), times a safety margin:
+(`benchmarks/bench_memory.py --calibrate`, numbers in docs/reliability.md), times a safety margin:
 the build's working set (references, boxes, clipped boxes, pools, nodes) grows linearly with the
 triangle count, and the renderer's buffers (camera rays, hit points, normals, sums) with the pixel count.
 """
@@ -22,14 +22,14 @@ MARGIN = 1.25  # measured peaks vary by scene (references per triangle); the lim
 # 487 B (median) per triangle. The exact sweep splits such a plane on its grid lines (1.0 reference).
 # The limit is a promise, so the estimate covers the flat plane: typical scenes need 3-6x less. The
 # exact sweep's 190 B (soup-1m) was exceeded by a denser soup (100k triangles 0.05 wide in a 2-unit
-# cube, 4.5 references a triangle: 324 B of peak, 405 B with the 1.25 of the table in the README),
+# cube, 4.5 references a triangle: 324 B of peak, 405 B with the 1.25 of the table in docs/reliability.md),
 # which the in-build check below found: 420 B. All of these were measured at the SAH's former
 # intersection_cost of 1.5. At today's 0.3 trees are shallower but keep a 36-byte copy of every leaf
 # reference (leaf_triangles.py), made after release_freed_memory: 91-124 B (binned), 105-177 (median),
 # 96-128 (exact) on the scenes above (the flat plane now 1.04 references a triangle), and 289 / 307 /
 # 278 B on the dense soup (6.1-6.8 references a triangle). Where the C library cannot release memory
 # the copy adds to the peak: 318 / 365 / 338 B on the dense soup, 338 B being 423 with the 1.25 of the
-# table in the README: hence 430 for the exact sweep. Densely overlapping triangles in one plane (cards
+# table in docs/reliability.md: hence 430 for the exact sweep. Densely overlapping triangles in one plane (cards
 # on a floor) split on until the duplication budget stops them (options.py): ~18 references a triangle,
 # 710 / 774 / 750 B peak (binned / median / exact, bench_memory.py --calibrate --scenes flat-cards-200k),
 # so median and exact now cover 774 / 1.25 and 750 / 1.25.

@@ -22,7 +22,7 @@ DEPTH_LIMIT = 60
 
 # Clipping straddlers, snapping planes to box boundaries and searching all three axes refine splits
 # at extra build work per reference. Time to image with clip and snap off, against on (rays given,
-# 640 x 480, README *Choices*): 0.91x at 0.6 rays a triangle, 0.94x at 2.4, 1.00x at 6.1, 1.08x at 21.
+# 640 x 480, docs/choices.md): 0.91x at 0.6 rays a triangle, 0.94x at 2.4, 1.00x at 6.1, 1.08x at 21.
 # A per-node rule (rays entering the node per reference, as beats_leaf estimates them) still lost
 # 4-7% at 21: AO rays start on the surface, and the deep nodes there see more rays than rays from
 # outside would. Searching the longest axis first as well: 0.80-0.95x more at 0.6-3.7.
@@ -38,12 +38,12 @@ class BuildOptions:
         median of the longest axis, with the SAH deciding only when to stop: the cheap baseline).
     bins: min-max bins per axis for "binned" (seed 000 found 32 sufficient).
     exact_below: "binned" switches to the exact sweep in nodes with at most this many references.
-        Seed 000 switches at `bins`. Measured on suzanne-251k (README): switching at 16/32/64 lowers
+        Seed 000 switches at `bins`. Measured on suzanne-251k (docs/choices.md): switching at 16/32/64 lowers
         the SAH cost by 0.6/2.8/4.6% but makes the build 26/41/88% slower and time to image no
         better, so the default is 0 (binning everywhere; 32 bins resolve small nodes nearly exactly).
     snap: "binned" also tries, below the parallel top levels, the box boundaries nearest to its best
         bin boundary and keeps the cheapest plane (split_binned.snap_to_boundaries): grids and height
-        fields stop paying for planes between their vertex lines (README: a wave-modified grid went
+        fields stop paying for planes between their vertex lines (docs/choices.md: a wave-modified grid went
         from 7.6 to 1.1 references a triangle and built ~5x faster; suzanne-251k's SAH cost -7%).
     split_axes: "all" (the binned SAH searches x, y and z) or "longest" (below the parallel top levels,
         the node's longest axis, as fast BVH builders bin (Wald 2007, "On fast construction of
@@ -54,7 +54,7 @@ class BuildOptions:
     max_depth: None means 1.2*log2(N) + 2 (seed 003 §3.5), capped at 60.
     traversal_cost, intersection_cost: SAH constants (cost of one traversal step and of one
         ray/triangle test). 0.3 since leaves screen their triangles in a vectorised loop
-        (triangle_test.leaf_candidates), swept end to end (README *Choices*): lower values helped
+        (triangle_test.leaf_candidates), swept end to end (docs/choices.md): lower values helped
         dense soups and many samples a little more but lost with few rays a triangle; 1.5 before.
     empty_bonus: fraction of the intersection cost forgiven when one child is empty, in [0, 1).
         0.2, measured: with pbrt's 0.5 the SAH spends the depth budget cutting off empty space and
@@ -91,7 +91,7 @@ class BuildOptions:
         share its area exactly, so every split pays and the build went on to max_depth (outside QA:
         50,000 such triangles made 1,246 references a triangle, 3.5 GB, 36 s). With 16 the ordinary
         scenes of benchmarks/bench_duplication.py build the trees they build without it; where it
-        binds, tracing pays (README, *Choices*). None: no budget.
+        binds, tracing pays (docs/choices.md). None: no budget.
     rays: how many rays the tree will answer (for one render: core.frame_ray_count, e.g. width x
         height x 2 for camera rays plus one shadow ray a pixel). None: as many as it takes, no build
         term. Given, a node is split only when the rays expected to enter it save more than the

@@ -2,7 +2,7 @@
 
 A KdTree could also be queried as a one-instance scene (scene_queries.py, as the renderer does); the
 library's own queries keep the direct kernel, which skips the instance transform (camera rays on
-suzanne-251k measured 6-7% faster before both took unowned views, README "Choices")."""
+suzanne-251k measured 6-7% faster before both took unowned views, docs/choices.md)."""
 from typing import NamedTuple
 
 import numpy as np

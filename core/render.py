@@ -51,7 +51,7 @@ class PreviewRender:
     """A progressive preview: call `step()` until `done`, read `image()` at any time.
 
     `tree` is a KdTree or a TwoLevelScene; a KdTree is traced as a one-instance scene with the
-    identity matrix, so both take the same kernels (the overhead is measured in the README).
+    identity matrix, so both take the same kernels (the overhead is measured in docs/choices.md).
 
     Settings: mode ("ao", "shadow", "ao+shadow"), samples (per pixel), ao_distance, lights (core.Light),
     seed (any integer, taken modulo 2^32), sampler ("sobol" or "random"), error_target (None: off),

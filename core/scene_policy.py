@@ -13,7 +13,7 @@ visits several objects' trees where one flat tree would have separated their tri
 - if the remaining static single objects overlap heavily (OVERLAP_LIMIT, see `overlap_depth`), they
   go to the soup too;
 - an instance whose matrix cannot be inverted (zero scale) can only be flattened.
-Figures behind SMALL_OBJECT and OVERLAP_LIMIT: benchmarks/bench_two_level.py and the README.
+Figures behind SMALL_OBJECT and OVERLAP_LIMIT: benchmarks/bench_two_level.py and docs/choices.md.
 
 A soup stores its members' world triangles in float32 relative to an anchor, so a member loses the
 float32 precision of its distance from that anchor: a 1 cm sphere 5,000 units from the centre of a

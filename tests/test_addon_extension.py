@@ -54,7 +54,7 @@ def test_extension_builds_installs_renders_and_uninstalls(tmp_path):
         names = set(zf.namelist())
     assert {"__init__.py", "blender_manifest.toml", "kd_addon/__init__.py", "kd_addon/corelib.py",
             "core/__init__.py", "core/render.py"} <= names
-    assert not any(n.startswith(("tests/", "benchmarks/", "tools/", "scripts/")) for n in names)
+    assert not any(n.startswith(("tests/", "benchmarks/", "tools/", "scripts/", "docs/")) for n in names)
     user = tmp_path / "user"
     env = {"BLENDER_USER_RESOURCES": str(user), "NUMBA_CACHE_DIR": None}  # None: the extension picks the folder
     kept, compiled = installed_kernels_folder(path), tmp_path / "compiled_kernels"
