@@ -18,7 +18,8 @@ Two-level scenes (a kd-tree per mesh in object space under a top-level tree over
     build_two_level(mesh_trees, mesh_of, matrices, visibility=None, **options) -> TwoLevelScene
     build_scene(meshes, mesh_of, matrices, origin=None, layout="auto", visibility=None, **options)
     SceneBuilder(layout="auto", **options).build(MeshInputs, mesh_of, matrices, origin, reuse, visibility,
-        rays) -> (scene, report); rays: the frame's ray count, for the trees of deforming meshes
+        rays) -> (scene, report); rays: the frame's ray count, for the trees of deforming meshes;
+        PlacementRangeError (a ValueError; .instances) when matrices place meshes beyond float32's range
     intersect_scene / occluded_scene (scene or tree, origins, directions, ..., ray_mask=ALL_RAYS)
         -> SceneHits / (R,) bool
     Per-instance ray visibility (Blender's Ray Visibility, as Cycles applies it): visibility bits
@@ -46,7 +47,7 @@ from .parallel_compile import rendering_kernels_alongside
 from .pixel_reuse import PixelState
 from .queries import Hits, intersect, occluded
 from .ray_visibility import ALL_RAYS, CAMERA_RAYS, HOLDOUT, SHADOW_RAYS
-from .scene_builder import BuildReport, MeshInput, SceneBuilder, build_scene
+from .scene_builder import BuildReport, MeshInput, PlacementRangeError, SceneBuilder, build_scene
 from .scene_queries import SceneHits, intersect_scene, occluded_scene
 from .two_level import TwoLevelScene, build_two_level
 
@@ -55,4 +56,5 @@ __all__ = ["denoise_pixels",
            "render_preview", "PreviewRender", "frame_ray_count", "TwoLevelScene", "build_two_level", "build_scene",
            "SceneBuilder",
            "MeshInput", "BuildReport", "SceneHits", "intersect_scene", "occluded_scene", "MemoryLimitError",
-           "PixelState", "rendering_kernels_alongside", "CAMERA_RAYS", "SHADOW_RAYS", "ALL_RAYS", "HOLDOUT"]
+           "PlacementRangeError", "PixelState", "rendering_kernels_alongside", "CAMERA_RAYS", "SHADOW_RAYS",
+           "ALL_RAYS", "HOLDOUT"]

@@ -323,19 +323,31 @@ def _hashable(key):
     return True
 
 
+class PlacementRangeError(ValueError):
+    """Instances whose matrices place their meshes beyond float32's range of the scene origin.
+    `instances`: the indices (into mesh_of) of every such instance, so that a caller can leave them out,
+    as the add-on does for non-finite placements, and build the rest."""
+
+    def __init__(self, message, instances):
+        super().__init__(message)
+        self.instances = instances
+
+
 def _check_world_extent(world_boxes, mesh_of, origin, checked):
-    """A ValueError naming the first `checked` instance (rays meet it, its mesh is not empty) whose
-    matrix carries its mesh beyond float32's range (measured from `origin`): its world triangles (a
-    soup's, or the top level's boxes) would be inf. world_boxes (I, 6): the instances' world boxes.
-    Outside QA: an instance moved 1e39 away was taken silently by one layout and blamed on another
-    instance's triangle by the other."""
+    """A PlacementRangeError naming the first `checked` instance (rays meet it, its mesh is not empty)
+    whose matrix carries its mesh beyond float32's range (measured from `origin`), and listing all of
+    them: its world triangles (a soup's, or the top level's boxes) would be inf. world_boxes (I, 6):
+    the instances' world boxes. Outside QA: an instance moved 1e39 away was taken silently by one
+    layout and blamed on another instance's triangle by the other."""
     shifted = world_boxes - np.concatenate([origin, origin])
     with np.errstate(invalid="ignore"):
-        beyond = checked & ~(np.abs(shifted) <= FLOAT32_MAX).all(axis=1)
-    if beyond.any():
-        i = int(np.flatnonzero(beyond)[0])
-        raise ValueError(f"instance {i} (mesh {int(mesh_of[i])}): its matrix places the mesh beyond float32's range "
-                         f"(|coordinate| > {FLOAT32_MAX:.3g} from the scene origin): move it or the origin closer")
+        beyond = np.flatnonzero(checked & ~(np.abs(shifted) <= FLOAT32_MAX).all(axis=1))
+    if len(beyond):
+        i = int(beyond[0])
+        others = f" (and {len(beyond) - 1} more)" if len(beyond) > 1 else ""
+        raise PlacementRangeError(f"instance {i} (mesh {int(mesh_of[i])}){others}: its matrix places the mesh beyond "
+                                  f"float32's range (|coordinate| > {FLOAT32_MAX:.3g} from the scene origin): move it "
+                                  "or the origin closer", beyond)
 
 
 def _bounds(meshes):

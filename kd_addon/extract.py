@@ -126,6 +126,16 @@ class Instance:
     shadow: bool = True  # Ray Visibility > Shadow: also what AO rays see (ANDed with the instancer's)
     holdout: bool = False  # Holdout (the instancer's for an instance): seen pixels stay empty
 
+    @property
+    def label(self) -> str:
+        """How warnings name it: "object 'X'", or "object 'X' instanced by 'Y'"."""
+        return object_label(self.name, self.instancer)
+
+
+def object_label(name: str, instancer: str | None) -> str:
+    """How warnings name an object and the instancer that placed it (None or itself: none)."""
+    return f"object '{name}'" if instancer in (None, name) else f"object '{name}' instanced by '{instancer}'"
+
 
 @dataclass
 class ExtractedScene:
@@ -769,9 +779,8 @@ class _EntryReader:
         name, instancer, camera, shadow, holdout = verdict
         matrix = np.array(inst.matrix_world, dtype=np.float64)
         if not np.isfinite(matrix).all():  # a NaN location or scale (a driver, a script): not placeable
-            where = f"object '{name}'" if instancer in (None, name) else f"object '{name}' instanced by '{instancer}'"
             self.non_finite_placements.setdefault(
-                (name, instancer), f"{where} has a non-finite transform (NaN or infinite location, rotation or "
+                (name, instancer), f"{object_label(name, instancer)} has a non-finite transform (NaN or infinite location, rotation or "
                 "scale); left out")
             return None
         key = self.geometries.get(ob, name)
@@ -799,8 +808,7 @@ class _EntryReader:
         if verdict is None:
             return
         name, instancer = verdict[0], verdict[1]
-        where = f"object '{name}'" if instancer in (None, name) else f"object '{name}' instanced by '{instancer}'"
-        message = f"{where} makes {kind}, not triangles: left out of the preview"
+        message = f"{object_label(name, instancer)} makes {kind}, not triangles: left out of the preview"
         self.not_triangles.setdefault((name, instancer), message)
 
     def _verdict(self, ob, parent) -> tuple[str, str | None, bool, bool, bool] | None:

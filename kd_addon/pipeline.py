@@ -31,6 +31,7 @@ seen within that time even in the middle of a multi-second build.
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import threading
 import time
@@ -225,6 +226,7 @@ class FrameJob:
             self._info.update(self._state.info, objects_reused=len(read.instances[0]), image_reused=True)
             return
         camera, lights = self._camera_and_lights(core, inputs)
+        self._placed = extracted.instances  # names the instances a build leaves out (_build_placeable)
         self._pending = BackgroundCall(KERNEL_LOCK, self._build_and_start, core, read.instances,
                                        inputs.camera.position, reuse, camera, lights, inputs.width, inputs.height)
 
@@ -239,7 +241,9 @@ class FrameJob:
         core = corelib.load_core()
         meshes, mesh_of, matrices, visibility = tree_cache.mesh_inputs(core, extracted)
         visibility, unapplied = self._lazy_visibility(core, extracted, visibility)
-        key = tree_cache.image_key(meshes, mesh_of, matrices, visibility, inputs.camera.keywords(), inputs.lights,
+        # an AO image does not depend on the lights: animated lights must not stop its reuse (outside review)
+        lights = inputs.lights if self.config.settings.mode != "ao" else []
+        key = tree_cache.image_key(meshes, mesh_of, matrices, visibility, inputs.camera.keywords(), lights,
                                    (inputs.width, inputs.height), self.config.as_dict())
         return _SceneRead(inputs, extracted, (meshes, mesh_of, matrices, visibility), unapplied, key)
 
@@ -249,9 +253,7 @@ class FrameJob:
         instance stops every ray, none is a holdout) and each object they would have changed is named."""
         if not self.config.build_options.get("lazy") or len(set(visibility.tolist())) <= 1:
             return visibility, []
-        names = sorted({f"object '{i.name}'" if i.instancer in (None, i.name) else
-                        f"object '{i.name}' instanced by '{i.instancer}'"
-                        for i in extracted.instances if not (i.camera and i.shadow) or i.holdout})
+        names = sorted({i.label for i in extracted.instances if not (i.camera and i.shadow) or i.holdout})
         return np.full_like(visibility, core.ALL_RAYS), [
             f"{name}: Ray Visibility and Holdout not applied with Lazy Build on (the scene is traced as one tree)"
             for name in names]
@@ -268,7 +270,7 @@ class FrameJob:
         alongside = (core.rendering_kernels_alongside(self.config.denoise) if self._first_run
                      else contextlib.nullcontext())
         with alongside as helper:
-            scene, report = self._build(*instances, origin, reuse, rays)
+            scene, report = self._build_placeable(core, instances, origin, reuse, rays)
         self._timings["build_ms"] = _ms_since(t0)
         if helper is not None:
             self._info["compile_helper"] = helper.outcome
@@ -348,6 +350,23 @@ class FrameJob:
                                       "transparent")
         self._timings["extract_ms"] = _ms_since(t0)
         return extracted
+
+    def _build_placeable(self, core, instances, origin: np.ndarray, reuse: bool, rays: int):
+        """_build, leaving out the instances whose matrices place them beyond float32's range of the
+        camera (an absurd scale or location, keyed or driven), with a warning naming each object, as
+        extraction leaves out a non-finite placement: the rest of the frame renders. Outside review: a
+        scale keyed to 3e38 on one frame stopped the animation with a traceback naming "instance 2"."""
+        meshes, mesh_of, matrices, visibility = instances
+        try:
+            return self._build(meshes, mesh_of, matrices, visibility, origin, reuse, rays)
+        except core.PlacementRangeError as error:
+            keep = np.ones(len(mesh_of), bool)
+            keep[error.instances] = False
+            labels = collections.Counter(self._placed[i].label for i in error.instances)
+            self._info["warnings"] += [
+                f"{label}{f' ({n} instances)' if n > 1 else ''} is placed beyond float32's range of the camera "
+                "(a coordinate past 3.4e38 after its scale and location); left out" for label, n in labels.items()]
+            return self._build(meshes, mesh_of[keep], matrices[keep], visibility[keep], origin, reuse, rays)
 
     def _build(self, meshes, mesh_of, matrices, visibility, origin: np.ndarray, reuse: bool, rays: int):
         """On the worker, holding KERNEL_LOCK. `rays`: the frame's ray count, for the trees of deforming

@@ -326,3 +326,9 @@ def test_an_instance_placed_beyond_float32s_range_is_named(layout):
     core.build_scene([(v, f)], np.array([0]), far[None], origin=(1e39, 0, 0), layout=layout)
     core.build_scene([(v, f)], np.array([0, 0]), np.stack([np.eye(4), far]), layout=layout,
                      visibility=np.array([3, 0], np.uint8))  # an instance no ray meets is left out
+    farther = far.copy()
+    farther[0, 3] = -2e39
+    with pytest.raises(core.PlacementRangeError, match=r"instance 1 \(mesh 0\) \(and 1 more\)") as raised:
+        core.SceneBuilder(layout=layout).build([core.MeshInput("m", v, f, 0)], np.array([0, 0, 0, 0]),
+                                               np.stack([np.eye(4), far, np.eye(4), farther]))
+    assert raised.value.instances.tolist() == [1, 3]  # every one, so a caller can leave them out

@@ -119,6 +119,35 @@ def test_non_finite_objects_are_named_and_nothing_else_changes(addon):  # noqa: 
     np.testing.assert_array_equal(result.image, reference.image)
 
 
+def test_objects_placed_beyond_float32s_range_are_named_and_left_out(addon):  # noqa: F811
+    """Outside review: a scale keyed to 3e38 on one frame stopped the animation with core's traceback
+    naming "instance 2". Such a placement is left out and named, as a non-finite one is, and the rest
+    of the frame renders as it would without it."""
+    scene = half_plane_scene()
+    reference = render(scene)
+    scenes.add_cube("Giant", scale=2.0, location=(-2, 1, 1)).scale = (3e38, 3e38, 3e38)  # corners at 6e38
+    source = scenes.new_collection("Source", exclude=True)
+    scenes.add_cube("Member", scale=0.3, collection=source)
+    # finite matrices (Blender makes its instances' in float32: further out they are inf, non-finite) whose
+    # boxes reach past float32's range: 3.3e38 + 0.3 * 1e38, 3.3e38 + 0.25 * 1e38
+    scenes.add_collection_instance("Far", source, location=(3.3e38, 0, 0)).scale = (1e38, 1, 1)
+    row = scenes.add_gn_instancer("Row", count=2, offset=(0, 1, 0), cube_size=0.5, location=(3.3e38, 0, 0))
+    row.scale = (1e38, 1, 1)  # two instances, one warning
+    scenes.add_collection_instance("Near", source, location=(50, 50, -40))  # placeable: stays (out of view)
+    result = render(scene)
+    far = sorted(w for w in result.warnings if "float32" in w)
+    assert far == [
+        "object 'Giant' is placed beyond float32's range of the camera (a coordinate past 3.4e38 after its "
+        "scale and location); left out",
+        "object 'Member' instanced by 'Far' is placed beyond float32's range of the camera (a coordinate past "
+        "3.4e38 after its scale and location); left out",
+        "object 'Row' (2 instances) is placed beyond float32's range of the camera (a coordinate past 3.4e38 "
+        "after its scale and location); left out"]
+    assert not any("non-finite" in w for w in result.warnings)
+    np.testing.assert_array_equal(result.image, reference.image)
+    assert result.objects_rebuilt + result.objects_reused == 3  # ground, half plane, the near member
+
+
 def test_faceless_flat_and_non_mesh_objects_are_skipped_quietly(addon):  # noqa: F811
     scene = half_plane_scene()
     reference = render(scene)
