@@ -780,8 +780,8 @@ class _EntryReader:
         matrix = np.array(inst.matrix_world, dtype=np.float64)
         if not np.isfinite(matrix).all():  # a NaN location or scale (a driver, a script): not placeable
             self.non_finite_placements.setdefault(
-                (name, instancer), f"{object_label(name, instancer)} has a non-finite transform (NaN or infinite location, rotation or "
-                "scale); left out")
+                (name, instancer), f"{object_label(name, instancer)} has a non-finite transform (NaN or infinite "
+                "location, rotation or scale); left out")
             return None
         key = self.geometries.get(ob, name)
         if key is None:
