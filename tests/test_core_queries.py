@@ -7,8 +7,10 @@ from tests.core_helpers import BUILDERS, assert_same_as_brute, assert_same_as_mo
 from tests.meshes import degenerate_mix, icosphere, lattice, mesh_triangles, random_soup, subdivided_cube
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture
 def rng():
+    """The same generator state for every test: the builder variants of one test then meet the same rays,
+    and the brute-force reference is computed once for all of them (core_helpers.oracle_once)."""
     return np.random.default_rng(1234)
 
 
