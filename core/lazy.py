@@ -63,7 +63,7 @@ class DeferredSubtrees:
         return len(self.built)
 
     def stats(self):
-        """The lazy fields of KdTree.stats() (see README, Build options)."""
+        """The lazy fields of KdTree.stats() (see README, Lazy (on-demand) building)."""
         return {"lazy": True, "subtrees_total": self.total, "subtrees_built": int(self.built.sum()),
                 "unbuilt_references": int(np.diff(self.start)[~self.built].sum()),
                 "lazy_build_ms": self.build_ms, "lazy_rounds": self.rounds,
