@@ -226,8 +226,7 @@ class FrameJob:
             self._info.update(self._state.info, objects_reused=len(read.instances[0]), image_reused=True)
             return
         camera, lights = self._camera_and_lights(core, inputs)
-        self._placed = extracted.instances  # names the instances a build leaves out (_build_placeable)
-        self._pending = BackgroundCall(KERNEL_LOCK, self._build_and_start, core, read.instances,
+        self._pending = BackgroundCall(KERNEL_LOCK, self._build_and_start, core, read.instances, extracted.instances,
                                        inputs.camera.position, reuse, camera, lights, inputs.width, inputs.height)
 
     @property
@@ -258,9 +257,9 @@ class FrameJob:
             f"{name}: Ray Visibility and Holdout not applied with Lazy Build on (the scene is traced as one tree)"
             for name in names]
 
-    def _build_and_start(self, core, instances, origin, reuse, camera, lights, width, height) -> None:
+    def _build_and_start(self, core, instances, placed, origin, reuse, camera, lights, width, height) -> None:
         """On the worker, holding KERNEL_LOCK: the scene, then the renderer (whose constructor traces
-        the camera rays)."""
+        the camera rays). `placed`: the extracted instances, in the order of `instances`' rows."""
         options = self.config.render_options
         rays = core.frame_ray_count(width, height, options["mode"], options["samples"], lights)
         # A process's first frame: with an empty kernel cache a helper process compiles the sampling
@@ -270,7 +269,7 @@ class FrameJob:
         alongside = (core.rendering_kernels_alongside(self.config.denoise) if self._first_run
                      else contextlib.nullcontext())
         with alongside as helper:
-            scene, report = self._build_placeable(core, instances, origin, reuse, rays)
+            scene, report = self._build_placeable(core, instances, placed, origin, reuse, rays)
         self._timings["build_ms"] = _ms_since(t0)
         if helper is not None:
             self._info["compile_helper"] = helper.outcome
@@ -351,7 +350,7 @@ class FrameJob:
         self._timings["extract_ms"] = _ms_since(t0)
         return extracted
 
-    def _build_placeable(self, core, instances, origin: np.ndarray, reuse: bool, rays: int):
+    def _build_placeable(self, core, instances, placed, origin: np.ndarray, reuse: bool, rays: int):
         """_build, leaving out the instances whose matrices place them beyond float32's range of the
         camera (an absurd scale or location, keyed or driven), with a warning naming each object, as
         extraction leaves out a non-finite placement: the rest of the frame renders. Outside review: a
@@ -362,7 +361,7 @@ class FrameJob:
         except core.PlacementRangeError as error:
             keep = np.ones(len(mesh_of), bool)
             keep[error.instances] = False
-            labels = collections.Counter(self._placed[i].label for i in error.instances)
+            labels = collections.Counter(placed[i].label for i in error.instances)
             self._info["warnings"] += [
                 f"{label}{f' ({n} instances)' if n > 1 else ''} is placed beyond float32's range of the camera "
                 "(a coordinate past 3.4e38 after its scale and location); left out" for label, n in labels.items()]

@@ -181,11 +181,12 @@ def fetch_wheels(wheels: list[Wheel], cache: Path) -> None:
             continue
         print("downloading {} ...".format(wheel.filename), flush=True)
         with tempfile.TemporaryDirectory(dir=cache, prefix=".download-") as private:
-            pip_download(wheel, Path(private))
-            if not (Path(private) / wheel.filename).is_file():
+            downloaded = Path(private) / wheel.filename
+            pip_download(wheel, downloaded.parent)
+            if not downloaded.is_file():
                 raise BuildError("pip saved a different file than the manifest lists ({}): fix the manifest's "
                                  "wheel names, see {}".format(wheel.filename, sorted(os.listdir(private))))
-            os.replace(Path(private) / wheel.filename, cache / wheel.filename)
+            os.replace(downloaded, cache / wheel.filename)
 
 
 # -----------------------------------------------------------------------------
