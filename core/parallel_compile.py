@@ -2,19 +2,20 @@
 Numba's on-disk cache while this process builds the tree (compiling the builder's kernels) and then
 makes the camera pass (compiling the camera rays' traversal and surface_frames).
 
-Why: with an empty cache a first render compiles every kernel, one at a time, in one process: 180-187 s
+Why: with an empty cache a first render compiles every kernel, one at a time, in one process: 135 s
 for the demo's first frame on a 2-core AVX2 host (`benchmarks/bench_compile.py --helper off`,
-2026-11-26), ~45 s of it the builder's kernels, ~82 s the sampling kernel (`add_samples` with its
-inlined traversal, sampler and light sampling), ~30 s the camera rays' traversal and ~8-11 s
+2026-11-27), ~50 s of it the builder's kernels, ~40 s the sampling kernel (`add_samples` with its
+inlined traversal, sampler and light sampling), ~20 s the camera rays' traversal and ~11 s
 surface_frames. All go to the same cache (cache=True), so a second process can compile one set while
 this one compiles the others; the render then loads what the helper wrote. The split: the helper
 compiles the sampling kernel, the image and the denoiser if the render will filter; this process
 compiles the builder's kernels, then the camera pass (the camera rays' traversal and surface_frames).
-Measured (`bench_compile.py --helper on`, idle host, 2026-11-26): first frame 85.6 s against 186.6 s
-in one process; this process compiled 85 s of it. Since the traversal is inlined into its callers
-(traversal.trace_ray) the sampling kernel takes twice as long to compile (39 s before), and the
-earlier split, in which the helper also traced the camera rays, made the first frame wait 117 s for
-it. Before that split, the helper rendered everything, surface frames included (98 s against 138 s).
+Measured (`bench_compile.py --helper both`, idle host, 2026-11-27): first frame 82 s against 135 s in
+one process; this process compiled 82 s of it, so the frame no longer waits for the helper. Before
+Numba's inliner copied a callee's scope once (inline_copy.py) the sampling kernel took ~82 s and the
+split measured 86 s against 187 s; the earlier split, in which the helper also traced the camera
+rays, made the first frame wait 117 s for it. Before that split, the helper rendered everything,
+surface frames included (98 s against 138 s).
 
 The two sets do not overlap, but both processes may still compile one function: any kernel this
 process needs before the helper has saved it, it compiles as well.
