@@ -15,7 +15,7 @@ from numba import njit
 from numba.core import inline_closurecall, ir
 if {patched}:
     import core.inline_copy  # installs itself
-    assert inline_closurecall.InlineWorker.inline_ir.kd_preview_scope_sharing
+    assert inline_closurecall.InlineWorker.inline_function.kd_preview_scope_sharing
 copies = [0]
 numba_var_copy = ir.Var.__deepcopy__
 def counting_var_copy(self, memo):
