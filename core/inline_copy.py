@@ -11,9 +11,10 @@ visibility <- scene traversal <- tree traversal) grows B and V at every level. N
 ("Spurious deep copies in inlining", open) reports the same. Profiled (cProfile, an empty cache, the
 first render of a small scene): 215 of 433 s in deepcopy, 11.6 million Var copies.
 
-`install` gives `copy_ir` one memo per callee scope for the length of one inlining of an
-inline="always" function (`InlineWorker.inline_function`, the untyped pass), so a callee's blocks
-share one copied scope, as the callee's own blocks share one. `inline_ir` then gives every
+`install` gives `copy_ir` one memo per callee scope for the length of one `inline_ir` (both of
+Numba's inlinings: the untyped pass's of inline="always" functions and the typed pass's of
+@overload(inline="always") implementations), so a callee's blocks share one copied scope, as the
+callee's own blocks share one. `inline_ir` then gives every
 copied block the caller's scope and renames the callee's variables into it, so nothing downstream can
 tell the copies apart. Checked: the sampling kernel's LLVM IR is byte-identical with and without
 (tests/test_inline_copy.py checks a nested kernel the same way). Measured (benchmarks/bench_compile.py's
@@ -21,10 +22,13 @@ demo, one process, an empty cache, 2026-11-27): the first frame 255 -> 135 s; th
 inline pass 64 -> 11 s (docs/choices.md).
 
 The shim replaces the `copy` module in numba.core.inline_closurecall only, whose one use of it is
-that deepcopy (numba 0.68.1, pinned); anything else it is asked for is the `copy` module's own, and
-outside `inline_function` (the typed pass's inlining of @overload(inline="always") implementations)
-it copies as Numba does. The patch is process-wide: other Numba code in the process (another add-on
-in the same Blender) gets the same IR faster.
+that deepcopy (numba 0.68.1, pinned); anything else it is asked for is the `copy` module's own. The
+memos live for one `inline_ir` only: an outside review found that memos kept for a whole
+`inline_function` (which may compile other functions while it runs) handed the typed pass's second
+inlining of a cached @overload IR the first one's already-renamed blocks, and the compile failed
+(tests/test_inline_copy.py keeps that case). The patch is process-wide: other Numba code in the
+process (another add-on in the same Blender) gets the same IR faster. It relies on Numba's global
+compiler lock: one inlining at a time.
 """
 import copy
 import functools
@@ -36,7 +40,7 @@ class _ScopeSharingCopy:
     """Stands in for the `copy` module inside numba.core.inline_closurecall."""
 
     def __init__(self):
-        self.memos = None  # scope id -> deepcopy memo, while an inline_function runs
+        self.memos = None  # scope id -> deepcopy memo, while an inline_ir runs
 
     def deepcopy(self, value, memo=None):
         scope = getattr(value, "scope", None)
@@ -52,14 +56,14 @@ class _ScopeSharingCopy:
 _SHIM = _ScopeSharingCopy()
 
 
-def _sharing_scope_copies(inline_function):
-    """A fresh set of memos for each inlining; a callee's own inlinings (compiling it to IR inlines
-    its callees first) nest, and get theirs."""
-    @functools.wraps(inline_function)
+def _sharing_scope_copies(inline_ir):
+    """Fresh memos for each inlining; an inlining that compiles other functions (the typed pass
+    types the inlined body) nests, and they get theirs."""
+    @functools.wraps(inline_ir)
     def wrapped(self, *args, **kwargs):
         outer, _SHIM.memos = _SHIM.memos, {}
         try:
-            return inline_function(self, *args, **kwargs)
+            return inline_ir(self, *args, **kwargs)
         finally:
             _SHIM.memos = outer
 
@@ -71,8 +75,8 @@ def install() -> None:
     """Idempotent; must run before core's kernels compile (their first call), not before decoration."""
     inline_closurecall.copy = _SHIM
     worker = inline_closurecall.InlineWorker
-    if not getattr(worker.inline_function, "kd_preview_scope_sharing", False):
-        worker.inline_function = _sharing_scope_copies(worker.inline_function)
+    if not getattr(worker.inline_ir, "kd_preview_scope_sharing", False):
+        worker.inline_ir = _sharing_scope_copies(worker.inline_ir)
 
 
 install()

@@ -1,5 +1,6 @@
-"""Numba's inliner with core's scope-sharing copy (core/inline_copy.py) compiles a kernel of nested
-inline="always" functions to the same LLVM IR as Numba's own, copying far fewer variables."""
+"""Numba's inliner with core's scope-sharing copy (core/inline_copy.py) compiles to the same LLVM IR as
+Numba's own: a kernel of nested inline="always" functions (copying far fewer variables), and an
+@overload(inline="always") inlined twice in a function compiled during another inlining."""
 import json
 
 import pytest
@@ -15,7 +16,7 @@ from numba import njit
 from numba.core import inline_closurecall, ir
 if {patched}:
     import core.inline_copy  # installs itself
-    assert inline_closurecall.InlineWorker.inline_function.kd_preview_scope_sharing
+    assert inline_closurecall.InlineWorker.inline_ir.kd_preview_scope_sharing
 copies = [0]
 numba_var_copy = ir.Var.__deepcopy__
 def counting_var_copy(self, memo):
@@ -62,8 +63,45 @@ print(json.dumps({{"llvm": llvm, "copies": copies[0], "result": result}}))
 """
 
 
-def _compile(patched: bool) -> dict:
-    proc = run_python(KERNEL.format(patched=patched), env={"NUMBA_DISABLE_JIT": None})
+# The outside review's case: the typed pass inlines a cached @overload IR twice into g, which compiles
+# while f is being inlined (isinstance makes the untyped inliner type f's body). Memos kept across that
+# whole inlining handed the second inlining the first one's renamed blocks: the compile failed.
+TYPED_TWICE = KERNEL[:KERNEL.index("@njit(inline=\"always\")")] + """
+from numba.extending import overload
+
+def distance(a, b):
+    pass
+
+@overload(distance, inline="always")
+def distance_impl(a, b):
+    def impl(a, b):
+        if a > b:
+            return a - b
+        return b - a + 1
+    return impl
+
+@njit
+def g(x):
+    return distance(x, x + 3) + distance(x + 7, x) * 10
+
+@njit(inline="always")
+def f(x):
+    if isinstance(x, int):
+        return g(x) + g(4)
+    return g(x) + g(4) + 1
+
+@njit
+def kernel(x):
+    return f(x)
+
+result = kernel(5)
+llvm = "\\n".join(kernel.inspect_llvm().values()) + "\\n".join(g.inspect_llvm().values())
+print(json.dumps({{"llvm": llvm, "copies": copies[0], "result": result}}))
+"""
+
+
+def _compile(patched: bool, script: str = KERNEL) -> dict:
+    proc = run_python(script.format(patched=patched), env={"NUMBA_DISABLE_JIT": None})
     assert proc.returncode == 0, proc.stderr[-3000:]
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
@@ -95,3 +133,9 @@ def test_scope_sharing_copy_compiles_the_same_code_with_fewer_copies():
     assert shared["result"] == numba_own["result"]
     # Numba's own copies each block's scope: at least one Var copy per block and variable
     assert shared["copies"] * 3 < numba_own["copies"], (shared["copies"], numba_own["copies"])
+
+
+def test_overload_inlined_twice_during_another_inlining_compiles_the_same():
+    numba_own, shared = _compile(False, TYPED_TWICE), _compile(True, TYPED_TWICE)
+    assert numba_own["result"] == shared["result"] == (4 + 70) + (4 + 70)  # g(5) + g(4)
+    assert shared["llvm"] == numba_own["llvm"]
