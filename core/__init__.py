@@ -35,7 +35,7 @@ Denoising (edge-avoiding à-trous, variance-guided; the raw estimate stays the d
     denoise_pixels(width, height, pixels, points, normals, sums, sq_sums, counts) -> (H, W, 4) float32
 """
 from . import kernel_cache  # first: kernels are keyed by all of core's sources when decorated
-from . import inline_copy  # noqa: F401  (before any kernel compiles: halves Numba's inlining time)
+from . import inline_copy  # noqa: F401  (before any kernel compiles: halves a cold compile)
 from .build import build_kdtree
 from .camera import Camera
 from .denoise import denoise_pixels

@@ -7,9 +7,9 @@ import pytest
 
 from tests.addon_support import run_python
 
-# Three levels of inlined functions with loops and branches (many blocks, many variables), compiled
-# without a cache in a fresh process; prints the LLVM IR, the number of Var deep copies and a result.
-KERNEL = """
+# Compiled without a cache in a fresh process, with or without the patch; each kernel script ends by
+# printing its LLVM IR, the number of Var deep copies and a result.
+PREAMBLE = """
 import json
 import numpy as np
 from numba import njit
@@ -23,7 +23,10 @@ def counting_var_copy(self, memo):
     copies[0] += 1
     return numba_var_copy(self, memo)
 ir.Var.__deepcopy__ = counting_var_copy
+"""
 
+# Three levels of inlined functions with loops and branches (many blocks, many variables).
+KERNEL = PREAMBLE + """
 @njit(inline="always")
 def clamp(x, lo, hi):
     if x < lo:
@@ -66,7 +69,7 @@ print(json.dumps({{"llvm": llvm, "copies": copies[0], "result": result}}))
 # The outside review's case: the typed pass inlines a cached @overload IR twice into g, which compiles
 # while f is being inlined (isinstance makes the untyped inliner type f's body). Memos kept across that
 # whole inlining handed the second inlining the first one's renamed blocks: the compile failed.
-TYPED_TWICE = KERNEL[:KERNEL.index("@njit(inline=\"always\")")] + """
+TYPED_TWICE = PREAMBLE + """
 from numba.extending import overload
 
 def distance(a, b):
