@@ -38,10 +38,18 @@ Render visibility (the viewport depsgraph also holds render-hidden objects)
       each pick among the render-visible members in a render, among the
       viewport-enabled ones in the viewport: where the two differ the preview
       cannot reproduce the render's pick, and a warning says so.
-    * An object that instances things (particles, vertex/face/collection
-      instancing) is left out itself when ``show_instancer_for_render`` is off.
-      Not handled: that flag on a geometry-nodes object whose output holds
-      instances (the realized part is always kept).
+    * Show Instancer: an object that instances things (particles,
+      vertex/face/collection instancing, geometry nodes whose output holds
+      instances) is left out itself when ``show_instancer_for_render`` is off
+      (Blender's BKE_object_visibility in render mode). ``is_instancer`` is
+      False for a geometry-nodes carrier, so a carrier's own entry is dropped
+      once the walk has seen it instance something (outside review: Cycles hid
+      such a plate, the preview showed it). The viewport's flag
+      (``show_instancer_for_viewport``) is the one the viewport depsgraph
+      applies: with it off and the render's on, the depsgraph yields the
+      instances but not the object itself, so its evaluated mesh is read
+      from ``evaluated_get`` (before: left out, with a warning that wrongly
+      called it hidden).
     * Ray visibility: an object with ``visible_camera`` False *and*
       ``visible_shadow`` False is left out: it can neither be seen nor occlude.
       Otherwise each Instance carries the two flags (``camera``, ``shadow``),
@@ -537,15 +545,61 @@ def extract_scene(depsgraph: bpy.types.Depsgraph | None = None) -> ExtractedScen
     vis = _Visibility(depsgraph)
     walker = _EntryReader(vis)
     instances = [r for r in map(walker.read, depsgraph.object_instances) if r is not None]
+    instances = walker.without_hidden_carriers(instances)
+    shown = _instancers_hidden_in_viewport_only(depsgraph, vis, walker.instanced_by)
+    instances += [r for r in map(walker.read, (_SelfEntry(ob.evaluated_get(depsgraph)) for ob in shown))
+                  if r is not None]
     return ExtractedScene(
         geometries=walker.geometries.geometries,
         instances=instances,
-        warnings=(walker.geometries.warnings + list(walker.non_finite_placements.values())
-                  + list(walker.not_triangles.values())
+        warnings=(_unused_layer_warnings(depsgraph) + walker.geometries.warnings
+                  + list(walker.non_finite_placements.values()) + list(walker.not_triangles.values())
                   + left_out_warnings(depsgraph, vis, walker.instanced_by)),
         extract_ms=(time.perf_counter() - t0) * 1e3,
         frame=depsgraph.scene.frame_current,
     )
+
+
+@dataclass(frozen=True)
+class _SelfEntry:
+    """An object's own entry, made up where the viewport depsgraph yields none (the attributes
+    _EntryReader.read takes from a DepsgraphObjectInstance)."""
+
+    object: bpy.types.Object  # the evaluated object
+    is_instance: bool = False
+    parent: None = None
+
+    @property
+    def matrix_world(self):
+        return self.object.matrix_world
+
+
+def _instancers_hidden_in_viewport_only(depsgraph, vis: _Visibility, instanced_by: dict[int, set[int]]) -> list:
+    """Render-visible mesh objects with Show Instancer on for renders that the viewport depsgraph
+    yields no entry of only because their Show Instancer for the viewport is off."""
+    evaluated = {ob.original.as_pointer() for ob in depsgraph.objects}
+    return [ob for ob in _rendered_layers_objects(depsgraph)
+            if ob.type == "MESH" and ob.show_instancer_for_render and ob.as_pointer() not in evaluated
+            and _self_hidden_by_viewport_flag(ob, depsgraph, instanced_by) and vis.scene_object(ob)]
+
+
+def _self_hidden_by_viewport_flag(ob, depsgraph, instanced_by: dict[int, set[int]]) -> bool:
+    """For an object the viewport depsgraph yields no entry of: whether only its Show Instancer for
+    the viewport hides it, i.e. the flag is off and the viewport shows the object (it instanced
+    something this frame, which a hidden object does not, or it is visible in the view layer)."""
+    return not ob.show_instancer_for_viewport and (
+        ob.as_pointer() in instanced_by or ob.visible_get(view_layer=depsgraph.view_layer))
+
+
+def _unused_layer_warnings(depsgraph) -> list[str]:
+    """The preview renders the window's view layer (or the command line's --scene's render layer);
+    a final render writes only the layers enabled for rendering (outside review: a disabled window
+    layer rendered without a word)."""
+    layer = depsgraph.view_layer
+    if layer.use:
+        return []
+    return [f"view layer '{layer.name}' is not enabled for rendering (Use for Rendering off): the preview "
+            "renders it, a final render writes only the enabled layers"]
 
 
 # Object types whose evaluated geometry is a mesh the preview reads, and those Cycles renders that
@@ -563,12 +617,16 @@ def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility, instance
     evaluate them) or not triangles, collection instancers hidden there (their instances go with
     them), members of collections that instancers, geometry nodes or particles render whole, disabled
     in viewports (`instanced_by`: the original objects the depsgraph instanced, by original
-    instancer), and hair particles drawn as strands."""
+    instancer), and hair particles drawn as strands. An object whose Show Instancer for the viewport
+    alone keeps it out of the depsgraph's entries is not hidden: it is read anyway when a render
+    shows it (_instancers_hidden_in_viewport_only), and its instances are yielded."""
     evaluated = {ob.original.as_pointer() for ob in depsgraph.objects}
     warnings = []
     instancers = {}
     for ob in _rendered_layers_objects(depsgraph):
         kind = ob.type
+        if ob.as_pointer() not in evaluated and _self_hidden_by_viewport_flag(ob, depsgraph, instanced_by):
+            evaluated.add(ob.as_pointer())
         if kind in TRIANGLE_TYPES and ob.as_pointer() in evaluated:
             if len(ob.particle_systems):
                 warnings += _strand_warnings(ob, vis) + _pick_warnings(ob, vis)
@@ -763,6 +821,7 @@ class _EntryReader:
         self.instanced_by: dict[int, set[int]] = {}  # instancer (original) -> the originals it instanced
         self.not_triangles: dict[tuple[str, str | None], str] = {}
         self.non_finite_placements: dict[tuple[str, str | None], str] = {}  # one warning each
+        self._own_entries_hidden_if_instancing: list[tuple[int, Instance]] = []
 
     def read(self, inst) -> Instance | None:
         """Record for one entry, or None to skip it. Copies everything out at
@@ -786,7 +845,7 @@ class _EntryReader:
         key = self.geometries.get(ob, name)
         if key is None:
             return None
-        return Instance(
+        record = Instance(
             geometry_key=key,
             matrix_world=matrix,
             name=name,
@@ -796,6 +855,16 @@ class _EntryReader:
             shadow=shadow,
             holdout=holdout,
         )
+        if parent is None and not ob.original.show_instancer_for_render:
+            self._own_entries_hidden_if_instancing.append((ob.original.as_pointer(), record))
+        return record
+
+    def without_hidden_carriers(self, records: list[Instance]) -> list[Instance]:
+        """`records` without the own entries of objects whose Show Instancer for renders is off and
+        that instanced something in this walk: geometry-nodes carriers, which is_instancer does not
+        name (_instancer_hides_self), and, whatever the order of the walk, after their instances."""
+        hidden = {id(r) for pointer, r in self._own_entries_hidden_if_instancing if pointer in self.instanced_by}
+        return [r for r in records if id(r) not in hidden] if hidden else records
 
     def _note_not_triangles(self, ob, parent) -> None:
         """Warn once per object and instancer about render-visible geometry that is not triangles

@@ -601,6 +601,66 @@ def test_a_child_of_a_vertex_or_face_instancing_parent_shows_only_as_its_instanc
     assert all(i.is_instance and i.instancer == "Parent" for i in result.instances)
 
 
+def _plate_and_instances_group(source):
+    """Geometry nodes joining the input mesh with an instance of object `source` on each of its points."""
+    group = bpy.data.node_groups.new("PlateAndInstances", "GeometryNodeTree")
+    group.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    group.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    nodes, links = group.nodes, group.links
+    given, out = nodes.new("NodeGroupInput"), nodes.new("NodeGroupOutput")
+    on_points, info, join = (nodes.new(kind) for kind in ("GeometryNodeInstanceOnPoints", "GeometryNodeObjectInfo",
+                                                           "GeometryNodeJoinGeometry"))
+    info.inputs["Object"].default_value = source
+    links.new(given.outputs[0], on_points.inputs["Points"])
+    links.new(info.outputs["Geometry"], on_points.inputs["Instance"])
+    links.new(on_points.outputs["Instances"], join.inputs[0])
+    links.new(given.outputs[0], join.inputs[0])
+    links.new(join.outputs[0], out.inputs[0])
+    return group
+
+
+@pytest.mark.parametrize("kind", ["NODES", "FACES"])
+@pytest.mark.parametrize("viewport, render", [(True, True), (True, False), (False, True), (False, False)])
+def test_show_instancer_for_render_alone_decides_whether_an_instancer_shows_itself(scene, kind, viewport, render):
+    """Blender's rule for a final render (BKE_object_visibility, render mode): an object that instances
+    things shows itself iff Show Instancer > Render is on; the viewport's flag, which the viewport
+    depsgraph applies, changes nothing. Outside review against Cycles: a geometry-nodes carrier
+    (is_instancer False) with Render off still showed its own plate, and an instancer with Viewport off
+    and Render on was left out with a warning calling it hidden in the viewport."""
+    plate = scenes.add_mesh("Plate", [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)], [(0, 1, 2, 3)],
+                            location=(0, 0, 2))
+    cube = scenes.add_cube("Cube", scale=0.2, location=(0, 0, 2))
+    if kind == "NODES":  # a cube on each of the plate's 4 corners; the source itself is not rendered
+        cube.location, cube.hide_render = (50, 0, 0), True
+        plate.modifiers.new("GN", "NODES").node_group = _plate_and_instances_group(cube)
+    else:  # one cube on the plate's one face
+        plate.instance_type, cube.parent = "FACES", plate
+    plate.show_instancer_for_viewport, plate.show_instancer_for_render = viewport, render
+    result = extract_scene()
+    copies = 4 if kind == "NODES" else 1
+    assert sum(i.is_instance and i.instancer == "Plate" for i in result.instances) == copies
+    own = [k for k, i in enumerate(result.instances) if not i.is_instance]
+    assert [result.instances[k].name for k in own] == (["Plate"] if render else [])
+    assert result.warnings == []
+    if render:
+        plate_triangles = result.world_triangles()[result.triangle_object_ids() == own[0]]
+        assert len(plate_triangles) == 2
+        lo, hi = bounds(plate_triangles)
+        np.testing.assert_allclose(lo, (0, 0, 2), atol=1e-6)
+        np.testing.assert_allclose(hi, (1, 1, 2), atol=1e-6)
+
+
+def test_a_view_layer_not_enabled_for_rendering_is_named(scene):
+    """Outside review: the preview renders the window's view layer; a final render writes only the
+    layers enabled for rendering, so a disabled one gets a warning (and renders as before)."""
+    scenes.add_cube("Box")
+    bpy.context.view_layer.use = False
+    result = extract_scene()
+    assert result.object_names == ["Box"]
+    assert result.warnings == [f"view layer '{bpy.context.view_layer.name}' is not enabled for rendering (Use for "
+                               "Rendering off): the preview renders it, a final render writes only the enabled layers"]
+
+
 @pytest.mark.parametrize("instance_type", ["VERTS", "FACES"])
 def test_a_child_disabled_in_renders_is_not_instanced_on_vertices_or_faces(scene, instance_type):
     """Outside QA against Cycles: Blender instances the children that the depsgraph holds, and a render's
