@@ -46,7 +46,7 @@ def as_triangles(triangles):
     arr = np.asarray(triangles)
     if arr.ndim != 3 or arr.shape[1:] != (3, 3):
         raise ValueError(f"triangles must have shape (N, 3, 3) (N triangles, 3 vertices, xyz), got {arr.shape}")
-    if not _is_real(arr.dtype):
+    if not is_real_dtype(arr.dtype):
         raise ValueError(f"triangles must be real numbers (float32 or float64; integers are taken too), got dtype "
                          f"{arr.dtype}")
     if len(arr) and not np.isfinite(arr).all():
@@ -105,7 +105,7 @@ def as_ray_limits(tmin, tmax, count):
     return lo, hi
 
 
-def _is_real(dtype):
+def is_real_dtype(dtype):
     """Whether an array of this dtype holds real numbers (floats or integers; not bool, complex, str, object)."""
     return np.issubdtype(dtype, np.floating) or np.issubdtype(dtype, np.integer)
 
@@ -114,7 +114,7 @@ def _as_points(name, values):
     arr = np.asarray(values)
     if arr.ndim != 2 or arr.shape[1] != 3:
         raise ValueError(f"{name} must have shape (R, 3), got {arr.shape}")
-    if not _is_real(arr.dtype):
+    if not is_real_dtype(arr.dtype):
         raise ValueError(f"{name} must be a float array, got dtype {arr.dtype}")
     arr = np.ascontiguousarray(arr, dtype=np.float64)
     finite = np.isfinite(arr).all(axis=1)
@@ -127,7 +127,7 @@ def _as_points(name, values):
 def _as_limit(name, value, count):
     try:
         arr = np.asarray(value)
-        if not _is_real(arr.dtype):
+        if not is_real_dtype(arr.dtype):
             raise TypeError
         arr = arr.astype(np.float64)
     except (TypeError, ValueError):  # None or a string would become NaN or a silently parsed number

@@ -4,7 +4,7 @@
 numbers the Numba kernels see.
 """
 from dataclasses import dataclass, asdict
-from math import log2
+from math import isfinite, log2
 from typing import NamedTuple, Optional
 
 import numpy as np
@@ -241,8 +241,8 @@ def _check_int(name, value, low, high):
 
 
 def _check_float(name, value, low, high, low_open=False, high_open=False):
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or value != value:
-        raise ValueError(f"build option {name!r} must be a number, got {value!r}")
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not isfinite(value):
+        raise ValueError(f"build option {name!r} must be a finite number, got {value!r}")
     if low is not None and (value < low or (low_open and value == low)):
         raise ValueError(f"build option {name!r} must be {'>' if low_open else '>='} {low}, got {value}")
     if high is not None and (value > high or (high_open and value == high)):

@@ -31,7 +31,7 @@ from typing import Hashable, NamedTuple
 import numpy as np
 
 from .build import build_kdtree
-from .inputs import FLOAT32_MAX, first_row_beyond_float32
+from .inputs import FLOAT32_MAX, first_row_beyond_float32, is_real_dtype
 from .instance_signature import instance_signature, mesh_digest
 from .options import make_options
 from .ray_visibility import ALL_RAYS, as_visibility, stops_rays
@@ -132,6 +132,10 @@ class SceneBuilder:
             raise ValueError(f"mesh keys must be hashable, got {[k for k in keys if not _hashable(k)][0]!r}") from None
         if not unique:
             raise ValueError("mesh keys must be unique within a frame")
+        unhashable = [m.key for m in meshes if not _hashable(m.fingerprint)]
+        if unhashable:  # compared with last frame's: an array failed one frame late, naming no mesh
+            raise ValueError(f"mesh {unhashable[0]!r}: fingerprint must be hashable (e.g. an int such as a CRC of "
+                             f"the vertex and index bytes), got {type(meshes[keys.index(unhashable[0])].fingerprint).__name__}")
         for m in meshes:
             _check_mesh(m)
         if rays is not None:
@@ -147,6 +151,8 @@ class SceneBuilder:
         soup = np.zeros(len(mesh_of), bool)
         soup[shown] = plan_soup(self.layout, np.array([len(m.triangles) for m in meshes], np.int64), bounds,
                                 mesh_of[shown], o2w[shown], np.array([k in self._dynamic for k in keys], bool))
+        if self.options["lazy"]:
+            soup[shown] = self._lazy_plan(soup[shown], mesh_of[shown])
         if self.options["lazy"] and len(set(visibility[soup].tolist())) > 1:
             raise ValueError("a lazy build has to be the scene's one tree, so the instances merged into it must stop "
                              f"the same rays: got visibilities {sorted(set(visibility[soup].tolist()))}")
@@ -185,6 +191,19 @@ class SceneBuilder:
         report = BuildReport(rebuilt, reused, len(trees) - len(groups), int(soup.sum()), soup_rebuilt,
                              (perf_counter() - start) * 1e3, top_ms)
         return scene, report
+
+    def _lazy_plan(self, soup, mesh_of):
+        """A lazy build has to be the scene's one tree (build_two_level takes no lazy tree among several
+        meshes): one mesh kept apart (placed by any number of instances) or one soup. Where the plan
+        gives more, "auto" merges everything, as "flat" does; "two_level" is refused, naming the meshes
+        (outside review: "auto" failed naming an internal tree index as "mesh 0")."""
+        apart = sorted(set(mesh_of[~soup].tolist()))
+        if len(apart) + bool(soup.any()) <= 1:
+            return soup
+        if self.layout == "auto":
+            return np.ones_like(soup)
+        raise ValueError(f"lazy=True needs one tree, but layout 'two_level' keeps meshes {apart} apart: use layout "
+                         "'auto' or 'flat' (which merge them into one lazy tree), or build eagerly")
 
     def _track_changes(self, meshes, mesh_of, o2w, visibility):
         """Mark keys whose geometry changed, or whose single instance moved or changed visibility (which
@@ -295,6 +314,9 @@ def _check_mesh(mesh):
         if not (len(shape) == 2 and shape[1] == 3) and not (name == "triangles" and np.size(a) == 0):
             raise ValueError(f"mesh {mesh.key!r}: {name} must have shape (N, 3), got {shape}")
     tris, verts = np.asarray(mesh.triangles), np.asarray(mesh.vertices)
+    if not is_real_dtype(verts.dtype):  # as build_kdtree's triangles (outside review: complex parts were dropped)
+        raise ValueError(f"mesh {mesh.key!r}: vertices must be real numbers (float32 or float64; integers are taken "
+                         f"too), got dtype {verts.dtype}")
     if tris.size and tris.dtype.kind not in "iu":
         raise ValueError(f"mesh {mesh.key!r}: triangles must be integer vertex indices, got dtype {tris.dtype}")
     if tris.size and (tris.min() < 0 or tris.max() >= len(verts)):

@@ -145,6 +145,10 @@ def test_default_max_depth_follows_seed_003():
     ({"rays": 0}, "rays"),
     ({"rays": 2.5}, "rays"),
     ({"rays": True}, "rays"),
+    ({"traversal_cost": float("inf")}, "'traversal_cost' must be a finite number, got inf"),
+    ({"cost_ratio": float("inf")}, "'cost_ratio' must be a finite number"),
+    ({"intersection_cost": float("nan")}, "'intersection_cost' must be a finite number"),
+    ({"duplication_budget": float("inf")}, "'duplication_budget' must be a finite number"),
 ])
 def test_bad_options_are_named(bad, message):
     with pytest.raises(ValueError, match=message):
