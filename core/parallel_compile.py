@@ -1,6 +1,6 @@
 """A first render's JIT compile on two cores: a helper process compiles the rendering kernels into
 Numba's on-disk cache while this process builds the tree (compiling the builder's kernels) and then
-makes the camera pass (compiling the camera rays' traversal and surface_frames).
+makes the camera pass (compiling the camera rays' traversal; their hit frames load the helper's).
 
 Why: with an empty cache a first render compiles every kernel, one at a time, in one process: 135 s
 for the demo's first frame on a 2-core AVX2 host (`benchmarks/bench_compile.py --helper off`,
@@ -8,14 +8,18 @@ for the demo's first frame on a 2-core AVX2 host (`benchmarks/bench_compile.py -
 inlined traversal, sampler and light sampling), ~20 s the camera rays' traversal and ~11 s
 surface_frames. All go to the same cache (cache=True), so a second process can compile one set while
 this one compiles the others; the render then loads what the helper wrote. The split: the helper
-compiles the sampling kernel, the image and the denoiser if the render will filter; this process
-compiles the builder's kernels, then the camera pass (the camera rays' traversal and surface_frames).
-Measured (`bench_compile.py --helper both`, idle host, 2026-11-27): first frame 82 s against 135 s in
-one process; this process compiled 82 s of it, so the frame no longer waits for the helper. Before
-Numba's inliner copied a callee's scope once (inline_copy.py) the sampling kernel took ~82 s and the
-split measured 86 s against 187 s; the earlier split, in which the helper also traced the camera
-rays, made the first frame wait 117 s for it. Before that split, the helper rendered everything,
-surface frames included (98 s against 138 s).
+compiles surface_frames (the camera hits' frames, first), the sampling kernel, the image and the
+denoiser if the render will filter; this process compiles the builder's kernels, then the camera
+rays' traversal, and by then surface_frames is in the cache. This process still sets the first frame
+(the helper's ~55 s end first). Measured (`bench_compile.py --helper on --runs 1`, three runs each,
+alternating with the split before, in which this process also compiled surface_frames, idle host,
+2026-11-27): first frame 76.6 / 80.8 / 69.9 s against 97.5 / 79.6 / 73.7 s (paired 0.79x, 1.02x,
+0.95x); this process's compile time 77 / 82 / 70 s against 97 / 79 / 73 s, surface_frames' 10-14 s
+gone from it but the rest slower while the helper shares the two cores. Earlier: 82 s against 135 s
+in one process (the split before); before Numba's inliner copied a callee's scope once
+(inline_copy.py) the sampling kernel took ~82 s and the split measured 86 s against 187 s; a split
+in which the helper also traced the camera rays made the first frame wait 117 s for it; before that,
+the helper rendered everything (98 s against 138 s).
 
 The two sets do not overlap, but both processes may still compile one function: any kernel this
 process needs before the helper has saved it, it compiles as well.
@@ -45,7 +49,7 @@ from .layout import LEAF
 from .lights import Light
 from .options import BuildOptions
 from .render import PreviewRender
-from .render_kernels import add_samples
+from .render_kernels import add_samples, surface_frames
 from .two_level import as_two_level
 
 
@@ -86,29 +90,35 @@ def _hand_made_render(render_class):
 
 def compile_camera_pass() -> None:
     """The camera pass, run here after the build: a PreviewRender's constructor traces the camera rays
-    and makes their hit frames (surface_frames), compiling both here, and samples nothing."""
+    (compiling their traversal here) and makes their hit frames (surface_frames, which the helper
+    compiles first: loaded here when it has saved it, else compiled here too), and samples nothing."""
     _hand_made_render(PreviewRender)
 
 
 class _SamplingOnly(PreviewRender):
-    """A render that makes up its camera hits (every pixel sees the square's centre from above) without
-    tracing camera rays, so neither their traversal nor surface_frames compiles in the helper. The arrays
-    have the real pass's types (int64 pixel indices, float64 depths and (M, 3) frames, all C-contiguous
-    and writable): Numba compiles one version per type signature, and the real render must find this
-    one in the cache."""
+    """A render that makes up its camera hits without tracing camera rays, so their traversal does not
+    compile in the helper: the camera looks straight down at the square's plane z = 0, so every ray meets
+    it at t = 3 / -d_z, and the hit frames come from the real surface_frames (on the square's first
+    triangle, whose plane it is), which compiles here. The arrays have the real pass's types (int32
+    instance and triangle indices, int64 pixel indices, float64 rays, depths and (M, 3) frames, all
+    C-contiguous and writable): Numba compiles one version per type signature, and the real render must
+    find this one in the cache."""
 
     def _camera_hits(self, traced):
-        pixels = traced.copy()
-        points, normals = np.zeros((len(pixels), 3)), np.zeros((len(pixels), 3))
-        normals[:, 2] = 1.0
-        starts = points + 1e-6 * normals
-        return pixels, np.full(len(pixels), 3.0), points, normals, starts
+        origins, directions, _, _ = self.camera.rays(self.width, self.height, traced)
+        t = -origins[:, 2] / directions[:, 2]
+        first = np.zeros(len(traced), np.int32)
+        hit = np.arange(len(traced), dtype=np.int64)
+        points, normals, starts = np.empty((len(hit), 3)), np.empty((len(hit), 3)), np.empty((len(hit), 3))
+        surface_frames(self.scene.arrays, origins, directions, t, first, first.copy(), hit, points, normals, starts)
+        return traced[hit], t[hit], points, normals, starts
 
 
 def compile_rendering_kernels(denoise=False) -> None:
-    """What the helper runs: AO and shadow samples of the hand-made tree (AO rays that hit and miss,
-    shadow rays), the image, and the denoiser if asked. Resolutions, modes and sample counts are
-    runtime values, so this compiles what every render uses but the camera pass."""
+    """What the helper runs: the camera hits' frames, AO and shadow samples of the hand-made tree (AO
+    rays that hit and miss, shadow rays), the image, and the denoiser if asked. Resolutions, modes and
+    sample counts are runtime values, so this compiles what every render uses but the camera rays'
+    traversal."""
     render = _hand_made_render(_SamplingOnly)
     render.step(render.target_samples)
     render.image(denoise=denoise)
@@ -123,7 +133,7 @@ def rendering_kernels_alongside(denoise=False):
     """Compile the rendering kernels in a helper process while the `with` block runs (a build), when the
     cache does not hold the sampling kernel yet and HELPER_SWITCH is not "0" (`denoise`: the render
     will filter its image, so the helper compiles the denoiser too); yields the helper or None. On
-    leaving, run the camera pass here (compiling its rays' traversal and hit frames), then wait for
+    leaving, run the camera pass here (compiling its rays' traversal), then wait for
     the helper (at most HELPER_TIMEOUT); if the block raised, end the helper at once. Either way no
     helper runs afterwards."""
     helper = None

@@ -243,6 +243,31 @@ def test_the_two_sides_compile_what_a_real_render_runs():
     assert {k: len(k.signatures) for k in kernels} == before
 
 
+SIDES = """
+import sys
+sys.path.insert(0, {root!r})
+from core import instance_traversal, parallel_compile, render_kernels
+parallel_compile.compile_scene_wrapping()
+getattr(parallel_compile, sys.argv[1])()
+print(*(len(k.signatures) for k in (render_kernels.add_samples, render_kernels.surface_frames,
+                                     instance_traversal.trace_scene_rays)))
+"""
+
+
+def test_the_helper_makes_the_hit_frames_and_traces_no_camera_ray():
+    """The split (module docstring): the helper's side runs the sampling kernel and surface_frames but
+    not the camera rays' traversal, which this process compiles after the build; the camera pass runs
+    the traversal and surface_frames and no sampling. Each side in a fresh process (loading what this
+    run's cache holds): (add_samples, surface_frames, trace_scene_rays) versions it ran."""
+    script = SIDES.format(root=str(ROOT))
+    ran = {}
+    for side in ("compile_rendering_kernels", "compile_camera_pass"):
+        run = subprocess.run([sys.executable, "-c", script, side], capture_output=True, text=True, timeout=900)
+        assert run.returncode == 0, run.stderr
+        ran[side] = [int(n) for n in run.stdout.split()[-3:]]
+    assert ran == {"compile_rendering_kernels": [1, 1, 0], "compile_camera_pass": [0, 1, 1]}
+
+
 def test_the_hand_made_tree_renders_like_a_built_one():
     """The helper's tree is a valid KdTree: its render equals one of a built tree over the same square."""
     import numpy as np
