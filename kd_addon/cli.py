@@ -29,7 +29,7 @@ from types import SimpleNamespace
 import bpy
 
 from . import background, corelib, demo_scene, properties
-from .config import DEFAULTS, OUTPUT_FORMATS, SETTING_NAMES, make_config
+from .config import DEFAULTS, OUTPUT_FORMATS, SETTING_NAMES, SettingsError, make_config
 from .errors import Cancelled, PreviewError
 from .extract import render_view_layer
 from .operators import depsgraph_source
@@ -112,6 +112,8 @@ def load_scene(args) -> bpy.types.Scene:
         raise PreviewError(f"give a .blend file or --demo, not both (got {args.blend} and --demo)")
     if args.blend:
         path = Path(args.blend)
+        if path.is_dir():
+            raise PreviewError(f"{path} is a folder, not a .blend file")
         if not path.is_file():
             raise PreviewError(f"no such .blend file: {path}")
         try:
@@ -218,13 +220,14 @@ def run(args) -> int:
 def _run(args, cancelled) -> int:
     job = None
     try:
-        make_config(args)  # bad options fail before a file is opened
+        _check_options(args)  # bad options fail before a file is opened
         if not args.out.strip():
             raise PreviewError("--out is empty: give the folder to write the frames to")
         scene, layer_name = pick_scene(load_scene(args), args.scene)
         config = make_config(saved_settings_with_overrides(scene, args))
         frames = parse_frames(args.frames if args.frames is not None  # --frames "" is an error, not the default
                               else f"{scene.frame_start}-{scene.frame_end}:{max(1, scene.frame_step)}")
+        _note_frames_outside(scene, frames)
         job = SequenceJob(scene, config, frames, Path(args.out),
                           depsgraph_source(scene, scene.view_layers[layer_name]), on_frame=_print_row)
         print(f"KD Preview: scene '{scene.name}', {len(frames)} frame(s), mode {config.settings.mode}, "
@@ -244,6 +247,35 @@ def _run(args, cancelled) -> int:
         return 130
     _print_totals(job)
     return 0
+
+
+def _note_frames_outside(scene, frames: list[int]) -> None:
+    """Frames beyond the scene's range render as Blender would go to them; a note catches a typo
+    (outside review: --frames 100-102 on a 1-5 scene rendered without a word)."""
+    outside = [f for f in frames if not scene.frame_start <= f <= scene.frame_end]
+    if outside:
+        print(f"{COMMAND_ID}: note: {len(outside)} of the frames ({outside[0]}"
+              + (f" ... {outside[-1]}" if len(outside) > 1 else "")
+              + f") are outside scene '{scene.name}''s frame range {scene.frame_start}-{scene.frame_end}; "
+              "rendering them anyway", file=sys.stderr, flush=True)
+
+
+# Options whose flag is not the setting's name with dashes (build_parser's dest=).
+FLAG_OF_SETTING = {"resolution_percentage": "--resolution", "memory_limit_mb": "--memory-limit",
+                   "output_format": "--format"}
+
+
+def _check_options(args) -> None:
+    """The command line's own values (absent ones take the defaults here), checked before a file is
+    opened; an error names the flag typed, not only the setting behind it (outside review:
+    "--resolution 0" answered "resolution_percentage must be ...")."""
+    try:
+        make_config(args)
+    except SettingsError as error:
+        if error.setting is None:
+            raise
+        flag = FLAG_OF_SETTING.get(error.setting, "--" + error.setting.replace("_", "-"))
+        raise PreviewError(f"{flag}: {error}") from None
 
 
 def _run_claimed(job, cancelled) -> None:

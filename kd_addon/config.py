@@ -22,7 +22,12 @@ MAX_MEMORY_LIMIT_MB = 1 << 30  # 1 PiB, beyond any machine's memory; the panel's
 
 
 class SettingsError(PreviewError, ValueError):
-    """A setting is out of range; the message names it and the allowed values."""
+    """A setting is out of range; the message names it and the allowed values, `setting` its name
+    (None for a rule on several)."""
+
+    def __init__(self, message: str, setting: str | None = None):
+        super().__init__(message)
+        self.setting = setting
 
 
 @dataclass(frozen=True)
@@ -160,18 +165,18 @@ def _validate(s: Settings) -> None:
     _number("error_target", s.error_target, positive=False, note="0 = off")
     for name in ("rebuild_all", "lazy", "denoise"):
         if not isinstance(getattr(s, name), bool):
-            raise SettingsError(f"{name} must be True or False; got {getattr(s, name)!r}")
+            raise SettingsError(f"{name} must be True or False; got {getattr(s, name)!r}", name)
 
 
 def _choice(name, value, choices) -> None:
     if value not in choices:
-        raise SettingsError(f"{name} must be one of {', '.join(choices)}; got {value!r}")
+        raise SettingsError(f"{name} must be one of {', '.join(choices)}; got {value!r}", name)
 
 
 def _integer(name, value, low, high, note="") -> None:
     suffix = f" ({note})" if note else ""
     if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
-        raise SettingsError(f"{name} must be an integer from {low} to {high}{suffix}; got {value!r}")
+        raise SettingsError(f"{name} must be an integer from {low} to {high}{suffix}; got {value!r}", name)
 
 
 def _number(name, value, *, positive, note="") -> None:
@@ -180,7 +185,7 @@ def _number(name, value, *, positive, note="") -> None:
     if not ok:
         bound = "greater than 0" if positive else "0 or more"
         suffix = f" ({note})" if note else ""
-        raise SettingsError(f"{name} must be a finite number {bound}{suffix}; got {value!r}")
+        raise SettingsError(f"{name} must be a finite number {bound}{suffix}; got {value!r}", name)
 
 
 def frame_size(resolution_x: int, resolution_y: int, percentage: int) -> tuple[int, int]:

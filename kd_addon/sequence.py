@@ -51,12 +51,14 @@ FIRST_FRAME, LAST_FRAME = -1048574, 1048574
 def _parse_range(part: str) -> list[int]:
     match = _RANGE.match(part)
     if match is None:
-        raise PreviewError(f"bad frame range {part!r}: use N, A-B or A-B:STEP")
+        raise PreviewError(f"bad frame range {part!r}: use N, A-B or A-B:STEP, or a comma list of those")
     first = int(match.group(1))
     last = int(match.group(2)) if match.group(2) is not None else first
     stride = int(match.group(3) or 1)
-    if last < first or stride < 1:
-        raise PreviewError(f"bad frame range {part!r}: the end is before the start or the step is below 1")
+    if last < first:
+        raise PreviewError(f"bad frame range {part!r}: the end ({last}) is before the start ({first})")
+    if stride < 1:
+        raise PreviewError(f"bad frame range {part!r}: the step must be 1 or more, got {stride}")
     check_frames_in_range((first, last))
     return list(range(first, last + 1, stride))
 

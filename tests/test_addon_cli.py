@@ -142,11 +142,19 @@ def test_cli_takes_the_files_saved_settings_and_options_override_them(tmp_path, 
 
 
 @pytest.mark.parametrize("args, code, message", [
-    (["render", "--out", "X", "--frames", "5-2"], 1, "bad frame range '5-2'"),
+    (["render", "--out", "X", "--frames", "5-2"], 1, "bad frame range '5-2': the end (2) is before the start (5)"),
+    (["render", "--out", "X", "--frames", "1-5:0"], 1, "bad frame range '1-5:0': the step must be 1 or more, got 0"),
+    (["render", "--out", "X", "--frames", "1,x"], 1, "bad frame range 'x': use N, A-B or A-B:STEP, or a comma list"),
     (["render", "--out", "X", "--frames", ""], 1, "bad frame range '': no frames"),  # not the scene's range
-    (["render", "--out", "X", "--resolution", "0"], 1, "resolution_percentage must be an integer from 1 to 100"),
-    (["render", "--out", "X", "--mode", "normals"], 1, "mode must be one of ao, shadow, ao+shadow"),
+    # the flag typed, then the setting behind it (outside review: only the setting's name was given)
+    (["render", "--out", "X", "--resolution", "0"], 1,
+     "--resolution: resolution_percentage must be an integer from 1 to 100"),
+    (["render", "--out", "X", "--leaf-size", "0"], 1, "--leaf-size: leaf_size must be an integer from 1"),
+    (["render", "--out", "X", "--ao-distance", "-1"], 1, "--ao-distance: ao_distance must be a finite number"),
+    (["render", "--out", "X", "--memory-limit", "-1"], 1, "--memory-limit: memory_limit_mb must be an integer"),
+    (["render", "--out", "X", "--mode", "normals"], 1, "--mode: mode must be one of ao, shadow, ao+shadow"),
     (["render", "missing.blend", "--out", "X"], 1, "no such .blend file: missing.blend"),
+    (["render", ".", "--out", "X"], 1, ". is a folder, not a .blend file"),
     (["render", "scene.blend", "--demo", "--out", "X"], 1, "give a .blend file or --demo, not both"),
     (["render", "--frames", "1"], 2, "the following arguments are required: --out"),
     (["render", "--out", "X", "--samples", "many"], 2, "argument --samples: invalid int value"),
@@ -173,6 +181,24 @@ def test_scene_errors_exit_nonzero_with_the_message(tmp_path, capsys):
     assert cli.execute(["render", str(nothing), "--out", str(tmp_path / "o"), "--frames", "1"]) == 0
     assert "warning: frame 1: nothing to render at frame 1" in capsys.readouterr().err
     assert (tmp_path / "o" / "frame_0001.png").is_file()
+
+
+def test_frames_outside_the_scene_range_render_with_a_note(tmp_path, capsys):
+    """Outside review: --frames beyond the scene's range rendered without a word (a typo goes unseen);
+    they still render, as Blender goes to any frame, with a note naming them."""
+    floor_scene(40, 30)
+    scene = bpy.context.scene
+    scene.frame_start, scene.frame_end, name = 1, 5, scene.name  # the file's reload removes this scene
+    blend = tmp_path / "short.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    out = tmp_path / "o"
+    assert cli.execute(["render", str(blend), "--out", str(out), "--frames", "5-7", "--samples", "1"]) == 0
+    err = capsys.readouterr().err
+    assert (f"note: 2 of the frames (6 ... 7) are outside scene '{name}''s frame range 1-5; rendering them "
+            "anyway") in err
+    assert sorted(p.name for p in out.glob("*.png")) == ["frame_0005.png", "frame_0006.png", "frame_0007.png"]
+    assert cli.execute(["render", str(blend), "--out", str(out), "--frames", "2-3", "--samples", "1"]) == 0
+    assert "note:" not in capsys.readouterr().err
 
 
 def test_frames_with_nothing_visible_are_transparent_and_the_sequence_goes_on(tmp_path, capsys):
