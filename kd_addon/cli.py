@@ -280,11 +280,15 @@ def _check_options(args) -> None:
 
 def _run_claimed(job, cancelled) -> None:
     claim(job)
+    stopped_by = None
     try:
         run_job(job, cancelled)
+    except BaseException as error:  # noqa: B036  (a cancel too: the report says where and why it stopped)
+        stopped_by = error
+        raise
     finally:
         release(job)
-        job.close()
+        job.close(stopped_by)
 
 
 def _print_totals(job) -> None:

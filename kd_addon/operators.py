@@ -52,8 +52,8 @@ class _JobOperator:
         """Publish a finished job; return the message to report."""
         raise NotImplementedError
 
-    def cleanup(self, job) -> None:
-        """Called after success, cancel and failure alike."""
+    def cleanup(self, job, error) -> None:
+        """Called after success (error None), cancel and failure alike."""
 
     # -- synchronous ----------------------------------------------------------
 
@@ -180,7 +180,7 @@ class _JobOperator:
                 # frame handler, seeing no run, rendered that frame synchronously (598 ms of frozen UI in
                 # outside QA) although the preview already showed it; an edit made meanwhile is left to
                 # the edit timer, which renders it modal once the claim is released.
-                self.cleanup(job)
+                self.cleanup(job, error)
             finally:
                 release(job)
                 state.running = False
@@ -263,8 +263,8 @@ class KDPREVIEW_OT_render_animation(_JobOperator, bpy.types.Operator):
         return SequenceJob(scene, config, frames, output_folder(settings.output_dir),
                            depsgraph_source(scene, context.view_layer))
 
-    def cleanup(self, job) -> None:
-        job.close()
+    def cleanup(self, job, error) -> None:
+        job.close(error)
 
     def finish(self, context, job) -> str:
         last = job.results[-1].summary()

@@ -18,7 +18,7 @@ from pathlib import Path
 
 from . import background, output
 from .config import RenderConfig
-from .errors import PreviewError
+from .errors import Cancelled, PreviewError
 from .pipeline import FrameJob, FrameResult
 
 REPORT_NAME = "report.json"
@@ -122,6 +122,7 @@ class SequenceJob:
         self._t0 = time.perf_counter()
         self.report_path: Path | None = None
         self._reported = 0  # frames the last report written lists
+        self._stopped: dict | None = None  # what stopped an unfinished sequence (close), for its report
         self._next_report = 0.0  # perf_counter time before which _report_progress writes none
         self.totals: dict = {}
 
@@ -193,10 +194,15 @@ class SequenceJob:
         self.files.append(path)
         return path
 
-    def close(self) -> None:
+    def close(self, stopped_by: BaseException | None = None) -> None:
         """Put the scene back on the frame it was on (call on success, cancel and failure), and when
         the sequence stopped early, write report.json for the frames that were written, marked
-        incomplete (best effort: the error that stopped it is the one to report)."""
+        incomplete, with the frame it stopped at and why (`stopped_by`: the error or cancel that ended
+        it; outside review: the report said incomplete but not why). Best effort: the error that
+        stopped it is the one to report."""
+        if stopped_by is not None and len(self.results) < len(self.frames):
+            self._stopped = {"frame": self.frames[len(self.results)], "reason": stop_reason(stopped_by)}
+            self._reported = -1  # the report on disk does not say so yet
         if self.results and self._reported != len(self.results):  # stopped early, or the last report failed
             try:
                 self._write_report()
@@ -231,8 +237,15 @@ class SequenceJob:
     def _write_report(self) -> None:
         self.totals = summarize(self.results, (time.perf_counter() - self._t0) * 1e3)
         self.report_path = write_report(self.out_dir, self.scene_name(), self.config, self.results, self.files,
-                                        self.totals, len(self.frames))
+                                        self.totals, len(self.frames), self._stopped)
         self._reported = len(self.results)
+
+
+def stop_reason(error: BaseException) -> str:
+    """report.json's words for what ended a sequence early."""
+    if isinstance(error, (Cancelled, KeyboardInterrupt)):
+        return "cancelled"
+    return str(error) or type(error).__name__
 
 
 def summarize(results: list[FrameResult], wall_ms: float) -> dict:
@@ -249,13 +262,15 @@ def summarize(results: list[FrameResult], wall_ms: float) -> dict:
 
 
 def write_report(out_dir: Path, scene_name: str, config: RenderConfig, results: list[FrameResult],
-                 files: list[Path], totals: dict, frames_requested: int) -> Path:
+                 files: list[Path], totals: dict, frames_requested: int, stopped: dict | None = None) -> Path:
     """Write `report.json` (settings, one row per frame, totals) and return its path. `complete` is
-    False when fewer frames than requested were written (a cancelled or failed sequence)."""
+    False when fewer frames than requested were written (a cancelled or failed sequence, or one still
+    running); `stopped` ({"frame", "reason"}), when given, says where and why it ended."""
     first = results[0]
     report = {
         "scene": scene_name,
         "complete": len(results) == frames_requested,
+        **({"stopped": stopped} if stopped is not None else {}),
         "frames_requested": frames_requested,
         "resolution": [first.width, first.height],
         "settings": config.as_dict(),

@@ -27,6 +27,7 @@ import bpy  # noqa: E402
 
 from kd_addon import live_update, pipeline  # noqa: E402
 from kd_addon.config import make_config  # noqa: E402
+from kd_addon.errors import Cancelled, PreviewError  # noqa: E402
 from kd_addon.operators import KDPREVIEW_OT_render  # noqa: E402
 from kd_addon.output import IMAGE_NAME  # noqa: E402
 
@@ -224,6 +225,7 @@ def test_ctrl_c_stops_blenders_command_whose_sigint_handler_python_cannot_see(tm
     report = json.loads((out / "report.json").read_text())
     written = sorted(p.name for p in out.glob("frame_*.png"))
     assert report["complete"] is False and 1 <= len(report["frames"]) == len(written) < 200
+    assert report["stopped"] == {"frame": len(written) + 1, "reason": "cancelled"}
     assert f"interrupted; the {len(written)} frame(s) already written are kept" in err
 
 
@@ -293,7 +295,6 @@ def test_ctrl_c_outlives_an_interrupt_that_blender_swallows():
     a driver), so a KeyboardInterrupt landing there would let the render go on. The command line's
     SIGINT handler also sets a flag that the job loop polls: the job stops at its next tick."""
     from kd_addon import cli
-    from kd_addon.errors import Cancelled
     from kd_addon.pipeline import run_job
 
     before = signal.getsignal(signal.SIGINT)
@@ -343,16 +344,26 @@ def test_a_sequence_stopped_early_still_reports_the_frames_it_wrote(addon, tmp_p
     stopped = SequenceJob(scene, config, [1, 2, 3], tmp_path / "stopped", depsgraph)
     while len(stopped.results) < 1:
         stopped.tick()
-    stopped.close()  # what the command line and the operator do on cancel
+    stopped.close(Cancelled("cancelled"))  # what the command line and the operator do on cancel
     report = json.loads((tmp_path / "stopped" / "report.json").read_text())
     assert (report["complete"], report["frames_requested"], len(report["frames"])) == (False, 3, 1)
+    assert report["stopped"] == {"frame": 2, "reason": "cancelled"}  # outside review: it said not why
     assert report["frames"][0]["file"] == "frame_0001.png" and scene.frame_current == 1
+    failed = SequenceJob(scene, config, [4, 5, 6], tmp_path / "failed", depsgraph)
+    while len(failed.results) < 2:
+        failed.tick()
+    failed._report_progress()  # a report of these two frames already on disk: it must be rewritten
+    failed.close(PreviewError("could not write frame_0006.png: a folder is in the way"))
+    report = json.loads((tmp_path / "failed" / "report.json").read_text())
+    assert (report["complete"], len(report["frames"])) == (False, 2)
+    assert report["stopped"] == {"frame": 6, "reason": "could not write frame_0006.png: a folder is in the way"}
     finished = SequenceJob(scene, config, [1, 2], tmp_path / "finished", depsgraph)
     while not finished.tick():
         pass
     finished.close()
     report = json.loads((tmp_path / "finished" / "report.json").read_text())
     assert (report["complete"], report["frames_requested"], len(report["frames"])) == (True, 2, 2)
+    assert "stopped" not in report
 
 
 def test_a_sequence_stopped_before_its_first_frame_keeps_the_earlier_report(addon, tmp_path):  # noqa: F811
