@@ -256,7 +256,7 @@ def _note_frames_outside(scene, frames: list[int]) -> None:
     if outside:
         print(f"{COMMAND_ID}: note: {len(outside)} of the frames ({outside[0]}"
               + (f" ... {outside[-1]}" if len(outside) > 1 else "")
-              + f") are outside scene '{scene.name}''s frame range {scene.frame_start}-{scene.frame_end}; "
+              + f") are outside the frame range {scene.frame_start}-{scene.frame_end} of scene '{scene.name}'; "
               "rendering them anyway", file=sys.stderr, flush=True)
 
 

@@ -194,8 +194,8 @@ def test_frames_outside_the_scene_range_render_with_a_note(tmp_path, capsys):
     out = tmp_path / "o"
     assert cli.execute(["render", str(blend), "--out", str(out), "--frames", "5-7", "--samples", "1"]) == 0
     err = capsys.readouterr().err
-    assert (f"note: 2 of the frames (6 ... 7) are outside scene '{name}''s frame range 1-5; rendering them "
-            "anyway") in err
+    assert (f"note: 2 of the frames (6 ... 7) are outside the frame range 1-5 of scene '{name}'; rendering "
+            "them anyway") in err
     assert sorted(p.name for p in out.glob("*.png")) == ["frame_0005.png", "frame_0006.png", "frame_0007.png"]
     assert cli.execute(["render", str(blend), "--out", str(out), "--frames", "2-3", "--samples", "1"]) == 0
     assert "note:" not in capsys.readouterr().err
