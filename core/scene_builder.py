@@ -132,10 +132,6 @@ class SceneBuilder:
             raise ValueError(f"mesh keys must be hashable, got {[k for k in keys if not _hashable(k)][0]!r}") from None
         if not unique:
             raise ValueError("mesh keys must be unique within a frame")
-        unhashable = [m.key for m in meshes if not _hashable(m.fingerprint)]
-        if unhashable:  # compared with last frame's: an array failed one frame late, naming no mesh
-            raise ValueError(f"mesh {unhashable[0]!r}: fingerprint must be hashable (e.g. an int such as a CRC of "
-                             f"the vertex and index bytes), got {type(meshes[keys.index(unhashable[0])].fingerprint).__name__}")
         for m in meshes:
             _check_mesh(m)
         if rays is not None:
@@ -153,9 +149,9 @@ class SceneBuilder:
                                 mesh_of[shown], o2w[shown], np.array([k in self._dynamic for k in keys], bool))
         if self.options["lazy"]:
             soup[shown] = self._lazy_plan(soup[shown], mesh_of[shown])
-        if self.options["lazy"] and len(set(visibility[soup].tolist())) > 1:
-            raise ValueError("a lazy build has to be the scene's one tree, so the instances merged into it must stop "
-                             f"the same rays: got visibilities {sorted(set(visibility[soup].tolist()))}")
+            if len(set(visibility[soup].tolist())) > 1:
+                raise ValueError("a lazy build has to be the scene's one tree, so the instances merged into it must "
+                                 f"stop the same rays: got visibilities {sorted(set(visibility[soup].tolist()))}")
         own = ~soup & met
         trees, new_mesh_of, rebuilt, reused = self._mesh_trees(meshes, mesh_of, own, reuse, rays)
         shifted = o2w[own].copy()
@@ -305,7 +301,8 @@ def _gather(mesh):
 
 
 def _check_mesh(mesh):
-    """A ValueError naming the mesh for wrong shapes, non-integer or out-of-range indices, and the first
+    """A ValueError naming the mesh for wrong shapes, an unhashable fingerprint, vertices that are not real
+    numbers, non-integer or out-of-range indices, and the first
     triangle with a NaN or inf vertex (or the first such vertex, if no triangle uses one). All before
     anything merges the mesh: in a soup a NaN spread to the merged meshes' common centre, and the error
     named another triangle, all NaN (outside QA)."""
@@ -313,6 +310,9 @@ def _check_mesh(mesh):
         shape = np.shape(a)
         if not (len(shape) == 2 and shape[1] == 3) and not (name == "triangles" and np.size(a) == 0):
             raise ValueError(f"mesh {mesh.key!r}: {name} must have shape (N, 3), got {shape}")
+    if not _hashable(mesh.fingerprint):  # compared with last frame's: an array failed a frame late, unnamed
+        raise ValueError(f"mesh {mesh.key!r}: fingerprint must be hashable (e.g. an int such as a CRC of the vertex "
+                         f"and index bytes), got {type(mesh.fingerprint).__name__}")
     tris, verts = np.asarray(mesh.triangles), np.asarray(mesh.vertices)
     if not is_real_dtype(verts.dtype):  # as build_kdtree's triangles (outside review: complex parts were dropped)
         raise ValueError(f"mesh {mesh.key!r}: vertices must be real numbers (float32 or float64; integers are taken "

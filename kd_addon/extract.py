@@ -546,15 +546,18 @@ def extract_scene(depsgraph: bpy.types.Depsgraph | None = None) -> ExtractedScen
     walker = _EntryReader(vis)
     instances = [r for r in map(walker.read, depsgraph.object_instances) if r is not None]
     instances = walker.without_hidden_carriers(instances)
-    shown = _instancers_hidden_in_viewport_only(depsgraph, vis, walker.instanced_by)
+    evaluated = {ob.original.as_pointer() for ob in depsgraph.objects}
+    flag_hidden = _hidden_by_viewport_flag_only(depsgraph, evaluated, walker.instanced_by)
+    shown = [ob for ob in flag_hidden if ob.type == "MESH" and ob.show_instancer_for_render and vis.scene_object(ob)]
     instances += [r for r in map(walker.read, (_SelfEntry(ob.evaluated_get(depsgraph)) for ob in shown))
                   if r is not None]
+    viewport_shown = evaluated | {ob.as_pointer() for ob in flag_hidden}
     return ExtractedScene(
         geometries=walker.geometries.geometries,
         instances=instances,
         warnings=(_unused_layer_warnings(depsgraph) + walker.geometries.warnings
                   + list(walker.non_finite_placements.values()) + list(walker.not_triangles.values())
-                  + left_out_warnings(depsgraph, vis, walker.instanced_by)),
+                  + left_out_warnings(depsgraph, vis, walker.instanced_by, viewport_shown)),
         extract_ms=(time.perf_counter() - t0) * 1e3,
         frame=depsgraph.scene.frame_current,
     )
@@ -574,21 +577,14 @@ class _SelfEntry:
         return self.object.matrix_world
 
 
-def _instancers_hidden_in_viewport_only(depsgraph, vis: _Visibility, instanced_by: dict[int, set[int]]) -> list:
-    """Render-visible mesh objects with Show Instancer on for renders that the viewport depsgraph
-    yields no entry of only because their Show Instancer for the viewport is off."""
-    evaluated = {ob.original.as_pointer() for ob in depsgraph.objects}
+def _hidden_by_viewport_flag_only(depsgraph, evaluated: set[int], instanced_by: dict[int, set[int]]) -> list:
+    """Objects of the rendered layers the viewport depsgraph yields no entry of (`evaluated`: the
+    originals it does) only because their Show Instancer for the viewport is off: the flag is off and
+    the viewport shows the object (it instanced something this frame, which a hidden object does not,
+    or it is visible in the view layer). A final render shows those with Show Instancer for renders on."""
     return [ob for ob in _rendered_layers_objects(depsgraph)
-            if ob.type == "MESH" and ob.show_instancer_for_render and ob.as_pointer() not in evaluated
-            and _self_hidden_by_viewport_flag(ob, depsgraph, instanced_by) and vis.scene_object(ob)]
-
-
-def _self_hidden_by_viewport_flag(ob, depsgraph, instanced_by: dict[int, set[int]]) -> bool:
-    """For an object the viewport depsgraph yields no entry of: whether only its Show Instancer for
-    the viewport hides it, i.e. the flag is off and the viewport shows the object (it instanced
-    something this frame, which a hidden object does not, or it is visible in the view layer)."""
-    return not ob.show_instancer_for_viewport and (
-        ob.as_pointer() in instanced_by or ob.visible_get(view_layer=depsgraph.view_layer))
+            if not ob.show_instancer_for_viewport and ob.as_pointer() not in evaluated
+            and (ob.as_pointer() in instanced_by or ob.visible_get(view_layer=depsgraph.view_layer))]
 
 
 def _unused_layer_warnings(depsgraph) -> list[str]:
@@ -611,22 +607,20 @@ NOT_TRIANGLE_DATA = {"Curves": "hair curves", "PointCloud": "a point cloud", "Vo
                      "GreasePencil": "grease pencil", "GreasePencilv3": "grease pencil"}  # by data type
 
 
-def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility, instanced_by: dict[int, set[int]]) -> list[str]:
+def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility, instanced_by: dict[int, set[int]],
+                      evaluated: set[int]) -> list[str]:
     """A warning per render-visible thing a final render shows and the preview leaves out: objects of
     the scene and its background scenes hidden in the viewport (the viewport depsgraph does not
     evaluate them) or not triangles, collection instancers hidden there (their instances go with
     them), members of collections that instancers, geometry nodes or particles render whole, disabled
     in viewports (`instanced_by`: the original objects the depsgraph instanced, by original
-    instancer), and hair particles drawn as strands. An object whose Show Instancer for the viewport
-    alone keeps it out of the depsgraph's entries is not hidden: it is read anyway when a render
-    shows it (_instancers_hidden_in_viewport_only), and its instances are yielded."""
-    evaluated = {ob.original.as_pointer() for ob in depsgraph.objects}
+    instancer), and hair particles drawn as strands. `evaluated`: pointers of the originals the
+    viewport shows, those its Show Instancer flag alone keeps out of the depsgraph's entries included
+    (they are read anyway when a render shows them, _hidden_by_viewport_flag_only)."""
     warnings = []
     instancers = {}
     for ob in _rendered_layers_objects(depsgraph):
         kind = ob.type
-        if ob.as_pointer() not in evaluated and _self_hidden_by_viewport_flag(ob, depsgraph, instanced_by):
-            evaluated.add(ob.as_pointer())
         if kind in TRIANGLE_TYPES and ob.as_pointer() in evaluated:
             if len(ob.particle_systems):
                 warnings += _strand_warnings(ob, vis) + _pick_warnings(ob, vis)

@@ -202,8 +202,8 @@ class SequenceJob:
         stopped it is the one to report."""
         if stopped_by is not None and len(self.results) < len(self.frames):
             self._stopped = {"frame": self.frames[len(self.results)], "reason": stop_reason(stopped_by)}
-            self._reported = -1  # the report on disk does not say so yet
-        if self.results and self._reported != len(self.results):  # stopped early, or the last report failed
+        # stopped early (the report on disk does not say so yet), or the last report failed
+        if self.results and (self._stopped is not None or self._reported != len(self.results)):
             try:
                 self._write_report()
             except PreviewError:
