@@ -149,15 +149,8 @@ def partition_parallel(tris, prims, boxes, axis, pos, planar_left, clip, nchunks
     sides = np.empty(n, np.uint8)
     counts = np.zeros((nchunks, 2), np.int64)
     for c in prange(nchunks):
-        scratch = new_split_scratch()
-        box_l, box_r = scratch[3], scratch[4]
-        for i in range(c * n // nchunks, (c + 1) * n // nchunks):
-            side = side_of(boxes, i, axis, pos, planar_left)
-            if side == BOTH:
-                side = split_reference(tris[prims[i]], boxes[i], axis, pos, clip, scratch, box_l, box_r)
-            sides[i] = side
-            counts[c, 0] += (side & LEFT) != 0
-            counts[c, 1] += (side & RIGHT) != 0
+        counts[c, 0], counts[c, 1] = _classify_chunk(tris, prims, boxes, axis, pos, planar_left, clip,
+                                                     c * n // nchunks, (c + 1) * n // nchunks, sides)
     offsets = np.zeros((nchunks + 1, 2), np.int64)
     for c in range(nchunks):
         offsets[c + 1] = offsets[c] + counts[c]
@@ -172,21 +165,43 @@ def partition_parallel(tris, prims, boxes, axis, pos, planar_left, clip, nchunks
 
 
 @njit(cache=True)
+def _classify_chunk(tris, prims, boxes, axis, pos, planar_left, clip, start, end, sides):
+    """First pass of partition_parallel: each reference's sides, and how many go left and right.
+    Counted in locals: the threads' counters share a cache line, and incrementing them there per
+    reference made the pass several times slower (false sharing)."""
+    scratch = new_split_scratch()
+    box_l, box_r = scratch[3], scratch[4]
+    n_left = n_right = 0
+    for i in range(start, end):
+        side = side_of(boxes, i, axis, pos, planar_left)
+        if side == BOTH:
+            side = split_reference(tris[prims[i]], boxes[i], axis, pos, clip, scratch, box_l, box_r)
+        sides[i] = side
+        n_left += (side & LEFT) != 0
+        n_right += (side & RIGHT) != 0
+    return n_left, n_right
+
+
+@njit(cache=True)
 def _write_chunk(tris, prims, boxes, sides, axis, pos, clip, start, end, w_left, w_right, lp, lb, rp, rb):
-    """Second pass of partition_parallel: write one slice's references (straddlers clipped again)."""
+    """Second pass of partition_parallel: write one slice's references (straddlers clipped again, the
+    others copied element by element: slice assignments cost more than the copy)."""
     scratch = new_split_scratch()
     box_l, box_r = scratch[3], scratch[4]
     for i in range(start, end):
         side = sides[i]
-        box_l[:] = boxes[i]
-        box_r[:] = boxes[i]
         if boxes[i, axis] < pos < boxes[i, axis + 3]:  # a straddler: clip it again, as in pass one
             split_reference(tris[prims[i]], boxes[i], axis, pos, clip, scratch, box_l, box_r)
+        else:
+            for k in range(6):
+                box_l[k] = box_r[k] = boxes[i, k]
         if side & LEFT:
             lp[w_left] = prims[i]
-            lb[w_left] = box_l
+            for k in range(6):
+                lb[w_left, k] = box_l[k]
             w_left += 1
         if side & RIGHT:
             rp[w_right] = prims[i]
-            rb[w_right] = box_r
+            for k in range(6):
+                rb[w_right, k] = box_r[k]
             w_right += 1
