@@ -19,10 +19,15 @@ class Camera:
     shift: (x, y) lens shift in units of the larger image dimension's view extent (Blender's shift_x and
         shift_y with sensor fit AUTO): the image plane moves by shift times its larger extent, so the
         view direction of the image centre changes while the camera stays put (architectural shots).
+    pixel_aspect: a pixel's height over its width (Blender's pixel_aspect_y / pixel_aspect_x). The image
+        then spans width by height * pixel_aspect pixel widths, and "larger dimension" above means
+        larger in that extent, as Blender's sensor fit AUTO compares resolution times pixel aspect
+        (BKE_camera_params_compute_viewplane): an anamorphic frame keeps its pixel count and is
+        stretched on display.
     """
 
     def __init__(self, matrix_world, fov=None, *, ortho_scale=None, clip_start=0.0, clip_end=np.inf,
-                 shift=(0.0, 0.0)):
+                 shift=(0.0, 0.0), pixel_aspect=1.0):
         m = np.asarray(matrix_world, np.float64)
         if m.shape != (4, 4):
             raise ValueError(f"camera matrix_world must be a 4x4 matrix, got shape {m.shape}")
@@ -45,6 +50,10 @@ class Camera:
         if shift.shape != (2,) or not (np.abs(shift) <= 1e6).all():
             raise ValueError(f"camera shift must be two numbers (x, y) within +-1e6, got {shift.tolist()}")
         self.shift = (float(shift[0]), float(shift[1]))
+        if not 1e-3 <= as_number("camera pixel_aspect", pixel_aspect) <= 1e3:
+            raise ValueError(f"camera pixel_aspect must be in [0.001, 1000] (Blender's pixel aspects are 1-200), "
+                             f"got {pixel_aspect}")
+        self.pixel_aspect = float(pixel_aspect)
         self.matrix_world = m
         self.fov = None if fov is None else float(fov)
         self.ortho_scale = None if ortho_scale is None else float(ortho_scale)
@@ -59,7 +68,7 @@ class Camera:
         m = self.matrix_world.copy()
         m[:3, 3] -= np.asarray(offset, np.float64)
         return Camera(m, self.fov, ortho_scale=self.ortho_scale, clip_start=self.clip_start,
-                      clip_end=self.clip_end, shift=self.shift)
+                      clip_end=self.clip_end, shift=self.shift, pixel_aspect=self.pixel_aspect)
 
     def rays(self, width, height, pixels=None):
         """Rays through pixel centres, row 0 at the top: (origins, directions, tmin, tmax), (R, 3).
@@ -91,14 +100,16 @@ class Camera:
     def _half_extent(self, width, height):
         """Half the image plane's size at distance 1 (perspective) or in world units (ortho)."""
         half = np.tan(self.fov / 2.0) if self.fov is not None else self.ortho_scale / 2.0
-        if width >= height:
-            return half, half * height / width
-        return half * width / height, half
+        tall = height * self.pixel_aspect  # the image's height in pixel widths
+        if width >= tall:
+            return half, half * tall / width
+        return half * width / tall, half
 
     def __repr__(self):
         kind = f"fov={self.fov:.4f}" if self.fov is not None else f"ortho_scale={self.ortho_scale}"
         shift = f", shift={self.shift}" if any(self.shift) else ""
-        return f"Camera(position={self.position.round(4).tolist()}, {kind}{shift})"
+        aspect = f", pixel_aspect={self.pixel_aspect}" if self.pixel_aspect != 1.0 else ""
+        return f"Camera(position={self.position.round(4).tolist()}, {kind}{shift}{aspect})"
 
 
 def _pixel_indices(pixels, width, height):

@@ -52,7 +52,8 @@ def settings_key(camera, width, height, mode, samples, ao_distance, lights, seed
                  min_samples, ambient):
     """Bytes that differ whenever a setting that affects pixels differs (lights: packed rows)."""
     cam = np.concatenate([camera.matrix_world.ravel(), [camera.fov or 0.0, camera.ortho_scale or 0.0,
-                                                         camera.clip_start, camera.clip_end, *camera.shift]])
+                                                         camera.clip_start, camera.clip_end, *camera.shift,
+                                                         camera.pixel_aspect]])
     head = repr((width, height, mode, samples, ao_distance, seed, sampler, error_target, min_samples, ambient))
     return head.encode() + cam.tobytes() + np.ascontiguousarray(lights, np.float64).tobytes()
 

@@ -35,6 +35,7 @@ class CameraInput:
     clip_start: float
     clip_end: float
     shift: tuple[float, float] = (0.0, 0.0)  # lens shift in units of the larger image dimension
+    pixel_aspect: float = 1.0  # a pixel's height over its width (core.Camera)
 
     @property
     def position(self) -> np.ndarray:
@@ -48,6 +49,7 @@ class CameraInput:
             "clip_start": self.clip_start,
             "clip_end": self.clip_end,
             "shift": self.shift,
+            "pixel_aspect": self.pixel_aspect,
         }
 
 
@@ -80,7 +82,7 @@ class SceneInputs:
 # --------------------------------------------------------------------------
 
 
-def fitted_axis(sensor_fit: str, width: int, height: int) -> str:
+def fitted_axis(sensor_fit: str, width: float, height: float) -> str:
     """"x" or "y": the image axis Blender fits the sensor (or ortho scale) to."""
     if sensor_fit == "HORIZONTAL":
         return "x"
@@ -89,7 +91,7 @@ def fitted_axis(sensor_fit: str, width: int, height: int) -> str:
     return "x" if width >= height else "y"
 
 
-def to_larger_dimension(extent: float, sensor_fit: str, width: int, height: int) -> float:
+def to_larger_dimension(extent: float, sensor_fit: str, width: float, height: float) -> float:
     """Rescale an extent measured along the fitted axis to the larger image dimension.
 
     Works for anything proportional to the image plane size: 2*tan(fov/2) or ortho_scale.
@@ -101,7 +103,7 @@ def to_larger_dimension(extent: float, sensor_fit: str, width: int, height: int)
     return extent * max(width, height) / min(width, height)
 
 
-def shift_to_larger_dimension(shift: float, sensor_fit: str, width: int, height: int) -> float:
+def shift_to_larger_dimension(shift: float, sensor_fit: str, width: float, height: float) -> float:
     """Rescale a lens shift from Blender's unit (the fitted axis's extent) to the larger dimension's.
 
     Blender moves the view plane by shift * (pixels along the fitted axis) (BKE_camera_params_compute_
@@ -112,14 +114,14 @@ def shift_to_larger_dimension(shift: float, sensor_fit: str, width: int, height:
 
 
 def perspective_fov(lens: float, sensor_width: float, sensor_height: float,
-                    sensor_fit: str, width: int, height: int) -> float:
+                    sensor_fit: str, width: float, height: float) -> float:
     """Field of view in radians along the larger image dimension."""
     sensor = sensor_height if sensor_fit == "VERTICAL" else sensor_width
     tan_half = to_larger_dimension(sensor / (2.0 * lens), sensor_fit, width, height)
     return 2.0 * math.atan(tan_half)
 
 
-def orthographic_scale(ortho_scale: float, sensor_fit: str, width: int, height: int) -> float:
+def orthographic_scale(ortho_scale: float, sensor_fit: str, width: float, height: float) -> float:
     """Orthographic view extent along the larger image dimension."""
     return to_larger_dimension(ortho_scale, sensor_fit, width, height)
 
@@ -135,20 +137,25 @@ def normalized_matrix(matrix) -> np.ndarray:
     return m
 
 
-def camera_input(data, matrix_world, width: int, height: int) -> tuple[CameraInput, list[str]]:
-    """CameraInput from a bpy Camera datablock (or anything with its attribute names)."""
+def camera_input(data, matrix_world, width: int, height: int,
+                 pixel_aspect: float = 1.0) -> tuple[CameraInput, list[str]]:
+    """CameraInput from a bpy Camera datablock (or anything with its attribute names). `pixel_aspect`:
+    the scene's pixel_aspect_y / pixel_aspect_x. Blender fits the sensor to the image's extent in pixel
+    widths, width by height * pixel_aspect (BKE_camera_params_compute_viewplane), so the conversions
+    below take that extent."""
     warnings = []
     if data.type == "PANO":
         raise PreviewError("panoramic cameras are not supported: use a perspective or orthographic camera")
-    shift = tuple(shift_to_larger_dimension(float(v), data.sensor_fit, width, height)
+    tall = height * pixel_aspect
+    shift = tuple(shift_to_larger_dimension(float(v), data.sensor_fit, width, tall)
                   for v in (data.shift_x, data.shift_y))
     fov = ortho = None
     if data.type == "ORTHO":
-        ortho = orthographic_scale(data.ortho_scale, data.sensor_fit, width, height)
+        ortho = orthographic_scale(data.ortho_scale, data.sensor_fit, width, tall)
     else:
-        fov = perspective_fov(data.lens, data.sensor_width, data.sensor_height, data.sensor_fit, width, height)
+        fov = perspective_fov(data.lens, data.sensor_width, data.sensor_height, data.sensor_fit, width, tall)
     camera = CameraInput(normalized_matrix(matrix_world), fov, ortho, float(data.clip_start), float(data.clip_end),
-                         shift)
+                         shift, float(pixel_aspect))
     return camera, warnings
 
 
@@ -222,7 +229,8 @@ def read_camera(scene, depsgraph, width: int, height: int) -> tuple[CameraInput,
         raise PreviewError(f"the scene camera '{scene.camera.name}' is a {scene.camera.type}, not a camera object")
     evaluated = scene.camera.evaluated_get(depsgraph)
     try:
-        return camera_input(evaluated.data, evaluated.matrix_world, width, height)
+        return camera_input(evaluated.data, evaluated.matrix_world, width, height,
+                            scene.render.pixel_aspect_y / scene.render.pixel_aspect_x)
     except PreviewError as error:  # named: timeline markers may switch between several cameras
         raise PreviewError(f"scene camera '{scene.camera.name}': {error}") from None
 
@@ -267,8 +275,6 @@ def read_scene(scene, depsgraph, width: int, height: int, lights: bool = True) -
     """Camera and lights of the evaluated scene for a width x height preview (`lights` False: an AO
     frame, which needs none, so lights hidden in the viewport are not looked for)."""
     warnings = []
-    if scene.render.pixel_aspect_x != scene.render.pixel_aspect_y:
-        warnings.append("non-square pixel aspect is ignored by the preview")
     if scene.render.use_border:  # outside QA: a final render crops or blanks outside the region
         warnings.append("the Render Region (Output > Format) is ignored by the preview: it renders the whole frame")
     camera, camera_warnings = read_camera(scene, depsgraph, width, height)

@@ -56,18 +56,23 @@ def test_auto_fit_fov_equals_blenders_angle(scene):
 @pytest.mark.parametrize("fit", ["AUTO", "HORIZONTAL", "VERTICAL"])
 @pytest.mark.parametrize("size", [(160, 90), (90, 160), (100, 100)])
 @pytest.mark.parametrize("shift", [(0.0, 0.0), (0.3, -0.2)])
-def test_view_extent_matches_blender_view_frame(scene, kind, fit, size, shift):
+@pytest.mark.parametrize("pixel_aspect", [(1.0, 1.0), (1.0, 2.0), (3.0, 1.0)])
+def test_view_extent_matches_blender_view_frame(scene, kind, fit, size, shift, pixel_aspect):
     """Camera.view_frame gives the corners of Blender's own image plane (at z = -1 for perspective),
-    lens shift included: core's image plane from the converted camera has the same corners."""
+    lens shift and pixel aspect included: core's image plane from the converted camera has the same
+    corners. (The aspects (1, 2) and (3, 1) turn 160 x 90 and 90 x 160 taller or wider than they are in
+    pixels, so sensor fit AUTO picks the other axis.)"""
     cam = scenes.add_camera()
     cam.data.type, cam.data.sensor_fit, cam.data.lens, cam.data.ortho_scale = kind, fit, 28.0, 7.0
     cam.data.shift_x, cam.data.shift_y = shift
     scene.render.resolution_x, scene.render.resolution_y = size
+    scene.render.pixel_aspect_x, scene.render.pixel_aspect_y = pixel_aspect
+    scene.camera = cam
     corners = np.array([tuple(v) for v in cam.data.view_frame(scene=scene)])
     depth = np.abs(corners[:, 2]).max() if kind == "PERSP" else 1.0
     expected = (corners[:, 0].min() / depth, corners[:, 0].max() / depth,
                 corners[:, 1].min() / depth, corners[:, 1].max() / depth)
-    converted, warnings = scene_input.camera_input(cam.data, cam.matrix_world, *size)
+    converted, warnings = scene_input.read_camera(scene, bpy.context.evaluated_depsgraph_get(), *size)
     assert warnings == []
     assert (converted.fov is None) == (kind == "ORTHO") and (converted.ortho_scale is None) == (kind == "PERSP")
     plane = core.Camera(**converted.keywords()).image_plane(*size)
@@ -359,12 +364,12 @@ def test_read_scene_uses_the_evaluated_camera(scene):
 
 
 def test_settings_the_preview_does_not_apply_are_named(scene):
-    """A render region and non-square pixels change a final render but not the preview: each is named."""
+    """A render region changes a final render but not the preview: it is named. Non-square pixels are
+    applied (test_view_extent_matches_blender_view_frame), so they are not."""
     add_top_camera(location=(0, 0, 5), lens=50.0)
     depsgraph = bpy.context.evaluated_depsgraph_get()
     assert scene_input.read_scene(scene, depsgraph, 100, 50).warnings == []
     scene.render.use_border = True
     scene.render.pixel_aspect_x = 2.0
     assert scene_input.read_scene(scene, bpy.context.evaluated_depsgraph_get(), 100, 50).warnings == [
-        "non-square pixel aspect is ignored by the preview",
         "the Render Region (Output > Format) is ignored by the preview: it renders the whole frame"]

@@ -304,6 +304,27 @@ def test_lens_shift_moves_the_image_plane():
         core.Camera(m, 1.0, shift=(np.nan, 0.0))
 
 
+def test_pixel_aspect_stretches_the_image_plane_as_blender_does():
+    """A pixel twice as tall as wide: a 40 x 20 image spans 40 by 40 pixel widths, a square, so the view
+    extent is the fov's in both directions and a pixel covers twice the height of a square pixel's
+    (Blender compares width and height times pixel aspect). Its rays are every other row of a square
+    camera's 40 x 40, taken at the rows' middle. Taller than wide in that extent, the fov goes to y."""
+    m = np.eye(4)
+    m[:3, 3] = (0, 0, 5.0)
+    fov = 2 * np.arctan(0.5)
+    tall_pixels = core.Camera(m, fov, pixel_aspect=2.0)
+    assert tall_pixels.image_plane(40, 20) == pytest.approx((-0.5, 0.5, -0.5, 0.5))
+    _, d_square = core.Camera(m, fov).rays(40, 40)[:2]
+    d_square = d_square.reshape(40, 40, 3)
+    expected = (d_square[0::2] + d_square[1::2]) / 2  # pixel row i spans square rows 2i and 2i + 1
+    np.testing.assert_allclose(tall_pixels.rays(40, 20)[1].reshape(20, 40, 3), expected, atol=1e-12)
+    assert core.Camera(m, fov, pixel_aspect=4.0).image_plane(40, 20) == pytest.approx((-0.25, 0.25, -0.5, 0.5))
+    assert core.Camera(m, ortho_scale=2.0, pixel_aspect=0.5).image_plane(40, 40) == pytest.approx((-1, 1, -0.5, 0.5))
+    for bad in (0.0, -1.0, np.nan, np.inf, "2"):
+        with pytest.raises(ValueError, match="pixel_aspect"):
+            core.Camera(m, fov, pixel_aspect=bad)
+
+
 def test_bad_settings_are_named():
     tree = core.build_kdtree(floor(0.0))
     cam = look_down((0, 0, 1.0))
