@@ -3,8 +3,8 @@
 Trees: every evaluated mesh gets a key that is stable across frames -- (mesh name, name of the first
 object placing it, that object's instancer, occurrence number) -- because `MeshGeometry.key`
 (`as_pointer`) is only stable within one extraction. A key is only a name for the cache: a tree is
-reused only when the mesh's fingerprint (extract.geometry_fingerprint, a CRC of its vertex and index
-bytes) is the same as when the tree was built, so a key mix-up costs a rebuild, never a wrong image.
+reused only when the mesh's fingerprint (extract.geometry_fingerprint, 64 bits of CRC-32 and Adler-32
+of its vertex and index bytes) is the same as when the tree was built, so a key mix-up costs a rebuild, never a wrong image.
 
 Image: `image_key` digests everything that affects the pixels (each mesh's key and fingerprint, every
 instance's mesh, matrix and ray visibility, camera, lights, resolution, settings); an unchanged key reuses the last

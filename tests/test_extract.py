@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import math
+import zlib
 
 import bpy
+
 import numpy as np
 import pytest
 
@@ -888,6 +890,49 @@ def test_fingerprint_tracks_geometry_changes(scene):
         (geom,) = extract_scene().geometries.values()
         prints.setdefault(frame, set()).add(geometry_fingerprint(geom))
     assert len(prints[1]) == 1 and prints[1] != prints[10]
+
+
+def _with_crc32_restored(data: bytes, changed: bytes, at: int) -> bytes:
+    """`changed` with the four bytes at `at` chosen so that its CRC-32 is `data`'s. CRC-32 is affine
+    over GF(2): flipping bit i changes the CRC by a fixed vector e_i whatever the other bytes, and the
+    e_i of 32 consecutive bits are independent, so the wanted difference is the XOR of some of them."""
+    def effect(i):
+        flipped = bytearray(changed)
+        flipped[at + i // 8] ^= 1 << (i % 8)
+        return zlib.crc32(bytes(flipped)) ^ zlib.crc32(changed)
+
+    basis = []  # (vector, which bits make it), one per leading bit, largest first
+    for i in range(32):
+        vector, bits = effect(i), 1 << i
+        for b_vector, b_bits in basis:
+            if vector ^ b_vector < vector:  # vector has b_vector's leading bit
+                vector, bits = vector ^ b_vector, bits ^ b_bits
+        basis = sorted(basis + [(vector, bits)], reverse=True)
+    target, flips = zlib.crc32(changed) ^ zlib.crc32(data), 0
+    for b_vector, b_bits in basis:
+        if target ^ b_vector < target:
+            target, flips = target ^ b_vector, flips ^ b_bits
+    assert target == 0
+    out = bytearray(changed)
+    out[at:at + 4] = (int.from_bytes(out[at:at + 4], "little") ^ flips).to_bytes(4, "little")
+    return bytes(out)
+
+
+def test_a_change_that_keeps_the_crc_changes_the_fingerprint():
+    """A mesh edited so that its vertex bytes keep their CRC-32 (which a CRC-32 fingerprint would call
+    unchanged, keeping a stale tree and image) gets another fingerprint."""
+    from kd_addon.extract import MeshGeometry
+
+    vertices = np.arange(30, dtype=np.float32).reshape(10, 3)
+    triangles = np.array([[0, 1, 2], [3, 4, 5]], np.int32)
+    edited = vertices.copy()
+    edited[2] = (5.0, -1.0, 7.5)
+    forged = np.frombuffer(_with_crc32_restored(vertices.tobytes(), edited.tobytes(), at=36), np.float32)
+    forged = forged.reshape(10, 3).copy()
+    assert zlib.crc32(forged) == zlib.crc32(vertices) and not np.array_equal(forged, vertices)
+    before = geometry_fingerprint(MeshGeometry(0, "M", vertices, triangles))
+    assert geometry_fingerprint(MeshGeometry(0, "M", forged, triangles)) != before
+    assert geometry_fingerprint(MeshGeometry(0, "M", vertices.copy(), triangles.copy())) == before
 
 
 def test_a_group_called_many_times_with_the_same_inputs_is_read_once(scene, monkeypatch):
