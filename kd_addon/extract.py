@@ -830,6 +830,8 @@ class _EntryReader:
         mesh = ob.data
         parent = inst.parent if inst.is_instance else None
         if not isinstance(mesh, bpy.types.Mesh):
+            if parent is not None:  # an instanced empty or light makes its carrier an instancer too
+                self._note_instanced(parent, ob)
             self._note_not_triangles(ob, parent)
             return None
         verdict = self._verdict(ob, parent)
@@ -893,6 +895,12 @@ class _EntryReader:
             visible = (camera or shadow) and _entry_visible(self.vis, parent, ob)
             instancer = parent.original.name if parent is not None else None
             if parent is not None:  # once per (object, instancer): no extra cost per entry
-                self.instanced_by.setdefault(parent.original.as_pointer(), set()).add(orig.as_pointer())
+                self._note_instanced(parent, ob)
             self._verdicts[memo_key] = (orig.name, instancer, camera, shadow, holdout) if visible else None
         return self._verdicts[memo_key]
+
+    def _note_instanced(self, parent, ob) -> None:
+        """Record that `parent` instanced `ob` (whatever its type: Blender counts a geometry-nodes
+        carrier whose output holds instances of empties or lights as an instancer, which Show Instancer
+        > Render off then hides, BKE_object_visibility; checked against Cycles)."""
+        self.instanced_by.setdefault(parent.original.as_pointer(), set()).add(ob.original.as_pointer())
