@@ -653,8 +653,8 @@ def test_show_instancer_for_render_alone_decides_whether_an_instancer_shows_itse
 
 
 @pytest.mark.parametrize("source", ["EMPTY", "LIGHT"])
-@pytest.mark.parametrize("render", [True, False])
-def test_a_carrier_instancing_only_empties_or_lights_is_an_instancer(scene, source, render):
+@pytest.mark.parametrize("viewport, render", [(True, True), (True, False), (False, True), (False, False)])
+def test_a_carrier_instancing_only_empties_or_lights_is_an_instancer(scene, source, viewport, render):
     """Geometry nodes whose output holds instances of an empty or a light only: Blender still counts the
     object as an instancer (its geometry has instances), so Show Instancer > Render off hides its own
     mesh, as Cycles does (checked: 142 hit pixels with the flag on, 0 off, for both sources). The walk
@@ -667,7 +667,7 @@ def test_a_carrier_instancing_only_empties_or_lights_is_an_instancer(scene, sour
     group = _plate_and_instances_group(thing)
     next(n for n in group.nodes if n.bl_idname == "GeometryNodeObjectInfo").inputs["As Instance"].default_value = True
     plate.modifiers.new("GN", "NODES").node_group = group
-    plate.show_instancer_for_render = render
+    plate.show_instancer_for_viewport, plate.show_instancer_for_render = viewport, render
     result = extract_scene()
     assert result.object_names == (["Plate"] if render else [])
     assert result.warnings == []
