@@ -364,12 +364,18 @@ def test_read_scene_uses_the_evaluated_camera(scene):
 
 
 def test_settings_the_preview_does_not_apply_are_named(scene):
-    """A render region changes a final render but not the preview: it is named. Non-square pixels are
-    applied (test_view_extent_matches_blender_view_frame), so they are not."""
-    add_top_camera(location=(0, 0, 5), lens=50.0)
+    """A render region, motion blur and depth of field change a final render but not the preview: each
+    is named. Non-square pixels are applied (test_view_extent_matches_blender_view_frame), so they are
+    not."""
+    camera = add_top_camera(location=(0, 0, 5), lens=50.0)
     depsgraph = bpy.context.evaluated_depsgraph_get()
     assert scene_input.read_scene(scene, depsgraph, 100, 50).warnings == []
     scene.render.use_border = True
     scene.render.pixel_aspect_x = 2.0
+    scene.render.use_motion_blur = True
+    camera.data.dof.use_dof = True
     assert scene_input.read_scene(scene, bpy.context.evaluated_depsgraph_get(), 100, 50).warnings == [
-        "the Render Region (Output > Format) is ignored by the preview: it renders the whole frame"]
+        "the Render Region (Output > Format) is ignored by the preview: it renders the whole frame",
+        "motion blur is ignored by the preview: it renders the frame's instant",
+        f"the depth of field of camera '{camera.name}' is ignored by the preview: it renders a pinhole camera, "
+        "everything in focus"]
