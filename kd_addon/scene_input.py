@@ -146,6 +146,9 @@ def camera_input(data, matrix_world, width: int, height: int,
     warnings = []
     if data.type == "PANO":
         raise PreviewError("panoramic cameras are not supported: use a perspective or orthographic camera")
+    if not data.clip_start < data.clip_end:  # Blender takes it; Cycles then renders an empty frame
+        raise PreviewError(f"clip start {data.clip_start:g} is not below clip end {data.clip_end:g}, so the camera sees "
+                           "nothing (a final render is empty): set Clip Start below Clip End")
     tall = height * pixel_aspect
     shift = tuple(shift_to_larger_dimension(float(v), data.sensor_fit, width, tall)
                   for v in (data.shift_x, data.shift_y))

@@ -94,6 +94,8 @@ def test_camera_problems_are_named():
         scene_input.camera_input(camera_data(type="PANO"), np.eye(4), 10, 10)
     with pytest.raises(PreviewError, match="degenerate"):
         scene_input.camera_input(camera_data(), np.diag([0.0, 1.0, 1.0, 1.0]), 10, 10)
+    with pytest.raises(PreviewError, match="clip start 20 is not below clip end 10, so the camera sees nothing"):
+        scene_input.camera_input(camera_data(clip_start=20.0, clip_end=10.0), np.eye(4), 10, 10)
 
 
 def test_no_scene_camera_is_named(scene):
