@@ -116,6 +116,7 @@ def load_scene(args) -> bpy.types.Scene:
             raise PreviewError(f"{path} is a folder, not a .blend file")
         if not path.is_file():
             raise PreviewError(f"no such .blend file: {path}")
+        _check_blend_header(path)
         try:
             bpy.ops.wm.open_mainfile(filepath=str(path.resolve()), load_ui=False)
         except RuntimeError as error:
@@ -124,6 +125,21 @@ def load_scene(args) -> bpy.types.Scene:
         bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
         demo_scene.build_demo_scene(bpy.context.scene)
     return bpy.context.scene
+
+
+BLEND_MAGICS = (b"BLENDER", b"\x1f\x8b", b"\x28\xb5\x2f\xfd")  # plain, gzip and zstd-compressed .blend
+
+
+def _check_blend_header(path: Path) -> None:
+    """Name a file that is no .blend at all before Blender reads it: Blender's own refusal ("File format
+    is not supported") goes to stdout, ahead of and apart from our message on stderr."""
+    try:
+        with path.open("rb") as file:
+            head = file.read(len(BLEND_MAGICS[0]))
+    except OSError as error:
+        raise PreviewError(f"could not read {path}: {error.strerror or error}") from None
+    if not head.startswith(BLEND_MAGICS):
+        raise PreviewError(f"{path} is not a .blend file (it does not begin with Blender's file header)")
 
 
 def pick_scene(current, name: str | None):

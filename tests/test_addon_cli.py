@@ -70,7 +70,7 @@ def test_cli_renders_a_saved_blend_with_its_frame_range(tmp_path):
     scene.frame_start, scene.frame_end = 3, 4
     scene.render.resolution_x, scene.render.resolution_y = 40, 30
     blend = tmp_path / "scene.blend"
-    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend), compress=True)  # zstd: passes the header check too
     scenes.reset()
     out = tmp_path / "out"
     args = ["render", str(blend), "--out", str(out), "--resolution", "100", "--samples", "2", "--format", "exr",
@@ -165,6 +165,17 @@ def test_usage_and_setting_errors_exit_nonzero_with_the_message(tmp_path, capsys
     assert cli.execute(args) == code
     assert message in capsys.readouterr().err
     assert not (tmp_path / "X").exists()
+
+
+@pytest.mark.parametrize("content", [b"", b"garbage\n", b"BLEND", b"\x89PNG\r\n\x1a\n" + bytes(64)])
+def test_a_file_that_is_no_blend_is_named_and_blender_says_nothing(tmp_path, capfd, content):
+    """Outside QA: Blender's own "File format is not supported" went to stdout ahead of our error."""
+    path = tmp_path / "scene.blend"
+    path.write_bytes(content)
+    assert cli.execute(["render", str(path), "--out", str(tmp_path / "o")]) == 1
+    captured = capfd.readouterr()
+    assert f"{path} is not a .blend file (it does not begin with Blender's file header)" in captured.err
+    assert captured.out == "" and not (tmp_path / "o").exists()
 
 
 def test_scene_errors_exit_nonzero_with_the_message(tmp_path, capsys):
