@@ -11,6 +11,17 @@ if [ -z "$PY" ]; then
   echo "KD Preview needs Python 3.11 or 3.13 (the bpy module is built for those); set PYTHON=/path/to/python3.11" >&2
   exit 1
 fi
+BPY_PYTHONS='import sys; sys.exit(sys.version_info[:2] not in ((3, 11), (3, 13)))'
+if ! "$PY" -c "$BPY_PYTHONS" 2>/dev/null; then
+  echo "PYTHON=$PY is $("$PY" -V 2>&1); KD Preview needs Python 3.11 or 3.13 (the bpy module is built for those)" >&2
+  exit 1
+fi
+# A .venv made earlier with another Python (an IDE's, a first try with PYTHON set wrong) would fail
+# every install with pip's "requires a different Python" (outside QA): make it again.
+if [ -e .venv ] && ! .venv/bin/python -c "$BPY_PYTHONS" 2>/dev/null; then
+  echo "setup: .venv holds $(.venv/bin/python -V 2>&1 || echo 'no working Python'), not 3.11 or 3.13; making it again with $PY" >&2
+  rm -rf .venv
+fi
 if [ ! -x .venv/bin/python ]; then
   "$PY" -m venv .venv
 fi
