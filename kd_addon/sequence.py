@@ -80,6 +80,8 @@ def prepare_folder(folder: Path) -> list[Path]:
     while not probe.exists() and probe != probe.parent:
         missing.append(probe)
         probe = probe.parent
+    if not probe.is_dir():  # mkdir would say "File exists" (outside QA)
+        raise PreviewError(f"cannot write to the output folder {folder}: {probe} is a file, not a folder")
     try:
         folder.mkdir(parents=True, exist_ok=True)
         tempfile.TemporaryFile(dir=folder).close()

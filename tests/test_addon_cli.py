@@ -238,8 +238,11 @@ def test_unwritable_output_folder_is_named_before_a_frame_renders(tmp_path, caps
     blocker.write_text("not a folder")
     assert cli.execute(["render", "--frames", "1", "--out", str(blocker / "sub"), *SMALL]) == 1
     out, err = capsys.readouterr()
-    assert f"error: cannot write to the output folder {blocker / 'sub'}: " in err
+    assert f"error: cannot write to the output folder {blocker / 'sub'}: {blocker} is a file, not a folder" in err
     assert "frame 1:" not in err and out.rstrip().endswith(cli.HEADER)  # stopped before frame 1 started
+    assert cli.execute(["render", "--frames", "1", "--out", str(blocker), *SMALL]) == 1  # the file itself
+    assert f"{blocker}: {blocker} is a file, not a folder" in capsys.readouterr().err
+    assert blocker.read_text() == "not a folder"
 
 
 def test_report_that_cannot_be_written_is_not_blamed_on_a_frame(tmp_path, capsys):
