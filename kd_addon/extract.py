@@ -38,6 +38,13 @@ Render visibility (the viewport depsgraph also holds render-hidden objects)
       each pick among the render-visible members in a render, among the
       viewport-enabled ones in the viewport: where the two differ the preview
       cannot reproduce the render's pick, and a warning says so.
+    * An instance whose path goes through an instancer a render does not make
+      or that is render-hidden (Blender makes no instances from a render-hidden
+      object, at any depth) is left out, even where the same object is reached
+      through a visible path too, and the instances of a render-hidden source
+      of an Object Info node with them (its own mesh still shows): the
+      verdicts above are per (object, top-level instancer), so each entry's
+      path is walked on its own (dupli_paths.py).
     * Show Instancer: an object that instances things (particles,
       vertex/face/collection instancing, geometry nodes whose output holds
       instances) is left out itself when ``show_instancer_for_render`` is off
@@ -94,6 +101,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
+from .dupli_paths import DupliPaths
 from .node_instances import node_references, particle_references
 
 # --------------------------------------------------------------------------
@@ -822,13 +830,17 @@ class _EntryReader:
         self.not_triangles: dict[tuple[str, str | None], str] = {}
         self.non_finite_placements: dict[tuple[str, str | None], str] = {}  # one warning each
         self._own_entries_hidden_if_instancing: list[tuple[int, Instance]] = []
+        self.paths = DupliPaths(lambda parent, orig: collection_visible(vis, parent, orig))
 
     def read(self, inst) -> Instance | None:
         """Record for one entry, or None to skip it. Copies everything out at
-        once: ``inst.object`` is a temporary the iterator reuses."""
+        once: ``inst.object`` is a temporary the iterator reuses. Every entry
+        goes through `paths`, in the depsgraph's order (dupli_paths.py)."""
         ob = inst.object
-        mesh = ob.data
         parent = inst.parent if inst.is_instance else None
+        if not self.paths.made_by_render(inst, ob, parent):
+            return None
+        mesh = ob.data
         if not isinstance(mesh, bpy.types.Mesh):
             if parent is not None:  # an instanced empty or light makes its carrier an instancer too
                 self._note_instanced(parent, ob)

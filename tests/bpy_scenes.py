@@ -366,3 +366,59 @@ def add_collection_points_host(name, collection, *, count, separate_children=Tru
     obj = add_mesh(name, [], [], location=location)
     obj.modifiers.new("GN", "NODES").node_group = group
     return obj
+
+
+TWO_PATH_TOPS = ("collection instance", "collection info")
+TWO_PATH_HIDINGS = ("hidden instancer", "instancer in a hidden child collection", "visible twin of a hidden instancer")
+
+
+def add_two_path_scene(top, hidden_path):
+    """Cube 'Leaf' (0.3) in excluded collection 'LeafC', reached two ways through excluded collection
+    'Mid': by an empty 'Vis' instancing LeafC at x = -3 (or, for "visible twin of a hidden instancer",
+    by Leaf itself linked into Mid, at 0), and by an empty 'Hid' instancing LeafC at x = +3 that a
+    render does not make: Disable in Renders, or for "instancer in a hidden child collection" inside a
+    render-hidden child collection of Mid. 'Top' instances Mid at the origin: an empty (`top`
+    "collection instance") or a Collection Info node host ("collection info"). A final render shows
+    Leaf once, from the visible path."""
+    leaf_collection = new_collection("LeafC", exclude=True)
+    add_cube("Leaf", scale=0.3, collection=leaf_collection)
+    mid = new_collection("Mid", exclude=True)
+    if hidden_path == "visible twin of a hidden instancer":
+        mid.objects.link(bpy.data.objects["Leaf"])
+    else:
+        add_collection_instance("Vis", leaf_collection, location=(-3, 0, 0), collection=mid)
+    holder = mid
+    if hidden_path == "instancer in a hidden child collection":
+        holder = new_collection("HiddenChild", parent=mid)
+        holder.hide_render = True
+    hidden = add_collection_instance("Hid", leaf_collection, location=(3, 0, 0), collection=holder)
+    hidden.hide_render = hidden_path != "instancer in a hidden child collection"
+    if top == "collection instance":
+        add_collection_instance("Top", mid)
+    else:
+        add_info_node_host("Top", mid)
+
+
+OBJECT_INFO_SOURCES = ("collection instancer", "vertex-instancing parent", "nodes carrier")
+
+
+def add_object_info_of_instancer(source_kind, hidden):
+    """'Host', whose Object Info node (As Instance) instances 'Source', an object at z = -30 that
+    instances things itself: an empty instancing collection 'K' (cube 'X'), a triangle (legs 2) instancing
+    its child 'X' on its 3 vertices, or a geometry-nodes carrier making 2 cubes of its own (at x = 0, 2). `hidden`:
+    Source has Disable in Renders, so a final render shows only its own mesh through Host (Blender
+    makes no instances from a render-hidden object)."""
+    far = (30, 30, -30)  # out of the way: Object Info instances Source's local geometry at Host
+    if source_kind == "collection instancer":
+        inner = new_collection("K", exclude=True)
+        add_cube("X", scale=0.3, collection=inner)
+        source = add_collection_instance("Source", inner, location=far)
+    elif source_kind == "vertex-instancing parent":
+        source = add_mesh("Source", [(0, 0, 0), (2, 0, 0), (0, 2, 0)], [(0, 1, 2)], location=far)
+        source.instance_type = "VERTS"
+        child = add_cube("X", scale=0.3)
+        child.parent = source  # at the parent's origin: instanced on its vertices
+    else:
+        source = add_gn_instancer("Source", count=2, cube_size=0.6, location=far)
+    source.hide_render = hidden
+    add_info_node_host("Host", source)

@@ -721,6 +721,43 @@ def test_collection_info_follows_nested_collection_instances(scene, nested_insta
     assert sorted(_instances_by_host(result)["Carrier"]) == expected
 
 
+def _leaf_centres(result: ExtractedScene, name: str) -> list[tuple[float, ...]]:
+    """Centres of the instances of object `name`, sorted (each instance is one whole cube)."""
+    return sorted(tuple(np.round(inst.matrix_world[:3, 3], 6)) for inst in result.instances if inst.name == name)
+
+
+@pytest.mark.parametrize("top", scenes.TWO_PATH_TOPS)
+@pytest.mark.parametrize("hidden_path", scenes.TWO_PATH_HIDINGS)
+def test_an_object_reached_by_a_visible_and_a_render_hidden_path_is_made_once(scene, top, hidden_path):
+    """Outside review against Cycles: 'Mid' holds an empty instancing 'LeafC' (Leaf) at x = -3 and
+    another at x = +3 that a render does not make (Disable in Renders, or in a render-hidden child
+    collection); Blender makes no instances from a render-hidden object (object_dupli.cc,
+    get_dupli_generator) nor from a hidden child collection's members, but the viewport's depsgraph
+    makes both, and the verdict kept per (object, top-level instancer) drew Leaf at +3 too (145-579
+    extra pixels). Also when the hidden path's object itself is directly in 'Mid' (no nesting at all
+    on the visible path)."""
+    scenes.add_two_path_scene(top, hidden_path)
+    expected = [(0.0, 0.0, 0.0)] if hidden_path == "visible twin of a hidden instancer" else [(-3.0, 0.0, 0.0)]
+    result = extract_scene()
+    assert _leaf_centres(result, "Leaf") == expected
+
+
+@pytest.mark.parametrize("hidden", [False, True])
+@pytest.mark.parametrize("source_kind", scenes.OBJECT_INFO_SOURCES)
+def test_an_object_info_source_hidden_from_renders_brings_its_own_mesh_but_not_its_instances(
+        scene, source_kind, hidden):
+    """Outside review against Cycles: an Object Info node (As Instance) of a render-hidden object
+    still shows that object's own mesh in a render, but not the instances the object makes itself
+    (Blender makes none from a render-hidden object, at any depth); the preview drew them (~1,100
+    pixels each). With the source visible both show."""
+    scenes.add_object_info_of_instancer(source_kind, hidden)
+    own, made = {"collection instancer": ([], ["X"]), "vertex-instancing parent": (["Source"], ["X"] * 3),
+                 "nodes carrier": ([], ["Source"] * 2)}[source_kind]  # a carrier's instances are its own entries
+    result = extract_scene()
+    expected = own if hidden else own + made
+    assert sorted(_instances_by_host(result).get("Host", [])) == sorted(expected)
+
+
 @pytest.mark.parametrize("first_layer_renders", [True, False])
 def test_background_scenes_are_rendered_through_their_render_view_layer(scene, first_layer_renders):
     """Outside QA against Cycles: a render shows the objects of the scene's Background Scene (and of
