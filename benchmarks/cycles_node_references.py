@@ -13,6 +13,7 @@ The cases:
 - unconnected / muted link: an Object Info node instancing a render-hidden object chosen by a Switch
   node, beside a Collection Info node naming that object's collection that reaches no output.
 """
+import argparse
 import sys
 import tempfile
 from pathlib import Path
@@ -92,6 +93,7 @@ def _cycles_coverage(scene, folder):
 
 
 def main():
+    argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split())).parse_args()  # --help
     disagreements = 0
     with tempfile.TemporaryDirectory() as folder:
         for case, build in CASES.items():
