@@ -677,10 +677,10 @@ def _hidden_member_warnings(collection, members: list, hosts: list, vis: _Visibi
     shown = vis.instanced_objects(collection)  # nested instances' render-visible members included
     out = []
     for ob, owner, chain in members:
-        if (ob.type not in TRIANGLE_TYPES or ob.as_pointer() not in shown or ob.as_pointer() in instanced
-                or vis.scene_object(ob) or _renders_nothing(ob)):  # scene objects are named as such
-            continue
-        host = next((h for h in hosts if _ray_visible(ob, *chain, h)), None)
+        if (ob.type not in TRIANGLE_TYPES or ob.type == "META" or ob.as_pointer() not in shown
+                or ob.as_pointer() in instanced or vis.scene_object(ob) or _renders_nothing(ob)):
+            continue  # scene objects are named as such; no render instances a metaball (object_dupli.cc: no_draw)
+        host = next((h for h in hosts if _ray_visible(ob, *chain, h) and (not chain or _nests(h))), None)
         if host is not None:
             through = "".join(f" through '{inner.name}'" for inner in chain)
             why = ("is disabled in viewports" if ob.hide_viewport else
@@ -688,6 +688,13 @@ def _hidden_member_warnings(collection, members: list, hosts: list, vis: _Visibi
             out.append(f"object '{ob.name}' in collection '{owner.name}' (instanced by '{host.name}'{through}) {why}: "
                        "the preview leaves its instances out, a final render shows them")
     return out
+
+
+def _nests(host) -> bool:
+    """Whether `host`'s instances of a collection expand the collection instances among its members: a
+    collection instancer's and geometry nodes' do, particles' do not (object_dupli.cc makes particles'
+    instances without recursing; Cycles showed none, outside review)."""
+    return host.instance_type == "COLLECTION" or any(m.type == "NODES" for m in host.modifiers)
 
 
 def _shows_instances_of(host, members: set[int], instanced_by: dict[int, set[int]]) -> bool:

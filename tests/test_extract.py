@@ -413,6 +413,27 @@ def test_hidden_instancers_and_viewport_disabled_members_are_named(scene):
         "leaves its instances out, a final render shows them"]
 
 
+@pytest.mark.parametrize("host", ["particles", "collection instance"])
+def test_members_no_render_makes_are_not_named_as_missing(scene, host):
+    """Outside review against Cycles (hit masks equal): particles render a collection's objects but do
+    not expand the collection instances among them (object_dupli.cc makes no nested instances for
+    particles), and no render instances a metaball; the preview left both out, as a render does,
+    yet warned that each 'is not instanced in the viewport ... a final render shows them'."""
+    leaf_collection = scenes.new_collection("LeafC", exclude=True)
+    scenes.add_cube("Leaf", scale=0.2, collection=leaf_collection)
+    rendered = scenes.new_collection("Rendered", exclude=True)
+    blob = scenes.add_metaball("Blob", radius=0.3)
+    bpy.context.scene.collection.objects.unlink(blob)
+    rendered.objects.link(blob)
+    if host == "particles":
+        scenes.add_collection_instance("Nest", leaf_collection, collection=rendered)
+        scenes.add_particle_emitter("Emitter", count=2, collection=rendered)
+    else:
+        scenes.add_collection_instance("Top", rendered)
+    result = extract_scene()
+    assert result.object_names == [] and result.warnings == []
+
+
 def test_a_viewport_disabled_member_is_named_when_any_instancer_shows_it(scene):
     """Two instancers of one collection, the first invisible to camera and shadow rays: the member a
     render shows through the second is named once, with that instancer (the first alone hid it)."""
