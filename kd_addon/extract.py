@@ -89,7 +89,7 @@ Geometry whose evaluated positions contain NaN or inf is left out with a
 warning naming the object. Geometry keys are ``Mesh.as_pointer()`` values of
 evaluated meshes: unique and stable *within one extraction* only.
 
-This module imports bpy, numpy and node_instances only (never ``core``).
+This module imports bpy, numpy and its sibling bpy-only modules (never ``core``).
 """
 
 from __future__ import annotations
@@ -103,6 +103,7 @@ import numpy as np
 
 from .dupli_paths import DupliPaths
 from .node_instances import node_references, particle_references
+from .viewport_evaluation import viewport_evaluation_warning
 
 # --------------------------------------------------------------------------
 # Records
@@ -560,21 +561,46 @@ def extract_scene(depsgraph: bpy.types.Depsgraph | None = None) -> ExtractedScen
     walker = _EntryReader(vis)
     instances = [r for r in map(walker.read, depsgraph.object_instances) if r is not None]
     instances = walker.without_hidden_carriers(instances)
+    surfaces_off = _surfaces_off_warnings(depsgraph.view_layer)
     evaluated = {ob.original.as_pointer() for ob in depsgraph.objects}
     flag_hidden = _hidden_by_viewport_flag_only(depsgraph, evaluated, walker.instanced_by)
     shown = [ob for ob in flag_hidden if ob.type == "MESH" and ob.show_instancer_for_render and vis.scene_object(ob)]
     instances += [r for r in map(walker.read, (_SelfEntry(ob.evaluated_get(depsgraph)) for ob in shown))
                   if r is not None]
     viewport_shown = evaluated | {ob.as_pointer() for ob in flag_hidden}
+    shown_objects = _objects_shown(depsgraph, vis, instances)
+    if surfaces_off:
+        instances = []
     return ExtractedScene(
         geometries=walker.geometries.geometries,
         instances=instances,
-        warnings=(_unused_layer_warnings(depsgraph) + walker.geometries.warnings
+        warnings=(surfaces_off + _unused_layer_warnings(depsgraph) + walker.geometries.warnings
                   + list(walker.non_finite_placements.values()) + list(walker.not_triangles.values())
-                  + left_out_warnings(depsgraph, vis, walker.instanced_by, viewport_shown)),
+                  + left_out_warnings(depsgraph, vis, walker.instanced_by, viewport_shown)
+                  + viewport_evaluation_warning(shown_objects, depsgraph.scene)),
         extract_ms=(time.perf_counter() - t0) * 1e3,
         frame=depsgraph.scene.frame_current,
     )
+
+
+def _surfaces_off_warnings(view_layer) -> list[str]:
+    """A view layer whose Filter > Surfaces is off renders no surfaces at all (Cycles: no hit pixel;
+    the preview drew them all, outside review)."""
+    if view_layer.use_solid:
+        return []
+    return [f"view layer '{view_layer.name}' has Filter > Surfaces off: a final render shows no surfaces, so the "
+            "preview renders none"]
+
+
+def _objects_shown(depsgraph, vis: _Visibility, instances: list[Instance]) -> list[bpy.types.Object]:
+    """The original objects a final render shows in the scene (hidden in the viewport or not) and those
+    the preview instanced, each once."""
+    out = {ob.as_pointer(): ob for ob in _rendered_layers_objects(depsgraph) if vis.scene_object(ob)}
+    for name in {r.name for r in instances if r.is_instance}:
+        ob = bpy.data.objects.get(name)
+        if ob is not None:
+            out.setdefault(ob.as_pointer(), ob)
+    return list(out.values())
 
 
 @dataclass(frozen=True)

@@ -64,7 +64,8 @@ def test_objects_in_edit_mode_give_their_edited_triangles(scene):
     no "position" attribute). The edit, not yet written back to the mesh, must show, as in Cycles."""
     plain = scenes.add_cube("Plain", location=(0, 0, 0))
     smooth = scenes.add_cube("Smooth", location=(5, 0, 0))
-    smooth.modifiers.new("Subdivision", "SUBSURF").levels = 1
+    subdivision = smooth.modifiers.new("Subdivision", "SUBSURF")
+    subdivision.levels = subdivision.render_levels = 1  # a render's evaluation differs otherwise (named)
     for ob in (plain, smooth):
         ob.select_set(True)
     bpy.context.view_layer.objects.active = plain
@@ -497,7 +498,9 @@ def test_members_of_realized_collection_info_are_not_named(scene):
     assert result.warnings == []
     emitter = scenes.add_particle_emitter("Emitter", count=3, collection=source, location=(9, 0, 0))
     emitter.modifiers[0].show_viewport = False  # particles in renders only: no member is the reason
-    assert extract_scene().warnings == []
+    assert extract_scene().warnings == [  # ... that warning names the modifier only
+        "the preview evaluates geometry as the viewport does, a final render with its own settings, which differ "
+        "for 'Emitter' (modifier 'Particles' enabled only in renders)"]
 
 
 @pytest.mark.parametrize("host", ["particles", "collection info", "separate children"])
@@ -1044,3 +1047,72 @@ def test_a_group_called_many_times_with_the_same_inputs_is_read_once(scene, monk
     collections, objects = node_instances.node_references(host)
     assert [c.name for c in collections] == ["Src"] and objects == []
     assert sorted(reads) == sorted(["HostTree", "HostScatter"] + [f"Level{level}" for level in range(6)])
+
+
+def _evaluation_warnings(result: ExtractedScene) -> list[str]:
+    return [w for w in result.warnings if w.startswith("the preview evaluates geometry as the viewport does")]
+
+
+def test_settings_a_render_evaluates_differently_are_named_in_one_warning(scene):
+    """Outside review against Cycles: each of these changed the image by 230-2,200 pixels of 19,200
+    with no word from the preview, which reads the viewport's evaluation."""
+    subdivided = scenes.add_cube("Subdivided")
+    subdivision = subdivided.modifiers.new("Subdivision", "SUBSURF")
+    subdivision.levels, subdivision.render_levels = 0, 3
+    render_only = scenes.add_cube("RenderOnly", location=(3, 0, 0))
+    render_only.modifiers.new("Bevel", "BEVEL").show_viewport = False
+    tube = scenes.add_bevel_curve("Tube", location=(6, 0, 0))
+    tube.data.resolution_u, tube.data.render_resolution_u = 2, 24
+    blob = scenes.add_metaball("Blob", location=(9, 0, 0), resolution=0.4)
+    blob.data.render_resolution = 0.1
+    switch = scenes.add_cube("Switched", location=(12, 0, 0))
+    tree = bpy.data.node_groups.new("Switch", "GeometryNodeTree")
+    tree.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    tree.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    tree.nodes.new("GeometryNodeIsViewport")
+    tree.links.new(tree.nodes.new("NodeGroupInput").outputs[0], tree.nodes.new("NodeGroupOutput").inputs[0])
+    switch.modifiers.new("Nodes", "NODES").node_group = tree
+    pebble = scenes.add_cube("Pebble", scale=0.1, location=(50, 0, 0))
+    pebble.hide_render = True
+    emitter = scenes.add_particle_emitter("Emitter", count=10, obj=pebble, location=(0, 9, 0))
+    emitter.particle_systems[0].settings.display_percentage = 30  # the viewport shows 3 of 10
+    plain = scenes.add_cube("Plain", location=(15, 0, 0))
+    same = plain.modifiers.new("Same", "SUBSURF")
+    same.levels = same.render_levels = 2  # equal: not named
+    scene.render.use_simplify = True
+    scene.render.simplify_subdivision, scene.render.simplify_subdivision_render = 1, 4
+    assert _evaluation_warnings(extract_scene()) == [
+        "the preview evaluates geometry as the viewport does, a final render with its own settings, which differ "
+        "for 'Subdivided' (modifier 'Subdivision' 0 levels in the viewport, 3 in renders), 'RenderOnly' "
+        "(modifier 'Bevel' enabled only in renders), 'Tube' (resolution U 2 in the viewport, 24 in renders), "
+        "'Blob' (metaball resolution 0.4 in the viewport, 0.1 in renders), 'Switched' (modifier 'Nodes' reads "
+        "Is Viewport), 'Emitter' (particles 'Particles': 30% shown in the viewport, all in renders), and "
+        "Simplify (max subdivision 1 in the viewport, 4 in renders)"]
+    scene.render.use_simplify = False
+    for name in ("Subdivided", "RenderOnly", "Tube", "Blob", "Switched", "Emitter"):
+        bpy.data.objects.remove(bpy.data.objects[name])
+    assert _evaluation_warnings(extract_scene()) == []
+
+
+def test_the_evaluation_warning_names_a_few_objects_and_counts_the_rest(scene):
+    """Instanced members are checked too (their modifiers evaluate as in the viewport as well)."""
+    source = scenes.new_collection("Source", exclude=True)
+    for i in range(9):
+        cube = scenes.add_cube(f"C{i}", location=(3 * i, 0, 0), collection=source)
+        cube.modifiers.new("Subdivision", "SUBSURF")  # levels 1, render_levels 2: Blender's defaults
+    scenes.add_collection_instance("Instancer", source)
+    (warning,) = _evaluation_warnings(extract_scene())
+    assert warning.count("(modifier 'Subdivision' 1 levels in the viewport, 2 in renders)") == 6
+    assert warning.endswith(" and 3 more object(s)")
+
+
+def test_a_view_layer_with_surfaces_filtered_out_renders_no_triangles(scene):
+    """Outside review: with View Layer > Filter > Surfaces off Cycles renders no surface (0 hit pixels
+    of the 1,069 it renders with it on); the preview drew them all."""
+    scenes.add_cube("Box")
+    assert extract_scene().triangle_count == 12
+    bpy.context.view_layer.use_solid = False
+    result = extract_scene()
+    assert result.triangle_count == 0 and result.warnings == [
+        "view layer 'ViewLayer' has Filter > Surfaces off: a final render shows no surfaces, so the preview "
+        "renders none"]

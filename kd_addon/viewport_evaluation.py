@@ -1,0 +1,99 @@
+"""Settings whose viewport value the preview's geometry follows where a final render takes another.
+
+The preview reads the viewport's depsgraph (`bpy` offers no render-mode depsgraph outside a render
+engine), so modifiers enabled only in renders or only in the viewport, Subdivision and Multires
+levels, geometry nodes' Is Viewport, the resolution of curves, text, surfaces and metaballs, particles'
+viewport display amount, child particle amounts and Simplify evaluate as in the viewport. An outside review against Cycles measured
+each of these changing the image by 230-2,200 of 19,200 pixels without a word from the preview; this
+names them, in one warning a frame (a scene may have many subdivided objects).
+
+This module imports bpy only.
+"""
+from __future__ import annotations
+
+import bpy
+
+CURVE_TYPES = frozenset(("CURVE", "FONT", "SURFACE"))
+SUBDIVIDING = frozenset(("SUBSURF", "MULTIRES"))
+NAMED_AT_MOST = 6  # objects a warning names before "and N more"
+
+
+def viewport_evaluation_warning(objects, scene: bpy.types.Scene) -> list[str]:
+    """[] or one warning naming what in `objects` (the original objects the preview shows or a render
+    would) and in the scene's Simplify settings a final render evaluates differently."""
+    found = [f"'{ob.name}' ({'; '.join(diffs)})" for ob in objects if (diffs := _differences(ob))]
+    simplify = _simplify_differences(scene.render)
+    if not found and not simplify:
+        return []
+    parts = []
+    if found:
+        more = len(found) - NAMED_AT_MOST
+        parts.append(", ".join(found[:NAMED_AT_MOST]) + (f" and {more} more object(s)" if more > 0 else ""))
+    if simplify:
+        parts.append(f"Simplify ({'; '.join(simplify)})")
+    return [f"the preview evaluates geometry as the viewport does, a final render with its own settings, which "
+            f"differ for {', and '.join(parts)}"]
+
+
+def _differences(ob: bpy.types.Object) -> list[str]:
+    out = [text for m in ob.modifiers if (text := _modifier_difference(m))]
+    data = ob.data
+    if ob.type in CURVE_TYPES:
+        out += _resolution_difference("resolution U", data.resolution_u, data.render_resolution_u)
+        if ob.type == "SURFACE":
+            out += _resolution_difference("resolution V", data.resolution_v, data.render_resolution_v)
+    elif ob.type == "META" and data.render_resolution != data.resolution:
+        out.append(f"metaball resolution {data.resolution:g} in the viewport, {data.render_resolution:g} in renders")
+    for system in ob.particle_systems:
+        settings = system.settings
+        if settings.display_percentage < 100 and settings.render_type in ("OBJECT", "COLLECTION"):
+            out.append(f"particles '{system.name}': {settings.display_percentage}% shown in the viewport, all in renders")
+        if settings.child_type != "NONE" and settings.child_percent != settings.rendered_child_count:
+            out.append(f"particles '{system.name}': {settings.child_percent} children each in the viewport, "
+                       f"{settings.rendered_child_count} in renders")
+    return out
+
+
+def _modifier_difference(m) -> str | None:
+    if m.show_viewport != m.show_render:
+        return f"modifier '{m.name}' enabled only {'in renders' if m.show_render else 'in the viewport'}"
+    if not m.show_render:
+        return None
+    if m.type in SUBDIVIDING and m.levels != m.render_levels:
+        return f"modifier '{m.name}' {m.levels} levels in the viewport, {m.render_levels} in renders"
+    if m.type == "NODES" and m.node_group is not None and _uses_is_viewport(m.node_group, set()):
+        return f"modifier '{m.name}' reads Is Viewport"
+    return None
+
+
+def _resolution_difference(label, viewport, render) -> list[str]:
+    """A curve's render resolution 0 means the viewport's."""
+    return [] if render in (0, viewport) else [f"{label} {viewport} in the viewport, {render} in renders"]
+
+
+def _uses_is_viewport(tree, seen: set) -> bool:
+    """Whether a node tree or a group it calls holds an Is Viewport node (used or not: checking
+    whether its value reaches the output is not worth a wrong silence)."""
+    if tree.as_pointer() in seen:
+        return False
+    seen.add(tree.as_pointer())
+    for node in tree.nodes:
+        if node.bl_idname == "GeometryNodeIsViewport":
+            return True
+        inner = getattr(node, "node_tree", None)
+        if inner is not None and _uses_is_viewport(inner, seen):
+            return True
+    return False
+
+
+def _simplify_differences(render) -> list[str]:
+    if not render.use_simplify:
+        return []
+    out = []
+    if render.simplify_subdivision != render.simplify_subdivision_render:
+        out.append(f"max subdivision {render.simplify_subdivision} in the viewport, "
+                   f"{render.simplify_subdivision_render} in renders")
+    if render.simplify_child_particles != render.simplify_child_particles_render:
+        out.append(f"child particles {render.simplify_child_particles:g} in the viewport, "
+                   f"{render.simplify_child_particles_render:g} in renders")
+    return out
