@@ -73,7 +73,8 @@ def _twist_column(collection):
 
 def _movers(collection):
     monkey = _mesh_object("Monkey", lambda bm: bmesh.ops.create_monkey(bm), collection)
-    monkey.modifiers.new("Smooth", "SUBSURF").levels = 1
+    smooth = monkey.modifiers.new("Smooth", "SUBSURF")
+    smooth.levels = smooth.render_levels = 1  # as a final render evaluates it: the preview shows the viewport's
     _key(monkey, "location", [(FRAMES[0], (-2.0, -2.0, 1.0)), (FRAMES[1], (2.0, -2.0, 1.6))])
     _key(monkey, "rotation_euler", [(FRAMES[0], (0.0, 0.0, -0.6)), (FRAMES[1], (0.0, 0.0, 0.6))])
     cube = _mesh_object("Cube", lambda bm: bmesh.ops.create_cube(bm, size=1.0), collection)
