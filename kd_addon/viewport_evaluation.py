@@ -46,7 +46,8 @@ def _differences(ob: bpy.types.Object) -> list[str]:
         out.append(f"metaball resolution {data.resolution:g} in the viewport, {data.render_resolution:g} in renders")
     for system in ob.particle_systems:
         settings = system.settings
-        if settings.display_percentage < 100 and settings.render_type in ("OBJECT", "COLLECTION"):
+        if (settings.display_percentage < 100 and settings.render_type in ("OBJECT", "COLLECTION")
+                and settings.child_type == "NONE" and not _dynamic(system)):
             out.append(f"particles '{system.name}': {settings.display_percentage}% shown in the viewport, all in renders")
         if settings.child_type != "NONE" and settings.child_percent != settings.rendered_child_count:
             out.append(f"particles '{system.name}': {settings.child_percent} children each in the viewport, "
@@ -64,6 +65,16 @@ def _modifier_difference(m) -> str | None:
     if m.type == "NODES" and m.node_group is not None and _uses_is_viewport(m.node_group, set()):
         return f"modifier '{m.name}' reads Is Viewport"
     return None
+
+
+def _dynamic(system) -> bool:
+    """Particles whose display amount renders too (particle.cc, psys_get_current_display_percentage: a
+    render takes all of them only when they are not simulated: no physics, keyed, or a baked cache;
+    hair without hair dynamics). With children the amount applies to the children instead."""
+    settings = system.settings
+    if settings.type == "HAIR":
+        return system.use_hair_dynamics
+    return not system.point_cache.is_baked and settings.physics_type in ("NEWTON", "BOIDS", "FLUID")
 
 
 def _resolution_difference(label, viewport, render) -> list[str]:

@@ -1076,6 +1076,9 @@ def test_settings_a_render_evaluates_differently_are_named_in_one_warning(scene)
     pebble.hide_render = True
     emitter = scenes.add_particle_emitter("Emitter", count=10, obj=pebble, location=(0, 9, 0))
     emitter.particle_systems[0].settings.display_percentage = 30  # the viewport shows 3 of 10
+    simulated = scenes.add_particle_emitter("Simulated", count=10, obj=pebble, location=(0, -9, 0))
+    simulated.particle_systems[0].settings.physics_type = "NEWTON"  # renders 30% too: not named
+    simulated.particle_systems[0].settings.display_percentage = 30
     plain = scenes.add_cube("Plain", location=(15, 0, 0))
     same = plain.modifiers.new("Same", "SUBSURF")
     same.levels = same.render_levels = 2  # equal: not named
@@ -1089,7 +1092,7 @@ def test_settings_a_render_evaluates_differently_are_named_in_one_warning(scene)
         "Is Viewport), 'Emitter' (particles 'Particles': 30% shown in the viewport, all in renders), and "
         "Simplify (max subdivision 1 in the viewport, 4 in renders)"]
     scene.render.use_simplify = False
-    for name in ("Subdivided", "RenderOnly", "Tube", "Blob", "Switched", "Emitter"):
+    for name in ("Subdivided", "RenderOnly", "Tube", "Blob", "Switched", "Emitter", "Simulated"):
         bpy.data.objects.remove(bpy.data.objects[name])
     assert _evaluation_warnings(extract_scene()) == []
 
