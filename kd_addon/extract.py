@@ -863,7 +863,10 @@ class _EntryReader:
         self.not_triangles: dict[tuple[str, str | None], str] = {}
         self.non_finite_placements: dict[tuple[str, str | None], str] = {}  # one warning each
         self._own_entries_hidden_if_instancing: list[tuple[int, Instance]] = []
-        self.paths = DupliPaths(lambda parent, orig: collection_visible(vis, parent, orig))
+        # A hidden top-level instancer's entries are all left out anyway (collection_visible), so the
+        # path walk's rule ignores it and depends on what the instancer instances only.
+        self.paths = DupliPaths(lambda parent, orig: not vis.scene_object(parent.original)
+                                or collection_visible(vis, parent, orig))
 
     def read(self, inst) -> Instance | None:
         """Record for one entry, or None to skip it. Copies everything out at

@@ -1119,3 +1119,15 @@ def test_a_view_layer_with_surfaces_filtered_out_renders_no_triangles(scene):
     assert result.triangle_count == 0 and result.warnings == [
         "view layer 'ViewLayer' has Filter > Surfaces off: a final render shows no surfaces, so the preview "
         "renders none"]
+
+
+def test_a_hidden_instancer_of_a_collection_does_not_hide_a_visible_ones_nested_instances(scene):
+    """The path walk remembers per instanced collection which members make nothing: a render-hidden
+    instancer of the same collection walked first must not make that of a visible one's nested
+    instancer 'nothing'."""
+    scenes.add_two_path_scene("collection instance", "hidden instancer")
+    bpy.data.objects["Top"].hide_render = True
+    scenes.add_collection_instance("Later", bpy.data.collections["Mid"], location=(0, 9, 0))
+    order = [i.parent.name for i in bpy.context.evaluated_depsgraph_get().object_instances if i.is_instance]
+    assert order.index("Top") < order.index("Later")  # the hidden one is walked first
+    assert _leaf_centres(extract_scene(), "Leaf") == [(-3.0, 9.0, 0.0)]
