@@ -72,7 +72,7 @@ class DupliPaths:
         walk = self._walks.get(parent_ptr)
         if walk is None:
             walk = self._walks[parent_ptr] = self._reach_of(parent.original)[1]
-            self._kinds[parent_ptr] = _instancer_kind(parent)
+            self._kinds[parent_ptr] = _instancer_kind(parent.original)
         if not walk:
             return True
         depth = _depth(inst.persistent_id)
@@ -128,7 +128,7 @@ def _instancer_kind(ob) -> tuple:
     if ob.instance_type == "COLLECTION" and ob.instance_collection is not None and not ob.particle_systems \
             and not any(m.type == "NODES" for m in ob.modifiers):
         return ("collection", ob.instance_collection.as_pointer())
-    return ("object", ob.original.as_pointer())
+    return ("object", ob.as_pointer())
 
 
 def _depth(persistent_id) -> int:
