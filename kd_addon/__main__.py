@@ -12,7 +12,7 @@ try:
         raise KeyboardInterrupt
     code = main()
 except KeyboardInterrupt:
-    print("kdpreview: interrupted", file=sys.stderr)
+    print("python -m kd_addon: interrupted", file=sys.stderr)
     code = 130
 background.exit_now_if_abandoned(code)
 sys.exit(code)

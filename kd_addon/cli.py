@@ -23,6 +23,7 @@ import signal
 import sys
 import threading
 from contextlib import contextmanager
+from functools import partial
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -66,6 +67,7 @@ def build_parser(prog: str = COMMAND_ID) -> argparse.ArgumentParser:
     """The one parser. Setting options default to SUPPRESS so absent ones take the scene's saved settings
     (saved_settings_with_overrides), which default to config.DEFAULTS."""
     parser = _Parser(prog=prog, description="KD Preview: ray-traced AO / shadow previews from the command line")
+    parser.set_defaults(prog=prog)  # messages name the program as it was run (outside QA: "kdpreview" under python -m)
     commands = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     render = commands.add_parser("render", help="render frames to images and report.json",
                                  epilog="Options not given take the scene's own KD Preview settings (saved in the "
@@ -172,7 +174,7 @@ def saved_settings_with_overrides(scene, args) -> SimpleNamespace:
             properties.unregister()
 
 
-def _print_row(result, path) -> None:
+def _print_row(prog, result, path) -> None:
     mark = "*" if result.first_run else ""
     print(TABLE.format(f"{mark}{result.frame}", f"{result.triangles:,}", result.objects, f"{result.extract_ms:.1f}",
                        f"{result.build_ms:.1f}", f"{result.trace_ms:.1f}", f"{result.total_ms:.1f}",
@@ -181,7 +183,7 @@ def _print_row(result, path) -> None:
                        f"{result.tree_stats.get('nodes', 0):,}", result.objects_rebuilt, result.objects_reused,
                        "reused" if result.image_reused else "new"), flush=True)
     for warning in result.warnings:  # e.g. an object left out for non-finite vertices
-        print(f"{COMMAND_ID}: warning: frame {result.frame}: {warning}", file=sys.stderr, flush=True)
+        print(f"{prog}: warning: frame {result.frame}: {warning}", file=sys.stderr, flush=True)
 
 
 @contextmanager
@@ -243,9 +245,10 @@ def _run(args, cancelled) -> int:
         config = make_config(saved_settings_with_overrides(scene, args))
         frames = parse_frames(args.frames if args.frames is not None  # --frames "" is an error, not the default
                               else f"{scene.frame_start}-{scene.frame_end}:{max(1, scene.frame_step)}")
-        _note_frames_outside(scene, frames)
+        _note_frames_outside(args.prog, scene, frames)
         job = SequenceJob(scene, config, frames, Path(args.out),
-                          depsgraph_source(scene, scene.view_layers[layer_name]), on_frame=_print_row)
+                          depsgraph_source(scene, scene.view_layers[layer_name]),
+                          on_frame=partial(_print_row, args.prog))
         print(f"KD Preview: scene '{scene.name}', {len(frames)} frame(s), mode {config.settings.mode}, "
               f"{config.settings.samples} samples, {config.resolution_percentage}% resolution -> {args.out}")
         if not corelib.cache_is_warm():  # else a first run looks hung for minutes (outside QA)
@@ -254,23 +257,23 @@ def _run(args, cancelled) -> int:
         print(HEADER, flush=True)  # piped, it would wait for the first frame: minutes on a first run
         _run_claimed(job, cancelled)
     except PreviewError as error:
-        print(f"{COMMAND_ID}: error: {error}", file=sys.stderr)
+        print(f"{args.prog}: error: {error}", file=sys.stderr)
         return 1
     except (Cancelled, KeyboardInterrupt):
         written = len(job.results) if job is not None else 0
-        print(f"{COMMAND_ID}: interrupted; " + (f"the {written} frame(s) already written are kept" if written
+        print(f"{args.prog}: interrupted; " + (f"the {written} frame(s) already written are kept" if written
                                                 else "no frame was written"), file=sys.stderr)
         return 130
     _print_totals(job)
     return 0
 
 
-def _note_frames_outside(scene, frames: list[int]) -> None:
+def _note_frames_outside(prog, scene, frames: list[int]) -> None:
     """Frames beyond the scene's range render as Blender would go to them; a note catches a typo
     (outside review: --frames 100-102 on a 1-5 scene rendered without a word)."""
     outside = [f for f in frames if not scene.frame_start <= f <= scene.frame_end]
     if outside:
-        print(f"{COMMAND_ID}: note: {len(outside)} of the frames ({outside[0]}"
+        print(f"{prog}: note: {len(outside)} of the frames ({outside[0]}"
               + (f" ... {outside[-1]}" if len(outside) > 1 else "")
               + f") are outside the frame range {scene.frame_start}-{scene.frame_end} of scene '{scene.name}'; "
               "rendering them anyway", file=sys.stderr, flush=True)

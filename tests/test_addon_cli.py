@@ -178,6 +178,15 @@ def test_a_file_that_is_no_blend_is_named_and_blender_says_nothing(tmp_path, cap
     assert captured.out == "" and not (tmp_path / "o").exists()
 
 
+def test_messages_name_the_program_as_it_was_run(tmp_path, capsys):
+    """Outside QA: under `python -m kd_addon` errors said "kdpreview:" (the Blender command's name),
+    argparse's usage errors the program's name."""
+    assert cli.main(["render", str(tmp_path / "missing.blend"), "--out", str(tmp_path / "o")]) == 1
+    assert capsys.readouterr().err.startswith(f"python -m kd_addon: error: no such .blend file: {tmp_path}")
+    assert cli.execute(["render", str(tmp_path / "missing.blend"), "--out", str(tmp_path / "o")]) == 1
+    assert capsys.readouterr().err.startswith("kdpreview: error: no such .blend file")
+
+
 def test_scene_errors_exit_nonzero_with_the_message(tmp_path, capsys):
     floor_scene(40, 30, camera=False)
     no_camera = tmp_path / "no_camera.blend"
