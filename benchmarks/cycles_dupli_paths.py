@@ -5,8 +5,9 @@ Usage: .venv/bin/python benchmarks/cycles_dupli_paths.py [--size 144 108] [--out
 Blender makes no instances from a render-hidden object, at any depth of nesting, and none from a
 render-hidden child collection's members; the viewport's depsgraph, which the preview reads, makes
 them (kd_addon/dupli_paths.py). Each case builds a scene with the test suite's builders
-(tests/bpy_scenes.py: add_two_path_scene, add_object_info_of_instancer; tests/test_extract.py asserts
-the extraction of the same scenes), adds a camera looking down at them, saves it, renders it with the
+(tests/bpy_scenes.py: add_two_path_scene, add_object_info_of_instancer,
+add_hidden_source_beside_nested_instances, add_hidden_member_named_and_nested; tests/test_extract.py
+asserts the extraction of the same scenes), adds a camera looking down at them, saves it, renders it with the
 preview's command line and with Cycles (transparent film, the narrowest pixel filter) and prints the
 hit pixels of both and how many differ. Exit 1 when a case differs in more pixels than its
 silhouettes could explain (MAX_EDGE_PIXELS).
@@ -38,6 +39,10 @@ def cases():
         for hidden in (False, True):
             label = f"object info of a {'render-hidden ' if hidden else ''}{source}"
             yield label, lambda s=source, h=hidden: scenes.add_object_info_of_instancer(s, h)
+    for first in (True, False):
+        yield (f"hidden source {'before' if first else 'after'} nested instances",
+               lambda f=first: scenes.add_hidden_source_beside_nested_instances(f))
+    yield "hidden member named directly and nested", scenes.add_hidden_member_named_and_nested
 
 
 def save_case(build, path, size):

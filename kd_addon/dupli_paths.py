@@ -35,8 +35,9 @@ _INSTANCING_TYPES = frozenset(("COLLECTION", "VERTS", "FACES"))
 class DupliPaths:
     """Feed it every object_instances entry in order; `made_by_render` says whether a render makes it.
 
-    `generated(parent, orig)` is the caller's rule for whether a render generates an instance entry of
-    `orig` under top-level instancer `parent` as far as collections go (extract.collection_visible).
+    `generated(instancer, orig)` (originals) is the caller's rule for whether a render makes `orig`
+    under `instancer` as far as collections go, whatever the instancer's own visibility
+    (extract.instanced_visible).
     The walk costs ~9 us an entry (reading persistent_id alone ~2 us; 2,000 collection instancers of a
     collection holding 4 nested instancers, 18,000 entries: 435-521 ms a frame without it, 597-685 ms
     with it, load ~2), so it runs only under top-level instancers that can reach another instancing
@@ -49,11 +50,13 @@ class DupliPaths:
         self._walks: dict[int, bool] = {}  # top-level instancer -> whether its entries need the walk
         self._kinds: dict[int, tuple] = {}  # top-level instancer -> _instancer_kind
         self._parent = 0
-        self._stack: list[tuple[int, int, bool]] = []  # (depth, original's pointer, makes nothing)
+        self._stack: list[tuple[tuple, int, bool]] = []  # (levels, original's pointer, makes nothing)
+        self.blocked: set[int] = set()  # originals some entry of which a render does not make
         self._makes_nothing: dict[tuple[int, int], bool] = {}
         self._objects: dict[int, bpy.types.Object] = {}
         self._made: dict[tuple[int, int], bool] = {}
-        self._reach: dict[int, tuple[frozenset[int], bool]] = {}
+        self._reach: dict[tuple, tuple[frozenset[int], bool]] = {}
+        self._member_sets: dict[int, frozenset[int]] = {}
 
     def made_by_render(self, inst, ob, parent) -> bool:
         """`ob` and `parent` are the entry's object and top-level instancer (None: not an instance),
@@ -75,23 +78,40 @@ class DupliPaths:
             self._kinds[parent_ptr] = _instancer_kind(parent.original)
         if not walk:
             return True
-        depth = _depth(inst.persistent_id)
-        while self._stack and self._stack[-1][0] >= depth:
+        pid = _levels(inst.persistent_id)
+        while self._stack and len(self._stack[-1][0]) >= len(pid):
             self._stack.pop()
         orig = ob.original
         pointer = orig.as_pointer()
         key = (self._kinds[parent_ptr], pointer)
         own = self._makes_nothing.get(key)
         if own is None:  # per (kind of instancer, object): most entries repeat one
-            own = self._makes_nothing[key] = orig.hide_render or not self._generated(parent, orig)
+            own = self._makes_nothing[key] = orig.hide_render or not self._generated(parent.original, orig)
             self._objects[pointer] = orig
-        blocked = False
-        for _, ancestor, hidden in self._stack:
-            if hidden and self._makes(ancestor, pointer):
-                blocked = True
-                break
-        self._stack.append((depth, pointer, blocked or own))
+        blocked = self._blocked(pid, pointer)
+        self._stack.append((pid, pointer, blocked or own))
+        if blocked:
+            self.blocked.add(pointer)
         return not blocked
+
+    def _blocked(self, pid: tuple, pointer: int) -> bool:
+        """Whether an ancestor of the entry (pid, pointer) makes nothing, or the nearest one instances
+        a collection whose render skips the entry's object (render-hidden there, or in a hidden child
+        collection; outside review: a render-hidden object named directly by an Object Info node
+        and also reached through a collection instance showed through both)."""
+        nearest = True
+        for ancestor_pid, ancestor, makes_nothing in reversed(self._stack):
+            if not (_descends(pid, ancestor_pid) and self._makes(ancestor, pointer)):
+                continue
+            if makes_nothing:
+                return True
+            if nearest:
+                nearest = False
+                collection = _instanced_collection(self._objects[ancestor])
+                if collection is not None and pointer in self._members(collection) \
+                        and not self._generated(self._objects[ancestor], self._objects[pointer]):
+                    return True
+        return False
 
     def _makes(self, ancestor: int, pointer: int) -> bool:
         """Whether object `ancestor` can instance object `pointer`, directly or through what it instances
@@ -101,6 +121,13 @@ class DupliPaths:
         if made is None:
             made = self._made[key] = ancestor == pointer or pointer in self._reach_of(self._objects[ancestor])[0]
         return made
+
+    def _members(self, collection) -> frozenset[int]:
+        """Pointers of a collection's own objects, its child collections' included (not nested instances')."""
+        key = collection.as_pointer()
+        if key not in self._member_sets:
+            self._member_sets[key] = frozenset(ob.as_pointer() for ob in collection.all_objects)
+        return self._member_sets[key]
 
     def _reach_of(self, ob: bpy.types.Object, stack: frozenset = frozenset()) -> tuple[frozenset[int], bool]:
         """(pointers of every object `ob` can instance, nested instancing included; whether one of
@@ -131,9 +158,27 @@ def _instancer_kind(ob) -> tuple:
     return ("object", ob.as_pointer())
 
 
-def _depth(persistent_id) -> int:
-    """Nesting levels an entry's persistent_id uses (the rest hold UNUSED_LEVEL)."""
-    return len(persistent_id) - tuple(persistent_id).count(UNUSED_LEVEL)
+def _levels(persistent_id) -> tuple:
+    """The nesting levels an entry's persistent_id uses, innermost first (the rest hold UNUSED_LEVEL)."""
+    levels = tuple(persistent_id)
+    return levels[:len(levels) - levels.count(UNUSED_LEVEL)]
+
+
+def _descends(pid: tuple, ancestor_pid: tuple) -> bool:
+    """Whether an entry's levels continue an ancestor's: its outer levels are the ancestor's, except
+    that geometry nodes number the instances of a collection member's own instances from the member's
+    index plus one (object_dupli.cc: make_dupli(..., id++), then make_recursive_duplis(..., id)). A
+    sibling at a deeper level (geometry-nodes levels that hold no object yield no entry) fails this
+    (outside review: a hidden Object Info source ahead of a nested instance hid it)."""
+    gap = len(pid) - len(ancestor_pid)
+    if gap <= 0:
+        return False
+    outer = pid[gap:]
+    return outer == ancestor_pid or (outer[0] == ancestor_pid[0] + 1 and outer[1:] == ancestor_pid[1:])
+
+
+def _instanced_collection(ob):
+    return ob.instance_collection if ob.instance_type == "COLLECTION" else None
 
 
 def _instanced_directly(ob: bpy.types.Object):
@@ -159,7 +204,7 @@ def _instances_things(ob: bpy.types.Object) -> bool:
 
 
 def _any_render_hidden_instancer() -> bool:
-    """Whether the file has anything that can hide instances on a path: a render-hidden collection, or
-    a render-hidden object that instances things. Without one no entry is walked."""
-    return (any(c.hide_render for c in bpy.data.collections)
-            or any(ob.hide_render and _instances_things(ob) for ob in bpy.data.objects))
+    """Whether the file has anything a path can hide instances by: a render-hidden collection or object
+    (an instancer, or a member that a collection instance on the path skips). Without one no entry is
+    walked."""
+    return any(c.hide_render for c in bpy.data.collections) or any(ob.hide_render for ob in bpy.data.objects)

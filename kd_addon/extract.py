@@ -479,9 +479,12 @@ def collection_visible(vis: _Visibility, parent, orig: bpy.types.Object) -> bool
     instance), without the ray-visibility flags."""
     if parent is None:
         return vis.scene_object(orig)
-    parent = parent.original
-    if not vis.scene_object(parent):
-        return False
+    return vis.scene_object(parent.original) and instanced_visible(vis, parent.original, orig)
+
+
+def instanced_visible(vis: _Visibility, parent: bpy.types.Object, orig: bpy.types.Object) -> bool:
+    """Whether the original instancer `parent` makes `orig` in a render, whatever `parent`'s own
+    visibility (collection_visible adds that)."""
     if parent == orig:
         return True
     if parent.instance_type in _INSTANCING_PARENT_TYPES and _descends_from(orig, parent):
@@ -576,7 +579,7 @@ def extract_scene(depsgraph: bpy.types.Depsgraph | None = None) -> ExtractedScen
         instances=instances,
         warnings=(surfaces_off + _unused_layer_warnings(depsgraph) + walker.geometries.warnings
                   + list(walker.non_finite_placements.values()) + list(walker.not_triangles.values())
-                  + left_out_warnings(depsgraph, vis, walker.instanced_by, viewport_shown)
+                  + left_out_warnings(depsgraph, vis, walker.instanced_by, viewport_shown, walker.paths.blocked)
                   + viewport_evaluation_warning(shown_objects, depsgraph.scene)),
         extract_ms=(time.perf_counter() - t0) * 1e3,
         frame=depsgraph.scene.frame_current,
@@ -593,13 +596,18 @@ def _surfaces_off_warnings(view_layer) -> list[str]:
 
 
 def _objects_shown(depsgraph, vis: _Visibility, instances: list[Instance]) -> list[bpy.types.Object]:
-    """The original objects a final render shows in the scene (hidden in the viewport or not) and those
-    the preview instanced, each once."""
+    """The original objects a final render shows in the scene (hidden in the viewport or not), those
+    the preview instanced, and those geometry nodes read (an Object Info source's evaluation shapes
+    the realized copy too), each once."""
     out = {ob.as_pointer(): ob for ob in _rendered_layers_objects(depsgraph) if vis.scene_object(ob)}
     for name in {r.name for r in instances if r.is_instance}:
         ob = bpy.data.objects.get(name)
         if ob is not None:
             out.setdefault(ob.as_pointer(), ob)
+    for ob in [ob for ob in out.values() if any(m.type == "NODES" for m in ob.modifiers)]:
+        collections, objects = node_references(ob)  # sources the nodes read, realized ones too
+        for source in objects + [member for c in collections for member in c.all_objects]:
+            out.setdefault(source.as_pointer(), source)
     return list(out.values())
 
 
@@ -648,7 +656,7 @@ NOT_TRIANGLE_DATA = {"Curves": "hair curves", "PointCloud": "a point cloud", "Vo
 
 
 def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility, instanced_by: dict[int, set[int]],
-                      evaluated: set[int]) -> list[str]:
+                      evaluated: set[int], not_made: set[int] = frozenset()) -> list[str]:
     """A warning per render-visible thing a final render shows and the preview leaves out: objects of
     the scene and its background scenes hidden in the viewport (the viewport depsgraph does not
     evaluate them) or not triangles, collection instancers hidden there (their instances go with
@@ -656,7 +664,8 @@ def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility, instance
     in viewports (`instanced_by`: the original objects the depsgraph instanced, by original
     instancer), and hair particles drawn as strands. `evaluated`: pointers of the originals the
     viewport shows, those its Show Instancer flag alone keeps out of the depsgraph's entries included
-    (they are read anyway when a render shows them, _hidden_by_viewport_flag_only)."""
+    (they are read anyway when a render shows them, _hidden_by_viewport_flag_only). `not_made`: originals
+    the viewport instanced on a path a render does not make (dupli_paths.py), not missing either."""
     warnings = []
     instancers = {}
     for ob in _rendered_layers_objects(depsgraph):
@@ -684,7 +693,7 @@ def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility, instance
                 warnings.append(f"object '{ob.name}' is hidden in the viewport (eye icon, Disable in Viewports or "
                                 f"a hidden collection): the preview reads the viewport's scene and leaves {what} out, "
                                 "a final render shows it")
-    instanced = set().union(*instanced_by.values())
+    instanced = set().union(*instanced_by.values()) | not_made
     for collection, hosts in instancers.values():
         members = list(_members(collection, (), {collection.as_pointer()}))
         pointers = {ob.as_pointer() for ob, _, _ in members}
@@ -863,10 +872,9 @@ class _EntryReader:
         self.not_triangles: dict[tuple[str, str | None], str] = {}
         self.non_finite_placements: dict[tuple[str, str | None], str] = {}  # one warning each
         self._own_entries_hidden_if_instancing: list[tuple[int, Instance]] = []
-        # A hidden top-level instancer's entries are all left out anyway (collection_visible), so the
-        # path walk's rule ignores it and depends on what the instancer instances only.
-        self.paths = DupliPaths(lambda parent, orig: not vis.scene_object(parent.original)
-                                or collection_visible(vis, parent, orig))
+        # The path walk's rule depends on what an instancer instances only, not on whether the
+        # instancer itself is shown (a hidden one's entries are all left out anyway, by the verdict).
+        self.paths = DupliPaths(lambda instancer, orig: instanced_visible(vis, instancer, orig))
 
     def read(self, inst) -> Instance | None:
         """Record for one entry, or None to skip it. Copies everything out at

@@ -422,3 +422,71 @@ def add_object_info_of_instancer(source_kind, hidden):
         source = add_gn_instancer("Source", count=2, cube_size=0.6, location=far)
     source.hide_render = hidden
     add_info_node_host("Host", source)
+
+
+def _object_info(tree, target):
+    info = tree.nodes.new("GeometryNodeObjectInfo")
+    info.inputs["Object"].default_value = target
+    info.inputs["As Instance"].default_value = True
+    return info.outputs["Geometry"]
+
+
+def _on_points(tree, instance, xs):
+    """Instance on Points of `instance` on points at (x, 0, 0) for x in xs (a Mesh Line)."""
+    line = tree.nodes.new("GeometryNodeMeshLine")
+    line.inputs["Count"].default_value = len(xs)
+    line.inputs["Start Location"].default_value = (xs[0], 0.0, 0.0)
+    line.inputs["Offset"].default_value = (xs[1] - xs[0] if len(xs) > 1 else 0.0, 0.0, 0.0)
+    node = tree.nodes.new("GeometryNodeInstanceOnPoints")
+    tree.links.new(line.outputs[0], node.inputs["Points"])
+    tree.links.new(instance, node.inputs["Instance"])
+    return node.outputs[0]
+
+
+def add_joined_nodes_host(name, outputs_of, *, location=(0, 0, 0)):
+    """Empty-mesh object whose geometry nodes join the geometries `outputs_of(tree)` returns, in order."""
+    tree = bpy.data.node_groups.new(f"{name}Tree", "GeometryNodeTree")
+    tree.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    join = tree.nodes.new("GeometryNodeJoinGeometry")
+    for output in outputs_of(tree):
+        tree.links.new(output, join.inputs[0])
+    tree.links.new(join.outputs[0], tree.nodes.new("NodeGroupOutput").inputs[0])
+    host = add_mesh(name, [], [], location=location)
+    host.modifiers.new("GN", "NODES").node_group = tree
+    return host
+
+
+def add_hidden_source_beside_nested_instances(hidden_first):
+    """Cube 'X'; a render-hidden carrier 'H' (no faces) whose nodes instance X; 'Host' joins an Object
+    Info instance of H (a render makes nothing of it) and X on 2 x 2 points through two Instance on
+    Points levels (4 copies in a render), H's part first or last. The nested copies sit one level
+    deeper than H's entry, with a geometry level between that yields no entry."""
+    x = add_cube("X", scale=0.2, location=(0, 0, -30))
+    hidden = add_joined_nodes_host("H", lambda tree: [_on_points(tree, _object_info(tree, x), [0.0])],
+                                   location=(0, 0, -40))
+    hidden.hide_render = True
+
+    def parts(tree):
+        of_hidden = _on_points(tree, _object_info(tree, hidden), [-4.0])
+        nested = _on_points(tree, _on_points(tree, _object_info(tree, x), [0.0, 1.0]), [0.0, 2.0])
+        return [of_hidden, nested] if hidden_first else [nested, of_hidden]
+
+    add_joined_nodes_host("Host", parts)
+
+
+def add_hidden_member_named_and_nested():
+    """Render-hidden cube 'X' in excluded collection 'LeafC'; excluded 'Mid' holds an empty 'F'
+    instancing LeafC; 'Host' joins an Object Info instance of X (rendered: named directly) and a
+    Collection Info instance of Mid (a render skips X there, it is hidden in LeafC)."""
+    leaf_collection = new_collection("LeafC", exclude=True)
+    x = add_cube("X", scale=0.3, collection=leaf_collection)
+    x.hide_render = True
+    mid = new_collection("Mid", exclude=True)
+    add_collection_instance("F", leaf_collection, location=(3, 0, 0), collection=mid)
+
+    def parts(tree):
+        info = tree.nodes.new("GeometryNodeCollectionInfo")
+        info.inputs["Collection"].default_value = mid
+        return [_on_points(tree, _object_info(tree, x), [-3.0]), _on_points(tree, info.outputs[0], [0.0])]
+
+    add_joined_nodes_host("Host", parts)

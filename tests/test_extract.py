@@ -1079,18 +1079,21 @@ def test_settings_a_render_evaluates_differently_are_named_in_one_warning(scene)
     simulated = scenes.add_particle_emitter("Simulated", count=10, obj=pebble, location=(0, -9, 0))
     simulated.particle_systems[0].settings.physics_type = "NEWTON"  # renders 30% too: not named
     simulated.particle_systems[0].settings.display_percentage = 30
+    switched_off = scenes.add_particle_emitter("SwitchedOff", count=10, obj=pebble, location=(0, -18, 0))
+    switched_off.particle_systems[0].settings.display_percentage = 30
+    switched_off.modifiers[0].show_viewport = switched_off.modifiers[0].show_render = False  # off in both
     plain = scenes.add_cube("Plain", location=(15, 0, 0))
     same = plain.modifiers.new("Same", "SUBSURF")
     same.levels = same.render_levels = 2  # equal: not named
     scene.render.use_simplify = True
-    scene.render.simplify_subdivision, scene.render.simplify_subdivision_render = 1, 4
+    scene.render.simplify_subdivision, scene.render.simplify_subdivision_render = 2, 4  # Plain: 2 both
     assert _evaluation_warnings(extract_scene()) == [
         "the preview evaluates geometry as the viewport does, a final render with its own settings, which differ "
         "for 'Subdivided' (modifier 'Subdivision' 0 levels in the viewport, 3 in renders), 'RenderOnly' "
         "(modifier 'Bevel' enabled only in renders), 'Tube' (resolution U 2 in the viewport, 24 in renders), "
         "'Blob' (metaball resolution 0.4 in the viewport, 0.1 in renders), 'Switched' (modifier 'Nodes' reads "
         "Is Viewport), 'Emitter' (particles 'Particles': 30% shown in the viewport, all in renders), and "
-        "Simplify (max subdivision 1 in the viewport, 4 in renders)"]
+        "Simplify (max subdivision 2 in the viewport, 4 in renders)"]
     scene.render.use_simplify = False
     for name in ("Subdivided", "RenderOnly", "Tube", "Blob", "Switched", "Emitter", "Simulated"):
         bpy.data.objects.remove(bpy.data.objects[name])
@@ -1121,13 +1124,59 @@ def test_a_view_layer_with_surfaces_filtered_out_renders_no_triangles(scene):
         "renders none"]
 
 
-def test_a_hidden_instancer_of_a_collection_does_not_hide_a_visible_ones_nested_instances(scene):
+@pytest.mark.parametrize("hidden_path", scenes.TWO_PATH_HIDINGS[:2])
+def test_a_hidden_instancer_of_a_collection_does_not_decide_for_a_visible_one(scene, hidden_path):
     """The path walk remembers per instanced collection which members make nothing: a render-hidden
-    instancer of the same collection walked first must not make that of a visible one's nested
-    instancer 'nothing'."""
-    scenes.add_two_path_scene("collection instance", "hidden instancer")
+    top-level instancer of the same collection walked first must decide nothing for a visible one
+    (outside review, with the hidden child collection: 69 pixels of a copy Cycles does not draw)."""
+    scenes.add_two_path_scene("collection instance", hidden_path)
     bpy.data.objects["Top"].hide_render = True
     scenes.add_collection_instance("Later", bpy.data.collections["Mid"], location=(0, 9, 0))
     order = [i.parent.name for i in bpy.context.evaluated_depsgraph_get().object_instances if i.is_instance]
     assert order.index("Top") < order.index("Later")  # the hidden one is walked first
     assert _leaf_centres(extract_scene(), "Leaf") == [(-3.0, 9.0, 0.0)]
+
+
+@pytest.mark.parametrize("hidden_first", [True, False])
+def test_a_hidden_source_does_not_hide_nested_instances_beside_it(scene, hidden_first):
+    """Outside review against Cycles (0 against 183 pixels): a geometry-nodes level that holds no
+    object yields no entry, so the hidden Object Info source's entry looked like an ancestor of the
+    nested copies after it; an ancestor is believed only when the copies' levels continue its own."""
+    scenes.add_hidden_source_beside_nested_instances(hidden_first)
+    assert sorted(_instances_by_host(extract_scene()).get("Host", [])) == ["X"] * 4
+
+
+def test_a_hidden_member_named_directly_shows_once(scene):
+    """Outside review against Cycles (124 against 36 pixels): render-hidden X named by an Object Info
+    node renders, but not where a collection instance on its path skips it."""
+    scenes.add_hidden_member_named_and_nested()
+    assert _leaf_centres(extract_scene(), "X") == [(-3.0, 0.0, 0.0)]
+
+
+def test_instances_of_a_hidden_vertex_parent_in_a_collection_are_not_named_as_missing(scene):
+    """Outside review: a render-hidden vertex-instancing parent inside an instanced collection makes no
+    copies of its child in a render (Cycles: none), yet the child was named as 'not instanced in the
+    viewport ... a final render shows them'."""
+    source = scenes.new_collection("K", exclude=True)
+    parent = scenes.add_mesh("VParent", [(0, 0, 0), (1, 0, 0), (0, 1, 0)], [(0, 1, 2)], collection=source)
+    parent.instance_type, parent.hide_render = "VERTS", True
+    child = scenes.add_cube("VChild", scale=0.2, collection=source)
+    child.parent = parent
+    scenes.add_cube("Other", scale=0.2, location=(3, 0, 0), collection=source)
+    scenes.add_collection_instance("Top", source)
+    result = extract_scene()
+    assert result.object_names == ["Other"] and result.warnings == []
+
+
+def test_subdivision_levels_simplify_caps_alike_are_not_named(scene):
+    """Outside review: Subdivision 1 against 3 levels under Simplify's 0 and 0 evaluates to 0 levels
+    either way (Cycles' mask equals the preview's), yet was named."""
+    scenes.add_cube("Capped").modifiers.new("Subdivision", "SUBSURF").render_levels = 3
+    scene.render.use_simplify = True
+    scene.render.simplify_subdivision = scene.render.simplify_subdivision_render = 0
+    assert _evaluation_warnings(extract_scene()) == []
+    scene.render.simplify_subdivision_render = 2
+    assert _evaluation_warnings(extract_scene()) == [
+        "the preview evaluates geometry as the viewport does, a final render with its own settings, which differ "
+        "for 'Capped' (modifier 'Subdivision' 0 levels in the viewport, 2 in renders), and Simplify (max "
+        "subdivision 0 in the viewport, 2 in renders)"]
