@@ -16,11 +16,15 @@ an object reached through such an instancer from the same object reached through
 So this walks the instance tree itself. `depsgraph.object_instances` yields a top-level object's
 instances depth first, each instancing object right before the instances it makes, and each entry's
 `persistent_id` holds one index a nesting level (unused levels are INT_MAX), so an entry's ancestors
-are the latest entries of smaller depth. Geometry-nodes levels that hold no object yield no entry, so
-a latest entry of smaller depth might be a sibling's; an ancestor is therefore only believed when it
-could make the entry (its collection holds the object, it parents it, its nodes or particles name it,
-or it is the object itself: a carrier's own node instances). Where that cannot be told (a collection
-computed by nodes), the entry is kept, as before.
+are among the latest entries of smaller depth. Geometry-nodes levels that hold no object yield no
+entry, so a latest entry of smaller depth might be a sibling's; an ancestor is therefore only believed
+when the entry's levels continue its own (_descends) and it could make the entry (its collection holds
+the object, it parents it, its nodes or particles name it, or it is the object itself: a carrier's own
+node instances). Where that cannot be told (a collection
+computed by nodes), the entry is kept, as before. Known miss (outside review): a Collection Info node
+with Separate Children whose collection holds a render-hidden instancer and, in a child collection, a
+visible instancer of the same collection: the visible one's copies continue the hidden one's levels too
+(the +1 numbering below), so they are left out.
 """
 from __future__ import annotations
 
@@ -41,8 +45,8 @@ class DupliPaths:
     The walk costs ~9 us an entry (reading persistent_id alone ~2 us; 2,000 collection instancers of a
     collection holding 4 nested instancers, 18,000 entries: 435-521 ms a frame without it, 597-685 ms
     with it, load ~2), so it runs only under top-level instancers that can reach another instancing
-    object, in files with a render-hidden collection or instancing object: a geometry-nodes carrier
-    scattering 100k copies of its own geometry pays one memo lookup an entry."""
+    object, in files with a render-hidden collection or object: a geometry-nodes carrier scattering
+    100k copies of its own geometry pays one memo lookup an entry."""
 
     def __init__(self, generated):
         self._generated = generated
