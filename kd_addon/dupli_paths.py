@@ -21,10 +21,8 @@ entry, so a latest entry of smaller depth might be a sibling's; an ancestor is t
 when the entry's levels continue its own (_descends) and it could make the entry (its collection holds
 the object, it parents it, its nodes or particles name it, or it is the object itself: a carrier's own
 node instances). Where that cannot be told (a collection
-computed by nodes), the entry is kept, as before. Known miss (outside review): a Collection Info node
-with Separate Children whose collection holds a render-hidden instancer and, in a child collection, a
-visible instancer of the same collection: the visible one's copies continue the hidden one's levels too
-(the +1 numbering below), so they are left out.
+computed by nodes), the entry is kept, as before. Each entry asks only its parent (_blocked), whose
+flag carries what its own ancestors decided.
 """
 from __future__ import annotations
 
@@ -99,22 +97,23 @@ class DupliPaths:
         return not blocked
 
     def _blocked(self, pid: tuple, pointer: int) -> bool:
-        """Whether an ancestor of the entry (pid, pointer) makes nothing, or the nearest one instances
-        a collection whose render skips the entry's object (render-hidden there, or in a hidden child
-        collection; outside review: a render-hidden object named directly by an Object Info node
-        and also reached through a collection instance showed through both)."""
-        nearest = True
-        for ancestor_pid, ancestor, makes_nothing in reversed(self._stack):
-            if not (_descends(pid, ancestor_pid) and self._makes(ancestor, pointer)):
+        """Whether the entry's parent, the nearest stacked entry it descends from (its levels continue
+        the parent's and the parent could make it), makes nothing (itself hidden, or on a path a render
+        does not make: the flag is inherited down the stack), or instances a collection whose render
+        skips the entry's object (render-hidden there, or in a hidden child collection; outside review:
+        a render-hidden object named directly by an Object Info node and also reached through a
+        collection instance showed through both). Only the parent is asked: a farther entry whose
+        levels the entry's also continue (geometry nodes' +1 numbering makes such twins) may be a
+        sibling of the parent's line, which a render-hidden one would wrongly block (outside review:
+        Separate Children with a hidden and a visible instancer of one collection)."""
+        for parent_pid, parent, makes_nothing in reversed(self._stack):
+            if not (_descends(pid, parent_pid) and self._makes(parent, pointer)):
                 continue
             if makes_nothing:
                 return True
-            if nearest:
-                nearest = False
-                collection = _instanced_collection(self._objects[ancestor])
-                if collection is not None and pointer in self._members(collection) \
-                        and not self._generated(self._objects[ancestor], self._objects[pointer]):
-                    return True
+            collection = _instanced_collection(self._objects[parent])
+            return (collection is not None and pointer in self._members(collection)
+                    and not self._generated(self._objects[parent], self._objects[pointer]))
         return False
 
     def _makes(self, ancestor: int, pointer: int) -> bool:

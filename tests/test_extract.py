@@ -1180,3 +1180,18 @@ def test_subdivision_levels_simplify_caps_alike_are_not_named(scene):
         "the preview evaluates geometry as the viewport does, a final render with its own settings, which differ "
         "for 'Capped' (modifier 'Subdivision' 0 levels in the viewport, 2 in renders), and Simplify (max "
         "subdivision 0 in the viewport, 2 in renders)"]
+
+
+def test_separate_children_with_a_hidden_and_a_visible_instancer_of_one_collection(scene):
+    """Outside review against Cycles (0 against 61 pixels): geometry nodes number a collection member's
+    own instances from its index + 1, so the copies under the visible instancer (in child collection
+    'Sub') also continued the levels of the render-hidden one beside 'Sub'; only an entry's parent
+    decides now."""
+    leaf_collection = scenes.new_collection("LeafC", exclude=True)
+    scenes.add_cube("Leaf", scale=0.3, collection=leaf_collection)
+    top = scenes.new_collection("TopC", exclude=True)
+    scenes.add_collection_instance("HI", leaf_collection, location=(3, 0, 0), collection=top).hide_render = True
+    sub = scenes.new_collection("Sub", parent=top)
+    scenes.add_collection_instance("VI", leaf_collection, location=(-3, 0, 0), collection=sub)
+    scenes.add_info_node_host("Host", top, separate_children=True)
+    assert _leaf_centres(extract_scene(), "Leaf") == [(-3.0, 0.0, 0.0)]
