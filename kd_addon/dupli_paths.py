@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import bpy
 
-from .node_instances import node_references, particle_references
+from .node_instances import has_node_modifier, instancing_references
 
 UNUSED_LEVEL = 2 ** 31 - 1  # persistent_id's filler beyond an entry's depth (INT_MAX)
 _INSTANCING_TYPES = frozenset(("COLLECTION", "VERTS", "FACES"))
@@ -49,8 +49,7 @@ class DupliPaths:
     def __init__(self, generated):
         self._generated = generated
         self._active: bool | None = None  # decided at the first instance entry (most frames have none)
-        self._walks: dict[int, bool] = {}  # top-level instancer -> whether its entries need the walk
-        self._kinds: dict[int, tuple] = {}  # top-level instancer -> _instancer_kind
+        self._tops: dict[int, tuple[bool, tuple]] = {}  # top-level instancer -> (walk its entries, kind)
         self._parent = 0
         self._stack: list[tuple[tuple, int, bool]] = []  # (levels, original's pointer, makes nothing)
         self.blocked: set[int] = set()  # originals some entry of which a render does not make
@@ -67,17 +66,17 @@ class DupliPaths:
             self._stack.clear()
             return True
         if self._active is None:
-            self._active = _any_render_hidden_instancer()
+            self._active = _anything_render_hidden()
         if not self._active:
             return True
         parent_ptr = parent.as_pointer()
         if parent_ptr != self._parent:  # a top-level object's instances come in one run
             self._parent = parent_ptr
             self._stack.clear()
-        walk = self._walks.get(parent_ptr)
-        if walk is None:
-            walk = self._walks[parent_ptr] = self._reach_of(parent.original)[1]
-            self._kinds[parent_ptr] = _instancer_kind(parent.original)
+        top = self._tops.get(parent_ptr)
+        if top is None:
+            top = self._tops[parent_ptr] = (self._reach_of(parent.original)[1], _instancer_kind(parent.original))
+        walk, kind = top
         if not walk:
             return True
         pid = _levels(inst.persistent_id)
@@ -85,7 +84,7 @@ class DupliPaths:
             self._stack.pop()
         orig = ob.original
         pointer = orig.as_pointer()
-        key = (self._kinds[parent_ptr], pointer)
+        key = (kind, pointer)
         own = self._makes_nothing.get(key)
         if own is None:  # per (kind of instancer, object): most entries repeat one
             own = self._makes_nothing[key] = orig.hide_render or not self._generated(parent.original, orig)
@@ -155,9 +154,9 @@ class DupliPaths:
 def _instancer_kind(ob) -> tuple:
     """What decides the instances an object makes: the collection it instances, or the object itself
     (vertex or face instancing, particles, geometry nodes)."""
-    if ob.instance_type == "COLLECTION" and ob.instance_collection is not None and not ob.particle_systems \
-            and not any(m.type == "NODES" for m in ob.modifiers):
-        return ("collection", ob.instance_collection.as_pointer())
+    collection = _instanced_collection(ob)
+    if collection is not None and not ob.particle_systems and not has_node_modifier(ob):
+        return ("collection", collection.as_pointer())
     return ("object", ob.as_pointer())
 
 
@@ -187,26 +186,23 @@ def _instanced_collection(ob):
 def _instanced_directly(ob: bpy.types.Object):
     """The objects `ob` instances itself: its instance collection's (children included), its
     children when it instances on vertices or faces, those its geometry nodes and particles name."""
-    if ob.instance_type == "COLLECTION" and ob.instance_collection is not None:
-        yield from ob.instance_collection.all_objects
+    collection = _instanced_collection(ob)
+    if collection is not None:
+        yield from collection.all_objects
     if ob.instance_type in ("VERTS", "FACES"):
         yield from ob.children_recursive
-    if len(ob.particle_systems) or any(m.type == "NODES" for m in ob.modifiers):
-        collections, objects = node_references(ob)
-        if len(ob.particle_systems):
-            more_collections, more_objects = particle_references(ob)
-            collections, objects = collections + more_collections, objects + more_objects
+    if len(ob.particle_systems) or has_node_modifier(ob):
+        collections, objects = instancing_references(ob)
         for collection in collections:
             yield from collection.all_objects
         yield from objects
 
 
 def _instances_things(ob: bpy.types.Object) -> bool:
-    return (ob.instance_type in _INSTANCING_TYPES or len(ob.particle_systems) > 0
-            or any(m.type == "NODES" for m in ob.modifiers))
+    return ob.instance_type in _INSTANCING_TYPES or len(ob.particle_systems) > 0 or has_node_modifier(ob)
 
 
-def _any_render_hidden_instancer() -> bool:
+def _anything_render_hidden() -> bool:
     """Whether the file has anything a path can hide instances by: a render-hidden collection or object
     (an instancer, or a member that a collection instance on the path skips). Without one no entry is
     walked."""

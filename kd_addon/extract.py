@@ -102,7 +102,7 @@ import bpy
 import numpy as np
 
 from .dupli_paths import DupliPaths
-from .node_instances import node_references, particle_references
+from .node_instances import has_node_modifier, instancing_references, node_references
 from .viewport_evaluation import viewport_evaluation_warning
 
 # --------------------------------------------------------------------------
@@ -355,10 +355,7 @@ class _Visibility:
         instance directly; memoized."""
         ptr = instancer.as_pointer()
         if ptr not in self._node_memo:
-            collections, objects = node_references(instancer)
-            if len(instancer.particle_systems):
-                particle_collections, particle_objects = particle_references(instancer)
-                collections, objects = collections + particle_collections, objects + particle_objects
+            collections, objects = instancing_references(instancer)
             members = frozenset().union(*(_reachable_objects(c, {c.as_pointer()}) for c in collections))
             shown = frozenset().union(*(self._collection_objects(c, set()) for c in collections))
             self._node_memo[ptr] = (members, shown, frozenset(ob.as_pointer() for ob in objects))
@@ -604,7 +601,7 @@ def _objects_shown(depsgraph, vis: _Visibility, instances: list[Instance]) -> li
         ob = bpy.data.objects.get(name)
         if ob is not None:
             out.setdefault(ob.as_pointer(), ob)
-    for ob in [ob for ob in out.values() if any(m.type == "NODES" for m in ob.modifiers)]:
+    for ob in [ob for ob in out.values() if has_node_modifier(ob)]:
         collections, objects = node_references(ob)  # sources the nodes read, realized ones too
         for source in objects + [member for c in collections for member in c.all_objects]:
             out.setdefault(source.as_pointer(), source)
@@ -729,7 +726,7 @@ def _nests(host) -> bool:
     """Whether `host`'s instances of a collection expand the collection instances among its members: a
     collection instancer's and geometry nodes' do, particles' do not (object_dupli.cc makes particles'
     instances without recursing; Cycles showed none, outside review)."""
-    return host.instance_type == "COLLECTION" or any(m.type == "NODES" for m in host.modifiers)
+    return host.instance_type == "COLLECTION" or has_node_modifier(host)
 
 
 def _shows_instances_of(host, members: set[int], instanced_by: dict[int, set[int]]) -> bool:
@@ -804,7 +801,7 @@ def _collections_rendered_whole(ob, vis: _Visibility) -> list:
     collection instance's is (_hidden_member_warnings). Measured with Cycles (bpy 5.0.1): a final
     render shows such a member in all three ways, and a child collection disabled in viewports that
     Separate Children instances."""
-    nodes = any(m.type == "NODES" for m in ob.modifiers)
+    nodes = has_node_modifier(ob)
     if not (nodes or len(ob.particle_systems)) or not (vis.scene_object(ob) and _ray_visible(ob)):
         return []
     collections = node_references(ob)[0] if nodes else []

@@ -65,6 +65,19 @@ def _unique(ids: list) -> list:
     return list({id_.as_pointer(): id_ for id_ in ids}.values())
 
 
+def has_node_modifier(ob: bpy.types.Object) -> bool:
+    return any(m.type == "NODES" for m in ob.modifiers)
+
+
+def instancing_references(ob: bpy.types.Object) -> tuple[list[bpy.types.Collection], list[bpy.types.Object]]:
+    """node_references and particle_references of `ob` together: what its nodes and particles instance."""
+    collections, objects = node_references(ob)
+    if len(ob.particle_systems):
+        particle_collections, particle_objects = particle_references(ob)
+        collections, objects = collections + particle_collections, objects + particle_objects
+    return collections, objects
+
+
 def particle_references(ob: bpy.types.Object) -> tuple[list[bpy.types.Collection], list[bpy.types.Object]]:
     """(collections rendered by `ob`'s particle systems, whole or one member per particle; objects
     rendered by them) for an original object."""
