@@ -169,13 +169,22 @@ def _object_normal(tri):
 
 
 @njit(cache=True, inline="always")
-def world_normal(scene, inst, prim, out):
-    """Unit geometric normal of an instance's triangle in world space: the object-space normal times
+def hit_surface(scene, inst, prim):
+    """What the hit frame needs of instance inst's triangle prim, fetched and computed once per hit:
+    (triangle (3, 3), world-to-object rows (3, 4), inverse_parts of them, object-space normal e1 x e2).
+    onto_triangle_plane, world_normal and surface_error_scale each took them afresh (the normal three
+    times, the matrix's cofactors four times)."""
+    tri = scene[16][scene[10][scene[7][inst]] + prim]
+    a = rows(scene[6], inst, inst + 1)[0]
+    return tri, a, inverse_parts(a), _object_normal(tri)
+
+
+@njit(cache=True, inline="always")
+def world_normal(surface, out):
+    """Unit geometric normal of a hit_surface in world space: the object-space normal times
     the inverse transpose of the object-to-world matrix, i.e. the transposed world-to-object matrix.
     A mirroring matrix flips its side; callers turn it to face the ray anyway."""
-    tri = scene[16][scene[10][scene[7][inst]] + prim]
-    w2o = rows(scene[6], inst, inst + 1)[0]
-    nx, ny, nz = _object_normal(tri)
+    _, w2o, _, (nx, ny, nz) = surface
     for k in range(3):
         out[k] = w2o[0, k] * nx + w2o[1, k] * ny + w2o[2, k] * nz
     norm = np.sqrt(out[0] * out[0] + out[1] * out[1] + out[2] * out[2])
@@ -192,9 +201,8 @@ def _object_point(a, p):
 
 
 @njit(cache=True, inline="always")
-def _world_vector(a, ux, uy, uz):
-    """The world vector x with a x = u (a's 3x3 part), by Cramer's rule: the scene keeps only
-    world-to-object matrices."""
+def inverse_parts(a):
+    """The cofactors (by column of the inverse) and determinant of a's 3x3 part, for _world_vector."""
     c0x, c0y, c0z = a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1], a[1, 2] * a[2, 0] - a[1, 0] * a[2, 2], \
         a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0]
     c1x, c1y, c1z = a[0, 2] * a[2, 1] - a[0, 1] * a[2, 2], a[0, 0] * a[2, 2] - a[0, 2] * a[2, 0], \
@@ -202,6 +210,14 @@ def _world_vector(a, ux, uy, uz):
     c2x, c2y, c2z = a[0, 1] * a[1, 2] - a[0, 2] * a[1, 1], a[0, 2] * a[1, 0] - a[0, 0] * a[1, 2], \
         a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]
     det = a[0, 0] * c0x + a[0, 1] * c0y + a[0, 2] * c0z
+    return c0x, c0y, c0z, c1x, c1y, c1z, c2x, c2y, c2z, det
+
+
+@njit(cache=True, inline="always")
+def _world_vector(parts, ux, uy, uz):
+    """The world vector x with a x = u (a's 3x3 part, given as inverse_parts(a)), by Cramer's rule:
+    the scene keeps only world-to-object matrices."""
+    c0x, c0y, c0z, c1x, c1y, c1z, c2x, c2y, c2z, det = parts
     return ((c0x * ux + c1x * uy + c2x * uz) / det, (c0y * ux + c1y * uy + c2y * uz) / det,
             (c0z * ux + c1z * uy + c2z * uz) / det)
 
@@ -213,7 +229,7 @@ def _row_magnitude(a, k, p):
 
 
 @njit(cache=True, inline="always")
-def surface_error_scale(scene, inst, prim, p, n):
+def surface_error_scale(surface, p, n):
     """A magnitude whose float64 rounding bounds how far hit point p, once moved onto its triangle's
     plane (onto_triangle_plane), may lie off that plane along unit normal n, and the rounding the
     triangle test's t carries near it: the largest of
@@ -229,10 +245,8 @@ def surface_error_scale(scene, inst, prim, p, n):
     Not max |p_k|: a floor at z = 0 but x = 5e5 would lift ray starts by 5e5 roundings' worth and
     carry them through a roof 1e-4 above (outside QA), where its height's ulps are what count. Nor the
     camera ray's |o| and t |d|: their error moves p along the ray, which the projection takes out."""
-    tri = scene[16][scene[10][scene[7][inst]] + prim]
-    a = rows(scene[6], inst, inst + 1)[0]
+    tri, a, parts, (nx, ny, nz) = surface
     world = abs(n[0] * p[0]) + abs(n[1] * p[1]) + abs(n[2] * p[2])
-    nx, ny, nz = _object_normal(tri)
     qx, qy, qz = _object_point(a, p)
     along = (abs(nx) * (_row_magnitude(a, 0, p) + abs(qx - tri[0, 0]))
              + abs(ny) * (_row_magnitude(a, 1, p) + abs(qy - tri[0, 1]))
@@ -243,13 +257,13 @@ def surface_error_scale(scene, inst, prim, p, n):
     objectspace = along / length if length > 0.0 else 0.0
     reach = 0.0
     for i in range(3):
-        x, y, z = _world_vector(a, tri[i, 0] - qx, tri[i, 1] - qy, tri[i, 2] - qz)
+        x, y, z = _world_vector(parts, tri[i, 0] - qx, tri[i, 1] - qy, tri[i, 2] - qz)
         reach = max(reach, abs(x), abs(y), abs(z))
     return max(world, objectspace, reach)
 
 
 @njit(cache=True, inline="always")
-def onto_triangle_plane(scene, inst, prim, p):
+def onto_triangle_plane(surface, p):
     """Move hit point p (in place) along its triangle's normal onto the triangle's plane.
 
     p = o + t d inherits t's error, and the triangle test's t is a ratio of terms of the size of the
@@ -258,15 +272,13 @@ def onto_triangle_plane(scene, inst, prim, p):
     shading.py), and AO rays started under it: dark speckles. The distance to the plane,
     (q - v0) . n, has an error of only eps R, as a point rebuilt from barycentrics has (pbrt,
     Pharr et al., 3rd ed. §3.9), so the offset clears it. Done in object space, where the triangle is."""
-    tri = scene[16][scene[10][scene[7][inst]] + prim]
-    a = rows(scene[6], inst, inst + 1)[0]
+    tri, a, parts, (nx, ny, nz) = surface
     qx, qy, qz = _object_point(a, p)
-    nx, ny, nz = _object_normal(tri)
     nn = nx * nx + ny * ny + nz * nz
     if nn == 0.0:  # a degenerate triangle is never hit; nothing to project onto
         return
     above = ((qx - tri[0, 0]) * nx + (qy - tri[0, 1]) * ny + (qz - tri[0, 2]) * nz) / nn
-    x, y, z = _world_vector(a, above * nx, above * ny, above * nz)
+    x, y, z = _world_vector(parts, above * nx, above * ny, above * nz)
     p[0] -= x
     p[1] -= y
     p[2] -= z

@@ -28,8 +28,8 @@ import numpy as np
 from numba import njit, prange
 
 from .array_views import rows, unowned
-from .instance_traversal import (new_scratch, onto_triangle_plane, surface_error_scale, trace_scene, unowned_scene,
-                                 world_normal)
+from .instance_traversal import (hit_surface, new_scratch, onto_triangle_plane, surface_error_scale, trace_scene,
+                                 unowned_scene, world_normal)
 from .layout import NO_HIT
 from .lights import COLOR, DELTA, NO_SHADOW
 from .pixel_reuse import segment_meets_any
@@ -232,14 +232,14 @@ def surface_frames(scene, origins, directions, t, inst, prim, hit_index, points,
         r = hit_index[a]
         for k in range(3):
             points[a, k] = origins[r, k] + t[r] * directions[r, k]
-        onto_triangle_plane(scene, inst[r], prim[r], points[a])
-        world_normal(scene, inst[r], prim[r], normals[a])
+        surface = hit_surface(scene, inst[r], prim[r])
+        onto_triangle_plane(surface, points[a])
+        world_normal(surface, normals[a])
         facing = normals[a, 0] * directions[r, 0] + normals[a, 1] * directions[r, 1] + normals[a, 2] * directions[r, 2]
         if facing > 0.0:
             for k in range(3):
                 normals[a, k] = -normals[a, k]
-        offset_origin(points[a], normals[a], surface_error_scale(scene, inst[r], prim[r], points[a], normals[a]),
-                      starts[a])
+        offset_origin(points[a], normals[a], surface_error_scale(surface, points[a], normals[a]), starts[a])
 
 
 @njit(cache=True, parallel=True)
