@@ -16,6 +16,7 @@ AREA_SHAPES = {"SQUARE": 0, "RECTANGLE": 1, "DISK": 2, "ELLIPSE": 3}
 # squared lengths), spot_inv_len_z, no_shadow, delta, shape, color(3)
 ROW = 24
 AREA_TAN_HALF_SPREAD, SPOT_INV_LEN_Z, NO_SHADOW, DELTA, COLOR = 9, 17, 18, 19, 21
+COLOR_MAX = float(np.finfo(np.float32).max)  # a pixel is at most its lights' largest colour component
 FULL_SPREAD = np.pi + 1e-6  # Blender's 180 degrees, a float32 pi, is a little above float64's
 
 
@@ -26,6 +27,9 @@ class Light:
         rgb = _floats(color)
         if rgb.shape != (3,) or not np.isfinite(rgb).all() or (rgb < 0).any():
             raise ValueError(f"light color must be 3 finite non-negative numbers (r, g, b), got {color!r}")
+        if (rgb > COLOR_MAX).any():  # the image is float32: a larger colour made inf pixels (outside review)
+            raise ValueError(f"light color components must be at most {COLOR_MAX:.4g} (the float32 image's "
+                             f"range), got {color!r}")
         color = rgb
         if not (np.isfinite(as_number("light power", power)) and power >= 0):
             raise ValueError(f"light power must be finite and >= 0, got {power}")

@@ -35,7 +35,7 @@ from .lights import COLOR, DELTA, NO_SHADOW
 from .pixel_reuse import segment_meets_any
 from .ray_visibility import SHADOW_RAYS
 from .sampling import pixel_seed, sample_2d
-from .shading import cosine_direction, offset_origin, sample_light
+from .shading import cosine_direction, offset_origin, sample_light, short_of_light
 from .traversal import block_range, interleaved_blocks
 
 AO, SHADOW, AO_SHADOW = 1, 2, 3
@@ -148,7 +148,8 @@ def _sample_pixel(scene, points, normals, starts, pixels, i, first, count, mode,
 def _ray_of_use(use, lights, point, normal, ao_distance, sampler, ps, s, dim1, direction):
     """The ray of one use of sample s: its direction (into `direction`), its tmax and its weight.
     USE_AO: a cosine-weighted direction about the normal within ao_distance, weight 1. Light k (use
-    1 + k): a direction to a sampled point of the light and the distance to it, weight
+    1 + k): a direction to a sampled point of the light and the distance to it (a step short of it,
+    shading.short_of_light), weight
     max(0, N.L) * mask (spot cone, area light's front side); weight 0 needs no ray."""
     if use == USE_AO:
         u1, u2 = sample_2d(sampler, ps, s, use, dim1)
@@ -164,7 +165,7 @@ def _ray_of_use(use, lights, point, normal, ao_distance, sampler, ps, s, dim1, d
     cos_nl = normal[0] * direction[0] + normal[1] * direction[1] + normal[2] * direction[2]
     if mask <= 0.0 or cos_nl <= 0.0:
         return dist, 0.0
-    return dist, cos_nl * mask
+    return short_of_light(point, direction, dist), cos_nl * mask
 
 
 @njit(cache=True, inline="always")

@@ -29,6 +29,29 @@ def offset_origin(p, n, error_scale, out):
         out[k] = p[k] + n[k] * step
 
 
+LIGHT_END_RELATIVE = 2.0 ** -32  # how far short of a sampled light point a shadow ray ends, relative
+
+
+@njit(cache=True, inline="always")
+def short_of_light(p, direction, dist):
+    """A shadow ray's tmax: the distance from p to the sampled light point, less a step off the light.
+
+    A light lying on a surface (an area light flush with a ceiling or a window's wall, a point light on
+    a floor's plane) is reached at t = dist, where the surface it lies on is met too, within rounding:
+    it shadowed everything (an outside review: a room lit by a ceiling-flush panel came out black, a
+    wall-flush one speckled). Cycles moves the light end off the light (ray_offset(ls->P, ls->Ng) in its
+    shadow-ray setup); here the ray stops 2^-32 of (dist + the light point's largest coordinate) short
+    of it: 2^21 float64 roundings of those magnitudes, far more than the triangle test's t carries there,
+    and far less than float32 geometry can place between a surface and the light. A sun's rays (dist inf) are unchanged.
+    """
+    if dist == np.inf:
+        return dist
+    reach = dist
+    for k in range(3):
+        reach = max(reach, abs(p[k] + direction[k] * dist))
+    return max(0.0, dist - (dist + reach) * LIGHT_END_RELATIVE)
+
+
 @njit(cache=True, inline="always")
 def tangent_frame(n):
     """Two unit vectors completing n to an orthonormal basis (Duff et al. 2017, branchless ONB)."""

@@ -136,6 +136,8 @@ def _box_mesh():
                                    lights=core.Light.sun((0, 0, -1))), r"pass \[light\]"),
     (lambda t: core.Light.point((0, 0, 1), color=(1, 1)), r"light color must be 3 finite non-negative numbers \(r, g, b\)"),
     (lambda t: core.Light.sun((0, 0, -1), color="red"), r"light color must be 3 finite .* got 'red'"),
+    # outside review: a colour beyond float32 made inf pixels
+    (lambda t: core.Light.point((0, 0, 3), color=(1e39, 1, 1)), r"light color components must be at most 3\.403e\+38"),
     (lambda t: core.build_scene([(np.zeros((4, 2)), np.array([[0, 1, 2]]))], [0], np.eye(4)[None]),
      r"mesh 0: vertices must have shape \(N, 3\), got \(4, 2\)"),
     (lambda t: core.build_kdtree(np.zeros((1, 3, 3)), memory_limit=0), "memory_limit"),

@@ -74,6 +74,58 @@ def test_point_light_cosine_falloff():
     np.testing.assert_allclose(img[..., 0], expected, rtol=1e-6)
 
 
+@pytest.mark.parametrize("offset", [0.0, 1e4])
+def test_a_point_light_on_the_ceilings_plane_lights_the_floor(offset):
+    """Outside review: a light lying on a surface's plane was blocked by it (every shadow ray ends where
+    the surface is met, within rounding), so a room came out black. The ray now stops a step short of
+    the light (shading.short_of_light), as Cycles' does: the floor gets the bare N.L falloff."""
+    h = 3.0
+    shift = np.array([offset, -offset, 0.0])
+    tris = np.concatenate([floor(0.0, half=50, center=shift[:2]), floor(h, half=50, center=shift[:2])])
+    light = core.Light.point((0.3 + offset, -0.1 - offset, h))
+    camera = look_down((offset, -offset, 2.5), fov=1.2)
+    size = 24
+    img = render(tris, camera, size, samples=1, mode="shadow", lights=[light])
+    origins, directions, _, _ = camera.rays(size, size)
+    p = origins + directions * 2.5
+    r2 = (p[:, 0] - 0.3 - offset) ** 2 + (p[:, 1] + 0.1 + offset) ** 2
+    expected = (h / np.sqrt(r2 + h * h)).reshape(size, size)
+    np.testing.assert_allclose(img[..., 0], expected, rtol=1e-5)
+
+
+@pytest.mark.parametrize("wall", [False, True])
+def test_an_area_light_flush_with_a_surface_lights_as_one_just_off_it(wall):
+    """An area light flush with the ceiling (emitting down) or with a wall (emitting into the room)
+    lights the floor as the same light moved 1e-6 off the surface does (the review measured a black
+    floor and a speckled one: 0.39-0.97 of the moved light's value)."""
+    tris = np.concatenate([floor(0.0, half=5), floor(3.0, half=5),
+                           quad((-5.0, 0.0, 1.5), (0.0, 5.0, 0.0), (0.0, 0.0, 1.5))])  # the wall at x = -5
+    camera = look_down((0.0, 0.0, 2.9), fov=1.0)
+    tree = core.build_kdtree(tris)
+    images = []
+    for gap in (0.0, 1e-6):
+        m = np.eye(4)
+        if wall:  # its -Z along world +X, into the room
+            m[:3, :3] = [[0, 0, -1], [0, 1, 0], [1, 0, 0]]
+            m[:3, 3] = (-5.0 + gap, 0.0, 1.5)
+        else:
+            m[:3, 3] = (0.3, 0.2, 3.0 - gap)
+        light = core.Light.area(m, size=1.0)
+        images.append(core.render_preview(tree, camera, 32, 24, samples=16, mode="shadow", lights=[light])[..., 0])
+    flush, moved = images
+    assert moved.mean() > 0.2
+    np.testing.assert_allclose(flush, moved, atol=1e-5)
+
+
+def test_an_occluder_just_under_a_light_still_shadows():
+    """The step short of the light is tiny: a slab 1e-4 under a point light still hides it."""
+    tris = np.concatenate([floor(0.0, half=50), quad((0.3, -0.1, 3.0 - 1e-4), (0.5, 0, 0), (0, 0.5, 0))])
+    light = core.Light.point((0.3, -0.1, 3.0))
+    img = render(tris, look_down((0.0, 0.0, 2.5), fov=1.2), 24, samples=1, mode="shadow", lights=[light])
+    assert hit_mask(img).all()
+    assert (img[..., :3] == 0.0).all()
+
+
 def test_light_behind_surface_and_spot_cone_send_no_rays():
     tree = core.build_kdtree(floor(0.0))
     camera = look_down((0.0, 0.0, 1.0))
