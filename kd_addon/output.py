@@ -1,7 +1,9 @@
 """Getting a finished frame into Blender: the "KD Preview" image, image editors, and files.
 
 Only called with a complete frame, never with a partial one, so a cancelled
-or failed run leaves the previous preview untouched. The last frame stored is
+or failed run leaves the previous preview untouched; a sequence, whose finished
+frames pass through the preview on their way to disk, puts it back when it does
+not finish (preview_state, put_back_preview). The last frame stored is
 remembered, so image_keeping.py can write it back where Blender's undo loses it.
 """
 
@@ -26,11 +28,7 @@ def preview_image(width: int, height: int) -> bpy.types.Image:
     the image carrying IMAGE_TAG (or an untagged float "KD Preview" from an earlier version, adopted);
     a user's own image of that name is never touched: ours then gets Blender's next free name.
     """
-    image = tagged_image()
-    if image is None:
-        named = bpy.data.images.get(IMAGE_NAME)
-        if named is not None and named.source == "GENERATED" and named.is_float:
-            image = named
+    image = _current_preview()
     if image is None or not _writable(image):
         image = bpy.data.images.new(IMAGE_NAME, width, height, alpha=True, float_buffer=True)
     elif tuple(image.size) != (width, height):
@@ -41,6 +39,16 @@ def preview_image(width: int, height: int) -> bpy.types.Image:
 
 def tagged_image() -> bpy.types.Image | None:
     return next((im for im in bpy.data.images if im.get(IMAGE_TAG)), None)
+
+
+def _current_preview() -> bpy.types.Image | None:
+    """Ours (tagged), or an untagged float "KD Preview" an earlier version made, which preview_image adopts."""
+    image = tagged_image()
+    if image is None:
+        named = bpy.data.images.get(IMAGE_NAME)
+        if named is not None and named.source == "GENERATED" and named.is_float:
+            image = named
+    return image
 
 
 def _writable(image: bpy.types.Image) -> bool:
@@ -74,6 +82,40 @@ def restore_last_frame() -> bpy.types.Image | None:
     target = _write(_last_frame)
     show_in_image_editor(target, take_busy_editor=False, open_view=False)
     return target
+
+
+def preview_state() -> tuple:
+    """What the preview holds now, for put_back_preview: the last frame stored (None before any) and
+    the preview image's name, size and pixels (None when there is no preview image)."""
+    image = _current_preview()
+    if image is None:
+        return _last_frame, None
+    pixels = np.empty(len(image.pixels), np.float32)
+    image.pixels.foreach_get(pixels)
+    return _last_frame, (image.name, tuple(image.size), pixels)
+
+
+def put_back_preview(state: tuple) -> None:
+    """Make the preview what preview_state() found: a sequence that failed or was cancelled passed its
+    finished frames through the preview image on their way to disk (save_frame), and left the last
+    of them there under the panel's figures of the run before (outside review). An image made since
+    is removed; one the user has made their own since (renamed, unpacked to a file) is left alone."""
+    global _last_frame
+    last_frame, saved = state
+    _last_frame = last_frame
+    image = _current_preview()
+    if image is None:
+        return
+    if saved is None:
+        bpy.data.images.remove(image)
+        return
+    name, size, pixels = saved
+    if image.name != name or not _writable(image):
+        return
+    if tuple(image.size) != size:
+        image.scale(*size)
+    image.pixels.foreach_set(pixels)
+    image.update()
 
 
 def forget_last_frame() -> None:

@@ -127,6 +127,7 @@ class SequenceJob:
         self._stopped: dict | None = None  # what stopped an unfinished sequence (close), for its report
         self._next_report = 0.0  # perf_counter time before which _report_progress writes none
         self.totals: dict = {}
+        self._preview_before = output.preview_state()  # put back by close() when the run does not finish
 
     @property
     def done(self) -> bool:
@@ -198,12 +199,16 @@ class SequenceJob:
 
     def close(self, stopped_by: BaseException | None = None) -> None:
         """Put the scene back on the frame it was on (call on success, cancel and failure), and when
-        the sequence stopped early, write report.json for the frames that were written, marked
-        incomplete, with the frame it stopped at and why (`stopped_by`: the error or cancel that ended
-        it; outside review: the report said incomplete but not why). Best effort: the error that
-        stopped it is the one to report."""
+        the sequence stopped early, put the preview image back as it was before the run and write
+        report.json for the frames that were written, marked incomplete, with the frame it stopped at
+        and why (`stopped_by`: the error or cancel that ended it; outside review: the report said
+        incomplete but not why). Best effort: the error that stopped it is the one to report."""
         if stopped_by is not None and len(self.results) < len(self.frames):
             self._stopped = {"frame": self.frames[len(self.results)], "reason": stop_reason(stopped_by)}
+            try:  # the frames written stay on disk; the preview and the panel's figures stay the last run's
+                output.put_back_preview(self._preview_before)
+            except (ReferenceError, RuntimeError):
+                pass
         # stopped early (the report on disk does not say so yet), or the last report failed
         if self.results and (self._stopped is not None or self._reported != len(self.results)):
             try:

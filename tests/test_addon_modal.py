@@ -166,6 +166,25 @@ def test_esc_during_animation_restores_the_frame(modal, tmp_path):
     assert (report["complete"], report["frames_requested"], len(report["frames"])) == (False, 3, 1)
 
 
+def test_esc_during_animation_keeps_the_previous_preview(modal, tmp_path):
+    """The frames written pass through the preview image; Esc puts back the one shown before the run
+    (outside review: the last frame written stayed, under the figures of the run before)."""
+    scene = half_plane_scene()
+    bpy.ops.kdpreview.render()
+    before, last_run = preview_pixels().copy(), modal.window_manager.kd_preview_state.last_run
+    scene.frame_start, scene.frame_end = 1, 3
+    scene.kd_preview.ao_distance = 3.0
+    scene.kd_preview.output_dir = str(tmp_path)
+    op = driver(KDPREVIEW_OT_render_animation)
+    op.invoke(modal, None)
+    while not (tmp_path / "frame_0001.png").exists():
+        assert op.modal(modal, event("TIMER")) == {"PASS_THROUGH"}
+    assert not np.array_equal(preview_pixels(), before)  # frame 1, on its way to disk
+    assert op.modal(modal, event("ESC")) == {"CANCELLED"}
+    assert np.array_equal(preview_pixels(), before)
+    assert modal.window_manager.kd_preview_state.last_run == last_run
+
+
 def test_esc_during_an_animation_frames_kernel_call_restores_the_frame_without_evaluating_the_scene(modal, tmp_path):
     """Esc while a frame's build still ran put the start frame back with frame_set, which evaluates the
     scene beside the worker's call (the crash of background.SCENE_READ_WAIT). Now only the frame is

@@ -425,6 +425,45 @@ def test_a_report_that_fails_on_the_last_frame_is_written_when_the_sequence_clos
     assert sorted(p.name for p in (tmp_path / "seq").iterdir()) == ["frame_0001.png", "frame_0002.png", "report.json"]
 
 
+def _fail_at_frame_3(scene):
+    """Key the camera's clip end below its clip start at frame 3: frames 1 and 2 render, 3 stops the run."""
+    camera = scene.camera.data
+    camera.clip_start = 0.1
+    for frame, value in ((2, 100.0), (3, 0.05)):
+        camera.clip_end = value
+        camera.keyframe_insert("clip_end", frame=frame)
+    scene.frame_start, scene.frame_end = 1, 3
+
+
+def test_a_failed_animation_puts_the_preview_and_its_figures_back(addon, tmp_path):  # noqa: F811
+    """Outside review: an animation that failed at frame 3 left frame 2 in the preview image (its frames
+    pass through it on their way to disk) under the panel's figures of the render before. The frames
+    written stay on disk; the preview is the one before the run."""
+    scene = half_plane_scene()
+    _fail_at_frame_3(scene)
+    scene.frame_set(1)
+    scene.kd_preview.ao_distance = 0.2
+    bpy.ops.kdpreview.render()
+    before, state = preview_pixels().copy(), bpy.context.window_manager.kd_preview_state
+    last_run = state.last_run
+    scene.kd_preview.ao_distance = 3.0  # frames of the animation differ from the preview
+    scene.kd_preview.output_dir = str(tmp_path)
+    with pytest.raises(RuntimeError, match="frame 3.*clip start 0.1 is not below clip end 0.05"):
+        bpy.ops.kdpreview.render_animation()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["frame_0001.png", "frame_0002.png", "report.json"]
+    assert np.array_equal(preview_pixels(), before) and state.last_run == last_run
+    assert scene.frame_current == 1
+
+
+def test_a_failed_first_animation_leaves_no_preview_image(addon, tmp_path):  # noqa: F811
+    scene = half_plane_scene()
+    _fail_at_frame_3(scene)
+    scene.kd_preview.output_dir = str(tmp_path)
+    with pytest.raises(RuntimeError, match="clip start"):
+        bpy.ops.kdpreview.render_animation()
+    assert IMAGE_NAME not in bpy.data.images and len(list(tmp_path.iterdir())) == 3
+
+
 def test_animation_needs_a_saved_file_for_relative_output(addon):  # noqa: F811
     half_plane_scene()
     with pytest.raises(RuntimeError, match="relative to the .blend file, which is not saved"):
