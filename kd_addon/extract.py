@@ -101,6 +101,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
+from .cycles_culling import culling_warning
 from .dupli_paths import DupliPaths
 from .node_instances import has_node_modifier, instancing_references, node_references
 from .viewport_evaluation import viewport_evaluation_warning
@@ -577,7 +578,8 @@ def extract_scene(depsgraph: bpy.types.Depsgraph | None = None) -> ExtractedScen
         warnings=(surfaces_off + _unused_layer_warnings(depsgraph) + walker.geometries.warnings
                   + list(walker.non_finite_placements.values()) + list(walker.not_triangles.values())
                   + left_out_warnings(depsgraph, vis, walker.instanced_by, viewport_shown, walker.paths.blocked)
-                  + viewport_evaluation_warning(shown_objects, depsgraph.scene)),
+                  + viewport_evaluation_warning(shown_objects, depsgraph.scene)
+                  + culling_warning(shown_objects, depsgraph.scene)),
         extract_ms=(time.perf_counter() - t0) * 1e3,
         frame=depsgraph.scene.frame_current,
     )

@@ -1112,6 +1112,41 @@ def test_the_evaluation_warning_names_a_few_objects_and_counts_the_rest(scene):
     assert warning.endswith(" and 3 more object(s)")
 
 
+def _culling_warnings(result: ExtractedScene) -> list[str]:
+    return [w for w in result.warnings if "Culling is on" in w]
+
+
+def test_objects_cycles_may_cull_are_named(scene):
+    """Outside review: with Simplify's Camera Culling on, Cycles left out a cube just outside the view
+    whose shadow the preview drew over 13% of the floor, with no word."""
+    camera = scenes.add_camera()
+    scene.camera = camera
+    culled = scenes.add_cube("Culled")
+    scenes.add_cube("Kept", location=(3, 0, 0))
+    lamp = scenes.add_light()
+    for ob in (culled, lamp):  # a light has no geometry to cull: not named
+        ob.cycles.use_camera_cull = True
+    scene.render.engine = "CYCLES"
+    scene.cycles.use_camera_cull = True
+    assert _culling_warnings(extract_scene()) == []  # Simplify off: nothing is culled
+    scene.render.use_simplify = True
+    assert _culling_warnings(extract_scene()) == [
+        "Simplify's Camera Culling is on: a Cycles render may leave out 'Culled', which the preview traces "
+        "(it does not apply Cycles' culling)"]
+    scene.cycles.use_camera_cull = False
+    culled.cycles.use_distance_cull = True
+    scene.cycles.use_distance_cull = True
+    assert "Distance Culling" in _culling_warnings(extract_scene())[0]
+    scene.cycles.distance_cull_margin = 0.0  # Cycles culls nothing at distance 0
+    assert _culling_warnings(extract_scene()) == []
+    scene.cycles.distance_cull_margin = 10.0
+    camera.data.type = "PANO"  # Cycles culls nothing for a panoramic camera
+    assert _culling_warnings(extract_scene()) == []
+    camera.data.type = "PERSP"
+    scene.render.engine = "BLENDER_WORKBENCH"
+    assert _culling_warnings(extract_scene()) == []
+
+
 def test_a_view_layer_with_surfaces_filtered_out_renders_no_triangles(scene):
     """Outside review: with View Layer > Filter > Surfaces off Cycles renders no surface (0 hit pixels
     of the 1,069 it renders with it on); the preview drew them all."""
