@@ -3,28 +3,35 @@
 Usage: python benchmarks/bench_render.py [--size 512] [--runs 3] [--reference-samples 1024]
                                          [--samples 1,2,4,...] [--no-cycles] [--out benchmarks/out]
 
+Before any timing, every method runs once untimed (JIT compile and cache load, reported on one line).
 1. A converged reference of suzanne-251k (512x512, ao_distance 1.0, --reference-samples samples, Sobol),
-   cached in benchmarks/data/.
+   cached in benchmarks/data/ under a name holding core's sources digest (a changed renderer makes a
+   new one).
 2. A sweep over samples per pixel, samplers (sobol, random), builders and a few builder settings:
-   time (build + trace, median of --runs, JIT compile excluded and reported once) and RMSE against the
-   reference on hit pixels. The binned rows are repeated with the denoiser (core/denoise.py, time
-   includes the filter), "... denoised". Written to OUT/render_sweep.csv and plotted to
+   time (build + trace, median of --runs) and RMSE against the reference on hit pixels. The binned
+   rows are repeated with the denoiser (core/denoise.py, time includes the filter), "... denoised".
+   Written to OUT/render_sweep.csv (the run's settings in OUT/render_sweep.json) and plotted to
    OUT/render_rmse_vs_time.png with two Pareto fronts marked: raw estimates only, and with denoised rows.
    Also the denoiser's bias at convergence: RMSE between the reference and the denoised reference.
-3. Cycles' AO pass of the same .blend and camera at matching sample counts (raw, Cycles' denoiser off),
+3. Cycles' AO pass of the same .blend (the subdivided mesh, no modifier left to evaluate) and camera
+   at matching sample counts (raw: Cycles has no denoiser for that pass), on as many threads as ours,
    timed in the same run, round-robin with our rows of the same sample count (sweep() says why), RMSE
-   against the same reference; our time / Cycles' time at equal RMSE
-   (interpolated on our Pareto front in log-log), for the raw front and the front with the denoiser.
+   against the same reference; our time / Cycles' time at equal RMSE (interpolated in log-log) on the
+   raw front, the front with the denoiser and our default setup alone.
 4. Seed 000 Table 3's setting: 640x480, camera rays and one shadow ray to a point light, the tree
-   rebuilt from scratch each time; median time to image, with the default build and with the build
-   told the frame's ray count (BuildOptions.rays), in alternating runs.
+   rebuilt from scratch each time; median time to image, with the default build, with the build told
+   the frame's ray count (BuildOptions.rays), the latter on one thread, and Embree's build and queries
+   of the same frame on one thread as the reference, in alternating runs.
 """
 import argparse
 import csv
+import json
+import platform
 import sys
 import time
 from pathlib import Path
 
+import numba
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
@@ -32,6 +39,7 @@ sys.path[:0] = [str(HERE), str(HERE.parent)]
 
 import core  # noqa: E402
 from core.denoise import SOBOL_VARIANCE_DECAY  # noqa: E402
+from core.sources_digest import sources_digest  # noqa: E402
 from scenes import DATA_DIR, blend_path, load_scene  # noqa: E402
 
 BUILD_CONFIGS = {
@@ -45,8 +53,10 @@ BUILD_CONFIGS = {
 
 
 def reference_path(scene, size, samples, ao_distance):
-    """Where the converged reference image is cached."""
-    return DATA_DIR / f"ref_{scene.name}_{size}_{samples}spp_ao{ao_distance}.npy"
+    """Where the converged reference image is cached: keyed by core's sources too, so a change to the
+    renderer (ray offsets, sampling) makes a new one instead of reusing a stale one (outside review)."""
+    digest = sources_digest(HERE.parent / "core")
+    return DATA_DIR / f"ref_{scene.name}_{size}_{samples}spp_ao{ao_distance}_core-{digest}.npy"
 
 
 def reference_image(scene, camera, size, samples, ao_distance):
@@ -120,6 +130,7 @@ def sweep(scene, camera, ref, args):
 
 
 CYCLES = "cycles ao pass"
+DEFAULT_METHOD = "kd binned sobol"  # what the add-on renders with
 
 
 def cycles_image(scene, ref, args, spp):
@@ -158,6 +169,19 @@ def time_at_rmse(front, target):
     return float(np.exp(np.interp(np.log(target), e[order], t[order])))
 
 
+def ratio_text(front, cycles_row):
+    """Our time / Cycles' time at Cycles' RMSE on `front`. Where Cycles is less accurate than our fastest
+    point, that point's ratio is an upper bound ("<= x"); where it is more accurate than all of ours,
+    there is none."""
+    ours = time_at_rmse(front, cycles_row["rmse"])
+    if ours is not None:
+        return f"{ours / cycles_row['seconds']:.3f}"
+    fastest = min(front, key=lambda r: r["seconds"])
+    if cycles_row["rmse"] > fastest["rmse"]:
+        return f"<= {fastest['seconds'] / cycles_row['seconds']:.3f}"
+    return "none (ours less accurate)"
+
+
 def denoiser_bias(scene, camera, ref, args):
     """RMSE between the reference and the reference denoised: how much the filter moves a converged
     image. AO samples are 0 or 1, so the reference's grey sums of squares equal its sums."""
@@ -172,13 +196,14 @@ def denoiser_bias(scene, camera, ref, args):
     return rmse(img, ref)
 
 
-def plot(rows, fronts, path):
+def plot(rows, fronts, path, title):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(8, 6))
     for method in sorted({r["method"] for r in rows}):
-        pts = sorted((r["seconds"], r["rmse"]) for r in rows if r["method"] == method)
+        pts = [(r["seconds"], r["rmse"]) for r in sorted((r for r in rows if r["method"] == method),
+                                                         key=lambda r: (r["samples"], -float(r.get("error_target") or 0)))]
         style = dict(color="red", marker="s", ms=4, lw=2) if method == CYCLES else dict(marker="o", ms=3, lw=1)
         ax.plot(*zip(*pts), label=method, **style)
     for (label, front), style in zip(fronts.items(), ("k--", "k:")):
@@ -187,30 +212,98 @@ def plot(rows, fronts, path):
     ax.set_yscale("log")
     ax.set_xlabel("time to image: build + trace (+ denoise) (s), median")
     ax.set_ylabel("RMSE against the converged reference (hit pixels)")
-    ax.set_title("suzanne-251k, 512x512 AO, ao_distance 1.0")
+    ax.set_title(title, fontsize=9)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
 
 
-def seed000_time_to_image(scene, runs, size=(640, 480)):
+def warm_up(scene, camera, args):
+    """One untimed 8x8 run of every method (each builder over the whole scene: its parallel top levels
+    use kernels a small scene does not; the denoiser, the random sampler, the adaptive mode), shadow
+    mode, and unless --no-cycles or --only-seed000 one small Cycles render, so no timed run compiles
+    (outside review: the exact builder's first build took 58 s with an empty cache, the denoised rows'
+    first runs paid their compile)."""
+    seed000 = core.build_kdtree(scene.triangles)
+    core.render_preview(seed000, camera, 8, 8, samples=1, mode="shadow", lights=[core.Light.point((0, 0, 3))])
+    if args.only_seed000:
+        return
+    for _, options, sampler, denoise in our_methods():
+        one_render(scene, camera, 8, options, 1, sampler, args.ao_distance, denoise=denoise)
+    for target in args.error_targets[:1]:
+        one_render(scene, camera, 8, {}, 2, "sobol", args.ao_distance, error_target=target)
+    if not args.no_cycles:
+        from cycles_ao import render_cycles_ao
+        render_cycles_ao(blend_path(scene.name), 8, 8, 1, ao_distance=args.ao_distance, threads=args.threads)
+
+
+SEED000_SIZE = (640, 480)
+SEED000_LIGHT = (2.0, -3.0, 4.0)
+
+
+def seed000_time_to_image(scene, runs, size=SEED000_SIZE):
     """Camera rays plus one shadow ray to a point light per hit, tree rebuilt from scratch: median
     (time, build time) of the default build and of a build told the frame's ray count (the `rays`
-    option: one camera and at most one shadow ray a pixel), in alternating runs."""
+    option: one camera and at most one shadow ray a pixel), and of the latter on one thread, and the
+    same frame's rays through Embree (seed000_embree), all in alternating runs: the reference measured
+    in the same run (outside review: the figure was compared with the 2007 paper's only)."""
     camera = core.Camera(scene.camera_matrix, scene.camera_fov)
-    light = core.Light.point((2.0, -3.0, 4.0))
-    configs = {"default build": {}, "rays=W*H*2": {"rays": core.frame_ray_count(*size, "shadow", 1, [light])}}
-    times = {name: [] for name in configs}
-    builds = {name: [] for name in configs}
+    light = core.Light.point(SEED000_LIGHT)
+    rays = core.frame_ray_count(*size, "shadow", 1, [light])
+    configs = {"default build": {}, "rays=W*H*2": {"rays": rays}, "rays=W*H*2, 1 thread": {"rays": rays, "threads": 1}}
+    times = {name: [] for name in [*configs, EMBREE]}
+    builds = {name: [] for name in times}
+    embree_frame = seed000_embree_frame(scene, camera, size)
     for run in range(runs):
-        for name in (list(configs) if run % 2 == 0 else list(configs)[::-1]):
+        for name in (list(times) if run % 2 == 0 else list(times)[::-1]):
+            if name == EMBREE:
+                seconds, build = seed000_embree(scene, *embree_frame)
+                times[name].append(seconds)
+                builds[name].append(build)
+                continue
             t = time.perf_counter()
             tree = core.build_kdtree(scene.triangles, **configs[name])
             builds[name].append(time.perf_counter() - t)
-            core.render_preview(tree, camera, size[0], size[1], samples=1, mode="shadow", lights=[light])
+            core.render_preview(tree, camera, size[0], size[1], samples=1, mode="shadow", lights=[light],
+                                threads=configs[name].get("threads"))
             times[name].append(time.perf_counter() - t)
-    return {name: (float(np.median(times[name])), float(np.median(builds[name]))) for name in configs}
+    return {name: (float(np.median(times[name])), float(np.median(builds[name]))) for name in times}
+
+
+EMBREE = "Embree (1 thread)"
+
+
+def seed000_embree_frame(scene, camera, size):
+    """The frame's camera rays, and the shadow rays Embree traces for them: from each hit facing the
+    light (N.L > 0, the rays ours traces), started 1e-4 towards it, ending 1e-4 short of it."""
+    from reference_tracers import EmbreeTracer
+    origins, directions, _, _ = camera.rays(*size)
+    t, prim = EmbreeTracer(scene.triangles).closest(origins, directions)
+    hit = prim >= 0
+    points = origins[hit] + t[hit, None] * directions[hit]
+    tri = scene.triangles[prim[hit]].astype(np.float64)
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    normal *= -np.sign(np.einsum("ij,ij->i", normal, directions[hit]))[:, None]  # facing the camera
+    towards = np.asarray(SEED000_LIGHT) - points
+    distance = np.linalg.norm(towards, axis=1)
+    towards /= distance[:, None]
+    lit = np.einsum("ij,ij->i", normal, towards) > 0.0
+    return (origins, directions), (points[lit] + 1e-4 * towards[lit], towards[lit], distance[lit] - 2e-4)
+
+
+def seed000_embree(scene, camera_rays, shadow_rays):
+    """(seconds, build seconds) of Embree on the frame: its BVH build (the commit, TBB-parallel), the
+    camera rays' closest hits and the shadow rays' occlusion, traced on one thread (embreex's loop is
+    serial). Not counted: embreex's serial copy of the triangles into Embree's buffers (~0.4 s, more
+    than Embree's build: a cost of the binding, not of Embree), shading, ray setup and the image, so
+    this is a lower bound of an Embree-based renderer's time to image."""
+    from reference_tracers import EmbreeTracer
+    tracer = EmbreeTracer(scene.triangles)
+    t = time.perf_counter()
+    tracer.closest(*camera_rays)
+    tracer.occluded(*shadow_rays)
+    return tracer.commit_seconds + time.perf_counter() - t, tracer.commit_seconds
 
 
 def main():
@@ -222,7 +315,8 @@ def main():
     ap.add_argument("--error-targets", default="0.1,0.05,0.02",
                     help="adaptive rows: at most max(--samples) samples, a pixel stops below this standard error")
     ap.add_argument("--ao-distance", type=float, default=1.0)
-    ap.add_argument("--threads", type=int, default=2, help="Cycles' thread count (ours uses all cores)")
+    ap.add_argument("--threads", type=int, default=numba.get_num_threads(),
+                    help="Cycles' thread count (default: Numba's, which ours uses)")
     ap.add_argument("--no-cycles", action="store_true")
     ap.add_argument("--only-seed000", action="store_true")
     ap.add_argument("--out", default=str(HERE / "out"))
@@ -238,18 +332,24 @@ def main():
     scene = load_scene("suzanne-251k")
     camera = core.Camera(scene.camera_matrix, scene.camera_fov)
     t = time.perf_counter()
-    warm = core.build_kdtree(scene.triangles)  # the whole scene: its parallel top levels use more kernels
-    core.render_preview(warm, camera, 8, 8, samples=1)
-    core.render_preview(warm, camera, 8, 8, samples=1, mode="shadow", lights=[core.Light.point((0, 0, 3))])
-    print(f"JIT compile / cache load: {time.perf_counter() - t:.2f} s (excluded from all timings)")
+    warm_up(scene, camera, args)
+    args.jit_seconds = time.perf_counter() - t
+    print(f"JIT compile / cache load, one untimed run of each method: {args.jit_seconds:.2f} s (excluded from "
+          "all timings)")
 
     print("seed 000 Table 3 setting (640x480, camera + 1 shadow ray, rebuild); paper: 0.235 s on 1 core, "
-          "0.062 s on 4 cores (2007); target <= 0.15 s:")
-    for name, (seconds, build) in seed000_time_to_image(scene, max(args.runs, 5)).items():
-        print(f"  {name:<14} {seconds:.3f} s median (build {build:.3f} s)")
+          f"0.062 s on 4 cores (2007); target <= 0.15 s; {numba.get_num_threads()} threads unless said:")
+    seed000 = seed000_time_to_image(scene, max(args.runs, 5))
+    for name, (seconds, build) in seed000.items():
+        print(f"  {name:<22} {seconds:.3f} s median (build {build:.3f} s)")
+    print(f"  ours on 1 thread / Embree on 1 thread: {seed000['rays=W*H*2, 1 thread'][0] / seed000[EMBREE][0]:.2f} "
+          f"(Embree's time: its BVH build, camera and shadow queries only)")
     if args.only_seed000:
         return
 
+    if args.reference_samples < max(1024, 4 * max(args.samples)):
+        print(f"warning: a {args.reference_samples}-sample reference is not converged against {max(args.samples)}-sample "
+              "renders (the issue asks for >= 1024 samples): RMSE figures of this run are a smoke test only")
     ref = reference_image(scene, camera, args.size, args.reference_samples, args.ao_distance)
     rows = sweep(scene, camera, ref, args)
     fronts = our_fronts(rows)
@@ -263,21 +363,40 @@ def main():
             print(f"  {spp:>4} spp: {b['rmse'] / a['rmse']:.2f}x")
     if not args.no_cycles:
         crow = [r for r in rows if r["method"] == CYCLES]
-        print("\nOur time / Cycles' time at equal RMSE (target <= 0.2; Cycles raw, no denoiser):")
-        print(f"  {'':>44} {'ours raw':>12} {'ours denoised':>14}")
+        default = pareto([r for r in rows if r["method"] == DEFAULT_METHOD])
+        print("\nOur time / Cycles' time at equal RMSE (target <= 0.2; Cycles' AO pass raw: it has no denoiser):\n"
+              f"  on our raw front, on the front with our denoiser, and on our default setup alone "
+              f"({DEFAULT_METHOD!r}: the front picks, per sample count, the fastest of several setups that give\n"
+              "  the same image, so noise helps it)")
+        print(f"  {'':>44} {'ours raw':>12} {'ours denoised':>14} {'ours default':>14}")
         for r in crow:
-            ratios = []
-            for front in fronts.values():
-                ours = time_at_rmse(front, r["rmse"])
-                ratios.append(f"{ours / r['seconds']:.3f}" if ours else "out of range")
+            ratios = [ratio_text(front, r) for front in (*fronts.values(), default)]
             print(f"  Cycles {r['samples']:>4} spp (RMSE {r['rmse']:.4f}, {r['seconds']:6.2f} s): "
-                  f"{ratios[0]:>12} {ratios[1]:>14}")
+                  f"{ratios[0]:>12} {ratios[1]:>14} {ratios[2]:>14}")
     with open(out / "render_sweep.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=["method", "samples", "seconds", "rmse", "error_target"])
         w.writeheader()
         w.writerows(rows)
-    plot(rows, fronts, out / "render_rmse_vs_time.png")
-    print(f"\nwrote {out / 'render_sweep.csv'} and {out / 'render_rmse_vs_time.png'}")
+    meta = run_description(args)
+    (out / "render_sweep.json").write_text(json.dumps(meta, indent=1))
+    plot(rows, fronts, out / "render_rmse_vs_time.png", plot_title(meta))
+    print(f"\nwrote {out / 'render_sweep.csv'}, {out / 'render_sweep.json'} (the run's settings) and "
+          f"{out / 'render_rmse_vs_time.png'}")
+
+
+def run_description(args):
+    """What a sweep's CSV came from (written beside it: a smoke run's CSV looks like a real one)."""
+    return {"scene": "suzanne-251k", "size": args.size, "ao_distance": args.ao_distance, "runs": args.runs,
+            "reference_samples": args.reference_samples, "samples": args.samples,
+            "error_targets": args.error_targets, "cycles": not args.no_cycles, "cycles_threads": args.threads,
+            "numba_threads": numba.get_num_threads(), "jit_seconds": round(args.jit_seconds, 2),
+            "core_sources": sources_digest(HERE.parent / "core"), "host": platform.node(),
+            "cpu": platform.processor() or platform.machine(), "date": time.strftime("%Y-%m-%d %H:%M:%S")}
+
+
+def plot_title(meta):
+    return (f"{meta['scene']}, {meta['size']}x{meta['size']} AO, ao_distance {meta['ao_distance']:g}, "
+            f"reference {meta['reference_samples']} spp, medians of {meta['runs']}")
 
 
 def replot(out):
@@ -286,7 +405,9 @@ def replot(out):
         rows = [{**r, "samples": int(r["samples"]), "seconds": float(r["seconds"]), "rmse": float(r["rmse"])}
                 for r in csv.DictReader(f)]
     fronts = our_fronts(rows)
-    plot(rows, fronts, out / "render_rmse_vs_time.png")
+    meta = out / "render_sweep.json"
+    title = plot_title(json.loads(meta.read_text())) if meta.is_file() else "suzanne-251k AO (settings not recorded)"
+    plot(rows, fronts, out / "render_rmse_vs_time.png", title)
     print(f"wrote {out / 'render_rmse_vs_time.png'}")
 
 
