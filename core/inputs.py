@@ -43,7 +43,11 @@ def first_row_beyond_float32(rows):
 
 def as_triangles(triangles):
     """Triangles as a C-contiguous (N, 3, 3) float32 array of finite vertex positions."""
-    arr = np.asarray(triangles)
+    try:
+        arr = np.asarray(triangles)
+    except ValueError as error:  # ragged nested lists: numpy's message named no argument (outside review)
+        raise ValueError(f"triangles must be an (N, 3, 3) array of numbers (N triangles, 3 vertices, xyz): "
+                         f"{error}") from None
     if arr.ndim != 3 or arr.shape[1:] != (3, 3):
         raise ValueError(f"triangles must have shape (N, 3, 3) (N triangles, 3 vertices, xyz), got {arr.shape}")
     if not is_real_dtype(arr.dtype):
@@ -139,13 +143,16 @@ def _as_limit(name, value, count):
     return np.ascontiguousarray(arr)
 
 
-def hit_distances_as_float32(t, prim):
+def hit_distances_as_float32(t, prim, tmin=0.0, tmax=np.inf):
     """The float64 hit distances as the float32 `t` queries return. A hit beyond float32's range
     raises ValueError naming the first such ray (inf would read as a miss; only rays whose direction is
     tiny against the distance travelled, e.g. 1e-15 long and 1e30 away, get there). A positive t below
     float32's smallest subnormal becomes that subnormal, not 0: 0 is outside the open interval (tmin,
     tmax), and near 0 float32's precision is absolute (hypothesis found a ray 3.5e-46 behind a triangle
-    with a subnormal vertex, which used to fail its whole batch)."""
+    with a subnormal vertex, which used to fail its whole batch). Likewise a t that rounds onto or past
+    the ray's tmin or tmax (checked limits, scalars or (R,) arrays) moves one float32 step back inside:
+    a hit at 1 - 1e-9 with tmax 1 came back as t = 1.0 (outside review), which a caller filtering on
+    t < tmax dropped."""
     with np.errstate(over="ignore"):
         out = t.astype(np.float32)
     hit = prim >= 0
@@ -155,4 +162,9 @@ def hit_distances_as_float32(t, prim):
         raise ValueError(f"ray {r} hits at t = {t[r]:.6g}, beyond float32's range for t: scale its direction "
                          "(t is in units of the direction's length)")
     out[hit & (out == 0.0)] = np.nextafter(np.float32(0), np.float32(1))
+    lo, hi = (np.broadcast_to(np.asarray(x, np.float64), out.shape) for x in (tmin, tmax))
+    past = hit & (out >= hi)
+    out[past] = np.nextafter(out[past], np.float32(-np.inf))
+    before = hit & (out <= lo)
+    out[before] = np.nextafter(out[before], np.float32(np.inf))
     return out

@@ -27,7 +27,7 @@ class Hits(NamedTuple):
 def intersect(tree, origins, directions, tmin=0.0, tmax=np.inf, threads=None):
     """Closest hit of each ray in the open interval (tmin, tmax); tmin, tmax scalars or (R,) arrays."""
     t, prim, u, v = _trace(tree, origins, directions, tmin, tmax, False, threads)
-    return Hits(hit_distances_as_float32(t, prim), prim, u.astype(np.float32), v.astype(np.float32))
+    return Hits(hit_distances_as_float32(t, prim, tmin, tmax), prim, u.astype(np.float32), v.astype(np.float32))
 
 
 def occluded(tree, origins, directions, tmin=0.0, tmax=np.inf, threads=None):

@@ -136,6 +136,8 @@ def _box_mesh():
                                    lights=core.Light.sun((0, 0, -1))), r"pass \[light\]"),
     (lambda t: core.Light.point((0, 0, 1), color=(1, 1)), r"light color must be 3 finite non-negative numbers \(r, g, b\)"),
     (lambda t: core.Light.sun((0, 0, -1), color="red"), r"light color must be 3 finite .* got 'red'"),
+    (lambda t: core.build_kdtree([[[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 0, 0], [1, 0]]]),
+     r"triangles must be an \(N, 3, 3\) array of numbers"),  # ragged: numpy's own message named nothing
     # outside review: a colour beyond float32 made inf pixels
     (lambda t: core.Light.point((0, 0, 3), color=(1e39, 1, 1)), r"light color components must be at most 3\.403e\+38"),
     (lambda t: core.build_scene([(np.zeros((4, 2)), np.array([[0, 1, 2]]))], [0], np.eye(4)[None]),
@@ -215,6 +217,18 @@ def test_hits_beyond_float32s_range_of_t_are_named_and_tiny_ones_kept():
         for query in (core.intersect, core.intersect_scene):
             hits = query(tree, np.array([origin]), np.array([direction]))
             assert hits.prim[0] == 0 and hits.t[0] == tiny
+
+
+def test_a_hit_t_rounding_onto_the_intervals_ends_is_moved_inside():
+    """Outside review: a hit at t = 1 - 1e-9 with tmax 1 came back as float32 t = 1.0, outside the open
+    interval (tmin, tmax), so a caller filtering on t < tmax lost it. Likewise at tmin."""
+    tree = core.build_kdtree(np.array([[[-1, -1, 0], [1, -1, 0], [0, 1, 0]]], np.float32))
+    down = np.array([[0.0, 0.0, -1.0]])
+    for query in (core.intersect, core.intersect_scene):
+        hits = query(tree, np.array([[0.0, 0.0, 1.0 - 1e-9]]), down, tmax=1.0)
+        assert hits.prim[0] == 0 and hits.t[0] < 1.0 and hits.t[0] == np.nextafter(np.float32(1), np.float32(0))
+        hits = query(tree, np.array([[0.0, 0.0, 3.0 + 1e-9]]), down, tmin=np.array([3.0]))
+        assert hits.prim[0] == 0 and hits.t[0] > 3.0 and hits.t[0] == np.nextafter(np.float32(3), np.float32(4))
 
 
 def test_a_render_larger_than_the_machine_is_refused_before_allocating(tree):
