@@ -71,11 +71,14 @@ def build_top_levels(tris, prims, boxes, root_box, params, strategy, threads):
         if axis < 0:
             tasks.append(task)
             continue
+        lp, lb, rp, rb = partition_parallel(tris, task.prims, task.boxes, axis, pos, planar_left,
+                                            params.clip, nchunks)
+        if len(lp) == len(rp) == len(task.prims):  # separates nothing (subtree.py): the subtree build decides
+            tasks.append(task)
+            continue
         node = nodes[task.slot]
         node.axis, node.pos, node.left = axis, pos, len(nodes)
         nodes.extend((TopNode(), TopNode()))
-        lp, lb, rp, rb = partition_parallel(tris, task.prims, task.boxes, axis, pos, planar_left,
-                                            params.clip, nchunks)
         room = child_room(task.room, len(task.prims), len(lp) + len(rp))
         for slot, p, b, is_left in ((node.left, lp, lb, True), (node.left + 1, rp, rb, False)):
             child_box = task.box.copy()

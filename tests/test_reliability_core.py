@@ -9,6 +9,7 @@ import pytest
 
 import core
 from core import memory
+from tests.core_helpers import assert_same_as_brute
 from tests.meshes import icosphere, mesh_triangles, subdivided_cube
 from tests.render_scenes import floor, look_at
 
@@ -70,19 +71,44 @@ def test_memory_limit_within_bounds_builds_the_same_tree():
 
 def test_memory_limit_holds_while_splitting_past_the_sah():
     """Forced splits (cost_ratio 100, leaf_size 1, a deep max_depth) duplicate the references that
-    meet at a sphere's vertices at every level: 320 triangles made 3.3M nodes and 165 MB under a
-    32 MiB limit (outside QA). Without the duplication budget the subtree's pools are checked after
-    every split, so the build stops with the settings named; with the default budget (at most 32
-    references a triangle) or the default cost ratio the same limit builds."""
+    meet at a sphere's vertices: 320 triangles made 3.3M nodes and 165 MB under a 32 MiB limit
+    (outside QA), until splits that separate nothing became leaves (subtree.py): 26,861 nodes, 34
+    references a triangle, ~0.8 MB of tree. Without the duplication budget the subtree's pools are
+    checked after every split, so under a limit below that the build stops with the settings named;
+    with the default budget (at most 32 references a triangle) or the default cost ratio it builds."""
     tris = mesh_triangles(*icosphere(2))
-    limit = 4 << 20
+    limit = 512 << 10
     forced = dict(leaf_size=1, cost_ratio=100.0, max_depth=40, memory_limit=limit)
-    with pytest.raises(core.MemoryLimitError, match=r"outgrew memory_limit \(4.0 MB\) while splitting: .*cost_ratio "
+    with pytest.raises(core.MemoryLimitError, match=r"outgrew memory_limit \(0.5 MB\) while splitting: .*cost_ratio "
                                                     r"100, leaf_size 1, max_depth 40"):
         core.build_kdtree(tris, duplication_budget=None, **forced)
     assert core.build_kdtree(tris, **forced).stats()["references_per_triangle"] <= 32
     tree = core.build_kdtree(tris, leaf_size=1, max_depth=40, memory_limit=limit, duplication_budget=None)
     assert tree.stats()["nodes"] < 10_000
+
+
+def test_forced_splits_of_coincident_triangles_stop_where_nothing_is_separated():
+    """Outside review: 3,000 triangles, 20 distinct, with cost_ratio 2 and no duplication budget gained
+    ~1.4x references a level (382 a triangle at depth 28; max_depth 60 ran out of memory), since no
+    plane separates copies of a triangle and the forced split was taken anyway. A split that leaves
+    every reference in both children is a leaf now; the tree still answers exactly."""
+    rng = np.random.default_rng(0)
+    centres = rng.random((20, 1, 3))
+    distinct = (centres + (rng.random((20, 3, 3)) - 0.5) * 0.3).astype(np.float32)
+    tris = distinct[rng.integers(0, 20, 3000)]
+    tree = core.build_kdtree(tris, cost_ratio=2.0, duplication_budget=None, max_depth=60)
+    assert tree.stats()["references_per_triangle"] < 3
+    o = rng.uniform(-0.5, 1.5, (500, 3))
+    d = rng.normal(size=(500, 3))
+    assert_same_as_brute(tree, tris, o, d)
+
+
+def test_the_parallel_top_levels_do_not_copy_coincident_triangles():
+    """Outside review: top="clustering" (seed 000's object median, which asks no cost) split 40,000
+    copies of one triangle into 23 nodes holding 280,000 references; "sah" made one leaf."""
+    tris = np.repeat(np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0]]], np.float32), 40_000, axis=0)
+    for top in ("sah", "clustering"):
+        assert core.build_kdtree(tris, threads=2, top=top).stats()["references"] == 40_000
 
 
 @pytest.mark.parametrize("bad", [-1, 1.5, "1GB", True])
