@@ -18,6 +18,8 @@ from time import perf_counter
 import numpy as np
 
 from .layout import NO_HIT, UNBUILT, subtree_of
+from .leaf_triangles import BYTES_PER_REFERENCE as LEAF_COPY_BYTES
+from .memory import MB, MemoryLimitError
 from .merge import splice_subtrees
 from .subtree import build_subtrees
 from .threads import thread_count
@@ -30,6 +32,7 @@ from .top_levels import Task
 # rounds asked for 66/118, 40/52, 10/12 and 2/2 subtrees; building all at the first round removes
 # three retraces (benchmarks/bench_lazy.py). Occluded scenes ask for a few per cent and are unaffected.
 BUILD_ALL_SHARE = 0.5
+NODE_BYTES = 13  # axis, split, child, count (layout.py)
 
 
 class DeferredSubtrees:
@@ -98,12 +101,34 @@ def build_requested(tree, requested, threads=None):
     start = perf_counter()
     with thread_count(threads) as n_threads:
         subtrees = build_subtrees(tree.triangles, deferred.tasks(ids), deferred.params, n_threads)
+    _check_memory_limit(tree, subtrees)
     tree.replace_nodes(splice_subtrees(tree.node_arrays, deferred.node[ids], subtrees))
     deferred.built[ids] = True
     if deferred.built.all():  # nothing left to build: let the kept references go
         deferred.prims, deferred.boxes = deferred.prims[:0], deferred.boxes[:0]
     deferred.rounds += 1
     deferred.build_ms += (perf_counter() - start) * 1e3
+
+
+def _check_memory_limit(tree, subtrees):
+    """Refuse a round whose subtrees would grow the tree past its memory_limit, before splicing them
+    (the tree stays as it was, and usable). Each subtree's own build checks its pools against its
+    share of the limit, with a 1 MB floor for tiny builds (memory.MIN_SUBTREE_BUDGET); a lazy tree's
+    subtrees are all small, so the floors added up: an outside review's lazy tree grew to 46 MB under a
+    20 MiB limit that the eager build of the same triangles kept."""
+    limit = tree.options.memory_limit
+    if limit is None:
+        return
+    held = sum(a.nbytes for a in tree.node_arrays) + tree.leaf_triangles.nbytes
+    held += tree.deferred.prims.nbytes + tree.deferred.boxes.nbytes
+    nodes = sum(len(s[0]) for s in subtrees)
+    references = sum(len(s[4]) for s in subtrees)
+    grown = held + NODE_BYTES * nodes + (4 + LEAF_COPY_BYTES) * references
+    if grown > limit:
+        raise MemoryLimitError(
+            f"a lazy kd-tree over {len(tree.triangles):,} triangles would outgrow memory_limit "
+            f"({limit / MB:,.1f} MB) building the subtrees its rays reach ({grown / MB:,.1f} MB): raise "
+            "memory_limit, or lower max_depth or cost_ratio; the tree keeps what earlier rounds built, not this round")
 
 
 def resolve_suspended(tree, status, retrace, threads=None):

@@ -199,6 +199,30 @@ def test_progressive_render_with_error_target_identical_to_eager():
     assert lazy.rays_traced == eager.rays_traced and lazy.rays_saved == eager.rays_saved
 
 
+def test_a_lazy_tree_keeps_its_memory_limit_while_it_grows():
+    """Outside review: with forced splits the eager build of these triangles stops at memory_limit,
+    but the lazy tree built every subtree its rays reached, each within a 1 MB floor of its own, and
+    grew to 46 MB under a 20 MiB limit. A round that would pass the limit is refused before it is
+    spliced in; the tree still answers within it (fewer rays reach fewer subtrees)."""
+    rng = np.random.default_rng(2)
+    centres = rng.random((20000, 1, 3))
+    tris = (centres + (rng.random((20000, 3, 3)) - 0.5) * 0.1).astype(np.float32)
+    options = dict(cost_ratio=3.0, leaf_size=1, duplication_budget=None, max_depth=30, memory_limit=20 << 20)
+    with pytest.raises(core.MemoryLimitError):
+        core.build_kdtree(tris, **options)
+    tree = core.build_kdtree(tris, lazy=True, lazy_subtree_size=256, **options)
+    o, d = rng.random((3000, 3)) * 1.4 - 0.2, rng.normal(size=(3000, 3))
+    with pytest.raises(core.MemoryLimitError, match=r"lazy kd-tree over 20,000 triangles would outgrow memory_limit "
+                                                    r"\(20.0 MB\)"):
+        core.intersect(tree, o, d)
+    assert tree.stats()["tree_bytes"] <= 20 << 20
+    few = core.build_kdtree(tris, lazy=True, lazy_subtree_size=256, **options)
+    hits = core.intersect(few, o[:3], d[:3])  # three rays reach a few subtrees: within the limit
+    assert few.stats()["tree_bytes"] <= 20 << 20 and few.stats()["subtrees_built"] < few.stats()["subtrees_total"]
+    eager = core.build_kdtree(tris, cost_ratio=3.0, leaf_size=1, duplication_budget=None, max_depth=30)
+    np.testing.assert_array_equal(hits.prim, core.intersect(eager, o[:3], d[:3]).prim)
+
+
 def test_bad_lazy_options_are_named():
     with pytest.raises(ValueError, match="lazy_subtree_size"):
         core.build_kdtree(random_soup(np.random.default_rng(0), 10), lazy=True, lazy_subtree_size=0)
