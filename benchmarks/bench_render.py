@@ -202,8 +202,9 @@ def plot(rows, fronts, path, title):
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(8, 6))
     for method in sorted({r["method"] for r in rows}):
-        pts = [(r["seconds"], r["rmse"]) for r in sorted((r for r in rows if r["method"] == method),
-                                                         key=lambda r: (r["samples"], -float(r.get("error_target") or 0)))]
+        ordered = sorted((r for r in rows if r["method"] == method),  # by sample count, then target
+                         key=lambda r: (r["samples"], -float(r.get("error_target") or 0)))
+        pts = [(r["seconds"], r["rmse"]) for r in ordered]
         style = dict(color="red", marker="s", ms=4, lw=2) if method == CYCLES else dict(marker="o", ms=3, lw=1)
         ax.plot(*zip(*pts), label=method, **style)
     for (label, front), style in zip(fronts.items(), ("k--", "k:")):

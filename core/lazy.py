@@ -128,7 +128,8 @@ def _check_memory_limit(tree, subtrees):
         raise MemoryLimitError(
             f"a lazy kd-tree over {len(tree.triangles):,} triangles would outgrow memory_limit "
             f"({limit / MB:,.1f} MB) building the subtrees its rays reach ({grown / MB:,.1f} MB): raise "
-            "memory_limit, or lower max_depth or cost_ratio; the tree keeps what earlier rounds built, not this round")
+            "memory_limit, or lower max_depth or cost_ratio; the tree keeps what earlier rounds built, not "
+            "this round")
 
 
 def resolve_suspended(tree, status, retrace, threads=None):

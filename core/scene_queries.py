@@ -32,7 +32,8 @@ def intersect_scene(scene, origins, directions, tmin=0.0, tmax=np.inf, threads=N
     ids = getattr(scene, "caller_ids", None)
     if ids is not None:
         inst, prim = ids.map(inst, prim)
-    return SceneHits(hit_distances_as_float32(t, prim, tmin, tmax), inst, prim, u.astype(np.float32), v.astype(np.float32))
+    return SceneHits(hit_distances_as_float32(t, prim, tmin, tmax), inst, prim, u.astype(np.float32),
+                     v.astype(np.float32))
 
 
 def occluded_scene(scene, origins, directions, tmin=0.0, tmax=np.inf, threads=None, ray_mask=ALL_RAYS):

@@ -41,15 +41,16 @@ def short_of_light(p, direction, dist):
     it shadowed everything (an outside review: a room lit by a ceiling-flush panel came out black, a
     wall-flush one speckled). Cycles moves the light end off the light (ray_offset(ls->P, ls->Ng) in its
     shadow-ray setup); here the ray stops 2^-32 of (dist + the light point's largest coordinate) short
-    of it: 2^21 float64 roundings of those magnitudes, far more than the triangle test's t carries there,
-    and far less than float32 geometry can place between a surface and the light. A sun's rays (dist inf) are unchanged.
+    of it: 2^21 float64 roundings of those magnitudes, far more than the triangle test's t carries
+    there, and far less than float32 geometry can place between a surface and the light. A sun's rays
+    (dist inf) are unchanged.
     """
     if dist == np.inf:
         return dist
-    reach = dist
+    largest = 0.0
     for k in range(3):
-        reach = max(reach, abs(p[k] + direction[k] * dist))
-    return max(0.0, dist - (dist + reach) * LIGHT_END_RELATIVE)
+        largest = max(largest, abs(p[k] + direction[k] * dist))
+    return max(0.0, dist - (dist + largest) * LIGHT_END_RELATIVE)
 
 
 @njit(cache=True, inline="always")
