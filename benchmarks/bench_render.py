@@ -226,8 +226,8 @@ def warm_up(scene, camera, args):
     mode, and unless --no-cycles or --only-seed000 one small Cycles render, so no timed run compiles
     (outside review: the exact builder's first build took 58 s with an empty cache, the denoised rows'
     first runs paid their compile)."""
-    seed000 = core.build_kdtree(scene.triangles)
-    core.render_preview(seed000, camera, 8, 8, samples=1, mode="shadow", lights=[core.Light.point((0, 0, 3))])
+    tree = core.build_kdtree(scene.triangles)
+    core.render_preview(tree, camera, 8, 8, samples=1, mode="shadow", lights=[core.Light.point((0, 0, 3))])
     if args.only_seed000:
         return
     for _, options, sampler, denoise in our_methods():

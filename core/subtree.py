@@ -90,17 +90,15 @@ def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, root_room, p
         if room >= 1.0:  # else no room left for more references (module docstring)
             split_axis, pos, planar_left = choose_split(boxes, start, end, box, depth, params, min_bins,
                                                         max_bins, scratch)
+        n_right = n_left = 0
+        if split_axis != NO_SPLIT:
+            n_right, n_left = partition_in_place(tris, prims, boxes, start, end, split_axis, pos,
+                                                 planar_left, params.clip, split_scratch)
+            if n_left == n and n_right == n:  # separates nothing (module docstring): the right child's
+                split_axis = NO_SPLIT  # copy, at start..end like the node's own references, is the leaf
         if split_axis == NO_SPLIT:
             leaf_prims = ensure_array(leaf_prims, n_leaf_prims, n_leaf_prims + n)
             leaf_prims[n_leaf_prims:n_leaf_prims + n] = prims[start:end]
-            axis[node], split[node], child[node], count[node] = LEAF, 0.0, n_leaf_prims, n
-            n_leaf_prims += n
-            continue
-        n_right, n_left = partition_in_place(tris, prims, boxes, start, end, split_axis, pos,
-                                             planar_left, params.clip, split_scratch)
-        if n_left == n and n_right == n:  # separates nothing: a leaf of the right child's copy (below)
-            leaf_prims = ensure_array(leaf_prims, n_leaf_prims, n_leaf_prims + n)
-            leaf_prims[n_leaf_prims:n_leaf_prims + n] = prims[start:start + n]
             axis[node], split[node], child[node], count[node] = LEAF, 0.0, n_leaf_prims, n
             n_leaf_prims += n
             continue

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import bpy
 
-from .viewport_evaluation import NAMED_AT_MOST
+from .viewport_evaluation import first_few
 
 GEOMETRY_TYPES = frozenset(("MESH", "CURVE", "SURFACE", "FONT", "META", "CURVES", "POINTCLOUD", "VOLUME"))
 LABELS = {"use_camera_cull": "Camera Culling", "use_distance_cull": "Distance Culling"}  # flag: setting
@@ -31,8 +31,7 @@ def culling_warning(objects, scene: bpy.types.Scene) -> list[str]:
     marked = sorted({ob.name for ob in objects if _marked(ob, kinds)})
     if not marked:
         return []
-    more = len(marked) - NAMED_AT_MOST
-    names = ", ".join(f"'{name}'" for name in marked[:NAMED_AT_MOST]) + (f" and {more} more" if more > 0 else "")
+    names = first_few([f"'{name}'" for name in marked])
     return [f"Simplify's {' and '.join(LABELS[k] for k in kinds)} is on: a Cycles render may leave out {names}, "
             f"which the preview traces (it does not apply Cycles' culling)"]
 

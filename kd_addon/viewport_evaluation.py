@@ -27,12 +27,17 @@ def viewport_evaluation_warning(objects, scene: bpy.types.Scene) -> list[str]:
         return []
     parts = []
     if found:
-        more = len(found) - NAMED_AT_MOST
-        parts.append(", ".join(found[:NAMED_AT_MOST]) + (f" and {more} more object(s)" if more > 0 else ""))
+        parts.append(first_few(found, " object(s)"))
     if simplify:
         parts.append(f"Simplify ({'; '.join(simplify)})")
     return [f"the preview evaluates geometry as the viewport does, a final render with its own settings, which "
             f"differ for {', and '.join(parts)}"]
+
+
+def first_few(items: list[str], unit: str = "") -> str:
+    """The first NAMED_AT_MOST items joined, then "and N more" (+ unit) for the rest."""
+    more = len(items) - NAMED_AT_MOST
+    return ", ".join(items[:NAMED_AT_MOST]) + (f" and {more} more{unit}" if more > 0 else "")
 
 
 def _differences(ob: bpy.types.Object, render) -> list[str]:
