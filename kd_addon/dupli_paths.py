@@ -144,7 +144,7 @@ class DupliPaths:
         for other in objects:
             other_key = other.as_pointer()
             reach.add(other_key)
-            if other_key != pointer and other_key not in stack and _instances_things(other):
+            if other_key != pointer and other_key not in stack and instances_things(other):
                 nested = True
                 reach |= self._reach_of(other, stack | {pointer})[0]
         self._reach[key] = (frozenset(reach), nested)
@@ -198,7 +198,9 @@ def _instanced_directly(ob: bpy.types.Object):
         yield from objects
 
 
-def _instances_things(ob: bpy.types.Object) -> bool:
+def instances_things(ob: bpy.types.Object) -> bool:
+    """Whether `ob` may instance objects: a collection, its children on vertices or faces, or
+    through particles or geometry nodes."""
     return ob.instance_type in _INSTANCING_TYPES or len(ob.particle_systems) > 0 or has_node_modifier(ob)
 
 

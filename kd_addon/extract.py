@@ -102,7 +102,7 @@ import bpy
 import numpy as np
 
 from .cycles_culling import culling_warning
-from .dupli_paths import DupliPaths
+from .dupli_paths import DupliPaths, instances_things
 from .node_instances import has_node_modifier, instancing_references, node_references
 from .viewport_evaluation import viewport_evaluation_warning
 
@@ -332,60 +332,100 @@ class _Visibility:
         self.scene_objects = _layer_render_objects(self.view_layer.layer_collection)
         for background in _set_scenes(depsgraph.scene):
             self.scene_objects |= _layer_render_objects(render_view_layer(background).layer_collection)
-        self._collection_memo: dict[int, frozenset[int]] = {}
-        self._node_memo: dict[int, tuple[frozenset, frozenset, frozenset]] = {}
+        self._collection_memo: dict[int, tuple[frozenset, frozenset]] = {}
+        self._expansion_memo: dict[tuple, tuple[frozenset, frozenset]] = {}
 
     def scene_object(self, orig: bpy.types.Object) -> bool:
         """A non-instanced object: own flag plus collection path."""
         return (not orig.hide_render) and orig.as_pointer() in self.scene_objects
 
     def in_instanced_collection(self, instancer: bpy.types.Object, orig) -> bool:
-        """Whether a collection-instancer, or a geometry-nodes object instancing collections through
-        Collection Info or an emitter whose particles render collections (node_instances.py), would
-        instance `orig` in a render."""
-        if instancer.instance_type == "COLLECTION" and instancer.instance_collection is not None:
-            objs = self._collection_objects(instancer.instance_collection, set())
-            return orig.as_pointer() in objs
-        members, shown, direct = self._node_instanced(instancer)
+        """Whether `instancer` (a collection instancer, a vertex or face instancing parent, geometry
+        nodes or particles, node_instances.py) would make `orig` in a render, through whatever it
+        instances, nested: every object it can reach counts unless its render skips it (render-hidden,
+        or in a render-hidden collection or instancer on the way). An object it cannot be seen to reach
+        (a collection computed by nodes) is kept."""
+        reach, shown = self._expansion(instancer, frozenset())
         ptr = orig.as_pointer()
-        return ptr not in members or ptr in shown or ptr in direct
-
-    def _node_instanced(self, instancer: bpy.types.Object) -> tuple[frozenset, frozenset, frozenset]:
-        """Pointers of (every member, the render-visible members) of the collections `instancer`'s
-        geometry nodes or particles expand like a collection instance, and of the objects they
-        instance directly; memoized."""
-        ptr = instancer.as_pointer()
-        if ptr not in self._node_memo:
-            collections, objects = instancing_references(instancer)
-            members = frozenset().union(*(_reachable_objects(c, {c.as_pointer()}) for c in collections))
-            shown = frozenset().union(*(self._collection_objects(c, set()) for c in collections))
-            self._node_memo[ptr] = (members, shown, frozenset(ob.as_pointer() for ob in objects))
-        return self._node_memo[ptr]
+        return ptr not in reach or ptr in shown
 
     def instanced_objects(self, collection: bpy.types.Collection) -> frozenset[int]:
-        """Pointers of the objects a render of an instance of `collection` shows."""
-        return self._collection_objects(collection, set())
+        """Pointers of the objects a render of an instance of `collection` shows, nested instancers'
+        included."""
+        return self._collection_expansion(collection, frozenset())[1]
 
-    def _collection_objects(self, coll: bpy.types.Collection, stack: set) -> frozenset[int]:
-        """Render-visible objects a collection instance yields, nested ones too."""
+    def _expansion(self, ob: bpy.types.Object, stack: frozenset) -> tuple[frozenset, frozenset]:
+        """(reach, shown): pointers of every object `ob` can instance, nested instancing included
+        (a geometry-nodes carrier inside an instanced collection, Object Info of a collection
+        instancer, a parent instancing a carrier on its vertices), and of those a render makes.
+        Memoized per object (per collection for plain collection instancers, of which a scene may
+        hold thousands)."""
+        collection = ob.instance_collection if ob.instance_type == "COLLECTION" else None
+        plain = collection is not None and not len(ob.particle_systems) and not has_node_modifier(ob)
+        key = ("collection", collection.as_pointer()) if plain else ("object", ob.as_pointer())
+        if key in self._expansion_memo:
+            return self._expansion_memo[key]
+        if key in stack:
+            return frozenset(), frozenset()
+        stack = stack | {key}
+        reach, shown = set(), set()
+        if collection is not None:
+            self._add(self._collection_expansion(collection, stack), reach, shown)
+        if ob.instance_type in _INSTANCING_PARENT_TYPES:
+            for child in ob.children_recursive:  # those the depsgraph holds (make_child_duplis)
+                self._add_object(child, self.scene_object(child), stack, reach, shown)
+        if len(ob.particle_systems) or has_node_modifier(ob):
+            collections, objects = instancing_references(ob)
+            for coll in collections:
+                self._add(self._collection_expansion(coll, stack), reach, shown)
+            for other in objects:  # named directly: shown whatever its flags, its own instances not if hidden
+                self._add_object(other, True, stack, reach, shown, instances_shown=not other.hide_render)
+        self._expansion_memo[key] = (frozenset(reach), frozenset(shown))
+        return self._expansion_memo[key]
+
+    def _collection_expansion(self, coll: bpy.types.Collection, stack: frozenset) -> tuple[frozenset, frozenset]:
+        """(reach, shown) of an instance of `coll`: its objects and its child collections', and what
+        they instance; shown: those a render walks (objects and collections not render-hidden)."""
         ptr = coll.as_pointer()
         if ptr in self._collection_memo:
             return self._collection_memo[ptr]
-        if coll.hide_render or ptr in stack:
-            return frozenset()
-        stack.add(ptr)
-        out: set[int] = set()
-        for ob in coll.objects:
-            if ob.hide_render:
-                continue
-            out.add(ob.as_pointer())
-            if ob.instance_type == "COLLECTION" and ob.instance_collection is not None:
-                out |= self._collection_objects(ob.instance_collection, stack)
-        for child in coll.children:
-            out |= self._collection_objects(child, stack)
-        stack.discard(ptr)
-        self._collection_memo[ptr] = frozenset(out)
+        if ("collection members", ptr) in stack:
+            return frozenset(), frozenset()
+        stack = stack | {("collection members", ptr)}
+        reach, shown = set(), set()
+        walked = _render_walked(coll)
+        for ob in coll.all_objects:
+            self._add_object(ob, ob.as_pointer() in walked, stack, reach, shown)
+        self._collection_memo[ptr] = (frozenset(reach), frozenset(shown))
         return self._collection_memo[ptr]
+
+    def _add_object(self, ob, visible: bool, stack: frozenset, reach: set, shown: set,
+                    instances_shown: bool | None = None) -> None:
+        """Add `ob` and what it instances to reach, and to shown where a render makes them."""
+        reach.add(ob.as_pointer())
+        if visible:
+            shown.add(ob.as_pointer())
+        if instances_things(ob):
+            self._add(self._expansion(ob, stack), reach, shown if (visible if instances_shown is None
+                                                                  else instances_shown) else None)
+
+    @staticmethod
+    def _add(expansion: tuple[frozenset, frozenset], reach: set, shown: set | None) -> None:
+        reach |= expansion[0]
+        if shown is not None:
+            shown |= expansion[1]
+
+
+def _render_walked(coll: bpy.types.Collection) -> set[int]:
+    """Pointers of the objects a render walks in an instance of `coll`: not render-hidden, in it or
+    in child collections that are not render-hidden either."""
+    out: set[int] = set()
+    todo = [] if coll.hide_render else [coll]
+    while todo:
+        c = todo.pop()
+        out.update(ob.as_pointer() for ob in c.objects if not ob.hide_render)
+        todo.extend(child for child in c.children if not child.hide_render)
+    return out
 
 
 def _set_scenes(scene: bpy.types.Scene) -> list[bpy.types.Scene]:
@@ -405,18 +445,6 @@ def render_view_layer(scene: bpy.types.Scene) -> bpy.types.ViewLayer:
     command line's --scene): Blender's BKE_view_layer_default_render, the first one enabled for
     rendering, else the first."""
     return next((layer for layer in scene.view_layers if layer.use), scene.view_layers[0])
-
-
-def _reachable_objects(coll: bpy.types.Collection, stack: set) -> set[int]:
-    """Pointers of every object an instance of `coll` could bring, whatever its visibility: the
-    collection's objects, its children's, and those of the collections they instance, nested."""
-    out: set[int] = set()
-    for ob in coll.all_objects:
-        out.add(ob.as_pointer())
-        inner = ob.instance_collection if ob.instance_type == "COLLECTION" else None
-        if inner is not None and inner.as_pointer() not in stack:
-            out |= _reachable_objects(inner, stack | {inner.as_pointer()})
-    return out
 
 
 def _layer_render_objects(layer_coll: bpy.types.LayerCollection) -> set[int]:
@@ -457,7 +485,11 @@ def _entry_visible(vis: _Visibility, parent, ob: bpy.types.Object) -> bool:
     if not collection_visible(vis, parent, orig):
         return False
     if parent is not None:  # the instances of an instancer hidden so go with it (Blender skips its duplis)
-        return not _instanced_by_its_parent(parent.original)
+        if _instanced_by_its_parent(parent.original):
+            return False
+        # An instancer inside an instance (an emitter or a vertex parent in an instanced collection)
+        # hides itself as at the top level (outside review against Cycles: 46 pixels against 1,024).
+        return orig == parent.original or not _instancer_hides_self(orig, ob)
     return not (_instancer_hides_self(orig, ob) or _instanced_by_its_parent(orig))
 
 

@@ -1,0 +1,127 @@
+"""Instancing paths checked against a final render's own depsgraph (tests/render_depsgraph.py).
+
+The preview reads the viewport's depsgraph and decides which of its entries a render makes; a render
+engine gets the render-mode depsgraph, which has decided already. Each scene here nests instancers in a
+way an outside review found the two disagreeing (Cycles agreed with the render depsgraph each time).
+"""
+from __future__ import annotations
+
+import bpy
+import pytest
+
+from kd_addon.extract import extract_scene
+from tests import bpy_scenes as scenes
+from tests.render_depsgraph import differences, render_entries
+
+
+@pytest.fixture
+def scene():
+    return scenes.reset()
+
+
+def assert_extraction_matches_render():
+    result = extract_scene()
+    entries = render_entries()
+    assert entries, "the render made nothing: the scene does not test anything"
+    assert differences(result, entries) == []
+    return result
+
+
+def _object_info_host(name, target, *, as_instance, location=(0, 0, 0)):
+    host = scenes.add_info_node_host(name, target, location=location)
+    info = next(n for n in host.modifiers["GN"].node_group.nodes if n.bl_idname == "GeometryNodeObjectInfo")
+    info.inputs["As Instance"].default_value = as_instance
+    return host
+
+
+def _collection_with_hidden_member(name="Rocks"):
+    """A collection excluded from the view layer with a visible cube and a render-hidden one."""
+    rocks = scenes.new_collection(name, exclude=True)
+    scenes.add_cube(f"{name}Shown", scale=0.3, collection=rocks)
+    scenes.add_cube(f"{name}Hidden", scale=0.3, offset=(1, 0, 0), collection=rocks).hide_render = True
+    return rocks
+
+
+@pytest.mark.parametrize("source", ["collection info", "object info", "object info as instance"])
+def test_a_carrier_inside_a_collection_instance_brings_what_it_instances(scene, source):
+    """A geometry-nodes carrier that is a member of an instanced collection, instancing an object or a
+    collection that is not a member: the render shows its instances under the outer instancer (the
+    preview dropped them all, without a word)."""
+    inner = scenes.new_collection("Inner", exclude=True)
+    if source == "collection info":
+        rocks = scenes.new_collection("Rocks", exclude=True)
+        scenes.add_cube("Rock", scale=0.3, collection=rocks)
+        carrier = scenes.add_info_node_host("Carrier", rocks)
+    else:
+        rock = scenes.add_cube("Rock", scale=0.3, location=(0, 0, -30))
+        carrier = _object_info_host("Carrier", rock, as_instance=source.endswith("as instance"))
+    bpy.context.scene.collection.objects.unlink(carrier)
+    inner.objects.link(carrier)
+    scenes.add_collection_instance("Outer", inner, location=(5, 0, 0))
+    result = assert_extraction_matches_render()
+    made = "Carrier" if source == "object info" else "Rock"  # As Instance off: realized into the carrier
+    assert any(i.name == made and i.instancer == "Outer" for i in result.instances)
+
+
+@pytest.mark.parametrize("as_instance", [False, True])
+def test_object_info_of_a_collection_instancer_leaves_render_hidden_members_out(scene, as_instance):
+    """Object Info of an empty that instances a collection with a render-hidden member: a render
+    leaves the member out, as any instance of the collection does (the preview showed it)."""
+    rocks = _collection_with_hidden_member()
+    empty = scenes.add_collection_instance("RocksEmpty", rocks, location=(0, 0, -30))
+    _object_info_host("Carrier", empty, as_instance=as_instance)
+    result = assert_extraction_matches_render()
+    assert {i.name for i in result.instances} >= {"RocksShown"}
+    assert "RocksHidden" not in {i.name for i in result.instances}
+
+
+@pytest.mark.parametrize("route", ["object info", "object info as instance", "collection info", "vertices"])
+def test_a_nested_collection_info_carrier_leaves_render_hidden_members_out(scene, route):
+    """A carrier scattering a collection with a render-hidden member, reached through another
+    instancer: Object Info of the carrier, Collection Info of a collection holding it, or a parent
+    instancing it on its vertices. A render leaves the member out on every route."""
+    rocks = _collection_with_hidden_member()
+    inner_host = scenes.add_info_node_host("Scatter", rocks, location=(0, 0, -30))
+    if route.startswith("object info"):
+        _object_info_host("Top", inner_host, as_instance=route.endswith("as instance"))
+    elif route == "collection info":
+        holder = scenes.new_collection("Holder", exclude=True)
+        bpy.context.scene.collection.objects.unlink(inner_host)
+        holder.objects.link(inner_host)
+        scenes.add_info_node_host("Top", holder)
+    else:
+        parent = scenes.add_mesh("Top", [(0, 0, 0), (3, 0, 0)], [], edges=[(0, 1)])
+        parent.instance_type = "VERTS"
+        inner_host.parent = parent
+    result = assert_extraction_matches_render()
+    assert "RocksShown" in {i.name for i in result.instances}
+    assert "RocksHidden" not in {i.name for i in result.instances}
+
+
+@pytest.mark.parametrize("kind", ["emitter particles", "hair particles", "vertices"])
+def test_an_instanced_instancer_hides_itself_and_makes_its_instances(scene, kind):
+    """An emitter or a vertex-instancing parent inside an instanced collection, with Show Instancer
+    (Show Emitter) for renders off: a render hides its own mesh there as it does at the top level, and
+    makes its instances under the outer instancer (the preview showed the mesh, and dropped the
+    particles' instances of an object that is not a member)."""
+    inner = scenes.new_collection("Inner", exclude=True)
+    if kind.endswith("particles"):
+        dot = scenes.add_cube("Dot", scale=0.1, location=(0, 0, -30))
+        host = scenes.add_particle_emitter("Host", count=5, obj=dot)
+        settings = host.particle_systems[0].settings
+        settings.type = kind.split()[0].upper()
+        settings.physics_type = "NEWTON"  # hair without physics grows no strands
+    else:
+        host = scenes.add_mesh("Host", [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)], [(0, 1, 2, 3)])
+        host.instance_type = "VERTS"
+        dot = scenes.add_cube("Dot", scale=0.1)
+        dot.parent = host
+        bpy.context.scene.collection.objects.unlink(dot)
+        inner.objects.link(dot)
+    host.show_instancer_for_render = False
+    bpy.context.scene.collection.objects.unlink(host)
+    inner.objects.link(host)
+    scenes.add_collection_instance("Outer", inner, location=(20, 0, 0))
+    result = assert_extraction_matches_render()
+    assert not any(i.name == "Host" for i in result.instances)
+    assert sum(i.name == "Dot" and i.instancer == "Outer" for i in result.instances) == (4 if kind == "vertices" else 5)
