@@ -373,12 +373,21 @@ def _check_world_extent(world_boxes, mesh_of, origin, checked):
 
 
 def _bounds(meshes):
-    """(M, 6) float32 object-space boxes of the meshes' vertices (inverted when empty)."""
+    """(M, 6) float32 object-space boxes of the vertices the meshes' triangles use (inverted when a mesh
+    has none). Loose vertices do not count: one far from a small mesh (a Blender mesh's stray vertex)
+    chose the soup's anchor and zone from a box 1e6 wide and stored the mesh in float32 relative to a
+    point 5e5 away, which lost its 2 cm box altogether (outside review)."""
     out = np.empty((len(meshes), 6), np.float32)
     for i, m in enumerate(meshes):
-        v = np.asarray(m.vertices, np.float32)
-        out[i] = np.concatenate([v.min(axis=0), v.max(axis=0)]) if len(v) and len(m.triangles) else \
-            (np.inf,) * 3 + (-np.inf,) * 3
+        v, tris = np.asarray(m.vertices, np.float32), np.asarray(m.triangles)
+        if len(v) == 0 or tris.size == 0:
+            out[i] = (np.inf,) * 3 + (-np.inf,) * 3
+            continue
+        used = np.zeros(len(v), bool)
+        used[tris.reshape(-1)] = True
+        if not used.all():
+            v = v[used]
+        out[i] = np.concatenate([v.min(axis=0), v.max(axis=0)])
     return out
 
 

@@ -153,6 +153,10 @@ def check_placement(n_meshes, mesh_of, matrices):
     raw = np.asarray(mesh_of).reshape(-1)
     if raw.dtype.kind not in "iub" and not (raw.dtype.kind == "f" and np.array_equal(raw, np.round(raw))):
         raise ValueError(f"mesh_of must hold integer mesh indices, got {raw[:5].tolist()}")
+    out_of_range = (raw < 0) | (raw >= n_meshes)  # before the int32 cast, which wraps 2**32 + 1 to 1
+    if out_of_range.any():
+        bad = int(np.flatnonzero(out_of_range)[0])
+        raise ValueError(f"instance {bad} names mesh {raw[bad]}, but there are {n_meshes} meshes")
     mesh_of = np.ascontiguousarray(raw, np.int32)
     try:
         o2w = np.ascontiguousarray(matrices, np.float64)
@@ -160,9 +164,6 @@ def check_placement(n_meshes, mesh_of, matrices):
         raise ValueError("matrices must be an (I, 4, 4) array of numbers") from None
     if o2w.shape != (len(mesh_of), 4, 4):
         raise ValueError(f"matrices must have shape ({len(mesh_of)}, 4, 4), one per instance, got {o2w.shape}")
-    if len(mesh_of) and (mesh_of.min() < 0 or mesh_of.max() >= n_meshes):
-        bad = int(np.flatnonzero((mesh_of < 0) | (mesh_of >= n_meshes))[0])
-        raise ValueError(f"instance {bad} names mesh {mesh_of[bad]}, but there are {n_meshes} meshes")
     finite = np.isfinite(o2w).reshape(len(o2w), 16).all(axis=1)
     if not finite.all():
         raise ValueError(f"instance {int(np.flatnonzero(~finite)[0])} has a non-finite matrix")
@@ -242,6 +243,13 @@ def build_top_level(boxes, opts):
         return axis, split, child, count, items, bounds
     sub = np.ascontiguousarray(boxes[keep])
     bounds = np.concatenate([sub[:, :3].min(axis=0), sub[:, 3:].max(axis=0)]).astype(np.float32)
+    e = (bounds[3:] - bounds[:3]).astype(np.float64)
+    if e[0] * e[1] + e[1] * e[2] + e[2] * e[0] == 0.0:
+        # Every box on one point or line (instances scaled to ~1e-17, outside review): no area for the
+        # SAH to divide by (it raised ZeroDivisionError), and no split would separate rays: one leaf.
+        axis, split, child, count, _ = empty_arrays()
+        count[0] = len(keep)
+        return axis, split, child, count, keep, bounds
     placeholder = np.zeros((len(keep), 3, 3), np.float32)  # never read: clipping is off
     box_opts = make_options({**opts.as_dict(), "clip": False, "lazy": False,
                              "intersection_cost": opts.intersection_cost * INSTANCE_TEST_COST})

@@ -113,6 +113,9 @@ def _box_mesh():
                               np.ones((1, 3))), "use core.intersect_scene"),
     (lambda t: core.build_scene([_box_mesh()], [2], np.eye(4)[None]), "instance 0 names mesh 2, but there are 1"),
     (lambda t: core.build_scene([_box_mesh()], [-1], np.eye(4)[None]), "instance 0 names mesh -1"),
+    (lambda t: core.build_scene([_box_mesh()] * 2, np.array([0, 2**32 + 1]), np.stack([np.eye(4)] * 2)),
+     "instance 1 names mesh 4294967297"),  # wrapped to mesh 1 by the int32 cast (outside review)
+    (lambda t: core.build_two_level([t], np.array([-2**32]), np.eye(4)[None]), "instance 0 names mesh -4294967296"),
     (lambda t: core.build_scene([_box_mesh()], [0], np.full((1, 4, 4), np.nan)), "instance 0 has a non-finite matrix"),
     (lambda t: core.build_scene([_box_mesh()], [0, 0], np.eye(4)[None]), r"matrices must have shape \(2, 4, 4\)"),
     (lambda t: core.build_scene([(_box_mesh()[0], _box_mesh()[1] * 1.0)], [0], np.eye(4)[None]),

@@ -180,6 +180,21 @@ def test_small_soup_members_far_from_its_centre_keep_their_shape(layout):
         assert max(worst) > 1e-2, worst
 
 
+@pytest.mark.parametrize("layout", ["auto", "flat", "two_level"])
+def test_a_loose_vertex_far_away_does_not_move_the_mesh(layout):
+    """A 2 cm box with one vertex 1e6 away that no triangle uses (a Blender mesh's stray vertex, which
+    the add-on passes on): the soup's anchor came from the box around every vertex, 5e5 away, and
+    float32 lost the box (every ray missed). Reference: the exact box faces."""
+    corners = np.array([[x, y, z] for x in (-.01, .01) for y in (-.01, .01) for z in (-.01, .01)])
+    faces = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
+                      [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])
+    loose = np.vstack([corners, [[1e6, 1e6, 1e6]]])
+    origins = np.array([[0.003, 0.002, 1.0], [0.0, 0.0, 1.0], [0.5, 0.5, 0.004]])
+    directions = np.array([[0, 0, -1.0], [0, 0, -1.0], [-1.0, -1.0, 0]])
+    scene = core.build_scene([(loose, faces)], [0], np.eye(4)[None], layout=layout)
+    np.testing.assert_allclose(core.intersect_scene(scene, origins, directions).t, [0.99, 0.99, 0.49], rtol=1e-6)
+
+
 def test_a_small_convex_soup_member_far_from_the_soups_centre_is_unoccluded():
     """AO of the first small sphere seen from above, ao_distance well under its height over the ground:
     1 on every pixel (the view is filled by the sphere's top). Before zones: 0.984 on 16 of 1,024 pixels."""
@@ -268,6 +283,24 @@ def test_degenerate_inputs():
         core.build_two_level([tree], np.array([3]), np.eye(4)[None])
     with pytest.raises(ValueError, match="non-finite"):
         core.build_two_level([tree], np.array([0]), np.full((1, 4, 4), np.nan))
+
+
+@pytest.mark.parametrize("layout", ["two_level", "auto"])
+def test_instance_boxes_on_one_line_build_one_leaf(layout):
+    """Ten instances of a triangle scaled by 1e-17 along a line: in float64 their boxes have no extent
+    across it, so the top level's root box has no area, which the SAH divides by (ZeroDivisionError,
+    outside review). Now one leaf; with a unit-size instance added the top level splits as usual."""
+    triangle = (np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0.]]), np.array([[0, 1, 2]]))
+    mats = np.stack([np.eye(4)] * 11)
+    mats[:10, :3, :3] *= 1e-17
+    mats[:10, 0, 3], mats[:10, 1, 3], mats[:10, 2, 3] = np.arange(1, 11), 1.0, 1.0
+    mats[10, :3, 3] = (0, 0, 5)
+    origins, directions = np.array([[0.2, 0.2, 10.0], [5.0, 1.0, 3.0]]), np.array([[0, 0, -1.0], [0, 0, -1.0]])
+    line = core.build_scene([triangle], np.zeros(10, int), mats[:10], layout=layout)
+    assert (core.intersect_scene(line, origins, directions).prim == -1).all()
+    both = core.build_scene([triangle], np.zeros(11, int), mats, layout=layout)
+    hits = core.intersect_scene(both, origins, directions)
+    assert hits.t[0] == pytest.approx(5.0) and hits.prim[1] == -1
 
 
 def test_render_of_instanced_scene_matches_flat_render():
