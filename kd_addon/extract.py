@@ -609,7 +609,8 @@ def extract_scene(depsgraph: bpy.types.Depsgraph | None = None) -> ExtractedScen
         instances=instances,
         warnings=(surfaces_off + _unused_layer_warnings(depsgraph) + walker.geometries.warnings
                   + list(walker.non_finite_placements.values()) + list(walker.not_triangles.values())
-                  + left_out_warnings(depsgraph, vis, walker.instanced_by, viewport_shown, walker.paths.blocked)
+                  + left_out_warnings(depsgraph, vis, walker.instanced_by, viewport_shown, walker.paths.blocked,
+                                    walker.meshed)
                   + viewport_evaluation_warning(shown_objects, depsgraph.scene)
                   + culling_warning(shown_objects, depsgraph.scene)),
         extract_ms=(time.perf_counter() - t0) * 1e3,
@@ -687,7 +688,7 @@ NOT_TRIANGLE_DATA = {"Curves": "hair curves", "PointCloud": "a point cloud", "Vo
 
 
 def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility, instanced_by: dict[int, set[int]],
-                      evaluated: set[int], not_made: set[int] = frozenset()) -> list[str]:
+                      evaluated: set[int], not_made: set[int] = frozenset(), meshed: set[int] = frozenset()) -> list[str]:
     """A warning per render-visible thing a final render shows and the preview leaves out: objects of
     the scene and its background scenes hidden in the viewport (the viewport depsgraph does not
     evaluate them) or not triangles, collection instancers hidden there (their instances go with
@@ -696,7 +697,9 @@ def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility, instance
     instancer), and hair particles drawn as strands. `evaluated`: pointers of the originals the
     viewport shows, those its Show Instancer flag alone keeps out of the depsgraph's entries included
     (they are read anyway when a render shows them, _hidden_by_viewport_flag_only). `not_made`: originals
-    the viewport instanced on a path a render does not make (dupli_paths.py), not missing either."""
+    the viewport instanced on a path a render does not make (dupli_paths.py), not missing either.
+    `meshed`: originals whose own evaluated geometry gave triangles (a point cloud or curves object
+    whose geometry nodes output a mesh is named only for what is left of its points or curves)."""
     warnings = []
     instancers = {}
     for ob in _rendered_layers_objects(depsgraph):
@@ -717,7 +720,11 @@ def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility, instance
         if ((kind in TRIANGLE_TYPES or kind in NOT_TRIANGLES) and vis.scene_object(ob) and _ray_visible(ob)
                 and not _renders_nothing(ob)):
             if kind in NOT_TRIANGLES:
-                warnings.append(f"object '{ob.name}' is {NOT_TRIANGLES[kind]}, not triangles: left out of the preview")
+                if ob.as_pointer() not in meshed:
+                    warnings.append(f"object '{ob.name}' is {NOT_TRIANGLES[kind]}, not triangles: left out of the preview")
+                elif _own_elements(ob.evaluated_get(depsgraph)):
+                    warnings.append(f"object '{ob.name}' is {NOT_TRIANGLES[kind]}: the preview shows the triangles its "
+                                    f"geometry nodes make and leaves the rest out")
             else:
                 what = ("it and the instances it makes" if ob.instance_type in _INSTANCING_PARENT_TYPES
                         or len(ob.particle_systems) else "it")
@@ -732,6 +739,18 @@ def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility, instance
         if hosts:
             warnings += _hidden_member_warnings(collection, members, hosts, vis, instanced)
     return warnings
+
+
+def _own_elements(evaluated) -> bool:
+    """Whether an evaluated point cloud or curves object still holds points or curves of its own (its
+    geometry nodes may turn them all into a mesh); True where that cannot be counted (volumes, grease
+    pencil)."""
+    data = evaluated.data
+    for name in ("curves", "points"):
+        elements = getattr(data, name, None)
+        if elements is not None:
+            return len(elements) > 0
+    return True
 
 
 def _hidden_member_warnings(collection, members: list, hosts: list, vis: _Visibility,
@@ -749,10 +768,14 @@ def _hidden_member_warnings(collection, members: list, hosts: list, vis: _Visibi
         host = next((h for h in hosts if _ray_visible(ob, *chain, h) and (not chain or _nests(h))), None)
         if host is not None:
             through = "".join(f" through '{inner.name}'" for inner in chain)
+            where = f"object '{ob.name}' in collection '{owner.name}' (instanced by '{host.name}'{through})"
+            if not ob.hide_viewport and not ob.show_instancer_for_viewport and instances_things(ob):
+                out.append(f"{where} has Show Instancer > Viewport off: the preview leaves its own mesh out there, "
+                           "a final render shows it")  # its instances are made (outside review)
+                continue
             why = ("is disabled in viewports" if ob.hide_viewport else
                    "is not instanced in the viewport (a collection or instancer on its path is disabled in viewports)")
-            out.append(f"object '{ob.name}' in collection '{owner.name}' (instanced by '{host.name}'{through}) {why}: "
-                       "the preview leaves its instances out, a final render shows them")
+            out.append(f"{where} {why}: the preview leaves its instances out, a final render shows them")
     return out
 
 
@@ -903,6 +926,7 @@ class _EntryReader:
         self.not_triangles: dict[tuple[str, str | None], str] = {}
         self.non_finite_placements: dict[tuple[str, str | None], str] = {}  # one warning each
         self._own_entries_hidden_if_instancing: list[tuple[int, Instance]] = []
+        self.meshed: set[int] = set()  # originals whose own geometry gave triangles (left_out_warnings)
         # The path walk's rule depends on what an instancer instances only, not on whether the
         # instancer itself is shown (a hidden one's entries are all left out anyway, by the verdict).
         self.paths = DupliPaths(lambda instancer, orig: instanced_visible(vis, instancer, orig))
@@ -946,6 +970,8 @@ class _EntryReader:
         )
         if parent is None and not ob.original.show_instancer_for_render:
             self._own_entries_hidden_if_instancing.append((ob.original.as_pointer(), record))
+        if instancer in (None, name):
+            self.meshed.add(ob.original.as_pointer())
         return record
 
     def without_hidden_carriers(self, records: list[Instance]) -> list[Instance]:

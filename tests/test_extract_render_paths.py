@@ -125,3 +125,79 @@ def test_an_instanced_instancer_hides_itself_and_makes_its_instances(scene, kind
     result = assert_extraction_matches_render()
     assert not any(i.name == "Host" for i in result.instances)
     assert sum(i.name == "Dot" and i.instancer == "Outer" for i in result.instances) == (4 if kind == "vertices" else 5)
+
+
+@pytest.mark.parametrize("kind, method", [("EMITTER", "DOT"), ("EMITTER", "NONE"), ("HAIR", "PATH"), ("HAIR", "RENDER")])
+def test_particles_not_displayed_as_rendered_are_named(scene, kind, method):
+    """Blender makes particles' object instances in the viewport only when they display as Rendered;
+    a render always does. The preview cannot show them; it names them (it said nothing, outside review)."""
+    pebble = scenes.add_cube("Pebble", scale=0.1, location=(0, 0, -30))
+    emitter = scenes.add_particle_emitter("Emitter", count=10, obj=pebble)
+    settings = emitter.particle_systems[0].settings
+    settings.type, settings.physics_type, settings.display_method = kind, "NEWTON", method
+    result = extract_scene()
+    missing = differences(result, render_entries())
+    named = [w for w in result.warnings if "display as" in w]
+    if method == "RENDER":
+        assert missing == [] and named == []
+    else:
+        assert [m.split(":")[0] for m in missing] == ["('Pebble', 'Emitter')"]
+        shown_as = {"DOT": "Point", "NONE": "None", "PATH": "Path"}[method]
+        assert named and f"'Emitter' (particles 'Particles' display as '{shown_as}' in the viewport" in named[0]
+
+
+@pytest.mark.parametrize("update", ["UPDATE_ALWAYS", "NEVER"])
+def test_a_metaball_never_updated_in_the_viewport_is_named(scene, update):
+    """Update on Edit: Never leaves a metaball unmeshed in the viewport (a render meshes it)."""
+    blob = scenes.add_metaball("Blob")
+    blob.data.update_method = update
+    blob.data.render_resolution = blob.data.resolution
+    result = extract_scene()
+    assert (result.triangle_count == 0) == (update == "NEVER")
+    assert any("'Blob' (metaball Update on Edit 'Never'" in w for w in result.warnings) == (update == "NEVER")
+    assert render_entries()  # a render meshes it either way
+
+
+@pytest.mark.parametrize("keep_curve", [False, True])
+def test_a_curves_object_whose_nodes_make_a_mesh_is_named_only_for_what_is_left(scene, keep_curve):
+    """A hair curves object whose geometry nodes turn a curve into a tube: the tube is triangles, which
+    the preview shows, so "is hair curves, not triangles: left out" was wrong (outside review). With the
+    curve kept beside the tube, that curve is named."""
+    hair = scenes.link(bpy.data.objects.new("Hair", bpy.data.hair_curves.new("Hair")))
+    tree = bpy.data.node_groups.new("Tube", "GeometryNodeTree")
+    tree.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    line = tree.nodes.new("GeometryNodeCurvePrimitiveLine")
+    profile = tree.nodes.new("GeometryNodeCurvePrimitiveCircle")
+    tube = tree.nodes.new("GeometryNodeCurveToMesh")
+    tree.links.new(line.outputs[0], tube.inputs["Curve"])
+    tree.links.new(profile.outputs[0], tube.inputs["Profile Curve"])
+    out = tube.outputs[0]
+    if keep_curve:
+        join = tree.nodes.new("GeometryNodeJoinGeometry")
+        tree.links.new(line.outputs[0], join.inputs[0])
+        tree.links.new(tube.outputs[0], join.inputs[0])
+        out = join.outputs[0]
+    tree.links.new(out, tree.nodes.new("NodeGroupOutput").inputs[0])
+    hair.modifiers.new("GN", "NODES").node_group = tree
+    result = assert_extraction_matches_render()
+    assert [i.name for i in result.instances] == ["Hair"]
+    named = [w for w in result.warnings if "'Hair'" in w]
+    assert named == (["object 'Hair' is hair curves: the preview shows the triangles its geometry nodes make and "
+                      "leaves the rest out"] if keep_curve else [])
+
+
+def test_a_member_showing_itself_only_in_renders_is_named_for_its_own_mesh(scene):
+    """A vertex-instancing member of an instanced collection with Show Instancer off for the viewport
+    and on for renders: the viewport makes its instances but not its own mesh, which a render shows.
+    The warning blamed a collection disabled in viewports and named its instances (outside review)."""
+    inner = scenes.new_collection("Inner", exclude=True)
+    parent = scenes.add_mesh("Parent", [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)], [(0, 1, 2, 3)], collection=inner)
+    parent.instance_type = "VERTS"
+    parent.show_instancer_for_viewport, parent.show_instancer_for_render = False, True
+    scenes.add_cube("Dot", scale=0.1, collection=inner).parent = parent
+    scenes.add_collection_instance("Outer", inner, location=(0, 8, 0))
+    result = extract_scene()
+    missing = differences(result, render_entries())
+    assert [m.split(":")[0] for m in missing] == ["('Parent', 'Outer')"]
+    assert result.warnings == ["object 'Parent' in collection 'Inner' (instanced by 'Outer') has Show Instancer > "
+                               "Viewport off: the preview leaves its own mesh out there, a final render shows it"]
