@@ -201,3 +201,22 @@ def test_a_member_showing_itself_only_in_renders_is_named_for_its_own_mesh(scene
     assert [m.split(":")[0] for m in missing] == ["('Parent', 'Outer')"]
     assert result.warnings == ["object 'Parent' in collection 'Inner' (instanced by 'Outer') has Show Instancer > "
                                "Viewport off: the preview leaves its own mesh out there, a final render shows it"]
+
+
+EARLIER_SCENES = (
+    [(f"two paths: {top}, {hiding}", lambda top=top, hiding=hiding: scenes.add_two_path_scene(top, hiding))
+     for top in scenes.TWO_PATH_TOPS for hiding in scenes.TWO_PATH_HIDINGS]
+    + [(f"object info of a {kind}, hidden {hidden}",
+        lambda kind=kind, hidden=hidden: scenes.add_object_info_of_instancer(kind, hidden))
+       for kind in scenes.OBJECT_INFO_SOURCES for hidden in (False, True)]
+    + [(f"hidden source beside nested instances, first {first}",
+        lambda first=first: scenes.add_hidden_source_beside_nested_instances(first)) for first in (True, False)]
+    + [("hidden member named and nested", scenes.add_hidden_member_named_and_nested)])
+
+
+@pytest.mark.parametrize("build", [b for _, b in EARLIER_SCENES], ids=[n for n, _ in EARLIER_SCENES])
+def test_earlier_reviews_scenes_match_a_render_depsgraph(scene, build):
+    """The scenes of earlier outside reviews (each checked against Cycles by pixel counts, and by
+    test_extract.py's expected instances) against a render's own depsgraph, object by object."""
+    build()
+    assert differences(extract_scene(), render_entries()) == []  # two of them render nothing, as the preview
