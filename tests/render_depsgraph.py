@@ -54,26 +54,22 @@ def render_entries(scene: bpy.types.Scene | None = None) -> list:
     returns its mesh entries; the scene's engine and resolution are put back. Adds a camera when
     the scene has none (a render needs one)."""
     scene = scene or bpy.context.scene
-    if not _registered:
-        bpy.utils.register_class(CaptureEngine)
-        _registered.append(True)
     if scene.camera is None:
         camera = bpy.data.objects.new("CaptureCamera", bpy.data.cameras.new("CaptureCamera"))
         scene.collection.objects.link(camera)
         scene.camera = camera
     kept = scene.render.engine, scene.render.resolution_x, scene.render.resolution_y
-    scene.render.engine = CaptureEngine.bl_idname
-    scene.render.resolution_x, scene.render.resolution_y = 8, 6
+    bpy.utils.register_class(CaptureEngine)  # and unregistered: bpy 4.2 crashed at exit with it left in
     try:
+        scene.render.engine = CaptureEngine.bl_idname
+        scene.render.resolution_x, scene.render.resolution_y = 8, 6
         bpy.ops.render.render(write_still=False, scene=scene.name)
     finally:
         scene.render.engine, scene.render.resolution_x, scene.render.resolution_y = kept
+        bpy.utils.unregister_class(CaptureEngine)
     entries = list(_captured)
     _captured.clear()
     return entries
-
-
-_registered: list = []
 
 
 def differences(result, entries) -> list[str]:
