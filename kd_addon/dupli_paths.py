@@ -51,13 +51,15 @@ class DupliPaths:
         self._active: bool | None = None  # decided at the first instance entry (most frames have none)
         self._tops: dict[int, tuple[bool, tuple]] = {}  # top-level instancer -> (walk its entries, kind)
         self._parent = 0
-        self._stack: list[tuple[tuple, int, bool]] = []  # (levels, original's pointer, makes nothing)
+        self._stack: list[tuple[tuple, int, bool, bool]] = []  # (levels, original's pointer, makes nothing,
+        # made by a plain collection instancer)
         self.blocked: set[int] = set()  # originals some entry of which a render does not make
         self._makes_nothing: dict[tuple[int, int], bool] = {}
         self._objects: dict[int, bpy.types.Object] = {}
         self._made: dict[tuple[int, int], bool] = {}
         self._reach: dict[tuple, tuple[frozenset[int], bool]] = {}
         self._member_sets: dict[int, frozenset[int]] = {}
+        self._numbered: dict[int, tuple[list, frozenset[int]]] = {}  # collection -> _hidden_member's tables
 
     def made_by_render(self, inst, ob, parent) -> bool:
         """`ob` and `parent` are the entry's object and top-level instancer (None: not an instance),
@@ -89,13 +91,13 @@ class DupliPaths:
         if own is None:  # per (kind of instancer, object): most entries repeat one
             own = self._makes_nothing[key] = orig.hide_render or not self._generated(parent.original, orig)
             self._objects[pointer] = orig
-        blocked = self._blocked(pid, pointer)
-        self._stack.append((pid, pointer, blocked or own))
+        blocked, maker = self._blocked(pid, pointer, parent.original if kind[0] == "collection" else None)
+        self._stack.append((pid, pointer, blocked or own, maker))
         if blocked:
             self.blocked.add(pointer)
         return not blocked
 
-    def _blocked(self, pid: tuple, pointer: int) -> bool:
+    def _blocked(self, pid: tuple, pointer: int, plain_top) -> tuple[bool, bool]:
         """Whether the entry's parent, the nearest stacked entry it descends from (its levels continue
         the parent's and the parent could make it), makes nothing (itself hidden, or on a path a render
         does not make: the flag is inherited down the stack), or instances a collection whose render
@@ -104,16 +106,44 @@ class DupliPaths:
         collection instance showed through both). Only the parent is asked: a farther entry whose
         levels the entry's also continue (geometry nodes' +1 numbering makes such twins) may be a
         sibling of the parent's line, which a render-hidden one would wrongly block (outside review:
-        Separate Children with a hidden and a visible instancer of one collection)."""
-        for parent_pid, parent, makes_nothing in reversed(self._stack):
+        Separate Children with a hidden and a visible instancer of one collection).
+
+        Returns (blocked, whether the entry's own level was made by a plain collection instancer:
+        the top-level instancer `plain_top` (None when it is not one), or its parent). A member of a
+        plain collection carries its own index at its level, and so do its instances
+        (make_duplis_collection recurses with the member's id, no +1), so a stacked entry made so is
+        believed a parent only with that exact index, and an index no stacked entry has names the
+        member whose instances the entry is (_hidden_member): a member with no entry of its own (Show
+        Instancer off in the viewport) must neither pass its instances to the member before it nor
+        let them through when a render skips it (random scenes against a render's depsgraph)."""
+        for parent_pid, parent, makes_nothing, plain_level in reversed(self._stack):
+            if plain_level and pid[len(pid) - len(parent_pid)] != parent_pid[0]:
+                continue
             if not (_descends(pid, parent_pid) and self._makes(parent, pointer)):
                 continue
+            instancer = self._objects[parent]
+            maker = _plain_collection_instancer(instancer)
             if makes_nothing:
-                return True
-            collection = _instanced_collection(self._objects[parent])
-            return (collection is not None and pointer in self._members(collection)
-                    and not self._generated(self._objects[parent], self._objects[pointer]))
-        return False
+                return True, maker
+            if maker and len(pid) > len(parent_pid) + 1 and self._hidden_member(
+                    instancer.instance_collection, pid[len(pid) - len(parent_pid) - 1], pointer):
+                return True, maker
+            return not self._generated(instancer, self._objects[pointer]), maker
+        if plain_top is not None and len(pid) > 1:
+            return self._hidden_member(plain_top.instance_collection, pid[-1], pointer), True
+        return False, plain_top is not None
+
+    def _hidden_member(self, collection, index: int, pointer: int) -> bool:
+        """Whether the member an instance of `collection` numbers `index` (among the members the
+        viewport walks, in order) is another object than the entry's and one a render skips."""
+        key = collection.as_pointer()
+        if key not in self._numbered:
+            self._numbered[key] = (viewport_members(collection), frozenset(render_walked(collection)))
+        members, rendered = self._numbered[key]
+        if index >= len(members):
+            return False
+        member = members[index].as_pointer()
+        return member != pointer and member not in rendered
 
     def _makes(self, ancestor: int, pointer: int) -> bool:
         """Whether object `ancestor` can instance object `pointer`, directly or through what it instances
@@ -149,6 +179,35 @@ class DupliPaths:
                 reach |= self._reach_of(other, stack | {pointer})[0]
         self._reach[key] = (frozenset(reach), nested)
         return self._reach[key]
+
+
+def render_walked(coll: bpy.types.Collection) -> set[int]:
+    """Pointers of the objects a render walks in an instance of `coll`: not render-hidden, in it or
+    in child collections that are not render-hidden either."""
+    out: set[int] = set()
+    todo = [] if coll.hide_render else [coll]
+    while todo:
+        c = todo.pop()
+        out.update(ob.as_pointer() for ob in c.objects if not ob.hide_render)
+        todo.extend(child for child in c.children if not child.hide_render)
+    return out
+
+
+def viewport_members(coll: bpy.types.Collection) -> list:
+    """The objects the viewport's walk of an instance of `coll` takes, in its order (the collection's
+    object cache, all_objects, less objects and child collections disabled in viewports): their
+    positions are the ids make_duplis_collection gives them."""
+    shown: set[int] = set()
+    todo = [] if coll.hide_viewport else [coll]
+    while todo:
+        c = todo.pop()
+        shown.update(ob.as_pointer() for ob in c.objects if not ob.hide_viewport)
+        todo.extend(child for child in c.children if not child.hide_viewport)
+    return [ob for ob in coll.all_objects if ob.as_pointer() in shown]
+
+
+def _plain_collection_instancer(ob) -> bool:
+    return _instancer_kind(ob)[0] == "collection"
 
 
 def _instancer_kind(ob) -> tuple:

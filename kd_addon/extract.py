@@ -102,8 +102,8 @@ import bpy
 import numpy as np
 
 from .cycles_culling import culling_warning
-from .dupli_paths import DupliPaths, instances_things
-from .node_instances import has_node_modifier, instancing_references, node_references
+from .dupli_paths import DupliPaths, instances_things, render_walked
+from .node_instances import has_node_modifier, instancing_references, node_references, objects_read_as_geometry
 from .viewport_evaluation import viewport_evaluation_warning
 
 # --------------------------------------------------------------------------
@@ -372,14 +372,18 @@ class _Visibility:
         if collection is not None:
             self._add(self._collection_expansion(collection, stack), reach, shown)
         if ob.instance_type in _INSTANCING_PARENT_TYPES:
-            for child in ob.children_recursive:  # those the depsgraph holds (make_child_duplis)
-                self._add_object(child, self.scene_object(child), stack, reach, shown)
+            for child in ob.children_recursive:  # those a render's depsgraph holds (make_child_duplis)
+                self._add_object(child, not child.hide_render, stack, reach, shown)
         if len(ob.particle_systems) or has_node_modifier(ob):
             collections, objects = instancing_references(ob)
             for coll in collections:
                 self._add(self._collection_expansion(coll, stack), reach, shown)
-            for other in objects:  # named directly: shown whatever its flags, its own instances not if hidden
-                self._add_object(other, True, stack, reach, shown, instances_shown=not other.hide_render)
+            geometry = {o.as_pointer() for o in objects_read_as_geometry(ob)} if has_node_modifier(ob) else set()
+            for other in objects:  # named directly: shown whatever its flags (but a child of a vertex or face
+                # instancer only as its instances); its own instances unless it is render-hidden and
+                # instanced as an object (read as geometry they come along)
+                self._add_object(other, not _instanced_by_its_parent(other), stack, reach, shown,
+                                 instances_shown=not other.hide_render or other.as_pointer() in geometry)
         self._expansion_memo[key] = (frozenset(reach), frozenset(shown))
         return self._expansion_memo[key]
 
@@ -393,9 +397,9 @@ class _Visibility:
             return frozenset(), frozenset()
         stack = stack | {("collection members", ptr)}
         reach, shown = set(), set()
-        walked = _render_walked(coll)
-        for ob in coll.all_objects:
-            self._add_object(ob, ob.as_pointer() in walked, stack, reach, shown)
+        walked = render_walked(coll)
+        for ob in coll.all_objects:  # a child of a vertex or face instancer shows only as its instances
+            self._add_object(ob, ob.as_pointer() in walked and not _instanced_by_its_parent(ob), stack, reach, shown)
         self._collection_memo[ptr] = (frozenset(reach), frozenset(shown))
         return self._collection_memo[ptr]
 
@@ -414,18 +418,6 @@ class _Visibility:
         reach |= expansion[0]
         if shown is not None:
             shown |= expansion[1]
-
-
-def _render_walked(coll: bpy.types.Collection) -> set[int]:
-    """Pointers of the objects a render walks in an instance of `coll`: not render-hidden, in it or
-    in child collections that are not render-hidden either."""
-    out: set[int] = set()
-    todo = [] if coll.hide_render else [coll]
-    while todo:
-        c = todo.pop()
-        out.update(ob.as_pointer() for ob in c.objects if not ob.hide_render)
-        todo.extend(child for child in c.children if not child.hide_render)
-    return out
 
 
 def _set_scenes(scene: bpy.types.Scene) -> list[bpy.types.Scene]:
@@ -929,7 +921,7 @@ class _EntryReader:
         self.meshed: set[int] = set()  # originals whose own geometry gave triangles (left_out_warnings)
         # The path walk's rule depends on what an instancer instances only, not on whether the
         # instancer itself is shown (a hidden one's entries are all left out anyway, by the verdict).
-        self.paths = DupliPaths(lambda instancer, orig: instanced_visible(vis, instancer, orig))
+        self.paths = DupliPaths(vis.in_instanced_collection)
 
     def read(self, inst) -> Instance | None:
         """Record for one entry, or None to skip it. Copies everything out at

@@ -60,6 +60,19 @@ def node_references(ob: bpy.types.Object) -> tuple[list[bpy.types.Collection], l
     return _unique(collections), _unique(objects)
 
 
+def objects_read_as_geometry(ob: bpy.types.Object) -> list[bpy.types.Object]:
+    """The objects `ob`'s Object Info nodes read as geometry (As Instance off, or not known to be on):
+    their evaluated geometry, instances included, comes through whatever their render visibility,
+    where an object instanced as an object makes no instances when it is render-hidden (checked
+    against a render's depsgraph: a render-hidden collection instancer read so showed its collection)."""
+    geometry: list[bpy.types.Object] = []
+    walked: set = set()
+    for mod in ob.modifiers:
+        if mod.type == "NODES" and mod.node_group is not None:
+            _walk(mod.node_group, _modifier_inputs(mod), set(), walked, [], [], geometry)
+    return _unique(geometry)
+
+
 def _unique(ids: list) -> list:
     """The IDs in first-seen order, each once."""
     return list({id_.as_pointer(): id_ for id_ in ids}.values())
@@ -92,12 +105,14 @@ def particle_references(ob: bpy.types.Object) -> tuple[list[bpy.types.Collection
     return collections, objects
 
 
-def _walk(tree, group_inputs, path: set[int], walked: set, collections: list, objects: list) -> None:
+def _walk(tree, group_inputs, path: set[int], walked: set, collections: list, objects: list,
+          geometry: list | None = None) -> None:
     """Collect from the nodes of `tree` that reach its output, and from the groups they call.
     `group_inputs(identifier)`: the value the caller feeds the tree's group input `identifier`, None
     when unknown. `path`: the groups being walked (Blender forbids recursion; this guards anyway).
     `walked`: the (tree, input values) already walked: a group called many times with the same inputs
-    is read once (a review found a group chain called 4 ways a level read 4^depth times)."""
+    is read once (a review found a group chain called 4 ways a level read 4^depth times). `geometry`:
+    where given, collects the Object Info objects not known to be read As Instance."""
     key = (tree.as_pointer(), _input_values(tree, group_inputs))
     if key in walked:
         return
@@ -123,8 +138,11 @@ def _walk(tree, group_inputs, path: set[int], walked: set, collections: list, ob
             found = _socket_value(node.inputs.get("Object"), group_inputs)
             if isinstance(found, bpy.types.Object):
                 objects.append(found)
+                if geometry is not None and _socket_value(node.inputs.get("As Instance"), group_inputs) is not True:
+                    geometry.append(found)
         elif kind == "GeometryNodeGroup" and node.node_tree is not None and node.node_tree.as_pointer() not in path:
-            _walk(node.node_tree, _group_node_inputs(node, group_inputs), path, walked, collections, objects)
+            _walk(node.node_tree, _group_node_inputs(node, group_inputs), path, walked, collections, objects,
+                  geometry)
 
 
 def _input_values(tree, group_inputs) -> tuple:

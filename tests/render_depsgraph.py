@@ -72,9 +72,10 @@ def render_entries(scene: bpy.types.Scene | None = None) -> list:
     return entries
 
 
-def differences(result, entries) -> list[str]:
+def differences(result, entries, placement: bool = True) -> list[str]:
     """How an ExtractedScene (kd_addon.extract) differs from a render's entries, per (object,
-    top-level instancer): missing or extra objects, or other triangle counts, areas or bounds."""
+    top-level instancer): missing or extra objects, or other triangle counts, areas or (with
+    `placement`) bounds."""
     ids = result.triangle_object_ids()
     world = result.world_triangles().astype(np.float64)
     ours: dict = {}
@@ -87,7 +88,8 @@ def differences(result, entries) -> list[str]:
     for key in sorted(set(ours) | set(theirs), key=str):
         a = _measure(np.concatenate(ours[key])) if key in ours else None
         b = _measure(np.concatenate(theirs[key])) if key in theirs else None
-        if a is None or b is None or a[0] != b[0] or not np.allclose(a[1:], b[1:], rtol=1e-5, atol=1e-4):
+        compared = slice(1, None if placement else 2)
+        if a is None or b is None or a[0] != b[0] or not np.allclose(a[compared], b[compared], rtol=1e-5, atol=1e-4):
             out.append(f"{key}: preview {a}, render {b}")
     return out
 
