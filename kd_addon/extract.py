@@ -878,15 +878,34 @@ def _pick_candidates(coll: bpy.types.Collection, hidden: str) -> set[int]:
     return out
 
 
-def hidden_light_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility) -> list[str]:
+def hidden_light_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility,
+                          instanced_lights: set[int] = frozenset()) -> list[str]:
     """A warning per render-visible light of the scene or its background scenes hidden in the
     viewport: its depsgraph does not evaluate it, so the preview cannot use it, while a final render
-    does. `vis`: the render-visibility table, shared with the caller."""
+    does; and per light member of a collection a collection instancer renders whole that the viewport
+    did not instance (`instanced_lights`: pointers of the originals of the lights it did), disabled in
+    viewports or in a collection that is (outside review: Cycles lit 153 pixels, the preview none, in
+    silence). `vis`: the render-visibility table, shared with the caller."""
     evaluated = {ob.original.as_pointer() for ob in depsgraph.objects}
-    return [f"light '{ob.name}' is hidden in the viewport (eye icon, Disable in Viewports or a hidden collection): "
-            "the preview leaves it out, a final render uses it"
-            for ob in _rendered_layers_objects(depsgraph)
-            if ob.type == "LIGHT" and ob.as_pointer() not in evaluated and vis.scene_object(ob)]
+    out = [f"light '{ob.name}' is hidden in the viewport (eye icon, Disable in Viewports or a hidden collection): "
+           "the preview leaves it out, a final render uses it"
+           for ob in _rendered_layers_objects(depsgraph)
+           if ob.type == "LIGHT" and ob.as_pointer() not in evaluated and vis.scene_object(ob)]
+    named = set()
+    for host in _rendered_layers_objects(depsgraph):
+        collection = host.instance_collection if host.instance_type == "COLLECTION" else None
+        if collection is None or host.as_pointer() not in evaluated or not vis.scene_object(host):
+            continue
+        shown = vis.instanced_objects(collection)
+        for ob, owner, chain in _members(collection, (), {collection.as_pointer()}):
+            if (ob.type == "LIGHT" and ob.as_pointer() in shown and ob.as_pointer() not in instanced_lights
+                    and ob.as_pointer() not in named):
+                named.add(ob.as_pointer())
+                through = "".join(f" through '{inner.name}'" for inner in chain)
+                out.append(f"light '{ob.name}' in collection '{owner.name}' (instanced by '{host.name}'{through}) is "
+                           "not instanced in the viewport (disabled in viewports, or a collection on its path is): the "
+                           "preview leaves it out, a final render uses it")
+    return out
 
 
 def _rendered_layers_objects(depsgraph: bpy.types.Depsgraph):

@@ -242,10 +242,11 @@ def read_camera(scene, depsgraph, width: int, height: int) -> tuple[CameraInput,
     return camera, warnings
 
 
-def read_lights(depsgraph, visibility: _Visibility | None = None) -> list[LightInput]:
+def read_lights(depsgraph, visibility: _Visibility | None = None, instanced: set | None = None) -> list[LightInput]:
     """Render-visible scene lights, instanced ones too (a light in an instanced collection lights the
     scene in Cycles): the render-visibility rules of meshes (extract.py), from object_instances.
-    `visibility`: the view layer's visibility table when the caller has one."""
+    `visibility`: the view layer's visibility table when the caller has one. `instanced`: a set that
+    gets the original pointers of the instanced lights the viewport made (hidden_light_warnings)."""
     visibility = _Visibility(depsgraph) if visibility is None else visibility
     lights = []
     for inst in depsgraph.object_instances:
@@ -253,20 +254,24 @@ def read_lights(depsgraph, visibility: _Visibility | None = None) -> list[LightI
         if ob.type != "LIGHT":
             continue
         parent = inst.parent if inst.is_instance else None
+        if parent is not None and instanced is not None:
+            instanced.add(ob.original.as_pointer())
         if not _entry_visible(visibility, parent, ob):  # a light is no instancer: the collection rules and
             continue  # the vertex/face-instancing parent's
         name = ob.original.name if parent is None else f"{ob.original.name} (instanced by {parent.original.name})"
         light = light_input(name, ob.data, inst.matrix_world)
         if light is not None:
-            lights.append(replace(light, unapplied=unapplied_light_settings(ob) + light.unapplied))
+            lights.append(replace(light, unapplied=unapplied_light_settings(ob, parent) + light.unapplied))
     return lights
 
 
-def unapplied_light_settings(ob) -> tuple[str, ...]:
+def unapplied_light_settings(ob, instancer=None) -> tuple[str, ...]:
     """What Cycles would apply and the preview does not, named so a warning can say so: the object's
     light and shadow linking (Blender 4.0+: which objects the light lights, which block it) and its
-    Diffuse ray visibility (off: it lights no diffuse surface, which is all the preview shades). The
-    light's own shader nodes are named by light_input."""
+    Diffuse ray visibility, or its instancer's (off: it lights no diffuse surface, which is all the
+    preview shades; Cycles ANDs an instance's ray visibility with its instancer's: outside review, an
+    instancer with Diffuse off left its light dark in Cycles). The light's own shader nodes are named
+    by light_input."""
     found = []
     linking = getattr(ob, "light_linking", None)
     for attribute, what in (("receiver_collection", "light linking"), ("blocker_collection", "shadow linking")):
@@ -275,6 +280,8 @@ def unapplied_light_settings(ob) -> tuple[str, ...]:
             found.append(f"{what} (collection '{collection.name}')")
     if not getattr(ob, "visible_diffuse", True):
         found.append("Ray Visibility > Diffuse off")
+    elif instancer is not None and not getattr(instancer.original, "visible_diffuse", True):
+        found.append(f"its instancer '{instancer.original.name}''s Ray Visibility > Diffuse off")
     return tuple(found)
 
 
@@ -288,5 +295,7 @@ def read_scene(scene, depsgraph, width: int, height: int, lights: bool = True) -
         warnings.append("motion blur is ignored by the preview: it renders the frame's instant")
     camera, camera_warnings = read_camera(scene, depsgraph, width, height)
     visibility = _Visibility(depsgraph)  # one table for the lights read and the hidden ones
-    return SceneInputs(camera, read_lights(depsgraph, visibility), width, height, warnings + camera_warnings,
-                       hidden_light_warnings(depsgraph, visibility) if lights else [])
+    instanced: set[int] = set()
+    read = read_lights(depsgraph, visibility, instanced)
+    return SceneInputs(camera, read, width, height, warnings + camera_warnings,
+                       hidden_light_warnings(depsgraph, visibility, instanced) if lights else [])

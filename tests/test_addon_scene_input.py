@@ -318,6 +318,39 @@ def test_instanced_lights_are_read_at_their_instances(scene):
     assert found == [("Lamp (instanced by A)", (11.0, 0.0, 2.0)), ("Lamp (instanced by B)", (21.0, 0.0, 2.0))]
 
 
+@pytest.mark.parametrize("hidden", ["light", "child collection"])
+def test_an_instanced_light_the_viewport_does_not_make_is_named(scene, hidden):
+    """A light member of an instanced collection, disabled in viewports (or in a child collection that
+    is): Cycles lights the scene with it (outside review: 153 pixels), the viewport makes none, and
+    nothing said so. A render-hidden one is left out in both, so not named."""
+    source = scenes.new_collection("Rig", exclude=True)
+    holder = source
+    if hidden == "child collection":
+        holder = bpy.data.collections.new("Inner")
+        source.children.link(holder)
+    lamp = scenes.link(bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", "SPOT")), holder)
+    quiet = scenes.link(bpy.data.objects.new("Quiet", bpy.data.lights.new("Quiet", "POINT")), source)
+    quiet.hide_viewport = quiet.hide_render = True
+    (holder if hidden == "child collection" else lamp).hide_viewport = True
+    scenes.add_collection_instance("Inst", source, location=(5, 0, 0))
+    add_top_camera(location=(0, 0, 5))
+    inputs = scene_input.read_scene(scene, bpy.context.evaluated_depsgraph_get(), 32, 32)
+    assert inputs.lights == []
+    assert inputs.hidden_lights == [
+        "light 'Lamp' in collection 'Rig' (instanced by 'Inst') is not instanced in the viewport (disabled "
+        "in viewports, or a collection on its path is): the preview leaves it out, a final render uses it"]
+
+
+def test_an_instancers_diffuse_switch_is_named_for_its_lights(scene):
+    """Cycles ANDs an instance's ray visibility with its instancer's: an instancer with Diffuse off
+    leaves its lights dark on diffuse surfaces (outside review: 0 against 120 pixels)."""
+    source = scenes.new_collection("Rig", exclude=True)
+    scenes.link(bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", "POINT")), source)
+    scenes.add_collection_instance("Inst", source).visible_diffuse = False
+    (light,) = scene_input.read_lights(bpy.context.evaluated_depsgraph_get())
+    assert light.unapplied == ("its instancer 'Inst''s Ray Visibility > Diffuse off",)
+
+
 def test_a_light_child_of_a_vertex_instancing_parent_lights_only_from_the_instances(scene):
     """As for meshes (extract.py): a final render hides the child at its own place and keeps the
     copies the parent makes at its vertices."""
