@@ -93,16 +93,19 @@ def build_parser(prog: str = COMMAND_ID) -> argparse.ArgumentParser:
     render.add_argument("--bins", type=int, default=s, help=f"(default {DEFAULTS.bins})")
     render.add_argument("--threads", type=int, default=s, help="0 = all cores (default)")
     render.add_argument("--error-target", dest="error_target", type=float, default=s, help="0 = off (default)")
-    render.add_argument("--denoise", action="store_true", default=s,
+    on_off = argparse.BooleanOptionalAction  # --no-X turns off a setting the .blend saved on (outside review)
+    render.add_argument("--denoise", action=on_off, default=s,
                         help="filter each finished frame with the edge-avoiding à-trous denoiser (default off)")
     render.add_argument("--seed", type=int, default=s, help=f"(default {DEFAULTS.seed})")
     render.add_argument("--memory-limit", dest="memory_limit_mb", type=int, default=s,
                         help="MiB; refuse a frame estimated to need more (default 0 = no limit)")
     render.add_argument("--format", dest="output_format", type=_output_format, default=s,
                         help="PNG (default) or EXR")
-    render.add_argument("--lazy", action="store_true", default=s,
-                        help="build the kd-tree on demand, only where rays go (same image)")
-    render.add_argument("--rebuild-all", dest="rebuild_all", action="store_true", default=s,
+    render.add_argument("--lazy", action=on_off, default=s,
+                        help="build the kd-tree on demand, only where rays go (the same image; in the shadow "
+                             "modes up to the last float32 bit, as one merged tree rounds some shadow rays "
+                             "differently)")
+    render.add_argument("--rebuild-all", dest="rebuild_all", action=on_off, default=s,
                         help="rebuild every kd-tree and re-trace every frame (no reuse of unchanged objects' "
                              "trees or of unchanged images)")
     return parser

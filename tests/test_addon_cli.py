@@ -121,6 +121,7 @@ def test_cli_takes_the_files_saved_settings_and_options_override_them(tmp_path, 
         saved = scene.kd_preview
         saved.mode, saved.samples, saved.ao_distance = "ao+shadow", 3, 0.25
         saved.resolution_percentage, saved.output_format, saved.seed = 100, "OPEN_EXR", 7
+        saved.denoise = saved.lazy = saved.rebuild_all = True  # on/off switches: --no-X turns them off
         blend = tmp_path / "panel.blend"
         bpy.ops.wm.save_as_mainfile(filepath=str(blend))
     finally:
@@ -130,13 +131,15 @@ def test_cli_takes_the_files_saved_settings_and_options_override_them(tmp_path, 
         kd_addon.register()
     try:
         out = tmp_path / "out"
-        assert cli.execute(["render", str(blend), "--out", str(out), "--frames", "1", "--samples", "2"]) == 0
+        assert cli.execute(["render", str(blend), "--out", str(out), "--frames", "1", "--samples", "2",
+                            "--no-denoise", "--no-lazy"]) == 0
     finally:
         if registered:
             kd_addon.unregister()
     settings = json.loads((out / "report.json").read_text())["settings"]
     assert (settings["mode"], settings["samples"], settings["ao_distance"]) == ("ao+shadow", 2, 0.25)
     assert (settings["resolution_percentage"], settings["output_format"], settings["seed"]) == (100, "OPEN_EXR", 7)
+    assert (settings["denoise"], settings["lazy"], settings["rebuild_all"]) == (False, False, True)
     assert exr_channels(out / "frame_0001.exr")["A"].shape == (30, 40)
     assert hasattr(bpy.types.Scene, "kd_preview") is False  # the settings group went again
 
