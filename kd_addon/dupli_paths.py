@@ -138,7 +138,7 @@ class DupliPaths:
         viewport walks, in order) is another object than the entry's and one a render skips."""
         key = collection.as_pointer()
         if key not in self._numbered:
-            self._numbered[key] = (viewport_members(collection), frozenset(render_walked(collection)))
+            self._numbered[key] = (viewport_members(collection), frozenset(unhidden_objects(collection, "hide_render")))
         members, rendered = self._numbered[key]
         if index >= len(members):
             return False
@@ -181,28 +181,23 @@ class DupliPaths:
         return self._reach[key]
 
 
-def render_walked(coll: bpy.types.Collection) -> set[int]:
-    """Pointers of the objects a render walks in an instance of `coll`: not render-hidden, in it or
-    in child collections that are not render-hidden either."""
+def unhidden_objects(coll: bpy.types.Collection, hidden: str) -> set[int]:
+    """Pointers of the objects of `coll` and of its child collections that have the flag `hidden`
+    ("hide_render" or "hide_viewport") off, as has every collection on their path: the members a
+    render, or the viewport, walks in an instance of `coll` (and picks particle instances from)."""
     out: set[int] = set()
-    todo = [] if coll.hide_render else [coll]
+    todo = [] if getattr(coll, hidden) else [coll]
     while todo:
         c = todo.pop()
-        out.update(ob.as_pointer() for ob in c.objects if not ob.hide_render)
-        todo.extend(child for child in c.children if not child.hide_render)
+        out.update(ob.as_pointer() for ob in c.objects if not getattr(ob, hidden))
+        todo.extend(child for child in c.children if not getattr(child, hidden))
     return out
 
 
 def viewport_members(coll: bpy.types.Collection) -> list:
     """The objects the viewport's walk of an instance of `coll` takes, in its order (the collection's
-    object cache, all_objects, less objects and child collections disabled in viewports): their
-    positions are the ids make_duplis_collection gives them."""
-    shown: set[int] = set()
-    todo = [] if coll.hide_viewport else [coll]
-    while todo:
-        c = todo.pop()
-        shown.update(ob.as_pointer() for ob in c.objects if not ob.hide_viewport)
-        todo.extend(child for child in c.children if not child.hide_viewport)
+    object cache, all_objects): their positions are the ids make_duplis_collection gives them."""
+    shown = unhidden_objects(coll, "hide_viewport")
     return [ob for ob in coll.all_objects if ob.as_pointer() in shown]
 
 

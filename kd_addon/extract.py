@@ -102,7 +102,7 @@ import bpy
 import numpy as np
 
 from .cycles_culling import culling_warning
-from .dupli_paths import DupliPaths, instances_things, render_walked
+from .dupli_paths import DupliPaths, instances_things, unhidden_objects
 from .node_instances import has_node_modifier, instancing_references, node_references, objects_read_as_geometry
 from .viewport_evaluation import viewport_evaluation_warning
 
@@ -397,7 +397,7 @@ class _Visibility:
             return frozenset(), frozenset()
         stack = stack | {("collection members", ptr)}
         reach, shown = set(), set()
-        walked = render_walked(coll)
+        walked = unhidden_objects(coll, "hide_render")
         for ob in coll.all_objects:  # a child of a vertex or face instancer shows only as its instances
             self._add_object(ob, ob.as_pointer() in walked and not _instanced_by_its_parent(ob), stack, reach, shown)
         self._collection_memo[ptr] = (frozenset(reach), frozenset(shown))
@@ -835,7 +835,7 @@ def _pick_warnings(ob, vis: _Visibility) -> list[str]:
         coll = settings.instance_collection
         if (system.as_pointer() in shown and settings.render_type == "COLLECTION" and coll is not None
                 and not settings.use_whole_collection
-                and _pick_candidates(coll, "hide_render") != _pick_candidates(coll, "hide_viewport")):
+                and unhidden_objects(coll, "hide_render") != unhidden_objects(coll, "hide_viewport")):
             out.append(f"object '{ob.name}': particle system '{system.name}' gives each particle one object of "
                        f"collection '{coll.name}', which a final render picks among the render-visible members "
                        "only: the preview's particle-to-object assignment differs from a final render's (it leaves "
@@ -864,18 +864,6 @@ def _collections_rendered_whole(ob, vis: _Visibility) -> list:
 def _render_shown_systems(ob) -> set[int]:
     """Pointers of ob's particle systems whose modifier is shown in renders."""
     return {m.particle_system.as_pointer() for m in ob.modifiers if m.type == "PARTICLE_SYSTEM" and m.show_render}
-
-
-def _pick_candidates(coll: bpy.types.Collection, hidden: str) -> set[int]:
-    """Pointers of the objects of `coll` and of its child collections that have the flag `hidden`
-    ("hide_render" or "hide_viewport") off, as has every collection on their path: the members
-    Blender picks particle instances from, in a render or in the viewport."""
-    if getattr(coll, hidden):
-        return set()
-    out = {ob.as_pointer() for ob in coll.objects if not getattr(ob, hidden)}
-    for child in coll.children:
-        out |= _pick_candidates(child, hidden)
-    return out
 
 
 def hidden_light_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility,
