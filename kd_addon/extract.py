@@ -680,7 +680,7 @@ NOT_TRIANGLE_DATA = {"Curves": "hair curves", "PointCloud": "a point cloud", "Vo
 
 
 def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility, instanced_by: dict[int, set[int]],
-                      evaluated: set[int], not_made: set[int] = frozenset(), meshed: set[int] = frozenset()) -> list[str]:
+                      evaluated: set[int], not_made: set[int] = frozenset(), meshed: set[str] = frozenset()) -> list[str]:
     """A warning per render-visible thing a final render shows and the preview leaves out: objects of
     the scene and its background scenes hidden in the viewport (the viewport depsgraph does not
     evaluate them) or not triangles, collection instancers hidden there (their instances go with
@@ -690,7 +690,7 @@ def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility, instance
     viewport shows, those its Show Instancer flag alone keeps out of the depsgraph's entries included
     (they are read anyway when a render shows them, _hidden_by_viewport_flag_only). `not_made`: originals
     the viewport instanced on a path a render does not make (dupli_paths.py), not missing either.
-    `meshed`: originals whose own evaluated geometry gave triangles (a point cloud or curves object
+    `meshed`: names of the originals whose own evaluated geometry gave triangles (a point cloud or curves object
     whose geometry nodes output a mesh is named only for what is left of its points or curves)."""
     warnings = []
     instancers = {}
@@ -712,7 +712,7 @@ def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility, instance
         if ((kind in TRIANGLE_TYPES or kind in NOT_TRIANGLES) and vis.scene_object(ob) and _ray_visible(ob)
                 and not _renders_nothing(ob)):
             if kind in NOT_TRIANGLES:
-                if ob.as_pointer() not in meshed:
+                if ob.name not in meshed:
                     warnings.append(f"object '{ob.name}' is {NOT_TRIANGLES[kind]}, not triangles: left out of the preview")
                 elif _own_elements(ob.evaluated_get(depsgraph)):
                     warnings.append(f"object '{ob.name}' is {NOT_TRIANGLES[kind]}: the preview shows the triangles its "
@@ -925,7 +925,7 @@ class _EntryReader:
         self.not_triangles: dict[tuple[str, str | None], str] = {}
         self.non_finite_placements: dict[tuple[str, str | None], str] = {}  # one warning each
         self._own_entries_hidden_if_instancing: list[tuple[int, Instance]] = []
-        self.meshed: set[int] = set()  # originals whose own geometry gave triangles (left_out_warnings)
+        self.meshed: set[str] = set()  # names of the originals whose own geometry gave triangles
         # The path walk's rule depends on what an instancer instances only, not on whether the
         # instancer itself is shown (a hidden one's entries are all left out anyway, by the verdict).
         self.paths = DupliPaths(vis.in_instanced_collection)
@@ -969,8 +969,8 @@ class _EntryReader:
         )
         if parent is None and not ob.original.show_instancer_for_render:
             self._own_entries_hidden_if_instancing.append((ob.original.as_pointer(), record))
-        if instancer in (None, name):
-            self.meshed.add(ob.original.as_pointer())
+        if instancer in (None, name):  # by name: a pointer costs two RNA reads an entry
+            self.meshed.add(name)
         return record
 
     def without_hidden_carriers(self, records: list[Instance]) -> list[Instance]:
