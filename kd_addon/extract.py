@@ -373,16 +373,18 @@ class _Visibility:
             self._add(self._collection_expansion(collection, stack), reach, shown)
         if ob.instance_type in _INSTANCING_PARENT_TYPES:
             for child in ob.children_recursive:  # those a render's depsgraph holds (make_child_duplis)
-                self._add_object(child, not child.hide_render, stack, reach, shown)
+                self._add_object(child, _in_render(child), stack, reach, shown)
         if len(ob.particle_systems) or has_node_modifier(ob):
             collections, objects = instancing_references(ob)
             for coll in collections:
                 self._add(self._collection_expansion(coll, stack), reach, shown)
             geometry = {o.as_pointer() for o in objects_read_as_geometry(ob)} if has_node_modifier(ob) else set()
-            for other in objects:  # named directly: shown whatever its flags (but a child of a vertex or face
-                # instancer only as its instances); its own instances unless it is render-hidden and
-                # instanced as an object (read as geometry they come along)
-                self._add_object(other, not _instanced_by_its_parent(other), stack, reach, shown,
+            for other in objects:  # named directly: a mesh shown whatever its flags, a render-hidden curve or
+                # text not (outside review against Cycles), a child of a vertex or face instancer only as its
+                # instances; its own instances unless it is render-hidden and instanced as an object (read
+                # as geometry they come along)
+                shows = not _instanced_by_its_parent(other) and (other.type == "MESH" or not other.hide_render)
+                self._add_object(other, shows, stack, reach, shown,
                                  instances_shown=not other.hide_render or other.as_pointer() in geometry)
         self._expansion_memo[key] = (frozenset(reach), frozenset(shown))
         return self._expansion_memo[key]
@@ -418,6 +420,13 @@ class _Visibility:
         reach |= expansion[0]
         if shown is not None:
             shown |= expansion[1]
+
+
+def _in_render(ob: bpy.types.Object) -> bool:
+    """Whether a render's depsgraph holds `ob` for its parent to instance: not render-hidden, and in a
+    collection that is not either (outside review: a child in a render-disabled collection was copied
+    onto its parent's vertices, 159 pixels where Cycles drew none)."""
+    return not ob.hide_render and any(not getattr(c, "hide_render", False) for c in ob.users_collection)
 
 
 def _set_scenes(scene: bpy.types.Scene) -> list[bpy.types.Scene]:
@@ -761,7 +770,11 @@ def _hidden_member_warnings(collection, members: list, hosts: list, vis: _Visibi
         if host is not None:
             through = "".join(f" through '{inner.name}'" for inner in chain)
             where = f"object '{ob.name}' in collection '{owner.name}' (instanced by '{host.name}'{through})"
+            if _instanced_by_its_parent(ob):
+                continue  # shows only as its parent's instances, which the parent's own line covers
             if not ob.hide_viewport and not ob.show_instancer_for_viewport and instances_things(ob):
+                if not ob.show_instancer_for_render:
+                    continue  # hidden in renders too (outside review: named as shown by a render)
                 out.append(f"{where} has Show Instancer > Viewport off: the preview leaves its own mesh out there, "
                            "a final render shows it")  # its instances are made (outside review)
                 continue

@@ -5,11 +5,12 @@ with ``hide_render`` (or in a render-hidden child collection) is not rendered, w
 depsgraph the preview reads yields it. Measured with Cycles (bpy 5.0.1, a cube and a hide_render
 sphere in an excluded collection): Collection Info with *Separate Children* off instances only the
 cube; with it on, or behind *Realize Instances*, Cycles renders the sphere too, and so does an
-*Object Info* node pointing at a hidden object.
+*Object Info* node pointing at a hidden object (a hidden mesh; a hidden text or curve renders nothing:
+outside review against Cycles).
 
 So only Collection Info nodes that are not muted and whose *Separate Children* input is not linked
 count. With it off, the node's collection is instanced whole. With it on, the node makes one instance
-per child: a child *object* is an object reference, rendered even when render-hidden (the sphere
+per child: a child *object* is an object reference, rendered even when render-hidden if it is a mesh (the sphere
 above), while a child *collection* is a collection reference, which a render expands like a
 collection instance (measured with Cycles: a hide_render child collection, and a hide_render object
 in a visible child collection, were not rendered, with the node's output used directly or picked by
@@ -124,12 +125,13 @@ def _walk(tree, group_inputs, path: set[int], walked: set, collections: list, ob
         kind = node.bl_idname
         if kind == "GeometryNodeCollectionInfo":
             separate = node.inputs.get("Separate Children")
-            if separate is not None and _upstream(separate) is not None:
-                continue  # unknown which way the node instances: keep the instances shown
+            separated = _socket_value(separate, group_inputs) if separate is not None else False
+            if not isinstance(separated, (bool, int)):  # an ID property may hold the modifier's bool as an int
+                continue  # computed by other nodes: unknown which way the node instances, keep them shown
             found = _socket_value(node.inputs.get("Collection"), group_inputs)
             if not isinstance(found, bpy.types.Collection):
                 continue
-            if separate is not None and separate.default_value:  # one reference per child
+            if separated:  # one reference per child (a modifier's input may set it: outside review)
                 collections.extend(found.children)
                 objects.extend(found.objects)
             else:

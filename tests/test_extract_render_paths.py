@@ -220,3 +220,73 @@ def test_earlier_reviews_scenes_match_a_render_depsgraph(scene, build):
     test_extract.py's expected instances) against a render's own depsgraph, object by object."""
     build()
     assert differences(extract_scene(), render_entries()) == []  # two of them render nothing, as the preview
+
+
+@pytest.mark.parametrize("route", ["collection instance", "object info"])
+def test_a_vertex_parents_child_in_a_render_disabled_collection_is_not_copied(scene, route):
+    """A render's depsgraph holds no object of a render-disabled collection, so a vertex parent has no
+    such child to copy (outside review against Cycles: 159 pixels where Cycles drew none)."""
+    hidden = bpy.data.collections.new("Hidden")
+    hidden.hide_render = True
+    if route == "collection instance":
+        inner = scenes.new_collection("Inner", exclude=True)
+        inner.children.link(hidden)
+        parent = scenes.add_mesh("Parent", [(0, 0, 0), (2, 0, 0), (0, 2, 0)], [(0, 1, 2)], collection=inner)
+        scenes.add_collection_instance("Outer", inner)
+    else:
+        bpy.context.scene.collection.children.link(hidden)
+        parent = scenes.add_mesh("Parent", [(0, 0, 0), (2, 0, 0), (0, 2, 0)], [(0, 1, 2)], location=(0, 0, -30))
+        _object_info_host("Outer", parent, as_instance=True)
+    parent.instance_type = "VERTS"
+    parent.show_instancer_for_render = parent.show_instancer_for_viewport = False
+    scenes.add_cube("Kid", scale=0.3, collection=hidden).parent = parent
+    scenes.add_cube("Ground", scale=3.0, location=(0, 0, -5))
+    result = assert_extraction_matches_render()
+    assert not any(i.name == "Kid" for i in result.instances)
+
+
+@pytest.mark.parametrize("kind", ["text", "curve"])
+def test_object_info_of_a_render_hidden_curve_or_text_shows_nothing(scene, kind):
+    """Object Info (As Instance) shows a render-hidden mesh, but not a render-hidden text or curve
+    (outside review against Cycles: 187 pixels where Cycles drew none)."""
+    source = (scenes.add_text("Source", "Ab", location=(0, 0, -30)) if kind == "text"
+              else scenes.add_bevel_curve("Source", location=(0, 0, -30)))
+    source.hide_render = True
+    scenes.add_info_node_host("Host", source)
+    scenes.add_cube("Ground", scale=3.0, location=(0, 0, -5))
+    result = assert_extraction_matches_render()
+    assert not any(i.name == "Source" for i in result.instances)
+
+
+@pytest.mark.parametrize("separate", [False, True])
+def test_separate_children_set_by_the_modifiers_input_is_read(scene, separate):
+    """Collection Info's Separate Children fed from the modifier's own input: off, the collection is
+    instanced whole and a render leaves its render-hidden member out; on, each child object is a
+    reference and renders (outside review: the preview kept the member either way)."""
+    rocks = _collection_with_hidden_member()
+    tree = bpy.data.node_groups.new("Scatter", "GeometryNodeTree")
+    tree.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    item = tree.interface.new_socket("Separate", in_out="INPUT", socket_type="NodeSocketBool")
+    info = tree.nodes.new("GeometryNodeCollectionInfo")
+    info.inputs["Collection"].default_value = rocks
+    tree.links.new(tree.nodes.new("NodeGroupInput").outputs["Separate"], info.inputs["Separate Children"])
+    tree.links.new(info.outputs[0], tree.nodes.new("NodeGroupOutput").inputs[0])
+    host = scenes.add_mesh("Host", [], [])
+    modifier = host.modifiers.new("GN", "NODES")
+    modifier.node_group = tree
+    scenes.set_modifier_input(modifier, item.identifier, separate)
+    result = assert_extraction_matches_render()
+    assert ("RocksHidden" in {i.name for i in result.instances}) == separate
+
+
+def test_members_hidden_in_renders_too_are_not_named_as_shown_by_one(scene):
+    """A member with Show Instancer off for the viewport and for renders shows its own mesh in neither:
+    it was named as 'a final render shows it' (outside review)."""
+    inner = scenes.new_collection("Inner", exclude=True)
+    parent = scenes.add_mesh("Parent", [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)], [(0, 1, 2, 3)], collection=inner)
+    parent.instance_type = "VERTS"
+    parent.show_instancer_for_viewport = parent.show_instancer_for_render = False
+    scenes.add_cube("Dot", scale=0.1, collection=inner).parent = parent
+    scenes.add_collection_instance("Outer", inner, location=(0, 8, 0))
+    result = assert_extraction_matches_render()
+    assert result.warnings == []
