@@ -739,6 +739,9 @@ def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility, instance
         hosts = [h for h in hosts if _shows_instances_of(h, pointers, instanced_by)]
         if hosts:
             warnings += _hidden_member_warnings(collection, members, hosts, vis, instanced)
+            shown = vis.instanced_objects(collection)  # emitters inside: named as at the top (outside review)
+            warnings += [w for ob, _, _ in members if len(ob.particle_systems) and ob.as_pointer() in shown
+                         for w in _pick_warnings(ob, vis, instanced=True) if w not in warnings]
     return warnings
 
 
@@ -834,12 +837,13 @@ def _strand_warnings(ob, vis: _Visibility) -> list[str]:
             and system.settings.render_type == "PATH"]
 
 
-def _pick_warnings(ob, vis: _Visibility) -> list[str]:
+def _pick_warnings(ob, vis: _Visibility, instanced: bool = False) -> list[str]:
     """Particle systems that render one member of a collection per particle (Whole Collection off):
     a final render picks among the render-visible members, the viewport among the viewport-enabled
     ones, so where the two sets differ the preview's particle-to-object assignment is not a final
-    render's (the render-hidden members' particles are left out, see _Visibility)."""
-    if not (vis.scene_object(ob) and _ray_visible(ob)):
+    render's (the render-hidden members' particles are left out, see _Visibility). `instanced`: ob is
+    a member a collection instance renders (left_out_warnings decided), not a scene object."""
+    if not ((instanced or vis.scene_object(ob)) and _ray_visible(ob)):
         return []
     shown = _render_shown_systems(ob)
     out = []

@@ -290,3 +290,17 @@ def test_members_hidden_in_renders_too_are_not_named_as_shown_by_one(scene):
     scenes.add_collection_instance("Outer", inner, location=(0, 8, 0))
     result = assert_extraction_matches_render()
     assert result.warnings == []
+
+
+def test_an_emitter_picking_members_inside_an_instanced_collection_is_named(scene):
+    """Particles giving each particle one member of a collection with a render-hidden member pick
+    differently in a render (among the render-visible members): named at the top level, and now inside
+    an instanced collection too (outside review: no word there)."""
+    rocks = _collection_with_hidden_member()
+    inner = scenes.new_collection("Inner", exclude=True)
+    emitter = scenes.add_particle_emitter("Emitter", count=4, collection=rocks, whole_collection=False, size=2.0)
+    bpy.context.scene.collection.objects.unlink(emitter)
+    inner.objects.link(emitter)
+    scenes.add_collection_instance("Outer", inner)
+    named = [w for w in extract_scene().warnings if "particle-to-object assignment differs" in w]
+    assert len(named) == 1 and named[0].startswith("object 'Emitter': particle system 'Particles' gives each")
