@@ -39,7 +39,7 @@ class DupliPaths:
 
     `generated(instancer, orig)` (originals) is the caller's rule for whether a render makes `orig`
     under `instancer` as far as collections go, whatever the instancer's own visibility
-    (extract.instanced_visible).
+    (extract._Visibility.in_instanced_collection).
     The walk costs ~9 us an entry (reading persistent_id alone ~2 us; 2,000 collection instancers of a
     collection holding 4 nested instancers, 18,000 entries: 435-521 ms a frame without it, 597-685 ms
     with it, load ~2), so it runs only under top-level instancers that can reach another instancing
@@ -77,7 +77,7 @@ class DupliPaths:
             self._stack.clear()
         top = self._tops.get(parent_ptr)
         if top is None:
-            top = self._tops[parent_ptr] = (self._reach_of(parent.original)[1], _instancer_kind(parent.original))
+            top = self._tops[parent_ptr] = (self._reach_of(parent.original)[1], instancer_kind(parent.original))
         walk, kind = top
         if not walk:
             return True
@@ -134,11 +134,13 @@ class DupliPaths:
         return False, plain_top is not None
 
     def _hidden_member(self, collection, index: int, pointer: int) -> bool:
-        """Whether the member an instance of `collection` numbers `index` (among the members the
-        viewport walks, in order) is another object than the entry's and one a render skips."""
+        """Whether the member an instance of `collection` numbers `index` is another object than the
+        entry's and one a render skips. make_duplis_collection counts every base of the collection's
+        object cache (all_objects), viewport-hidden ones too (checked: with A hidden in the viewport,
+        B's persistent_id is (1, ...))."""
         key = collection.as_pointer()
         if key not in self._numbered:
-            self._numbered[key] = (viewport_members(collection), frozenset(unhidden_objects(collection, "hide_render")))
+            self._numbered[key] = (list(collection.all_objects), frozenset(unhidden_objects(collection, "hide_render")))
         members, rendered = self._numbered[key]
         if index >= len(members):
             return False
@@ -166,7 +168,7 @@ class DupliPaths:
         them instances things itself), memoized (per collection for collection instancers: a scene
         may hold thousands of one collection's instancers). A collection computed by nodes is not
         seen: its members then count as not instanced by `ob`, and their entries are kept, as before."""
-        key = _instancer_kind(ob)
+        key = instancer_kind(ob)
         if key in self._reach:
             return self._reach[key]
         objects = list(_instanced_directly(ob))
@@ -194,21 +196,14 @@ def unhidden_objects(coll: bpy.types.Collection, hidden: str) -> set[int]:
     return out
 
 
-def viewport_members(coll: bpy.types.Collection) -> list:
-    """The objects the viewport's walk of an instance of `coll` takes, in its order (the collection's
-    object cache, all_objects): their positions are the ids make_duplis_collection gives them."""
-    shown = unhidden_objects(coll, "hide_viewport")
-    return [ob for ob in coll.all_objects if ob.as_pointer() in shown]
-
-
 def _plain_collection_instancer(ob) -> bool:
-    return _instancer_kind(ob)[0] == "collection"
+    return instancer_kind(ob)[0] == "collection"
 
 
-def _instancer_kind(ob) -> tuple:
+def instancer_kind(ob) -> tuple:
     """What decides the instances an object makes: the collection it instances, or the object itself
     (vertex or face instancing, particles, geometry nodes)."""
-    collection = _instanced_collection(ob)
+    collection = instanced_collection(ob)
     if collection is not None and not ob.particle_systems and not has_node_modifier(ob):
         return ("collection", collection.as_pointer())
     return ("object", ob.as_pointer())
@@ -233,14 +228,14 @@ def _descends(pid: tuple, ancestor_pid: tuple) -> bool:
     return outer == ancestor_pid or (outer[0] == ancestor_pid[0] + 1 and outer[1:] == ancestor_pid[1:])
 
 
-def _instanced_collection(ob):
+def instanced_collection(ob):
     return ob.instance_collection if ob.instance_type == "COLLECTION" else None
 
 
 def _instanced_directly(ob: bpy.types.Object):
     """The objects `ob` instances itself: its instance collection's (children included), its
     children when it instances on vertices or faces, those its geometry nodes and particles name."""
-    collection = _instanced_collection(ob)
+    collection = instanced_collection(ob)
     if collection is not None:
         yield from collection.all_objects
     if ob.instance_type in ("VERTS", "FACES"):

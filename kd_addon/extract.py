@@ -102,8 +102,10 @@ import bpy
 import numpy as np
 
 from .cycles_culling import culling_warning
-from .dupli_paths import DupliPaths, instances_things, unhidden_objects
-from .node_instances import has_node_modifier, instancing_references, node_references, objects_read_as_geometry
+from .dupli_paths import (DupliPaths, instanced_collection, instancer_kind, instances_things,
+                          unhidden_objects)
+from .node_instances import (has_node_modifier, instancing_references, node_references,
+                             objects_read_as_geometry)
 from .viewport_evaluation import viewport_evaluation_warning
 
 # --------------------------------------------------------------------------
@@ -334,10 +336,21 @@ class _Visibility:
             self.scene_objects |= _layer_render_objects(render_view_layer(background).layer_collection)
         self._collection_memo: dict[int, tuple[frozenset, frozenset]] = {}
         self._expansion_memo: dict[tuple, tuple[frozenset, frozenset]] = {}
+        self._render_enabled: set[int] | None = None  # in_render's collections, found when first asked
+        self._cuts = 0  # cycles cut short so far (_remember)
 
     def scene_object(self, orig: bpy.types.Object) -> bool:
         """A non-instanced object: own flag plus collection path."""
         return (not orig.hide_render) and orig.as_pointer() in self.scene_objects
+
+    def in_render(self, ob: bpy.types.Object) -> bool:
+        """Whether a render's depsgraph holds `ob` for a vertex or face parent to instance: not
+        render-hidden, and in a collection none of whose ancestors on some path is render-disabled
+        (outside reviews: a child in a render-disabled collection, or below one, was copied onto its
+        parent's vertices, 159 pixels where Cycles drew none)."""
+        if self._render_enabled is None:
+            self._render_enabled = _render_enabled_collections()
+        return not ob.hide_render and any(c.as_pointer() in self._render_enabled for c in ob.users_collection)
 
     def in_instanced_collection(self, instancer: bpy.types.Object, orig) -> bool:
         """Whether `instancer` (a collection instancer, a vertex or face instancing parent, geometry
@@ -360,20 +373,20 @@ class _Visibility:
         instancer, a parent instancing a carrier on its vertices), and of those a render makes.
         Memoized per object (per collection for plain collection instancers, of which a scene may
         hold thousands)."""
-        collection = ob.instance_collection if ob.instance_type == "COLLECTION" else None
-        plain = collection is not None and not len(ob.particle_systems) and not has_node_modifier(ob)
-        key = ("collection", collection.as_pointer()) if plain else ("object", ob.as_pointer())
+        collection = instanced_collection(ob)
+        key = instancer_kind(ob)
         if key in self._expansion_memo:
             return self._expansion_memo[key]
         if key in stack:
+            self._cuts += 1
             return frozenset(), frozenset()
-        stack = stack | {key}
+        stack, cuts = stack | {key}, self._cuts
         reach, shown = set(), set()
         if collection is not None:
             self._add(self._collection_expansion(collection, stack), reach, shown)
         if ob.instance_type in _INSTANCING_PARENT_TYPES:
             for child in ob.children_recursive:  # those a render's depsgraph holds (make_child_duplis)
-                self._add_object(child, _in_render(child), stack, reach, shown)
+                self._add_object(child, self.in_render(child), stack, reach, shown)
         if len(ob.particle_systems) or has_node_modifier(ob):
             collections, objects = instancing_references(ob)
             for coll in collections:
@@ -386,8 +399,7 @@ class _Visibility:
                 shows = not _instanced_by_its_parent(other) and (other.type == "MESH" or not other.hide_render)
                 self._add_object(other, shows, stack, reach, shown,
                                  instances_shown=not other.hide_render or other.as_pointer() in geometry)
-        self._expansion_memo[key] = (frozenset(reach), frozenset(shown))
-        return self._expansion_memo[key]
+        return self._remember(self._expansion_memo, key, (frozenset(reach), frozenset(shown)), cuts)
 
     def _collection_expansion(self, coll: bpy.types.Collection, stack: frozenset) -> tuple[frozenset, frozenset]:
         """(reach, shown) of an instance of `coll`: its objects and its child collections', and what
@@ -396,14 +408,21 @@ class _Visibility:
         if ptr in self._collection_memo:
             return self._collection_memo[ptr]
         if ("collection members", ptr) in stack:
+            self._cuts += 1
             return frozenset(), frozenset()
-        stack = stack | {("collection members", ptr)}
+        stack, cuts = stack | {("collection members", ptr)}, self._cuts
         reach, shown = set(), set()
         walked = unhidden_objects(coll, "hide_render")
         for ob in coll.all_objects:  # a child of a vertex or face instancer shows only as its instances
             self._add_object(ob, ob.as_pointer() in walked and not _instanced_by_its_parent(ob), stack, reach, shown)
-        self._collection_memo[ptr] = (frozenset(reach), frozenset(shown))
-        return self._collection_memo[ptr]
+        return self._remember(self._collection_memo, ptr, (frozenset(reach), frozenset(shown)), cuts)
+
+    def _remember(self, memo: dict, key, value, cuts: int):
+        """Keep `value` unless a cycle was cut short while computing it (then it holds only part of
+        what this key reaches from elsewhere: its answer would depend on the order of questions)."""
+        if self._cuts == cuts:
+            memo[key] = value
+        return value
 
     def _add_object(self, ob, visible: bool, stack: frozenset, reach: set, shown: set,
                     instances_shown: bool | None = None) -> None:
@@ -422,11 +441,20 @@ class _Visibility:
             shown |= expansion[1]
 
 
-def _in_render(ob: bpy.types.Object) -> bool:
-    """Whether a render's depsgraph holds `ob` for its parent to instance: not render-hidden, and in a
-    collection that is not either (outside review: a child in a render-disabled collection was copied
-    onto its parent's vertices, 159 pixels where Cycles drew none)."""
-    return not ob.hide_render and any(not getattr(c, "hide_render", False) for c in ob.users_collection)
+def _render_enabled_collections() -> set[int]:
+    """Pointers of the collections a render can walk into: not render-disabled, and reached from a
+    scene's master collection or from a collection no other one holds (one only instanced) through
+    collections that are not either."""
+    held = {child.as_pointer() for c in bpy.data.collections for child in c.children}
+    todo = [scene.collection for scene in bpy.data.scenes]
+    todo += [c for c in bpy.data.collections if c.as_pointer() not in held and not c.hide_render]
+    out: set[int] = set()
+    while todo:
+        c = todo.pop()
+        if c.as_pointer() not in out:
+            out.add(c.as_pointer())
+            todo.extend(child for child in c.children if not child.hide_render)
+    return out
 
 
 def _set_scenes(scene: bpy.types.Scene) -> list[bpy.types.Scene]:
@@ -721,9 +749,11 @@ def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility, instance
         if ((kind in TRIANGLE_TYPES or kind in NOT_TRIANGLES) and vis.scene_object(ob) and _ray_visible(ob)
                 and not _renders_nothing(ob)):
             if kind in NOT_TRIANGLES:
-                if ob.name not in meshed:
+                if not _own_elements(ob.evaluated_get(depsgraph)):
+                    pass  # its nodes made it all triangles or instances (outside reviews), or it is empty
+                elif ob.name not in meshed:
                     warnings.append(f"object '{ob.name}' is {NOT_TRIANGLES[kind]}, not triangles: left out of the preview")
-                elif _own_elements(ob.evaluated_get(depsgraph)):
+                else:
                     warnings.append(f"object '{ob.name}' is {NOT_TRIANGLES[kind]}: the preview shows the triangles its "
                                     f"geometry nodes make and leaves the rest out")
             else:
@@ -896,11 +926,15 @@ def hidden_light_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility,
            "the preview leaves it out, a final render uses it"
            for ob in _rendered_layers_objects(depsgraph)
            if ob.type == "LIGHT" and ob.as_pointer() not in evaluated and vis.scene_object(ob)]
-    named = set()
+    named, walked = set(), set()
+    if not any(ob.type == "LIGHT" for ob in bpy.data.objects):
+        return out
     for host in _rendered_layers_objects(depsgraph):
         collection = host.instance_collection if host.instance_type == "COLLECTION" else None
-        if collection is None or host.as_pointer() not in evaluated or not vis.scene_object(host):
+        if (collection is None or collection.as_pointer() in walked or host.as_pointer() not in evaluated
+                or not vis.scene_object(host)):
             continue
+        walked.add(collection.as_pointer())
         shown = vis.instanced_objects(collection)
         for ob, owner, chain in _members(collection, (), {collection.as_pointer()}):
             if (ob.type == "LIGHT" and ob.as_pointer() in shown and ob.as_pointer() not in instanced_lights

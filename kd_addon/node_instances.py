@@ -148,14 +148,18 @@ def _walk(tree, group_inputs, path: set[int], walked: set, collections: list, ob
 
 
 def _input_values(tree, group_inputs) -> tuple:
-    """What the caller feeds the tree's ID inputs (collections, objects), as pointers: the part of the
-    inputs the walk's result depends on."""
+    """What the caller feeds the tree's ID inputs (collections, objects), as pointers, and its boolean
+    inputs (Separate Children, As Instance may come from them): the part of the inputs the walk's
+    result depends on."""
     values = []
     for item in tree.interface.items_tree:
         if getattr(item, "in_out", None) == "INPUT" and item.socket_type in ("NodeSocketCollection",
                                                                              "NodeSocketObject"):
             value = group_inputs(item.identifier)
             values.append((item.identifier, value.as_pointer() if value is not None else 0))
+        elif getattr(item, "in_out", None) == "INPUT" and item.socket_type == "NodeSocketBool":
+            value = group_inputs(item.identifier)  # Separate Children, As Instance (outside review)
+            values.append((item.identifier, bool(value) if isinstance(value, (bool, int)) else None))
     return tuple(values)
 
 

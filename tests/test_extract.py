@@ -381,7 +381,9 @@ def test_viewport_hidden_and_non_triangle_objects_are_named(scene):
     quiet = scenes.add_cube("RenderHiddenToo", location=(9, 0, 0))
     quiet.hide_viewport = quiet.hide_render = True
     hair = bpy.data.objects.new("Hair", bpy.data.hair_curves.new("Hair"))
+    hair.data.add_curves([3])  # one strand: something a render shows (an empty one is not named)
     scenes.link(hair)
+    scenes.link(bpy.data.objects.new("NoHair", bpy.data.hair_curves.new("NoHair")))
     result = extract_scene()
     assert result.object_names == ["Shown"]
     assert sorted(result.warnings) == [

@@ -10,6 +10,7 @@ import bpy
 import pytest
 
 from kd_addon.extract import extract_scene
+from kd_addon.node_instances import node_references
 from tests import bpy_scenes as scenes
 from tests.render_depsgraph import differences, render_entries
 
@@ -222,12 +223,18 @@ def test_earlier_reviews_scenes_match_a_render_depsgraph(scene, build):
     assert differences(extract_scene(), render_entries()) == []  # two of them render nothing, as the preview
 
 
+@pytest.mark.parametrize("below", [False, True])
 @pytest.mark.parametrize("route", ["collection instance", "object info"])
-def test_a_vertex_parents_child_in_a_render_disabled_collection_is_not_copied(scene, route):
-    """A render's depsgraph holds no object of a render-disabled collection, so a vertex parent has no
-    such child to copy (outside review against Cycles: 159 pixels where Cycles drew none)."""
+def test_a_vertex_parents_child_in_a_render_disabled_collection_is_not_copied(scene, route, below):
+    """A render's depsgraph holds no object of a render-disabled collection, or of one below it, so a
+    vertex parent has no such child to copy (outside reviews against Cycles: 159 pixels where Cycles
+    drew none)."""
     hidden = bpy.data.collections.new("Hidden")
     hidden.hide_render = True
+    holder = hidden
+    if below:  # the child's own collection is not disabled, one above it is
+        holder = bpy.data.collections.new("Sub")
+        hidden.children.link(holder)
     if route == "collection instance":
         inner = scenes.new_collection("Inner", exclude=True)
         inner.children.link(hidden)
@@ -239,7 +246,7 @@ def test_a_vertex_parents_child_in_a_render_disabled_collection_is_not_copied(sc
         _object_info_host("Outer", parent, as_instance=True)
     parent.instance_type = "VERTS"
     parent.show_instancer_for_render = parent.show_instancer_for_viewport = False
-    scenes.add_cube("Kid", scale=0.3, collection=hidden).parent = parent
+    scenes.add_cube("Kid", scale=0.3, collection=holder).parent = parent
     scenes.add_cube("Ground", scale=3.0, location=(0, 0, -5))
     result = assert_extraction_matches_render()
     assert not any(i.name == "Kid" for i in result.instances)
@@ -304,3 +311,78 @@ def test_an_emitter_picking_members_inside_an_instanced_collection_is_named(scen
     scenes.add_collection_instance("Outer", inner)
     named = [w for w in extract_scene().warnings if "particle-to-object assignment differs" in w]
     assert len(named) == 1 and named[0].startswith("object 'Emitter': particle system 'Particles' gives each")
+
+
+@pytest.mark.parametrize("viewport_hidden_first", [False, True])
+def test_members_are_numbered_with_the_viewport_hidden_ones(scene, viewport_hidden_first):
+    """Two instancers of one collection inside an instanced one, the first render-hidden, neither with
+    an entry of its own (Show Instancer off in the viewport): their copies are told apart by the member
+    index, which counts every member, viewport-hidden ones too (outside review: with one ahead of
+    them the hidden instancer's copy passed)."""
+    rocks = scenes.new_collection("Rocks", exclude=True)
+    scenes.add_cube("Rock", scale=0.3, collection=rocks)
+    inner = scenes.new_collection("Inner", exclude=True)
+    if viewport_hidden_first:
+        scenes.add_cube("Away", scale=0.1, location=(0, 0, 9), collection=inner).hide_viewport = True
+    hidden = scenes.add_collection_instance("Hidden", rocks, location=(3, 0, 0), collection=inner)
+    shown = scenes.add_collection_instance("Shown", rocks, location=(-3, 0, 0), collection=inner)
+    hidden.hide_render = True
+    hidden.show_instancer_for_viewport = shown.show_instancer_for_viewport = False
+    scenes.add_collection_instance("Outer", inner)
+    result = extract_scene()
+    assert sum(i.name == "Rock" for i in result.instances) == 1
+    missing = [d for d in differences(result, render_entries()) if not d.startswith("('Away'")]
+    assert missing == []
+
+
+@pytest.mark.parametrize("order", [(True, False), (False, True)])
+def test_a_group_called_twice_with_other_switches_is_read_twice(scene, order):
+    """A node group feeding its Collection and Separate Children inputs to a Collection Info node,
+    called with the same collection, once separated and once whole: the walk read the group once, so
+    the second call's way was lost (outside review). Both are read now, in either order. (Which copy
+    of the render-hidden member a render keeps, the separated call's, the preview cannot tell from the
+    other's: README, the gaps left open.)"""
+    rocks = _collection_with_hidden_member()
+    group = bpy.data.node_groups.new("Pick", "GeometryNodeTree")
+    group.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    group.interface.new_socket("Collection", in_out="INPUT", socket_type="NodeSocketCollection")
+    group.interface.new_socket("Separate", in_out="INPUT", socket_type="NodeSocketBool")
+    inputs, info = group.nodes.new("NodeGroupInput"), group.nodes.new("GeometryNodeCollectionInfo")
+    group.links.new(inputs.outputs["Collection"], info.inputs["Collection"])
+    group.links.new(inputs.outputs["Separate"], info.inputs["Separate Children"])
+    group.links.new(info.outputs[0], group.nodes.new("NodeGroupOutput").inputs[0])
+    tree = bpy.data.node_groups.new("Host", "GeometryNodeTree")
+    tree.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    join = tree.nodes.new("GeometryNodeJoinGeometry")
+    for separate in order:
+        call = tree.nodes.new("GeometryNodeGroup")
+        call.node_tree = group
+        call.inputs["Collection"].default_value, call.inputs["Separate"].default_value = rocks, separate
+        tree.links.new(call.outputs[0], join.inputs[0])
+    tree.links.new(join.outputs[0], tree.nodes.new("NodeGroupOutput").inputs[0])
+    host = scenes.add_mesh("Host", [], [])
+    host.modifiers.new("GN", "NODES").node_group = tree
+    collections, objects = node_references(host)
+    assert [c.name for c in collections] == ["Rocks"]  # the whole call
+    assert sorted(o.name for o in objects) == ["RocksHidden", "RocksShown"]  # the separated call's children
+
+
+def test_a_point_cloud_whose_nodes_make_instances_is_not_named(scene):
+    """A point cloud whose nodes put an instance of a mesh on new points: everything renders as
+    triangles, so "is a point cloud, not triangles: left out" was wrong (outside review)."""
+    rock = scenes.add_cube("Rock", scale=0.2, location=(0, 0, -30))
+    cloud = scenes.link(bpy.data.objects.new("Cloud", bpy.data.pointclouds.new("Cloud")))
+    tree = bpy.data.node_groups.new("Scatter", "GeometryNodeTree")
+    tree.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    points = tree.nodes.new("GeometryNodePoints")
+    points.inputs["Count"].default_value = 3
+    info = tree.nodes.new("GeometryNodeObjectInfo")
+    info.inputs["Object"].default_value, info.inputs["As Instance"].default_value = rock, True
+    on_points = tree.nodes.new("GeometryNodeInstanceOnPoints")
+    tree.links.new(points.outputs[0], on_points.inputs["Points"])
+    tree.links.new(info.outputs["Geometry"], on_points.inputs["Instance"])
+    tree.links.new(on_points.outputs[0], tree.nodes.new("NodeGroupOutput").inputs[0])
+    cloud.modifiers.new("GN", "NODES").node_group = tree
+    result = assert_extraction_matches_render()
+    assert sum(i.name == "Rock" and i.instancer == "Cloud" for i in result.instances) == 3
+    assert result.warnings == []
