@@ -46,8 +46,9 @@ class DupliPaths:
     object, in files with a render-hidden collection or object: a geometry-nodes carrier scattering
     100k copies of its own geometry pays one memo lookup an entry."""
 
-    def __init__(self, generated):
+    def __init__(self, generated, descendants=lambda ob: ob.children_recursive):
         self._generated = generated
+        self._descendants = descendants  # children_recursive, or the caller's faster copy of it
         self._active: bool | None = None  # decided at the first instance entry (most frames have none)
         self._tops: dict[int, tuple[bool, tuple]] = {}  # top-level instancer -> (walk its entries, kind)
         self._parent = 0
@@ -171,7 +172,7 @@ class DupliPaths:
         key = instancer_kind(ob)
         if key in self._reach:
             return self._reach[key]
-        objects = list(_instanced_directly(ob))
+        objects = list(_instanced_directly(ob, self._descendants))
         reach, nested, pointer = set(), False, ob.as_pointer()
         for other in objects:
             other_key = other.as_pointer()
@@ -232,14 +233,14 @@ def instanced_collection(ob):
     return ob.instance_collection if ob.instance_type == "COLLECTION" else None
 
 
-def _instanced_directly(ob: bpy.types.Object):
+def _instanced_directly(ob: bpy.types.Object, descendants):
     """The objects `ob` instances itself: its instance collection's (children included), its
     children when it instances on vertices or faces, those its geometry nodes and particles name."""
     collection = instanced_collection(ob)
     if collection is not None:
         yield from collection.all_objects
     if ob.instance_type in ("VERTS", "FACES"):
-        yield from ob.children_recursive
+        yield from descendants(ob)
     if len(ob.particle_systems) or has_node_modifier(ob):
         collections, objects = instancing_references(ob)
         for collection in collections:
