@@ -59,7 +59,6 @@ class DupliPaths:
         self._objects: dict[int, bpy.types.Object] = {}
         self._made: dict[tuple[int, int], bool] = {}
         self._reach: dict[tuple, tuple[frozenset[int], bool]] = {}
-        self._member_sets: dict[int, frozenset[int]] = {}
         self._numbered: dict[int, tuple[list, frozenset[int]]] = {}  # collection -> _hidden_member's tables
 
     def made_by_render(self, inst, ob, parent) -> bool:
@@ -141,7 +140,8 @@ class DupliPaths:
         B's persistent_id is (1, ...))."""
         key = collection.as_pointer()
         if key not in self._numbered:
-            self._numbered[key] = (list(collection.all_objects), frozenset(unhidden_objects(collection, "hide_render")))
+            self._numbered[key] = (list(collection.all_objects),
+                                   frozenset(unhidden_objects(collection, "hide_render")))
         members, rendered = self._numbered[key]
         if index >= len(members):
             return False
@@ -156,13 +156,6 @@ class DupliPaths:
         if made is None:
             made = self._made[key] = ancestor == pointer or pointer in self._reach_of(self._objects[ancestor])[0]
         return made
-
-    def _members(self, collection) -> frozenset[int]:
-        """Pointers of a collection's own objects, its child collections' included (not nested instances')."""
-        key = collection.as_pointer()
-        if key not in self._member_sets:
-            self._member_sets[key] = frozenset(ob.as_pointer() for ob in collection.all_objects)
-        return self._member_sets[key]
 
     def _reach_of(self, ob: bpy.types.Object, stack: frozenset = frozenset()) -> tuple[frozenset[int], bool]:
         """(pointers of every object `ob` can instance, nested instancing included; whether one of

@@ -751,7 +751,8 @@ NOT_TRIANGLE_DATA = {"Curves": "hair curves", "PointCloud": "a point cloud", "Vo
 
 
 def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility, instanced_by: dict[int, set[int]],
-                      evaluated: set[int], not_made: set[int] = frozenset(), meshed: set[str] = frozenset()) -> list[str]:
+                      evaluated: set[int], not_made: set[int] = frozenset(),
+                      meshed: set[str] = frozenset()) -> list[str]:
     """A warning per render-visible thing a final render shows and the preview leaves out: objects of
     the scene and its background scenes hidden in the viewport (the viewport depsgraph does not
     evaluate them) or not triangles, collection instancers hidden there (their instances go with
@@ -786,7 +787,8 @@ def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility, instance
                 if not _own_elements(ob.evaluated_get(depsgraph)):
                     pass  # its nodes made it all triangles or instances (outside reviews), or it is empty
                 elif ob.name not in meshed:
-                    warnings.append(f"object '{ob.name}' is {NOT_TRIANGLES[kind]}, not triangles: left out of the preview")
+                    warnings.append(f"object '{ob.name}' is {NOT_TRIANGLES[kind]}, not triangles: left out of "
+                                    "the preview")
                 else:
                     warnings.append(f"object '{ob.name}' is {NOT_TRIANGLES[kind]}: the preview shows the triangles its "
                                     f"geometry nodes make and leaves the rest out")
