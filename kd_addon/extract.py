@@ -830,10 +830,14 @@ def _hidden_member_warnings(collection, members: list, hosts: list, vis: _Visibi
     collection on its path disabled in viewports), one warning each, naming the first of `hosts` (the
     objects instancing the collection) whose instances of it rays can see."""
     shown = vis.instanced_objects(collection)  # nested instances' render-visible members included
-    out = []
+    out, named = [], set()
     for ob, owner, chain in members:
-        if (ob.type not in TRIANGLE_TYPES or ob.type == "META" or ob.as_pointer() not in shown
-                or ob.as_pointer() in instanced or vis.scene_object(ob) or _renders_nothing(ob)):
+        # a collection instancer disabled in viewports takes its copies with it: named itself, once
+        # (outside review: with a visible sibling instancing the same collection nothing was named)
+        nesting = instanced_collection(ob) is not None and _nests(ob) and ob.hide_viewport
+        if ((ob.type not in TRIANGLE_TYPES and not nesting) or ob.type == "META" or ob.as_pointer() not in shown
+                or ob.as_pointer() in instanced or vis.scene_object(ob) or _renders_nothing(ob)
+                or any(inner.as_pointer() in named for inner in chain)):
             continue  # scene objects are named as such; no render instances a metaball (object_dupli.cc: no_draw)
         host = next((h for h in hosts if _ray_visible(ob, *chain, h) and (not chain or _nests(h))), None)
         if host is not None:
@@ -850,6 +854,7 @@ def _hidden_member_warnings(collection, members: list, hosts: list, vis: _Visibi
             why = ("is disabled in viewports" if ob.hide_viewport else
                    "is not instanced in the viewport (a collection or instancer on its path is disabled in viewports)")
             out.append(f"{where} {why}: the preview leaves its instances out, a final render shows them")
+            named.add(ob.as_pointer())
     return out
 
 

@@ -386,3 +386,24 @@ def test_a_point_cloud_whose_nodes_make_instances_is_not_named(scene):
     result = assert_extraction_matches_render()
     assert sum(i.name == "Rock" and i.instancer == "Cloud" for i in result.instances) == 3
     assert result.warnings == []
+
+
+@pytest.mark.parametrize("sibling", [False, True])
+def test_a_nested_instancer_disabled_in_viewports_is_named_once(scene, sibling):
+    """A collection instancer inside an instanced collection, disabled in viewports: its copies are
+    missing from the preview. With a visible sibling instancing the same collection nothing named them
+    (outside review: 1 copy against a render's 2); now the instancer is named, once, and not again
+    through its members."""
+    leaf = scenes.new_collection("Leaf", exclude=True)
+    scenes.add_cube("LeafCube", scale=0.3, collection=leaf)
+    branch = scenes.new_collection("Branch", exclude=True)
+    scenes.add_collection_instance("LeafInst", leaf, location=(1, 0, 0), collection=branch).hide_viewport = True
+    if sibling:
+        scenes.add_collection_instance("LeafInst2", leaf, location=(-1, 0, 0), collection=branch)
+    scenes.add_cube("BranchBox", scale=0.25, collection=branch)
+    scenes.add_collection_instance("Tree", branch)
+    result = extract_scene()
+    missing = differences(result, render_entries())
+    assert [m.split(":")[0] for m in missing] == ["('LeafCube', 'Tree')"]
+    assert result.warnings == ["object 'LeafInst' in collection 'Branch' (instanced by 'Tree') is disabled in "
+                               "viewports: the preview leaves its instances out, a final render shows them"]
