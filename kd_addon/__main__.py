@@ -1,5 +1,6 @@
 """`python -m kd_addon render [scene.blend] --frames 1-24 --out DIR [...]` with the bpy module (see cli.py)."""
 
+import os
 import sys
 
 from . import background, early_interrupt
@@ -15,4 +16,12 @@ except KeyboardInterrupt:
     print("python -m kd_addon: interrupted", file=sys.stderr)
     code = 130
 background.exit_now_if_abandoned(code)
+if code in (130, 143):
+    # Interrupted (SIGINT) or terminated (SIGTERM): the run's report is written; end with that code now.
+    # A KeyboardInterrupt that landed while Blender ran Python itself (it prints and clears it) can leave
+    # the interpreter's "unhandled KeyboardInterrupt" flag set, and Python's teardown then turns the exit
+    # into a SIGINT kill (-2): seen once in CI on bpy 4.2 with Ctrl-C 0.6 s in.
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)
 sys.exit(code)
