@@ -13,6 +13,7 @@ from time import perf_counter
 import numpy as np
 
 from .build import _build_arrays
+from .geometry import half_area
 from .kdtree import KdTree, empty_arrays
 from .layout import LEAF
 from .options import make_options
@@ -235,18 +236,13 @@ def build_top_level(boxes, opts):
     plane are referenced from both sides. Instances with an empty box are left out.
     """
     keep = np.flatnonzero(boxes[:, 0] <= boxes[:, 3]).astype(np.int32)
-    if len(keep) <= 1:
-        axis, split, child, count, items = empty_arrays()
-        if len(keep) == 1:
-            count[0], items = 1, keep
-        bounds = boxes[keep[0]].copy() if len(keep) else np.zeros(6, np.float32)
-        return axis, split, child, count, items, bounds
+    if len(keep) == 0:
+        return (*empty_arrays(), np.zeros(6, np.float32))
     sub = np.ascontiguousarray(boxes[keep])
     bounds = np.concatenate([sub[:, :3].min(axis=0), sub[:, 3:].max(axis=0)]).astype(np.float32)
-    e = (bounds[3:] - bounds[:3]).astype(np.float64)
-    if e[0] * e[1] + e[1] * e[2] + e[2] * e[0] == 0.0:
-        # Every box on one point or line (instances scaled to ~1e-17, outside review): no area for the
-        # SAH to divide by (it raised ZeroDivisionError), and no split would separate rays: one leaf.
+    if len(keep) == 1 or half_area(bounds) == 0.0:
+        # One box, or every box on one point or line (instances scaled to ~1e-17, outside review: no area
+        # for the SAH to divide by, it raised ZeroDivisionError, and no split would separate rays): a leaf.
         axis, split, child, count, _ = empty_arrays()
         count[0] = len(keep)
         return axis, split, child, count, keep, bounds

@@ -411,11 +411,12 @@ class _Visibility:
         if ob.instance_type in _INSTANCING_PARENT_TYPES:
             for child in self.descendants(ob):  # those a render's depsgraph holds (make_child_duplis)
                 self._add_object(child, self.in_render(child), stack, reach, shown)
-        if len(ob.particle_systems) or has_node_modifier(ob):
+        nodes = has_node_modifier(ob)
+        if len(ob.particle_systems) or nodes:
             collections, objects = instancing_references(ob)
             for coll in collections:
                 self._add(self._collection_expansion(coll, stack), reach, shown)
-            geometry = {o.as_pointer() for o in objects_read_as_geometry(ob)} if has_node_modifier(ob) else set()
+            geometry = {o.as_pointer() for o in objects_read_as_geometry(ob)} if nodes else set()
             for other in objects:  # named directly: a mesh shown whatever its flags, a render-hidden curve or
                 # text not (outside review against Cycles), a child of a vertex or face instancer only as its
                 # instances; its own instances unless it is render-hidden and instanced as an object (read
@@ -841,8 +842,7 @@ def _hidden_member_warnings(collection, members: list, hosts: list, vis: _Visibi
             continue  # scene objects are named as such; no render instances a metaball (object_dupli.cc: no_draw)
         host = next((h for h in hosts if _ray_visible(ob, *chain, h) and (not chain or _nests(h))), None)
         if host is not None:
-            through = "".join(f" through '{inner.name}'" for inner in chain)
-            where = f"object '{ob.name}' in collection '{owner.name}' (instanced by '{host.name}'{through})"
+            where = f"object '{ob.name}' in collection '{owner.name}' (instanced by '{host.name}'{_through(chain)})"
             if _instanced_by_its_parent(ob):
                 continue  # shows only as its parent's instances, which the parent's own line covers
             if not ob.hide_viewport and not ob.show_instancer_for_viewport and instances_things(ob):
@@ -856,6 +856,11 @@ def _hidden_member_warnings(collection, members: list, hosts: list, vis: _Visibi
             out.append(f"{where} {why}: the preview leaves its instances out, a final render shows them")
             named.add(ob.as_pointer())
     return out
+
+
+def _through(chain) -> str:
+    """" through 'A' through 'B'": the instancers a collection member is nested through."""
+    return "".join(f" through '{inner.name}'" for inner in chain)
 
 
 def _nests(host) -> bool:
@@ -971,7 +976,7 @@ def hidden_light_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility,
     if not any(ob.type == "LIGHT" for ob in bpy.data.objects):
         return out
     for host in _rendered_layers_objects(depsgraph):
-        collection = host.instance_collection if host.instance_type == "COLLECTION" else None
+        collection = instanced_collection(host)
         if (collection is None or collection.as_pointer() in walked or host.as_pointer() not in evaluated
                 or not vis.scene_object(host)):
             continue
@@ -981,10 +986,9 @@ def hidden_light_warnings(depsgraph: bpy.types.Depsgraph, vis: _Visibility,
             if (ob.type == "LIGHT" and ob.as_pointer() in shown and ob.as_pointer() not in instanced_lights
                     and ob.as_pointer() not in named):
                 named.add(ob.as_pointer())
-                through = "".join(f" through '{inner.name}'" for inner in chain)
-                out.append(f"light '{ob.name}' in collection '{owner.name}' (instanced by '{host.name}'{through}) is "
-                           "not instanced in the viewport (disabled in viewports, or a collection on its path is): the "
-                           "preview leaves it out, a final render uses it")
+                out.append(f"light '{ob.name}' in collection '{owner.name}' (instanced by '{host.name}'"
+                           f"{_through(chain)}) is not instanced in the viewport (disabled in viewports, or a "
+                           "collection on its path is): the preview leaves it out, a final render uses it")
     return out
 
 
