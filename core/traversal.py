@@ -16,7 +16,7 @@ Robustness without NaN paths:
 import numpy as np
 from numba import njit, prange
 
-from .array_views import rows, unowned
+from .array_views import at, rows, unowned
 from .layout import LEAF, suspended_prim
 from .triangle_test import LEAF_CHUNK, intersect_leaf_triangle, leaf_candidates, ray_shear
 
@@ -77,25 +77,25 @@ def trace_ray(tree, o, d, tmin, tmax, any_hit, stack_node, stack_t, inv, flags):
     best_t, best_prim, best_u, best_v = tmax, -1, 0.0, 0.0
     node, sp, t_exit = 0, 0, t1
     while True:
-        a = axis[node]
+        a = axis[at(node)]
         if a < LEAF:
-            node, t1, t_exit, sp = _descend(node, a, split[node], child[node], o[a], d[a], inv[a], t0, t1,
-                                            t_exit, stack_node, stack_t, sp)
+            node, t1, t_exit, sp = _descend(node, a, split[at(node)], child[at(node)], o[at(a)], d[at(a)], inv[at(a)],
+                                            t0, t1, t_exit, stack_node, stack_t, sp)
             continue
-        first = child[node]
+        first = child[at(node)]
         if a != LEAF:  # UNBUILT: the one extra test, made only at leaves
             return np.inf, suspended_prim(first), 0.0, 0.0
-        end = first + count[node]
+        end = first + count[at(node)]
         for lo in range(first, end, LEAF_CHUNK):
             hi = min(end, lo + LEAF_CHUNK)
             if not leaf_candidates(leaf_tris, base + lo, base + hi, o, kx, ky, kz, sx, sy, flags):
                 continue
             for j in range(lo, hi):
-                if flags[j - lo] == 0:
+                if flags[at(j - lo)] == 0:
                     continue
                 t, u, v = intersect_leaf_triangle(leaf_tris, base + j, o, kx, ky, kz, sx, sy, sz)
                 if tmin < t < best_t:
-                    best_t, best_prim, best_u, best_v = t, leaf_prims[j], u, v
+                    best_t, best_prim, best_u, best_v = t, leaf_prims[at(j)], u, v
                     if any_hit:
                         return best_t, best_prim, best_u, best_v
         if best_prim >= 0 and best_t <= t_exit:  # no slack: stopping late is safe, early is not
@@ -142,7 +142,7 @@ def _pop(stack_node, stack_t, sp, best_t, found):
     entries do not start in order."""
     while sp > 0:
         sp -= 1
-        node, t0, t1, t_exit = stack_node[sp], stack_t[sp, 0], stack_t[sp, 1], stack_t[sp, 2]
+        node, t0, t1, t_exit = stack_node[at(sp)], stack_t[at(sp), 0], stack_t[at(sp), 1], stack_t[at(sp), 2]
         if not found or best_t >= t0 - _slack(t0):
             return node, t0, t1, t_exit, sp
         if best_t <= t_exit:
@@ -152,10 +152,10 @@ def _pop(stack_node, stack_t, sp, best_t, found):
 
 @njit(cache=True, inline="always")
 def _push(stack_node, stack_t, sp, node, t0, t1, t_exit):
-    stack_node[sp] = node
-    stack_t[sp, 0] = t0
-    stack_t[sp, 1] = t1
-    stack_t[sp, 2] = t_exit
+    stack_node[at(sp)] = node
+    stack_t[at(sp), 0] = t0
+    stack_t[at(sp), 1] = t1
+    stack_t[at(sp), 2] = t_exit
     return sp + 1
 
 
