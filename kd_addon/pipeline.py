@@ -478,6 +478,8 @@ def _usable_light(core, light: scene_input.LightInput):
         raise ValueError("its colour is black, so it emits no light")
     if light.portal:
         raise ValueError("it is a Cycles light portal, which emits no light")
+    if light.no_diffuse:
+        raise ValueError(f"{light.no_diffuse}, so it lights no diffuse surface")
     return getattr(core.Light, light.kind)(**light.keywords)
 
 

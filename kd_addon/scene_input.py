@@ -63,6 +63,7 @@ class LightInput:
     unapplied: tuple[str, ...] = ()  # the light's settings that change Cycles' image but not the preview's
     portal: bool = False  # a Cycles light portal: an area light that only guides the world's light, emitting none
     emits_nothing: str = ""  # why its nodes emit no light in Cycles (light_nodes.py), "" when they emit
+    no_diffuse: str = ""  # why it lights no diffuse surface in Cycles (diffuse_switched_off), "" when it does
 
 
 @dataclass
@@ -261,28 +262,36 @@ def read_lights(depsgraph, visibility: _Visibility | None = None, instanced: set
         name = ob.original.name if parent is None else f"{ob.original.name} (instanced by {parent.original.name})"
         light = light_input(name, ob.data, inst.matrix_world)
         if light is not None:
-            lights.append(replace(light, unapplied=unapplied_light_settings(ob, parent) + light.unapplied))
+            lights.append(replace(light, unapplied=unapplied_light_settings(ob) + light.unapplied,
+                                  no_diffuse=diffuse_switched_off(ob, parent)))
     return lights
 
 
-def unapplied_light_settings(ob, instancer=None) -> tuple[str, ...]:
+def unapplied_light_settings(ob) -> tuple[str, ...]:
     """What Cycles would apply and the preview does not, named so a warning can say so: the object's
-    light and shadow linking (Blender 4.0+: which objects the light lights, which block it) and its
-    Diffuse ray visibility, or its instancer's (off: it lights no diffuse surface, which is all the
-    preview shades; Cycles ANDs an instance's ray visibility with its instancer's: outside review, an
-    instancer with Diffuse off left its light dark in Cycles). The light's own shader nodes are named
-    by light_input."""
+    light and shadow linking (Blender 4.0+: which objects the light lights, which block it). The
+    light's own shader nodes are named by light_input."""
     found = []
     linking = getattr(ob, "light_linking", None)
     for attribute, what in (("receiver_collection", "light linking"), ("blocker_collection", "shadow linking")):
         collection = getattr(linking, attribute, None)
         if collection is not None:
             found.append(f"{what} (collection '{collection.name}')")
-    if not getattr(ob, "visible_diffuse", True):
-        found.append("Ray Visibility > Diffuse off")
-    elif instancer is not None and not getattr(instancer.original, "visible_diffuse", True):
-        found.append(f"its instancer '{instancer.original.name}''s Ray Visibility > Diffuse off")
     return tuple(found)
+
+
+def diffuse_switched_off(ob, instancer=None) -> str:
+    """Why the light lights no diffuse surface in Cycles, "" when it does: its Ray Visibility > Diffuse
+    is off, or its instancer's (Cycles ANDs an instance's ray visibility with its instancer's: outside
+    review, an instancer with Diffuse off left its light dark in Cycles). Diffuse surfaces are all the
+    preview shades (N.L), so such a light is left out, as one that emits nothing is (until 2026-12-03 it
+    was traced and only named; a point light with Diffuse off took Cycles' image of a default-material
+    plane from 1.22 to 0.048, the rest being its specular part)."""
+    if not getattr(ob, "visible_diffuse", True):
+        return "its Ray Visibility > Diffuse is off"
+    if instancer is not None and not getattr(instancer.original, "visible_diffuse", True):
+        return f"its instancer '{instancer.original.name}''s Ray Visibility > Diffuse is off"
+    return ""
 
 
 def read_scene(scene, depsgraph, width: int, height: int, lights: bool = True) -> SceneInputs:

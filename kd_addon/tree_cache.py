@@ -91,7 +91,8 @@ def image_key(meshes, mesh_of, matrices, visibility, camera_keywords: dict, ligh
     h.update(np.ascontiguousarray(visibility, np.uint8).tobytes())
     _update(h, camera_keywords)
     for light in lights:  # what it is, does and is warned about: a portal toggled must render anew
-        h.update(f"{light.name}:{light.kind}:{light.portal}:{light.emits_nothing!r}:{light.unapplied!r}".encode())
+        h.update(f"{light.name}:{light.kind}:{light.portal}:{light.emits_nothing!r}:{light.no_diffuse!r}:"
+                 f"{light.unapplied!r}".encode())
         _update(h, light.keywords)
     h.update(repr(size).encode())
     h.update(repr(sorted((k, v) for k, v in settings.items() if k not in NOT_IN_IMAGE)).encode())

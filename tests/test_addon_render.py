@@ -155,16 +155,16 @@ def test_a_scenes_only_light_dimmed_to_nothing_darkens_that_frame_alone(addon): 
 
 
 def test_light_settings_the_preview_does_not_apply_are_named(addon):  # noqa: F811
-    """Light and shadow linking, a light's Diffuse ray visibility and its shader nodes change Cycles' image; the preview
-    lights and shadows every object regardless, so the shadow modes say so, naming light and setting. Nodes the
-    preview applies (Blender's default Emission tree) are not named."""
+    """Light and shadow linking and a light's shader nodes change Cycles' image; the preview lights and shadows
+    every object regardless, so the shadow modes say so, naming light and setting. Nodes the preview applies
+    (Blender's default Emission tree) are not named."""
     scene = half_plane_scene()
     sun = bpy.data.objects["Sun"]
     linked = scenes.new_collection("Hero")
     sun.light_linking.receiver_collection = linked
     sun.light_linking.blocker_collection = linked
     rim = scenes.link(bpy.data.objects.new("Rim", bpy.data.lights.new("Rim", "POINT")))
-    rim.location, rim.visible_diffuse = (0.0, 0.0, 3.0), False
+    rim.location = (0.0, 0.0, 3.0)
     scenes.light_nodes_on(rim.data)  # a Blackbody node feeds the Emission node's Color: not applied
     nodes = rim.data.node_tree.nodes
     emission = next(n for n in nodes if n.type == "EMISSION")
@@ -179,11 +179,34 @@ def test_light_settings_the_preview_does_not_apply_are_named(addon):  # noqa: F8
 
     assert not frame("ao").warnings
     assert sorted(frame("shadow").warnings) == [
-        "light 'Rim': Ray Visibility > Diffuse off not applied by the preview",
         "light 'Rim': its shader nodes (only an Emission node's own Color and Strength are applied) not applied "
         "by the preview",
         "light 'Sun': light linking (collection 'Hero') not applied by the preview",
         "light 'Sun': shadow linking (collection 'Hero') not applied by the preview"]
+
+
+def test_a_light_with_diffuse_ray_visibility_off_lights_nothing(addon):  # noqa: F811
+    """Cycles lights no diffuse surface from a light whose Ray Visibility > Diffuse is off (its own or its
+    instancer's), and N.L on diffuse surfaces is what the shadow modes show: such a light is left out, named,
+    and the frame is the frame without it, bit for bit; switched back on, it lights again."""
+    scene = half_plane_scene()
+
+    def frame():
+        return pipeline.render_frame(scene, bpy.context.evaluated_depsgraph_get(), make_config(scene.kd_preview))
+
+    scene.kd_preview.mode = "shadow"
+    without = frame()
+    rim = scenes.link(bpy.data.objects.new("Rim", bpy.data.lights.new("Rim", "POINT")))
+    rim.location = (0.0, 0.0, 3.0)
+    lit = frame()
+    assert not np.array_equal(lit.image, without.image)
+    rim.visible_diffuse = False
+    dark = frame()
+    assert dark.warnings == ["light 'Rim' left out: its Ray Visibility > Diffuse is off, so it lights no diffuse "
+                             "surface"]
+    np.testing.assert_array_equal(dark.image, without.image)
+    rim.visible_diffuse = True
+    np.testing.assert_array_equal(frame().image, lit.image)
 
 
 def test_object_ray_visibility_is_applied_and_changes_the_next_frame(addon):  # noqa: F811

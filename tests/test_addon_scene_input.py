@@ -341,14 +341,23 @@ def test_an_instanced_light_the_viewport_does_not_make_is_named(scene, hidden):
         "in viewports, or a collection on its path is): the preview leaves it out, a final render uses it"]
 
 
-def test_an_instancers_diffuse_switch_is_named_for_its_lights(scene):
+def test_an_instancers_diffuse_switch_darkens_its_lights(scene):
     """Cycles ANDs an instance's ray visibility with its instancer's: an instancer with Diffuse off
-    leaves its lights dark on diffuse surfaces (outside review: 0 against 120 pixels)."""
+    leaves its lights dark on diffuse surfaces (outside review: 0 against 120 pixels); the light's own
+    switch does the same, and a light with both on lights."""
     source = scenes.new_collection("Rig", exclude=True)
     scenes.link(bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", "POINT")), source)
-    scenes.add_collection_instance("Inst", source).visible_diffuse = False
+    instancer = scenes.add_collection_instance("Inst", source)
     (light,) = scene_input.read_lights(bpy.context.evaluated_depsgraph_get())
-    assert light.unapplied == ("its instancer 'Inst''s Ray Visibility > Diffuse off",)
+    assert light.no_diffuse == "" and light.unapplied == ()
+    instancer.visible_diffuse = False
+    (light,) = scene_input.read_lights(bpy.context.evaluated_depsgraph_get())
+    assert light.no_diffuse == "its instancer 'Inst''s Ray Visibility > Diffuse is off"
+    assert light.unapplied == ()
+    instancer.visible_diffuse = True
+    bpy.data.objects["Lamp"].visible_diffuse = False
+    (light,) = scene_input.read_lights(bpy.context.evaluated_depsgraph_get())
+    assert light.no_diffuse == "its Ray Visibility > Diffuse is off"
 
 
 def test_a_light_child_of_a_vertex_instancing_parent_lights_only_from_the_instances(scene):
