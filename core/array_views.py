@@ -47,6 +47,6 @@ def at(i):
     """Index i (never negative where used) as Numba reads it without wraparound. A signed index gets
     'if i < 0: i += length' at each access; in the traversal's node step that lands on the chain of
     dependent loads (node -> axis -> the ray's component -> the split test -> the next node). With it
-    there, seed 000's camera and shadow rays took 0.95x as long (benchmarks/bench_against_revision.py,
-    15 pairs, identical results)."""
+    there, seed 000's camera and shadow rays took 0.94x as long and its render 0.905x
+    (benchmarks/bench_against_revision.py, 21 pairs, identical results; docs/choices.md)."""
     return np.uint64(i)
