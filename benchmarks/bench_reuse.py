@@ -11,7 +11,7 @@ frame 2 (where reuse learns which objects change and splits them from the static
 but left out of the medians. Modes alternate, --runs times, for each resolution:samples pair of
 --settings. With reuse, pixels whose rays cannot reach the moving or deforming objects keep last
 frame's samples (core/pixel_reuse.py), so the trace shrinks too; the share of pixels kept is printed.
-Also measured: the fingerprint (kd_addon.extract.geometry_fingerprint) that decides whether a mesh
+Also measured: the fingerprint (kd_addon.scene_records.geometry_fingerprint) that decides whether a mesh
 changed.
 
     python benchmarks/bench_reuse.py [--frames 12] [--runs 2] [--settings 50:16,25:4] [--deformer grid]
@@ -87,7 +87,8 @@ def fingerprint_cost(repeats=7) -> tuple[float, int]:
     """Median ms to fingerprint every mesh of the open scene's frame, and the vertex count."""
     import bpy
 
-    from kd_addon.extract import extract_scene, geometry_fingerprint
+    from kd_addon.extract import extract_scene
+    from kd_addon.scene_records import geometry_fingerprint
 
     extracted = extract_scene(bpy.context.evaluated_depsgraph_get())
     times = []

@@ -32,7 +32,7 @@ import bpy
 from . import background, corelib, demo_scene, properties
 from .config import DEFAULTS, OUTPUT_FORMATS, SETTING_NAMES, SettingsError, make_config
 from .errors import Cancelled, PreviewError
-from .extract import render_view_layer
+from .render_visibility import render_view_layer
 from .operators import depsgraph_source
 from .pipeline import claim, release, run_job
 from .sequence import SequenceJob, parse_frames
@@ -149,7 +149,7 @@ def _check_blend_header(path: Path) -> None:
 
 def pick_scene(current, name: str | None):
     """(scene, view layer name) to render: the file's current scene and view layer, or the scene named
-    `name` through the view layer a render of it takes (extract.render_view_layer)."""
+    `name` through the view layer a render of it takes (render_visibility.render_view_layer)."""
     if name is None:
         return current, bpy.context.view_layer.name
     scene = bpy.data.scenes.get(name)

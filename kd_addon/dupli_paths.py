@@ -8,7 +8,7 @@ collection's render-visible members only, too. The viewport's depsgraph, which t
 applies the viewport's flags instead, so it yields instances a render never makes: those of a
 render-hidden empty inside an instanced collection, of a render-hidden vertex-instancing parent or
 geometry-nodes carrier that an *Object Info* node instances, of an instancer in a render-hidden child
-collection. extract.py decides visibility once per (object, top-level instancer) pair, which cannot tell
+collection. render_visibility.py decides visibility once per (object, top-level instancer) pair, which cannot tell
 an object reached through such an instancer from the same object reached through a visible path
 (outside review against Cycles: drawn twice, 145-579 extra pixels; or kept where Cycles drops them,
 ~1,100 pixels).
@@ -39,7 +39,7 @@ class DupliPaths:
 
     `generated(instancer, orig)` (originals) is the caller's rule for whether a render makes `orig`
     under `instancer` as far as collections go, whatever the instancer's own visibility
-    (extract._Visibility.in_instanced_collection).
+    (render_visibility.RenderVisibility.in_instanced_collection).
     The walk costs ~9 us an entry (reading persistent_id alone ~2 us; 2,000 collection instancers of a
     collection holding 4 nested instancers, 18,000 entries: 435-521 ms a frame without it, 597-685 ms
     with it, load ~2), so it runs only under top-level instancers that can reach another instancing

@@ -38,7 +38,7 @@ in a hide_render child collection and a hide_render member of a visible child co
 rendered); particles rendering one object render it even when it is render-hidden. So
 :func:`particle_references` returns those collections and objects alike. With *Whole Collection* off
 the viewport also picks among a different set of members than a render (the render-visible ones
-only), which extract.py warns about: the preview cannot reproduce a render's pick.
+only), which extraction_warnings.py warns about: the preview cannot reproduce a render's pick.
 
 This module imports bpy only.
 """

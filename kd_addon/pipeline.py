@@ -43,7 +43,8 @@ from . import background, corelib, memory_limit, scene_input, tree_cache
 from .background import BackgroundCall
 from .config import RenderConfig, frame_size
 from .errors import Cancelled, PreviewError
-from .extract import ExtractedScene, extract_scene
+from .extract import extract_scene
+from .scene_records import ExtractedScene
 
 KERNEL_LOCK = threading.Lock()
 POLL_SECONDS = 0.05  # longest a tick waits for the worker: the bound on cancel latency

@@ -21,7 +21,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .errors import PreviewError
-from .extract import _Visibility, _entry_visible, hidden_light_warnings  # extraction's visibility rules
+from .extraction_warnings import hidden_light_warnings
+from .render_visibility import RenderVisibility, entry_visible  # the meshes' visibility rules
 from .light_nodes import NO_NODES, Emission, plain_emission
 
 
@@ -243,12 +244,12 @@ def read_camera(scene, depsgraph, width: int, height: int) -> tuple[CameraInput,
     return camera, warnings
 
 
-def read_lights(depsgraph, visibility: _Visibility | None = None, instanced: set | None = None) -> list[LightInput]:
+def read_lights(depsgraph, visibility: RenderVisibility | None = None, instanced: set | None = None) -> list[LightInput]:
     """Render-visible scene lights, instanced ones too (a light in an instanced collection lights the
-    scene in Cycles): the render-visibility rules of meshes (extract.py), from object_instances.
+    scene in Cycles): the render-visibility rules of meshes (render_visibility.py), from object_instances.
     `visibility`: the view layer's visibility table when the caller has one. `instanced`: a set that
     gets the original pointers of the instanced lights the viewport made (hidden_light_warnings)."""
-    visibility = _Visibility(depsgraph) if visibility is None else visibility
+    visibility = RenderVisibility(depsgraph) if visibility is None else visibility
     lights = []
     for inst in depsgraph.object_instances:
         ob = inst.object
@@ -257,7 +258,7 @@ def read_lights(depsgraph, visibility: _Visibility | None = None, instanced: set
         parent = inst.parent if inst.is_instance else None
         if parent is not None and instanced is not None:
             instanced.add(ob.original.as_pointer())
-        if not _entry_visible(visibility, parent, ob):  # a light is no instancer: the collection rules and
+        if not entry_visible(visibility, parent, ob):  # a light is no instancer: the collection rules and
             continue  # the vertex/face-instancing parent's
         name = ob.original.name if parent is None else f"{ob.original.name} (instanced by {parent.original.name})"
         light = light_input(name, ob.data, inst.matrix_world)
@@ -303,7 +304,7 @@ def read_scene(scene, depsgraph, width: int, height: int, lights: bool = True) -
     if scene.render.use_motion_blur:
         warnings.append("motion blur is ignored by the preview: it renders the frame's instant")
     camera, camera_warnings = read_camera(scene, depsgraph, width, height)
-    visibility = _Visibility(depsgraph)  # one table for the lights read and the hidden ones
+    visibility = RenderVisibility(depsgraph)  # one table for the lights read and the hidden ones
     instanced: set[int] = set()
     read = read_lights(depsgraph, visibility, instanced)
     return SceneInputs(camera, read, width, height, warnings + camera_warnings,

@@ -3,7 +3,7 @@
 Trees: every evaluated mesh gets a key that is stable across frames -- (mesh name, name of the first
 object placing it, that object's instancer, occurrence number) -- because `MeshGeometry.key`
 (`as_pointer`) is only stable within one extraction. A key is only a name for the cache: a tree is
-reused only when the mesh's fingerprint (extract.geometry_fingerprint, 64 bits of CRC-32 and Adler-32
+reused only when the mesh's fingerprint (scene_records.geometry_fingerprint, 64 bits of CRC-32 and Adler-32
 of its vertex and index bytes) is the same as when the tree was built, so a key mix-up costs a rebuild, never a wrong image.
 
 Image: `image_key` digests everything that affects the pixels (each mesh's key and fingerprint, every
@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .extract import ExtractedScene, geometry_fingerprint
+from .scene_records import ExtractedScene, geometry_fingerprint
 
 # Settings that cannot change the image (output format, the reuse switch itself).
 NOT_IN_IMAGE = ("output_format", "rebuild_all")

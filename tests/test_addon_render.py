@@ -232,7 +232,7 @@ def test_object_ray_visibility_is_applied_and_changes_the_next_frame(addon):  # 
     for home in homes:
         home.objects.unlink(box)
     indirect.objects.link(box)
-    indirect_only, warnings = ao()  # Cycles: the same image as camera rays off (extract.py)
+    indirect_only, warnings = ao()  # Cycles: the same image as camera rays off (render_visibility.py)
     np.testing.assert_array_equal(indirect_only, unseen)
     assert not warnings
     indirect.objects.unlink(box)

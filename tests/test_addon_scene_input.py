@@ -16,7 +16,8 @@ import numpy as np  # noqa: E402
 import core  # noqa: E402
 
 from kd_addon import scene_input  # noqa: E402
-from kd_addon.extract import _Visibility, hidden_light_warnings  # noqa: E402
+from kd_addon.extraction_warnings import hidden_light_warnings  # noqa: E402
+from kd_addon.render_visibility import RenderVisibility  # noqa: E402
 from kd_addon.errors import PreviewError  # noqa: E402
 from tests import bpy_scenes as scenes  # noqa: E402
 
@@ -298,7 +299,7 @@ def test_a_background_scene_light_hidden_in_the_viewport_is_named(scene):
     hidden.hide_viewport = True
     depsgraph = bpy.context.evaluated_depsgraph_get()
     assert [light.name for light in scene_input.read_lights(depsgraph)] == ["SetSun"]
-    assert hidden_light_warnings(depsgraph, _Visibility(depsgraph)) == [
+    assert hidden_light_warnings(depsgraph, RenderVisibility(depsgraph)) == [
         "light 'SetLamp' is hidden in the viewport (eye icon, Disable in Viewports or a hidden collection): "
         "the preview leaves it out, a final render uses it"]
 
@@ -361,7 +362,7 @@ def test_an_instancers_diffuse_switch_darkens_its_lights(scene):
 
 
 def test_a_light_child_of_a_vertex_instancing_parent_lights_only_from_the_instances(scene):
-    """As for meshes (extract.py): a final render hides the child at its own place and keeps the
+    """As for meshes (render_visibility.py): a final render hides the child at its own place and keeps the
     copies the parent makes at its vertices."""
     parent = scenes.add_mesh("Parent", [(1, 0, 0), (10, 0, 0)], [], edges=[(0, 1)])
     parent.instance_type = "VERTS"

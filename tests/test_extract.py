@@ -10,12 +10,9 @@ import bpy
 import numpy as np
 import pytest
 
-from kd_addon.extract import (
-    ExtractedScene,
-    extract_scene,
-    geometry_fingerprint,
-    read_mesh,
-)
+from kd_addon.extract import extract_scene
+from kd_addon.mesh_reading import read_mesh
+from kd_addon.scene_records import ExtractedScene, geometry_fingerprint
 from tests import bpy_scenes as scenes
 
 CUBE = np.array(scenes.CUBE_VERTS)
@@ -869,7 +866,7 @@ def test_ray_visibility_flags_are_read_and_anded_with_the_instancer(scene):
 
 
 def test_holdout_and_indirect_only_are_read_from_the_object_or_its_instancer(scene):
-    """Holdout and Indirect Only as Cycles reads them (measured with Cycles, see extract.py): an
+    """Holdout and Indirect Only as Cycles reads them (measured with Cycles, see render_visibility.py): an
     object's own flag or its collection's; for an instance only the top-level instancer's, so a
     holdout member of an instanced collection is not one. Indirect Only turns camera rays off,
     except on a holdout; with shadow rays off too the object is left out."""
@@ -1005,7 +1002,7 @@ def _with_crc32_restored(data: bytes, changed: bytes, at: int) -> bytes:
 def test_a_change_that_keeps_the_crc_changes_the_fingerprint():
     """A mesh edited so that its vertex bytes keep their CRC-32 (which a CRC-32 fingerprint would call
     unchanged, keeping a stale tree and image) gets another fingerprint."""
-    from kd_addon.extract import MeshGeometry
+    from kd_addon.scene_records import MeshGeometry
 
     vertices = np.arange(30, dtype=np.float32).reshape(10, 3)
     triangles = np.array([[0, 1, 2], [3, 4, 5]], np.int32)

@@ -1,0 +1,101 @@
+"""Reading an evaluated Blender mesh into numpy: positions and loop triangles in bulk.
+
+Triangles come from ``calc_loop_triangles()`` and ``foreach_get`` into preallocated arrays, each mesh
+read once per extraction however many objects use it.
+"""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+
+from .scene_records import MeshGeometry
+
+
+def read_mesh(mesh: bpy.types.Mesh) -> tuple[np.ndarray, np.ndarray]:
+    """Object-space (vertices float32 (V,3), triangles int32 (T,3)) of a Mesh.
+
+    Uses only bulk foreach_get paths that are plain memcpys. Measured with
+    bpy 5.0.1 on a 1M-triangle grid (500k vertices):
+      positions: attributes["position"] "vector" into float32   0.2-0.5 ms
+                 (vertices.foreach_get("co") 20 ms; float64 buffer 38 ms)
+      corners:   loop_triangles "loops" into *uint32*            0.7 ms
+                 (the same into int32: 86-140 ms, the property is unsigned
+                  so any other dtype drops to a per-item path)
+                 loop_triangles "vertices" (uint32 32 ms, int32 190 ms)
+      .corner_vert "value" into int32                            0.3 ms
+      gather corner_vert[loops]                                  4-5 ms
+    """
+    mesh.calc_loop_triangles()  # cached in 5.0: a no-op when already built
+    n_tris = len(mesh.loop_triangles)
+    n_verts = len(mesh.vertices)
+    verts = np.empty(n_verts * 3, dtype=np.float32)
+    if n_verts:
+        mesh.attributes["position"].data.foreach_get("vector", verts)
+    if n_tris == 0:
+        return verts.reshape(-1, 3), np.empty((0, 3), dtype=np.int32)
+    corners = np.empty(n_tris * 3, dtype=np.uint32)
+    mesh.loop_triangles.foreach_get("loops", corners)
+    corner_vert = np.empty(len(mesh.loops), dtype=np.int32)
+    attr = mesh.attributes.get(".corner_vert")  # internal name; guard renames
+    if attr is not None:
+        attr.data.foreach_get("value", corner_vert)
+    else:  # ~100 ms per 1M corners, but stays correct
+        mesh.loops.foreach_get("vertex_index", corner_vert)
+    tris = np.take(corner_vert, corners.view(np.int32)).reshape(-1, 3)
+    return verts.reshape(-1, 3), tris
+
+
+def read_object_mesh(ob: bpy.types.Object, mesh: bpy.types.Mesh) -> tuple[np.ndarray, np.ndarray]:
+    """read_mesh of an evaluated object's mesh `mesh`, Edit Mode included. An object in Edit Mode
+    evaluates to a wrapper around its edit mesh that has no "position" attribute and, without
+    modifiers, no triangles: the preview lost the object being modelled, or failed (KeyError) with a
+    modifier. to_mesh() flushes the edit mesh with every layer, as Cycles does (object_to_mesh in
+    intern/cycles/blender/util.h); the copy is freed at once."""
+    if not mesh.is_editmode:
+        return read_mesh(mesh)
+    try:
+        return read_mesh(ob.to_mesh())
+    finally:
+        ob.to_mesh_clear()
+
+
+class GeometryReader:
+    """Reads each evaluated mesh once; a rejected mesh warns once, naming every object that uses it."""
+
+    def __init__(self):
+        self.geometries: dict[int, MeshGeometry] = {}
+        self.rejected: set[int] = set()
+        self.non_finite: dict[int, tuple[str, set[str]]] = {}  # key -> (mesh name, its objects)
+
+    def get(self, ob: bpy.types.Object, object_name: str) -> int | None:
+        """Geometry key for the evaluated object `ob`'s mesh, or None when it has no usable triangles."""
+        mesh = ob.data
+        key = mesh.as_pointer()
+        if key in self.geometries:
+            return key
+        if key in self.rejected:
+            if key in self.non_finite:
+                self.non_finite[key][1].add(object_name)
+            return None
+        verts, tris = read_object_mesh(ob, mesh)
+        if len(tris) and not np.isfinite(verts).all():  # 0.5 ms per 1M verts
+            self.non_finite[key] = (mesh.name, {object_name})
+            tris = tris[:0]
+        if len(tris) == 0:
+            self.rejected.add(key)
+            return None
+        self.geometries[key] = MeshGeometry(key, mesh.name, verts, tris)
+        return key
+
+    @property
+    def warnings(self) -> list[str]:
+        out = []
+        for mesh_name, users in self.non_finite.values():
+            names = ", ".join(f"'{n}'" for n in sorted(users))
+            if len(users) == 1:
+                out.append(f"object {names} has non-finite vertex coordinates; left out")
+            else:
+                out.append(f"objects {names} (sharing mesh '{mesh_name}') have non-finite vertex coordinates; "
+                           "left out")
+        return out
