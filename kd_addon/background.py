@@ -1,28 +1,11 @@
 """Kernel work on a worker thread, so the caller can stop waiting at any moment.
 
-Why: a Numba kernel cannot be interrupted, and a kd-tree build over a few
-million triangles (or one trace step at a large resolution) takes seconds.
-If the main thread ran it, ESC, a cancel callback or Ctrl-C would only be
-seen once it returned. Instead every kernel call of a frame runs here and
-the main thread polls it in short waits (`FrameJob.tick`), checking for
-cancel in between, so a cancel returns within one poll interval (~50 ms).
-
-A cancelled job simply stops polling: its worker runs to the end and writes
-only into that job's own tree and renderer, which nobody reads any more.
-The worker holds `lock` (the pipeline's KERNEL_LOCK) while it runs, so a
-later job's kernels wait for the abandoned ones instead of running beside
-them: Numba's workqueue threading layer aborts the process when two threads
-launch parallel kernels at once.
-
-The thread is a daemon, so a process that ends after a cancel (Ctrl-C on the
-command line) ends at once instead of waiting for the abandoned build.
-Measured: exiting while a daemon worker was inside a 1M-triangle build ended
-cleanly with the intended exit code in 5 of 5 runs, with Numba's workqueue
-layer and with the tbb layer bpy brings, with the bpy 5.0 module; the bpy 4.2
-module's interpreter teardown crashes beside the running worker (SIGSEGV
-instead of exit code 130), and so did a real Blender 5.2 exiting during a first
-run's compile (LLVM), so both command lines end with os._exit then
-(exit_now_if_abandoned).
+A Numba kernel cannot be interrupted and a build can take seconds, so every kernel call of a frame
+runs here while the main thread polls it in short waits (`FrameJob.tick`) and sees a cancel within
+one poll. A cancelled job stops polling; its worker runs to the end under `lock` (KERNEL_LOCK), so a
+later job's kernels wait for it instead of running beside it. The thread is a daemon, and the
+command lines end with os._exit while one still runs (exit_now_if_abandoned;
+docs/choices.md#a-daemon-worker-and-an-immediate-exit-while-a-cancelled-build-runs).
 """
 
 from __future__ import annotations
@@ -34,14 +17,10 @@ import time
 import weakref
 
 _calls: weakref.WeakSet = weakref.WeakSet()  # every BackgroundCall not yet collected
-# The bpy module crashed (SIGSEGV in the main thread's evaluated_depsgraph_get, about 1 run in 10 of
-# test_addon_modal.py, CI once) when the scene was evaluated while the worker ran a call's Python code
-# (not a kernel); the cause inside Blender was not found, so the add-on reads the scene only while no
-# kernel call runs: ticks run on the main thread, so none starts before the reader returns. A job
-# (pipeline.FrameJob, sequence.SequenceJob) evaluates its depsgraph and sets frames in a tick that first
-# finds no call running (earlier ticks just wait: a Render clicked during a cancelled run's long build
-# reads the scene after it). Live Update's timer and frame handler, which must return at once, wait at
-# most SCENE_READ_WAIT seconds, then try again later.
+# The bpy module can crash (SIGSEGV in evaluated_depsgraph_get) when the scene is evaluated while the
+# worker runs a call's Python code, so the scene is read only while no kernel call runs: a job reads
+# it in a tick that first finds no call running; Live Update's timer and frame handler, which must
+# return at once, wait at most SCENE_READ_WAIT seconds, then try again later.
 SCENE_READ_WAIT = 0.1
 
 
@@ -64,8 +43,7 @@ def wait_for_work(timeout: float) -> bool:
 
 def exit_now_if_abandoned(code: int) -> None:
     """End the process with `code` at once, skipping the interpreter's (and Blender's) teardown, if a
-    cancelled kernel call still runs: the bpy 4.2 module crashed in that teardown beside the worker,
-    and Blender 5.2 itself crashed in LLVM when it exited during a first run's compile."""
+    cancelled kernel call still runs (that teardown can crash beside the worker)."""
     if abandoned_work_running():
         sys.stdout.flush()
         sys.stderr.flush()

@@ -3,17 +3,11 @@
     blender -b scene.blend --command kdpreview render --frames 1-24 --out DIR [options]
     python -m kd_addon render [scene.blend] --frames 1-24 --out DIR [options]
 
-Which scene is rendered: the .blend given as argument; otherwise the file
-Blender already has open (`blender -b scene.blend --command ...`); otherwise,
-or with --demo, the built-in animated demo scene. Frames default to the
-scene's range. Settings are the scene's own KD Preview settings (saved with the
-.blend from the panel; the defaults for a file that has none), each overridden by
-the option of the same name when given. Writes DIR/frame_0001.png... and
-DIR/report.json, prints one table row per frame. Exit codes: 0 done, 1 a problem
-with the scene, files or settings (the message names it), 2 bad command-line
-usage, 130 interrupted (Ctrl-C), 143 terminated (SIGTERM: `timeout`, `kill`, a
-render farm or container stopping the job; the frames written are kept and
-report.json says the run is incomplete, as after Ctrl-C).
+The scene is the .blend given, else the file Blender has open, else (or with --demo) the built-in
+demo. Settings are the scene's own KD Preview settings, each overridden by the option of the same
+name. Writes DIR/frame_0001.png... and DIR/report.json. Exit codes: 0 done, 1 a problem with the
+scene, files or settings, 2 bad usage, 130 interrupted (Ctrl-C), 143 terminated (SIGTERM); the frames
+written are kept and report.json says an interrupted run is incomplete.
 """
 
 from __future__ import annotations
@@ -32,9 +26,9 @@ import bpy
 from . import background, corelib, demo_scene, properties
 from .config import DEFAULTS, OUTPUT_FORMATS, SETTING_NAMES, SettingsError, make_config
 from .errors import Cancelled, PreviewError
-from .render_visibility import render_view_layer
 from .operators import depsgraph_source
 from .pipeline import claim, release, run_job
+from .render_visibility import render_view_layer
 from .sequence import SequenceJob, parse_frames
 
 COMMAND_ID = "kdpreview"
@@ -67,7 +61,7 @@ def build_parser(prog: str = COMMAND_ID) -> argparse.ArgumentParser:
     """The one parser. Setting options default to SUPPRESS so absent ones take the scene's saved settings
     (saved_settings_with_overrides), which default to config.DEFAULTS."""
     parser = _Parser(prog=prog, description="KD Preview: ray-traced AO / shadow previews from the command line")
-    parser.set_defaults(prog=prog)  # messages name the program as it was run (outside QA: "kdpreview" under python -m)
+    parser.set_defaults(prog=prog)  # messages name the program as it was run
     commands = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     render = commands.add_parser("render", help="render frames to images and report.json",
                                  epilog="Options not given take the scene's own KD Preview settings (saved in the "
@@ -93,7 +87,7 @@ def build_parser(prog: str = COMMAND_ID) -> argparse.ArgumentParser:
     render.add_argument("--bins", type=int, default=s, help=f"(default {DEFAULTS.bins})")
     render.add_argument("--threads", type=int, default=s, help="0 = all cores (default)")
     render.add_argument("--error-target", dest="error_target", type=float, default=s, help="0 = off (default)")
-    on_off = argparse.BooleanOptionalAction  # --no-X turns off a setting the .blend saved on (outside review)
+    on_off = argparse.BooleanOptionalAction  # --no-X turns off a setting the .blend saved on
     render.add_argument("--denoise", action=on_off, default=s,
                         help="filter each finished frame with the edge-avoiding à-trous denoiser (default off)")
     render.add_argument("--seed", type=int, default=s, help=f"(default {DEFAULTS.seed})")
@@ -192,20 +186,15 @@ def _print_row(prog, result, path) -> None:
 @contextmanager
 def interrupt_flag():
     """An Event that Ctrl-C (SIGINT) or SIGTERM sets, for the job loop to poll, while the first such
-    signal also raises KeyboardInterrupt at once; `signum` says which one it was (the exit code). Why
-    both: an exception raised while Blender runs Python on our behalf (a handler or driver during
-    frame_set, say) is printed and cleared by Blender, and the render would go on; the flag survives
-    that and stops the job at its next tick. Later signals are ignored, so a second Ctrl-C cannot
-    break the cleanup that writes the report. SIGTERM (`timeout`, `kill`, a farm or container
-    stopping the job) killed the process at once, leaving report.json to describe an earlier run
-    (outside review); it is taken over only where Python's default is in place.
+    signal also raises KeyboardInterrupt at once; `signum` says which one it was (the exit code). The
+    flag survives Blender printing and clearing an exception raised in a handler or driver during
+    frame_set. Later signals are ignored, so a second Ctrl-C cannot break the cleanup that writes the
+    report. SIGTERM is taken over only where Python's default is in place.
 
-    Inside Blender (`blender -b --command kdpreview`) SIGINT's handler is Blender's own, in C (Python
-    sees None): it only prints "Sent an internal break event" and the render went on to exit 0, and a
-    second Ctrl-C killed Blender mid-frame (outside QA on a real Blender 5.2.2). Python cannot put a C
-    handler back, so there SIGINT is ignored after the run: Blender exits right after the command, and
-    a Ctrl-C repeated into its teardown must not turn exit 130 into a kill. Outside the main thread,
-    where signal handlers cannot be set, and in Blender's UI, the flag is never set."""
+    Inside Blender SIGINT's handler is Blender's own, in C (Python sees None), which only prints a
+    message; Python cannot put it back, so there SIGINT is ignored after the run, and a Ctrl-C into
+    Blender's teardown cannot turn exit 130 into a kill. Outside the main thread, and in Blender's
+    UI, the flag is never set."""
     flag = threading.Event()
     flag.signum = signal.SIGINT
 
@@ -254,7 +243,7 @@ def _run(args, cancelled) -> int:
                           on_frame=partial(_print_row, args.prog))
         print(f"KD Preview: scene '{scene.name}', {len(frames)} frame(s), mode {config.settings.mode}, "
               f"{config.settings.samples} samples, {config.resolution_percentage}% resolution -> {args.out}")
-        if not corelib.cache_is_warm():  # else a first run looks hung for minutes (outside QA)
+        if not corelib.cache_is_warm():  # else a first run looks hung for minutes
             print(f"First run with these sources and this Python: compiling the kernels takes a few minutes "
                   f"before frame 1 (kept in {corelib.numba_cache_dir()})", flush=True)
         print(HEADER, flush=True)  # piped, it would wait for the first frame: minutes on a first run
@@ -272,8 +261,7 @@ def _run(args, cancelled) -> int:
 
 
 def _note_frames_outside(prog, scene, frames: list[int]) -> None:
-    """Frames beyond the scene's range render as Blender would go to them; a note catches a typo
-    (outside review: --frames 100-102 on a 1-5 scene rendered without a word)."""
+    """Frames beyond the scene's range render as Blender would go to them; a note catches a typo."""
     outside = [f for f in frames if not scene.frame_start <= f <= scene.frame_end]
     if outside:
         print(f"{prog}: note: {len(outside)} of the frames ({outside[0]}"
@@ -289,8 +277,7 @@ FLAG_OF_SETTING = {"resolution_percentage": "--resolution", "memory_limit_mb": "
 
 def _check_options(args) -> None:
     """The command line's own values (absent ones take the defaults here), checked before a file is
-    opened; an error names the flag typed, not only the setting behind it (outside review:
-    "--resolution 0" answered "resolution_percentage must be ...")."""
+    opened; an error names the flag typed, not only the setting behind it."""
     try:
         make_config(args)
     except SettingsError as error:

@@ -1,26 +1,11 @@
 """The one place that imports `core` (lazily) and points Numba's cache somewhere writable first.
 
-Why lazily: importing core imports numba and llvmlite (~0.4 s) and its kernels
-compile on first use (tens of seconds cold), so enabling the add-on must not
-touch it; the first render does.
-
-Why the cache folder: without one, Numba writes `__pycache__` next to core's
-sources, i.e. inside the installed extension, which is wiped on every update
-and may be read-only (system repositories). Inside an installed extension the
-cache goes to Blender's per-extension user folder
-(`bpy.utils.extension_path_user`); outside one (tests, `python -m kd_addon`)
-to the platform's user cache folder. An explicit NUMBA_CACHE_DIR wins.
-
-Why a folder per version of core's sources: core keys its cached kernels by
-all of its sources (core/kernel_cache.py), so a stale kernel never runs; a
-folder per version also keeps an update from recompiling over the cache of
-the version before it (users switching back) and lets `cache_is_warm` tell
-"loading" from "compiling" by the folder alone.
-
-Why the two import spellings: installed, the package is
-`bl_ext.<repo>.kd_preview` and core is its sibling subpackage
-(`bl_ext.<repo>.kd_preview.core`); in the repository both `kd_addon` and
-`core` are top-level packages.
+Lazily, because importing core imports numba and its kernels compile on first use: enabling the
+add-on must not pay for that. The cache goes to Blender's per-extension user folder (or, outside an
+extension, the platform's user cache folder; NUMBA_CACHE_DIR wins), since Numba's default
+`__pycache__` inside the extension is wiped on update and may be read-only. One folder per digest of
+core's sources keeps versions apart and lets `cache_is_warm` tell loading from compiling. Installed,
+core is the sibling subpackage `bl_ext.<repo>.kd_preview.core`; in the repository, top-level `core`.
 """
 
 from __future__ import annotations
@@ -152,9 +137,8 @@ DENOISE_KERNEL = "denoise.atrous_pass"  # the denoiser's filter, compiled on Den
 
 def cache_is_warm(kernel: str = WARM_KERNEL) -> bool:
     """Whether the cache folder already holds `kernel` ("module.function") compiled for this Python
-    (so the first run only loads kernels). Any index file was not enough: the first appears seconds
-    into a compile of minutes, and the panel said "Loading compiled kernels" for four minutes
-    (outside QA)."""
+    (so the first run only loads kernels). Any index file is not enough: the first appears seconds
+    into a compile of minutes."""
     return holds_kernel(numba_cache_dir(), kernel)
 
 

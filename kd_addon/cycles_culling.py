@@ -1,14 +1,9 @@
 """Cycles' Simplify > Culling, which the preview does not apply, named.
 
-With Simplify on, Cycles leaves out an object marked for Camera Culling (its Object Properties >
-Visibility > Culling) whose bounding box lies outside the camera's view, widened by the scene's
-margin, when the scene's Camera Culling is on; likewise Distance Culling for objects farther from the
-camera than its distance, and an object marked for both only when both would cull it (Cycles'
-BlenderObjectCulling; neither applies to a panoramic camera or to multiview). The preview traces every
-object the scene renders, so a culled object's shadow and occlusion show where a render has none: an
-outside review's cube just outside the view shadowed 13% of the floor in the preview and none in
-Cycles. The preview does not redo Cycles' culling tests; it names the objects marked for it, in one
-warning a frame.
+With Simplify on, Cycles leaves out objects marked for Camera Culling outside the widened view, or
+for Distance Culling beyond the distance (Cycles' BlenderObjectCulling). The preview traces every
+object, so a culled object's shadow shows where a render has none; rather than redo Cycles' tests,
+the objects marked for culling are named, in one warning a frame.
 
 This module imports bpy only.
 """

@@ -1,15 +1,9 @@
 """A small animated scene for the command line's default run and for tests.
 
-It exercises every path the preview must handle from frame to frame:
-a deforming mesh (a sheet with a Wave modifier, which follows the frame),
-a modifier keyed over frames (a twisting column: Simple Deform angle),
-rigid keyed motion (a subdivided monkey and a cube), collection instances
-(a ring of pillars from one excluded collection, one instancer spinning),
-a ground plane, a sun and a point light, and a camera. ~25k triangles,
-frames 1-24, 960x540 (the preview renders a percentage of that).
-
-Built from bpy.data and bmesh only, so it works in background mode without
-operator context.
+It exercises every path the preview handles from frame to frame: a deforming mesh (Wave), a keyed
+modifier (Simple Deform), rigid keyed motion, collection instances (one instancer spinning), a sun, a
+point light and a camera; ~25k triangles, frames 1-24. Built from bpy.data and bmesh only, so it
+works in background mode without operator context.
 """
 
 from __future__ import annotations

@@ -1,28 +1,18 @@
 """Instances that a final render does not make because they come through a render-hidden instancer.
 
-Blender makes no instances from an object with *Disable in Renders* set, at any level of nesting: the
-dupli system asks each instancing object for its generator and returns none when the object's
-restrict flag for the depsgraph's mode is set (object_dupli.cc, get_dupli_generator: "Should the
-dupli's be generated for this object? - Respect restrict flags"). A render walks an instanced
-collection's render-visible members only, too. The viewport's depsgraph, which the preview reads,
-applies the viewport's flags instead, so it yields instances a render never makes: those of a
-render-hidden empty inside an instanced collection, of a render-hidden vertex-instancing parent or
-geometry-nodes carrier that an *Object Info* node instances, of an instancer in a render-hidden child
-collection. render_visibility.py decides visibility once per (object, top-level instancer) pair, which cannot tell
-an object reached through such an instancer from the same object reached through a visible path
-(outside review against Cycles: drawn twice, 145-579 extra pixels; or kept where Cycles drops them,
-~1,100 pixels).
+Blender makes no instances from an object with *Disable in Renders* set, at any depth
+(object_dupli.cc, get_dupli_generator), and a render walks only an instanced collection's
+render-visible members. The viewport's depsgraph applies the viewport's flags instead, so it yields
+instances a render never makes. render_visibility.py decides per (object, top-level instancer) pair,
+which cannot tell an object reached through a hidden instancer from the same object reached through
+a visible path, so this walks the instance tree itself.
 
-So this walks the instance tree itself. `depsgraph.object_instances` yields a top-level object's
-instances depth first, each instancing object right before the instances it makes, and each entry's
-`persistent_id` holds one index a nesting level (unused levels are INT_MAX), so an entry's ancestors
-are among the latest entries of smaller depth. Geometry-nodes levels that hold no object yield no
-entry, so a latest entry of smaller depth might be a sibling's; an ancestor is therefore only believed
-when the entry's levels continue its own (_descends) and it could make the entry (its collection holds
-the object, it parents it, its nodes or particles name it, or it is the object itself: a carrier's own
-node instances). Where that cannot be told (a collection
-computed by nodes), the entry is kept, as before. Each entry asks only its parent (_blocked), whose
-flag carries what its own ancestors decided.
+`depsgraph.object_instances` yields a top-level object's instances depth first, each instancer right
+before its instances, and `persistent_id` holds one index a nesting level (INT_MAX when unused), so an
+entry's ancestors are among the latest entries of smaller depth. Geometry-nodes levels without an
+object yield no entry, so an ancestor is believed only when the entry's levels continue its own
+(_descends) and it could make the entry. Where that cannot be told (a collection computed by nodes)
+the entry is kept. Each entry asks only its parent (_blocked), whose flag carries its ancestors'.
 """
 from __future__ import annotations
 
@@ -39,12 +29,9 @@ class DupliPaths:
 
     `generated(instancer, orig)` (originals) is the caller's rule for whether a render makes `orig`
     under `instancer` as far as collections go, whatever the instancer's own visibility
-    (render_visibility.RenderVisibility.in_instanced_collection).
-    The walk costs ~9 us an entry (reading persistent_id alone ~2 us; 2,000 collection instancers of a
-    collection holding 4 nested instancers, 18,000 entries: 435-521 ms a frame without it, 597-685 ms
-    with it, load ~2), so it runs only under top-level instancers that can reach another instancing
-    object, in files with a render-hidden collection or object: a geometry-nodes carrier scattering
-    100k copies of its own geometry pays one memo lookup an entry."""
+    (render_visibility.RenderVisibility.in_instanced_collection). The walk runs only under top-level
+    instancers that can reach another instancing object, in files with a render-hidden collection or
+    object, as it costs several microseconds an entry (docs/choices.md#walk-instance-paths-only-where-a-render-can-differ)."""
 
     def __init__(self, generated, descendants=lambda ob: ob.children_recursive):
         self._generated = generated
@@ -101,21 +88,16 @@ class DupliPaths:
         """Whether the entry's parent, the nearest stacked entry it descends from (its levels continue
         the parent's and the parent could make it), makes nothing (itself hidden, or on a path a render
         does not make: the flag is inherited down the stack), or instances a collection whose render
-        skips the entry's object (render-hidden there, or in a hidden child collection; outside review:
-        a render-hidden object named directly by an Object Info node and also reached through a
-        collection instance showed through both). Only the parent is asked: a farther entry whose
-        levels the entry's also continue (geometry nodes' +1 numbering makes such twins) may be a
-        sibling of the parent's line, which a render-hidden one would wrongly block (outside review:
-        Separate Children with a hidden and a visible instancer of one collection).
+        skips the entry's object (render-hidden there, or in a hidden child collection). Only the
+        parent is asked: a farther entry whose levels the entry's also continue (geometry nodes' +1
+        numbering makes such twins) may be a sibling of the parent's line, wrongly blocked if hidden.
 
         Returns (blocked, whether the entry's own level was made by a plain collection instancer:
         the top-level instancer `plain_top` (None when it is not one), or its parent). A member of a
         plain collection carries its own index at its level, and so do its instances
         (make_duplis_collection recurses with the member's id, no +1), so a stacked entry made so is
-        believed a parent only with that exact index, and an index no stacked entry has names the
-        member whose instances the entry is (_hidden_member): a member with no entry of its own (Show
-        Instancer off in the viewport) must neither pass its instances to the member before it nor
-        let them through when a render skips it (random scenes against a render's depsgraph)."""
+        a parent only with that exact index, and an index no stacked entry has names the member
+        whose instances the entry is (_hidden_member: a member without an entry of its own)."""
         for parent_pid, parent, makes_nothing, plain_level in reversed(self._stack):
             if plain_level and pid[len(pid) - len(parent_pid)] != parent_pid[0]:
                 continue
@@ -213,8 +195,7 @@ def _descends(pid: tuple, ancestor_pid: tuple) -> bool:
     """Whether an entry's levels continue an ancestor's: its outer levels are the ancestor's, except
     that geometry nodes number the instances of a collection member's own instances from the member's
     index plus one (object_dupli.cc: make_dupli(..., id++), then make_recursive_duplis(..., id)). A
-    sibling at a deeper level (geometry-nodes levels that hold no object yield no entry) fails this
-    (outside review: a hidden Object Info source ahead of a nested instance hid it)."""
+    sibling at a deeper level (geometry-nodes levels that hold no object yield no entry) fails this."""
     gap = len(pid) - len(ancestor_pid)
     if gap <= 0:
         return False

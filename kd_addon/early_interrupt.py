@@ -1,5 +1,5 @@
 """Ctrl-C from the first line of `python -m kd_addon`: importing bpy swallows a KeyboardInterrupt raised
-while it runs (Ctrl-C 0.3 s into its 0.6 s import was lost and the render ran to the end; outside QA),
+while it runs (the render would then run to the end),
 and raising one inside the imports it makes (numpy's) leaves them half done. So `install` sets a SIGINT
 handler that only records the interrupt, before the package imports bpy; __main__ checks `interrupted`
 after the import and then puts Python's own handler back. Never installed inside Blender.

@@ -17,8 +17,7 @@ from .scene_records import NOT_TRIANGLES, TRIANGLE_TYPES, Instance
 
 
 def surfaces_off_warnings(view_layer) -> list[str]:
-    """A view layer whose Filter > Surfaces is off renders no surfaces at all (Cycles: no hit pixel;
-    the preview drew them all, outside review)."""
+    """A view layer whose Filter > Surfaces is off renders no surfaces at all (Cycles: no hit pixel)."""
     if view_layer.use_solid:
         return []
     return [f"view layer '{view_layer.name}' has Filter > Surfaces off: a final render shows no surfaces, so the "
@@ -27,8 +26,7 @@ def surfaces_off_warnings(view_layer) -> list[str]:
 
 def unused_layer_warnings(depsgraph) -> list[str]:
     """The preview renders the window's view layer (or the command line's --scene's render layer);
-    a final render writes only the layers enabled for rendering (outside review: a disabled window
-    layer rendered without a word)."""
+    a final render writes only the layers enabled for rendering."""
     layer = depsgraph.view_layer
     if layer.use:
         return []
@@ -55,17 +53,13 @@ def objects_shown(depsgraph, vis: RenderVisibility, instances: list[Instance]) -
 def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: RenderVisibility, instanced_by: dict[int, set[int]],
                       evaluated: set[int], not_made: set[int] = frozenset(),
                       meshed: set[str] = frozenset()) -> list[str]:
-    """A warning per render-visible thing a final render shows and the preview leaves out: objects of
-    the scene and its background scenes hidden in the viewport (the viewport depsgraph does not
-    evaluate them) or not triangles, collection instancers hidden there (their instances go with
-    them), members of collections that instancers, geometry nodes or particles render whole, disabled
-    in viewports (`instanced_by`: the original objects the depsgraph instanced, by original
-    instancer), and hair particles drawn as strands. `evaluated`: pointers of the originals the
-    viewport shows, those its Show Instancer flag alone keeps out of the depsgraph's entries included
-    (they are read anyway when a render shows them, hidden_by_viewport_flag_only). `not_made`: originals
-    the viewport instanced on a path a render does not make (dupli_paths.py), not missing either.
-    `meshed`: names of the originals whose own evaluated geometry gave triangles (a point cloud or curves object
-    whose geometry nodes output a mesh is named only for what is left of its points or curves)."""
+    """A warning per render-visible thing a final render shows and the preview leaves out: objects
+    hidden in the viewport or not triangles, collection instancers hidden there, members disabled in
+    viewports of collections rendered whole, and hair strands. `instanced_by`: the originals the
+    depsgraph instanced, by original instancer. `evaluated`: pointers of the originals the viewport
+    shows (those only its Show Instancer flag keeps out included). `not_made`: originals instanced
+    on a path a render does not make (dupli_paths.py). `meshed`: names of the originals whose own
+    geometry gave triangles (a point cloud whose nodes output a mesh is named only for the rest)."""
     warnings = []
     instancers = {}
     for ob in rendered_layers_objects(depsgraph):
@@ -87,7 +81,7 @@ def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: RenderVisibility, ins
                 and not _renders_nothing(ob)):
             if kind in NOT_TRIANGLES:
                 if not _own_elements(ob.evaluated_get(depsgraph)):
-                    pass  # its nodes made it all triangles or instances (outside reviews), or it is empty
+                    pass  # its nodes made it all triangles or instances, or it is empty
                 elif ob.name not in meshed:
                     warnings.append(f"object '{ob.name}' is {NOT_TRIANGLES[kind]}, not triangles: left out of "
                                     "the preview")
@@ -107,7 +101,7 @@ def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: RenderVisibility, ins
         hosts = [h for h in hosts if _shows_instances_of(h, pointers, instanced_by)]
         if hosts:
             warnings += _hidden_member_warnings(collection, members, hosts, vis, instanced)
-            shown = vis.instanced_objects(collection)  # emitters inside: named as at the top (outside review)
+            shown = vis.instanced_objects(collection)  # emitters inside: named as at the top
             warnings += [w for ob, _, _ in members if len(ob.particle_systems) and ob.as_pointer() in shown
                          for w in _pick_warnings(ob, vis, instanced=True) if w not in warnings]
     return warnings
@@ -134,8 +128,8 @@ def _hidden_member_warnings(collection, members: list, hosts: list, vis: RenderV
     shown = vis.instanced_objects(collection)  # nested instances' render-visible members included
     out, named = [], set()
     for ob, owner, chain in members:
-        # a collection instancer disabled in viewports takes its copies with it: named itself, once
-        # (outside review: with a visible sibling instancing the same collection nothing was named)
+        # a collection instancer disabled in viewports takes its copies with it: named itself, once,
+        # even where a visible sibling instances the same collection
         nesting = instanced_collection(ob) is not None and _nests(ob) and ob.hide_viewport
         if ((ob.type not in TRIANGLE_TYPES and not nesting) or ob.type == "META" or ob.as_pointer() not in shown
                 or ob.as_pointer() in instanced or vis.scene_object(ob) or _renders_nothing(ob)
@@ -148,9 +142,9 @@ def _hidden_member_warnings(collection, members: list, hosts: list, vis: RenderV
                 continue  # shows only as its parent's instances, which the parent's own line covers
             if not ob.hide_viewport and not ob.show_instancer_for_viewport and instances_things(ob):
                 if not ob.show_instancer_for_render:
-                    continue  # hidden in renders too (outside review: named as shown by a render)
+                    continue  # hidden in renders too
                 out.append(f"{where} has Show Instancer > Viewport off: the preview leaves its own mesh out there, "
-                           "a final render shows it")  # its instances are made (outside review)
+                           "a final render shows it")  # its instances are made
                 continue
             why = ("is disabled in viewports" if ob.hide_viewport else
                    "is not instanced in the viewport (a collection or instancer on its path is disabled in viewports)")
@@ -167,7 +161,7 @@ def _through(chain) -> str:
 def _nests(host) -> bool:
     """Whether `host`'s instances of a collection expand the collection instances among its members: a
     collection instancer's and geometry nodes' do, particles' do not (object_dupli.cc makes particles'
-    instances without recursing; Cycles showed none, outside review)."""
+    instances without recursing)."""
     return host.instance_type == "COLLECTION" or has_node_modifier(host)
 
 
@@ -241,9 +235,8 @@ def _collections_rendered_whole(ob, vis: RenderVisibility) -> list:
     """The collections ob renders whole through geometry nodes (Collection Info, node_instances.py) or
     render-shown particle systems (Render As: Collection, Whole Collection on): their members follow
     the collection-instance rule, so a member disabled in viewports is left out of the preview as a
-    collection instance's is (_hidden_member_warnings). Measured with Cycles (bpy 5.0.1): a final
-    render shows such a member in all three ways, and a child collection disabled in viewports that
-    Separate Children instances."""
+    collection instance's is (_hidden_member_warnings); a final render shows such a member in all three
+    ways (docs/choices.md#collections-instanced-by-nodes-or-particles-follow-the-collection-instance-rule)."""
     nodes = has_node_modifier(ob)
     if not (nodes or len(ob.particle_systems)) or not (vis.scene_object(ob) and ray_visible(ob)):
         return []
@@ -266,8 +259,7 @@ def hidden_light_warnings(depsgraph: bpy.types.Depsgraph, vis: RenderVisibility,
     viewport: its depsgraph does not evaluate it, so the preview cannot use it, while a final render
     does; and per light member of a collection a collection instancer renders whole that the viewport
     did not instance (`instanced_lights`: pointers of the originals of the lights it did), disabled in
-    viewports or in a collection that is (outside review: Cycles lit 153 pixels, the preview none, in
-    silence). `vis`: the render-visibility table, shared with the caller."""
+    viewports or in a collection that is. `vis`: the render-visibility table, shared with the caller."""
     evaluated = {ob.original.as_pointer() for ob in depsgraph.objects}
     out = [f"light '{ob.name}' is hidden in the viewport (eye icon, Disable in Viewports or a hidden collection): "
            "the preview leaves it out, a final render uses it"

@@ -1,17 +1,9 @@
 """Keeping the preview image's pixels where Blender would lose them.
 
-A generated image's pixels live only in memory. Blender's undo and redo restore
-the image datablock and regenerate its pixels (black), and undoing past the
-first render removes the image; a saved .blend keeps the datablock without its
-pixels (black on reopen). So:
-- after undo and redo, the last frame stored in this session is written back:
-  like Render Result, the preview shows the last render whatever the undo step;
-- before a save, the image is packed into the .blend (OpenEXR, float, lossless)
-  if it changed since it was last packed and the file will keep it (it has
-  users: an image editor shows it, or showed it since the file was opened,
-  whose user Blender keeps until then; without the pixels the file would keep a
-  black image): what Blender's own "save modified images" does on quit;
-- loading a file forgets the last frame: the new file's preview is its own.
+A generated image's pixels live only in memory: undo and redo regenerate them black, and a saved
+.blend keeps the datablock without them. So after undo and redo the last frame of this session is
+written back (like Render Result); before a save a changed image that the file will keep (it has
+users) is packed as lossless float OpenEXR; loading a file forgets the last frame.
 """
 
 from __future__ import annotations

@@ -1,15 +1,11 @@
 """A light's shader nodes, read where the preview can apply them exactly.
 
-A light with *Use Nodes* on (every light, since Blender 5.1) emits what its node tree's Light Output
-receives. Blender's default tree, and what most artists make of it, is one Emission node with a
-constant Color and Strength feeding the output: Cycles then emits the light's Color times that Color,
-and its power times that Strength. The preview applies such a tree, through reroutes too (the colour
-multiplies in; a positive Strength is a power, which the preview does not weight, see the README's
-shadow formula). Trees from which Cycles emits nothing are told apart with the reason (a Strength of 0
-or below, nothing connected to the output, a muted link or Emission node, no output Cycles renders), so
-the light is left out by name. Anything else (a texture, Blackbody or RGB node feeding the Emission
-node, another shader, a group, a muted output, which Blender versions evaluate differently) is named as
-not applied, so the user knows the preview's light differs from Cycles'.
+A light with *Use Nodes* on emits what its tree's Light Output receives. The usual tree, one Emission
+node with a constant Color and Strength (through reroutes too), is applied: its Color multiplies the
+light's, and a positive Strength is a power, which the preview does not weight. A tree from which
+Cycles emits nothing (Strength 0 or below, nothing connected, a muted link or Emission node) leaves
+the light out by name; anything else (textures, Blackbody, other shaders, groups) is named as not
+applied.
 """
 from __future__ import annotations
 

@@ -1,24 +1,14 @@
 """Optional re-render on frame change and on edits (scene.kd_preview.live_update, off by default).
 
-Frame changes: the handler renders synchronously, which makes playback wait for
-each frame; that is the point of the option. It stays out while an operator
-renders (Render Animation's own frame_set calls would otherwise re-render every
-frame twice) and while Blender renders (the handler then runs on the render
-thread, where touching bpy.data images is unsafe). A frame the user moves to
-while Render renders one is left to the edit timer below: it renders after that
-run, or instead of it if Live Update started it (a frame change alone makes no
-depsgraph update list, so before, the preview stayed on the old frame).
+Frame changes: the handler renders synchronously, so playback waits for each frame (the point of the
+option). It stays out while an operator renders (Render Animation's own frame_set calls) and while
+Blender renders (the handler then runs on the render thread, where touching images is unsafe); a
+frame the user moves to during a render is left to the edit timer.
 
-Edits (moving, modelling, changing a light or a setting): each depsgraph update
-(re)starts a timer, so a drag renders once, when it pauses for EDIT_DELAY; the
-timer then runs the Render operator, modal, so Blender stays responsive and Esc
-cancels. A Live Update render still running when the timer fires is stale if the
-edits changed its image: it is ended (nothing written) and the edited scene
-renders at once, rather than after a frame nobody wants; if they did not (a
-selection), it goes on. A render the user started (Render, Render Animation)
-is waited for: the edit renders after it. Changes that affect nothing cost an
-extraction: the last image is reused. The preview's own image writes produce an
-empty update list: ignored.
+Edits: each depsgraph update (re)starts a timer, so a drag renders once, when it pauses for
+EDIT_DELAY; the timer runs the Render operator modal, so Esc cancels. A running Live Update render
+whose image the edits changed is ended and the edited scene renders at once; a render the user
+started is waited for. Unchanged images are reused; the preview's own image writes are ignored.
 
 Handlers are persistent (they survive loading another file) and registered at
 most once (app_handlers.py); the timer is not (loading a file drops it).
@@ -36,8 +26,7 @@ from .properties import run_state, set_last_run
 
 EDIT_DELAY = 0.3  # seconds without edits before live update renders them
 # Modal tools that edit as the mouse moves (grab/rotate/scale, gizmo drags, fly/walk navigation, sculpt
-# and paint strokes, loop cut): their edit renders when they end. Without this wait a render started
-# at one slow mouse move and every later move queued another, back to back (outside QA, Blender 5.2).
+# and paint strokes, loop cut): their edit renders when they end, not at every slow mouse move.
 INTERACTIVE_TOOLS = {"TRANSFORM", "VIEW3D", "MESH", "SCULPT", "PAINT", "GIZMO", "GIZMOGROUP"}
 
 

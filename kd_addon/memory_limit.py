@@ -1,16 +1,9 @@
 """The frame's memory limit: triangles, kd-tree and pixel buffers, estimated before any is allocated.
 
-Checked right after extraction, which only reads each distinct mesh once
-(small next to the instanced world triangles), and before the world
-triangles, the tree or the renderer exist: a frame over the limit fails
-with a message naming the estimate, the limit and what to change, instead
-of the out-of-memory killer ending Blender during the build.
-
-The per-triangle and per-pixel figures are core's (core/memory.py, measured
-by benchmarks/bench_memory.py). The world triangles the tree keeps are added
-on top of the build's own working set; their transient copies while being
-transformed (under 60 bytes a triangle) are smaller than that working set and
-freed before the build starts, so the sum bounds the peak.
+Checked right after extraction and before the world triangles, the tree or the renderer exist, so a
+frame over the limit fails with a message naming the estimate, the limit and what to change instead
+of the out-of-memory killer ending Blender during the build. The figures are core's (core/memory.py);
+the world triangles the tree keeps are added to the build's working set, which bounds the peak.
 """
 
 from __future__ import annotations
@@ -38,9 +31,8 @@ def check_frame(n_triangles: int, width: int, height: int, config, keeps_previou
     """Raise MemoryLimitError when the frame would need more than config.memory_limit bytes
     (keeps_previous: the last frame's pixel state is held while this one renders). With no limit set,
     only the pixel buffers are checked, against the machine's physical memory: their estimate is
-    close (171-198 B a pixel measured, 200 assumed), while the geometry's covers the worst scene
-    measured and would refuse typical ones that fit. Without this check a 20000 x 20000 frame built its
-    kd-tree and then failed in core with a traceback (outside QA)."""
+    close, while the geometry's covers the worst scene and would refuse typical ones that fit
+    (docs/choices.md#without-a-memory-limit-only-the-pixel-buffers-are-checked)."""
     geometry, pixels = frame_bytes(n_triangles, width, height, config.settings.builder, keeps_previous)
     limit = config.memory_limit
     if limit is None:

@@ -15,16 +15,10 @@ from .scene_records import MeshGeometry
 def read_mesh(mesh: bpy.types.Mesh) -> tuple[np.ndarray, np.ndarray]:
     """Object-space (vertices float32 (V,3), triangles int32 (T,3)) of a Mesh.
 
-    Uses only bulk foreach_get paths that are plain memcpys. Measured with
-    bpy 5.0.1 on a 1M-triangle grid (500k vertices):
-      positions: attributes["position"] "vector" into float32   0.2-0.5 ms
-                 (vertices.foreach_get("co") 20 ms; float64 buffer 38 ms)
-      corners:   loop_triangles "loops" into *uint32*            0.7 ms
-                 (the same into int32: 86-140 ms, the property is unsigned
-                  so any other dtype drops to a per-item path)
-                 loop_triangles "vertices" (uint32 32 ms, int32 190 ms)
-      .corner_vert "value" into int32                            0.3 ms
-      gather corner_vert[loops]                                  4-5 ms
+    Uses only bulk foreach_get paths that are plain memcpys: "position" into float32, the loop
+    triangles' "loops" into uint32 (the property is unsigned: any other dtype drops to a per-item
+    path), ".corner_vert" into int32, then one gather
+    (docs/choices.md#read-meshes-with-bulk-attribute-reads).
     """
     mesh.calc_loop_triangles()  # cached in 5.0: a no-op when already built
     n_tris = len(mesh.loop_triangles)

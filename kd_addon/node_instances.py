@@ -1,44 +1,18 @@
 """Which collections an object instances whole, through a Collection Info node or particles.
 
-Why this matters: a final render expands such a collection like a collection instance, so a member
-with ``hide_render`` (or in a render-hidden child collection) is not rendered, while the viewport
-depsgraph the preview reads yields it. Measured with Cycles (bpy 5.0.1, a cube and a hide_render
-sphere in an excluded collection): Collection Info with *Separate Children* off instances only the
-cube; with it on, or behind *Realize Instances*, Cycles renders the sphere too, and so does an
-*Object Info* node pointing at a hidden object (a hidden mesh; a hidden text or curve renders nothing:
-outside review against Cycles).
+A final render expands such a collection like a collection instance, so its render-hidden members
+are not rendered, while the viewport depsgraph the preview reads yields them; an object named
+directly (Object Info, a separated child object, particles rendering one object) is rendered even
+when render-hidden (docs/choices.md#collections-instanced-by-nodes-or-particles-follow-the-collection-instance-rule).
 
-So only Collection Info nodes that are not muted and whose *Separate Children* input is not linked
-count. With it off, the node's collection is instanced whole. With it on, the node makes one instance
-per child: a child *object* is an object reference, rendered even when render-hidden if it is a mesh (the sphere
-above), while a child *collection* is a collection reference, which a render expands like a
-collection instance (measured with Cycles: a hide_render child collection, and a hide_render object
-in a visible child collection, were not rendered, with the node's output used directly or picked by
-Instance on Points). The depsgraph's entries do not say which reference made them, but the node tree
-does, as reliably as in the whole case: the child collections count as instanced whole and the child
-objects as instanced directly. Instance on Points picks among the unfiltered children, in the
-viewport and in a render alike, so leaving those members out reproduces the render exactly.
-
-The collection is read from the socket's value, or, where a Group Input link (through reroutes)
-feeds it, from what feeds that group input: the modifier's input in the modifier's own node tree, the
-calling Group node's socket in a nested group (a reusable "scatter" group with a Collection input), as
-far up as it goes. Object Info objects are collected too: an object instanced directly keeps being
-rendered even if it is also a hidden member of such a collection. Anything the reading cannot resolve
-(a collection computed by other nodes, a linked *Separate Children*) is left out, which keeps the
-preview's earlier behaviour: the instance is shown.
-
-Only nodes whose output reaches the tree's active Group Output count, through links that are not
-muted and, across a muted node, only its pass-through (internal) links, as Blender evaluates them: a
-Collection Info node left in the tree unconnected instances nothing, and must not make the members of
-its collection count as instanced whole when the object instances them some other way.
-
-Particle systems that render a collection (*Render As: Collection*) expand it the same way in a
-render, whole or picking one member per particle (measured with Cycles: a hide_render member, a member
-in a hide_render child collection and a hide_render member of a visible child collection were not
-rendered); particles rendering one object render it even when it is render-hidden. So
-:func:`particle_references` returns those collections and objects alike. With *Whole Collection* off
-the viewport also picks among a different set of members than a render (the render-visible ones
-only), which extraction_warnings.py warns about: the preview cannot reproduce a render's pick.
+Only Collection Info nodes that are not muted, whose *Separate Children* input is not linked and whose
+output reaches the active Group Output (through unmuted links, or a muted node's pass-through links)
+count. With *Separate Children* off the collection is instanced whole; with it on, child collections
+count as instanced whole and child objects as instanced directly. The collection is read from the
+socket's value or, through Group Input links, from the modifier's input or the calling Group node's
+socket, as far up as it goes. What cannot be resolved (a collection computed by other nodes) is left
+out, so the instance is shown. Particles with *Whole Collection* off pick among other members in the
+viewport than in a render, which extraction_warnings.py names.
 
 This module imports bpy only.
 """
@@ -64,8 +38,7 @@ def node_references(ob: bpy.types.Object) -> tuple[list[bpy.types.Collection], l
 def objects_read_as_geometry(ob: bpy.types.Object) -> list[bpy.types.Object]:
     """The objects `ob`'s Object Info nodes read as geometry (As Instance off, or not known to be on):
     their evaluated geometry, instances included, comes through whatever their render visibility,
-    where an object instanced as an object makes no instances when it is render-hidden (checked
-    against a render's depsgraph: a render-hidden collection instancer read so showed its collection)."""
+    where an object instanced as an object makes no instances when it is render-hidden."""
     geometry: list[bpy.types.Object] = []
     walked: set = set()
     for mod in ob.modifiers:
@@ -112,7 +85,7 @@ def _walk(tree, group_inputs, path: set[int], walked: set, collections: list, ob
     `group_inputs(identifier)`: the value the caller feeds the tree's group input `identifier`, None
     when unknown. `path`: the groups being walked (Blender forbids recursion; this guards anyway).
     `walked`: the (tree, input values) already walked: a group called many times with the same inputs
-    is read once (a review found a group chain called 4 ways a level read 4^depth times). `geometry`:
+    is read once (else a chain of groups each called k ways is read k^depth times). `geometry`:
     where given, collects the Object Info objects not known to be read As Instance."""
     key = (tree.as_pointer(), _input_values(tree, group_inputs))
     if key in walked:
@@ -131,7 +104,7 @@ def _walk(tree, group_inputs, path: set[int], walked: set, collections: list, ob
             found = _socket_value(node.inputs.get("Collection"), group_inputs)
             if not isinstance(found, bpy.types.Collection):
                 continue
-            if separated:  # one reference per child (a modifier's input may set it: outside review)
+            if separated:  # one reference per child (a modifier's input may set it)
                 collections.extend(found.children)
                 objects.extend(found.objects)
             else:
@@ -158,7 +131,7 @@ def _input_values(tree, group_inputs) -> tuple:
             value = group_inputs(item.identifier)
             values.append((item.identifier, value.as_pointer() if value is not None else 0))
         elif getattr(item, "in_out", None) == "INPUT" and item.socket_type == "NodeSocketBool":
-            value = group_inputs(item.identifier)  # Separate Children, As Instance (outside review)
+            value = group_inputs(item.identifier)  # Separate Children, As Instance
             values.append((item.identifier, bool(value) if isinstance(value, (bool, int)) else None))
     return tuple(values)
 

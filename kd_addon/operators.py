@@ -1,12 +1,8 @@
 """Render and Render Animation operators.
 
-Both drive a job with `tick()` (pipeline.FrameJob or sequence.SequenceJob).
-From the UI (invoke) they run modal: a window-manager timer ticks the job for
-a few tens of milliseconds per event, so Blender stays responsive and ESC
-cancels between ticks. In background mode (`blender -b`, the bpy module)
-timers never fire and INVOKE_DEFAULT returns at once, so there the job runs
-to the end inside `execute`. Only a finished frame reaches the preview image
-or the disk; cancel and failure leave both, and the scene's frame, as they were.
+Both drive a job with `tick()`. From the UI they run modal (a timer ticks the job, so Blender stays
+responsive and Esc cancels between ticks); in background mode timers never fire, so the job runs to
+the end inside `execute`. Cancel and failure leave the preview image, the disk and the frame as they were.
 """
 
 from __future__ import annotations
@@ -177,9 +173,8 @@ class _JobOperator:
         try:
             try:
                 # Still claimed: Render Animation's cleanup sets the start frame again, and Live Update's
-                # frame handler, seeing no run, rendered that frame synchronously (598 ms of frozen UI in
-                # outside QA) although the preview already showed it; an edit made meanwhile is left to
-                # the edit timer, which renders it modal once the claim is released.
+                # frame handler, seeing no run, would render that frame synchronously (frozen UI) although
+                # the preview already shows it; an edit made meanwhile is left to the edit timer.
                 self.cleanup(job, error)
             finally:
                 release(job)
@@ -203,8 +198,7 @@ class _JobOperator:
 
     def _wall_time(self) -> str:
         """A modal run's time from the click, with Blender's redraws between ticks, which the frame's
-        own figures leave out (outside QA under software GL: 5.9 s for a "2,990 ms" frame); "" when
-        the run was synchronous (then the two agree)."""
+        own figures leave out; "" when the run was synchronous (then the two agree)."""
         invoked_at = getattr(self, "_invoked_at", None)
         return "" if invoked_at is None else f", {time.perf_counter() - invoked_at:.1f} s with Blender's redraws"
 
@@ -286,11 +280,9 @@ def scene_removed(job) -> bool:
 def depsgraph_source(scene, view_layer):
     """A function returning the evaluated depsgraph of `scene`'s `view_layer` when called (any
     arguments ignored: SequenceJob passes the scene), whatever the context then: a modal run's later
-    ticks get the window's, not the one it was invoked with (a script's temp_override of another scene
-    rendered the window scene's objects under the other's name and camera; outside QA). `context`
-    must not be kept beyond invoke, nor the ViewLayer (one kept across ticks and deleted meanwhile
-    crashed Blender; review): the layer is kept as its address and looked up at each call, so a layer
-    renamed during the render is still found."""
+    ticks would get the window's, not the one a script's temp_override invoked it with. Neither
+    `context` nor the ViewLayer may be kept beyond invoke (a layer deleted meanwhile crashes Blender):
+    the layer is kept as its address and looked up at each call, so a renamed layer is still found."""
     name, address = view_layer.name, view_layer.as_pointer()
     return lambda *_scene: evaluated_depsgraph(scene, name, address)
 
@@ -329,8 +321,8 @@ def output_folder(path: str) -> Path:
 
 def end_running_operator() -> None:
     """End a modal run as Esc would. Disabling the add-on unregisters the operator, and Blender then
-    drops its modal handler without calling cancel(), so the job stayed claimed and the panel
-    "running": every later render said "already running" until Blender restarted (outside QA)."""
+    drops its modal handler without calling cancel(), which would leave the job claimed and every
+    later render "already running" until Blender restarted."""
     global _running
     op, _running = _running, None
     if op is not None:

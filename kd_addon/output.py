@@ -1,10 +1,8 @@
 """Getting a finished frame into Blender: the "KD Preview" image, image editors, and files.
 
-Only called with a complete frame, never with a partial one, so a cancelled
-or failed run leaves the previous preview untouched; a sequence, whose finished
-frames pass through the preview on their way to disk, puts it back when it does
-not finish (preview_state, put_back_preview). The last frame stored is
-remembered, so image_keeping.py can write it back where Blender's undo loses it.
+Only called with a complete frame, so a cancelled or failed run leaves the previous preview
+untouched (a sequence that does not finish puts it back: put_back_preview). The last frame stored
+is remembered for image_keeping.py.
 """
 
 from __future__ import annotations
@@ -98,7 +96,7 @@ def preview_state() -> tuple:
 def put_back_preview(state: tuple) -> None:
     """Make the preview what preview_state() found: a sequence that failed or was cancelled passed its
     finished frames through the preview image on their way to disk (save_frame), and left the last
-    of them there under the panel's figures of the run before (outside review). An image made since
+    of them there under the panel's figures of the run before. An image made since
     is removed; one the user has made their own since (renamed, unpacked to a file) is left alone."""
     global _last_frame
     last_frame, saved = state

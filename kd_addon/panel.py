@@ -64,8 +64,7 @@ class _SubPanel(_SidebarTab):
 
 def wrapped_label(layout, context, text: str, icon: str = "NONE") -> None:
     """`text` as labels wrapped to the sidebar's width. Blender's labels do not wrap, and the sidebar
-    cut a status or warning at its edge ("KD Preview: 320x18...", outside QA in a real Blender),
-    though an error names the object, triangle or setting at fault. About 7 pixels a character at UI
+    cuts a status or warning at its edge, though an error names the object or setting at fault. About 7 pixels a character at UI
     scale 1; 40 characters when drawn without a region."""
     region = getattr(context, "region", None)
     preferences = getattr(context, "preferences", None)

@@ -1,32 +1,15 @@
 """One preview frame: extract -> two-level scene (trees kept across frames) -> progressive trace.
 
-`FrameJob` splits the frame into short calls (`tick`) so a modal operator can
-spread it over timer events and stay responsive; `render_frame` runs one to
-the end for scripts, background mode, the command line and the live-update
-handler. Nothing here writes images or touches the scene: a cancelled or
-failed frame leaves everything as it was.
+`FrameJob` splits the frame into short calls (`tick`) so a modal operator stays responsive;
+`render_frame` runs one to the end. Nothing here writes images or touches the scene, so a cancelled
+or failed frame leaves everything as it was.
 
-Why relative to the camera: triangles are float32; a scene a few km from the
-origin would lose millimetres. Mesh trees are in object space and the instance
-matrices (float64) are shifted by minus the camera position before anything is
-rounded (core.SceneBuilder's `origin`); the camera and lights are moved by the
-same offset (core's `.translated`).
-
-Reuse across frames (tree_cache.py): a mesh whose fingerprint did not change
-keeps its tree, a moved object only costs the top level, pixels whose rays
-cannot reach anything that moved or deformed keep last frame's samples (core
-pixel_reuse.py; same camera, lights and settings), and when nothing that
-affects the image changed the last image is reused. The `rebuild_all` setting
-turns all of it off.
-
-Why a lock: Numba's workqueue threading layer aborts the process when two
-threads launch parallel kernels at once. Blender can call the frame-change
-handler from its render thread, and bpy's tbb layer is not guaranteed on
-every platform, so every kernel call here is serialized by KERNEL_LOCK.
-
-Why a worker thread: the build and each trace step run in a BackgroundCall
-(background.py) that `tick` polls for at most POLL_SECONDS, so a cancel is
-seen within that time even in the middle of a multi-second build.
+Triangles are float32, so the scene is placed relative to the camera: instance matrices (float64)
+are shifted by minus the camera position before rounding, and camera and lights by the same offset.
+Unchanged meshes keep their trees and unchanged images are reused (tree_cache.py; `rebuild_all`
+turns that off). Every kernel call holds KERNEL_LOCK (Numba's workqueue layer aborts when two
+threads launch parallel kernels) and runs on a worker thread that `tick` polls for at most
+POLL_SECONDS, so a cancel is seen even in the middle of a build.
 """
 
 from __future__ import annotations
@@ -106,8 +89,7 @@ class FrameResult:
             "frame", "width", "height", "triangles", "objects", "lights", "extract_ms", "build_ms",
             "trace_ms", "total_ms", "rays", "rays_saved", "mrays_per_s", "samples", "first_run", "objects_rebuilt",
             "objects_reused", "image_reused", "pixels_reused", "rays_reused", "compile_helper")}
-        # Not the tree stats' build_ms: the sum of the trees' own build times, kept trees' included (a
-        # reused frame showed ~400 ms against its 6 ms; outside review). The row's build_ms is the frame's.
+        # Not the tree stats' build_ms (the sum over trees, kept ones included): the row's is the frame's.
         row["tree"] = {k: _plain(v) for k, v in self.tree_stats.items() if k != "build_ms"}
         row["warnings"] = list(self.warnings)
         return row
@@ -131,14 +113,9 @@ class _SceneRead:
 class FrameJob:
     """One frame of one scene, driven by `tick()` until `done`.
 
-    The first tick reads the scene and builds the tree (blocking: it cannot be
-    split, and on the first run it includes Numba's compile); every later tick
-    adds one sample per unconverged pixel (core keeps each such call short).
-
-    `depsgraph`: the scene's evaluated depsgraph, or a function of no arguments
-    returning it, called when the job reads the scene. A job reads the scene
-    only once no cancelled run's kernel call still runs on the worker (the
-    ticks before just wait): see background.SCENE_READ_WAIT for why.
+    The first ticks read the scene (once no cancelled run's kernel call still runs:
+    background.SCENE_READ_WAIT) and build the tree on the worker; later ticks add one sample per
+    unconverged pixel. `depsgraph`: the evaluated depsgraph, or a function returning it when read.
     """
 
     def __init__(self, scene, depsgraph, config: RenderConfig):
@@ -241,7 +218,7 @@ class FrameJob:
         core = corelib.load_core()
         meshes, mesh_of, matrices, visibility = tree_cache.mesh_inputs(core, extracted)
         visibility, unapplied = self._lazy_visibility(core, extracted, visibility)
-        # an AO image does not depend on the lights: animated lights must not stop its reuse (outside review)
+        # an AO image does not depend on the lights: animated lights must not stop its reuse
         lights = inputs.lights if self.config.settings.mode != "ao" else []
         key = tree_cache.image_key(meshes, mesh_of, matrices, visibility, inputs.camera.keywords(), lights,
                                    (inputs.width, inputs.height), self.config.as_dict())
@@ -259,8 +236,8 @@ class FrameJob:
             for name in names]
 
     def _build_and_start(self, core, instances, placed, origin, reuse, camera, lights, width, height) -> None:
-        """On the worker, holding KERNEL_LOCK: the scene, then the renderer (whose constructor traces
-        the camera rays). `placed`: the extracted instances, in the order of `instances`' rows."""
+        """On the worker, holding KERNEL_LOCK: the scene, then the renderer. `placed`: the extracted
+        instances, in the order of `instances`' rows."""
         options = self.config.render_options
         rays = core.frame_ray_count(width, height, options["mode"], options["samples"], lights)
         # A process's first frame: with an empty kernel cache a helper process compiles the sampling
@@ -293,12 +270,9 @@ class FrameJob:
         return inputs
 
     def _camera_and_lights(self, core, inputs: scene_input.SceneInputs):
-        """Camera and lights moved by the same offset as the triangles. Mode "ao" uses no lights, so
-        their settings cannot stop it; otherwise a light Blender accepts but that emits nothing or that
-        core cannot use (zero power, size or scale) is left out with a warning naming it, and a light
-        used with settings the preview does not apply (light linking) gets a warning naming them. When
-        every light is left out, the frame renders with S = 0 (black in mode shadow, AO times the ambient
-        term in ao+shadow) and a warning: a light may emit again later in the animation."""
+        """Camera and lights moved by the same offset as the triangles. A light that emits nothing or
+        that core rejects is left out, and settings not applied are named; with no light left the frame
+        renders with a shadow term of 0 (a light may emit again later in the animation)."""
         offset = inputs.camera.position
         try:
             camera = core.Camera(**inputs.camera.keywords()).translated(offset)
@@ -323,10 +297,9 @@ class FrameJob:
         return camera, lights
 
     def _start_tracing(self, core, scene, camera, lights, width, height, previous) -> None:
-        """The renderer (its constructor already traces the camera rays, so it counts as trace time),
-        continued from the last finished frame's pixels where their rays cannot reach what changed.
-        The first frame of a process that continues one compiles or loads the pixel-reuse kernels, so
-        it is marked as a first run too."""
+        """The renderer (its constructor traces the camera rays: trace time), continued from the last
+        frame's pixels where their rays cannot reach what changed; the first such frame of a process
+        also counts as a first run (it loads the pixel-reuse kernels)."""
         global _reuse_kernels_ready
         t0 = time.perf_counter()
         try:
@@ -352,10 +325,8 @@ class FrameJob:
         return extracted
 
     def _build_placeable(self, core, instances, placed, origin: np.ndarray, reuse: bool, rays: int):
-        """_build, leaving out the instances whose matrices place them beyond float32's range of the
-        camera (an absurd scale or location, keyed or driven), with a warning naming each object, as
-        extraction leaves out a non-finite placement: the rest of the frame renders. Outside review: a
-        scale keyed to 3e38 on one frame stopped the animation with a traceback naming "instance 2"."""
+        """_build, leaving out (and naming) the instances placed beyond float32's range of the camera,
+        as extraction leaves out a non-finite placement: the rest of the frame renders."""
         meshes, mesh_of, matrices, visibility = instances
         try:
             return self._build(meshes, mesh_of, matrices, visibility, origin, reuse, rays)
@@ -386,8 +357,8 @@ class FrameJob:
         _kernels_ready = True
 
     def finish(self) -> None:
-        """The image from the samples, on the worker: denoising takes a moment, and on its first use
-        ~11 s of compiling, during which Blender's UI (and Esc) must stay responsive."""
+        """The image from the samples, on the worker: the denoiser's first use compiles it, and
+        Blender's UI (and Esc) must stay responsive meanwhile."""
         self._pending = BackgroundCall(KERNEL_LOCK, self._finish_once)
 
     def _finish_once(self) -> None:

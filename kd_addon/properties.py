@@ -1,10 +1,8 @@
 """Settings (saved with the .blend, on the scene) and run state (not saved, on the window manager).
 
-`KDPreviewSettings` is the one settings group: its property names are
-config.Settings' names, so `config.make_config(scene.kd_preview)` maps and
-validates it exactly as it does command-line arguments. The run state is a
-separate group on the window manager because it is not a setting: it must
-not be saved with the file or travel with a linked scene.
+`KDPreviewSettings` uses config.Settings' names, so `config.make_config(scene.kd_preview)` validates
+it exactly as command-line arguments. The run state is not a setting, so it lives on the window
+manager: not saved with the file, not travelling with a linked scene.
 """
 
 from __future__ import annotations
@@ -18,7 +16,7 @@ from .config import DEFAULTS, MAX_DEPTH, MAX_LEAF_SIZE, MAX_MEMORY_LIMIT_MB, MAX
 
 
 # "//" paths are relative to the .blend: said so where Blender knows the option (4.5 on; 4.2 refuses
-# it), else setting one warns 'does not support blend relative "//" prefix' (outside QA, Blender 5.2).
+# it), else setting one warns 'does not support blend relative "//" prefix'.
 PATH_OPTIONS = {"ANIMATABLE"} | ({"PATH_SUPPORTS_BLEND_RELATIVE"} if "is_path_supports_blend_relative" in
                                 bpy.types.Property.bl_rna.properties else set())
 

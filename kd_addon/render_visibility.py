@@ -4,15 +4,15 @@ The viewport depsgraph also holds render-hidden objects, so the render's rules a
 
 * A scene object is kept when its original has ``hide_render`` False and the view layer's collection
   tree reaches it through collections neither excluded nor ``hide_render``.
-* An instance is kept when its top-level instancer passes that rule and the instancer makes the
-  object in a render: a collection instance's members follow their own and their nested collections'
-  ``hide_render``; geometry-nodes and particle instances ignore the source's ``hide_render``, except
-  for members of collections they render whole (node_instances.py). Paths through instancers a render
-  does not make are dropped per entry (dupli_paths.py).
+* An instance is kept when its top-level instancer passes that rule and makes the object in a
+  render: collection members follow their own and nested collections' ``hide_render``; geometry-nodes
+  and particle instances ignore the source's, except for collections they render whole
+  (node_instances.py). Paths through instancers a render does not make are dropped (dupli_paths.py).
 * Show Instancer for renders off hides an instancer's own geometry (Blender's BKE_object_visibility).
 * Ray visibility: an object with camera and shadow rays both off is left out; otherwise each instance
   carries both flags, ANDed with its instancer's. Holdout and Indirect Only are read from the object,
-  or for an instance from its top-level instancer only, as Cycles does.
+  or for an instance from its top-level instancer only, as Cycles does
+  (docs/choices.md#holdout-and-indirect-only-come-from-the-top-level-instancer).
 
 Objects the viewport does not show (eye icon, Disable in Viewports) are not in its depsgraph at all;
 extraction_warnings.py names them.
@@ -48,9 +48,7 @@ class RenderVisibility:
 
     def in_render(self, ob: bpy.types.Object) -> bool:
         """Whether a render's depsgraph holds `ob` for a vertex or face parent to instance: not
-        render-hidden, and in a collection none of whose ancestors on some path is render-disabled
-        (outside reviews: a child in a render-disabled collection, or below one, was copied onto its
-        parent's vertices, 159 pixels where Cycles drew none)."""
+        render-hidden, and in a collection none of whose ancestors on some path is render-disabled."""
         if self._render_enabled is None:
             self._render_enabled = _render_enabled_collections()
             self._holders = _holding_collections()
@@ -60,7 +58,7 @@ class RenderVisibility:
 
     def descendants(self, ob: bpy.types.Object) -> list:
         """ob.children_recursive from one parent map built per extraction: the property scans every
-        object of the file on each read (outside review: 1.9 s of 7.7 for 500 vertex parents)."""
+        object of the file on each read."""
         if self._children is None:
             self._children = {}
             for other in bpy.data.objects:
@@ -94,7 +92,7 @@ class RenderVisibility:
         instancer, a parent instancing a carrier on its vertices), and of those a render makes.
         Memoized per object (per collection for plain collection instancers, of which a scene may
         hold thousands)."""
-        pointer = ob.as_pointer()  # the memo first: one RNA read an entry (outside review's timing)
+        pointer = ob.as_pointer()  # the memo first: one RNA read an entry
         key = self._kinds.get(pointer)
         if key is None:
             key = self._kinds[pointer] = instancer_kind(ob)
@@ -118,9 +116,8 @@ class RenderVisibility:
                 self._add(self._collection_expansion(coll, stack), reach, shown)
             geometry = {o.as_pointer() for o in objects_read_as_geometry(ob)} if nodes else set()
             for other in objects:  # named directly: a mesh shown whatever its flags, a render-hidden curve or
-                # text not (outside review against Cycles), a child of a vertex or face instancer only as its
-                # instances; its own instances unless it is render-hidden and instanced as an object (read
-                # as geometry they come along)
+                # text not, a child of a vertex or face instancer only as its instances; its own instances
+                # unless it is render-hidden and instanced as an object (read as geometry they come along)
                 shows = not instanced_by_its_parent(other) and (other.type == "MESH" or not other.hide_render)
                 self._add_object(other, shows, stack, reach, shown,
                                  instances_shown=not other.hide_render or other.as_pointer() in geometry)
@@ -194,7 +191,7 @@ def _holding_collections() -> dict[int, list[int]]:
 
 def set_scenes(scene: bpy.types.Scene) -> list[bpy.types.Scene]:
     """The chain of background scenes (Scene > Background Scene, its own, ...): a render shows their
-    objects too, as the depsgraph holds them (outside QA: left out, so Cycles showed more)."""
+    objects too, as the depsgraph holds them."""
     chain, seen = [], {scene.as_pointer()}
     background = scene.background_set
     while background is not None and background.as_pointer() not in seen:  # Blender refuses cycles; be sure
@@ -252,7 +249,7 @@ def entry_visible(vis: RenderVisibility, parent, ob: bpy.types.Object) -> bool:
         if instanced_by_its_parent(parent.original):
             return False
         # An instancer inside an instance (an emitter or a vertex parent in an instanced collection)
-        # hides itself as at the top level (outside review against Cycles: 46 pixels against 1,024).
+        # hides itself as at the top level.
         return orig == parent.original or not _instancer_hides_self(orig, ob)
     return not (_instancer_hides_self(orig, ob) or instanced_by_its_parent(orig))
 

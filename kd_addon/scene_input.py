@@ -1,16 +1,11 @@
 """The scene's camera and lights, converted to the plain keywords core.Camera and core.Light take.
 
-The conversions are pure functions of numbers (tested against analytic values);
-`read_scene` only gathers those numbers from bpy. Nothing here imports core,
-so the conversion can be checked, and fail with a clear message, before any
-kernel is compiled.
+The conversions are pure functions of numbers; `read_scene` only gathers them from bpy. Nothing here
+imports core, so a scene can fail with a clear message before any kernel is compiled.
 
-Camera: Blender's `lens` and sensor size give the field of view along the
-*fitted* image axis (sensor fit AUTO: the larger one; HORIZONTAL: width;
-VERTICAL: height), `ortho_scale` the extent along the same axis. core wants
-both along the larger image dimension, so the fitted value is rescaled by
-the image aspect (as BKE_camera_params_compute_viewplane does). Lens shift is measured
-along the fitted axis too and rescaled the same way.
+Blender's `lens`, `ortho_scale` and lens shift are along the *fitted* sensor axis (AUTO: the larger
+one); core wants them along the larger image dimension, so they are rescaled by the image aspect, as
+BKE_camera_params_compute_viewplane does.
 """
 
 from __future__ import annotations
@@ -94,7 +89,7 @@ def fitted_axis(sensor_fit: str, width: float, height: float) -> str:
 
 
 def to_larger_dimension(extent: float, sensor_fit: str, width: float, height: float) -> float:
-    """Rescale an extent measured along the fitted axis to the larger image dimension.
+    """Rescale an extent along the fitted axis to the larger image dimension.
 
     Works for anything proportional to the image plane size: 2*tan(fov/2) or ortho_scale.
     """
@@ -179,10 +174,8 @@ def light_color(data, emission: Emission | None = NO_NODES) -> tuple[float, floa
     blackbody Temperature's colour when *Temperature* is on (Blender 4.5+; Blender normalises that to
     luminance 1, so a channel reaches 2.5 at 2000 K: its largest channel is scaled to 1 here). A colour
     above 1 (an Emission Color or a Color typed above 1) is a power, which the preview does not weight:
-    scaled down to 1 it keeps its hue, where S would otherwise leave [0, 1] and clip to another hue
-    when displayed.
-    `benchmarks/cycles_lights.py`: a 2000 K sun's floor has G/R and B/R 0.257 and 0.008 in the
-    preview and in Cycles (bpy 5.0.1; white if ignored)."""
+    scaled down to 1 it keeps its hue, where S would otherwise clip to another hue when displayed
+    (docs/choices.md#light-colour-normalised-to-its-largest-channel)."""
     color = np.array(data.color, np.float64)
     if emission is not None:
         color = color * emission.color
@@ -238,7 +231,7 @@ def read_camera(scene, depsgraph, width: int, height: int) -> tuple[CameraInput,
                                         scene.render.pixel_aspect_y / scene.render.pixel_aspect_x)
     except PreviewError as error:  # named: timeline markers may switch between several cameras
         raise PreviewError(f"scene camera '{scene.camera.name}': {error}") from None
-    if evaluated.data.dof.use_dof:  # outside review: Cycles blurred 704 silhouette pixels, silently here
+    if evaluated.data.dof.use_dof:  # Cycles blurs the silhouettes
         warnings.append(f"the depth of field of camera '{scene.camera.name}' is ignored by the preview: it renders "
                         "a pinhole camera, everything in focus")
     return camera, warnings
@@ -283,11 +276,9 @@ def unapplied_light_settings(ob) -> tuple[str, ...]:
 
 def diffuse_switched_off(ob, instancer=None) -> str:
     """Why the light lights no diffuse surface in Cycles, "" when it does: its Ray Visibility > Diffuse
-    is off, or its instancer's (Cycles ANDs an instance's ray visibility with its instancer's: outside
-    review, an instancer with Diffuse off left its light dark in Cycles). Diffuse surfaces are all the
-    preview shades (N.L), so such a light is left out, as one that emits nothing is (until 2026-12-03 it
-    was traced and only named; a point light with Diffuse off took Cycles' image of a default-material
-    plane from 1.22 to 0.048, the rest being its specular part)."""
+    is off, or its instancer's (Cycles ANDs an instance's ray visibility with its instancer's). Diffuse
+    surfaces are all the preview shades (N.L), so such a light is left out, as one that emits nothing
+    is (docs/choices.md#lights-with-diffuse-ray-visibility-off-are-left-out)."""
     if not getattr(ob, "visible_diffuse", True):
         return "its Ray Visibility > Diffuse is off"
     if instancer is not None and not getattr(instancer.original, "visible_diffuse", True):
@@ -299,7 +290,7 @@ def read_scene(scene, depsgraph, width: int, height: int, lights: bool = True) -
     """Camera and lights of the evaluated scene for a width x height preview (`lights` False: an AO
     frame, which needs none, so lights hidden in the viewport are not looked for)."""
     warnings = []
-    if scene.render.use_border:  # outside QA: a final render crops or blanks outside the region
+    if scene.render.use_border:  # a final render crops or blanks outside the region
         warnings.append("the Render Region (Output > Format) is ignored by the preview: it renders the whole frame")
     if scene.render.use_motion_blur:
         warnings.append("motion blur is ignored by the preview: it renders the frame's instant")

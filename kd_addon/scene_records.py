@@ -96,13 +96,8 @@ class ExtractedScene:
         return np.repeat(np.arange(len(self.instances), dtype=np.int32), counts)
 
     def world_triangles(self) -> np.ndarray:
-        """float32 (N, 3, 3) world-space triangles, in ``instances`` order.
-
-        Vectorized per geometry: all instances of one mesh are transformed in
-        one matmul and gathered with np.take, so the Python loop runs over
-        distinct meshes (and over the instances of a mesh only when there are
-        few of them), never over triangles.
-        """
+        """float32 (N, 3, 3) world-space triangles, in ``instances`` order: all instances of one mesh
+        in one matmul and one gather, so the Python loop never runs over triangles."""
         counts = self._instance_triangle_counts()
         starts = np.concatenate(([0], np.cumsum(counts)[:-1])).astype(np.int64)
         out = np.empty((int(counts.sum()), 3, 3), dtype=np.float32)
@@ -133,12 +128,8 @@ def _transform_points(mats: np.ndarray, points: np.ndarray) -> np.ndarray:
 
 
 def _scatter_triangles(out, starts, world, triangles) -> None:
-    """Gather (K,V,3) vertices by (T,3) indices into out[start_k : start_k+T].
-
-    np.take(..., out=...) is ~3x faster than world[k][triangles]; few
-    instances are written slice by slice, many small ones in one gather and
-    one (slice or fancy-index) assignment.
-    """
+    """Gather (K,V,3) vertices by (T,3) indices into out[start_k : start_k+T], with np.take (faster
+    than fancy indexing): few instances slice by slice, many small ones in one gather."""
     n_inst, n_tris = world.shape[0], triangles.shape[0]
     if n_inst <= 16:
         for k in range(n_inst):
@@ -158,11 +149,8 @@ def geometry_fingerprint(geom: MeshGeometry) -> int:
     CRC-32 in the low half, Adler-32 in the high half.
 
     A matching fingerprint keeps a mesh's tree and its pixels, so a change it misses is a stale image.
-    CRC-32 alone missed a random change once in 2^32, and is linear, so particular changes keep it (four
-    bytes chosen after any edit restore it: tests/test_extract.py makes one); Adler-32, a different
-    function of the same bytes, changes with them. Measured over 1M float32 vertices (12 MB), this
-    host: crc32 3.6 ms, adler32 4.1 ms; blake2b 16 ms, md5 19 ms, sha1 7.5 ms (with the CPU's SHA
-    instructions; 2-3x that without).
+    CRC-32 is linear, so four bytes chosen after any edit restore it; Adler-32 of the same bytes changes
+    with them (docs/choices.md#geometry-fingerprint-crc-32-and-adler-32).
     """
     count = np.int64(geom.vertices.shape[0]).tobytes()
     crc = zlib.crc32(geom.triangles, zlib.crc32(geom.vertices, zlib.crc32(count)))

@@ -1,9 +1,7 @@
 """A frame range rendered to an image sequence plus `report.json`, one FrameJob per frame.
 
-Shared by the Render Animation operator (ticked from a modal timer, or run to
-the end in background mode) and the command line, so the files and the report
-are the same however the sequence is started. The scene's current frame is
-put back afterwards, also on cancel or failure.
+Shared by the Render Animation operator and the command line, so the files and the report are the
+same however the sequence is started. The scene's frame is put back afterwards, on any outcome.
 """
 
 from __future__ import annotations
@@ -43,8 +41,7 @@ def parse_frames(text: str) -> list[int]:
 
 _RANGE = re.compile(r"^(-?\d+)(?:-(-?\d+))?(?::(\d+))?$")
 # Blender's frame limits (Scene.frame_current's hard range, MINAFRAME and MAXFRAME): frame_set clamps a
-# frame beyond them silently, which rendered the last frame again under the requested frame's name
-# (outside QA).
+# frame beyond them silently, which would render the last frame again under the requested frame's name.
 FIRST_FRAME, LAST_FRAME = -1048574, 1048574
 
 
@@ -80,7 +77,7 @@ def prepare_folder(folder: Path) -> list[Path]:
     while not probe.exists() and probe != probe.parent:
         missing.append(probe)
         probe = probe.parent
-    if not probe.is_dir():  # mkdir would say "File exists" (outside QA)
+    if not probe.is_dir():  # mkdir would say "File exists"
         raise PreviewError(f"cannot write to the output folder {folder}: {probe} is a file, not a folder")
     try:
         folder.mkdir(parents=True, exist_ok=True)
@@ -112,8 +109,8 @@ class SequenceJob:
         check_frames_in_range(frames)
         self.scene, self.config, self.frames = scene, config, list(frames)
         self._scene_name = scene.name  # the report's, should the scene be removed mid-run
-        # Normalised: with "a/missing/../b" every part looked missing, and a first frame that failed
-        # removed the user's empty folder b (review).
+        # Normalised: with "a/missing/../b" every part looks missing, and a first frame that failed
+        # would remove the user's empty folder b.
         self.out_dir = Path(os.path.normpath(os.path.abspath(out_dir)))
         self.depsgraph_for, self.on_frame = depsgraph_for, on_frame
         self.results: list[FrameResult] = []
@@ -170,10 +167,9 @@ class SequenceJob:
 
     def _report_progress(self) -> None:
         """The report of the frames written so far, marked incomplete, before the frame is announced, so
-        the report follows the files on disk even when the run is killed outright (a killed rerun left
-        an earlier run's report over its frames: outside review). Best effort (the last frame's report
-        or close() names a failure), and at most every REPORT_INTERVAL seconds, and never more than
-        1/20 of the time (a report of 5,000 frames takes ~0.2 s to write)."""
+        the report follows the files on disk even when the run is killed outright. Best effort (the
+        last frame's report or close() names a failure), at most every REPORT_INTERVAL seconds and
+        never more than 1/20 of the time (a long report takes a noticeable time to write)."""
         start = time.perf_counter()
         if start < self._next_report:
             return
@@ -201,8 +197,8 @@ class SequenceJob:
         """Put the scene back on the frame it was on (call on success, cancel and failure), and when
         the sequence stopped early, put the preview image back as it was before the run and write
         report.json for the frames that were written, marked incomplete, with the frame it stopped at
-        and why (`stopped_by`: the error or cancel that ended it; outside review: the report said
-        incomplete but not why). Best effort: the error that stopped it is the one to report."""
+        and why (`stopped_by`: the error or cancel that ended it). Best effort: the error that stopped
+        it is the one to report."""
         if stopped_by is not None and len(self.results) < len(self.frames):
             self._stopped = {"frame": self.frames[len(self.results)], "reason": stop_reason(stopped_by)}
             try:  # the frames written stay on disk; the preview and the panel's figures stay the last run's

@@ -1,18 +1,11 @@
 """What one scene keeps between frames: its mesh trees (core.SceneBuilder) and its last image.
 
-Trees: every evaluated mesh gets a key that is stable across frames -- (mesh name, name of the first
-object placing it, that object's instancer, occurrence number) -- because `MeshGeometry.key`
-(`as_pointer`) is only stable within one extraction. A key is only a name for the cache: a tree is
-reused only when the mesh's fingerprint (scene_records.geometry_fingerprint, 64 bits of CRC-32 and Adler-32
-of its vertex and index bytes) is the same as when the tree was built, so a key mix-up costs a rebuild, never a wrong image.
-
-Image: `image_key` digests everything that affects the pixels (each mesh's key and fingerprint, every
-instance's mesh, matrix and ray visibility, camera, lights, resolution, settings); an unchanged key reuses the last
-image without building or tracing. Pixels: the last finished frame's core PixelState; core keeps
-those of its pixels whose rays cannot reach what changed (same camera, lights and settings).
-
-State lives per scene (by `session_uid`, which survives renames) in this module, so the Render
-operator, Render Animation, the command line and live update all share it. `clear()` drops it all.
+Each mesh gets a key stable across frames (mesh name, first object placing it, its instancer,
+occurrence), but a tree is reused only when the mesh's fingerprint (scene_records.geometry_fingerprint)
+is unchanged, so a key mix-up costs a rebuild, never a wrong image. `image_key` digests everything
+that affects the pixels; an unchanged key reuses the last image, and core keeps the last frame's
+pixels whose rays cannot reach what changed. State lives per scene (`session_uid`), shared by every
+way of rendering; `clear()` drops it all.
 """
 
 from __future__ import annotations

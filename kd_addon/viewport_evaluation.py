@@ -1,12 +1,9 @@
 """Settings whose viewport value the preview's geometry follows where a final render takes another.
 
 The preview reads the viewport's depsgraph (`bpy` offers no render-mode depsgraph outside a render
-engine), so modifiers enabled only in renders or only in the viewport, Subdivision and Multires
-levels, Screw steps, Ocean resolution, geometry nodes' Is Viewport, the resolution of curves, text, surfaces and metaballs
-(a metaball set to Update on Edit: Never is not meshed at all), particles' viewport display amount and
-display method (only Rendered makes their instances), child particle amounts and Simplify evaluate as in the viewport. An outside review against Cycles measured
-each of these changing the image by 230-2,200 of 19,200 pixels without a word from the preview; this
-names them, in one warning a frame (a scene may have many subdivided objects).
+engine), so modifiers' viewport switches and levels, geometry nodes' Is Viewport, curve, text,
+surface and metaball resolution, particles' viewport amounts and display method, and Simplify
+evaluate as in the viewport. Each can change the image, so this names them, in one warning a frame.
 
 This module imports bpy only.
 """
@@ -61,7 +58,7 @@ def _differences(ob: bpy.types.Object, render) -> list[str]:
             continue  # off in renders or in the viewport: the modifier's own difference names it
         if settings.render_type in ("OBJECT", "COLLECTION") and settings.display_method != "RENDER":
             # Blender makes the instances in the viewport only when they display as rendered
-            # (object_dupli.cc: for_render || draw_as == PART_DRAW_REND); outside review against Cycles
+            # (object_dupli.cc: for_render || draw_as == PART_DRAW_REND)
             items = settings.bl_rna.properties["display_method"].enum_items  # hair's items are not listed
             method = settings.display_method
             shown_as = items[method].name if method in items.keys() else method.title()
