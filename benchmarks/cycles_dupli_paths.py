@@ -6,7 +6,7 @@ Blender makes no instances from a render-hidden object, at any depth of nesting,
 render-hidden child collection's members; the viewport's depsgraph, which the preview reads, makes
 them (kd_addon/dupli_paths.py). Each case builds a scene with the test suite's builders
 (tests/bpy_scenes.py: add_two_path_scene, add_object_info_of_instancer,
-add_hidden_source_beside_nested_instances, add_hidden_member_named_and_nested; tests/test_extract.py
+add_hidden_source_beside_nested_instances, add_hidden_member_named_and_nested; tests/test_extract_visibility.py
 asserts the extraction of the same scenes), adds a camera looking down at them, saves it, renders it with the
 preview's command line and with Cycles (transparent film, the narrowest pixel filter) and prints the
 hit pixels of both and how many differ. Exit 1 when a case differs in more pixels than its

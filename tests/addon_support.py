@@ -1,5 +1,5 @@
-"""Shared setup for the add-on tests (tests/test_addon_*.py). Numba's cache folder is set in
-tests/conftest.py."""
+"""Shared helpers for the add-on tests (tests/test_addon_*.py); the `addon` and `scene` fixtures and
+Numba's cache folder are set in tests/conftest.py."""
 
 from __future__ import annotations
 
@@ -12,34 +12,11 @@ from types import SimpleNamespace
 
 import bpy
 import numpy as np
-import pytest
 
-import kd_addon
-from kd_addon import background
 from tests import bpy_scenes as scenes
 
 REPO = Path(__file__).resolve().parents[1]
 PYTHON = sys.executable
-
-
-@pytest.fixture
-def addon(monkeypatch):
-    """The add-on registered on a fresh empty scene; unregistered afterwards. Live Update's edit timer
-    waits for the worker's kernel call as long as it takes (background.SCENE_READ_WAIT; at its 0.1 s a
-    slow build would make the tests' direct timer calls retry instead of acting)."""
-    monkeypatch.setattr(background, "SCENE_READ_WAIT", 60.0)
-    scenes.reset()
-    kd_addon.register()
-    try:
-        yield kd_addon
-    finally:
-        try:
-            kd_addon.unregister()
-        finally:
-            # A test that cancelled a run leaves its kernel call running; the next test's ticks would
-            # wait for it. One that never ends would make every later test wait: stop the session.
-            if not background.wait_for_work(120.0):
-                pytest.exit("a cancelled kernel call still runs 120 s after its test ended", returncode=1)
 
 
 EVENT_PROPERTIES = {p.identifier for p in bpy.types.Event.bl_rna.properties}

@@ -18,3 +18,37 @@ os.environ["NUMBA_CACHE_DIR"] = os.path.abspath(os.environ["NUMBA_CACHE_DIR"])  
 from kd_addon import corelib  # noqa: E402  (after the variable: corelib reads it)
 
 corelib.configure_numba_cache(corelib.numba_cache_dir())
+
+import pytest  # noqa: E402
+
+
+@pytest.fixture
+def scene():
+    """A fresh empty scene (bpy imported here, so tests of core alone never load Blender)."""
+    from tests import bpy_scenes
+
+    return bpy_scenes.reset()
+
+
+@pytest.fixture
+def addon(monkeypatch):
+    """The add-on registered on a fresh empty scene; unregistered afterwards. Live Update's edit timer
+    waits for the worker's kernel call as long as it takes (background.SCENE_READ_WAIT; at its 0.1 s a
+    slow build would make the tests' direct timer calls retry instead of acting)."""
+    import kd_addon
+    from kd_addon import background
+    from tests import bpy_scenes
+
+    monkeypatch.setattr(background, "SCENE_READ_WAIT", 60.0)
+    bpy_scenes.reset()
+    kd_addon.register()
+    try:
+        yield kd_addon
+    finally:
+        try:
+            kd_addon.unregister()
+        finally:
+            # A test that cancelled a run leaves its kernel call running; the next test's ticks would
+            # wait for it. One that never ends would make every later test wait: stop the session.
+            if not background.wait_for_work(120.0):
+                pytest.exit("a cancelled kernel call still runs 120 s after its test ended", returncode=1)

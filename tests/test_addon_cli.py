@@ -7,7 +7,7 @@ import json
 
 import pytest
 
-from tests.addon_support import add_quad, add_sun, add_top_camera, exr_channels, floor_scene, run_python  # noqa: F401
+from tests.addon_support import add_quad, add_sun, add_top_camera, exr_channels, floor_scene, run_python
 
 import bpy  # noqa: E402
 import numpy as np  # noqa: E402

@@ -6,16 +6,13 @@ import math
 from dataclasses import fields
 from types import SimpleNamespace
 
+import bpy
 import pytest
 
-from tests.addon_support import addon  # noqa: F401  (fixture)
-
-import bpy  # noqa: E402  (after addon_support, which sets the Numba cache)
-
-from kd_addon import config  # noqa: E402
-from kd_addon.config import DEFAULTS, SettingsError, frame_size, make_config  # noqa: E402
-from kd_addon.errors import PreviewError  # noqa: E402
-from kd_addon.sequence import parse_frames  # noqa: E402
+from kd_addon import config
+from kd_addon.config import DEFAULTS, SettingsError, frame_size, make_config
+from kd_addon.errors import PreviewError
+from kd_addon.sequence import parse_frames
 
 
 def test_defaults_map_to_core_keywords():
@@ -78,7 +75,7 @@ def test_defaults_agree_with_core():
     core.BuildOptions(**make_config(SimpleNamespace()).build_options)  # core accepts the mapping
 
 
-def test_property_group_mirrors_settings(addon):  # noqa: F811
+def test_property_group_mirrors_settings(addon):
     settings = bpy.context.scene.kd_preview
     for f in fields(config.Settings):
         assert getattr(settings, f.name) == pytest.approx(getattr(DEFAULTS, f.name)), f.name
@@ -94,7 +91,7 @@ def test_property_group_mirrors_settings(addon):  # noqa: F811
     assert cfg.build_options["threads"] == 3
 
 
-def test_every_integer_the_panel_accepts_is_a_valid_setting(addon):  # noqa: F811
+def test_every_integer_the_panel_accepts_is_a_valid_setting(addon):
     """Outside QA: the panel let Leaf Size and Memory Limit take values that the render then refused."""
     settings = bpy.context.scene.kd_preview
     for prop in settings.bl_rna.properties:

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tests.addon_support import addon, half_plane_scene, preview_pixels  # noqa: F401
+from tests.addon_support import half_plane_scene, preview_pixels
 
 import bpy  # noqa: E402
 
@@ -32,7 +32,7 @@ def push_undo(message: str) -> None:
     bpy.ops.ed.undo_push(message=message)
 
 
-def test_undo_past_the_first_render_and_redo_keep_the_last_frame(addon):  # noqa: F811
+def test_undo_past_the_first_render_and_redo_keep_the_last_frame(addon):
     scene = half_plane_scene()
     area = image_editor()
     push_undo("before any render")
@@ -54,7 +54,7 @@ def test_undo_past_the_first_render_and_redo_keep_the_last_frame(addon):  # noqa
     assert len([im for im in bpy.data.images if im.get(IMAGE_TAG)]) == 1
 
 
-def test_undo_leaves_an_editor_showing_another_image_alone(addon):  # noqa: F811
+def test_undo_leaves_an_editor_showing_another_image_alone(addon):
     half_plane_scene()
     area = image_editor()
     bpy.data.images.new("Mine", 4, 4).use_fake_user = True
@@ -66,7 +66,7 @@ def test_undo_leaves_an_editor_showing_another_image_alone(addon):  # noqa: F811
     assert IMAGE_NAME in bpy.data.images and area.spaces.active.image == bpy.data.images["Mine"]
 
 
-def test_a_saved_file_reopens_with_the_last_frame(addon, tmp_path):  # noqa: F811
+def test_a_saved_file_reopens_with_the_last_frame(addon, tmp_path):
     scene = half_plane_scene()
     image_editor()
     first = rendered()
@@ -86,7 +86,7 @@ def test_a_saved_file_reopens_with_the_last_frame(addon, tmp_path):  # noqa: F81
     assert np.array_equal(preview_pixels(), second)
 
 
-def test_an_image_no_editor_shows_is_not_packed(addon, tmp_path):  # noqa: F811
+def test_an_image_no_editor_shows_is_not_packed(addon, tmp_path):
     """The file would not keep it (no users): packing it would only cost the save its time."""
     half_plane_scene()
     rendered()
@@ -96,7 +96,7 @@ def test_an_image_no_editor_shows_is_not_packed(addon, tmp_path):  # noqa: F811
     assert image.packed_file is None
 
 
-def test_an_unchanged_image_is_not_packed_again(addon, tmp_path):  # noqa: F811
+def test_an_unchanged_image_is_not_packed_again(addon, tmp_path):
     half_plane_scene()
     image_editor()
     rendered()
@@ -107,7 +107,7 @@ def test_an_unchanged_image_is_not_packed_again(addon, tmp_path):  # noqa: F811
     assert bpy.data.images[IMAGE_NAME].packed_file == packed  # same packed data: no new EXR written
 
 
-def test_loading_a_file_forgets_the_last_frame(addon):  # noqa: F811
+def test_loading_a_file_forgets_the_last_frame(addon):
     """Another file's undo must not bring this file's preview into it."""
     half_plane_scene()
     rendered()
@@ -121,7 +121,7 @@ def test_loading_a_file_forgets_the_last_frame(addon):  # noqa: F811
 
 
 @pytest.mark.parametrize("kind", ["undo_post", "redo_post", "save_pre", "load_post"])
-def test_handlers_are_registered_once_and_removed(addon, kind):  # noqa: F811
+def test_handlers_are_registered_once_and_removed(addon, kind):
     def ours():
         return [h for h in getattr(bpy.app.handlers, kind) if h.__module__ == "kd_addon.image_keeping"]
     assert len(ours()) == 1

@@ -19,7 +19,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from tests.addon_support import EVENT_PROPERTIES, addon, event, half_plane_scene, preview_pixels  # noqa: F401
+from tests.addon_support import EVENT_PROPERTIES, event, half_plane_scene, preview_pixels
 from tests import bpy_scenes as scenes  # noqa: E402
 
 import bpy  # noqa: E402
@@ -67,7 +67,7 @@ def driver(operator_cls):
 
 
 @pytest.fixture
-def modal(addon, monkeypatch):  # noqa: F811
+def modal(addon, monkeypatch):
     monkeypatch.setattr(operators, "modal_possible", lambda context: True)
     monkeypatch.setattr(operators, "TICK_BUDGET", 0.0)  # one job tick per timer event
     return make_context()
@@ -423,7 +423,7 @@ def column_at(x: float) -> int:
     return int((x + 4.0) / 8.0 * 64)
 
 
-def test_a_newer_edit_replaces_a_stale_live_render(addon, monkeypatch):  # noqa: F811
+def test_a_newer_edit_replaces_a_stale_live_render(addon, monkeypatch):
     """Live Update: an edit that changes the image of the live render running ends it (nothing written,
     no warning) and renders the edited scene at once. Before, the stale frame ran to its end and the
     edit rendered after it."""
@@ -448,7 +448,7 @@ def test_a_newer_edit_replaces_a_stale_live_render(addon, monkeypatch):  # noqa:
     assert "last image reused" in state.status
 
 
-def test_the_edit_timer_reads_the_scene_only_between_kernel_calls(addon, monkeypatch):  # noqa: F811
+def test_the_edit_timer_reads_the_scene_only_between_kernel_calls(addon, monkeypatch):
     """The bpy module crashed (SIGSEGV in evaluated_depsgraph_get, ~1 run in 10, CI once) when the timer
     evaluated the scene while the worker ran a kernel call's Python code. A call still running after
     SCENE_READ_WAIT makes the timer try again later, without touching the depsgraph."""
@@ -498,7 +498,7 @@ def test_a_run_started_beside_a_cancelled_runs_kernel_call_reads_the_scene_after
     assert reads and not any(reads) and op.reports[-1][0] == {"INFO"}
 
 
-def test_an_edit_leaves_a_live_render_of_the_same_image_and_a_users_render_running(addon, monkeypatch):  # noqa: F811
+def test_an_edit_leaves_a_live_render_of_the_same_image_and_a_users_render_running(addon, monkeypatch):
     scene = half_plane_scene()
     scene.kd_preview.live_update = True
     live, context = started_modal(KDPREVIEW_OT_render, monkeypatch, live=True, ticks=1)
@@ -522,7 +522,7 @@ def test_an_edit_leaves_a_live_render_of_the_same_image_and_a_users_render_runni
     assert timer_events(users, context)[0] == {"FINISHED"} and "KD Preview" in bpy.data.images
 
 
-def test_a_frame_change_during_a_render_renders_after_it_or_instead_of_a_live_one(addon, monkeypatch):  # noqa: F811
+def test_a_frame_change_during_a_render_renders_after_it_or_instead_of_a_live_one(addon, monkeypatch):
     """Outside QA (Blender 5.2.2): moving to frame 2 while a live render of frame 1 ran left the preview
     on frame 1 for good: the frame handler stays out while a job runs, and a frame change alone makes
     no depsgraph update list. Now it leaves the frame to the edit timer."""

@@ -7,7 +7,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from tests.addon_support import REPO, run_python  # noqa: F401
+from tests.addon_support import REPO, run_python
 
 import bpy  # noqa: E402
 

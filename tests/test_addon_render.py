@@ -12,7 +12,7 @@ import math
 
 import pytest
 
-from tests.addon_support import addon, exr_channels, half_plane_scene, preview_pixels  # noqa: F401
+from tests.addon_support import exr_channels, half_plane_scene, preview_pixels
 
 import bpy  # noqa: E402
 import numpy as np  # noqa: E402
@@ -42,7 +42,7 @@ def check_half_plane_image(img):
     assert ao[16, column_of(-2.6)] < 0.9  # ground right beside the cube's wall
 
 
-def test_render_operator_fills_the_preview_image(addon):  # noqa: F811
+def test_render_operator_fills_the_preview_image(addon):
     half_plane_scene()
     assert bpy.ops.kdpreview.render() == {"FINISHED"}
     check_half_plane_image(preview_pixels())
@@ -56,13 +56,13 @@ def test_render_operator_fills_the_preview_image(addon):  # noqa: F811
     assert "redraws" not in state.status  # synchronous: no redraws between ticks to add
 
 
-def test_invoke_in_background_runs_synchronously(addon):  # noqa: F811
+def test_invoke_in_background_runs_synchronously(addon):
     half_plane_scene()
     assert bpy.ops.kdpreview.render("INVOKE_DEFAULT") == {"FINISHED"}
     check_half_plane_image(preview_pixels())
 
 
-def test_far_from_origin_gives_the_same_image(addon):  # noqa: F811
+def test_far_from_origin_gives_the_same_image(addon):
     """Tracing relative to the camera: 100 km away the image matches the one at the origin."""
     half_plane_scene()
     bpy.ops.kdpreview.render()
@@ -76,7 +76,7 @@ def test_far_from_origin_gives_the_same_image(addon):  # noqa: F811
     assert np.abs(near - far).max() < 1e-5
 
 
-def test_modes_with_lights(addon):  # noqa: F811
+def test_modes_with_lights(addon):
     scene = half_plane_scene()
     for mode in ("shadow", "ao+shadow"):
         scene.kd_preview.mode = mode
@@ -86,7 +86,7 @@ def test_modes_with_lights(addon):  # noqa: F811
         assert img[16, column_of(-3.9), 0] > 0.5  # lit open ground
 
 
-def test_lights_blender_accepts_but_that_emit_nothing_are_left_out_by_name(addon):  # noqa: F811
+def test_lights_blender_accepts_but_that_emit_nothing_are_left_out_by_name(addon):
     """Negative power, zero area size, a zero-scale area light, a black light, a Cycles light portal
     (outside QA: both lit the floor and halved the real light's share of S, where Cycles' image is the
     sun's alone): Blender takes them all. Mode ao ignores lights; the shadow modes leave such lights
@@ -130,7 +130,7 @@ def test_lights_blender_accepts_but_that_emit_nothing_are_left_out_by_name(addon
         np.testing.assert_allclose(result.image[..., :3], rgb, atol=1e-6)
 
 
-def test_a_scenes_only_light_dimmed_to_nothing_darkens_that_frame_alone(addon):  # noqa: F811
+def test_a_scenes_only_light_dimmed_to_nothing_darkens_that_frame_alone(addon):
     """Outside QA: a sun whose Emission Strength is animated 1 -> 0 -> 1 stopped the whole animation at
     frame 2 ("needs a light"). Frame 2 now renders black with a warning (Cycles' image is black too),
     and frame 3, lit again, renders anew and equals frame 1 (frame 2's image is not reused)."""
@@ -154,7 +154,7 @@ def test_a_scenes_only_light_dimmed_to_nothing_darkens_that_frame_alone(addon): 
     np.testing.assert_array_equal(lit_again.image, lit.image)
 
 
-def test_light_settings_the_preview_does_not_apply_are_named(addon):  # noqa: F811
+def test_light_settings_the_preview_does_not_apply_are_named(addon):
     """Light and shadow linking and a light's shader nodes change Cycles' image; the preview lights and shadows
     every object regardless, so the shadow modes say so, naming light and setting. Nodes the preview applies
     (Blender's default Emission tree) are not named."""
@@ -185,7 +185,7 @@ def test_light_settings_the_preview_does_not_apply_are_named(addon):  # noqa: F8
         "light 'Sun': shadow linking (collection 'Hero') not applied by the preview"]
 
 
-def test_a_light_with_diffuse_ray_visibility_off_lights_nothing(addon):  # noqa: F811
+def test_a_light_with_diffuse_ray_visibility_off_lights_nothing(addon):
     """Cycles lights no diffuse surface from a light whose Ray Visibility > Diffuse is off (its own or its
     instancer's), and N.L on diffuse surfaces is what the shadow modes show: such a light is left out, named,
     and the frame is the frame without it, bit for bit; switched back on, it lights again."""
@@ -209,7 +209,7 @@ def test_a_light_with_diffuse_ray_visibility_off_lights_nothing(addon):  # noqa:
     np.testing.assert_array_equal(frame().image, lit.image)
 
 
-def test_object_ray_visibility_is_applied_and_changes_the_next_frame(addon):  # noqa: F811
+def test_object_ray_visibility_is_applied_and_changes_the_next_frame(addon):
     """Cycles' Ray Visibility: with camera rays off (or in an Indirect Only collection) the cube is not
     seen but still occludes the ground (inside its footprint, under its top and between its walls, AO
     is well below 1, where its open top is 1); with shadow rays off it is seen but the
@@ -253,7 +253,7 @@ def test_object_ray_visibility_is_applied_and_changes_the_next_frame(addon):  # 
                         "traced as one tree)" for name in ("Box", "Member' instanced by 'FarInstancer")]
 
 
-def test_holdout_leaves_its_pixels_empty_and_still_occludes(addon):  # noqa: F811
+def test_holdout_leaves_its_pixels_empty_and_still_occludes(addon):
     """Cycles' Holdout: the cube's pixels are empty (alpha 0), the ground beside it is still occluded by
     it, and turning the holdout off renders the cube again (the last image is not reused)."""
     scene = half_plane_scene()
@@ -274,7 +274,7 @@ def test_holdout_leaves_its_pixels_empty_and_still_occludes(addon):  # noqa: F81
     np.testing.assert_array_equal(shown.image[16, column_of(-2.6)], row[column_of(-2.6)])
 
 
-def test_errors_leave_the_previous_image_and_report(addon):  # noqa: F811
+def test_errors_leave_the_previous_image_and_report(addon):
     scene = half_plane_scene()
     bpy.ops.kdpreview.render()
     before = preview_pixels().copy()
@@ -291,7 +291,7 @@ def test_errors_leave_the_previous_image_and_report(addon):  # noqa: F811
     assert (preview_pixels() == before).all()
 
 
-def test_a_light_hidden_in_the_viewport_is_named(addon):  # noqa: F811
+def test_a_light_hidden_in_the_viewport_is_named(addon):
     """The viewport's depsgraph does not evaluate a light hidden there, so the preview cannot use it
     (a final render does): a warning names it in modes with lights, and when it was the only light
     the error says so instead of "no render-visible light" (outside QA)."""
@@ -313,7 +313,7 @@ def test_a_light_hidden_in_the_viewport_is_named(addon):  # noqa: F811
     assert not any("light" in w for w in ao.warnings)
 
 
-def test_nothing_renderable_is_a_transparent_frame_with_a_warning_and_zero_size_is_named(addon):  # noqa: F811
+def test_nothing_renderable_is_a_transparent_frame_with_a_warning_and_zero_size_is_named(addon):
     scene = half_plane_scene()
     for obj in ("Ground", "Box"):
         bpy.data.objects[obj].hide_render = True
@@ -326,7 +326,7 @@ def test_nothing_renderable_is_a_transparent_frame_with_a_warning_and_zero_size_
         pipeline.render_frame(scene, bpy.context.evaluated_depsgraph_get(), make_config(scene.kd_preview))
 
 
-def test_cancel_callback_leaves_previous_image(addon):  # noqa: F811
+def test_cancel_callback_leaves_previous_image(addon):
     """A cancel after the tree is built (between trace steps) raises Cancelled; nothing is written."""
     scene = half_plane_scene()
     bpy.ops.kdpreview.render()
@@ -341,7 +341,7 @@ def test_cancel_callback_leaves_previous_image(addon):  # noqa: F811
     assert (preview_pixels() == before).all() and not pipeline.job_running()
 
 
-def test_one_job_at_a_time(addon):  # noqa: F811
+def test_one_job_at_a_time(addon):
     half_plane_scene()
     token = object()
     pipeline.claim(token)
@@ -353,7 +353,7 @@ def test_one_job_at_a_time(addon):  # noqa: F811
     assert bpy.ops.kdpreview.render() == {"FINISHED"}
 
 
-def test_animation_writes_frames_and_report(addon, tmp_path):  # noqa: F811
+def test_animation_writes_frames_and_report(addon, tmp_path):
     scene = half_plane_scene()
     box = bpy.data.objects["Box"]
     box.keyframe_insert("location", frame=1)
@@ -419,7 +419,7 @@ def test_a_frame_that_fails_to_save_leaves_the_earlier_file_whole(tmp_path, monk
     assert [p.name for p in tmp_path.iterdir()] == [name]
 
 
-def test_a_report_that_fails_on_the_last_frame_is_written_when_the_sequence_closes(addon, tmp_path,  # noqa: F811
+def test_a_report_that_fails_on_the_last_frame_is_written_when_the_sequence_closes(addon, tmp_path,
                                                                                      monkeypatch):
     """A signal (or a full disk) while the last frame's report is written: close() writes it (review:
     the folder held both frames and the report listed one, incomplete). Reports while the sequence
@@ -458,7 +458,7 @@ def _fail_at_frame_3(scene):
     scene.frame_start, scene.frame_end = 1, 3
 
 
-def test_a_failed_animation_puts_the_preview_and_its_figures_back(addon, tmp_path):  # noqa: F811
+def test_a_failed_animation_puts_the_preview_and_its_figures_back(addon, tmp_path):
     """Outside review: an animation that failed at frame 3 left frame 2 in the preview image (its frames
     pass through it on their way to disk) under the panel's figures of the render before. The frames
     written stay on disk; the preview is the one before the run."""
@@ -478,7 +478,7 @@ def test_a_failed_animation_puts_the_preview_and_its_figures_back(addon, tmp_pat
     assert scene.frame_current == 1
 
 
-def test_a_failed_first_animation_leaves_no_preview_image(addon, tmp_path):  # noqa: F811
+def test_a_failed_first_animation_leaves_no_preview_image(addon, tmp_path):
     scene = half_plane_scene()
     _fail_at_frame_3(scene)
     scene.kd_preview.output_dir = str(tmp_path)
@@ -487,13 +487,13 @@ def test_a_failed_first_animation_leaves_no_preview_image(addon, tmp_path):  # n
     assert IMAGE_NAME not in bpy.data.images and len(list(tmp_path.iterdir())) == 3
 
 
-def test_animation_needs_a_saved_file_for_relative_output(addon):  # noqa: F811
+def test_animation_needs_a_saved_file_for_relative_output(addon):
     half_plane_scene()
     with pytest.raises(RuntimeError, match="relative to the .blend file, which is not saved"):
         bpy.ops.kdpreview.render_animation()
 
 
-def test_live_update_renders_on_frame_change_only_when_enabled(addon):  # noqa: F811
+def test_live_update_renders_on_frame_change_only_when_enabled(addon):
     scene = half_plane_scene()
     scene.frame_set(2)
     assert IMAGE_NAME not in bpy.data.images
@@ -505,7 +505,7 @@ def test_live_update_renders_on_frame_change_only_when_enabled(addon):  # noqa: 
     assert handlers == [live_update.kd_preview_frame_change]
 
 
-def test_live_update_renders_an_edit_once_edits_pause(addon):  # noqa: F811
+def test_live_update_renders_an_edit_once_edits_pause(addon):
     """Each depsgraph update (re)starts a timer (EDIT_DELAY); when it fires, the Render operator renders
     the edit. Timers never fire in background mode, so the test calls the timer's function itself."""
     timers = bpy.app.timers
@@ -527,7 +527,7 @@ def test_live_update_renders_an_edit_once_edits_pause(addon):  # noqa: F811
     assert not timers.is_registered(live_update.render_edits)
 
 
-def test_live_update_renders_settings_set_by_a_script_and_its_own_switching_on(addon):  # noqa: F811
+def test_live_update_renders_settings_set_by_a_script_and_its_own_switching_on(addon):
     """Outside QA (Blender 5.2.2): a setting set from Python makes no depsgraph update, so Live Update
     did not render it; nor did switching Live Update on. Settings now schedule the render themselves."""
     timers = bpy.app.timers
@@ -549,7 +549,7 @@ def test_live_update_renders_settings_set_by_a_script_and_its_own_switching_on(a
     assert preview_pixels()[far_ground][..., 0].mean() < 0.99  # AO Distance 3 reaches the box
 
 
-def test_live_update_edits_wait_for_a_running_render_or_tool_and_need_the_option(addon, monkeypatch):  # noqa: F811
+def test_live_update_edits_wait_for_a_running_render_or_tool_and_need_the_option(addon, monkeypatch):
     timers = bpy.app.timers
     scene = half_plane_scene()
     bpy.data.objects["Box"].location.x = -1.0
@@ -580,7 +580,7 @@ def test_live_update_edits_wait_for_a_running_render_or_tool_and_need_the_option
     assert live_update.render_edits() is None and IMAGE_NAME not in bpy.data.images  # switched off since
 
 
-def test_a_users_image_named_kd_preview_is_left_alone(addon):  # noqa: F811
+def test_a_users_image_named_kd_preview_is_left_alone(addon):
     """Found by outside QA: a user's own (byte) image called "KD Preview" was silently renamed."""
     half_plane_scene()
     mine = bpy.data.images.new(IMAGE_NAME, 4, 4)
@@ -594,7 +594,7 @@ def test_a_users_image_named_kd_preview_is_left_alone(addon):  # noqa: F811
     check_half_plane_image(preview_pixels(ours[0].name))
 
 
-def test_without_an_image_editor_a_render_opens_one_where_blender_shows_renders(addon, monkeypatch):  # noqa: F811
+def test_without_an_image_editor_a_render_opens_one_where_blender_shows_renders(addon, monkeypatch):
     """Found in a real Blender: the default Layout workspace has no Image Editor, so Render showed
     nothing. render.view_show cannot open anything in background mode (checked: it returns
     PASS_THROUGH), so it is stood in for here by what it does with Render In: Image Editor."""
@@ -623,7 +623,7 @@ def test_without_an_image_editor_a_render_opens_one_where_blender_shows_renders(
     assert len(opened) == 1 and output.image_editors() == []
 
 
-def test_preview_image_is_resized_in_place_and_shown_in_an_image_editor(addon):  # noqa: F811
+def test_preview_image_is_resized_in_place_and_shown_in_an_image_editor(addon):
     scene = half_plane_scene()
     area = bpy.context.window.screen.areas[0]
     area.type = "IMAGE_EDITOR"

@@ -12,7 +12,7 @@ import json
 
 import pytest
 
-from tests.addon_support import add_quad, add_sun, add_top_camera, addon  # noqa: F401
+from tests.addon_support import add_quad, add_sun, add_top_camera
 
 import bpy  # noqa: E402
 import numpy as np  # noqa: E402
@@ -47,7 +47,7 @@ def render(scene, frame, **changes):
     return pipeline.render_frame(scene, bpy.context.evaluated_depsgraph_get(), make_config(scene.kd_preview))
 
 
-def test_static_and_moved_objects_keep_their_trees_deforming_ones_are_rebuilt(addon):  # noqa: F811
+def test_static_and_moved_objects_keep_their_trees_deforming_ones_are_rebuilt(addon):
     scene = animated_scene()
     tree_cache.clear()
     reused = [render(scene, f) for f in (1, 2, 3, 4)]
@@ -70,7 +70,7 @@ def test_static_and_moved_objects_keep_their_trees_deforming_ones_are_rebuilt(ad
     assert not np.array_equal(reused[2].image, reused[3].image)  # the animation does show
 
 
-def test_image_reused_only_when_nothing_changed(addon):  # noqa: F811
+def test_image_reused_only_when_nothing_changed(addon):
     scene = animated_scene()
     tree_cache.clear()
     first = render(scene, 11)  # the animation ended at frame 10: frames 11 and 12 are identical
@@ -97,7 +97,7 @@ def test_image_reused_only_when_nothing_changed(addon):  # noqa: F811
     assert not portal.image_reused and any("light 'Window' left out" in w for w in portal.warnings)
 
 
-def test_an_ao_image_is_reused_whatever_the_lights_do(addon):  # noqa: F811
+def test_an_ao_image_is_reused_whatever_the_lights_do(addon):
     """Mode "ao" traces no light, so animated lights must not stop the last image's reuse (outside review:
     a scene whose lights moved every frame rendered every frame anew, 11-39 ms against ~2 ms)."""
     scene = animated_scene()
@@ -117,7 +117,7 @@ def test_an_ao_image_is_reused_whatever_the_lights_do(addon):  # noqa: F811
     assert not lit.image_reused and not render(scene, 12).image_reused
 
 
-def test_cli_rebuild_all_flag_and_report_columns(addon, tmp_path, capsys):  # noqa: F811
+def test_cli_rebuild_all_flag_and_report_columns(addon, tmp_path, capsys):
     scene = animated_scene()
     scene.frame_start, scene.frame_end = 10, 12
     blend = tmp_path / "anim.blend"
@@ -146,7 +146,7 @@ def test_rebuild_all_must_be_a_bool(value):
         make_config(Source())
 
 
-def test_lazy_build_setting_renders_the_same_image_and_skips_hidden_geometry(addon):  # noqa: F811
+def test_lazy_build_setting_renders_the_same_image_and_skips_hidden_geometry(addon):
     """The Lazy Build setting: one flat tree built on demand. A 20k-triangle sheet under the ground is
     reached by no camera or AO ray, so most of its subtrees stay unbuilt; the image is the eager one."""
     scene = animated_scene()
@@ -160,7 +160,7 @@ def test_lazy_build_setting_renders_the_same_image_and_skips_hidden_geometry(add
     assert not eager.tree_stats.get("lazy")
 
 
-def test_first_frame_continuing_another_is_marked_as_a_first_run(addon, monkeypatch):  # noqa: F811
+def test_first_frame_continuing_another_is_marked_as_a_first_run(addon, monkeypatch):
     """A process's first frame compiles or loads the tracing kernels, its first continued frame the
     pixel-reuse ones: both carry first_run (the CLI's "*"), later frames do not."""
     scene = animated_scene()

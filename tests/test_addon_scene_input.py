@@ -22,11 +22,6 @@ from kd_addon.errors import PreviewError  # noqa: E402
 from tests import bpy_scenes as scenes  # noqa: E402
 
 
-@pytest.fixture
-def scene():
-    return scenes.reset()
-
-
 def camera_data(**kw):
     base = dict(type="PERSP", lens=50.0, sensor_width=36.0, sensor_height=24.0, sensor_fit="AUTO",
                 ortho_scale=6.0, shift_x=0.0, shift_y=0.0, clip_start=0.1, clip_end=100.0)

@@ -19,11 +19,6 @@ from tests import bpy_scenes as scenes
 from tests.render_depsgraph import differences, render_entries
 
 
-@pytest.fixture
-def scene():
-    return scenes.reset()
-
-
 class _RandomScene:
     def __init__(self, seed):
         self.rng = np.random.default_rng(seed)

@@ -15,11 +15,6 @@ from tests import bpy_scenes as scenes
 from tests.render_depsgraph import differences, render_entries
 
 
-@pytest.fixture
-def scene():
-    return scenes.reset()
-
-
 def assert_extraction_matches_render():
     result = extract_scene()
     entries = render_entries()
@@ -218,7 +213,7 @@ EARLIER_SCENES = (
 @pytest.mark.parametrize("build", [b for _, b in EARLIER_SCENES], ids=[n for n, _ in EARLIER_SCENES])
 def test_earlier_reviews_scenes_match_a_render_depsgraph(scene, build):
     """The scenes of earlier outside reviews (each checked against Cycles by pixel counts, and by
-    test_extract.py's expected instances) against a render's own depsgraph, object by object."""
+    test_extract_visibility.py's expected instances) against a render's own depsgraph, object by object."""
     build()
     assert differences(extract_scene(), render_entries()) == []  # two of them render nothing, as the preview
 

@@ -18,7 +18,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from tests.addon_support import PYTHON, REPO, addon, event, half_plane_scene, preview_pixels  # noqa: F401
+from tests.addon_support import PYTHON, REPO, event, half_plane_scene, preview_pixels
 from tests import bpy_scenes as scenes  # noqa: E402
 from tests.bpy_scenes import add_wavy_sheet  # noqa: E402
 from tests.test_addon_modal import driver, modal, timer_events  # noqa: F401
@@ -44,7 +44,7 @@ def timer(op, context):
     return op.modal(context, event("TIMER"))
 
 
-def test_esc_during_a_long_build_returns_at_once_and_the_next_render_is_right(modal):  # noqa: F811
+def test_esc_during_a_long_build_returns_at_once_and_the_next_render_is_right(modal):
     scene = half_plane_scene()
     assert bpy.ops.kdpreview.render() == {"FINISHED"}
     reference = preview_pixels().copy()
@@ -78,7 +78,7 @@ def test_esc_during_a_long_build_returns_at_once_and_the_next_render_is_right(mo
     assert (preview_pixels() == reference).all()
 
 
-def test_cancel_callback_during_tracing_returns_at_once(addon):  # noqa: F811
+def test_cancel_callback_during_tracing_returns_at_once(addon):
     scene = half_plane_scene(size=(640, 320))
     scene.kd_preview.samples = 4096
     config = make_config(scene.kd_preview)
@@ -101,7 +101,7 @@ def test_cancel_callback_during_tracing_returns_at_once(addon):  # noqa: F811
     assert IMAGE_NAME not in bpy.data.images
 
 
-def test_denoising_runs_on_the_worker_and_says_so(addon, monkeypatch):  # noqa: F811
+def test_denoising_runs_on_the_worker_and_says_so(addon, monkeypatch):
     """Found by outside QA: Denoise's first use compiled its kernels (~11 s) inside result(), on
     Blender's main thread, under a frozen "Tracing: 8/8 samples": Esc was not seen until it ended."""
     scene = half_plane_scene()
@@ -130,7 +130,7 @@ def test_denoising_runs_on_the_worker_and_says_so(addon, monkeypatch):  # noqa: 
     assert result.image.shape == (32, 64, 4) and (result.image[:, :32, 3] == 1.0).all()
 
 
-def test_frame_change_during_a_render_cannot_change_it(modal):  # noqa: F811
+def test_frame_change_during_a_render_cannot_change_it(modal):
     scene = half_plane_scene()
     box = bpy.data.objects["Box"]
     box.keyframe_insert("location", frame=1)
@@ -332,7 +332,7 @@ def test_interrupt_flag_off_the_main_thread_leaves_sigint_alone():
     assert seen == [(False, True)] and signal.getsignal(signal.SIGINT) is before
 
 
-def test_a_sequence_stopped_early_still_reports_the_frames_it_wrote(addon, tmp_path):  # noqa: F811
+def test_a_sequence_stopped_early_still_reports_the_frames_it_wrote(addon, tmp_path):
     """Found by outside QA: after Ctrl-C the written frames had no report.json. Closing a sequence
     that stopped early writes one for them, marked incomplete; a finished one is marked complete."""
     import json
@@ -366,7 +366,7 @@ def test_a_sequence_stopped_early_still_reports_the_frames_it_wrote(addon, tmp_p
     assert "stopped" not in report
 
 
-def test_a_sequence_stopped_before_its_first_frame_keeps_the_earlier_report(addon, tmp_path):  # noqa: F811
+def test_a_sequence_stopped_before_its_first_frame_keeps_the_earlier_report(addon, tmp_path):
     """No frame written: no report, so the folder's report.json from an earlier run still describes
     the frames on disk."""
     from kd_addon.sequence import SequenceJob

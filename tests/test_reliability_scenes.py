@@ -10,7 +10,7 @@ import math
 
 import pytest
 
-from tests.addon_support import (add_quad, add_top_camera, addon, floor_scene, half_plane_scene,  # noqa: F401
+from tests.addon_support import (add_quad, add_top_camera, floor_scene, half_plane_scene,
                                  preview_pixels)
 
 import bpy  # noqa: E402
@@ -56,7 +56,7 @@ def test_memory_limit_exits_nonzero_before_rendering(tmp_path, capsys):
     assert cli_render(tmp_path, blend, "--resolution", "100", "--memory-limit", "64") == 0  # fits: renders
 
 
-def test_a_frame_beyond_the_machines_memory_is_refused_without_a_limit(addon, tmp_path, capsys, monkeypatch):  # noqa: F811
+def test_a_frame_beyond_the_machines_memory_is_refused_without_a_limit(addon, tmp_path, capsys, monkeypatch):
     """No memory limit set: a frame whose pixel buffers are above the machine's physical memory is
     refused with a message before anything is built (outside QA: a 20000 x 20000 frame built its tree,
     then core's own check escaped as a traceback). The machine is made small so the test is cheap."""
@@ -93,7 +93,7 @@ def test_non_finite_object_warns_on_the_command_line_and_the_rest_renders(tmp_pa
 # -- objects that are left out -------------------------------------------------------------
 
 
-def test_non_finite_objects_are_named_and_nothing_else_changes(addon):  # noqa: F811
+def test_non_finite_objects_are_named_and_nothing_else_changes(addon):
     scene = half_plane_scene()
     reference = render(scene)
     scenes.add_mesh("NaNTri", [(-3, 0, 2), (-1, 0, 2), (math.nan, 1, 2)], [(0, 1, 2)])
@@ -119,7 +119,7 @@ def test_non_finite_objects_are_named_and_nothing_else_changes(addon):  # noqa: 
     np.testing.assert_array_equal(result.image, reference.image)
 
 
-def test_objects_placed_beyond_float32s_range_are_named_and_left_out(addon):  # noqa: F811
+def test_objects_placed_beyond_float32s_range_are_named_and_left_out(addon):
     """Outside review: a scale keyed to 3e38 on one frame stopped the animation with core's traceback
     naming "instance 2". Such a placement is left out and named, as a non-finite one is, and the rest
     of the frame renders as it would without it."""
@@ -148,7 +148,7 @@ def test_objects_placed_beyond_float32s_range_are_named_and_left_out(addon):  # 
     assert result.objects_rebuilt + result.objects_reused == 3  # ground, half plane, the near member
 
 
-def test_faceless_flat_and_non_mesh_objects_are_skipped_quietly(addon):  # noqa: F811
+def test_faceless_flat_and_non_mesh_objects_are_skipped_quietly(addon):
     scene = half_plane_scene()
     reference = render(scene)
     scenes.add_mesh("Points", [(-2, 0, 3), (-1, 0, 3)], [])
@@ -167,7 +167,7 @@ def test_faceless_flat_and_non_mesh_objects_are_skipped_quietly(addon):  # noqa:
 # -- cameras and placement -------------------------------------------------------------------
 
 
-def test_camera_inside_a_closed_mesh(addon):  # noqa: F811
+def test_camera_inside_a_closed_mesh(addon):
     """Every camera ray hits the inside of the box; within a long ao_distance every AO ray hits too."""
     scene = bpy.context.scene
     scenes.add_cube("Room", scale=2.0)
@@ -187,7 +187,7 @@ def test_camera_inside_a_closed_mesh(addon):  # noqa: F811
 
 
 @pytest.mark.parametrize("distance", [1e6, 1e7])
-def test_far_offsets_give_the_same_image(addon, distance):  # noqa: F811
+def test_far_offsets_give_the_same_image(addon, distance):
     """1e6 and 1e7 units away (exactly representable in Blender's float32 locations)."""
     scenes.reset()
     near = render(half_plane_scene()).image
@@ -211,7 +211,7 @@ def scaled_half_plane_scene(scale):
 
 
 @pytest.mark.parametrize("scale", [1e-4, 1e4])
-def test_tiny_and_huge_scenes_render_like_scale_one(addon, scale):  # noqa: F811
+def test_tiny_and_huge_scenes_render_like_scale_one(addon, scale):
     near = render(half_plane_scene()).image
     scenes.reset()
     scaled = render(scaled_half_plane_scene(scale)).image
@@ -222,7 +222,7 @@ def test_tiny_and_huge_scenes_render_like_scale_one(addon, scale):  # noqa: F811
 # -- many instances, linked data ---------------------------------------------------------------
 
 
-def test_a_hundred_thousand_instances_of_one_mesh(addon):  # noqa: F811
+def test_a_hundred_thousand_instances_of_one_mesh(addon):
     """400 x 250 tiles seen from above: a quarter of each unit cell is covered, and nothing occludes a
     flat layer of tiles from above, so every hit pixel has AO exactly 1."""
     scene = bpy.context.scene
@@ -249,7 +249,7 @@ def write_library(path):
 
 
 @pytest.mark.parametrize("how", ["object", "collection instance"])
-def test_linked_library_data_renders_like_local_data(addon, tmp_path, how):  # noqa: F811
+def test_linked_library_data_renders_like_local_data(addon, tmp_path, how):
     reference = render(half_plane_scene()).image
     library = tmp_path / "library.blend"
     write_library(library)
@@ -272,7 +272,7 @@ def test_linked_library_data_renders_like_local_data(addon, tmp_path, how):  # n
     np.testing.assert_array_equal(result.image, reference)
 
 
-def test_memory_limit_refuses_the_frame_and_keeps_the_previous_image(addon):  # noqa: F811
+def test_memory_limit_refuses_the_frame_and_keeps_the_previous_image(addon):
     scene = half_plane_scene()
     bpy.ops.kdpreview.render()
     before = preview_pixels().copy()
