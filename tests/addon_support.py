@@ -87,6 +87,24 @@ def half_plane_scene(*, offset=(0.0, 0.0, 0.0), size=(64, 32)):
     return scene
 
 
+def column_of(x, width=64):
+    """Pixel column whose centre is at world x (view x in [-4, 4])."""
+    return int((x + 4.0) / 8.0 * width)
+
+
+def check_half_plane_image(img):
+    """Alpha exactly on the left half; AO in [0, 1]; 1 on open ground and on the cube's top."""
+    assert img.shape == (32, 64, 4) and img.dtype == np.float32
+    assert (img[:, :32, 3] == 1.0).all() and (img[:, 32:, 3] == 0.0).all()
+    assert (img[:, 32:, :3] == 0.0).all()
+    ao = img[:, :32, 0]
+    assert (ao >= 0.0).all() and (ao <= 1.0).all()
+    assert (img[..., 0] == img[..., 1]).all() and (img[..., 1] == img[..., 2]).all()  # grey AO
+    assert ao[16, column_of(-3.9)] == 1.0  # ground 1.4 from the cube: nothing within ao_distance 1
+    assert ao[16, column_of(-2.0)] == 1.0  # centre of the cube's top face
+    assert ao[16, column_of(-2.6)] < 0.9  # ground right beside the cube's wall
+
+
 def preview_pixels(name="KD Preview") -> np.ndarray:
     """The preview image as (H, W, 4), row 0 at the top (as the renderer returns it)."""
     image = bpy.data.images[name]

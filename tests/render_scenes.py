@@ -4,6 +4,12 @@ import numpy as np
 import core
 
 
+def render(tris, camera, size=32, **settings):
+    """A size x size preview of triangles `tris` (one kd-tree) with core's render settings."""
+    tree = core.build_kdtree(tris)
+    return core.render_preview(tree, camera, size, size, **settings)
+
+
 def quad(center, u, v):
     """Two triangles spanning center +- u +- v."""
     c, u, v = (np.asarray(x, np.float64) for x in (center, u, v))

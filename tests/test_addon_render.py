@@ -1,8 +1,9 @@
-"""Operators, pipeline and live update in background mode, on scenes with a known answer.
+"""Render operator and pipeline in background mode, on scenes with a known answer.
 
-half_plane_scene: an orthographic camera sees a plane over exactly the left half of the image
-(x in [-4, 0] of an 8 x 4 view) with a 1 x 1 x 1 cube standing on it, so the hit mask and the
-places where AO must be 1 (open plane, cube top) or below 1 (plane next to the cube) are known.
+half_plane_scene (tests/addon_support.py): an orthographic camera sees a plane over exactly the left
+half of the image (x in [-4, 0] of an 8 x 4 view) with a 1 x 1 x 1 cube standing on it, so the hit
+mask and the places where AO must be 1 (open plane, cube top) or below 1 (plane next to the cube)
+are known.
 """
 
 from __future__ import annotations
@@ -10,36 +11,16 @@ from __future__ import annotations
 import json
 import math
 
+import bpy
+import numpy as np
 import pytest
 
-from tests.addon_support import exr_channels, half_plane_scene, preview_pixels
-
-import bpy  # noqa: E402
-import numpy as np  # noqa: E402
-
-from kd_addon import live_update, output, pipeline  # noqa: E402
-from kd_addon.config import make_config  # noqa: E402
-from kd_addon.errors import Cancelled, PreviewError  # noqa: E402
-from kd_addon.output import IMAGE_NAME, save_frame  # noqa: E402
-from tests import bpy_scenes as scenes  # noqa: E402
-
-
-def column_of(x, width=64):
-    """Pixel column whose centre is at world x (view x in [-4, 4])."""
-    return int((x + 4.0) / 8.0 * width)
-
-
-def check_half_plane_image(img):
-    """Alpha exactly on the left half; AO in [0, 1]; 1 on open ground and on the cube's top."""
-    assert img.shape == (32, 64, 4) and img.dtype == np.float32
-    assert (img[:, :32, 3] == 1.0).all() and (img[:, 32:, 3] == 0.0).all()
-    assert (img[:, 32:, :3] == 0.0).all()
-    ao = img[:, :32, 0]
-    assert (ao >= 0.0).all() and (ao <= 1.0).all()
-    assert (img[..., 0] == img[..., 1]).all() and (img[..., 1] == img[..., 2]).all()  # grey AO
-    assert ao[16, column_of(-3.9)] == 1.0  # ground 1.4 from the cube: nothing within ao_distance 1
-    assert ao[16, column_of(-2.0)] == 1.0  # centre of the cube's top face
-    assert ao[16, column_of(-2.6)] < 0.9  # ground right beside the cube's wall
+from kd_addon import output, pipeline
+from kd_addon.config import make_config
+from kd_addon.errors import Cancelled, PreviewError
+from kd_addon.output import IMAGE_NAME
+from tests import bpy_scenes as scenes
+from tests.addon_support import check_half_plane_image, column_of, half_plane_scene, preview_pixels
 
 
 def test_render_operator_fills_the_preview_image(addon):
@@ -351,233 +332,6 @@ def test_one_job_at_a_time(addon):
     finally:
         pipeline.release(token)
     assert bpy.ops.kdpreview.render() == {"FINISHED"}
-
-
-def test_animation_writes_frames_and_report(addon, tmp_path):
-    scene = half_plane_scene()
-    box = bpy.data.objects["Box"]
-    box.keyframe_insert("location", frame=1)
-    box.location.x = -1.0
-    box.keyframe_insert("location", frame=3)
-    scene.frame_start, scene.frame_end, scene.frame_current = 1, 3, 2
-    scene.kd_preview.output_dir = str(tmp_path / "seq")
-    scene.kd_preview.output_format = "OPEN_EXR"
-    assert bpy.ops.kdpreview.render_animation() == {"FINISHED"}
-    assert scene.frame_current == 2  # put back
-    names = sorted(p.name for p in (tmp_path / "seq").iterdir())
-    assert names == ["frame_0001.exr", "frame_0002.exr", "frame_0003.exr", "report.json"]
-    report = json.loads((tmp_path / "seq" / "report.json").read_text())
-    assert [row["frame"] for row in report["frames"]] == [1, 2, 3]
-    for row in report["frames"]:
-        for key in ("triangles", "objects", "extract_ms", "build_ms", "trace_ms", "total_ms", "rays",
-                    "mrays_per_s", "tree", "file"):
-            assert key in row, key
-        assert row["total_ms"] >= row["extract_ms"] + row["build_ms"] + row["trace_ms"]
-        assert "build_ms" not in row["tree"]  # the trees' own build times, kept ones included: not this frame's
-    assert report["settings"]["output_format"] == "OPEN_EXR" and report["resolution"] == [64, 32]
-    assert report["totals"]["frames"] == 3 and report["totals"]["rays"] == sum(r["rays"] for r in report["frames"])
-    exr = bpy.data.images.load(str(tmp_path / "seq" / "frame_0003.exr"))
-    pixels = np.empty(64 * 32 * 4, np.float32)
-    exr.pixels.foreach_get(pixels)
-    img = pixels.reshape(32, 64, 4)[::-1]
-    assert (img[:, :32, 3] == 1.0).all() and (img[:, 32:, 3] == 0.0).all()
-    assert img[16, column_of(-1.0), 0] == pytest.approx(1.0, abs=1e-3)  # box moved to x = -1: its top is open
-
-
-def test_exr_frames_hold_the_linear_values(tmp_path):
-    """The EXR holds the image's own (linear) floats: Image.save() would store 0.5 as 0.7354 (sRGB)."""
-    scenes.reset()
-    image = np.zeros((3, 5, 4), np.float32)
-    image[..., 0] = np.linspace(0.0, 1.0, 5)
-    image[..., 1], image[..., 2], image[..., 3] = 0.25, 0.5, 1.0
-    image[2, 4] = 0.0  # one background pixel, bottom right
-    save_frame(image, tmp_path / "f.exr", "OPEN_EXR")
-    channels = exr_channels(tmp_path / "f.exr")
-    stored = np.stack([channels[c] for c in "RGBA"], axis=-1)
-    assert np.array_equal(stored, image)
-    assert [s.name for s in bpy.data.scenes] == ["Scene"]  # the scratch scene for the settings is gone
-
-
-@pytest.mark.parametrize("file_format, name", [("PNG", "f.png"), ("OPEN_EXR", "f.exr")])
-def test_a_frame_that_fails_to_save_leaves_the_earlier_file_whole(tmp_path, monkeypatch, file_format, name):
-    """Frames are written beside their name and renamed over it, so a save that fails (or a run killed)
-    halfway leaves the earlier run's file as it was, and no partial file."""
-    from kd_addon import output
-    scenes.reset()
-    image = np.full((3, 5, 4), 0.5, np.float32)
-    path = save_frame(image, tmp_path / name, file_format)
-    before = path.read_bytes()
-
-    def half_written(_image, partial, *args):
-        partial.write_bytes(before[: len(before) // 2])
-        raise OSError("disk full")
-
-    monkeypatch.setattr(output, "_save_linear_exr" if file_format == "OPEN_EXR" else "_save_png", half_written)
-    with pytest.raises(OSError, match="disk full"):
-        save_frame(np.zeros((3, 5, 4), np.float32), path, file_format)
-    assert path.read_bytes() == before
-    assert [p.name for p in tmp_path.iterdir()] == [name]
-
-
-def test_a_report_that_fails_on_the_last_frame_is_written_when_the_sequence_closes(addon, tmp_path,
-                                                                                     monkeypatch):
-    """A signal (or a full disk) while the last frame's report is written: close() writes it (review:
-    the folder held both frames and the report listed one, incomplete). Reports while the sequence
-    runs are best effort: the first frame's failing report does not stop it."""
-    from kd_addon import sequence
-    scene = half_plane_scene()
-    real = sequence.write_report
-    calls = []
-
-    def flaky(out_dir, scene_name, config, results, *rest):
-        calls.append(len(results))
-        if len(calls) <= 2:  # frame 1's report (disk full), then frame 2's (a signal)
-            raise (PreviewError("disk full") if len(calls) == 1 else KeyboardInterrupt)
-        return real(out_dir, scene_name, config, results, *rest)
-
-    monkeypatch.setattr(sequence, "write_report", flaky)
-    job = sequence.SequenceJob(scene, make_config(scene.kd_preview), [1, 2], tmp_path / "seq",
-                               lambda _scene: bpy.context.evaluated_depsgraph_get())
-    with pytest.raises(KeyboardInterrupt):
-        while not job.tick():
-            pass
-    job.close()
-    assert calls == [1, 2, 2]
-    report = json.loads((tmp_path / "seq" / "report.json").read_text())
-    assert report["complete"] is True and [f["file"] for f in report["frames"]] == ["frame_0001.png", "frame_0002.png"]
-    assert sorted(p.name for p in (tmp_path / "seq").iterdir()) == ["frame_0001.png", "frame_0002.png", "report.json"]
-
-
-def _fail_at_frame_3(scene):
-    """Key the camera's clip end below its clip start at frame 3: frames 1 and 2 render, 3 stops the run."""
-    camera = scene.camera.data
-    camera.clip_start = 0.1
-    for frame, value in ((2, 100.0), (3, 0.05)):
-        camera.clip_end = value
-        camera.keyframe_insert("clip_end", frame=frame)
-    scene.frame_start, scene.frame_end = 1, 3
-
-
-def test_a_failed_animation_puts_the_preview_and_its_figures_back(addon, tmp_path):
-    """Outside review: an animation that failed at frame 3 left frame 2 in the preview image (its frames
-    pass through it on their way to disk) under the panel's figures of the render before. The frames
-    written stay on disk; the preview is the one before the run."""
-    scene = half_plane_scene()
-    _fail_at_frame_3(scene)
-    scene.frame_set(1)
-    scene.kd_preview.ao_distance = 0.2
-    bpy.ops.kdpreview.render()
-    before, state = preview_pixels().copy(), bpy.context.window_manager.kd_preview_state
-    last_run = state.last_run
-    scene.kd_preview.ao_distance = 3.0  # frames of the animation differ from the preview
-    scene.kd_preview.output_dir = str(tmp_path)
-    with pytest.raises(RuntimeError, match="frame 3.*clip start 0.1 is not below clip end 0.05"):
-        bpy.ops.kdpreview.render_animation()
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["frame_0001.png", "frame_0002.png", "report.json"]
-    assert np.array_equal(preview_pixels(), before) and state.last_run == last_run
-    assert scene.frame_current == 1
-
-
-def test_a_failed_first_animation_leaves_no_preview_image(addon, tmp_path):
-    scene = half_plane_scene()
-    _fail_at_frame_3(scene)
-    scene.kd_preview.output_dir = str(tmp_path)
-    with pytest.raises(RuntimeError, match="clip start"):
-        bpy.ops.kdpreview.render_animation()
-    assert IMAGE_NAME not in bpy.data.images and len(list(tmp_path.iterdir())) == 3
-
-
-def test_animation_needs_a_saved_file_for_relative_output(addon):
-    half_plane_scene()
-    with pytest.raises(RuntimeError, match="relative to the .blend file, which is not saved"):
-        bpy.ops.kdpreview.render_animation()
-
-
-def test_live_update_renders_on_frame_change_only_when_enabled(addon):
-    scene = half_plane_scene()
-    scene.frame_set(2)
-    assert IMAGE_NAME not in bpy.data.images
-    scene.kd_preview.live_update = True
-    scene.frame_set(3)
-    check_half_plane_image(preview_pixels())
-    assert json.loads(bpy.context.window_manager.kd_preview_state.last_run)["frame"] == 3
-    handlers = [h for h in bpy.app.handlers.frame_change_post if h.__name__ == "kd_preview_frame_change"]
-    assert handlers == [live_update.kd_preview_frame_change]
-
-
-def test_live_update_renders_an_edit_once_edits_pause(addon):
-    """Each depsgraph update (re)starts a timer (EDIT_DELAY); when it fires, the Render operator renders
-    the edit. Timers never fire in background mode, so the test calls the timer's function itself."""
-    timers = bpy.app.timers
-    scene = half_plane_scene()
-    scene.kd_preview.live_update = True
-    bpy.context.view_layer.update()
-    if timers.is_registered(live_update.render_edits):
-        timers.unregister(live_update.render_edits)
-    bpy.data.objects["Box"].location.x = -1.0
-    bpy.context.view_layer.update()
-    assert timers.is_registered(live_update.render_edits)  # scheduled, not rendered yet
-    assert IMAGE_NAME not in bpy.data.images
-    timers.unregister(live_update.render_edits)
-    assert live_update.render_edits() is None  # what the timer does when it fires
-    img = preview_pixels()
-    assert img[16, column_of(-1.0), 0] == pytest.approx(1.0, abs=1e-3)  # the moved box's open top
-    assert img[16, column_of(-2.0), 0] < 0.9  # where the box stood is ground beside it now
-    bpy.context.view_layer.update()  # the preview's own image write is no edit: nothing scheduled
-    assert not timers.is_registered(live_update.render_edits)
-
-
-def test_live_update_renders_settings_set_by_a_script_and_its_own_switching_on(addon):
-    """Outside QA (Blender 5.2.2): a setting set from Python makes no depsgraph update, so Live Update
-    did not render it; nor did switching Live Update on. Settings now schedule the render themselves."""
-    timers = bpy.app.timers
-    scene = half_plane_scene()
-    if timers.is_registered(live_update.render_edits):
-        timers.unregister(live_update.render_edits)
-    scene.kd_preview.samples = 4  # Live Update off: nothing
-    assert not timers.is_registered(live_update.render_edits)
-    scene.kd_preview.live_update = True  # switching it on renders the scene as it is
-    assert timers.is_registered(live_update.render_edits)
-    timers.unregister(live_update.render_edits)
-    assert live_update.render_edits() is None
-    far_ground = (slice(None), slice(0, column_of(-3.5)))  # over 1.0 from the box
-    assert (preview_pixels()[far_ground][..., 0] == 1.0).all()  # AO Distance 1: nothing occludes it
-    scene.kd_preview.ao_distance = 3.0  # no depsgraph update (no view_layer.update() here either)
-    assert timers.is_registered(live_update.render_edits)
-    timers.unregister(live_update.render_edits)
-    assert live_update.render_edits() is None
-    assert preview_pixels()[far_ground][..., 0].mean() < 0.99  # AO Distance 3 reaches the box
-
-
-def test_live_update_edits_wait_for_a_running_render_or_tool_and_need_the_option(addon, monkeypatch):
-    timers = bpy.app.timers
-    scene = half_plane_scene()
-    bpy.data.objects["Box"].location.x = -1.0
-    bpy.context.view_layer.update()
-    assert not timers.is_registered(live_update.render_edits)  # live update off
-    scene.kd_preview.live_update = True
-    token = object()
-    pipeline.claim(token)  # another render runs
-    try:
-        assert live_update.render_edits() == live_update.EDIT_DELAY  # tries again later
-        assert IMAGE_NAME not in bpy.data.images
-    finally:
-        pipeline.release(token)
-    assert live_update.render_edits() is None and IMAGE_NAME in bpy.data.images
-    bpy.data.images.remove(bpy.data.images[IMAGE_NAME])
-    interactive = live_update.interactive_tool_running
-    assert interactive(["TRANSFORM_OT_translate"]) and interactive(["sculpt.brush_stroke"])
-    assert not interactive([]) and not interactive(["KDPREVIEW_OT_render", "WM_OT_modal_timer_operator"])
-    monkeypatch.setattr(live_update, "interactive_tool_running", lambda idnames: True)  # a grab in progress
-    assert live_update.render_edits() == live_update.EDIT_DELAY and IMAGE_NAME not in bpy.data.images
-    monkeypatch.setattr(live_update, "interactive_tool_running", interactive)
-    assert live_update.render_edits() is None and IMAGE_NAME in bpy.data.images
-    bpy.data.objects.remove(bpy.data.objects["Cam"])  # an edit the preview cannot render
-    assert live_update.render_edits() is None  # no traceback from the timer: the status says why
-    assert bpy.context.window_manager.kd_preview_state.status.startswith("Error:")
-    scene.kd_preview.live_update = False
-    bpy.data.images.remove(bpy.data.images[IMAGE_NAME])
-    assert live_update.render_edits() is None and IMAGE_NAME not in bpy.data.images  # switched off since
 
 
 def test_a_users_image_named_kd_preview_is_left_alone(addon):
