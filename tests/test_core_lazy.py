@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 import core
+from tests.byte_counts import MIB
 from tests.meshes import degenerate_mix, icosphere, lattice, mesh_triangles, random_soup, subdivided_cube
 from tests.render_scenes import floor, look_at, quad
 
@@ -207,7 +208,7 @@ def test_a_lazy_tree_keeps_its_memory_limit_while_it_grows():
     rng = np.random.default_rng(2)
     centres = rng.random((20000, 1, 3))
     tris = (centres + (rng.random((20000, 3, 3)) - 0.5) * 0.1).astype(np.float32)
-    options = dict(cost_ratio=3.0, leaf_size=1, duplication_budget=None, max_depth=30, memory_limit=20 << 20)
+    options = dict(cost_ratio=3.0, leaf_size=1, duplication_budget=None, max_depth=30, memory_limit=20 * MIB)
     with pytest.raises(core.MemoryLimitError):
         core.build_kdtree(tris, **options)
     tree = core.build_kdtree(tris, lazy=True, lazy_subtree_size=256, **options)
@@ -215,10 +216,10 @@ def test_a_lazy_tree_keeps_its_memory_limit_while_it_grows():
     with pytest.raises(core.MemoryLimitError, match=r"lazy kd-tree over 20,000 triangles would outgrow memory_limit "
                                                     r"\(20.0 MB\)"):
         core.intersect(tree, o, d)
-    assert tree.stats()["tree_bytes"] <= 20 << 20
+    assert tree.stats()["tree_bytes"] <= 20 * MIB
     few = core.build_kdtree(tris, lazy=True, lazy_subtree_size=256, **options)
     hits = core.intersect(few, o[:3], d[:3])  # three rays reach a few subtrees: within the limit
-    assert few.stats()["tree_bytes"] <= 20 << 20 and few.stats()["subtrees_built"] < few.stats()["subtrees_total"]
+    assert few.stats()["tree_bytes"] <= 20 * MIB and few.stats()["subtrees_built"] < few.stats()["subtrees_total"]
     eager = core.build_kdtree(tris, cost_ratio=3.0, leaf_size=1, duplication_budget=None, max_depth=30)
     np.testing.assert_array_equal(hits.prim, core.intersect(eager, o[:3], d[:3]).prim)
 

@@ -9,11 +9,13 @@ import pytest
 
 import core
 from core import memory
+from tests.byte_counts import KIB, TRIANGLE_FLOAT32_BYTES
 from tests.core_helpers import assert_same_as_brute
 from tests.meshes import icosphere, mesh_triangles, subdivided_cube
 from tests.render_scenes import floor, look_at
 
 SIZE = (48, 32)
+SMALL_PEAK_BYTES = 100_000  # far below the 7.2 MB input of test_memory_limit_refuses_before_allocating
 
 
 def box_on_floor(scale=1.0):
@@ -44,7 +46,7 @@ def test_memory_limit_refuses_before_allocating():
         _, peak = tracemalloc.get_traced_memory()
     finally:
         tracemalloc.stop()
-    assert peak < 100_000  # bytes: nothing the size of the input, let alone the build, was allocated
+    assert peak < SMALL_PEAK_BYTES  # nothing the size of the input, let alone the build, was allocated
     message = str(info.value)
     assert "kd-tree over 200,000 triangles ('binned' builder)" in message
     assert f"needs about {memory.build_bytes(len(tris)) / memory.MB:,.0f} MB" in message
@@ -55,7 +57,7 @@ def test_memory_limit_refuses_before_allocating():
 def test_memory_limit_counts_the_float32_copy_of_float64_input():
     tris64 = box_on_floor()
     n = len(tris64)
-    assert memory.build_bytes(n, copies_input=True) - memory.build_bytes(n) == int(memory.MARGIN * 36 * n)
+    assert memory.build_bytes(n, copies_input=True) - memory.build_bytes(n) == int(memory.MARGIN * TRIANGLE_FLOAT32_BYTES * n)
     with pytest.raises(core.MemoryLimitError):
         core.build_kdtree(tris64, memory_limit=memory.build_bytes(n))  # enough for float32 only
     core.build_kdtree(tris64.astype(np.float32), memory_limit=memory.build_bytes(n))
@@ -77,7 +79,7 @@ def test_memory_limit_holds_while_splitting_past_the_sah():
     checked after every split, so under a limit below that the build stops with the settings named;
     with the default budget (at most 32 references a triangle) or the default cost ratio it builds."""
     tris = mesh_triangles(*icosphere(2))
-    limit = 512 << 10
+    limit = 512 * KIB
     forced = dict(leaf_size=1, cost_ratio=100.0, max_depth=40, memory_limit=limit)
     with pytest.raises(core.MemoryLimitError, match=r"outgrew memory_limit \(0.5 MB\) while splitting: .*cost_ratio "
                                                     r"100, leaf_size 1, max_depth 40"):

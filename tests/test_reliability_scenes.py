@@ -20,6 +20,7 @@ from kd_addon import cli, corelib, memory_limit, pipeline  # noqa: E402
 from kd_addon.config import make_config  # noqa: E402
 from kd_addon.errors import PreviewError  # noqa: E402
 from tests import bpy_scenes as scenes  # noqa: E402
+from tests.byte_counts import MIB  # noqa: E402
 
 
 def render(scene=None):
@@ -50,7 +51,7 @@ def test_memory_limit_exits_nonzero_before_rendering(tmp_path, capsys):
     assert cli_render(tmp_path, blend, "--resolution", "100", "--memory-limit", "1") == 1
     geometry, pixels = memory_limit.frame_bytes(2, 400, 300, "binned")
     err = capsys.readouterr().err
-    assert f"frame 1: this frame needs about {(geometry + pixels) / 2**20:,.0f} MiB (2 triangles" in err
+    assert f"frame 1: this frame needs about {(geometry + pixels) / MIB:,.0f} MiB (2 triangles" in err
     assert "400x300 pixels" in err and "above the memory limit of 1 MiB" in err and "raise the memory limit" in err
     assert not (tmp_path / "out" / "frame_0001.png").exists()
     assert cli_render(tmp_path, blend, "--resolution", "100", "--memory-limit", "64") == 0  # fits: renders
@@ -64,7 +65,7 @@ def test_a_frame_beyond_the_machines_memory_is_refused_without_a_limit(addon, tm
     blend = tmp_path / "scene.blend"
     bpy.ops.wm.save_as_mainfile(filepath=str(blend))
     core_memory = corelib.load_core().memory
-    monkeypatch.setattr(core_memory, "physical_memory", lambda: 2 ** 20)
+    monkeypatch.setattr(core_memory, "physical_memory", lambda: MIB)
     assert cli_render(tmp_path, blend, "--resolution", "100") == 1
     err = capsys.readouterr().err
     assert "this frame's 400x300 pixels need about" in err and "above this machine's memory of 1 MiB" in err
