@@ -72,10 +72,8 @@ class RenderVisibility:
         return out
 
     def in_instanced_collection(self, instancer: bpy.types.Object, orig) -> bool:
-        """Whether `instancer` (a collection instancer, a vertex or face instancing parent, geometry
-        nodes or particles, node_instances.py) would make `orig` in a render, through whatever it
-        instances, nested: every object it can reach counts unless its render skips it (render-hidden,
-        or in a render-hidden collection or instancer on the way). An object it cannot be seen to reach
+        """Whether `instancer` (of any kind) would make `orig` in a render, through whatever it
+        instances, nested, unless a render skips it on the way. An object it cannot be seen to reach
         (a collection computed by nodes) is kept."""
         reach, shown = self._expansion(instancer, frozenset())
         ptr = orig.as_pointer()

@@ -31,13 +31,9 @@ class MeshGeometry:
 
 @dataclass(frozen=True)
 class Instance:
-    """One placement of a geometry in the world.
-
-    ``is_instance`` mirrors ``DepsgraphObjectInstance.is_instance``; note that
-    the mesh of a curve, text, surface or metaball arrives as an instance of
-    its own object (``instancer == name``). ``instancer`` is the top-level
-    instancer (for nested collection instances, the outermost empty).
-    """
+    """One placement of a geometry in the world. The mesh of a curve, text, surface or metaball
+    arrives as an instance of its own object (``instancer == name``); ``instancer`` is the top-level
+    instancer (for nested collection instances, the outermost empty)."""
 
     geometry_key: int
     matrix_world: np.ndarray  # (4, 4) float64
