@@ -20,7 +20,7 @@ if code in (130, 143):
     # Interrupted (SIGINT) or terminated (SIGTERM): the run's report is written; end with that code now.
     # A KeyboardInterrupt that landed while Blender ran Python itself (it prints and clears it) can leave
     # the interpreter's "unhandled KeyboardInterrupt" flag set, and Python's teardown then turns the exit
-    # into a SIGINT kill (-2): seen once in CI on bpy 4.2 with Ctrl-C 0.6 s in.
+    # into a SIGINT kill (-2).
     sys.stdout.flush()
     sys.stderr.flush()
     os._exit(code)

@@ -63,9 +63,8 @@ class _SubPanel(_SidebarTab):
 
 
 def wrapped_label(layout, context, text: str, icon: str = "NONE") -> None:
-    """`text` as labels wrapped to the sidebar's width. Blender's labels do not wrap, and the sidebar
-    cuts a status or warning at its edge, though an error names the object or setting at fault. About 7 pixels a character at UI
-    scale 1; 40 characters when drawn without a region."""
+    """`text` as labels wrapped to the sidebar's width (Blender's labels do not wrap and the sidebar
+    cuts them at its edge). About 7 pixels a character at UI scale 1; 40 characters without a region."""
     region = getattr(context, "region", None)
     preferences = getattr(context, "preferences", None)
     scale = (preferences.system.ui_scale if preferences is not None else 0.0) or 1.0  # 0 in background mode

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numba
 import numpy as np
+import pytest
 
 from tests.addon_support import REPO, run_python
 
@@ -44,6 +45,7 @@ def build_zip(tmp_path):
     return tmp_path / "dist" / ZIP_NAME
 
 
+@pytest.mark.slow
 def test_extension_builds_installs_renders_and_uninstalls(tmp_path):
     if not sys.platform.startswith("linux"):
         import pytest

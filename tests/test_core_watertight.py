@@ -50,6 +50,7 @@ def test_icosphere_no_ray_escapes(options):
     assert core.occluded(tree, origins, targets - origins).all()
 
 
+@pytest.mark.slow
 def test_icosphere_every_ray_from_centre_hits_exactly_once():
     """From the centre the jittered sphere is star-shaped, so each ray crosses the surface once."""
     rng = np.random.default_rng(6)

@@ -124,8 +124,15 @@ class _RandomScene:
 KNOWN_GAPS = {134, 256}
 
 
-@pytest.mark.parametrize("seed", [pytest.param(s, marks=pytest.mark.xfail(strict=True, reason="known gap"))
-                                  if s in KNOWN_GAPS else s for s in range(300)])
+QUICK_SEEDS = 20  # the seeds the quick check (-m "not slow") runs; the full run runs all 300
+
+
+def _seed(seed: int):
+    marks = [pytest.mark.xfail(strict=True, reason="known gap")] if seed in KNOWN_GAPS else []
+    return pytest.param(seed, marks=marks + ([pytest.mark.slow] if seed >= QUICK_SEEDS else []))
+
+
+@pytest.mark.parametrize("seed", [_seed(s) for s in range(300)])
 def test_random_instancing_scene_matches_a_render_depsgraph(scene, seed):
     """Object by object: the same triangle counts and areas, and the same bounds unless an instancer
     hides itself (Show Instancer off): then bpy's render-mode object_instances gave some of its

@@ -128,6 +128,7 @@ def _python_reference(a, n):
     return sweep(n) + sweep(n + 1) + step(n)
 
 
+@pytest.mark.slow
 def test_scope_sharing_copy_compiles_the_same_code_with_fewer_copies():
     numba_own, shared = _compile(False), _compile(True)
     assert shared["llvm"] == numba_own["llvm"]

@@ -39,6 +39,7 @@ print(time.time())
 """
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(os.name == "nt", reason="the lock is held here with fcntl")
 def test_a_cache_index_save_waits_for_the_lock(tmp_path):
     """A process compiling a registered kernel writes its cache index only once the folder's lock is
@@ -136,6 +137,7 @@ os._exit(0)  # as `python -m kd_addon` ends after Ctrl-C: the helper is never st
 """
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(os.name == "nt", reason="the helper watches its parent's pid (POSIX getppid)")
 def test_the_helper_ends_when_its_parent_is_gone(tmp_path):
     """Outside QA: Ctrl-C during a first run's compile left the helper compiling for ~70 s after the

@@ -44,6 +44,7 @@ def timer(op, context):
     return op.modal(context, event("TIMER"))
 
 
+@pytest.mark.slow
 def test_esc_during_a_long_build_returns_at_once_and_the_next_render_is_right(modal):
     scene = half_plane_scene()
     assert bpy.ops.kdpreview.render() == {"FINISHED"}
@@ -193,6 +194,7 @@ def interrupt(proc, *, rows=0, pause=0.0, signals=1, signum=signal.SIGINT):
         proc.kill()
 
 
+@pytest.mark.slow
 def test_ctrl_c_on_the_command_line_exits_at_once_mid_render(tmp_path):
     """SIGINT while the worker builds or traces a 1M-triangle frame: exit code 130 and the message at
     once, without waiting for the abandoned kernel work."""
@@ -251,6 +253,7 @@ def test_sigterm_mid_animation_ends_like_ctrl_c_with_an_incomplete_report(tmp_pa
     assert sorted(p.name for p in out.iterdir()) == written + ["report.json"]
 
 
+@pytest.mark.slow
 def test_a_killed_rerun_leaves_a_report_of_its_own_frames(tmp_path):
     """SIGKILL cannot be handled: the report is written after every frame, so a rerun into a folder
     that holds a finished run, killed mid-animation, leaves report.json describing the new run's

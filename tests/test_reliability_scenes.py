@@ -223,6 +223,7 @@ def test_tiny_and_huge_scenes_render_like_scale_one(addon, scale):
 # -- many instances, linked data ---------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_a_hundred_thousand_instances_of_one_mesh(addon):
     """400 x 250 tiles seen from above: a quarter of each unit cell is covered, and nothing occludes a
     flat layer of tiles from above, so every hit pixel has AO exactly 1."""
