@@ -69,7 +69,7 @@ def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: RenderVisibility, ins
                 warnings += _strand_warnings(ob, vis) + _pick_warnings(ob, vis)
             for collection in _collections_rendered_whole(ob, vis):
                 instancers.setdefault(collection.as_pointer(), (collection, []))[1].append(ob)
-            continue  # the common case first: ~1.5 us an object
+            continue  # the common case first, cheapest
         if ob.instance_type == "COLLECTION" and ob.instance_collection is not None and vis.scene_object(ob):
             if ob.as_pointer() in evaluated:
                 instancers.setdefault(ob.instance_collection.as_pointer(), (ob.instance_collection, []))[1].append(ob)
