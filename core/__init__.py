@@ -34,23 +34,23 @@ Denoising (edge-avoiding à-trous, variance-guided; the raw estimate stays the d
     render_preview(..., denoise=True) / PreviewRender.image(denoise=True) -> (H, W, 4) float32
     denoise_pixels(width, height, pixels, points, normals, sums, sq_sums, counts) -> (H, W, 4) float32
 """
-from . import kernel_cache  # first: kernels are keyed by all of core's sources when decorated
-from . import inline_copy  # noqa: F401  (before any kernel compiles: halves a cold compile)
-from .build import build_kdtree
-from .camera import Camera
-from .denoise import denoise_pixels
-from .lights import Light
-from .render import PreviewRender, frame_ray_count, render_preview
-from .kdtree import KdTree
+from .jit import kernel_cache  # first: kernels are keyed by all of core's sources when decorated
+from .jit import inline_copy  # noqa: F401  (before any kernel compiles: halves a cold compile)
+from .build.builder import build_kdtree
+from .render.camera import Camera
+from .render.denoise import denoise_pixels
+from .render.lights import Light
+from .render.preview_render import PreviewRender, frame_ray_count, render_preview
+from .trace.kdtree import KdTree
 from .memory import MemoryLimitError
-from .options import BuildOptions
-from .parallel_compile import rendering_kernels_alongside
-from .pixel_reuse import PixelState
-from .queries import Hits, intersect, occluded
-from .ray_visibility import ALL_RAYS, CAMERA_RAYS, HOLDOUT, SHADOW_RAYS
-from .scene_builder import BuildReport, MeshInput, PlacementRangeError, SceneBuilder, build_scene
-from .scene_queries import SceneHits, intersect_scene, occluded_scene
-from .two_level import TwoLevelScene, build_two_level
+from .build.options import BuildOptions
+from .jit.parallel_compile import rendering_kernels_alongside
+from .render.pixel_reuse import PixelState
+from .trace.queries import Hits, intersect, occluded
+from .scene.ray_visibility import ALL_RAYS, CAMERA_RAYS, HOLDOUT, SHADOW_RAYS
+from .scene.scene_builder import BuildReport, MeshInput, PlacementRangeError, SceneBuilder, build_scene
+from .scene.scene_queries import SceneHits, intersect_scene, occluded_scene
+from .scene.two_level import TwoLevelScene, build_two_level
 
 __all__ = ["denoise_pixels",
            "build_kdtree", "intersect", "occluded", "KdTree", "Hits", "BuildOptions", "Camera", "Light",

@@ -12,7 +12,7 @@ cache goes to Blender's per-extension user folder
 to the platform's user cache folder. An explicit NUMBA_CACHE_DIR wins.
 
 Why a folder per version of core's sources: core keys its cached kernels by
-all of its sources (core/kernel_cache.py), so a stale kernel never runs; a
+all of its sources (core/jit/kernel_cache.py), so a stale kernel never runs; a
 folder per version also keeps an update from recompiling over the cache of
 the version before it (users switching back) and lets `cache_is_warm` tell
 "loading" from "compiling" by the folder alone.
@@ -110,9 +110,9 @@ def _digest(folder: Path) -> str:
 
 @functools.lru_cache(maxsize=1)
 def _core_sources_digest_module():
-    """core/sources_digest.py loaded as a file: importing it as part of core would import numba and
+    """core/jit/sources_digest.py loaded as a file: importing it as part of core would import numba and
     every kernel module, which enabling the add-on must not do (see above)."""
-    path = CORE_FOLDER / "sources_digest.py"
+    path = CORE_FOLDER / "jit" / "sources_digest.py"
     spec = importlib.util.spec_from_file_location(f"{APP_NAME}_core_sources_digest", path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)

@@ -179,13 +179,13 @@ def test_the_cache_is_warm_only_once_the_sampling_kernel_is_compiled_for_this_py
     the first index file appears seconds into a compile of minutes (outside QA)."""
     import sys
 
-    import core.render_kernels
+    import core.render.render_kernels
 
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
     folder = corelib.numba_cache_dir() / "core_0123"
     folder.mkdir(parents=True)
     module, function = corelib.WARM_KERNEL.split(".")
-    assert module == "render_kernels" and hasattr(core.render_kernels, function)
+    assert module == "render_kernels" and hasattr(core.render.render_kernels, function)
     python = f"py{sys.version_info[0]}{sys.version_info[1]}"
     (folder / f"pools.ensure_refs-12.{python}.nbi").touch()
     (folder / f"{corelib.WARM_KERNEL}-43.py30.nbi").touch()  # another Python's

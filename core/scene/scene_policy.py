@@ -24,7 +24,7 @@ PRECISION_RATIO of its own diagonals from its anchor.
 """
 import numpy as np
 
-from .inputs import FLOAT32_MAX
+from ..inputs import FLOAT32_MAX
 from .two_level import invertible, transformed_boxes
 
 LAYOUTS = ("auto", "two_level", "flat")

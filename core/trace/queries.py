@@ -7,10 +7,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .inputs import as_ray_limits, as_rays, hit_distances_as_float32
+from ..inputs import as_ray_limits, as_rays, hit_distances_as_float32
 from .kdtree import KdTree
-from .lazy import resolve_suspended
-from .threads import thread_count
+from ..build.lazy import resolve_suspended
+from ..jit.threads import thread_count
 from .traversal import trace_rays
 
 

@@ -15,11 +15,11 @@ suzanne-251k, a flat tree as one instance: +50% against the flat traversal; inli
 import numpy as np
 from numba import njit, prange
 
-from .array_views import at, rows, unowned
-from .layout import LEAF, NO_HIT
-from .traversal import (RAYS_PER_TASK, STACK_SIZE, _descend, _pop, block_range, clip_to_box,
+from ..trace.array_views import at, rows, unowned
+from ..trace.layout import LEAF, NO_HIT
+from ..trace.traversal import (RAYS_PER_TASK, STACK_SIZE, _descend, _pop, block_range, clip_to_box,
                         interleaved_blocks, trace_ray)
-from .triangle_test import LEAF_CHUNK
+from ..trace.triangle_test import LEAF_CHUNK
 
 
 @njit(cache=True)

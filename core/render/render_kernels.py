@@ -27,16 +27,16 @@ instead of one a sample. Without the memo (too many bits) every sample traces it
 import numpy as np
 from numba import njit, prange
 
-from .array_views import rows, unowned
-from .instance_traversal import (hit_surface, new_scratch, onto_triangle_plane, surface_error_scale, trace_scene,
+from ..trace.array_views import rows, unowned
+from ..scene.instance_traversal import (hit_surface, new_scratch, onto_triangle_plane, surface_error_scale, trace_scene,
                                  unowned_scene, world_normal)
-from .layout import NO_HIT
+from ..trace.layout import NO_HIT
 from .lights import COLOR, DELTA, NO_SHADOW
 from .pixel_reuse import segment_meets_any
-from .ray_visibility import SHADOW_RAYS
+from ..scene.ray_visibility import SHADOW_RAYS
 from .sampling import pixel_seed, sample_2d
 from .shading import cosine_direction, offset_origin, sample_light, short_of_light
-from .traversal import block_range, interleaved_blocks
+from ..trace.traversal import block_range, interleaved_blocks
 
 AO, SHADOW, AO_SHADOW = 1, 2, 3
 MODES = {"ao": AO, "shadow": SHADOW, "ao+shadow": AO_SHADOW}

@@ -6,7 +6,7 @@ same termination rule (cost ratio, leaf size, depth) decides when to stop.
 import numpy as np
 from numba import njit
 
-from .geometry import half_area, longest_axis
+from ..geometry import half_area, longest_axis
 from .sah import split_cost, valid_position
 
 

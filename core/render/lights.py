@@ -6,7 +6,7 @@ with cast_shadow=False (Blender's "Cast Shadow" off) lights every surface facing
 """
 import numpy as np
 
-from .inputs import as_number, without_negligible_components
+from ..inputs import as_number, without_negligible_components
 
 POINT, SUN, SPOT, AREA = 0, 1, 2, 3
 AREA_SHAPES = {"SQUARE": 0, "RECTANGLE": 1, "DISK": 2, "ELLIPSE": 3}

@@ -3,16 +3,16 @@ from time import perf_counter
 
 import numpy as np
 
-from .geometry import triangle_boxes, union_of_boxes
-from .inputs import as_triangles
-from .kdtree import KdTree, empty_arrays
+from ..geometry import triangle_boxes, union_of_boxes
+from ..inputs import as_triangles
+from ..trace.kdtree import KdTree, empty_arrays
 from .lazy import DeferredSubtrees
 from .leaf_triangles import leaf_triangles
-from .memory import MB, MemoryLimitError, check_build_memory, release_freed_memory
+from ..memory import MB, MemoryLimitError, check_build_memory, release_freed_memory
 from .merge import merge_tree
 from .options import make_options
 from .subtree import build_subtrees
-from .threads import thread_count
+from ..jit.threads import thread_count
 from .top_levels import build_top_levels
 
 

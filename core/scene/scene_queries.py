@@ -3,11 +3,11 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .inputs import as_ray_limits, as_rays, hit_distances_as_float32
+from ..inputs import as_ray_limits, as_rays, hit_distances_as_float32
 from .instance_traversal import trace_scene_rays
-from .lazy import resolve_suspended
+from ..build.lazy import resolve_suspended
 from .ray_visibility import ALL_RAYS, as_ray_mask
-from .threads import thread_count
+from ..jit.threads import thread_count
 from .two_level import as_two_level
 
 

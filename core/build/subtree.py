@@ -27,9 +27,9 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 from numba import njit
 
-from .layout import LEAF, UNBUILT
+from ..trace.layout import LEAF, UNBUILT
 from .leaf_triangles import BYTES_PER_REFERENCE as LEAF_COPY_BYTES
-from .memory import MIN_SUBTREE_BUDGET, MemoryLimitError
+from ..memory import MIN_SUBTREE_BUDGET, MemoryLimitError
 from .options import EXACT
 from .partition import new_split_scratch, partition_in_place
 from .pools import ensure_array, ensure_floats, ensure_nodes, ensure_refs

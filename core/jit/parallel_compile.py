@@ -42,15 +42,17 @@ from contextlib import contextmanager
 
 import numpy as np
 
-from .camera import Camera
-from .kdtree import KdTree
-from .kernel_cache import CORE_CACHE_FOLDER_VARIABLE, CORE_FOLDER, core_cache_folder
-from .layout import LEAF
-from .lights import Light
-from .options import BuildOptions
-from .render import PreviewRender
-from .render_kernels import add_samples, surface_frames
-from .two_level import as_two_level
+from ..render.camera import Camera
+from ..trace.kdtree import KdTree
+from .kernel_cache import CORE_CACHE_FOLDER_VARIABLE, CORE_FOLDER, core_cache_folders
+from ..trace.layout import LEAF
+from ..render.lights import Light
+from ..build.options import BuildOptions
+from ..render.preview_render import PreviewRender
+from ..render.render_kernels import add_samples, surface_frames
+from ..scene.two_level import as_two_level
+
+CORE_PACKAGE = __package__.rpartition(".")[0]  # core's module name: "core", or bl_ext.<repo>.<id>.core
 
 
 def rendering_kernels_cached() -> bool:
@@ -174,10 +176,10 @@ class RenderingKernelsHelper:
         self.stopped = False
         env = dict(os.environ, NUMBA_NUM_THREADS="1",
                    PYTHONPATH=os.pathsep.join(p for p in sys.path if p and os.path.isdir(p)))
-        env[CORE_CACHE_FOLDER_VARIABLE] = core_cache_folder(add_samples)  # where this process reads
+        env[CORE_CACHE_FOLDER_VARIABLE] = core_cache_folders()  # where this process reads
         env["KD_PREVIEW_HELPER_PARENT"] = str(os.getpid())  # the helper ends when this process is gone
         self.process = subprocess.Popen(
-            [sys.executable, "-c", _HELPER_CODE, __package__, str(CORE_FOLDER), "1" if denoise else "0"], env=env,
+            [sys.executable, "-c", _HELPER_CODE, CORE_PACKAGE, str(CORE_FOLDER), "1" if denoise else "0"], env=env,
             stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=self._errors,
             creationflags=getattr(subprocess, "CREATE_NO_WINDOW", 0))  # Windows: no console window
 
@@ -235,5 +237,5 @@ for depth in range(len(parts) - 1, 0, -1):
     stub.__path__ = [str(parent)]
     sys.modules.setdefault(stub.__name__, stub)
     parent = parent.parent
-importlib.import_module(name + ".parallel_compile").compile_rendering_kernels(sys.argv[3] == "1")
+importlib.import_module(name + ".jit.parallel_compile").compile_rendering_kernels(sys.argv[3] == "1")
 """

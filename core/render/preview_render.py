@@ -30,19 +30,19 @@ import numpy as np
 
 from .camera import Camera, tiled_pixels
 from .denoise import SOBOL_VARIANCE_DECAY, denoise_pixels
-from .inputs import as_number, check_image_size
-from .kdtree import KdTree
-from .lazy import resolve_suspended
-from .instance_signature import changed_boxes
+from ..inputs import as_number, check_image_size
+from ..trace.kdtree import KdTree
+from ..build.lazy import resolve_suspended
+from ..scene.instance_signature import changed_boxes
 from .lights import DELTA, pack_lights
-from .memory import check_render_memory
+from ..memory import check_render_memory
 from .pixel_reuse import PixelState, prepared_boxes, segments_touch, settings_key, surface_rays_touch
-from .ray_visibility import CAMERA_RAYS, HOLDOUT
+from ..scene.ray_visibility import CAMERA_RAYS, HOLDOUT
 from .render_kernels import MEMO_BITS, MODES, add_samples, assemble_image, surface_frames
 from .sampling import SAMPLERS, SOBOL_DIM1
-from .scene_queries import trace_valid_rays
-from .threads import thread_count
-from .two_level import TwoLevelScene, as_two_level
+from ..scene.scene_queries import trace_valid_rays
+from ..jit.threads import thread_count
+from ..scene.two_level import TwoLevelScene, as_two_level
 
 CHECK_EVERY = 4
 

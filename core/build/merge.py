@@ -6,7 +6,7 @@ subtrees it builds on demand into their UNBUILT slots the same way (lazy.py).
 """
 import numpy as np
 
-from .layout import LEAF, UNBUILT
+from ..trace.layout import LEAF, UNBUILT
 
 
 def merge_tree(top_nodes, subtrees):

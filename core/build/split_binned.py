@@ -10,7 +10,7 @@ made the builder cut "empty" slivers that were not empty until it ran out of dep
 import numpy as np
 from numba import njit
 
-from .geometry import cut_half_area, extents, half_area, longest_axis
+from ..geometry import cut_half_area, extents, half_area, longest_axis
 from .sah import cost_of_areas, improves_on_leaf, split_cost, valid_position
 
 

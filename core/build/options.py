@@ -9,8 +9,8 @@ from typing import NamedTuple, Optional
 
 import numpy as np
 
-from .geometry import half_area
-from .memory import subtree_bytes_per_reference
+from ..geometry import half_area
+from ..memory import subtree_bytes_per_reference
 
 BUILDERS = ("binned", "exact", "median")
 TOP_STRATEGIES = ("sah", "clustering")

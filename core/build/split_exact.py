@@ -9,7 +9,7 @@ problem by widening planar boxes; this rule is exact and needs no epsilon).
 import numpy as np
 from numba import njit
 
-from .geometry import half_area
+from ..geometry import half_area
 from .sah import split_cost, valid_position
 
 

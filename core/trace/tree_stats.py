@@ -9,7 +9,7 @@ stands, not a bound on the finished tree's.
 import numpy as np
 from numba import njit
 
-from .geometry import half_area
+from ..geometry import half_area
 from .layout import LEAF, UNBUILT
 
 

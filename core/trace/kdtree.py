@@ -2,7 +2,7 @@
 import numpy as np
 
 from .layout import LEAF
-from .leaf_triangles import leaf_triangles
+from ..build.leaf_triangles import leaf_triangles
 from .tree_stats import leaf_size_histogram, walk_stats
 
 

@@ -4,7 +4,7 @@ import functools
 import numpy as np
 from numba import njit, prange
 
-from .inputs import as_number, check_image_size, without_negligible_components
+from ..inputs import as_number, check_image_size, without_negligible_components
 
 TILE = 8  # tiled_pixels: 8 x 8 = 64 rays, one traversal task (traversal.RAYS_PER_TASK)
 

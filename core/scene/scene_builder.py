@@ -30,10 +30,10 @@ from typing import Hashable, NamedTuple
 
 import numpy as np
 
-from .build import build_kdtree
-from .inputs import FLOAT32_MAX, first_row_beyond_float32, is_real_dtype
+from ..build.builder import build_kdtree
+from ..inputs import FLOAT32_MAX, first_row_beyond_float32, is_real_dtype
 from .instance_signature import instance_signature, mesh_digest
-from .options import make_options
+from ..build.options import make_options
 from .ray_visibility import ALL_RAYS, as_visibility, stops_rays
 from .scene_policy import LAYOUTS, plan_soup, soup_zones
 from .two_level import build_two_level, check_placement, transformed_boxes

@@ -12,13 +12,13 @@ from time import perf_counter
 
 import numpy as np
 
-from .build import _build_arrays
-from .geometry import half_area
-from .kdtree import KdTree, empty_arrays
-from .layout import LEAF
-from .options import make_options
+from ..build.builder import _build_arrays
+from ..geometry import half_area
+from ..trace.kdtree import KdTree, empty_arrays
+from ..trace.layout import LEAF
+from ..build.options import make_options
 from .ray_visibility import as_visibility
-from .threads import thread_count
+from ..jit.threads import thread_count
 
 # An instance test (a matrix product, then the mesh tree's own traversal) costs the SAH this many triangle
 # tests: at the default intersection_cost (0.3, options.py) the top level keeps the 1.5 it was tuned with

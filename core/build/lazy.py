@@ -17,12 +17,12 @@ from time import perf_counter
 
 import numpy as np
 
-from .layout import NO_HIT, UNBUILT, subtree_of
+from ..trace.layout import NO_HIT, UNBUILT, subtree_of
 from .leaf_triangles import BYTES_PER_REFERENCE as LEAF_COPY_BYTES
-from .memory import MB, MemoryLimitError
+from ..memory import MB, MemoryLimitError
 from .merge import splice_subtrees
 from .subtree import build_subtrees
-from .threads import thread_count
+from ..jit.threads import thread_count
 from .top_levels import Task
 
 

@@ -41,8 +41,8 @@ Background pixels (no hit) and pixels without samples are never read and stay ex
 import numpy as np
 from numba import njit, prange
 
-from .threads import thread_count
-from .traversal import block_range, interleaved_blocks
+from ..jit.threads import thread_count
+from ..trace.traversal import block_range, interleaved_blocks
 
 ITERATIONS = 4  # 5x5 taps at spacing 1, 2, 4, 8 pixels: a 61x61 footprint (Dammertz et al. use 5 passes;
 # on suzanne-251k a fifth pass changed the RMSE by under 1% at 1-64 spp and costs a fifth of the time)

@@ -8,7 +8,7 @@ is told how many rays the tree will answer, when the split saves them more than 
 """
 from numba import njit
 
-from .geometry import half_area, half_area_cut
+from ..geometry import half_area, half_area_cut
 
 
 @njit(cache=True, inline="always")

@@ -1,8 +1,8 @@
 """Numba's on-disk kernel cache, invalidated by any change to core's sources, not just the kernel's file.
 
 Numba stamps a cached kernel with its own source file only (numba 0.68: a hash of that file's
-contents). Core's kernels inline functions from other files: `traversal.trace_rays` inlines
-`triangle_test.intersect_triangle`. After an update that edits the callee but not the caller, the
+contents). Core's kernels inline functions from other files: `trace.traversal.trace_rays` inlines
+`trace.triangle_test.intersect_triangle`. After an update that edits the callee but not the caller, the
 caller's stamp still matches and the stale machine code runs the old callee. That happened: a
 test run picked up a `trace_rays` cached before the triangle test's t rounding bound was added,
 and rays leaving a surface hit it again. The cache must therefore be keyed by all of core.
@@ -10,7 +10,9 @@ and rays leaving a surface hit it again. The cache must therefore be keyed by al
 Numba has no public hook for that, so `register` puts a locator in front of Numba's own
 (`numba.core.caching.CacheImpl._locator_classes`, internal; the numba version is pinned): for a
 kernel in a registered folder it keeps the location Numba would choose (NUMBA_CACHE_DIR,
-`__pycache__` or the user cache) and adds the digest of core's sources to the stamp. A stamp
+`__pycache__` or the user cache) and adds the digest of core's sources to the stamp. A registered
+folder covers its subfolders: every kernel in core's subpackages is stamped with the digest of all of
+core. A stamp
 mismatch makes Numba discard that cache index and compile afresh. Kernels elsewhere are untouched.
 
 Several processes may compile core's kernels into one cache at once: the first-render helper
@@ -26,9 +28,12 @@ A helper process must write core's kernels exactly where this process reads them
 folder from the environment is not enough: Numba picks a kernel's folder when it is decorated, but
 re-reads NUMBA_CACHE_DIR before every compile, so a variable set after core's import (a test module
 did) pointed a helper at another cache, where it compiled while this process compiled again.
-CORE_CACHE_FOLDER_VARIABLE, set for the helper (parallel_compile.py), names core's folder outright.
+CORE_CACHE_FOLDER_VARIABLE, set for the helper (parallel_compile.py), names core's folders outright:
+a JSON object from each kernel folder (relative to core, e.g. "render") to the cache folder this process
+gave its kernels.
 """
 import functools
+import json
 import os
 import tempfile
 from contextlib import contextmanager
@@ -38,11 +43,12 @@ from numba.core import caching
 
 from .sources_digest import sources_digest
 
-CORE_FOLDER = Path(__file__).resolve().parent
-_sources_of = {}  # registered kernel folder -> the folder whose sources stamp its kernels
+CORE_FOLDER = Path(__file__).resolve().parent.parent
+_sources_of = {}  # registered kernel folder (and its subfolders) -> the folder whose sources stamp its kernels
+_core_cache_folders = {}  # core's kernel folder, relative to core ("render") -> its kernels' cache folder
 _locked_folders = set()  # cache folders of registered kernels, whose index saves take the lock
 LOCK_NAME = "kd_preview_index.lock"
-CORE_CACHE_FOLDER_VARIABLE = "KD_PREVIEW_CORE_KERNEL_CACHE"  # a helper's cache folder for core's kernels
+CORE_CACHE_FOLDER_VARIABLE = "KD_PREVIEW_CORE_KERNEL_CACHE"  # a helper's cache folders for core's kernels
 
 
 @functools.lru_cache(maxsize=None)
@@ -80,16 +86,37 @@ class SourcesDigestLocator(caching._CacheLocator):
     @classmethod
     def from_function(cls, py_func, py_file):
         kernel_folder = Path(py_file).resolve().parent
-        sources = _sources_of.get(kernel_folder)
+        sources = _registered_sources(kernel_folder)
         if sources is None:
             return None
-        folder = os.environ.get(CORE_CACHE_FOLDER_VARIABLE) if kernel_folder == CORE_FOLDER else None
+        in_core = kernel_folder == CORE_FOLDER or CORE_FOLDER in kernel_folder.parents
+        relative = kernel_folder.relative_to(CORE_FOLDER).as_posix() if in_core else None
+        folder = _helper_cache_folders().get(relative) if in_core else None
         for usual_class in caching.CacheImpl._locator_classes:
             if usual_class is not cls:
                 usual = usual_class.from_function(py_func, py_file)
                 if usual is not None:
-                    return cls(usual, sources, folder)
+                    locator = cls(usual, sources, folder)
+                    if in_core:
+                        _core_cache_folders[relative] = locator.get_cache_path()
+                    return locator
         return None
+
+
+def _registered_sources(kernel_folder: Path):
+    """The sources that stamp the kernels of `kernel_folder`: those registered for it or for the nearest
+    folder above it; None when neither it nor any folder above is registered."""
+    for folder in (kernel_folder, *kernel_folder.parents):
+        if folder in _sources_of:
+            return _sources_of[folder]
+    return None
+
+
+def _helper_cache_folders() -> dict:
+    """In a helper process, the cache folders its parent gave core's kernels (CORE_CACHE_FOLDER_VARIABLE);
+    elsewhere empty, and each kernel goes where Numba would put it."""
+    value = os.environ.get(CORE_CACHE_FOLDER_VARIABLE)
+    return json.loads(value) if value else {}
 
 
 @contextmanager
@@ -135,15 +162,16 @@ def _save_under_lock(numba_save):
     return save
 
 
-def core_cache_folder(kernel) -> str:
-    """The folder a core kernel (a Numba dispatcher) caches into in this process."""
-    return kernel._cache._cache_path
+def core_cache_folders() -> str:
+    """The value of CORE_CACHE_FOLDER_VARIABLE for a helper: where this process caches the kernels of
+    each of core's folders, as JSON."""
+    return json.dumps(_core_cache_folders, sort_keys=True)
 
 
 def register(folder=CORE_FOLDER, sources=CORE_FOLDER) -> None:
-    """Key the cached kernels of `folder` (core's, or e.g. a test's that inline core's functions)
-    by the `*.py` files of `sources` too. Must run before the folder's kernels are decorated:
-    Numba picks a kernel's locator when `njit(cache=True)` wraps it."""
+    """Key the cached kernels of `folder` and its subfolders (core's, or e.g. a test's that inline
+    core's functions) by the `*.py` files of `sources` (and its subfolders) too. Must run before the
+    folder's kernels are decorated: Numba picks a kernel's locator when `njit(cache=True)` wraps it."""
     _sources_of[Path(folder).resolve()] = Path(sources).resolve()
     if SourcesDigestLocator not in caching.CacheImpl._locator_classes:
         caching.CacheImpl._locator_classes.insert(0, SourcesDigestLocator)
