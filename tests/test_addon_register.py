@@ -198,11 +198,13 @@ def test_numba_cache_folder_follows_the_core_sources(tmp_path):
     """Numba checks a cached kernel against its own file only, so a changed callee in another file
     would leave a stale caller: the cache folder is named by a digest of every core source file."""
     copy = tmp_path / "core"
-    copy.mkdir()
-    for path in (REPO / "core").glob("*.py"):
-        (copy / path.name).write_bytes(path.read_bytes())
+    for path in (REPO / "core").rglob("*.py"):  # the sources of every subpackage too
+        target = copy / path.relative_to(REPO / "core")
+        target.parent.mkdir(parents=True, exist_ok=True)
+        target.write_bytes(path.read_bytes())
     assert corelib.source_digest(copy) == corelib.source_digest()
-    (copy / "split_binned.py").write_bytes((copy / "split_binned.py").read_bytes() + b"\n")
+    edited = copy / "build" / "split_binned.py"
+    edited.write_bytes(edited.read_bytes() + b"\n")
     assert corelib.source_digest(copy) != corelib.source_digest()
     versioned = corelib._versioned(tmp_path / "cache")
     assert versioned.parent == tmp_path / "cache" and versioned.name == f"core-{corelib.source_digest()}"
