@@ -7,8 +7,10 @@ Public API:
     KdTree.stats() -> dict
     Camera(matrix_world, fov) / Camera(matrix_world, ortho_scale=s); clip_start, clip_end, shift
     Light.point / Light.sun / Light.spot / Light.area
-    render_preview(tree, camera, width, height, *, mode="ao", samples=16, ...) -> (H, W, 4) float32
-    PreviewRender(tree, camera, width, height, ..., previous=None)   progressive: step(), image(), done;
+    render_preview(tree, camera, width, height, options=None, mode="ao", samples=16, ...) -> (H, W, 4) float32
+    RenderOptions(mode="ao", samples=16, ...): the render settings, validated and frozen; the keywords
+        of render_preview and PreviewRender build one (or replace fields of `options`)
+    PreviewRender(tree, camera, width, height, options=None, ..., previous=None)   progressive: step(), image(), done;
         pixel_state() -> PixelState: continue the next frame from it (previous=), keeping the pixels
         whose rays cannot reach what changed (scenes from a SceneBuilder)
     frame_ray_count(width, height, mode, samples, lights) -> int: the most rays a render traces (for the
@@ -41,6 +43,7 @@ from .render.camera import Camera
 from .render.denoise import denoise_pixels
 from .render.lights import Light
 from .render.preview_render import PreviewRender, frame_ray_count, render_preview
+from .render.render_options import RenderOptions
 from .trace.kdtree import KdTree
 from .memory import MemoryLimitError
 from .build.options import BuildOptions
@@ -54,8 +57,8 @@ from .scene.two_level import TwoLevelScene, build_two_level
 
 __all__ = ["denoise_pixels",
            "build_kdtree", "intersect", "occluded", "KdTree", "Hits", "BuildOptions", "Camera", "Light",
-           "render_preview", "PreviewRender", "frame_ray_count", "TwoLevelScene", "build_two_level", "build_scene",
-           "SceneBuilder",
+           "render_preview", "PreviewRender", "RenderOptions", "frame_ray_count", "TwoLevelScene",
+           "build_two_level", "build_scene", "SceneBuilder",
            "MeshInput", "BuildReport", "SceneHits", "intersect_scene", "occluded_scene", "MemoryLimitError",
            "PlacementRangeError", "PixelState", "rendering_kernels_alongside", "CAMERA_RAYS", "SHADOW_RAYS",
            "ALL_RAYS", "HOLDOUT"]

@@ -85,7 +85,7 @@ class RenderConfig:
     """Validated settings in the shapes core wants.
 
     build_options: keywords for core.build_kdtree.
-    render_options: keywords for core.PreviewRender / core.render_preview.
+    render_options: the fields of a core.RenderOptions but its lights (a dict: config never imports core).
     """
 
     settings: Settings

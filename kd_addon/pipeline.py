@@ -329,8 +329,8 @@ class FrameJob:
         global _reuse_kernels_ready
         t0 = time.perf_counter()
         try:
-            self.renderer = core.PreviewRender(scene, camera, width, height, lights=lights, previous=previous,
-                                               **self.config.render_options)
+            options = core.RenderOptions(lights=lights, **self.config.render_options)
+            self.renderer = core.PreviewRender(scene, camera, width, height, options, previous=previous)
         except ValueError as error:  # core's own checks (its MemoryLimitError is one): a message, not a traceback
             raise PreviewError(f"the frame cannot be rendered: {error}") from None
         self._timings["trace_ms"] += _ms_since(t0)

@@ -6,6 +6,7 @@ import numpy as np
 from ..geometry import triangle_boxes, union_of_boxes
 from ..inputs import as_triangles
 from ..trace.kdtree import KdTree, empty_arrays
+from ..trace.layout import NodeArrays
 from .lazy import DeferredSubtrees
 from .leaf_triangles import leaf_triangles
 from ..memory import MB, MemoryLimitError, check_build_memory, release_freed_memory
@@ -48,8 +49,8 @@ def build_kdtree(triangles, **options):
                     f"{opts.depth_for(len(tris))}) do; raise memory_limit, or lower max_depth or cost_ratio") from None
         del prims, boxes  # the initial references; the leaf copy below may take their memory
         release_freed_memory()
-        leaf_tris = leaf_triangles(tris, arrays[4])  # part of the build: the traversal reads it
-    return KdTree(tris, bounds, *arrays, options=opts, build_ms=_ms_since(start), dropped=dropped,
+        leaf_tris = leaf_triangles(tris, arrays.leaf_prims)  # part of the build: the traversal reads it
+    return KdTree(tris, bounds, arrays, options=opts, build_ms=_ms_since(start), dropped=dropped,
                   timings=timings, deferred=deferred, leaf_tris=leaf_tris)
 
 
@@ -76,10 +77,10 @@ def _build_arrays(tris, prims, boxes, bounds, opts, threads, timings):
     subtrees = build_subtrees(tris, tasks, params, threads)
     timings["subtrees"] = _ms_since(t)
     t = perf_counter()
-    arrays = merge_tree(top_nodes, subtrees)
+    arrays = NodeArrays(*merge_tree(top_nodes, subtrees))
     deferred = None
     if opts.lazy:
-        deferred = DeferredSubtrees(subtrees, arrays[0], arrays[2], params, opts.lazy_speculative)
+        deferred = DeferredSubtrees(subtrees, arrays.axis, arrays.child, params, opts.lazy_speculative)
     timings["merge"] = _ms_since(t)
     return arrays, deferred
 

@@ -110,10 +110,9 @@ def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, root_room, p
         axis[node], split[node], child[node], count[node] = split_axis, pos, left, 0
         stack_room[sp] = stack_room[sp + 1] = child_room(room, n, n_left + n_right)
         # Right child first on the stack so the left one (on top of the pool) is built first.
-        sp = _push(stack_node, stack_range, stack_depth, stack_box, sp, left + 1, start, start + n_right,
-                   depth + 1, box, split_axis, pos, False)
-        sp = _push(stack_node, stack_range, stack_depth, stack_box, sp, left, start + n_right,
-                   start + n_right + n_left, depth + 1, box, split_axis, pos, True)
+        stack = (stack_node, stack_range, stack_depth, stack_box)
+        sp = _push(stack, sp, left + 1, start, start + n_right, depth + 1, box, split_axis, pos, False)
+        sp = _push(stack, sp, left, start + n_right, start + n_right + n_left, depth + 1, box, split_axis, pos, True)
     d_node, d_start, d_depth, d_box, d_prims, d_boxes, d_room = deferred
     n_deferred_refs = d_start[n_deferred]
     return (axis[:n_nodes].copy(), split[:n_nodes].copy(), child[:n_nodes].copy(),
@@ -162,9 +161,10 @@ def _defer(deferred, k, node, prims, boxes, start, end, box, depth, room):
 
 
 @njit(cache=True, inline="always")
-def _push(stack_node, stack_range, stack_depth, stack_box, sp, node, start, end, depth, box, axis, pos,
-          is_left):
-    """Push a child whose box is the parent's cut at `pos`; returns the new stack size."""
+def _push(stack, sp, node, start, end, depth, box, axis, pos, is_left):
+    """Push a child whose box is the parent's cut at `pos` onto stack = (stack_node, stack_range,
+    stack_depth, stack_box); returns the new stack size."""
+    stack_node, stack_range, stack_depth, stack_box = stack
     stack_node[sp] = node
     stack_range[sp, 0] = start
     stack_range[sp, 1] = end

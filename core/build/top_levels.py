@@ -163,7 +163,7 @@ def partition_parallel(tris, prims, boxes, axis, pos, planar_left, clip, nchunks
     rb = np.empty((offsets[nchunks, 1], 6), np.float32)
     for c in prange(nchunks):
         _write_chunk(tris, prims, boxes, sides, axis, pos, clip, c * n // nchunks, (c + 1) * n // nchunks,
-                     offsets[c, 0], offsets[c, 1], lp, lb, rp, rb)
+                     (offsets[c, 0], offsets[c, 1]), (lp, lb, rp, rb))
     return lp, lb, rp, rb
 
 
@@ -186,9 +186,12 @@ def _classify_chunk(tris, prims, boxes, axis, pos, planar_left, clip, start, end
 
 
 @njit(cache=True)
-def _write_chunk(tris, prims, boxes, sides, axis, pos, clip, start, end, w_left, w_right, lp, lb, rp, rb):
+def _write_chunk(tris, prims, boxes, sides, axis, pos, clip, start, end, offsets, out):
     """Second pass of partition_parallel: write one slice's references (straddlers clipped again, the
-    others copied element by element: slice assignments cost more than the copy)."""
+    others copied element by element: slice assignments cost more than the copy) into
+    out = (left prims, left boxes, right prims, right boxes), from offsets = (first left, first right)."""
+    lp, lb, rp, rb = out
+    w_left, w_right = offsets
     scratch = new_split_scratch()
     box_l, box_r = scratch[3], scratch[4]
     for i in range(start, end):

@@ -10,10 +10,10 @@ and rays leaving a surface hit it again. The cache must therefore be keyed by al
 Numba has no public hook for that, so `register` puts a locator in front of Numba's own
 (`numba.core.caching.CacheImpl._locator_classes`, internal; the numba version is pinned): for a
 kernel in a registered folder it keeps the location Numba would choose (NUMBA_CACHE_DIR,
-`__pycache__` or the user cache) and adds the digest of core's sources to the stamp. A registered
-folder covers its subfolders: every kernel in core's subpackages is stamped with the digest of all of
-core. A stamp
-mismatch makes Numba discard that cache index and compile afresh. Kernels elsewhere are untouched.
+`__pycache__` or the user cache) and adds the digest of core's sources to the stamp. A stamp
+mismatch makes Numba discard that cache index and compile afresh. Kernels elsewhere are untouched. A
+registered folder covers its subfolders: every kernel in core's subpackages is stamped with the digest
+of all of core.
 
 Several processes may compile core's kernels into one cache at once: the first-render helper
 (parallel_compile.py) beside a build, two Blender sessions, CI runs. Numba writes each file

@@ -45,7 +45,7 @@ import numpy as np
 from ..render.camera import Camera
 from ..trace.kdtree import KdTree
 from .kernel_cache import CORE_CACHE_FOLDER_VARIABLE, CORE_FOLDER, core_cache_folders
-from ..trace.layout import LEAF
+from ..trace.layout import LEAF, NodeArrays
 from ..render.lights import Light
 from ..build.options import BuildOptions
 from ..render.preview_render import PreviewRender
@@ -72,9 +72,9 @@ def hand_made_tree() -> KdTree:
     tris = np.array([[[-1, -1, 0], [1, -1, 0], [1, 1, 0]], [[-1, -1, 0], [1, 1, 0], [-1, 1, 0]]], np.float32)
     flat = tris.reshape(-1, 3)
     bounds = np.concatenate([flat.min(axis=0), flat.max(axis=0)]).astype(np.float32)
-    return KdTree(tris, bounds, np.array([LEAF], np.int8), np.zeros(1, np.float32), np.zeros(1, np.int32),
-                  np.array([2], np.int32), np.arange(2, dtype=np.int32), BuildOptions(), 0.0,
-                  np.zeros(0, np.int32))
+    nodes = NodeArrays(np.array([LEAF], np.int8), np.zeros(1, np.float32), np.zeros(1, np.int32),
+                       np.array([2], np.int32), np.arange(2, dtype=np.int32))
+    return KdTree(tris, bounds, nodes, BuildOptions(), 0.0, np.zeros(0, np.int32))
 
 
 def compile_scene_wrapping() -> None:

@@ -38,6 +38,8 @@ neighbourhood (neighbours across a normal or plane edge do not pool) divided by 
 Background pixels (no hit) and pixels without samples are never read and stay exactly 0; alpha is
 1 on hit pixels and 0 elsewhere, as in the raw image. Deterministic (no atomics, no random numbers).
 """
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit, prange
 
@@ -62,6 +64,16 @@ ROWS_PER_TASK = 2
 _FAST = {"contract", "afn", "arcp", "nsz"}
 
 
+class FilterSettings(NamedTuple):
+    """The filter's tuning, each with its default: `iterations` (ITERATIONS passes), `sigma_luminance`
+    (SIGMA_LUMINANCE), `sigma_normal` (SIGMA_NORMAL), `sigma_plane` (SIGMA_PLANE)."""
+
+    iterations: int = ITERATIONS
+    sigma_luminance: float = SIGMA_LUMINANCE
+    sigma_normal: float = SIGMA_NORMAL
+    sigma_plane: float = SIGMA_PLANE
+
+
 def _checked_pixels(n, pixels, points, normals, sums, sq_sums, counts):
     """The pixel indices as an integer array, or a ValueError naming the argument: they must be
     integers in [0, n) (a negative one would wrap around to another pixel), counts non-negative, and
@@ -82,16 +94,16 @@ def _checked_pixels(n, pixels, points, normals, sums, sq_sums, counts):
     return pixels.astype(np.int64, copy=False)
 
 
-def denoise_pixels(width, height, pixels, points, normals, sums, sq_sums, counts, *, iterations=ITERATIONS,
-                   sigma_luminance=SIGMA_LUMINANCE, sigma_normal=SIGMA_NORMAL, sigma_plane=SIGMA_PLANE,
-                   variance_decay=0.0, threads=None):
+def denoise_pixels(width, height, pixels, points, normals, sums, sq_sums, counts, *, variance_decay=0.0,
+                   threads=None, settings=FilterSettings()):
     """The denoised (H, W, 4) float32 image of a PreviewRender's accumulators (row 0 at the top).
 
     pixels (M,): flat indices of the hit pixels; points, normals (M, 3): their hit points and geometric
     normals; sums (M, 3), sq_sums (M,) (of the grey value), counts (M,): the per-pixel sample sums.
     variance_decay: the variance of a pixel's mean is taken to fall as n^-(1 + variance_decay) (0 for
-    independent samples, 0.5 for scrambled Sobol; see the module docstring).
+    independent samples, 0.5 for scrambled Sobol; see the module docstring). settings: FilterSettings.
     """
+    iterations, sigma_luminance, sigma_normal, sigma_plane = settings
     width, height = int(width), int(height)
     n = width * height
     pixels = _checked_pixels(n, pixels, points, normals, sums, sq_sums, counts)
@@ -119,7 +131,7 @@ def denoise_pixels(width, height, pixels, points, normals, sums, sq_sums, counts
             foot = np.zeros(n)
             footprints(valid, pos, height, width, foot)
             var = np.zeros(n)
-            pooled_variance(valid, pos, nrm, foot, s1, s2, cnt, height, width, float(sigma_normal),
+            pooled_variance(valid, pos, nrm, foot, (s1, s2, cnt), height, width, float(sigma_normal),
                             float(sigma_plane), float(variance_decay), var)
             col_b, var_b = np.empty_like(col), np.empty_like(var)
             rec = np.empty((n, 9))
@@ -178,11 +190,13 @@ def footprints(valid, pos, height, width, foot):
 
 
 @njit(cache=True, parallel=True, fastmath=_FAST)
-def pooled_variance(valid, pos, nrm, foot, s1, s2, cnt, height, width, sigma_normal, sigma_plane, decay, var):
+def pooled_variance(valid, pos, nrm, foot, moments, height, width, sigma_normal, sigma_plane, decay, var):
     """Variance of each valid pixel's mean grey value: the per-sample variance pooled over the 5x5
     neighbourhood, Bessel-corrected by the pooled sample count, over n_p ** (1 + decay). A neighbour
     pools when its normal and plane weights would be at least exp(-1) (a hard test: no exp per tap,
-    which made this step cost more than a filter pass)."""
+    which made this step cost more than a filter pass). moments: the per-pixel (sum of grey values,
+    sum of their squares, sample count)."""
+    s1, s2, cnt = moments
     min_cos = 1.0 - 1.0 / sigma_normal  # sigma_n (1 - c) <= -sigma_n log(c) <= 1
     iterations, per_band = interleaved_blocks(height, ROWS_PER_TASK)  # balanced: see ROWS_PER_TASK
     for task in prange(iterations):

@@ -30,15 +30,17 @@ import numpy as np
 
 from .camera import Camera, tiled_pixels
 from .denoise import SOBOL_VARIANCE_DECAY, denoise_pixels
-from ..inputs import as_number, check_image_size
+from ..inputs import check_image_size
 from ..trace.kdtree import KdTree
 from ..build.lazy import resolve_suspended
 from ..scene.instance_signature import changed_boxes
-from .lights import DELTA, pack_lights
+from .lights import DELTA
 from ..memory import check_render_memory
 from .pixel_reuse import PixelState, prepared_boxes, segments_touch, settings_key, surface_rays_touch
 from ..scene.ray_visibility import CAMERA_RAYS, HOLDOUT
-from .render_kernels import MEMO_BITS, MODES, add_samples, assemble_image, surface_frames
+from .render_kernels import (MEMO_BITS, MODES, PixelFrames, PixelSums, RayMemo, SampleBatch, add_samples,
+                             assemble_image, surface_frames)
+from .render_options import RenderOptions, check_mode_and_samples, packed_lights
 from .sampling import SAMPLERS, SOBOL_DIM1
 from ..scene.scene_queries import trace_valid_rays
 from ..jit.threads import thread_count
@@ -53,9 +55,9 @@ class PreviewRender:
     `tree` is a KdTree or a TwoLevelScene; a KdTree is traced as a one-instance scene with the
     identity matrix, so both take the same kernels (the overhead is measured in docs/choices.md).
 
-    Settings: mode ("ao", "shadow", "ao+shadow"), samples (per pixel), ao_distance, lights (core.Light),
-    seed (any integer, taken modulo 2^32), sampler ("sobol" or "random"), error_target (None: off),
-    min_samples, ambient, threads.
+    Settings: a RenderOptions (`options`, default RenderOptions()), and/or its fields as keywords (mode,
+    samples, ao_distance, lights, seed, sampler, error_target, min_samples, ambient, threads), which
+    replace the options' own.
 
     previous: the last frame's `pixel_state()`. With the same camera, lights and settings, and a scene
     from the same SceneBuilder (whose instance signature says what changed), pixels whose rays cannot
@@ -63,27 +65,27 @@ class PreviewRender:
     `pixels_reused` and `rays_reused` say what that saved. Anything else renders from scratch.
     """
 
-    def __init__(self, tree, camera, width, height, *, mode="ao", samples=16, ao_distance=1.0, lights=(),
-                 seed=0, sampler="sobol", error_target=None, min_samples=8, ambient=0.25, threads=None,
-                 previous=None):
-        _check_settings(tree, camera, width, height, mode, samples, ao_distance, seed, sampler, error_target,
-                        min_samples, ambient, threads)
+    def __init__(self, tree, camera, width, height, options=None, *, previous=None, **settings):
+        _check_frame(tree, camera, width, height)
+        options = RenderOptions.make(options, **settings)
         if previous is not None and not isinstance(previous, PixelState):
             raise ValueError(f"previous must be None or a PreviewRender's pixel_state(), got {type(previous).__name__}")
         check_render_memory(width, height)
         self.tree, self.camera, self.width, self.height = tree, camera, int(width), int(height)
+        self.options = options
         self.scene = as_two_level(tree)
-        self.mode, self.target_samples, self.ao_distance = mode, int(samples), float(ao_distance)
-        self.lights = _packed_lights(mode, lights)
-        self.seed, self.sampler = int(seed) & 0xFFFFFFFF, SAMPLERS.index(sampler)
-        self.error_target, self.min_samples, self.ambient = error_target, int(min_samples), float(ambient)
-        self.threads = threads
+        o = options
+        self.mode, self.target_samples, self.ao_distance = o.mode, int(o.samples), float(o.ao_distance)
+        self.lights = packed_lights(o.mode, o.lights)
+        self.seed, self.sampler = int(o.seed) & 0xFFFFFFFF, SAMPLERS.index(o.sampler)
+        self.error_target, self.min_samples, self.ambient = o.error_target, int(o.min_samples), float(o.ambient)
+        self.threads = o.threads
         self.samples_done = 0
         self.trace_ms = 0.0
         self.rays_saved = 0
         self.pixels_reused = self._pixels_rays_reused = self._rays_before = self.converged_pixels = 0
-        self.settings = settings_key(camera, self.width, self.height, mode, self.target_samples, self.ao_distance,
-                                     self.lights, self.seed, self.sampler, error_target, self.min_samples,
+        self.settings = settings_key(camera, self.width, self.height, o.mode, self.target_samples, self.ao_distance,
+                                     self.lights, self.seed, self.sampler, o.error_target, self.min_samples,
                                      self.ambient)
         start = perf_counter()
         boxes = self._changed_boxes(previous)
@@ -222,10 +224,11 @@ class PreviewRender:
         unbuilt subtree redo the batch once it is built (same samples, so the eager tree's sums)."""
         def run(active):
             status = np.empty(len(active), np.int64)
-            add_samples(self.scene.arrays, self.points, self.normals, self.starts, self.pixels, active,
-                        self.samples_done, batch, MODES[self.mode], self.ao_distance, self.ambient, self.lights,
-                        self.sampler, self.seed, SOBOL_DIM1, self.sums, self.sq_sums, self.counts, self.ray_counts,
-                        status, (self.memo, self.known, self.boxes, self.memo_reused, self.repeated))
+            add_samples(self.scene.arrays, PixelFrames(self.points, self.normals, self.starts, self.pixels), active,
+                        SampleBatch(self.samples_done, batch, MODES[self.mode], self.ao_distance, self.ambient,
+                                    self.sampler, self.seed, SOBOL_DIM1), self.lights,
+                        PixelSums(self.sums, self.sq_sums, self.counts, self.ray_counts), status,
+                        RayMemo(self.memo, self.known, self.boxes, self.memo_reused, self.repeated))
             return status
 
         with thread_count(self.threads):
@@ -290,10 +293,10 @@ class PreviewRender:
                 "converged_pixels": self.converged_pixels}
 
 
-def render_preview(tree, camera, width, height, denoise=False, **settings):
-    """Render the whole preview at once: the (H, W, 4) float32 image (see PreviewRender for settings;
-    `denoise` as in PreviewRender.image)."""
-    render = PreviewRender(tree, camera, width, height, **settings)
+def render_preview(tree, camera, width, height, denoise=False, options=None, **settings):
+    """Render the whole preview at once: the (H, W, 4) float32 image (see PreviewRender for `options`
+    and settings; `denoise` as in PreviewRender.image)."""
+    render = PreviewRender(tree, camera, width, height, options, **settings)
     render.step(render.target_samples)
     return render.image(denoise)
 
@@ -304,8 +307,8 @@ def frame_ray_count(width, height, mode="ao", samples=16, lights=()):
     takes one ray a pixel when its samples repeat it (render_kernels.py, repeated rays). What
     BuildOptions.rays and SceneBuilder.build(rays=...) take for a tree that serves one frame."""
     check_image_size(width, height)
-    _check_mode_and_samples(mode, samples)
-    rows = _packed_lights(mode, lights)
+    check_mode_and_samples(mode, samples)
+    rows = packed_lights(mode, lights)
     hard = int((rows[:, DELTA] != 0.0).sum()) if "shadow" in mode else 0
     soft = len(rows) * ("shadow" in mode) - hard
     repeats = samples * (1 + len(rows)) <= MEMO_BITS  # the memo holds sample 0's bit (PreviewRender._memo_rows)
@@ -313,41 +316,9 @@ def frame_ray_count(width, height, mode="ao", samples=16, lights=()):
     return int(width) * int(height) * per_pixel
 
 
-def _packed_lights(mode, lights):
-    """pack_lights(lights); a ValueError when a mode with shadows gets none."""
-    rows = pack_lights(lights)
-    if mode != "ao" and len(rows) == 0:
-        raise ValueError(f"mode {mode!r} needs at least one light")
-    return rows
-
-
-def _check_mode_and_samples(mode, samples):
-    if mode not in MODES:
-        raise ValueError(f"mode must be one of {sorted(MODES)}, got {mode!r}")
-    if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or samples < 1:
-        raise ValueError(f"samples must be an integer >= 1, got {samples!r}")
-
-
-def _check_settings(tree, camera, width, height, mode, samples, ao_distance, seed, sampler, error_target,
-                    min_samples, ambient, threads):
+def _check_frame(tree, camera, width, height):
     if not isinstance(tree, (KdTree, TwoLevelScene)):
         raise ValueError(f"tree must be a core.KdTree or core.TwoLevelScene, got {type(tree).__name__}")
     if not isinstance(camera, Camera):
         raise ValueError(f"camera must be a core.Camera, got {type(camera).__name__}")
     check_image_size(width, height)
-    _check_mode_and_samples(mode, samples)
-    if not (np.isfinite(as_number("ao_distance", ao_distance)) and ao_distance >= 0):
-        raise ValueError(f"ao_distance must be finite and >= 0, got {ao_distance!r}")
-    if sampler not in SAMPLERS:
-        raise ValueError(f"sampler must be one of {SAMPLERS}, got {sampler!r}")
-    if error_target is not None and not (np.isfinite(as_number("error_target", error_target)) and error_target > 0):
-        raise ValueError(f"error_target must be None or > 0, got {error_target!r}")
-    if isinstance(min_samples, bool) or not isinstance(min_samples, (int, np.integer)) or min_samples < 2:
-        raise ValueError(f"min_samples must be an integer >= 2, got {min_samples!r}")
-    if isinstance(ambient, bool) or not isinstance(ambient, (int, float, np.integer, np.floating)) \
-            or not 0.0 <= ambient <= 1.0:
-        raise ValueError(f"ambient must be in [0, 1], got {ambient!r}")
-    if not isinstance(seed, (int, np.integer)):
-        raise ValueError(f"seed must be an integer, got {seed!r}")
-    if threads is not None and (not isinstance(threads, (int, np.integer)) or threads < 1):
-        raise ValueError(f"threads must be None or an integer >= 1, got {threads!r}")

@@ -24,6 +24,8 @@ so with the memo on, samples after the first take sample 0's bit instead of trac
 in `repeated`, not in `rays`). In shadow mode with hard lights that is one shadow ray a light per pixel
 instead of one a sample. Without the memo (too many bits) every sample traces its ray, as before.
 """
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit, prange
 
@@ -45,52 +47,89 @@ PIXELS_PER_TASK = 64  # pixels a parallel task samples with one set of scratch b
 MEMO_BITS = 512  # most visibility bits kept per pixel (64 bytes): 16 samples x 32 uses, 512 AO samples
 
 
-@njit(cache=True, parallel=True)
-def add_samples(scene, points, normals, starts, pixels, active, first, count, mode, ao_distance, ambient, lights,
-                sampler, seed, dim1, sums, sq_sums, counts, rays, status, memo):
-    """Add samples first .. first+count-1 to every pixel listed in `active` (indices into points).
-    starts (M, 3) are the AO and shadow rays' origin per pixel: the hit point offset off its surface
-    (surface_frames).
+class PixelFrames(NamedTuple):
+    """The hit pixels, one row each: `points`, `normals` (M, 3) float64, the hit points and their
+    geometric normals facing the camera; `starts` (M, 3) float64, the AO and shadow rays' origin, the
+    point offset off its surface (surface_frames); `pixels` (M,) int64, their flat image indices."""
 
-    sums (M, 3) and sq_sums (M,) (of the sample's grey value) accumulate; counts[i] += count;
-    rays[i] counts the rays of pixel i's samples. status[a] is NO_HIT when pixel active[a] got its
-    samples, or the suspended prim of the unbuilt subtree that stopped it (lazy trees; sums untouched).
-    memo = (bits (M, B) uint8, known (M,) int64, boxes (K, 6), reused (M,) int64, repeated (M,) int64):
-    see the module docstring; reused[i] counts the rays whose bit was taken from last frame, repeated[i]
-    the rays of lights without extent that took sample 0's bit (not counted in rays[i]).
-    """
+    points: np.ndarray
+    normals: np.ndarray
+    starts: np.ndarray
+    pixels: np.ndarray
+
+
+class SampleBatch(NamedTuple):
+    """Which samples add_samples adds and how: samples `first` .. first+count-1, `mode` (AO, SHADOW or
+    AO_SHADOW), `ao_distance`, `ambient`, `sampler` (an index into sampling.SAMPLERS), `seed` and
+    `dim1` (the Sobol set's second dimension as byte tables, sampling.SOBOL_DIM1)."""
+
+    first: int
+    count: int
+    mode: int
+    ao_distance: float
+    ambient: float
+    sampler: int
+    seed: int
+    dim1: np.ndarray
+
+
+class PixelSums(NamedTuple):
+    """Per-pixel accumulators: `sums` (M, 3) and `sq_sums` (M,) (of the sample's grey value) float64,
+    `counts` (M,) int64 samples taken, `rays` (M,) int64 rays traced for them."""
+
+    sums: np.ndarray
+    sq_sums: np.ndarray
+    counts: np.ndarray
+    rays: np.ndarray
+
+
+class RayMemo(NamedTuple):
+    """The ray memo (module docstring): `bits` (M, B) uint8, `known` (M,) int64, `boxes` (K, 6) the
+    changed boxes, `reused` (M,) int64 rays whose bit was taken from last frame, `repeated` (M,) int64
+    rays of lights without extent that took sample 0's bit (not counted in PixelSums.rays)."""
+
+    bits: np.ndarray
+    known: np.ndarray
+    boxes: np.ndarray
+    reused: np.ndarray
+    repeated: np.ndarray
+
+
+@njit(cache=True, parallel=True)
+def add_samples(scene, frames, active, batch, lights, acc, status, memo):
+    """Add the SampleBatch `batch` to every pixel listed in `active` (indices into the PixelFrames
+    `frames`), with `lights` (lights.pack_lights rows), into the PixelSums `acc` (counts[i] += count)
+    and the RayMemo `memo`. status[a] is NO_HIT when pixel active[a] got its samples, or the suspended
+    prim of the unbuilt subtree that stopped it (lazy trees; its sums untouched)."""
     n = active.shape[0]
     iterations, per_band = interleaved_blocks(n, PIXELS_PER_TASK)  # balances image regions (traversal.py)
     for i in prange(iterations):
         start, stop = block_range(i, per_band, n, PIXELS_PER_TASK)
-        _sample_pixels(scene, points, normals, starts, pixels, active, start, stop, first, count, mode, ao_distance,
-                       ambient, lights, sampler, seed, dim1, sums, sq_sums, counts, rays, status, memo)
+        _sample_pixels(scene, frames, active, start, stop, batch, lights, acc, status, memo)
 
 
 @njit(cache=True)
-def _sample_pixels(scene, points, normals, starts, pixels, active, start, stop, first, count, mode, ao_distance,
-                   ambient, lights, sampler, seed, dim1, sums, sq_sums, counts, rays, status, memo):
+def _sample_pixels(scene, frames, active, start, stop, batch, lights, acc, status, memo):
     """Pixels active[start:stop], sharing one set of scratch buffers: allocating them per pixel cost
     ~25% of a one-sample step (kept out of the parallel loop body: Numba's parfor analysis does not
     cope with the inlined tuple code of the samplers). The scene and the memo go to the per-ray code
     as unowned views (array_views.py): with the owned arrays a one-sample shadow step took 1.5x as long
     as tracing the same rays alone."""
     scene = unowned_scene(scene)
-    memo = (unowned(memo[0]), unowned(memo[1]), unowned(memo[2]), unowned(memo[3]), unowned(memo[4]))
-    points, normals, starts = unowned(points), unowned(normals), unowned(starts)
-    pixels, lights = unowned(pixels), unowned(lights)
-    sums, sq_sums, counts, rays = unowned(sums), unowned(sq_sums), unowned(counts), unowned(rays)
+    memo = RayMemo(unowned(memo.bits), unowned(memo.known), unowned(memo.boxes), unowned(memo.reused),
+                   unowned(memo.repeated))
+    frames = PixelFrames(unowned(frames.points), unowned(frames.normals), unowned(frames.starts),
+                         unowned(frames.pixels))
+    lights = unowned(lights)
+    acc = PixelSums(unowned(acc.sums), unowned(acc.sq_sums), unowned(acc.counts), unowned(acc.rays))
     scratch = new_scratch()
     direction = np.empty(3)
     for a in range(start, stop):
-        status[a] = _sample_pixel(scene, points, normals, starts, pixels, active[a], first, count, mode,
-                                  ao_distance, ambient, lights, sampler, seed, dim1, sums, sq_sums, counts, rays,
-                                  scratch, direction, memo)
+        status[a] = _sample_pixel(scene, frames, active[a], batch, lights, acc, scratch, direction, memo)
 
 
 @njit(cache=True, inline="always")
-def _sample_pixel(scene, points, normals, starts, pixels, i, first, count, mode, ao_distance, ambient, lights,
-                  sampler, seed, dim1, sums, sq_sums, counts, rays, scratch, direction, memo):
+def _sample_pixel(scene, frames, i, batch, lights, acc, scratch, direction, memo):
     """All of one pixel's new samples. Returns NO_HIT, or the suspended prim of a ray that reached an
     unbuilt subtree, after restoring the pixel's sums.
 
@@ -99,9 +138,13 @@ def _sample_pixel(scene, points, normals, starts, pixels, i, first, count, mode,
 
     The pixel's point, normal and ray start (and each light's row below) are unowned views (array_views.py):
     a slice would update its parent's shared reference count, from both threads, on every ray."""
-    point, normal, origin = rows(points, i, i + 1)[0], rows(normals, i, i + 1)[0], rows(starts, i, i + 1)[0]
-    ps = pixel_seed(pixels[i], seed)
-    before = (sums[i, 0], sums[i, 1], sums[i, 2], sq_sums[i], rays[i], memo[3][i], memo[4][i])
+    first, count, mode, seed = batch.first, batch.count, batch.mode, batch.seed
+    ao_distance, ambient, sampler, dim1 = batch.ao_distance, batch.ambient, batch.sampler, batch.dim1
+    sums, sq_sums, counts, rays = acc.sums, acc.sq_sums, acc.counts, acc.rays
+    point, normal = rows(frames.points, i, i + 1)[0], rows(frames.normals, i, i + 1)[0]
+    origin = rows(frames.starts, i, i + 1)[0]
+    ps = pixel_seed(frames.pixels[i], seed)
+    before = (sums[i, 0], sums[i, 1], sums[i, 2], sq_sums[i], rays[i], memo.reused[i], memo.repeated[i])
     n_lights = lights.shape[0]
     uses = 1 + n_lights
     first_use = USE_AO if mode != SHADOW else USE_AO + 1
@@ -171,7 +214,7 @@ def _ray_of_use(use, lights, point, normal, ao_distance, sampler, ps, s, dim1, d
 @njit(cache=True, inline="always")
 def _restore(sums, sq_sums, rays, memo, i, before, prim):
     """Put pixel i's sums and counts back as they were before the batch; pass on the suspended prim."""
-    sums[i, 0], sums[i, 1], sums[i, 2], sq_sums[i], rays[i], memo[3][i], memo[4][i] = before
+    sums[i, 0], sums[i, 1], sums[i, 2], sq_sums[i], rays[i], memo.reused[i], memo.repeated[i] = before
     return prim
 
 
@@ -181,16 +224,16 @@ def _repeats(lights, use, s, memo):
     extent, a later sample, and a memo row. Sample 0's bit is this frame's by then, traced or kept from
     last frame: every frame samples its pixels in order from 0 (PreviewRender._continue restarts the
     pixels it does not keep at sample 0), and a lazy tree's redo repeats the same batch."""
-    return use != USE_AO and s > 0 and lights[use - 1, DELTA] != 0.0 and memo[0].shape[1] > 0
+    return use != USE_AO and s > 0 and lights[use - 1, DELTA] != 0.0 and memo.bits.shape[1] > 0
 
 
 @njit(cache=True, inline="always")
 def _repeated_visibility(memo, i, use, bit):
     """Sample 0's visibility bit for this use, copied into `bit` (every ray keeps its bit, memo rule);
     returns the any-hit prim's sign: 0 occluded, -1 clear."""
-    memo[4][i] += 1
-    occluded = _memo_bit(memo[0], i, use)
-    _keep_memo_bit(memo[0], i, bit, occluded)
+    memo.repeated[i] += 1
+    occluded = _memo_bit(memo.bits, i, use)
+    _keep_memo_bit(memo.bits, i, bit, occluded)
     return 0 if occluded else -1
 
 
@@ -200,7 +243,7 @@ def _visibility(scene, origin, direction, tmax, scratch, memo, i, bit, rays):
     last frame's bit when pixel i traced it last frame (bit < known[i]) and the ray cannot meet a
     changed box (counted in reused[i]), else traced; rays[i] counts both. The bit is kept for the next
     frame either way."""
-    bits, known, boxes, reused, _ = memo
+    bits, known, boxes, reused = memo.bits, memo.known, memo.boxes, memo.reused
     kept = bit < 8 * bits.shape[1]
     rays[i] += 1
     if kept and bit < known[i] and not segment_meets_any(origin, direction, 0.0, tmax, boxes):

@@ -8,7 +8,7 @@ ray transformed by its world-to-object matrix without normalising the direction,
 t is the same in both spaces (an affine map keeps it) and the best hit so far is passed on as tmax:
 a mesh is searched only in front of what is already known (Wald 2004, seed 000 §5).
 
-trace_scene is inlined into its callers: a call that passes the scene's 19 arrays costs an atomic
+trace_scene is inlined into its callers: a call that passes the scene's 20 arrays costs an atomic
 reference-count increment and decrement per array, which measured 0.2-0.4 us a ray (camera rays on
 suzanne-251k, a flat tree as one instance: +50% against the flat traversal; inlined: +10%).
 """
@@ -16,10 +16,11 @@ import numpy as np
 from numba import njit, prange
 
 from ..trace.array_views import at, rows, unowned
-from ..trace.layout import LEAF, NO_HIT
+from ..trace.layout import LEAF, NO_HIT, TreeArrays
 from ..trace.traversal import (RAYS_PER_TASK, STACK_SIZE, _descend, _pop, block_range, clip_to_box,
                         interleaved_blocks, trace_ray)
 from ..trace.triangle_test import LEAF_CHUNK
+from .two_level import SceneArrays
 
 
 @njit(cache=True)
@@ -37,27 +38,27 @@ def new_scratch():
 
 
 @njit(cache=True, inline="always")
-def unowned_scene(scene):
-    """The scene tuple (two_level.TwoLevelScene.arrays: 6 top-level arrays, world-to-object matrices,
-    mesh of each instance, 11 packed mesh arrays, ray visibility of each instance) as unowned views,
-    made once per block of rays: with owned arrays, the code inlined per ray took and dropped
-    references to them (array_views.py)."""
-    s = scene
-    return (unowned(s[0]), unowned(s[1]), unowned(s[2]), unowned(s[3]), unowned(s[4]), unowned(s[5]),
-            unowned(s[6]), unowned(s[7]), unowned(s[8]), unowned(s[9]), unowned(s[10]), unowned(s[11]),
-            unowned(s[12]), unowned(s[13]), unowned(s[14]), unowned(s[15]), unowned(s[16]), unowned(s[17]),
-            unowned(s[18]), unowned(s[19]))
+def unowned_scene(s):
+    """The SceneArrays (two_level.TwoLevelScene.arrays) as unowned views, made once per block of rays:
+    with owned arrays, the code inlined per ray took and dropped references to them (array_views.py)."""
+    return SceneArrays(unowned(s.top_axis), unowned(s.top_split), unowned(s.top_child), unowned(s.top_count),
+                       unowned(s.top_items), unowned(s.top_bounds), unowned(s.world_to_object), unowned(s.mesh_of),
+                       unowned(s.node_start), unowned(s.ref_start), unowned(s.tri_start), unowned(s.axis),
+                       unowned(s.split), unowned(s.child), unowned(s.count), unowned(s.leaf_prims),
+                       unowned(s.triangles), unowned(s.mesh_bounds), unowned(s.leaf_triangles),
+                       unowned(s.visibility))
 
 
 @njit(cache=True, inline="always")
 def mesh_tree(scene, m):
-    """Mesh m's tree as the tuple trace_ray takes: unowned views into the packed arrays (array_views.py
-    says why not slices)."""
-    node_start, ref_start, tri_start = scene[8], scene[9], scene[10]
+    """Mesh m's tree as the TreeArrays trace_ray takes: unowned views into the packed arrays
+    (array_views.py says why not slices)."""
+    node_start, ref_start, tri_start = scene.node_start, scene.ref_start, scene.tri_start
     n0, n1 = node_start[m], node_start[m + 1]
-    return (rows(scene[11], n0, n1), rows(scene[12], n0, n1), rows(scene[13], n0, n1), rows(scene[14], n0, n1),
-            rows(scene[15], ref_start[m], ref_start[m + 1]), rows(scene[16], tri_start[m], tri_start[m + 1]),
-            rows(scene[17], m, m + 1)[0], scene[18], ref_start[m])
+    return TreeArrays(rows(scene.axis, n0, n1), rows(scene.split, n0, n1), rows(scene.child, n0, n1),
+                      rows(scene.count, n0, n1), rows(scene.leaf_prims, ref_start[m], ref_start[m + 1]),
+                      rows(scene.triangles, tri_start[m], tri_start[m + 1]), rows(scene.mesh_bounds, m, m + 1)[0],
+                      scene.leaf_triangles, ref_start[m])
 
 
 @njit(cache=True, inline="always")
@@ -71,10 +72,10 @@ def _to_object(w2o, o, d, o_obj, d_obj):
 def trace_instance(scene, inst, o, d, tmin, tmax, any_hit, scratch):
     """(t, prim, u, v) of the ray against one instance, in (tmin, tmax); prim -1 on a miss."""
     stack_node, stack_t, inv, o_obj, d_obj, flags = scratch[3:9]
-    _to_object(rows(scene[6], inst, inst + 1)[0], o, d, o_obj, d_obj)
+    _to_object(rows(scene.world_to_object, inst, inst + 1)[0], o, d, o_obj, d_obj)
     if d_obj[0] == 0.0 and d_obj[1] == 0.0 and d_obj[2] == 0.0:
         return np.inf, -1, 0.0, 0.0  # underflow of an extreme scale: nothing to trace
-    return trace_ray(mesh_tree(scene, scene[7][inst]), o_obj, d_obj, tmin, tmax, any_hit, stack_node, stack_t,
+    return trace_ray(mesh_tree(scene, scene.mesh_of[inst]), o_obj, d_obj, tmin, tmax, any_hit, stack_node, stack_t,
                      inv, flags)
 
 
@@ -89,8 +90,8 @@ def trace_scene(scene, o, d, tmin, tmax, any_hit, ray_mask, scratch):
     trace_instance is called from one place only, the top leaf loop, because trace_ray is inlined
     there (traversal.py says why): a flat tree, one instance in a one-leaf top, goes through that loop
     too, only without the top's clip, which its own tree makes."""
-    axis, split, child, count, items, root_box = scene[0], scene[1], scene[2], scene[3], scene[4], scene[5]
-    visibility = scene[19]
+    axis, split, child, count = scene.top_axis, scene.top_split, scene.top_child, scene.top_count
+    items, root_box, visibility = scene.top_items, scene.top_bounds, scene.visibility
     if items.shape[0] == 0:
         return np.inf, -1, -1, 0.0, 0.0
     stack_node, stack_t, inv = scratch[0], scratch[1], scratch[2]
@@ -107,7 +108,7 @@ def trace_scene(scene, o, d, tmin, tmax, any_hit, ray_mask, scratch):
         a = axis[at(node)]
         if a != LEAF:
             node, t1, t_exit, sp = _descend(node, a, split[at(node)], child[at(node)], o[at(a)], d[at(a)], inv[at(a)],
-                                            t0, t1, t_exit, stack_node, stack_t, sp)
+                                            t0, t1, t_exit, (stack_node, stack_t), sp)
             continue
         first = child[at(node)]
         for j in range(first, first + count[at(node)]):
@@ -138,14 +139,15 @@ def trace_scene_rays(scene, origins, directions, tmin, tmax, any_hit, ray_mask, 
     iterations, per_band = interleaved_blocks(n, RAYS_PER_TASK)  # balances image regions (traversal.py)
     for i in prange(iterations):
         start, stop = block_range(i, per_band, n, RAYS_PER_TASK)
-        _trace_block(scene, origins, directions, tmin, tmax, any_hit, ray_mask, start, stop, out_t, out_inst, out_prim,
-                     out_u, out_v)
+        _trace_block(scene, origins, directions, tmin, tmax, any_hit, ray_mask, start, stop,
+                     (out_t, out_inst, out_prim, out_u, out_v))
 
 
 @njit(cache=True)
-def _trace_block(scene, origins, directions, tmin, tmax, any_hit, ray_mask, start, stop, out_t, out_inst, out_prim,
-                 out_u, out_v):
-    """Rays start..stop-1 with one scratch and the scene as unowned views."""
+def _trace_block(scene, origins, directions, tmin, tmax, any_hit, ray_mask, start, stop, out):
+    """Rays start..stop-1 with one scratch and the scene as unowned views; out: the five output arrays
+    of trace_scene_rays, in its order."""
+    out_t, out_inst, out_prim, out_u, out_v = out
     scratch = new_scratch()
     views = unowned_scene(scene)
     for r in range(start, stop):
@@ -174,8 +176,8 @@ def hit_surface(scene, inst, prim):
     (triangle (3, 3), world-to-object rows (3, 4), inverse_parts of them, object-space normal e1 x e2).
     onto_triangle_plane, world_normal and surface_error_scale each took them afresh (the normal three
     times, the matrix's cofactors four times)."""
-    tri = scene[16][scene[10][scene[7][inst]] + prim]
-    a = rows(scene[6], inst, inst + 1)[0]
+    tri = scene.triangles[scene.tri_start[scene.mesh_of[inst]] + prim]
+    a = rows(scene.world_to_object, inst, inst + 1)[0]
     return tri, a, inverse_parts(a), _object_normal(tri)
 
 

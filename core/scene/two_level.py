@@ -6,9 +6,11 @@ with the one kd-tree traversal (instance_traversal.py). An object that only move
 the top level, which is built over boxes, is rebuilt (scene_builder.py does that across frames).
 
 The mesh trees are packed into one set of contiguous arrays with per-mesh offsets, so the kernels take
-plain arrays (no typed lists) and a mesh's tree is a set of array views (`mesh_tree`).
+plain arrays (no typed lists), all in one named tuple (SceneArrays), and a mesh's tree is a set of
+array views (instance_traversal.mesh_tree).
 """
 from time import perf_counter
+from typing import NamedTuple
 
 import numpy as np
 
@@ -25,6 +27,39 @@ from ..jit.threads import thread_count
 # before the triangle test's cost fell.
 INSTANCE_TEST_COST = 5.0
 SINGULAR = 1e-12  # |det| of the linear part below this times its column norms' product: not invertible
+
+
+class SceneArrays(NamedTuple):
+    """What the scene kernels read of a two-level scene (instance_traversal.trace_scene), by name.
+
+    The top-level tree over the instances (layout.py): `top_axis`, `top_split`, `top_child`,
+    `top_count`, `top_items` (instance indices in leaf order), `top_bounds` (6,) float32. Per instance:
+    `world_to_object` (I, 3, 4) float64, `mesh_of` (I,) int32, `visibility` (I,) uint8 ray_visibility
+    bits. The mesh trees packed (pack_meshes): `node_start`, `ref_start`, `tri_start` ((M + 1,) int64
+    offsets of each mesh's nodes, leaf references and triangles), `axis`, `split`, `child`, `count`,
+    `leaf_prims`, `triangles`, `mesh_bounds` (M, 6) float32 and `leaf_triangles` (9, R) float32.
+    """
+
+    top_axis: np.ndarray
+    top_split: np.ndarray
+    top_child: np.ndarray
+    top_count: np.ndarray
+    top_items: np.ndarray
+    top_bounds: np.ndarray
+    world_to_object: np.ndarray
+    mesh_of: np.ndarray
+    node_start: np.ndarray
+    ref_start: np.ndarray
+    tri_start: np.ndarray
+    axis: np.ndarray
+    split: np.ndarray
+    child: np.ndarray
+    count: np.ndarray
+    leaf_prims: np.ndarray
+    triangles: np.ndarray
+    mesh_bounds: np.ndarray
+    leaf_triangles: np.ndarray
+    visibility: np.ndarray
 
 
 class TwoLevelScene:
@@ -56,8 +91,8 @@ class TwoLevelScene:
 
     @property
     def arrays(self):
-        """The tuple the instance traversal takes (see instance_traversal.trace_scene)."""
-        return (*self.top, self.world_to_object, self.mesh_of, *self._packed, self.visibility)  # 20 arrays
+        """The SceneArrays the instance traversal takes (see instance_traversal.trace_scene)."""
+        return SceneArrays(*self.top, self.world_to_object, self.mesh_of, *self._packed, self.visibility)
 
     @property
     def lazy_tree(self):

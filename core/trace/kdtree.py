@@ -1,7 +1,7 @@
 """The built tree: flat contiguous arrays (see layout.py), its triangles, and its statistics."""
 import numpy as np
 
-from .layout import LEAF
+from .layout import LEAF, NodeArrays, TreeArrays
 from ..build.leaf_triangles import leaf_triangles
 from .tree_stats import leaf_size_histogram, walk_stats
 
@@ -10,20 +10,20 @@ class KdTree:
     """A kd-tree over a triangle soup. Plain arrays only, so it pickles and kernels take it directly.
 
     Attributes: `triangles` (N, 3, 3) float32; `bounds` (6,) float32 box of the triangles in the tree;
-    `axis`, `split`, `child`, `count` (per node, layout.py) and `leaf_prims` (triangle indices);
+    `axis`, `split`, `child`, `count` (per node, layout.py) and `leaf_prims` (triangle indices), given
+    as one NodeArrays;
     `leaf_triangles` (9, R) float32, the triangles copied into leaf order (leaf_triangles.py);
     `options` (the BuildOptions used); `build_ms`; `dropped` (indices of zero-area triangles, which can
     never be hit and are left out); `deferred` (lazy builds: the subtrees not built yet, lazy.py; None
     for an eager tree). Queries on a lazy tree build what they need, so its node arrays grow.
     """
 
-    def __init__(self, triangles, bounds, axis, split, child, count, leaf_prims, options, build_ms,
-                 dropped, timings=None, deferred=None, leaf_tris=None):
+    def __init__(self, triangles, bounds, nodes, options, build_ms, dropped, timings=None, deferred=None,
+                 leaf_tris=None):
         self.triangles = triangles
         self.bounds = bounds
-        self.axis, self.split, self.child, self.count = axis, split, child, count
-        self.leaf_prims = leaf_prims
-        self.leaf_triangles = leaf_triangles(triangles, leaf_prims) if leaf_tris is None else leaf_tris
+        self.axis, self.split, self.child, self.count, self.leaf_prims = nodes
+        self.leaf_triangles = leaf_triangles(triangles, self.leaf_prims) if leaf_tris is None else leaf_tris
         self.options = options
         self.build_ms = build_ms
         self.dropped = dropped
@@ -33,14 +33,13 @@ class KdTree:
 
     @property
     def arrays(self):
-        """The tuple the traversal kernels take (traversal.trace_ray): the node arrays, the triangles, the
-        bounds, the leaf-ordered triangles and where this tree's columns start in them (0)."""
-        return (self.axis, self.split, self.child, self.count, self.leaf_prims, self.triangles, self.bounds,
-                self.leaf_triangles, 0)
+        """The TreeArrays the traversal kernels take (traversal.trace_ray)."""
+        return TreeArrays(self.axis, self.split, self.child, self.count, self.leaf_prims, self.triangles,
+                          self.bounds, self.leaf_triangles, 0)
 
     @property
     def node_arrays(self):
-        return (self.axis, self.split, self.child, self.count, self.leaf_prims)
+        return NodeArrays(self.axis, self.split, self.child, self.count, self.leaf_prims)
 
     def replace_nodes(self, node_arrays):
         """Swap in grown node arrays (a lazy tree after building deferred subtrees)."""
@@ -109,6 +108,6 @@ class KdTree:
 
 
 def empty_arrays():
-    """Node arrays of a tree with nothing in it: one empty leaf."""
-    return (np.array([LEAF], np.int8), np.zeros(1, np.float32), np.zeros(1, np.int32),
-            np.zeros(1, np.int32), np.zeros(0, np.int32))
+    """NodeArrays of a tree with nothing in it: one empty leaf."""
+    return NodeArrays(np.array([LEAF], np.int8), np.zeros(1, np.float32), np.zeros(1, np.int32),
+                      np.zeros(1, np.int32), np.zeros(0, np.int32))

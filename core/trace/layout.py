@@ -13,12 +13,46 @@ Children are allocated in pairs, so one index names both (13 bytes a node in all
 
 A ray that reaches an unbuilt node stops there and reports prim = suspended_prim(subtree) (<= -2)
 instead of a hit; -1 stays "no hit".
+
+The kernels take a tree's arrays as one named tuple (TreeArrays) and read them by name; Numba compiles
+a named tuple to the same code as a plain one.
 """
+from typing import NamedTuple
+
+import numpy as np
 from numba import njit
 
 LEAF = 3
 UNBUILT = 4
 NO_HIT = -1
+
+
+class NodeArrays(NamedTuple):
+    """A tree's nodes as the builder makes them (the arrays above): per node `axis` (int8), `split` (float32),
+    `child` (int32) and `count` (int32), and `leaf_prims` (int32 triangle indices in leaf order)."""
+
+    axis: np.ndarray
+    split: np.ndarray
+    child: np.ndarray
+    count: np.ndarray
+    leaf_prims: np.ndarray
+
+
+class TreeArrays(NamedTuple):
+    """What the traversal kernels read of one tree (traversal.trace_ray), by name: the node arrays,
+    the triangles (N, 3, 3) float32, the root box `bounds` (6,) float32, the leaf-ordered triangles
+    (9, R) float32 and `base`, where this tree's columns start in them (0 for a stand-alone tree; a
+    mesh's first column in a two-level scene's packed arrays)."""
+
+    axis: np.ndarray
+    split: np.ndarray
+    child: np.ndarray
+    count: np.ndarray
+    leaf_prims: np.ndarray
+    triangles: np.ndarray
+    bounds: np.ndarray
+    leaf_triangles: np.ndarray
+    base: int
 
 
 @njit(cache=True, inline="always")

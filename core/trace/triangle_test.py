@@ -83,7 +83,7 @@ def _hit(ax, ay, az, bx, by, bz, cx, cy, cz, sx, sy, sz):
             or (w == 0.0 and not _owns_zero_edge(s * (ax - bx), s * (ay - by)))):
         return np.inf, 0.0, 0.0
     t = (u * az + v * bz + w * cz) * sz / det
-    if t <= _t_rounding(ax, ay, bx, by, cx, cy, az, bz, cz, sx, sy, sz, u, v, w, det):
+    if t <= _t_rounding((ax, ay, az), (bx, by, bz), (cx, cy, cz), (sx, sy, sz), (u, v, w), det):
         return np.inf, 0.0, 0.0  # not surely in front of the origin: a ray leaving a surface misses it
     return t, v / det, w / det
 
@@ -141,8 +141,9 @@ def _gamma(n):
 
 
 @njit(cache=True, inline="always")
-def _t_rounding(ax, ay, bx, by, cx, cy, az, bz, cz, sx, sy, sz, u, v, w, det):
-    """A bound on the rounding error of t, from pbrt-v3's watertight test (Pharr, Jakob and Humphreys,
+def _t_rounding(a, b, c, shear, edges, det):
+    """A bound on the rounding error of t (the sheared vertices a, b, c, the shear (sx, sy, sz), the
+    edge values (u, v, w) and their sum det), from pbrt-v3's watertight test (Pharr, Jakob and Humphreys,
     §3.9.6): a t below it may be 0 or negative. pbrt bounds the shear term sx * z by the scaled z
     (|sx| <= 1); ours is applied to the unscaled z (sz only scales t) and bounded by |sx| |z|, which
     keeps the bound tight for tiny directions: with pbrt's form a ray along 2e-16 * (0, -1, 0) lost a
@@ -150,6 +151,9 @@ def _t_rounding(ax, ay, bx, by, cx, cy, az, bz, cz, sx, sy, sz, u, v, w, det):
     it a ray starting exactly on a triangle (tmin 0) reported that triangle at t ~ 1e-17, and, in the
     tree, sometimes instead of its true closest hit (outside QA; the renderer's offset ray starts stay
     far above it)."""
+    (ax, ay, az), (bx, by, bz), (cx, cy, cz) = a, b, c
+    sx, sy, sz = shear
+    u, v, w = edges
     shear_z = max(abs(az), abs(bz), abs(cz))  # the shear adds sx * z: unscaled z, times |sx| <= 1
     max_z = shear_z * abs(sz)  # t's z values are scaled by sz (huge for a tiny direction)
     max_x = max(abs(ax), abs(bx), abs(cx))
