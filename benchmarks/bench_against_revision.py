@@ -26,7 +26,7 @@ ROOT = HERE.parent
 sys.path[:0] = [str(HERE), str(ROOT)]
 
 import core  # noqa: E402
-from core.camera import tiled_pixels  # noqa: E402
+from core.render.camera import tiled_pixels  # noqa: E402
 from scenes import load_scene  # noqa: E402
 
 WIDTH, HEIGHT = 640, 480

@@ -31,7 +31,7 @@ HERE = Path(__file__).resolve().parent
 sys.path[:0] = [str(HERE), str(HERE.parent)]
 
 import core  # noqa: E402
-from core import render as render_module  # noqa: E402
+from core.render import preview_render as render_module  # noqa: E402
 from bench_render import reference_path, rmse  # noqa: E402
 from scenes import load_scene  # noqa: E402
 

@@ -9,7 +9,7 @@ while code inlined into it (inline="always") counts for it, which is what makes 
 at several call sites expensive. Prints the first frame's row, the total, and the top kernels.
 
 The add-on's first frame compiles the rendering kernels in a helper process while it builds
-(core/parallel_compile.py); `--helper off` runs with KD_PREVIEW_COMPILE_HELPER=0 (all in one process),
+(core/jit/parallel_compile.py); `--helper off` runs with KD_PREVIEW_COMPILE_HELPER=0 (all in one process),
 `--helper both` alternates the two `--runs` times and prints the median first-frame and process times.
 The per-kernel list counts this process's compiles only, not the helper's.
 """

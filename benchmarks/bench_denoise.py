@@ -21,7 +21,7 @@ sys.path[:0] = [str(HERE), str(HERE.parent)]
 
 import core  # noqa: E402
 from bench_render import reference_path, rmse  # noqa: E402
-from core.denoise import SOBOL_VARIANCE_DECAY  # noqa: E402
+from core.render.denoise import SOBOL_VARIANCE_DECAY  # noqa: E402
 from scenes import load_scene  # noqa: E402
 
 

@@ -21,7 +21,7 @@ HERE = Path(__file__).resolve().parent
 sys.path[:0] = [str(HERE), str(HERE.parent)]
 
 import core  # noqa: E402
-from core.lights import DELTA  # noqa: E402
+from core.render.lights import DELTA  # noqa: E402
 from scenes import load_scene  # noqa: E402
 
 WIDTH, HEIGHT = 640, 480

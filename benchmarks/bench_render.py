@@ -9,7 +9,7 @@ Before any timing, every method runs once untimed (JIT compile and cache load, r
    new one).
 2. A sweep over samples per pixel, samplers (sobol, random), builders and a few builder settings:
    time (build + trace, median of --runs) and RMSE against the reference on hit pixels. The binned
-   rows are repeated with the denoiser (core/denoise.py, time includes the filter), "... denoised".
+   rows are repeated with the denoiser (core/render/denoise.py, time includes the filter), "... denoised".
    Written to OUT/render_sweep.csv (the run's settings in OUT/render_sweep.json) and plotted to
    OUT/render_rmse_vs_time.png with two Pareto fronts marked: raw estimates only, and with denoised rows.
    Also the denoiser's bias at convergence: RMSE between the reference and the denoised reference.
@@ -38,8 +38,8 @@ HERE = Path(__file__).resolve().parent
 sys.path[:0] = [str(HERE), str(HERE.parent)]
 
 import core  # noqa: E402
-from core.denoise import SOBOL_VARIANCE_DECAY  # noqa: E402
-from core.sources_digest import sources_digest  # noqa: E402
+from core.render.denoise import SOBOL_VARIANCE_DECAY  # noqa: E402
+from core.jit.sources_digest import sources_digest  # noqa: E402
 from scenes import DATA_DIR, blend_path, load_scene  # noqa: E402
 
 BUILD_CONFIGS = {

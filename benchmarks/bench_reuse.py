@@ -10,7 +10,7 @@ per-frame `total_ms` (extract + build + trace) comes from report.json. Frame 1 (
 frame 2 (where reuse learns which objects change and splits them from the static rest) are shown
 but left out of the medians. Modes alternate, --runs times, for each resolution:samples pair of
 --settings. With reuse, pixels whose rays cannot reach the moving or deforming objects keep last
-frame's samples (core/pixel_reuse.py), so the trace shrinks too; the share of pixels kept is printed.
+frame's samples (core/render/pixel_reuse.py), so the trace shrinks too; the share of pixels kept is printed.
 Also measured: the fingerprint (kd_addon.scene_records.geometry_fingerprint) that decides whether a mesh
 changed.
 

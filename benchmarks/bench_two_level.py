@@ -2,7 +2,7 @@
 
 Seed 000 §5 found two levels pay for several non-overlapping objects and hurt when objects overlap;
 this measures both, plus many small objects and many instances of one mesh, for the three layouts of
-core.SceneBuilder ("flat", "two_level" and "auto", the policy in core/scene_policy.py):
+core.SceneBuilder ("flat", "two_level" and "auto", the policy in core/scene/scene_policy.py):
 
   apart      16 noisy spheres of 16k triangles on a 4 x 4 grid, boxes disjoint
   near       the same 1.6 apart: each box overlaps its neighbours' by about a quarter of its width
@@ -27,8 +27,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import core  # noqa: E402
-from core.scene_policy import overlap_depth  # noqa: E402
-from core.two_level import transformed_boxes  # noqa: E402
+from core.scene.scene_policy import overlap_depth  # noqa: E402
+from core.scene.two_level import transformed_boxes  # noqa: E402
 
 
 def sphere(n_lat, n_lon, rng, noise=0.05):

@@ -1,4 +1,4 @@
-"""What soup zones cost (core/scene_policy.py, soup_zones): scattered clutter on a large ground.
+"""What soup zones cost (core/scene/scene_policy.py, soup_zones): scattered clutter on a large ground.
 
 A soup stores its members' world triangles in float32 relative to one anchor; members far from it
 against their size go to zones anchored near them (one more soup tree and top-level instance each).
@@ -20,7 +20,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import core  # noqa: E402
-from core import scene_policy  # noqa: E402
+from core.scene import scene_policy  # noqa: E402
 
 CUBE_FACES = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1], [2, 3, 7], [2, 7, 6],
                        [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])

@@ -7,8 +7,10 @@ Public API:
     KdTree.stats() -> dict
     Camera(matrix_world, fov) / Camera(matrix_world, ortho_scale=s); clip_start, clip_end, shift
     Light.point / Light.sun / Light.spot / Light.area
-    render_preview(tree, camera, width, height, *, mode="ao", samples=16, ...) -> (H, W, 4) float32
-    PreviewRender(tree, camera, width, height, ..., previous=None)   progressive: step(), image(), done;
+    render_preview(tree, camera, width, height, options=None, mode="ao", samples=16, ...) -> (H, W, 4) float32
+    RenderOptions(mode="ao", samples=16, ...): the render settings, validated and frozen; the keywords
+        of render_preview and PreviewRender build one (or replace fields of `options`)
+    PreviewRender(tree, camera, width, height, options=None, ..., previous=None)   progressive: step(), image(), done;
         pixel_state() -> PixelState: continue the next frame from it (previous=), keeping the pixels
         whose rays cannot reach what changed (scenes from a SceneBuilder)
     frame_ray_count(width, height, mode, samples, lights) -> int: the most rays a render traces (for the
@@ -34,28 +36,29 @@ Denoising (edge-avoiding à-trous, variance-guided; the raw estimate stays the d
     render_preview(..., denoise=True) / PreviewRender.image(denoise=True) -> (H, W, 4) float32
     denoise_pixels(width, height, pixels, points, normals, sums, sq_sums, counts) -> (H, W, 4) float32
 """
-from . import kernel_cache  # first: kernels are keyed by all of core's sources when decorated
-from . import inline_copy  # noqa: F401  (before any kernel compiles: halves a cold compile)
-from .build import build_kdtree
-from .camera import Camera
-from .denoise import denoise_pixels
-from .lights import Light
-from .render import PreviewRender, frame_ray_count, render_preview
-from .kdtree import KdTree
+from .jit import kernel_cache  # first: kernels are keyed by all of core's sources when decorated
+from .jit import inline_copy  # noqa: F401  (before any kernel compiles: halves a cold compile)
+from .build.builder import build_kdtree
+from .render.camera import Camera
+from .render.denoise import denoise_pixels
+from .render.lights import Light
+from .render.preview_render import PreviewRender, frame_ray_count, render_preview
+from .render.render_options import RenderOptions
+from .trace.kdtree import KdTree
 from .memory import MemoryLimitError
-from .options import BuildOptions
-from .parallel_compile import rendering_kernels_alongside
-from .pixel_reuse import PixelState
-from .queries import Hits, intersect, occluded
-from .ray_visibility import ALL_RAYS, CAMERA_RAYS, HOLDOUT, SHADOW_RAYS
-from .scene_builder import BuildReport, MeshInput, PlacementRangeError, SceneBuilder, build_scene
-from .scene_queries import SceneHits, intersect_scene, occluded_scene
-from .two_level import TwoLevelScene, build_two_level
+from .build.options import BuildOptions
+from .jit.parallel_compile import rendering_kernels_alongside
+from .render.pixel_reuse import PixelState
+from .trace.queries import Hits, intersect, occluded
+from .scene.ray_visibility import ALL_RAYS, CAMERA_RAYS, HOLDOUT, SHADOW_RAYS
+from .scene.scene_builder import BuildReport, MeshInput, PlacementRangeError, SceneBuilder, build_scene
+from .scene.scene_queries import SceneHits, intersect_scene, occluded_scene
+from .scene.two_level import TwoLevelScene, build_two_level
 
 __all__ = ["denoise_pixels",
            "build_kdtree", "intersect", "occluded", "KdTree", "Hits", "BuildOptions", "Camera", "Light",
-           "render_preview", "PreviewRender", "frame_ray_count", "TwoLevelScene", "build_two_level", "build_scene",
-           "SceneBuilder",
+           "render_preview", "PreviewRender", "RenderOptions", "frame_ray_count", "TwoLevelScene",
+           "build_two_level", "build_scene", "SceneBuilder",
            "MeshInput", "BuildReport", "SceneHits", "intersect_scene", "occluded_scene", "MemoryLimitError",
            "PlacementRangeError", "PixelState", "rendering_kernels_alongside", "CAMERA_RAYS", "SHADOW_RAYS",
            "ALL_RAYS", "HOLDOUT"]

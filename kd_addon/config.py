@@ -13,11 +13,11 @@ from dataclasses import asdict, dataclass, fields
 from .errors import PreviewError
 
 MODES = ("ao", "shadow", "ao+shadow")
-BUILDERS = ("binned", "exact", "median")  # core.options.BUILDERS (a test keeps them equal)
+BUILDERS = ("binned", "exact", "median")  # core.build.options.BUILDERS (a test keeps them equal)
 OUTPUT_FORMATS = {"PNG": ".png", "OPEN_EXR": ".exr"}
 MAX_SAMPLES = 65536
-MAX_DEPTH = 60  # core.options.DEPTH_LIMIT
-MAX_LEAF_SIZE = 1 << 20  # core.options' bound
+MAX_DEPTH = 60  # core.build.options.DEPTH_LIMIT
+MAX_LEAF_SIZE = 1 << 20  # core.build.options' bound
 MAX_MEMORY_LIMIT_MB = 1 << 30  # 1 PiB, beyond any machine's memory; the panel's fields stop at these too
 
 
@@ -44,7 +44,7 @@ class Settings:
     max_depth: kd-tree depth limit; 0 = core's automatic 1.2 log2(N) + 2.
     threads: worker threads for build and trace; 0 = every core Numba sees.
     error_target: stop sampling a pixel once its standard error is below this; 0 = off.
-    denoise: filter the finished image with core's edge-avoiding à-trous denoiser (core/denoise.py),
+    denoise: filter the finished image with core's edge-avoiding à-trous denoiser (core/render/denoise.py),
         which fades out as pixels converge; off by default so the image stays the raw estimate
         (README: "Denoising").
     output_format: "PNG" or "OPEN_EXR" for animation frames.
@@ -85,7 +85,7 @@ class RenderConfig:
     """Validated settings in the shapes core wants.
 
     build_options: keywords for core.build_kdtree.
-    render_options: keywords for core.PreviewRender / core.render_preview.
+    render_options: the fields of a core.RenderOptions but its lights (a dict: config never imports core).
     """
 
     settings: Settings

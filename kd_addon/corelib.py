@@ -95,9 +95,9 @@ def _digest(folder: Path) -> str:
 
 @functools.lru_cache(maxsize=1)
 def _core_sources_digest_module():
-    """core/sources_digest.py loaded as a file: importing it as part of core would import numba and
+    """core/jit/sources_digest.py loaded as a file: importing it as part of core would import numba and
     every kernel module, which enabling the add-on must not do (see above)."""
-    path = CORE_FOLDER / "sources_digest.py"
+    path = CORE_FOLDER / "jit" / "sources_digest.py"
     spec = importlib.util.spec_from_file_location(f"{APP_NAME}_core_sources_digest", path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)

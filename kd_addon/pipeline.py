@@ -69,7 +69,7 @@ class FrameResult:
     rays_reused: int = 0  # rays those pixels (and their camera rays) did not need again
     tree_stats: dict = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
-    compile_helper: str | None = None  # a first frame's helper process (core/parallel_compile.py): its outcome
+    compile_helper: str | None = None  # a first frame's helper process (core/jit/parallel_compile.py): its outcome
 
     @property
     def height(self) -> int:
@@ -241,7 +241,7 @@ class FrameJob:
         options = self.config.render_options
         rays = core.frame_ray_count(width, height, options["mode"], options["samples"], lights)
         # A process's first frame: with an empty kernel cache a helper process compiles the sampling
-        # kernel while this one builds and then compiles the camera pass (core/parallel_compile.py); the
+        # kernel while this one builds and then compiles the camera pass (core/jit/parallel_compile.py); the
         # block ends once both are done, and the build's time includes that.
         t0 = time.perf_counter()
         alongside = (core.rendering_kernels_alongside(self.config.denoise) if self._first_run
@@ -303,8 +303,8 @@ class FrameJob:
         global _reuse_kernels_ready
         t0 = time.perf_counter()
         try:
-            self.renderer = core.PreviewRender(scene, camera, width, height, lights=lights, previous=previous,
-                                               **self.config.render_options)
+            options = core.RenderOptions(lights=lights, **self.config.render_options)
+            self.renderer = core.PreviewRender(scene, camera, width, height, options, previous=previous)
         except ValueError as error:  # core's own checks (its MemoryLimitError is one): a message, not a traceback
             raise PreviewError(f"the frame cannot be rendered: {error}") from None
         self._timings["trace_ms"] += _ms_since(t0)

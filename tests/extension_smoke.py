@@ -7,9 +7,10 @@ test_addon_extension.py) with BLENDER_USER_RESOURCES pointing at an empty temp f
 Prints one JSON line of facts for the test to check; any failed step raises (non-zero exit).
 
     --kernels-from DIR  before the render, copy the kernel files in DIR into the installed core's
-                        Numba folder (kernels an earlier run of this script compiled: see
+                        Numba folders (kernels an earlier run of this script compiled: see
                         test_addon_extension.py)
-    --kernels-to DIR    after the render, copy the installed core's kernel files into DIR
+    --kernels-to DIR    after the render, copy the installed core's kernel files into DIR, one
+                        subfolder per folder of core ("." for core itself, "render", ...)
 """
 
 import argparse
@@ -64,13 +65,16 @@ def installed_cache_folder() -> Path:
     return importlib.import_module(MODULE + ".kd_addon.corelib").numba_cache_dir()
 
 
-def installed_kernel_folder() -> Path:
-    """The folder Numba caches the installed core's kernels in: inside the add-on's cache folder, the
-    subfolder Numba names after the kernels' source folder."""
-    from numba.core.caching import _CacheLocator  # internal; numba is pinned (core/kernel_cache.py)
+def installed_kernel_folders() -> dict:
+    """{folder of the installed core, relative to it ("." for core itself, "render", ...): the folder
+    Numba caches its kernels in}: inside the add-on's cache folder, the subfolder Numba names after
+    the kernels' source folder (its full path, which differs from run to run)."""
+    from numba.core.caching import _CacheLocator  # internal; numba is pinned (core/jit/kernel_cache.py)
 
-    core_file = Path(sys.modules[MODULE].__file__).parent / "core" / "render.py"
-    return installed_cache_folder() / _CacheLocator.get_suitable_cache_subpath(str(core_file))
+    core = Path(sys.modules[MODULE].__file__).parent / "core"
+    sources = [core, *sorted(p for p in core.iterdir() if (p / "__init__.py").is_file())]
+    return {folder.relative_to(core).as_posix(): installed_cache_folder()
+            / _CacheLocator.get_suitable_cache_subpath(str(folder / "__init__.py")) for folder in sources}
 
 
 def kernel_files(folder: Path) -> dict:
@@ -84,6 +88,19 @@ def copy_kernel_files(source: Path, target: Path) -> None:
     target.mkdir(parents=True, exist_ok=True)
     for path in source.glob("*.nb[ic]"):
         shutil.copy2(path, target / path.name)  # copy2: the times stay, so kernel_files can compare
+
+
+def save_kernels(folders: dict, target: Path) -> None:
+    """Every core folder's kernel files into target/<its relative path>."""
+    for relative, folder in folders.items():
+        copy_kernel_files(folder, target / relative)
+
+
+def load_kernels(source: Path, folders: dict) -> None:
+    """The kernel files save_kernels wrote under `source` into this install's Numba folders."""
+    for relative, folder in folders.items():
+        if (source / relative).is_dir():
+            copy_kernel_files(source / relative, folder)
 
 
 def toggle_and_uninstall() -> dict:
@@ -105,14 +122,14 @@ def main(argv: list[str]) -> None:
     parser.add_argument("--kernels-to", type=Path)
     args = parser.parse_args(argv)
     facts = install(args.zip_path)
-    kernels = installed_kernel_folder()
+    kernels = installed_kernel_folders()
     if args.kernels_from is not None:
-        copy_kernel_files(args.kernels_from, kernels)
+        load_kernels(args.kernels_from, kernels)
     facts["kernel_files_before"] = kernel_files(installed_cache_folder())
     facts.update(render_default_scene())
     facts["kernel_files_after"] = kernel_files(installed_cache_folder())
     if args.kernels_to is not None:
-        copy_kernel_files(kernels, args.kernels_to)
+        save_kernels(kernels, args.kernels_to)
     facts.update(toggle_and_uninstall())
     print("FACTS " + json.dumps(facts))
 

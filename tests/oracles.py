@@ -10,9 +10,9 @@ from pathlib import Path
 import numpy as np
 from numba import njit, prange
 
-from core import kernel_cache
+from core.jit import kernel_cache
 from core.geometry import has_area
-from core.triangle_test import intersect_triangle, ray_shear
+from core.trace.triangle_test import intersect_triangle, ray_shear
 
 kernel_cache.register(Path(__file__).parent)  # before the kernels below, which inline core's test
 

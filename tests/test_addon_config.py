@@ -66,7 +66,7 @@ def test_bad_settings_are_named(name, value, words):
 
 def test_defaults_agree_with_core():
     import core
-    from core import options
+    from core.build import options
 
     core_defaults = core.BuildOptions()
     assert (DEFAULTS.builder, DEFAULTS.leaf_size, DEFAULTS.bins) == (

@@ -55,7 +55,7 @@ def test_extension_builds_installs_renders_and_uninstalls(tmp_path):
     with zipfile.ZipFile(path) as zf:
         names = set(zf.namelist())
     assert {"__init__.py", "blender_manifest.toml", "kd_addon/__init__.py", "kd_addon/corelib.py",
-            "core/__init__.py", "core/render.py"} <= names
+            "core/__init__.py", "core/render/preview_render.py"} <= names
     assert not any(n.startswith(("tests/", "benchmarks/", "tools/", "scripts/", "docs/")) for n in names)
     user = tmp_path / "user"
     env = {"BLENDER_USER_RESOURCES": str(user), "NUMBA_CACHE_DIR": None}  # None: the extension picks the folder
@@ -79,7 +79,7 @@ def test_extension_builds_installs_renders_and_uninstalls(tmp_path):
         assert facts["last_run"].get("compile_helper") is None
     else:
         # an empty cache: the rendering kernels compiled in a helper process that imported the installed
-        # core under its extension name beside the build (core/parallel_compile.py), and it succeeded
+        # core under its extension name beside the build (core/jit/parallel_compile.py), and it succeeded
         assert facts["kernel_files_before"] == {} and facts["last_run"]["compile_helper"] == "finished"
     assert facts["enabled_after_uninstall"] is False and facts["files_after_uninstall"] is False
     assert facts["scene_prop_after_uninstall"] is False

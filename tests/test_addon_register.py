@@ -179,13 +179,13 @@ def test_the_cache_is_warm_only_once_the_sampling_kernel_is_compiled_for_this_py
     the first index file appears seconds into a compile of minutes (outside QA)."""
     import sys
 
-    import core.render_kernels
+    import core.render.render_kernels
 
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
     folder = corelib.numba_cache_dir() / "core_0123"
     folder.mkdir(parents=True)
     module, function = corelib.WARM_KERNEL.split(".")
-    assert module == "render_kernels" and hasattr(core.render_kernels, function)
+    assert module == "render_kernels" and hasattr(core.render.render_kernels, function)
     python = f"py{sys.version_info[0]}{sys.version_info[1]}"
     (folder / f"pools.ensure_refs-12.{python}.nbi").touch()
     (folder / f"{corelib.WARM_KERNEL}-43.py30.nbi").touch()  # another Python's
@@ -198,11 +198,13 @@ def test_numba_cache_folder_follows_the_core_sources(tmp_path):
     """Numba checks a cached kernel against its own file only, so a changed callee in another file
     would leave a stale caller: the cache folder is named by a digest of every core source file."""
     copy = tmp_path / "core"
-    copy.mkdir()
-    for path in (REPO / "core").glob("*.py"):
-        (copy / path.name).write_bytes(path.read_bytes())
+    for path in (REPO / "core").rglob("*.py"):  # the sources of every subpackage too
+        target = copy / path.relative_to(REPO / "core")
+        target.parent.mkdir(parents=True, exist_ok=True)
+        target.write_bytes(path.read_bytes())
     assert corelib.source_digest(copy) == corelib.source_digest()
-    (copy / "split_binned.py").write_bytes((copy / "split_binned.py").read_bytes() + b"\n")
+    edited = copy / "build" / "split_binned.py"
+    edited.write_bytes(edited.read_bytes() + b"\n")
     assert corelib.source_digest(copy) != corelib.source_digest()
     versioned = corelib._versioned(tmp_path / "cache")
     assert versioned.parent == tmp_path / "cache" and versioned.name == f"core-{corelib.source_digest()}"

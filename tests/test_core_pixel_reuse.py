@@ -1,4 +1,4 @@
-"""Pixel reuse across frames (core/pixel_reuse.py): a frame continued from the last one's pixel state
+"""Pixel reuse across frames (core/render/pixel_reuse.py): a frame continued from the last one's pixel state
 is the image a full render of that frame gives, and it keeps the pixels nothing changed near.
 
 The reference is an independent full render of the same scene (no previous state). Random animated
@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 import core
-from core.pixel_reuse import MAX_BOXES, prepared_boxes, segments_touch, surface_rays_touch
-from core.render_kernels import MEMO_BITS
-from core.scene_builder import MeshInput, SceneBuilder
-from core.shading import cosine_direction, offset_origin, sample_light
+from core.render.pixel_reuse import MAX_BOXES, prepared_boxes, segments_touch, surface_rays_touch
+from core.render.render_kernels import MEMO_BITS
+from core.scene.scene_builder import MeshInput, SceneBuilder
+from core.render.shading import cosine_direction, offset_origin, sample_light
 from tests.render_scenes import look_at
 
 SIZE = (48, 36)
@@ -276,7 +276,7 @@ def test_soup_anchor_stays_while_inside_and_re_anchoring_marks_members_changed()
     """The soup keeps its anchor when a member leaves but the anchor is still inside the rest's box
     (their rows, hence their pixels, stay); once it falls outside, the rest is re-centred, hence
     re-rounded, and counts as changed."""
-    from core.instance_signature import changed_boxes
+    from core.scene.instance_signature import changed_boxes
     small = [MeshInput(f"c{k}", *cube(0.5), 0) for k in range(3)]
     builder = SceneBuilder("auto")
     place = [moved(-4, 0, 1), moved(0, 0, 1), moved(4, 0, 1)]  # all three in the soup, anchor (0, 0, 1)
@@ -337,7 +337,7 @@ def test_surface_ray_test_covers_every_sampled_ray(light):
     samplers) that meets a box is flagged by the conservative test. Boxes are small and placed near
     the rays' paths, off their axis by up to the light's size, where a test ignoring it would fail."""
     rng = np.random.default_rng(light)
-    lights = core.lights.pack_lights([WIDE_LIGHTS[light]])
+    lights = core.render.lights.pack_lights([WIDE_LIGHTS[light]])
     n, found = np.array([0.0, 0.0, 1.0]), 0
     for _ in range(120):
         p = rng.uniform(-4, 4, 3) * (1, 1, 0)

@@ -1,4 +1,4 @@
-"""Per-instance ray visibility (core/ray_visibility.py): camera rays meet only instances visible to the
+"""Per-instance ray visibility (core/scene/ray_visibility.py): camera rays meet only instances visible to the
 camera, AO and shadow rays only instances that cast shadows, and a holdout's pixels stay empty, in every
 layout, through soups, queries, renders and pixel reuse.
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import core
-from core.scene_builder import MeshInput, SceneBuilder
+from core.scene.scene_builder import MeshInput, SceneBuilder
 from tests.render_scenes import floor, hit_mask, look_at, look_down, quad
 from tests.test_core_pixel_reuse import GROUND, camera as reuse_camera, cube, moved, render
 from tests.test_core_two_level import _blob, _random_matrix, _rays

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 import core
-from core.layout import LEAF
-from core.options import REFINE_RAYS_PER_TRIANGLE
+from core.trace.layout import LEAF
+from core.build.options import REFINE_RAYS_PER_TRIANGLE
 from tests.core_helpers import BUILDERS, assert_same_as_brute
 from tests.meshes import degenerate_mix, lattice, random_soup
 
@@ -194,7 +194,7 @@ def test_snap_candidates_and_their_counts_match_a_brute_force_count(seed):
     """The one-pass search for the box boundaries nearest the binned plane (split_binned) finds the
     same planes and the same left / right / planar counts as counting at each plane directly, with
     many ties and planar boxes (values on a coarse grid)."""
-    from core.split_binned import _nearest_boundaries
+    from core.build.split_binned import _nearest_boundaries
 
     rng = np.random.default_rng(seed)
     lo = rng.integers(0, 40, 500) / 8.0

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import core
-from core.scene_policy import OVERLAP_LIMIT, PRECISION_RATIO, SMALL_OBJECT, overlap_depth, plan_soup, soup_zones
+from core.scene.scene_policy import OVERLAP_LIMIT, PRECISION_RATIO, SMALL_OBJECT, overlap_depth, plan_soup, soup_zones
 from tests.meshes import icosphere
 from tests.oracles import moller_trumbore
 

@@ -8,9 +8,9 @@ import pytest
 from numba import njit
 
 import core
-from core.layout import LEAF
-from core.leaf_triangles import leaf_triangles
-from core.triangle_test import LEAF_CHUNK, intersect_triangle, leaf_candidates, ray_shear
+from core.trace.layout import LEAF
+from core.build.leaf_triangles import leaf_triangles
+from core.trace.triangle_test import LEAF_CHUNK, intersect_triangle, leaf_candidates, ray_shear
 from tests.core_helpers import BUILDERS, assert_same_as_brute
 from tests.meshes import icosphere, mesh_triangles, subdivided_cube
 from tests.oracles import brute_watertight

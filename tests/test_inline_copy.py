@@ -1,4 +1,4 @@
-"""Numba's inliner with core's scope-sharing copy (core/inline_copy.py) compiles to the same LLVM IR as
+"""Numba's inliner with core's scope-sharing copy (core/jit/inline_copy.py) compiles to the same LLVM IR as
 Numba's own: a kernel of nested inline="always" functions (copying far fewer variables), and an
 @overload(inline="always") inlined twice in a function compiled during another inlining."""
 import json
@@ -15,7 +15,7 @@ import numpy as np
 from numba import njit
 from numba.core import inline_closurecall, ir
 if {patched}:
-    import core.inline_copy  # installs itself
+    import core.jit.inline_copy  # installs itself
     assert inline_closurecall.InlineWorker.inline_ir.kd_preview_scope_sharing
 copies = [0]
 numba_var_copy = ir.Var.__deepcopy__

@@ -1,13 +1,13 @@
 """Cached kernels are keyed by every source file they may inline, not only their own
-(core/kernel_cache.py). CI once ran a `trace_rays` cached before a fix to the triangle test it inlines."""
+(core/jit/kernel_cache.py). CI once ran a `trace_rays` cached before a fix to the triangle test it inlines."""
 import subprocess
 import sys
 import textwrap
 from pathlib import Path
 
 import core
-from core import kernel_cache
-from core.traversal import trace_rays
+from core.jit import kernel_cache
+from core.trace.traversal import trace_rays
 
 CALLER = """
 from numba import njit
@@ -27,7 +27,7 @@ def value():
 RUN = """
 import sys
 sys.path.insert(0, {root!r})
-from core import kernel_cache
+from core.jit import kernel_cache
 if {register}:
     kernel_cache.register({package!r}, sources={package!r})
 from pkg.caller import run
@@ -74,6 +74,48 @@ def test_core_kernels_are_stamped_with_all_of_core():
     assert isinstance(locator, kernel_cache.SourcesDigestLocator)
     own_stamp, digest = locator.get_source_stamp()
     assert digest == kernel_cache.folder_digest(kernel_cache.CORE_FOLDER)
+
+
+def test_kernels_in_every_subpackage_are_stamped_with_all_of_core():
+    """Core's kernels live in subpackages (build, trace, scene, render); each is keyed by all of core."""
+    from core.build.subtree import build_subtree
+    from core.render.render_kernels import add_samples
+    from core.scene.instance_traversal import trace_scene_rays
+
+    digest = kernel_cache.folder_digest(kernel_cache.CORE_FOLDER)
+    for kernel in (trace_rays, build_subtree, add_samples, trace_scene_rays):
+        locator = kernel._cache._impl.locator
+        assert isinstance(locator, kernel_cache.SourcesDigestLocator), kernel
+        assert locator.get_source_stamp()[1] == digest
+
+
+def test_the_digest_follows_files_in_subfolders(tmp_path):
+    """An edit, a new file or a move inside a subfolder changes the digest of the folder above."""
+    (tmp_path / "render").mkdir()
+    (tmp_path / "trace").mkdir()
+    (tmp_path / "a.py").write_text("x = 1\n")
+    (tmp_path / "render" / "kernels.py").write_text("y = 1\n")
+    before = kernel_cache.sources_digest(tmp_path)
+    (tmp_path / "render" / "kernels.py").write_text("y = 2\n")
+    edited = kernel_cache.sources_digest(tmp_path)
+    (tmp_path / "render" / "kernels.py").rename(tmp_path / "trace" / "kernels.py")
+    moved = kernel_cache.sources_digest(tmp_path)
+    (tmp_path / "trace" / "new.py").write_text("")
+    added = kernel_cache.sources_digest(tmp_path)
+    assert len({before, edited, moved, added}) == 4
+
+
+def test_a_helper_gets_the_cache_folder_of_every_core_folder_with_kernels():
+    """The helper process writes each of core's kernels where this process reads it
+    (CORE_CACHE_FOLDER_VARIABLE): one folder per subpackage with kernels."""
+    import json
+
+    from core.render.render_kernels import add_samples
+
+    folders = json.loads(kernel_cache.core_cache_folders())
+    assert {"build", "trace", "scene", "render"} <= set(folders)
+    assert folders["render"] == add_samples._cache._cache_path
+    assert folders["trace"] == trace_rays._cache._cache_path
 
 
 def test_the_digest_follows_every_source_file(tmp_path):

@@ -1,5 +1,5 @@
-"""The first render's helper process (core/parallel_compile.py) and the lock that lets several processes
-write one kernel cache (core/kernel_cache.py)."""
+"""The first render's helper process (core/jit/parallel_compile.py) and the lock that lets several processes
+write one kernel cache (core/jit/kernel_cache.py)."""
 import os
 import select
 import subprocess
@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from core import kernel_cache, parallel_compile
+from core.jit import kernel_cache, parallel_compile
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -24,7 +24,7 @@ def twice(x):
 COMPILE_PROBE = """
 import sys, time
 sys.path[:0] = [{root!r}, {folder!r}]
-from core import kernel_cache
+from core.jit import kernel_cache
 kernel_cache.register({folder!r}, sources={folder!r})
 asking = kernel_cache.locked_cache_folder
 
@@ -78,7 +78,7 @@ def _probe_cache_folder(folder: Path, cache: Path) -> Path:
     code = textwrap.dedent(f"""
         import sys
         sys.path[:0] = [{str(ROOT)!r}, {str(folder)!r}]
-        from core import kernel_cache
+        from core.jit import kernel_cache
         kernel_cache.register({str(folder)!r}, sources={str(folder)!r})
         import probe
         print(probe.twice._cache._cache_path)
@@ -101,9 +101,10 @@ def test_the_helper_imports_core_under_an_extension_package_name(tmp_path):
     """Installed, core is `bl_ext.<repo>.<id>.core` and the add-on's __init__ imports bpy: the helper
     imports core under that name without running the parents' __init__ files."""
     core_folder = tmp_path / "bl_ext" / "user_default" / "kd_preview" / "core"
-    core_folder.mkdir(parents=True)
-    (core_folder / "__init__.py").write_text("")
-    (core_folder / "parallel_compile.py").write_text(FAKE_CORE)
+    (core_folder / "jit").mkdir(parents=True)
+    for folder in (core_folder, core_folder / "jit"):
+        (folder / "__init__.py").write_text("")
+    (core_folder / "jit" / "parallel_compile.py").write_text(FAKE_CORE)
     for parent in core_folder.parents[:3]:
         (parent / "__init__.py").write_text("raise ImportError('a parent package ran')\n")
     name = "bl_ext.user_default.kd_preview.core"
@@ -111,7 +112,7 @@ def test_the_helper_imports_core_under_an_extension_package_name(tmp_path):
         run = subprocess.run([sys.executable, "-c", parallel_compile._HELPER_CODE, name, str(core_folder), flag],
                              capture_output=True, text=True, cwd=tmp_path)
         assert run.returncode == 0, run.stderr
-        assert (core_folder / "ran.txt").read_text() == f"{name}.parallel_compile denoise={denoise}"
+        assert (core_folder / "ran.txt").read_text() == f"{name}.jit.parallel_compile denoise={denoise}"
 
 
 SLOW_FAKE_CORE = """
@@ -144,10 +145,10 @@ def test_the_helper_ends_when_its_parent_is_gone(tmp_path):
     command line had exited. The helper lives while its parent does and ends within a second or two
     once the parent is gone without stopping it."""
     core_folder = tmp_path / "pkg" / "core"
-    core_folder.mkdir(parents=True)
-    for folder in (core_folder, core_folder.parent):
+    (core_folder / "jit").mkdir(parents=True)
+    for folder in (core_folder, core_folder.parent, core_folder / "jit"):
         (folder / "__init__.py").write_text("")
-    (core_folder / "parallel_compile.py").write_text(SLOW_FAKE_CORE)
+    (core_folder / "jit" / "parallel_compile.py").write_text(SLOW_FAKE_CORE)
     (tmp_path / "helper.py").write_text(parallel_compile._HELPER_CODE)
     parent = subprocess.run([sys.executable, "-c", PARENT, str(tmp_path / "helper.py"), "pkg.core", str(core_folder)],
                             capture_output=True, text=True, timeout=120, cwd=tmp_path)
@@ -221,8 +222,9 @@ def test_the_two_sides_compile_what_a_real_render_runs():
     import numpy as np
 
     import core
-    from core import camera as camera_module
-    from core import denoise, instance_traversal, render_kernels
+    from core.render import camera as camera_module
+    from core.render import denoise, render_kernels
+    from core.scene import instance_traversal
 
     parallel_compile.compile_rendering_kernels(denoise=True)
     parallel_compile.compile_camera_pass()
@@ -248,7 +250,9 @@ def test_the_two_sides_compile_what_a_real_render_runs():
 SIDES = """
 import sys
 sys.path.insert(0, {root!r})
-from core import instance_traversal, parallel_compile, render_kernels
+from core.jit import parallel_compile
+from core.render import render_kernels
+from core.scene import instance_traversal
 parallel_compile.compile_scene_wrapping()
 getattr(parallel_compile, sys.argv[1])()
 print(*(len(k.signatures) for k in (render_kernels.add_samples, render_kernels.surface_frames,

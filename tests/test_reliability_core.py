@@ -122,7 +122,7 @@ def test_bad_memory_limit_is_named(bad):
 def test_estimates_grow_with_triangles_and_pixels():
     assert memory.build_bytes(2_000_000) == 2 * memory.build_bytes(1_000_000) > 0
     assert memory.render_bytes(1920, 1080) == 4 * memory.render_bytes(960, 540) > 0
-    for builder in core.options.BUILDERS:
+    for builder in core.build.options.BUILDERS:
         assert memory.build_bytes(10, builder) > 0
 
 
@@ -180,7 +180,7 @@ def test_build_releases_freed_memory_before_the_leaf_copy(monkeypatch):
     """The subtree pools are freed before the tree's leaf copy is made, and handed back to the OS in
     between (memory.release_freed_memory): otherwise the copy adds its whole size to the process's
     peak (bench_core.py: 188 against 127 B a triangle on suzanne-251k)."""
-    import core.build as build
+    import core.build.builder as build
     calls = []
     real_copy = build.leaf_triangles
     monkeypatch.setattr(build, "release_freed_memory", lambda: calls.append("release"))

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 import core
-from core.camera import tiled_pixels
+from core.render.camera import tiled_pixels
 from tests.render_scenes import floor, hit_mask, look_at, look_down, quad, render
 
 
@@ -103,7 +103,7 @@ def test_the_order_pixels_are_traced_in_does_not_change_the_image(monkeypatch):
     images = {}
     for order in ("tiles", "rows"):
         if order == "rows":
-            monkeypatch.setattr(core.render, "tiled_pixels", lambda w, h: np.arange(w * h))
+            monkeypatch.setattr(core.render.preview_render, "tiled_pixels", lambda w, h: np.arange(w * h))
         images[order] = [core.render_preview(tree, camera, 37, 23, samples=4, mode=mode, lights=lights)
                          for mode in ("ao", "shadow", "ao+shadow")]
     for tiled, plain in zip(images["tiles"], images["rows"]):

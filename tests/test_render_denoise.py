@@ -1,10 +1,10 @@
-"""The edge-avoiding à-trous denoiser (core/denoise.py): it removes noise, keeps edges, never touches the
+"""The edge-avoiding à-trous denoiser (core/render/denoise.py): it removes noise, keeps edges, never touches the
 background, does not care about the scene's scale, and fails on no corner case."""
 import numpy as np
 import pytest
 
 import core
-from core.denoise import SOBOL_VARIANCE_DECAY
+from core.render.denoise import SOBOL_VARIANCE_DECAY
 from tests.render_scenes import floor, hit_mask, look_at, look_down, quad
 
 

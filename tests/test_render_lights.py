@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 import core
-from core.lights import DELTA
+from core.render.lights import DELTA
 from tests.render_scenes import floor, hit_mask, look_down, quad, render
 
 

@@ -1,0 +1,89 @@
+"""build_kdtree: checks the input, then runs the parallel top levels, the subtree builds and the merge."""
+from time import perf_counter
+
+import numpy as np
+
+from ..geometry import triangle_boxes, union_of_boxes
+from ..inputs import as_triangles
+from ..trace.kdtree import KdTree, empty_arrays
+from ..trace.layout import NodeArrays
+from .lazy import DeferredSubtrees
+from .leaf_triangles import leaf_triangles
+from ..memory import MB, MemoryLimitError, check_build_memory, release_freed_memory
+from .merge import merge_tree
+from .options import make_options
+from .subtree import build_subtrees
+from ..jit.threads import thread_count
+from .top_levels import build_top_levels
+
+
+def build_kdtree(triangles, **options):
+    """Build a kd-tree over an (N, 3, 3) array of triangle vertex positions.
+
+    Keyword options are those of `BuildOptions` (builder, bins, leaf_size, max_depth, traversal_cost,
+    intersection_cost, empty_bonus, cost_ratio, clip, skip, top, threads, lazy, memory_limit, ...), each
+    validated. With lazy=True only the top of the tree is built now and the rest as rays reach it (lazy.py).
+    Raises ValueError naming the first bad triangle or setting, or memory.MemoryLimitError (a ValueError)
+    when the estimated peak memory is above memory_limit.
+    """
+    opts = make_options(options)
+    check_build_memory(triangles, opts)
+    tris = as_triangles(triangles)
+    start = perf_counter()
+    timings = {}
+    with thread_count(opts.threads) as threads:
+        prims, boxes, bounds, dropped = _initial_references(tris)
+        timings["prepare"] = _ms_since(start)
+        deferred = None
+        if len(prims) == 0:
+            arrays = empty_arrays()
+        else:
+            try:
+                arrays, deferred = _build_arrays(tris, prims, boxes, bounds, opts, threads, timings)
+            except MemoryLimitError:  # raised in a kernel, whose message cannot carry the numbers
+                raise MemoryLimitError(
+                    f"building a kd-tree over {len(tris):,} triangles outgrew memory_limit "
+                    f"({opts.memory_limit / MB:,.1f} MB) while splitting: the triangles need more references "
+                    "than the estimate allows, as dense overlapping triangles and settings that force splits "
+                    f"(here cost_ratio {opts.cost_ratio:g}, leaf_size {opts.leaf_size}, max_depth "
+                    f"{opts.depth_for(len(tris))}) do; raise memory_limit, or lower max_depth or cost_ratio") from None
+        del prims, boxes  # the initial references; the leaf copy below may take their memory
+        release_freed_memory()
+        leaf_tris = leaf_triangles(tris, arrays.leaf_prims)  # part of the build: the traversal reads it
+    return KdTree(tris, bounds, arrays, options=opts, build_ms=_ms_since(start), dropped=dropped,
+                  timings=timings, deferred=deferred, leaf_tris=leaf_tris)
+
+
+def _initial_references(tris):
+    """One reference per triangle with area: its index and box; and the box around them all."""
+    boxes, keep = triangle_boxes(tris)
+    prims = np.flatnonzero(keep).astype(np.int32)
+    dropped = np.flatnonzero(~keep).astype(np.int32)
+    if len(dropped):
+        boxes = np.ascontiguousarray(boxes[keep])
+    if len(prims) == 0:
+        return prims, boxes, np.zeros(6, np.float32), dropped
+    bounds = union_of_boxes(boxes)
+    return prims, boxes, bounds, dropped
+
+
+def _build_arrays(tris, prims, boxes, bounds, opts, threads, timings):
+    params = opts.params(len(prims), bounds)
+    t = perf_counter()
+    top_nodes, tasks = build_top_levels(tris, prims, boxes, bounds, params, opts.top, threads)
+    del prims, boxes
+    timings["top"] = _ms_since(t)
+    t = perf_counter()
+    subtrees = build_subtrees(tris, tasks, params, threads)
+    timings["subtrees"] = _ms_since(t)
+    t = perf_counter()
+    arrays = NodeArrays(*merge_tree(top_nodes, subtrees))
+    deferred = None
+    if opts.lazy:
+        deferred = DeferredSubtrees(subtrees, arrays.axis, arrays.child, params, opts.lazy_speculative)
+    timings["merge"] = _ms_since(t)
+    return arrays, deferred
+
+
+def _ms_since(start):
+    return (perf_counter() - start) * 1000.0

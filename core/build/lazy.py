@@ -1,0 +1,143 @@
+"""On-demand (lazy) construction (seed 003 §3): deferred subtrees are built when rays first reach them.
+
+A lazy `build_kdtree` builds the parallel top levels and, inside each task, every node down to
+`lazy_subtree_size` references; smaller nodes are left UNBUILT (layout.py) and their references are kept
+here. Queries and renders trace all their rays through the one traversal; a ray that reaches an
+unbuilt node stops there and reports it. The caller then builds all the requested subtrees at once,
+in parallel, one thread per subtree, exactly like the eager subtrees (subtree.py), splices them into the
+flat arrays (merge.py) and traces only the suspended rays again, from the start.
+
+The traversal enters a subtree only where the eager traversal would, and a deferred subtree is built
+exactly as the eager build builds it, so every result is identical to the eager tree's and only the
+subtrees some ray needs get built. Seed 003 interleaves building and tracing in one GPU task pool;
+on a few CPU cores this simple alternation (trace everything, build the requested batch, retrace
+those rays) keeps one traversal and one builder, at the price of a few rounds per query.
+"""
+from time import perf_counter
+
+import numpy as np
+
+from ..trace.layout import NO_HIT, UNBUILT, subtree_of
+from .leaf_triangles import BYTES_PER_REFERENCE as LEAF_COPY_BYTES
+from ..memory import MB, MemoryLimitError
+from .merge import splice_subtrees
+from .subtree import build_subtrees
+from ..jit.threads import thread_count
+from .top_levels import Task
+
+
+# When one round asks for at least this share of the unbuilt subtrees, the rest is built with them:
+# such a scene is mostly visible, and each further round costs a retrace of the stopped rays and a
+# smaller, less parallel batch. Measured on suzanne-251k (no occlusion, 512x512, 4 AO samples): the
+# rounds asked for 66/118, 40/52, 10/12 and 2/2 subtrees; building all at the first round removes
+# three retraces (benchmarks/bench_lazy.py). Occluded scenes ask for a few per cent and are unaffected.
+BUILD_ALL_SHARE = 0.5
+NODE_BYTES = 13  # axis, split, child, count (layout.py)
+
+
+class DeferredSubtrees:
+    """The subtrees a lazy build left for later, and what has been built of them since.
+
+    Subtree k is node `node[k]` of the tree (axis UNBUILT, child k) with references
+    prims/boxes[start[k]:start[k+1]], box `box[k]`, depth `depth[k]` and room `room[k]` (subtree.py).
+    Plain arrays: it pickles.
+    """
+
+    def __init__(self, subtrees, axis, child, params, speculative):
+        parts = [s[5:] for s in subtrees]
+        sizes = np.concatenate([np.diff(p[1]) for p in parts]).astype(np.int64)
+        self.start = np.concatenate([[0], np.cumsum(sizes)])
+        self.depth = np.concatenate([p[2] for p in parts])
+        self.box = np.concatenate([p[3] for p in parts])
+        self.prims = np.concatenate([p[4] for p in parts])
+        self.boxes = np.concatenate([p[5] for p in parts])
+        self.room = np.concatenate([p[6] for p in parts])
+        unbuilt = np.flatnonzero(axis == UNBUILT)
+        self.node = np.empty(len(sizes), np.int64)
+        self.node[child[unbuilt]] = unbuilt
+        self.built = np.zeros(len(sizes), bool)
+        self.params = params._replace(defer_size=0)  # a deferred subtree is built whole
+        self.speculative = speculative
+        self.build_ms = 0.0
+        self.rounds = 0
+
+    @property
+    def total(self):
+        return len(self.built)
+
+    def stats(self):
+        """The lazy fields of KdTree.stats() (see README, Lazy (on-demand) building)."""
+        return {"lazy": True, "subtrees_total": self.total, "subtrees_built": int(self.built.sum()),
+                "unbuilt_references": int(np.diff(self.start)[~self.built].sum()),
+                "lazy_build_ms": self.build_ms, "lazy_rounds": self.rounds,
+                "deferred_bytes": int(self.prims.nbytes + self.boxes.nbytes)}
+
+    def select(self, requested):
+        """The unbuilt subtrees to build for these requests: the requested ones and, if speculative,
+        their neighbours in depth-first build order (usually a sibling or cousin; seed 003 §4
+        "speculative unlocking")."""
+        ids = np.unique(requested)
+        if self.speculative:
+            ids = np.unique(np.clip(np.concatenate([ids - 1, ids, ids + 1]), 0, self.total - 1))
+        ids = ids[~self.built[ids]]
+        unbuilt = np.flatnonzero(~self.built)
+        if len(ids) >= BUILD_ALL_SHARE * len(unbuilt):  # the rays see most of what is left
+            return unbuilt
+        return ids
+
+    def tasks(self, ids):
+        return [Task(int(self.node[k]), self.prims[self.start[k]:self.start[k + 1]],
+                     self.boxes[self.start[k]:self.start[k + 1]], self.box[k], int(self.depth[k]),
+                     float(self.room[k]))
+                for k in ids]
+
+
+def build_requested(tree, requested, threads=None):
+    """Build the deferred subtrees `requested` (indices, repeats allowed) and splice them into `tree`."""
+    deferred = tree.deferred
+    ids = deferred.select(requested)
+    if len(ids) == 0:
+        return
+    start = perf_counter()
+    with thread_count(threads) as n_threads:
+        subtrees = build_subtrees(tree.triangles, deferred.tasks(ids), deferred.params, n_threads)
+    _check_memory_limit(tree, subtrees)
+    tree.replace_nodes(splice_subtrees(tree.node_arrays, deferred.node[ids], subtrees))
+    deferred.built[ids] = True
+    if deferred.built.all():  # nothing left to build: let the kept references go
+        deferred.prims, deferred.boxes = deferred.prims[:0], deferred.boxes[:0]
+    deferred.rounds += 1
+    deferred.build_ms += (perf_counter() - start) * 1e3
+
+
+def _check_memory_limit(tree, subtrees):
+    """Refuse a round whose subtrees would grow the tree past its memory_limit, before splicing them
+    (the tree stays as it was, and usable). Each subtree's own build checks its pools against its
+    share of the limit, with a 1 MB floor for tiny builds (memory.MIN_SUBTREE_BUDGET); a lazy tree's
+    subtrees are all small, so the floors added up: an outside review's lazy tree grew to 46 MB under a
+    20 MiB limit that the eager build of the same triangles kept."""
+    limit = tree.options.memory_limit
+    if limit is None:
+        return
+    held = sum(a.nbytes for a in tree.node_arrays) + tree.leaf_triangles.nbytes
+    held += tree.deferred.prims.nbytes + tree.deferred.boxes.nbytes
+    nodes = sum(len(s[0]) for s in subtrees)
+    references = sum(len(s[4]) for s in subtrees)
+    grown = held + NODE_BYTES * nodes + (4 + LEAF_COPY_BYTES) * references
+    if grown > limit:
+        raise MemoryLimitError(
+            f"a lazy kd-tree over {len(tree.triangles):,} triangles would outgrow memory_limit "
+            f"({limit / MB:,.1f} MB) building the subtrees its rays reach ({grown / MB:,.1f} MB): raise "
+            "memory_limit, or lower max_depth or cost_ratio; the tree keeps what earlier rounds built, not "
+            "this round")
+
+
+def resolve_suspended(tree, status, retrace, threads=None):
+    """Finish work that stopped at unbuilt subtrees: while some items (rays, pixels) have a suspended
+    status (<= -2, layout.suspended_prim), build the subtrees they name and call retrace(indices), which
+    must redo those items from the start and update status[indices]. Nothing to do on an eager tree."""
+    pending = np.flatnonzero(status < NO_HIT)
+    while len(pending):
+        build_requested(tree, subtree_of(status[pending]), threads)
+        retrace(pending)
+        pending = pending[status[pending] < NO_HIT]

@@ -1,0 +1,249 @@
+"""Build settings: one object, every field with a documented default, validated once at the boundary.
+
+`BuildOptions` is what users pass (as keywords to `build_kdtree`); `BuildParams` is the plain tuple of
+numbers the Numba kernels see.
+"""
+from dataclasses import dataclass, asdict
+from math import isfinite, log2
+from typing import NamedTuple, Optional
+
+import numpy as np
+
+from ..geometry import half_area
+from ..memory import subtree_bytes_per_reference
+
+BUILDERS = ("binned", "exact", "median")
+TOP_STRATEGIES = ("sah", "clustering")
+SPLIT_AXES = ("all", "longest")
+
+# The traversal stack has one slot per level, so the depth is capped where the stack ends.
+DEPTH_LIMIT = 60
+
+
+# Clipping straddlers, snapping planes to box boundaries and searching all three axes refine splits
+# at extra build work per reference. Time to image with clip and snap off, against on (rays given,
+# 640 x 480, docs/choices.md): 0.91x at 0.6 rays a triangle, 0.94x at 2.4, 1.00x at 6.1, 1.08x at 21.
+# A per-node rule (rays entering the node per reference, as beats_leaf estimates them) still lost
+# 4-7% at 21: AO rays start on the surface, and the deep nodes there see more rays than rays from
+# outside would. Searching the longest axis first as well: 0.80-0.95x more at 0.6-3.7.
+REFINE_RAYS_PER_TRIANGLE = 4
+
+
+@dataclass(frozen=True)
+class BuildOptions:
+    """Settings of the kd-tree builder.
+
+    builder: "binned" (min-max binned SAH, seed 000 §3.3-3.4, exact sweep in small nodes), "exact"
+        (O(N log N) event sweep everywhere, seed 004 §3.1: the quality reference) or "median" (spatial
+        median of the longest axis, with the SAH deciding only when to stop: the cheap baseline).
+    bins: min-max bins per axis for "binned" (seed 000 found 32 sufficient).
+    exact_below: "binned" switches to the exact sweep in nodes with at most this many references.
+        Seed 000 switches at `bins`. Measured on suzanne-251k (docs/choices.md): switching at 16/32/64 lowers
+        the SAH cost by 0.6/2.8/4.6% but makes the build 26/41/88% slower and time to image no
+        better, so the default is 0 (binning everywhere; 32 bins resolve small nodes nearly exactly).
+    snap: "binned" also tries, below the parallel top levels, the box boundaries nearest to its best
+        bin boundary and keeps the cheapest plane (split_binned.snap_to_boundaries): grids and height
+        fields stop paying for planes between their vertex lines (docs/choices.md: a wave-modified grid went
+        from 7.6 to 1.1 references a triangle and built ~5x faster; suzanne-251k's SAH cost -7%).
+    split_axes: "all" (the binned SAH searches x, y and z) or "longest" (below the parallel top levels,
+        the node's longest axis, as fast BVH builders bin (Wald 2007, "On fast construction of
+        SAH-based bounding volume hierarchies"), and the other two only where it offers no plane
+        better than a leaf: a third of the binning in most nodes, for somewhat worse splits). Nodes
+        of at most exact_below references take the exact sweep over all three either way.
+    leaf_size: nodes with at most this many references become leaves without trying a split.
+    max_depth: None means 1.2*log2(N) + 2 (seed 003 §3.5), capped at 60.
+    traversal_cost, intersection_cost: SAH constants (cost of one traversal step and of one
+        ray/triangle test). 0.3 since leaves screen their triangles in a vectorised loop
+        (triangle_test.leaf_candidates), swept end to end (docs/choices.md): lower values helped
+        dense soups and many samples a little more but lost with few rays a triangle; 1.5 before.
+    empty_bonus: fraction of the intersection cost forgiven when one child is empty, in [0, 1).
+        0.2, measured: with pbrt's 0.5 the SAH spends the depth budget cutting off empty space and
+        leaves of 64+ triangles at the depth limit (SAH cost 83 against 29 on suzanne-251k).
+    cost_ratio: a node stays a leaf when the best split costs more than cost_ratio times the leaf
+        (seed 003 §3.5 uses 0.9 to favour time to image).
+    clip: tighten the boxes of straddling triangles by clipping the triangle to each child ("perfect
+        splits", seed 002 and Havran); off uses the triangle box cut by the plane.
+    skip: adaptive primitive skipping while binning large nodes (every log10(n)-th reference,
+        seed 000 §3.3).
+    top: how the parallel top levels are split: "sah" (data-parallel binned SAH at every top node) or
+        "clustering" (seed 000 §4.1: equal-count sub-domains from one high-resolution binning).
+    threads: worker threads; None uses every core Numba sees.
+    lazy: on-demand construction (seed 003 §3): build the top of the tree now and defer every node
+        of at most `lazy_subtree_size` references; a deferred subtree is built (exactly as the eager
+        build would build it) when a query or render first sends a ray into it. Results are identical
+        to the eager tree's; it pays when rays see only part of the scene (seed 003 §5.3).
+    lazy_subtree_size: the largest deferred subtree, in references. Smaller builds more levels
+        eagerly (each one a pass over all references) but defers in finer pieces, so less is built
+        around what the rays reach; larger the opposite. 4096 measured best (README, bench_lazy.py).
+    lazy_speculative: also build, with each requested subtree, its neighbours in depth-first build
+        order (the previous and next deferred subtree, usually its sibling or a cousin): seed 003 §4's
+        speculative building, trading some unneeded building for fewer suspend/build/retrace rounds.
+    memory_limit: bytes; a build whose estimated peak memory (memory.py) is above this raises
+        memory.MemoryLimitError (a ValueError) before allocating anything, and so does a build whose
+        pools outgrow their share of it while splitting (settings that force splits, such as a huge
+        cost_ratio with leaf_size 1 and a deep max_depth). None: no limit.
+    duplication_budget: how many references, per triangle it starts with, the tree may make by
+        splitting straddling triangles into both children, spent evenly along every path: a node's
+        room starts at this value at the root, each split divides it by that split's duplication
+        (n_left + n_right) / n, and a node whose room is below 1 becomes a leaf. Leaves then hold
+        at most twice this many references a triangle. The SAH weighs only tracing: where triangles
+        lie flat in one plane and overlap densely (cards on a floor at z = 0), a flat node's children
+        share its area exactly, so every split pays and the build went on to max_depth (outside QA:
+        50,000 such triangles made 1,246 references a triangle, 3.5 GB, 36 s). With 16 the ordinary
+        scenes of benchmarks/bench_duplication.py build the trees they build without it; where it
+        binds, tracing pays (docs/choices.md). None: no budget.
+    rays: how many rays the tree will answer (for one render: core.frame_ray_count, e.g. width x
+        height x 2 for camera rays plus one shadow ray a pixel). None: as many as it takes, no build
+        term. Given, a node is split only when the rays expected to enter it save more than the
+        split costs to build (sah.beats_leaf): time to image rather than traversal speed decides where
+        the tree stops, as seed 003 §3.5 tunes its termination for. Few rays a triangle, a shallower
+        tree; many, the same tree as None. Fewer than REFINE_RAYS_PER_TRIANGLE rays a triangle also
+        turn `clip` and `snap` off and set `split_axes` to "longest", whatever they were given as:
+        their build work per reference is repaid only by many rays. (KdTree.options keeps the
+        options as given; BuildOptions.params says what the build used.)
+    """
+
+    builder: str = "binned"
+    bins: int = 32
+    exact_below: int = 0
+    snap: bool = True
+    split_axes: str = "all"
+    leaf_size: int = 2
+    max_depth: Optional[int] = None
+    traversal_cost: float = 1.0
+    intersection_cost: float = 0.3
+    empty_bonus: float = 0.2
+    cost_ratio: float = 1.0
+    clip: bool = True
+    skip: bool = False
+    top: str = "sah"
+    threads: Optional[int] = None
+    lazy: bool = False
+    lazy_subtree_size: int = 4096
+    lazy_speculative: bool = False
+    memory_limit: Optional[int] = None
+    duplication_budget: Optional[float] = 16.0
+    rays: Optional[int] = None
+
+    def __post_init__(self):
+        _check_choice("builder", self.builder, BUILDERS)
+        _check_choice("top", self.top, TOP_STRATEGIES)
+        _check_choice("split_axes", self.split_axes, SPLIT_AXES)
+        _check_int("bins", self.bins, 2, 4096)
+        _check_int("exact_below", self.exact_below, 0, 1 << 30)
+        _check_int("leaf_size", self.leaf_size, 1, 1 << 20)
+        if self.max_depth is not None:
+            _check_int("max_depth", self.max_depth, 0, DEPTH_LIMIT)
+        if self.duplication_budget is not None:
+            _check_float("duplication_budget", self.duplication_budget, 1.0, None)
+        if self.threads is not None:
+            _check_int("threads", self.threads, 1, 1024)
+        if self.memory_limit is not None:
+            _check_int("memory_limit", self.memory_limit, 1, 1 << 62)  # None, not 0, means no limit
+        if self.rays is not None:
+            _check_int("rays", self.rays, 1, 1 << 62)
+        _check_float("traversal_cost", self.traversal_cost, 0.0, None)
+        _check_float("intersection_cost", self.intersection_cost, 0.0, None, low_open=True)
+        _check_float("empty_bonus", self.empty_bonus, 0.0, 1.0, high_open=True)
+        _check_float("cost_ratio", self.cost_ratio, 0.0, None, low_open=True)
+        _check_int("lazy_subtree_size", self.lazy_subtree_size, 1, 1 << 30)
+        for name in ("clip", "skip", "snap", "lazy", "lazy_speculative"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"build option {name!r} must be True or False, got {getattr(self, name)!r}")
+
+    def depth_for(self, n_triangles):
+        """The maximum depth used for a tree over `n_triangles`."""
+        if self.max_depth is not None:
+            return self.max_depth
+        return min(DEPTH_LIMIT, int(1.2 * log2(max(n_triangles, 1)) + 2))
+
+    def params(self, n_triangles, bounds=None):
+        """The numbers the Numba kernels need, as a `BuildParams` tuple (`bounds`: the root box, which
+        the `rays` term needs)."""
+        refine = self.rays is None or self.rays >= REFINE_RAYS_PER_TRIANGLE * n_triangles
+        return BuildParams(
+            builder=BUILDERS.index(self.builder),
+            bins=self.bins,
+            exact_below=self.exact_below,
+            snap=self.snap and refine,
+            longest_axis_only=self.split_axes == "longest" or not refine,
+            leaf_size=self.leaf_size,
+            max_depth=self.depth_for(n_triangles),
+            traversal_cost=float(self.traversal_cost),
+            intersection_cost=float(self.intersection_cost),
+            empty_bonus=float(self.empty_bonus),
+            cost_ratio=float(self.cost_ratio),
+            clip=self.clip and refine,
+            skip=self.skip,
+            defer_size=self.lazy_subtree_size if self.lazy else 0,
+            rays_per_area=_rays_per_area(self.rays, bounds),
+            bytes_per_reference=subtree_bytes_per_reference(self.memory_limit, n_triangles),
+            duplication_budget=np.inf if self.duplication_budget is None else float(self.duplication_budget),
+        )
+
+    def as_dict(self):
+        return asdict(self)
+
+
+class BuildParams(NamedTuple):
+    """BuildOptions resolved to plain numbers for the kernels (builder is an index into BUILDERS)."""
+
+    builder: int
+    bins: int
+    exact_below: int
+    snap: bool
+    longest_axis_only: bool  # split_axes "longest", or few rays a triangle
+    leaf_size: int
+    max_depth: int
+    traversal_cost: float
+    intersection_cost: float
+    empty_bonus: float
+    cost_ratio: float
+    clip: bool
+    skip: bool
+    defer_size: int  # build_subtree defers nodes of at most this many references (0: none, eager)
+    rays_per_area: float  # BuildOptions.rays / the root's half area: rays entering a node per unit of
+    # its half area, as the SAH assumes (0: no build term)
+    bytes_per_reference: float  # memory_limit's share: bytes a subtree may hold per starting reference (0: none)
+    duplication_budget: float  # the root's room (BuildOptions.duplication_budget; inf: none)
+
+
+def _rays_per_area(rays, bounds):
+    if rays is None or bounds is None:
+        return 0.0
+    area = half_area(np.asarray(bounds, np.float64))
+    return float(rays / area) if area > 0.0 and np.isfinite(area) else 0.0
+
+
+BINNED, EXACT, MEDIAN = 0, 1, 2
+
+
+def make_options(options):
+    """BuildOptions from a dict of keywords, naming any unknown one."""
+    known = BuildOptions.__dataclass_fields__
+    unknown = sorted(set(options) - set(known))
+    if unknown:
+        raise TypeError(f"unknown build option(s) {unknown}; known: {sorted(known)}")
+    # numpy scalars (np.int64(4), np.True_) are the Python values they hold
+    return BuildOptions(**{k: v.item() if isinstance(v, np.generic) else v for k, v in options.items()})
+
+
+def _check_choice(name, value, choices):
+    if value not in choices:
+        raise ValueError(f"build option {name!r} must be one of {choices}, got {value!r}")
+
+
+def _check_int(name, value, low, high):
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ValueError(f"build option {name!r} must be an integer, got {value!r}")
+    if not low <= value <= high:
+        raise ValueError(f"build option {name!r} must be in [{low}, {high}], got {value}")
+
+
+def _check_float(name, value, low, high, low_open=False, high_open=False):
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not isfinite(value):
+        raise ValueError(f"build option {name!r} must be a finite number, got {value!r}")
+    if low is not None and (value < low or (low_open and value == low)):
+        raise ValueError(f"build option {name!r} must be {'>' if low_open else '>='} {low}, got {value}")
+    if high is not None and (value > high or (high_open and value == high)):
+        raise ValueError(f"build option {name!r} must be {'<' if high_open else '<='} {high}, got {value}")

@@ -1,0 +1,196 @@
+"""Min-max binning and the SAH evaluated from the bins (seed 000 §3.3-3.4).
+
+Each reference updates one counter where its box begins and one where it ends, per axis, so binning is a
+single pass whose cost does not depend on the number of bins, and the counts left and right of every bin
+boundary are exact up to the bin resolution whatever the box sizes. Adaptive skipping (seed 000 §3.3)
+bins only every `stride`-th reference and weights the counts by `stride`; it is used only in large
+nodes, and a sampled count of zero is not trusted to mean an empty side (no empty bonus): granting it
+made the builder cut "empty" slivers that were not empty until it ran out of depth.
+"""
+import numpy as np
+from numba import njit
+
+from ..geometry import cut_half_area, extents, half_area, longest_axis
+from .sah import cost_of_areas, improves_on_leaf, split_cost, valid_position
+
+
+@njit(cache=True)
+def bin_references(boxes, start, end, stride, node_box, min_bins, max_bins):
+    """Add the references boxes[start:end:stride] to the per-axis min and max bin counters."""
+    top = min_bins.shape[1] - 1
+    lo0, lo1, lo2 = node_box[0], node_box[1], node_box[2]
+    s0 = _bin_scale(node_box, 0, top + 1)
+    s1 = _bin_scale(node_box, 1, top + 1)
+    s2 = _bin_scale(node_box, 2, top + 1)
+    for i in range(start, end, stride):
+        min_bins[0, _bin(boxes[i, 0], lo0, s0, top)] += 1
+        min_bins[1, _bin(boxes[i, 1], lo1, s1, top)] += 1
+        min_bins[2, _bin(boxes[i, 2], lo2, s2, top)] += 1
+        max_bins[0, _bin(boxes[i, 3], lo0, s0, top)] += 1
+        max_bins[1, _bin(boxes[i, 4], lo1, s1, top)] += 1
+        max_bins[2, _bin(boxes[i, 5], lo2, s2, top)] += 1
+
+
+@njit(cache=True)
+def bin_longest_axis(boxes, start, end, stride, node_box, min_bins, max_bins):
+    """bin_references on the node's longest axis only (BuildOptions.split_axes "longest"); the other
+    axes' counters stay zero, which best_binned_split takes as "not binned"."""
+    axis = longest_axis(node_box)
+    top = min_bins.shape[1] - 1
+    lo = node_box[axis]
+    scale = _bin_scale(node_box, axis, top + 1)
+    for i in range(start, end, stride):
+        min_bins[axis, _bin(boxes[i, axis], lo, scale, top)] += 1
+        max_bins[axis, _bin(boxes[i, axis + 3], lo, scale, top)] += 1
+
+
+@njit(cache=True, inline="always")
+def _bin_scale(node_box, axis, nbins):
+    extent = np.float64(node_box[axis + 3]) - node_box[axis]
+    return nbins / extent if extent > 0.0 else 0.0
+
+
+@njit(cache=True, inline="always")
+def _bin(x, lo, scale, top):
+    b = int((x - lo) * scale)
+    return min(max(b, 0), top)
+
+
+@njit(cache=True)
+def best_binned_split(min_bins, max_bins, weight, node_box, params):
+    """Cheapest split among the bin boundaries: (cost, axis, position); axis -1 if none is valid.
+
+    Planar references are counted where their bins put them; the partition then places them exactly.
+    With weight > 1 (skipping) an empty-looking side is counted as holding one reference.
+    The node's extents are computed once and each candidate only swaps in its two cut extents
+    (split_cost would re-read the box twice per candidate): the same arithmetic, 1.4x faster, and
+    this loop runs (bins - 1) x 3 times in every node that may split (~0.6 us a node before).
+    """
+    nbins = min_bins.shape[1]
+    inv_area = 1.0 / half_area(node_box)
+    e = extents(node_box)
+    best_cost, best_axis, best_pos = np.inf, -1, np.float32(0.0)
+    for axis in range(3):
+        n_right = max_bins[axis].sum()
+        if n_right == 0:
+            continue  # an axis bin_longest_axis did not bin (every binned reference ends in a bin)
+        lo, hi = np.float64(node_box[axis]), np.float64(node_box[axis + 3])
+        step = (hi - lo) / nbins
+        n_left = 0
+        for k in range(1, nbins):
+            n_left += min_bins[axis, k - 1]
+            n_right -= max_bins[axis, k - 1]
+            pos = np.float32(lo + k * step)
+            if not valid_position(node_box, axis, pos):
+                continue
+            cost = cost_of_areas(cut_half_area(e, axis, np.float64(pos) - lo),
+                                 cut_half_area(e, axis, hi - np.float64(pos)), inv_area,
+                                 _estimate(n_left, weight), _estimate(n_right, weight), params)
+            if cost < best_cost:
+                best_cost, best_axis, best_pos = cost, axis, pos
+    return best_cost, best_axis, best_pos
+
+
+@njit(cache=True, inline="always")
+def _estimate(count, weight):
+    if weight == 1:
+        return count
+    return max(count * weight, 1)
+
+
+SKIP_MIN_REFS = 4096
+
+
+@njit(cache=True)
+def skip_stride(n, params):
+    """Bin every l-th reference, l = floor(log10 n), when skipping is on and the node is large (seed 000 §3.3)."""
+    if not params.skip or n < SKIP_MIN_REFS:
+        return 1
+    return int(np.log10(n))
+
+
+@njit(cache=True)
+def binned_split(boxes, start, end, node_box, params, min_bins, max_bins):
+    """Bin the node's references and return the best binned split (cost, axis, position, planar_left),
+    refined to the nearest box boundaries when every reference was binned (`snap_to_boundaries`).
+    With params.longest_axis_only, the node's longest axis first, and all three only when it offers
+    no plane better than a leaf: triangles running the cell's length (a cylinder along it) leave the
+    longest axis nothing to split, and without this the whole mesh became one leaf (outside review)."""
+    stride = skip_stride(end - start, params)
+    cost, axis, pos = np.inf, -1, np.float32(0.0)
+    if params.longest_axis_only:
+        _clear(min_bins, max_bins)
+        bin_longest_axis(boxes, start, end, stride, node_box, min_bins, max_bins)
+        cost, axis, pos = best_binned_split(min_bins, max_bins, stride, node_box, params)
+    if axis < 0 or not improves_on_leaf(cost, end - start, params):
+        _clear(min_bins, max_bins)
+        bin_references(boxes, start, end, stride, node_box, min_bins, max_bins)
+        cost, axis, pos = best_binned_split(min_bins, max_bins, stride, node_box, params)
+    if axis < 0 or stride != 1 or not params.snap:
+        return cost, axis, pos, False
+    return snap_to_boundaries(boxes, start, end, node_box, params, cost, axis, pos)
+
+
+@njit(cache=True, inline="always")
+def _clear(min_bins, max_bins):
+    min_bins[:] = 0
+    max_bins[:] = 0
+
+
+@njit(cache=True)
+def snap_to_boundaries(boxes, start, end, node_box, params, cost, axis, pos):
+    """Try the box boundaries nearest to the binned plane on each side (within one bin) and keep the
+    cheapest of the three, counted exactly. Why: bin boundaries fall between the vertex lines of grids
+    and height fields, so the binned plane cuts a row of triangles that a plane on the nearest vertex
+    line would not; each cut triangle is referenced twice, and on a wave-modified grid the builder
+    reached 7.6 references a triangle. Evaluating the SAH exactly at a few event positions next to the
+    binned optimum follows Hunt, Mark and Stoll 2006 (sampled SAH, refined near its minimum). Planar
+    references lying on a candidate go to the cheaper side (planar_left), as in the exact sweep."""
+    step = (np.float64(node_box[axis + 3]) - node_box[axis]) / params.bins
+    near = _nearest_boundaries(boxes, start, end, axis, pos, step)
+    best = (cost, axis, pos, False)
+    inv_area = 1.0 / half_area(node_box)
+    for c, n_left, n_right, n_planar in near:
+        c = np.float32(c)
+        if not (valid_position(node_box, axis, c) and pos - step < c < pos + step):
+            continue
+        for planar_left in (True, False):
+            c_cost = split_cost(node_box, inv_area, axis, c, n_left + n_planar * planar_left,
+                                n_right + n_planar * (not planar_left), params)
+            if c_cost < best[0]:
+                best = (c_cost, axis, c, planar_left)
+    return best
+
+
+@njit(cache=True)
+def _nearest_boundaries(boxes, start, end, axis, pos, step):
+    """The box boundaries nearest to pos strictly below and above it within one bin, each with the
+    references left of it, right of it and lying in it: ((below, left, right, planar), (above, ...)).
+
+    One pass, where there were two (one to find them, one to count at them): it counts exactly at
+    pos and, for the running nearest boundary on each side, the references that begin, end and lie
+    there. No boundary falls strictly between the nearest one and pos, so the counts at it follow
+    from those at pos. Where no boundary lies within the bin, the candidate is the bin's edge, which
+    snap_to_boundaries rejects or which no boundary reaches."""
+    below, above = pos - step, pos + step
+    left_of_pos = right_of_pos = begin_at_pos = end_at_pos = 0
+    begin_below = end_below = planar_below = begin_above = end_above = planar_above = 0
+    for i in range(start, end):
+        lo, hi = boxes[i, axis], boxes[i, axis + 3]
+        left_of_pos += lo < pos
+        right_of_pos += hi > pos
+        begin_at_pos += lo == pos
+        end_at_pos += hi == pos
+        for v in (lo, hi):
+            if below < v < pos:
+                below, begin_below, end_below, planar_below = v, 0, 0, 0
+            elif pos < v < above:
+                above, begin_above, end_above, planar_above = v, 0, 0, 0
+        begin_below += lo == below
+        end_below += hi == below
+        planar_below += lo == hi == below
+        begin_above += lo == above
+        end_above += hi == above
+        planar_above += lo == hi == above
+    return ((below, left_of_pos - begin_below, right_of_pos + end_at_pos, planar_below),
+            (above, left_of_pos + begin_at_pos, right_of_pos - end_above, planar_above))

@@ -1,0 +1,195 @@
+"""Sequential construction of one subtree, iteratively and depth first, from pooled memory.
+
+This is the work each thread does after the parallel top levels (seed 000 §4: "each thread builds a
+sub-tree"). Nodes are processed from an explicit stack, left child first; a node's references live in
+one reference pool (partition.py keeps the left child on top), so the pool's live part is the pending
+right siblings plus the current node and never needs per-node allocation.
+
+A lazy build (params.defer_size > 0, seed 003 §3) stops at nodes of at most defer_size references:
+such a node is marked UNBUILT and its references are copied out. Building it later with build_subtree
+from those references (in the same order), its box, its depth and its room gives exactly the subtree
+the eager build makes there, because a node's split choice and partition depend on nothing else.
+
+A node's room is its share of params.duplication_budget (options.py): the root's is the budget, each
+split divides it by the split's duplication (n_left + n_right) / n for both children, and a node with
+room below 1 becomes a leaf. The children's budgets (room x references) then add up to the parent's,
+so leaves hold at most twice the budget's references (a leaf made for lack of room holds no more than
+its parent, which had room), however the SAH judges the splits.
+
+A split that leaves every reference in both children separates nothing and only copies them: the node
+becomes a leaf instead. The SAH never takes such a split (the children's areas add up to more than the
+node's), but forced splits did (cost_ratio far above 1 with no duplication budget): an outside review's
+3,000 triangles of 20 distinct ones gained ~1.4x references a level, 382 a triangle at depth 28, and at
+max_depth 60 ran out of memory.
+"""
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+from numba import njit
+
+from ..trace.layout import LEAF, UNBUILT
+from .leaf_triangles import BYTES_PER_REFERENCE as LEAF_COPY_BYTES
+from ..memory import MIN_SUBTREE_BUDGET, MemoryLimitError
+from .options import EXACT
+from .partition import new_split_scratch, partition_in_place
+from .pools import ensure_array, ensure_floats, ensure_nodes, ensure_refs
+from .split_choice import NO_SPLIT, choose_split
+
+
+@njit(cache=True, nogil=True)
+def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, root_room, params):
+    """Build the subtree over the first `n_refs` references of (prims, boxes) inside `root_box`, its
+    root at depth `root_depth` with room `root_room` (module docstring).
+
+    Returns the node arrays (axis, split, child, count; see layout.py) with local indices, node 0 being
+    the subtree's root, and the leaf triangle indices; then the deferred subtrees (none unless
+    params.defer_size > 0): (d_node, d_start, d_depth, d_box, d_prims, d_boxes, d_room), deferred subtree
+    k being local node d_node[k] (whose child is k) with references d_prims/d_boxes[d_start[k]:d_start[k+1]].
+    """
+    stack_size = params.max_depth - root_depth + 2
+    stack_node = np.empty(stack_size, np.int32)
+    stack_range = np.empty((stack_size, 2), np.int64)
+    stack_depth = np.empty(stack_size, np.int32)
+    stack_room = np.empty(stack_size, np.float64)
+    stack_box = np.empty((stack_size, 6), np.float32)
+    box = np.empty(6, np.float32)
+    min_bins = np.zeros((3, params.bins), np.int64)
+    max_bins = np.zeros((3, params.bins), np.int64)
+    scratch = np.empty(3 * min(n_refs, max(params.exact_below, 16)) + 16, np.float32)
+    split_scratch = new_split_scratch()
+
+    prims, boxes = ensure_refs(prims, boxes, n_refs, 2 * n_refs + 64)
+    axis, split, child, count = ensure_nodes(np.empty(0, np.int8), np.empty(0, np.float32),
+                                             np.empty(0, np.int32), np.empty(0, np.int32), 0,
+                                             max(16, n_refs // 2))
+    leaf_prims = np.empty(max(16, n_refs + n_refs // 2), np.int32)
+    n_nodes, n_leaf_prims = 1, 0
+    deferred = (np.empty(0, np.int32), np.zeros(1, np.int32), np.empty(0, np.int32),
+                np.empty((0, 6), np.float32), np.empty(0, np.int32), np.empty((0, 6), np.float32),
+                np.empty(0, np.float64))
+    n_deferred = 0
+
+    stack_node[0], stack_range[0, 0], stack_range[0, 1], stack_depth[0] = 0, 0, n_refs, root_depth
+    stack_box[0], stack_room[0] = root_box, root_room
+    sp = 1
+    while sp > 0:
+        sp -= 1
+        node, start, end, depth = stack_node[sp], stack_range[sp, 0], stack_range[sp, 1], stack_depth[sp]
+        room = stack_room[sp]
+        box[:] = stack_box[sp]
+        n = end - start
+        if room >= 1.0 and params.leaf_size < n <= params.defer_size:
+            deferred = _defer(deferred, n_deferred, node, prims, boxes, start, end, box, depth, room)
+            axis[node], split[node], child[node], count[node] = UNBUILT, 0.0, n_deferred, n
+            n_deferred += 1
+            continue
+        prims, boxes = ensure_refs(prims, boxes, end, start + 2 * n + 1)
+        if params.builder == EXACT or n <= params.exact_below:
+            scratch = ensure_floats(scratch, 3 * n)
+        split_axis, pos, planar_left = NO_SPLIT, np.float32(0.0), False
+        if room >= 1.0:  # else no room left for more references (module docstring)
+            split_axis, pos, planar_left = choose_split(boxes, start, end, box, depth, params, min_bins,
+                                                        max_bins, scratch)
+        n_right = n_left = 0
+        if split_axis != NO_SPLIT:
+            n_right, n_left = partition_in_place(tris, prims, boxes, start, end, split_axis, pos,
+                                                 planar_left, params.clip, split_scratch)
+            if n_left == n and n_right == n:  # separates nothing (module docstring): the right child's
+                split_axis = NO_SPLIT  # copy, at start..end like the node's own references, is the leaf
+        if split_axis == NO_SPLIT:
+            leaf_prims = ensure_array(leaf_prims, n_leaf_prims, n_leaf_prims + n)
+            leaf_prims[n_leaf_prims:n_leaf_prims + n] = prims[start:end]
+            axis[node], split[node], child[node], count[node] = LEAF, 0.0, n_leaf_prims, n
+            n_leaf_prims += n
+            continue
+        axis, split, child, count = ensure_nodes(axis, split, child, count, n_nodes, n_nodes + 2)
+        if params.bytes_per_reference > 0.0:
+            _check_budget(prims, leaf_prims, axis, deferred, params.bytes_per_reference * n_refs)
+        left = n_nodes
+        n_nodes += 2
+        axis[node], split[node], child[node], count[node] = split_axis, pos, left, 0
+        stack_room[sp] = stack_room[sp + 1] = child_room(room, n, n_left + n_right)
+        # Right child first on the stack so the left one (on top of the pool) is built first.
+        stack = (stack_node, stack_range, stack_depth, stack_box)
+        sp = _push(stack, sp, left + 1, start, start + n_right, depth + 1, box, split_axis, pos, False)
+        sp = _push(stack, sp, left, start + n_right, start + n_right + n_left, depth + 1, box, split_axis, pos, True)
+    d_node, d_start, d_depth, d_box, d_prims, d_boxes, d_room = deferred
+    n_deferred_refs = d_start[n_deferred]
+    return (axis[:n_nodes].copy(), split[:n_nodes].copy(), child[:n_nodes].copy(),
+            count[:n_nodes].copy(), leaf_prims[:n_leaf_prims].copy(),
+            d_node[:n_deferred].copy(), d_start[:n_deferred + 1].copy(), d_depth[:n_deferred].copy(),
+            d_box[:n_deferred].copy(), d_prims[:n_deferred_refs].copy(), d_boxes[:n_deferred_refs].copy(),
+            d_room[:n_deferred].copy())
+
+
+@njit(cache=True, inline="always")
+def child_room(room, n, n_children):
+    """Each child's room after a split of n references into n_children (module docstring)."""
+    return room * n / max(n_children, 1)
+
+
+@njit(cache=True, inline="always")
+def _check_budget(prims, leaf_prims, axis, deferred, budget):
+    """Raise MemoryLimitError when the pools hold more bytes than the subtree's share of memory_limit
+    (memory.py says why a build can outgrow its estimate). A leaf reference counts its index and the
+    copy of its triangle the finished tree keeps (leaf_triangles.py)."""
+    held = (28 * prims.shape[0] + (4 + LEAF_COPY_BYTES) * leaf_prims.shape[0] + 13 * axis.shape[0]
+            + 28 * deferred[4].shape[0])
+    if held > max(budget, MIN_SUBTREE_BUDGET):
+        raise MemoryLimitError("the kd-tree outgrew memory_limit while splitting: its triangles need more "
+                               "references than the limit allows (dense overlapping triangles, or settings "
+                               "that force splits); raise memory_limit")
+
+
+@njit(cache=True)
+def _defer(deferred, k, node, prims, boxes, start, end, box, depth, room):
+    """Record node `node` as deferred subtree k: copy its references (the pool range is reused)."""
+    d_node, d_start, d_depth, d_box, d_prims, d_boxes, d_room = deferred
+    d_node, d_box = ensure_refs(d_node, d_box, k, k + 1)
+    d_start = ensure_array(d_start, k + 1, k + 2)
+    d_depth = ensure_array(d_depth, k, k + 1)
+    d_room = ensure_array(d_room, k, k + 1)
+    used = d_start[k]
+    n = end - start
+    d_prims, d_boxes = ensure_refs(d_prims, d_boxes, used, used + n)
+    d_prims[used:used + n] = prims[start:end]
+    d_boxes[used:used + n] = boxes[start:end]
+    d_node[k], d_depth[k], d_room[k] = node, depth, room
+    d_box[k] = box
+    d_start[k + 1] = used + n
+    return d_node, d_start, d_depth, d_box, d_prims, d_boxes, d_room
+
+
+@njit(cache=True, inline="always")
+def _push(stack, sp, node, start, end, depth, box, axis, pos, is_left):
+    """Push a child whose box is the parent's cut at `pos` onto stack = (stack_node, stack_range,
+    stack_depth, stack_box); returns the new stack size."""
+    stack_node, stack_range, stack_depth, stack_box = stack
+    stack_node[sp] = node
+    stack_range[sp, 0] = start
+    stack_range[sp, 1] = end
+    stack_depth[sp] = depth
+    stack_box[sp] = box
+    if is_left:
+        stack_box[sp, axis + 3] = pos
+    else:
+        stack_box[sp, axis] = pos
+    return sp + 1
+
+
+def build_subtrees(tris, tasks, params, threads):
+    """Build every task's subtree (top_levels.Task), largest first, on `threads` threads (the kernel
+    releases the GIL). Returns build_subtree's tuples in task order."""
+    def build(task):
+        return build_subtree(tris, task.prims, task.boxes, len(task.prims), task.box, task.depth, task.room,
+                             params)
+
+    if threads == 1 or len(tasks) == 1:
+        return [build(task) for task in tasks]
+    order = sorted(range(len(tasks)), key=lambda i: -tasks[i].size)
+    results = [None] * len(tasks)
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        futures = {i: pool.submit(build, tasks[i]) for i in order}
+        for i, future in futures.items():
+            results[i] = future.result()
+    return results

@@ -1,0 +1,5 @@
+"""The JIT plumbing around Numba: kernels cached on disk and keyed by the digest of all of core's
+sources (kernel_cache.py, sources_digest.py), a faster copy in Numba's inliner (inline_copy.py), a
+helper process that compiles the rendering kernels during a first build (parallel_compile.py), and
+thread counts set and restored around kernels (threads.py). Nothing here traces a ray.
+"""

@@ -1,0 +1,182 @@
+"""Numba's on-disk kernel cache, invalidated by any change to core's sources, not just the kernel's file.
+
+Numba stamps a cached kernel with its own source file only (numba 0.68: a hash of that file's
+contents). Core's kernels inline functions from other files: `trace.traversal.trace_rays` inlines
+`trace.triangle_test.intersect_triangle`. After an update that edits the callee but not the caller, the
+caller's stamp still matches and the stale machine code runs the old callee. That happened: a
+test run picked up a `trace_rays` cached before the triangle test's t rounding bound was added,
+and rays leaving a surface hit it again. The cache must therefore be keyed by all of core.
+
+Numba has no public hook for that, so `register` puts a locator in front of Numba's own
+(`numba.core.caching.CacheImpl._locator_classes`, internal; the numba version is pinned): for a
+kernel in a registered folder it keeps the location Numba would choose (NUMBA_CACHE_DIR,
+`__pycache__` or the user cache) and adds the digest of core's sources to the stamp. A stamp
+mismatch makes Numba discard that cache index and compile afresh. Kernels elsewhere are untouched. A
+registered folder covers its subfolders: every kernel in core's subpackages is stamped with the digest
+of all of core.
+
+Several processes may compile core's kernels into one cache at once: the first-render helper
+(parallel_compile.py) beside a build, two Blender sessions, CI runs. Numba writes each file
+atomically (a temporary name, then a rename), but it adds an overload to a function's index by
+reading the index, adding the entry and writing it back, then writing the entry's data file
+(`IndexDataCacheFile.save`). Two writers of one index could lose an entry, or both pick the same
+data file name for different signatures, so that one key's entry loads the other's machine code.
+`register` therefore also wraps that save, for the cache folders of registered kernels only, in an
+exclusive lock on a file in the folder (`locked_cache_folder`), which makes the read-add-write one step.
+
+A helper process must write core's kernels exactly where this process reads them. Re-deriving the
+folder from the environment is not enough: Numba picks a kernel's folder when it is decorated, but
+re-reads NUMBA_CACHE_DIR before every compile, so a variable set after core's import (a test module
+did) pointed a helper at another cache, where it compiled while this process compiled again.
+CORE_CACHE_FOLDER_VARIABLE, set for the helper (parallel_compile.py), names core's folders outright:
+a JSON object from each kernel folder (relative to core, e.g. "render") to the cache folder this process
+gave its kernels.
+"""
+import functools
+import json
+import os
+import tempfile
+from contextlib import contextmanager
+from pathlib import Path
+
+from numba.core import caching
+
+from .sources_digest import sources_digest
+
+CORE_FOLDER = Path(__file__).resolve().parent.parent
+_sources_of = {}  # registered kernel folder (and its subfolders) -> the folder whose sources stamp its kernels
+_core_cache_folders = {}  # core's kernel folder, relative to core ("render") -> its kernels' cache folder
+_locked_folders = set()  # cache folders of registered kernels, whose index saves take the lock
+LOCK_NAME = "kd_preview_index.lock"
+CORE_CACHE_FOLDER_VARIABLE = "KD_PREVIEW_CORE_KERNEL_CACHE"  # a helper's cache folders for core's kernels
+
+
+@functools.lru_cache(maxsize=None)
+def folder_digest(folder: Path) -> str:
+    """Read once a process: sources do not change under kernels a process has already loaded."""
+    return sources_digest(folder)
+
+
+class SourcesDigestLocator(caching._CacheLocator):
+    """Numba's usual locator for the kernel's file, with the sources' digest added to its stamp."""
+
+    def __init__(self, usual, sources: Path, folder=None):
+        self._usual = usual
+        self._py_file = usual._py_file  # Numba's warning that a kernel cannot be cached names it
+        self._sources = sources
+        self._folder = folder or usual.get_cache_path()
+        _locked_folders.add(os.path.normpath(self._folder))
+
+    def ensure_cache_path(self):
+        if self._folder == self._usual.get_cache_path():
+            self._usual.ensure_cache_path()
+        else:  # as Numba's own: the folder must exist and take files
+            os.makedirs(self._folder, exist_ok=True)
+            tempfile.TemporaryFile(dir=self._folder).close()
+
+    def get_cache_path(self):
+        return self._folder
+
+    def get_source_stamp(self):
+        return self._usual.get_source_stamp(), folder_digest(self._sources)
+
+    def get_disambiguator(self):
+        return self._usual.get_disambiguator()
+
+    @classmethod
+    def from_function(cls, py_func, py_file):
+        kernel_folder = Path(py_file).resolve().parent
+        sources = _registered_sources(kernel_folder)
+        if sources is None:
+            return None
+        in_core = kernel_folder == CORE_FOLDER or CORE_FOLDER in kernel_folder.parents
+        relative = kernel_folder.relative_to(CORE_FOLDER).as_posix() if in_core else None
+        folder = _helper_cache_folders().get(relative) if in_core else None
+        for usual_class in caching.CacheImpl._locator_classes:
+            if usual_class is not cls:
+                usual = usual_class.from_function(py_func, py_file)
+                if usual is not None:
+                    locator = cls(usual, sources, folder)
+                    if in_core:
+                        _core_cache_folders[relative] = locator.get_cache_path()
+                    return locator
+        return None
+
+
+def _registered_sources(kernel_folder: Path):
+    """The sources that stamp the kernels of `kernel_folder`: those registered for it or for the nearest
+    folder above it; None when neither it nor any folder above is registered."""
+    for folder in (kernel_folder, *kernel_folder.parents):
+        if folder in _sources_of:
+            return _sources_of[folder]
+    return None
+
+
+def _helper_cache_folders() -> dict:
+    """In a helper process, the cache folders its parent gave core's kernels (CORE_CACHE_FOLDER_VARIABLE);
+    elsewhere empty, and each kernel goes where Numba would put it."""
+    value = os.environ.get(CORE_CACHE_FOLDER_VARIABLE)
+    return json.loads(value) if value else {}
+
+
+@contextmanager
+def locked_cache_folder(folder):
+    """Hold an exclusive lock on `folder`/LOCK_NAME (blocking; released on exit or process death).
+    Where the lock cannot be taken, it proceeds unlocked: Numba's own behaviour, not a failed compile."""
+    try:
+        handle = open(os.path.join(folder, LOCK_NAME), "a+b")
+    except OSError:
+        yield
+        return
+    with handle:
+        try:
+            _lock(handle, True)
+        except OSError:
+            yield
+            return
+        try:
+            yield
+        finally:
+            _lock(handle, False)
+
+
+def _lock(handle, take):
+    if os.name == "nt":
+        import msvcrt
+        handle.seek(0)
+        msvcrt.locking(handle.fileno(), msvcrt.LK_LOCK if take else msvcrt.LK_UNLCK, 1)
+    else:
+        import fcntl
+        fcntl.flock(handle.fileno(), fcntl.LOCK_EX if take else fcntl.LOCK_UN)
+
+
+def _save_under_lock(numba_save):
+    @functools.wraps(numba_save)
+    def save(self, key, data):
+        if os.path.normpath(self._cache_path) not in _locked_folders:
+            return numba_save(self, key, data)
+        with locked_cache_folder(self._cache_path):
+            return numba_save(self, key, data)
+
+    save.kd_preview_lock = True
+    return save
+
+
+def core_cache_folders() -> str:
+    """The value of CORE_CACHE_FOLDER_VARIABLE for a helper: where this process caches the kernels of
+    each of core's folders, as JSON."""
+    return json.dumps(_core_cache_folders, sort_keys=True)
+
+
+def register(folder=CORE_FOLDER, sources=CORE_FOLDER) -> None:
+    """Key the cached kernels of `folder` and its subfolders (core's, or e.g. a test's that inline
+    core's functions) by the `*.py` files of `sources` (and its subfolders) too. Must run before the
+    folder's kernels are decorated: Numba picks a kernel's locator when `njit(cache=True)` wraps it."""
+    _sources_of[Path(folder).resolve()] = Path(sources).resolve()
+    if SourcesDigestLocator not in caching.CacheImpl._locator_classes:
+        caching.CacheImpl._locator_classes.insert(0, SourcesDigestLocator)
+    if not getattr(caching.IndexDataCacheFile.save, "kd_preview_lock", False):
+        caching.IndexDataCacheFile.save = _save_under_lock(caching.IndexDataCacheFile.save)
+
+
+register()

@@ -1,0 +1,241 @@
+"""A first render's JIT compile on two cores: a helper process compiles the rendering kernels into
+Numba's on-disk cache while this process builds the tree (compiling the builder's kernels) and then
+makes the camera pass (compiling the camera rays' traversal; their hit frames load the helper's).
+
+Why: with an empty cache a first render compiles every kernel, one at a time, in one process: 135 s
+for the demo's first frame on a 2-core AVX2 host (`benchmarks/bench_compile.py --helper off`,
+2026-11-27), ~50 s of it the builder's kernels, ~40 s the sampling kernel (`add_samples` with its
+inlined traversal, sampler and light sampling), ~20 s the camera rays' traversal and ~11 s
+surface_frames. All go to the same cache (cache=True), so a second process can compile one set while
+this one compiles the others; the render then loads what the helper wrote. The split: the helper
+compiles surface_frames (the camera hits' frames, first), the sampling kernel, the image and the
+denoiser if the render will filter; this process compiles the builder's kernels, then the camera
+rays' traversal, and by then surface_frames is in the cache. This process still sets the first frame
+(the helper's ~55 s end first). Measured (`bench_compile.py --helper on --runs 1`, three runs each,
+alternating with the split before, in which this process also compiled surface_frames, idle host,
+2026-11-27): first frame 76.6 / 80.8 / 69.9 s against 97.5 / 79.6 / 73.7 s (paired 0.79x, 1.02x,
+0.95x); this process's compile time 77 / 82 / 70 s against 97 / 79 / 73 s, surface_frames' 10-14 s
+gone from it but the rest slower while the helper shares the two cores. Earlier: 82 s against 135 s
+in one process (the split before); before Numba's inliner copied a callee's scope once
+(inline_copy.py) the sampling kernel took ~82 s and the split measured 86 s against 187 s; a split
+in which the helper also traced the camera rays made the first frame wait 117 s for it; before that,
+the helper rendered everything (98 s against 138 s).
+
+The two sets do not overlap, but both processes may still compile one function: any kernel this
+process needs before the helper has saved it, it compiles as well.
+Numba's cache index of a function is rewritten whole by each writer
+(numba.core.caching.IndexDataCacheFile.save: read the index, add the entry, write it back), so two
+processes adding overloads at once could lose or mismatch an entry; kernel_cache.py serializes those
+saves with a file lock. The helper traces a tree made by hand (one leaf: no builder kernel runs), and
+the one builder step that rendering a tree takes, wrapping it as a one-instance scene
+(two_level.as_two_level, the top level's kernels), is compiled here before the helper starts, so the
+helper only loads it.
+
+Pixel-reuse kernels (a frame continued from the one before) are not in either set: they need a
+SceneBuilder's signature, i.e. the builder; they compile on the first continued frame, as before.
+"""
+import os
+import subprocess
+import sys
+import tempfile
+from contextlib import contextmanager
+
+import numpy as np
+
+from ..render.camera import Camera
+from ..trace.kdtree import KdTree
+from .kernel_cache import CORE_CACHE_FOLDER_VARIABLE, CORE_FOLDER, core_cache_folders
+from ..trace.layout import LEAF, NodeArrays
+from ..render.lights import Light
+from ..build.options import BuildOptions
+from ..render.preview_render import PreviewRender
+from ..render.render_kernels import add_samples, surface_frames
+from ..scene.two_level import as_two_level
+
+CORE_PACKAGE = __package__.rpartition(".")[0]  # core's module name: "core", or bl_ext.<repo>.<id>.core
+
+
+def rendering_kernels_cached() -> bool:
+    """Whether Numba's cache already holds the sampling kernel for these sources (then a helper would
+    only load kernels, which this process does as fast). Reads the kernel's cache index (internal API;
+    numba is pinned, as for kernel_cache.py): an index whose stamp does not match reads as empty."""
+    cache = getattr(add_samples, "_cache", None)
+    try:
+        return bool(cache._cache_file._load_index())
+    except (AttributeError, OSError, EOFError, ValueError):
+        return False
+
+
+def hand_made_tree() -> KdTree:
+    """A two-triangle square in z = 0 as a one-leaf tree, with the node arrays' real dtypes (layout.py),
+    made without any builder kernel."""
+    tris = np.array([[[-1, -1, 0], [1, -1, 0], [1, 1, 0]], [[-1, -1, 0], [1, 1, 0], [-1, 1, 0]]], np.float32)
+    flat = tris.reshape(-1, 3)
+    bounds = np.concatenate([flat.min(axis=0), flat.max(axis=0)]).astype(np.float32)
+    nodes = NodeArrays(np.array([LEAF], np.int8), np.zeros(1, np.float32), np.zeros(1, np.int32),
+                       np.array([2], np.int32), np.arange(2, dtype=np.int32))
+    return KdTree(tris, bounds, nodes, BuildOptions(), 0.0, np.zeros(0, np.int32))
+
+
+def compile_scene_wrapping() -> None:
+    """The builder kernels a render of a KdTree runs (the one-instance top level), compiled here."""
+    as_two_level(hand_made_tree())
+
+
+def _hand_made_render(render_class):
+    """A 4 x 4 ao+shadow render of the hand-made tree seen from 3 above, two samples a pixel (modes,
+    sizes and sample counts are runtime values: one render compiles what every render uses)."""
+    camera = Camera(np.array([[1.0, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 3], [0, 0, 0, 1]]), 0.9)
+    return render_class(as_two_level(hand_made_tree()), camera, 4, 4, mode="ao+shadow", samples=2,
+                        lights=[Light.point((0.0, 0.0, 2.0))])
+
+
+def compile_camera_pass() -> None:
+    """The camera pass, run here after the build: a PreviewRender's constructor traces the camera rays
+    (compiling their traversal here) and makes their hit frames (surface_frames, which the helper
+    compiles first: loaded here when it has saved it, else compiled here too), and samples nothing."""
+    _hand_made_render(PreviewRender)
+
+
+class _SamplingOnly(PreviewRender):
+    """A render that makes up its camera hits without tracing camera rays, so their traversal does not
+    compile in the helper: the camera looks straight down at the square's plane z = 0, so every ray meets
+    it at t = 3 / -d_z, and the hit frames come from the real surface_frames (on the square's first
+    triangle, whose plane it is), which compiles here. The arrays have the real pass's types (int32
+    instance and triangle indices, int64 pixel indices, float64 rays, depths and (M, 3) frames, all
+    C-contiguous and writable): Numba compiles one version per type signature, and the real render must
+    find this one in the cache."""
+
+    def _camera_hits(self, traced):
+        origins, directions, _, _ = self.camera.rays(self.width, self.height, traced)
+        t = -origins[:, 2] / directions[:, 2]
+        first = np.zeros(len(traced), np.int32)
+        hit = np.arange(len(traced), dtype=np.int64)
+        points, normals, starts = np.empty((len(hit), 3)), np.empty((len(hit), 3)), np.empty((len(hit), 3))
+        surface_frames(self.scene.arrays, origins, directions, t, first, first.copy(), hit, points, normals, starts)
+        return traced[hit], t[hit], points, normals, starts
+
+
+def compile_rendering_kernels(denoise=False) -> None:
+    """What the helper runs: the camera hits' frames, AO and shadow samples of the hand-made tree (AO
+    rays that hit and miss, shadow rays), the image, and the denoiser if asked. Resolutions, modes and
+    sample counts are runtime values, so this compiles what every render uses but the camera rays'
+    traversal."""
+    render = _hand_made_render(_SamplingOnly)
+    render.step(render.target_samples)
+    render.image(denoise=denoise)
+
+
+HELPER_SWITCH = "KD_PREVIEW_COMPILE_HELPER"  # "0": no helper process (e.g. where spawning one is not allowed)
+HELPER_TIMEOUT = 900.0  # seconds: a guard against a helper that never ends, far above its 1.5-4 minutes
+
+
+@contextmanager
+def rendering_kernels_alongside(denoise=False):
+    """Compile the rendering kernels in a helper process while the `with` block runs (a build), when the
+    cache does not hold the sampling kernel yet and HELPER_SWITCH is not "0" (`denoise`: the render
+    will filter its image, so the helper compiles the denoiser too); yields the helper or None. On
+    leaving, run the camera pass here (compiling its rays' traversal), then wait for
+    the helper (at most HELPER_TIMEOUT); if the block raised, end the helper at once. Either way no
+    helper runs afterwards."""
+    helper = None
+    if os.environ.get(HELPER_SWITCH, "1") != "0" and not rendering_kernels_cached():
+        compile_scene_wrapping()
+        try:
+            helper = RenderingKernelsHelper(denoise)
+        except (OSError, ValueError, subprocess.SubprocessError):
+            helper = None  # no interpreter to start (an embedded Python): this process compiles it all
+    try:
+        yield helper
+    except BaseException:
+        if helper is not None:
+            helper.stop()
+        raise
+    if helper is not None:
+        try:
+            compile_camera_pass()
+        finally:
+            helper.wait(HELPER_TIMEOUT)
+            helper.stop()
+
+
+class RenderingKernelsHelper:
+    """The helper process; start it once compile_scene_wrapping() has run here.
+
+    The helper imports core under this process's module name (in Blender an extension's core is
+    `bl_ext.<repo>.<id>.core`): Numba files cached kernels by source file, but a kernel's pickled
+    environment names its module. Parent packages are stubbed in the helper, so the add-on's
+    `__init__` (which imports bpy) does not run there. It inherits sys.path, writes core's kernels to
+    the folder this process reads them from (kernel_cache.CORE_CACHE_FOLDER_VARIABLE), runs one
+    thread, and its error output is kept for `outcome`: a helper that fails costs nothing but its
+    time, since this process then compiles whatever is missing itself.
+    """
+
+    def __init__(self, denoise=False):
+        self._errors = tempfile.TemporaryFile()  # the helper's stderr: its last line names a failure
+        self.stopped = False
+        env = dict(os.environ, NUMBA_NUM_THREADS="1",
+                   PYTHONPATH=os.pathsep.join(p for p in sys.path if p and os.path.isdir(p)))
+        env[CORE_CACHE_FOLDER_VARIABLE] = core_cache_folders()  # where this process reads
+        env["KD_PREVIEW_HELPER_PARENT"] = str(os.getpid())  # the helper ends when this process is gone
+        self.process = subprocess.Popen(
+            [sys.executable, "-c", _HELPER_CODE, CORE_PACKAGE, str(CORE_FOLDER), "1" if denoise else "0"], env=env,
+            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=self._errors,
+            creationflags=getattr(subprocess, "CREATE_NO_WINDOW", 0))  # Windows: no console window
+
+    def wait(self, timeout=None) -> bool:
+        """Wait for the helper (at most `timeout` seconds); True when it finished and succeeded."""
+        try:
+            return self.process.wait(timeout) == 0
+        except subprocess.TimeoutExpired:
+            return False
+
+    def stop(self) -> None:
+        """End the helper if it still runs. What it saved stays valid: Numba writes each cache file to
+        a temporary name and renames it, and an index entry whose data is missing reads as a miss."""
+        if self.process.poll() is None:
+            self.process.kill()
+            self.process.wait()
+            self.stopped = True
+
+    @property
+    def outcome(self) -> str:
+        """"running", "finished", "stopped" (ended here: the block raised, or HELPER_TIMEOUT) or
+        "failed (exit code N)"; the add-on reports it with the frame that started the helper."""
+        code = self.process.poll()
+        if code is None:
+            return "running"
+        if self.stopped:
+            return "stopped"
+        if code == 0:
+            return "finished"
+        self._errors.seek(0)
+        lines = self._errors.read().decode(errors="replace").strip().splitlines()
+        return f"failed (exit code {code}" + (f": {lines[-1]})" if lines else ")")
+
+
+# The helper's whole program (argv: core's module name, its folder, "1" to compile the denoiser): stub
+# core's parent packages, so that `bl_ext.<repo>.<id>.core` imports without the add-on's __init__, then
+# compile. On POSIX a thread ends it once its parent is gone (reparented: getppid changes), so a
+# parent that could not stop it (it ended with os._exit, or crashed) does not leave it compiling.
+_HELPER_CODE = """
+import importlib, os, sys, threading, time, types
+from pathlib import Path
+
+def _end_when_orphaned(parent_pid):
+    while os.getppid() == parent_pid:
+        time.sleep(0.5)
+    os._exit(1)
+
+if os.name != "nt":  # a parent that ended without stopping the helper (os._exit after Ctrl-C, a crash)
+    parent_pid = int(os.environ.get("KD_PREVIEW_HELPER_PARENT", os.getppid()))
+    threading.Thread(target=_end_when_orphaned, args=(parent_pid,), daemon=True).start()
+name, parent = sys.argv[1], Path(sys.argv[2]).parent
+parts = name.split(".")
+for depth in range(len(parts) - 1, 0, -1):
+    stub = types.ModuleType(".".join(parts[:depth]))
+    stub.__path__ = [str(parent)]
+    sys.modules.setdefault(stub.__name__, stub)
+    parent = parent.parent
+importlib.import_module(name + ".jit.parallel_compile").compile_rendering_kernels(sys.argv[3] == "1")
+"""

@@ -1,0 +1,324 @@
+"""Preview images: ambient occlusion, shadows, or both, accumulated progressively.
+
+Value of a pixel whose camera ray hits (geometric normal N turned to face the camera):
+- "ao": the fraction of the cosine-weighted hemisphere around N that is unoccluded within
+  `ao_distance`: AO = (1/pi) * integral of V(w) * cos(theta) dw, estimated with cosine-weighted rays.
+- "shadow": S = (1/L) * sum over the L lights of colour_l * V_l * max(0, N.L_l) * mask_l, with L_l
+  sampled over the light's extent (radius, sun angle, area shape) and mask_l the spot cone (Cycles'
+  smoothstep blend) or the area light's front side within its spread (shading._light_mask). No
+  distance falloff and no power: every light gets the same weight, so S is in [0, 1] for colours in
+  [0, 1] and shows where each light reaches, whatever its units.
+- "ao+shadow": AO * (ambient + (1 - ambient) * S), ambient 0.25 by default: shadows from the lights
+  over an occlusion-darkened ambient term.
+Background pixels are 0 with alpha 0; hit pixels have alpha 1. Row 0 is the top row.
+In a scene with per-instance ray visibility (ray_visibility.py), camera rays meet only the instances
+visible to camera rays, and AO and shadow rays only those visible to shadow rays, as in Cycles; a pixel
+whose camera ray hits a holdout instance is background (alpha 0), as Cycles' Holdout makes it.
+`image(denoise=True)` / `render_preview(..., denoise=True)` filter the estimate with core.denoise (edge-
+avoiding à-trous, guided by the per-pixel sample variance; background and alpha unchanged); the raw
+estimate stays the default.
+
+Sampling is deterministic for a seed. With an error target, a pixel stops once it has at least
+`min_samples` samples and the standard error of its mean (from the sample variance, floored by Laplace's
+rule of succession so that samples that all agreed do not count as certainty) is below the target.
+Convergence is checked only at multiples of CHECK_EVERY samples, so the image does not depend on how the
+caller batches its steps.
+"""
+from time import perf_counter
+
+import numpy as np
+
+from .camera import Camera, tiled_pixels
+from .denoise import SOBOL_VARIANCE_DECAY, denoise_pixels
+from ..inputs import check_image_size
+from ..trace.kdtree import KdTree
+from ..build.lazy import resolve_suspended
+from ..scene.instance_signature import changed_boxes
+from .lights import DELTA
+from ..memory import check_render_memory
+from .pixel_reuse import PixelState, prepared_boxes, segments_touch, settings_key, surface_rays_touch
+from ..scene.ray_visibility import CAMERA_RAYS, HOLDOUT
+from .render_kernels import (MEMO_BITS, MODES, PixelFrames, PixelSums, RayMemo, SampleBatch, add_samples,
+                             assemble_image, surface_frames)
+from .render_options import RenderOptions, check_mode_and_samples, packed_lights
+from .sampling import SAMPLERS, SOBOL_DIM1
+from ..scene.scene_queries import trace_valid_rays
+from ..jit.threads import thread_count
+from ..scene.two_level import TwoLevelScene, as_two_level
+
+CHECK_EVERY = 4
+
+
+class PreviewRender:
+    """A progressive preview: call `step()` until `done`, read `image()` at any time.
+
+    `tree` is a KdTree or a TwoLevelScene; a KdTree is traced as a one-instance scene with the
+    identity matrix, so both take the same kernels (the overhead is measured in docs/choices.md).
+
+    Settings: a RenderOptions (`options`, default RenderOptions()), and/or its fields as keywords (mode,
+    samples, ao_distance, lights, seed, sampler, error_target, min_samples, ambient, threads), which
+    replace the options' own.
+
+    previous: the last frame's `pixel_state()`. With the same camera, lights and settings, and a scene
+    from the same SceneBuilder (whose instance signature says what changed), pixels whose rays cannot
+    reach changed geometry are kept as they were (pixel_reuse.py): the image is the full render's,
+    `pixels_reused` and `rays_reused` say what that saved. Anything else renders from scratch.
+    """
+
+    def __init__(self, tree, camera, width, height, options=None, *, previous=None, **settings):
+        _check_frame(tree, camera, width, height)
+        options = RenderOptions.make(options, **settings)
+        if previous is not None and not isinstance(previous, PixelState):
+            raise ValueError(f"previous must be None or a PreviewRender's pixel_state(), got {type(previous).__name__}")
+        check_render_memory(width, height)
+        self.tree, self.camera, self.width, self.height = tree, camera, int(width), int(height)
+        self.options = options
+        self.scene = as_two_level(tree)
+        o = options
+        self.mode, self.target_samples, self.ao_distance = o.mode, int(o.samples), float(o.ao_distance)
+        self.lights = packed_lights(o.mode, o.lights)
+        self.seed, self.sampler = int(o.seed) & 0xFFFFFFFF, SAMPLERS.index(o.sampler)
+        self.error_target, self.min_samples, self.ambient = o.error_target, int(o.min_samples), float(o.ambient)
+        self.threads = o.threads
+        self.samples_done = 0
+        self.trace_ms = 0.0
+        self.rays_saved = 0
+        self.pixels_reused = self._pixels_rays_reused = self._rays_before = self.converged_pixels = 0
+        self.settings = settings_key(camera, self.width, self.height, o.mode, self.target_samples, self.ao_distance,
+                                     self.lights, self.seed, self.sampler, o.error_target, self.min_samples,
+                                     self.ambient)
+        start = perf_counter()
+        boxes = self._changed_boxes(previous)
+        if boxes is None:
+            self._trace_camera()
+        else:
+            self._continue(previous, boxes)
+        self.trace_ms += (perf_counter() - start) * 1e3
+
+    def _trace_camera(self):
+        """Every pixel from scratch."""
+        self.camera_rays = self.width * self.height
+        pixels, depths, points, normals, starts = self._camera_hits(tiled_pixels(self.width, self.height))
+        zero = np.zeros(len(pixels), np.int64)
+        self._start(pixels, depths, points, normals, starts, np.zeros((len(pixels), 3)), np.zeros(len(pixels)), zero,
+                    zero.copy(), np.arange(len(pixels), dtype=np.int64), self._memo_rows(len(pixels)))
+        self.known, self.boxes = np.zeros(len(pixels), np.int64), np.zeros((0, 6))
+
+    def _memo_rows(self, n):
+        """(n, B) zero visibility bits: one per ray of every sample (render_kernels.py), none when
+        more than MEMO_BITS would be needed."""
+        bits = self.target_samples * (1 + len(self.lights))
+        return np.zeros((n, (bits + 7) // 8 if bits <= MEMO_BITS else 0), np.uint8)
+
+    def _camera_hits(self, traced):
+        """(pixels, depths, points, normals, ray starts) of the camera rays through pixels `traced` that hit,
+        in the order of `traced` (tiled_pixels' order keeps camera and later rays coherent)."""
+        origins, directions, tmin, tmax = self.camera.rays(self.width, self.height, traced)
+        t, inst, prim, _, _ = trace_valid_rays(self.scene, origins, directions, tmin, tmax, False, self.threads,
+                                               CAMERA_RAYS)
+        seen = prim >= 0
+        seen[seen] = (self.scene.visibility[inst[seen]] & HOLDOUT) == 0  # a holdout leaves its pixels empty
+        hit = np.flatnonzero(seen).astype(np.int64)
+        points, normals, starts = np.empty((len(hit), 3)), np.empty((len(hit), 3)), np.empty((len(hit), 3))
+        with thread_count(self.threads):
+            surface_frames(self.scene.arrays, origins, directions, t, inst, prim, hit, points, normals, starts)
+        return traced[hit], t[hit], points, normals, starts
+
+    def _start(self, pixels, depths, points, normals, starts, sums, sq_sums, counts, ray_counts, active, memo):
+        self.pixels, self.depths, self.points, self.normals, self.starts = pixels, depths, points, normals, starts
+        self.sums, self.sq_sums, self.counts, self.ray_counts = sums, sq_sums, counts, ray_counts
+        self.active, self.memo = active, memo
+        self.memo_reused = np.zeros(len(pixels), np.int64)
+        self.repeated = np.zeros(len(pixels), np.int64)  # rays of lights without extent (render_kernels.py)
+
+    def _changed_boxes(self, previous):
+        """Where geometry changed since `previous` (a PixelState), or None when its pixels cannot be
+        kept: none given, other settings, camera or lights, or a scene without a signature."""
+        if previous is None or previous.settings != self.settings:
+            return None
+        return changed_boxes(previous.signature, self.scene.signature)
+
+    def _continue(self, prev, boxes):
+        """Keep the pixels of `prev` whose rays cannot meet a changed box (pixel_reuse.py); sample the
+        others again from sample 0, tracing camera rays only where they cross a changed box, and other
+        rays only where they can meet one (the rest take last frame's visibility bit)."""
+        boxes = prepared_boxes(boxes)
+        rays = self.camera.rays(self.width, self.height)
+        ends = rays[3].copy()
+        ends[prev.pixels] = prev.depths
+        with thread_count(self.threads):
+            retrace = segments_touch(*rays[:3], ends, boxes)
+            kept = np.flatnonzero(~retrace[prev.pixels])
+            ao_radius = self.ao_distance if self.mode != "shadow" else 0.0
+            touched = surface_rays_touch(prev.starts[kept], ao_radius, self.lights, boxes)
+        clean, dirty = kept[~touched], kept[touched]
+        tiled = tiled_pixels(self.width, self.height)
+        traced = tiled[retrace[tiled]]
+        self.camera_rays = len(traced)
+        new = self._camera_hits(traced)
+        fresh = len(dirty) + len(new[0])
+        order = np.concatenate([clean, dirty])
+        join = lambda old, add: np.concatenate([old[order], add])  # noqa: E731
+        self._start(join(prev.pixels, new[0]), join(prev.depths, new[1]), join(prev.points, new[2]),
+                    join(prev.normals, new[3]), join(prev.starts, new[4]),
+                    np.concatenate([prev.sums[clean], np.zeros((fresh, 3))]),
+                    np.concatenate([prev.sq_sums[clean], np.zeros(fresh)]),
+                    np.concatenate([prev.counts[clean], np.zeros(fresh, np.int64)]),
+                    np.concatenate([prev.ray_counts[clean], np.zeros(fresh, np.int64)]),
+                    np.arange(len(clean), len(clean) + fresh, dtype=np.int64),
+                    np.concatenate([prev.memo[order], self._memo_rows(len(new[0]))]))
+        # last frame's bits that hold traced outcomes: its samples' (render_kernels.py, ray memo)
+        self.known = np.concatenate([np.zeros(len(clean), np.int64), prev.counts[dirty] * (1 + len(self.lights)),
+                                     np.zeros(len(new[0]), np.int64)])
+        self.boxes = boxes
+        self._rays_before = int(prev.ray_counts[clean].sum())
+        self.pixels_reused = len(clean)
+        self._pixels_rays_reused = self._rays_before + self.width * self.height - self.camera_rays
+        if fresh == 0:
+            self.samples_done = self.target_samples
+
+    def pixel_state(self):
+        """This frame's pixels for the next frame's `previous` (None until the render is done)."""
+        if not self.done:
+            return None
+        return PixelState(self.settings, self.scene.signature, self.pixels, self.depths, self.points, self.normals,
+                          self.starts, self.sums, self.sq_sums, self.counts, self.ray_counts, self.memo)
+
+    @property
+    def rays_reused(self):
+        """Rays not traced thanks to `previous`: those of kept pixels (and their camera rays), and of
+        re-sampled pixels that took last frame's visibility bit."""
+        return self._pixels_rays_reused + int(self.memo_reused.sum())
+
+    @property
+    def done(self):
+        return self.samples_done >= self.target_samples or len(self.active) == 0
+
+    @property
+    def rays_traced(self):
+        return self.camera_rays + int(self.ray_counts.sum()) - self._rays_before - int(self.memo_reused.sum())
+
+    @property
+    def hit_pixels(self):
+        return len(self.pixels)
+
+    def step(self, samples=1):
+        """Add up to `samples` samples to every pixel still sampling; returns how many were added."""
+        if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or samples < 1:
+            raise ValueError(f"step(samples): samples must be an integer >= 1, got {samples!r}")
+        samples = min(int(samples), self.target_samples - self.samples_done)
+        added = 0
+        while added < samples and len(self.active):
+            batch = min(samples - added, CHECK_EVERY - self.samples_done % CHECK_EVERY)
+            start = perf_counter()
+            self._add_samples(batch)
+            self.trace_ms += (perf_counter() - start) * 1e3
+            self.samples_done += batch
+            added += batch
+            if self.samples_done % CHECK_EVERY == 0:
+                self._retire_converged()
+        return added
+
+    def _add_samples(self, batch):
+        """Samples samples_done .. +batch of every active pixel; on a lazy tree, pixels stopped by an
+        unbuilt subtree redo the batch once it is built (same samples, so the eager tree's sums)."""
+        def run(active):
+            status = np.empty(len(active), np.int64)
+            add_samples(self.scene.arrays, PixelFrames(self.points, self.normals, self.starts, self.pixels), active,
+                        SampleBatch(self.samples_done, batch, MODES[self.mode], self.ao_distance, self.ambient,
+                                    self.sampler, self.seed, SOBOL_DIM1), self.lights,
+                        PixelSums(self.sums, self.sq_sums, self.counts, self.ray_counts), status,
+                        RayMemo(self.memo, self.known, self.boxes, self.memo_reused, self.repeated))
+            return status
+
+        with thread_count(self.threads):
+            status = run(self.active)
+
+            def redo(pixels):
+                self.scene.refresh()
+                status[pixels] = run(self.active[pixels])
+
+            if self.scene.lazy_tree is not None:
+                resolve_suspended(self.scene.lazy_tree, status, redo, self.threads)
+
+    def _retire_converged(self):
+        """Stop sampling pixels whose standard error is below the target (after min_samples)."""
+        if self.error_target is None or self.samples_done < self.min_samples:
+            return
+        n = self.counts[self.active].astype(np.float64)
+        mean = self.sums[self.active].mean(axis=1) / n
+        var = np.maximum(self.sq_sums[self.active] / n - mean * mean, 0.0) * n / np.maximum(n - 1, 1)
+        # Laplace's rule of succession: after n samples, a visibility outcome not yet seen still has
+        # probability 1 / (n + 2), so a sample's variance is at least q (1 - q) for that q. Without this
+        # floor a pixel whose first samples all agreed had variance 0 and stopped at min_samples: at a
+        # target of 0.02, 5% of the hit pixels of a test scene ended more than 3 targets off.
+        q = 1.0 / (n + 2.0)
+        var = np.maximum(var, q * (1.0 - q))
+        converged = np.sqrt(var / n) < self.error_target
+        if converged.any():
+            stopped, n_stopped = self.active[converged], n[converged]
+            # lights without extent traced their ray at sample 0 only and would repeat it (render_kernels.py);
+            # without the memo nothing repeats, repeated is 0 and so is `hard`
+            hard = self.repeated[stopped] / np.maximum(n_stopped - 1.0, 1.0)
+            rays_per_sample = (self.ray_counts[stopped] - hard) / n_stopped
+            remaining = self.target_samples - self.samples_done
+            self.rays_saved += int(np.rint(rays_per_sample * remaining).sum())
+            self.converged_pixels += int(converged.sum())
+            self.active = self.active[~converged]
+
+    def image(self, denoise=False):
+        """The current estimate as an (H, W, 4) float32 image (row 0 at the top); with `denoise`, filtered
+        by core.denoise (edge-avoiding à-trous, variance-guided; background and alpha unchanged)."""
+        if not isinstance(denoise, (bool, np.bool_)):
+            raise ValueError(f"denoise must be True or False, got {denoise!r}")
+        if denoise:
+            decay = SOBOL_VARIANCE_DECAY if SAMPLERS[self.sampler] == "sobol" else 0.0
+            return denoise_pixels(self.width, self.height, self.pixels, self.points, self.normals, self.sums,
+                                  self.sq_sums, self.counts, variance_decay=decay, threads=self.threads)
+        img = np.zeros((self.height * self.width, 4), np.float32)
+        with thread_count(self.threads):
+            assemble_image(self.pixels, self.sums, self.counts, img)
+        return img.reshape(self.height, self.width, 4)
+
+    def sample_counts(self):
+        """Samples taken per pixel as an (H, W) int array (0 for background)."""
+        out = np.zeros(self.height * self.width, np.int64)
+        out[self.pixels] = self.counts
+        return out.reshape(self.height, self.width)
+
+    def stats(self):
+        return {"samples": self.samples_done, "hit_pixels": self.hit_pixels, "rays": self.rays_traced,
+                "rays_saved": self.rays_saved, "trace_ms": self.trace_ms, "pixels_reused": self.pixels_reused,
+                "rays_reused": self.rays_reused,
+                "converged_pixels": self.converged_pixels}
+
+
+def render_preview(tree, camera, width, height, denoise=False, options=None, **settings):
+    """Render the whole preview at once: the (H, W, 4) float32 image (see PreviewRender for `options`
+    and settings; `denoise` as in PreviewRender.image)."""
+    render = PreviewRender(tree, camera, width, height, options, **settings)
+    render.step(render.target_samples)
+    return render.image(denoise)
+
+
+def frame_ray_count(width, height, mode="ao", samples=16, lights=()):
+    """The most rays a render traces: one camera ray a pixel, and for every sample one AO ray (modes
+    with "ao") and one shadow ray a light (modes with "shadow"), except that a light without extent
+    takes one ray a pixel when its samples repeat it (render_kernels.py, repeated rays). What
+    BuildOptions.rays and SceneBuilder.build(rays=...) take for a tree that serves one frame."""
+    check_image_size(width, height)
+    check_mode_and_samples(mode, samples)
+    rows = packed_lights(mode, lights)
+    hard = int((rows[:, DELTA] != 0.0).sum()) if "shadow" in mode else 0
+    soft = len(rows) * ("shadow" in mode) - hard
+    repeats = samples * (1 + len(rows)) <= MEMO_BITS  # the memo holds sample 0's bit (PreviewRender._memo_rows)
+    per_pixel = 1 + (("ao" in mode) + soft) * samples + hard * (1 if repeats else samples)
+    return int(width) * int(height) * per_pixel
+
+
+def _check_frame(tree, camera, width, height):
+    if not isinstance(tree, (KdTree, TwoLevelScene)):
+        raise ValueError(f"tree must be a core.KdTree or core.TwoLevelScene, got {type(tree).__name__}")
+    if not isinstance(camera, Camera):
+        raise ValueError(f"camera must be a core.Camera, got {type(camera).__name__}")
+    check_image_size(width, height)

@@ -1,0 +1,59 @@
+"""Closest-hit and any-hit queries over a KdTree: input checks, then one parallel kernel.
+
+A KdTree could also be queried as a one-instance scene (scene_queries.py, as the renderer does); the
+library's own queries keep the direct kernel, which skips the instance transform (camera rays on
+suzanne-251k measured 6-7% faster before both took unowned views, docs/choices.md)."""
+from typing import NamedTuple
+
+import numpy as np
+
+from ..inputs import as_ray_limits, as_rays, hit_distances_as_float32
+from .kdtree import KdTree
+from ..build.lazy import resolve_suspended
+from ..jit.threads import thread_count
+from .traversal import trace_rays
+
+
+class Hits(NamedTuple):
+    """Per-ray results: `t` (float32, inf on a miss), `prim` (int32 triangle index, -1 on a miss),
+    `u`, `v` (float32 barycentric weights of the triangle's vertices 1 and 2)."""
+
+    t: np.ndarray
+    prim: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+
+
+def intersect(tree, origins, directions, tmin=0.0, tmax=np.inf, threads=None):
+    """Closest hit of each ray in the open interval (tmin, tmax); tmin, tmax scalars or (R,) arrays."""
+    t, prim, u, v = _trace(tree, origins, directions, tmin, tmax, False, threads)
+    return Hits(hit_distances_as_float32(t, prim, tmin, tmax), prim, u.astype(np.float32), v.astype(np.float32))
+
+
+def occluded(tree, origins, directions, tmin=0.0, tmax=np.inf, threads=None):
+    """(R,) bool: does each ray hit anything in (tmin, tmax)? Stops at the first hit found."""
+    return _trace(tree, origins, directions, tmin, tmax, True, threads)[1] >= 0
+
+
+def _trace(tree, origins, directions, tmin, tmax, any_hit, threads):
+    if not isinstance(tree, KdTree):
+        hint = ": use core.intersect_scene / occluded_scene for a TwoLevelScene" if hasattr(tree, "meshes") else ""
+        raise ValueError(f"tree must be a core.KdTree, got {type(tree).__name__}{hint}")
+    o, d = as_rays(origins, directions)
+    lo, hi = as_ray_limits(tmin, tmax, len(o))
+    n = len(o)
+    t = np.empty(n)
+    prim = np.empty(n, np.int32)
+    u = np.empty(n)
+    v = np.empty(n)
+    with thread_count(threads):
+        trace_rays(tree.arrays, o, d, lo, hi, any_hit, t, prim, u, v)
+
+        def retrace(rays):  # rays that stopped at unbuilt subtrees, now built (lazy trees only)
+            m = len(rays)
+            out = [np.empty(m), np.empty(m, np.int32), np.empty(m), np.empty(m)]
+            trace_rays(tree.arrays, o[rays], d[rays], lo[rays], hi[rays], any_hit, *out)
+            t[rays], prim[rays], u[rays], v[rays] = out
+
+        resolve_suspended(tree, prim, retrace, threads)
+    return t, prim, u, v
