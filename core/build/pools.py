@@ -1,6 +1,6 @@
 """Memory pools: arrays allocated once with room to spare and grown geometrically when full.
 
-Seed 000 §3.5 keeps chunk lists with a moving end pointer; a growable array with the same "commit at
+Seed 000 §3.5 keeps chunk lists with a moving end pointer; a growable array with the same "append at
 the end" discipline does the same job in Numba: allocation happens a handful of times per build, never
 per node.
 """

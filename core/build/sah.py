@@ -27,9 +27,8 @@ def cost_of_areas(area_left, area_right, inv_area, n_left, n_right, params):
     return params.traversal_cost + params.intersection_cost * (1.0 - bonus) * weighted
 
 
-# Building a split costs about this many traversal steps per reference of the node: the build's
-# ~33 ns a reference and level (one thread, suzanne-251k) against ~19-31 ns a SAH unit of tracing;
-# 2, 4 and 8 timed within noise of each other (docs/choices.md, "rays").
+# Building a split costs about this many traversal steps per reference of the node
+# (docs/choices.md#build-cost-per-reference).
 BUILD_COST_PER_REFERENCE = 4.0
 
 

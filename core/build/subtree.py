@@ -1,26 +1,19 @@
 """Sequential construction of one subtree, iteratively and depth first, from pooled memory.
 
-This is the work each thread does after the parallel top levels (seed 000 §4: "each thread builds a
-sub-tree"). Nodes are processed from an explicit stack, left child first; a node's references live in
-one reference pool (partition.py keeps the left child on top), so the pool's live part is the pending
-right siblings plus the current node and never needs per-node allocation.
+Each thread builds one subtree after the parallel top levels (seed 000 §4). Nodes come off an explicit
+stack, left child first; a node's references live in one pool (partition.py keeps the left child on
+top), so the pool's live part is the pending right siblings plus the current node: no per-node allocation.
 
-A lazy build (params.defer_size > 0, seed 003 §3) stops at nodes of at most defer_size references:
-such a node is marked UNBUILT and its references are copied out. Building it later with build_subtree
-from those references (in the same order), its box, its depth and its room gives exactly the subtree
-the eager build makes there, because a node's split choice and partition depend on nothing else.
+A lazy build (params.defer_size > 0, seed 003 §3) marks nodes of at most defer_size references UNBUILT
+and copies their references out. A node's split and partition depend only on its references (in
+order), box, depth and room, so building it later from those gives exactly the eager subtree.
 
 A node's room is its share of params.duplication_budget (options.py): the root's is the budget, each
-split divides it by the split's duplication (n_left + n_right) / n for both children, and a node with
-room below 1 becomes a leaf. The children's budgets (room x references) then add up to the parent's,
-so leaves hold at most twice the budget's references (a leaf made for lack of room holds no more than
-its parent, which had room), however the SAH judges the splits.
+split divides it by its duplication (n_left + n_right) / n, room below 1 makes a leaf. Children's
+budgets (room x references) add up to the parent's, so leaves hold at most twice the budget's references.
 
 A split that leaves every reference in both children separates nothing and only copies them: the node
-becomes a leaf instead. The SAH never takes such a split (the children's areas add up to more than the
-node's), but forced splits did (cost_ratio far above 1 with no duplication budget): an outside review's
-3,000 triangles of 20 distinct ones gained ~1.4x references a level, 382 a triangle at depth 28, and at
-max_depth 60 ran out of memory.
+becomes a leaf instead (the SAH never picks one, but forced splits did and grew without bound).
 """
 from concurrent.futures import ThreadPoolExecutor
 
