@@ -1,36 +1,20 @@
 """Numba's on-disk kernel cache, invalidated by any change to core's sources, not just the kernel's file.
 
-Numba stamps a cached kernel with its own source file only (numba 0.68: a hash of that file's
-contents). Core's kernels inline functions from other files: `trace.traversal.trace_rays` inlines
-`trace.triangle_test.intersect_triangle`. After an update that edits the callee but not the caller, the
-caller's stamp still matches and the stale machine code runs the old callee. That happened: a
-test run picked up a `trace_rays` cached before the triangle test's t rounding bound was added,
-and rays leaving a surface hit it again. The cache must therefore be keyed by all of core.
+Numba stamps a cached kernel with its own source file only (numba 0.68). Core's kernels inline
+functions from other files (`trace_rays` inlines `intersect_triangle`), so an edit to the callee alone
+left stale machine code running the old callee. `register` puts a locator in front of Numba's own
+(`CacheImpl._locator_classes`, internal; numba is pinned): for a kernel in a registered folder or its
+subfolders it keeps Numba's location and adds the digest of all of core's sources to the stamp, so a
+mismatch discards the index and recompiles. Kernels elsewhere are untouched.
 
-Numba has no public hook for that, so `register` puts a locator in front of Numba's own
-(`numba.core.caching.CacheImpl._locator_classes`, internal; the numba version is pinned): for a
-kernel in a registered folder it keeps the location Numba would choose (NUMBA_CACHE_DIR,
-`__pycache__` or the user cache) and adds the digest of core's sources to the stamp. A registered
-folder covers its subfolders: every kernel in core's subpackages is stamped with the digest of all of
-core. A stamp
-mismatch makes Numba discard that cache index and compile afresh. Kernels elsewhere are untouched.
+Several processes may compile into one cache at once (the first-render helper, two Blender sessions,
+CI). Numba's `IndexDataCacheFile.save` reads the index, adds an entry and writes it back, so two
+writers could lose an entry or share a data file name; `register` wraps that save, for registered
+kernels' folders only, in an exclusive file lock (`locked_cache_folder`).
 
-Several processes may compile core's kernels into one cache at once: the first-render helper
-(parallel_compile.py) beside a build, two Blender sessions, CI runs. Numba writes each file
-atomically (a temporary name, then a rename), but it adds an overload to a function's index by
-reading the index, adding the entry and writing it back, then writing the entry's data file
-(`IndexDataCacheFile.save`). Two writers of one index could lose an entry, or both pick the same
-data file name for different signatures, so that one key's entry loads the other's machine code.
-`register` therefore also wraps that save, for the cache folders of registered kernels only, in an
-exclusive lock on a file in the folder (`locked_cache_folder`), which makes the read-add-write one step.
-
-A helper process must write core's kernels exactly where this process reads them. Re-deriving the
-folder from the environment is not enough: Numba picks a kernel's folder when it is decorated, but
-re-reads NUMBA_CACHE_DIR before every compile, so a variable set after core's import (a test module
-did) pointed a helper at another cache, where it compiled while this process compiled again.
-CORE_CACHE_FOLDER_VARIABLE, set for the helper (parallel_compile.py), names core's folders outright:
-a JSON object from each kernel folder (relative to core, e.g. "render") to the cache folder this process
-gave its kernels.
+Numba picks a kernel's cache folder at decoration but re-reads NUMBA_CACHE_DIR before every compile,
+so a helper must be told where this process reads: CORE_CACHE_FOLDER_VARIABLE holds a JSON object from
+each kernel folder (relative to core, e.g. "render") to its cache folder.
 """
 import functools
 import json

@@ -2,37 +2,15 @@
 Numba's on-disk cache while this process builds the tree (compiling the builder's kernels) and then
 makes the camera pass (compiling the camera rays' traversal; their hit frames load the helper's).
 
-Why: with an empty cache a first render compiles every kernel, one at a time, in one process: 135 s
-for the demo's first frame on a 2-core AVX2 host (`benchmarks/bench_compile.py --helper off`,
-2026-11-27), ~50 s of it the builder's kernels, ~40 s the sampling kernel (`add_samples` with its
-inlined traversal, sampler and light sampling), ~20 s the camera rays' traversal and ~11 s
-surface_frames. All go to the same cache (cache=True), so a second process can compile one set while
-this one compiles the others; the render then loads what the helper wrote. The split: the helper
-compiles surface_frames (the camera hits' frames, first), the sampling kernel, the image and the
-denoiser if the render will filter; this process compiles the builder's kernels, then the camera
-rays' traversal, and by then surface_frames is in the cache. This process still sets the first frame
-(the helper's ~55 s end first). Measured (`bench_compile.py --helper on --runs 1`, three runs each,
-alternating with the split before, in which this process also compiled surface_frames, idle host,
-2026-11-27): first frame 76.6 / 80.8 / 69.9 s against 97.5 / 79.6 / 73.7 s (paired 0.79x, 1.02x,
-0.95x); this process's compile time 77 / 82 / 70 s against 97 / 79 / 73 s, surface_frames' 10-14 s
-gone from it but the rest slower while the helper shares the two cores. Earlier: 82 s against 135 s
-in one process (the split before); before Numba's inliner copied a callee's scope once
-(inline_copy.py) the sampling kernel took ~82 s and the split measured 86 s against 187 s; a split
-in which the helper also traced the camera rays made the first frame wait 117 s for it; before that,
-the helper rendered everything (98 s against 138 s).
-
-The two sets do not overlap, but both processes may still compile one function: any kernel this
-process needs before the helper has saved it, it compiles as well.
-Numba's cache index of a function is rewritten whole by each writer
-(numba.core.caching.IndexDataCacheFile.save: read the index, add the entry, write it back), so two
-processes adding overloads at once could lose or mismatch an entry; kernel_cache.py serializes those
-saves with a file lock. The helper traces a tree made by hand (one leaf: no builder kernel runs), and
-the one builder step that rendering a tree takes, wrapping it as a one-instance scene
-(two_level.as_two_level, the top level's kernels), is compiled here before the helper starts, so the
-helper only loads it.
-
-Pixel-reuse kernels (a frame continued from the one before) are not in either set: they need a
-SceneBuilder's signature, i.e. the builder; they compile on the first continued frame, as before.
+With an empty cache a first render compiles every kernel one at a time; all go to the same cache
+(cache=True), so a second process can compile one set while this one compiles the other
+(docs/choices.md#compile-helper-process). The helper compiles surface_frames first, then the sampling
+kernel, the image and the denoiser if the render will filter. The sets do not overlap, but a kernel
+this process needs before the helper has saved it is compiled here too. Numba rewrites a function's
+cache index whole on each save, so kernel_cache.py serializes saves with a file lock. The helper traces
+a hand-made one-leaf tree (no builder kernel runs); the one-instance scene wrapping (two_level.as_two_level)
+is compiled here before it starts. Pixel-reuse kernels need a SceneBuilder and compile on the first
+continued frame.
 """
 import os
 import subprocess
