@@ -59,13 +59,9 @@ def trace_ray(tree, o, d, tmin, tmax, any_hit, stack_node, stack_t, inv, flags):
     scratch, reused across rays. A leaf's triangles are screened LEAF_CHUNK at a time by their edge
     signs (triangle_test.leaf_candidates), and only those kept get the full test, on the same copy.
 
-    Inlined into its callers, so three kernels hold a copy: the flat one below, and through
-    instance_traversal.trace_scene the scene's ray kernel and the renderer's sampling kernel. Called, it
-    cost a call per ray whose machine code begins with 13 reference-count calls (NRT_incref, one per
-    array argument; unowned views make them no-ops, but not free). Paired in one process against the
-    called version (seed 000's setting, results identical): camera rays 0.83x, shadow rays 0.85x, render
-    0.87x. The price is compile time: the sampling kernel compiled in ~82 s instead of 39 s,
-    ~36 s since Numba's inliner copies a callee's scope once (inline_copy.py).
+    Inlined into its callers (the flat kernel below, and through instance_traversal.trace_scene the
+    scene's ray kernel and the sampling kernel): a call per ray cost more than the extra compile time
+    (docs/choices.md#inline-the-traversal).
     """
     axis, split, child, count, leaf_prims, _, root_box, leaf_tris, base = tree
     for k in range(3):
@@ -169,15 +165,11 @@ def interleaved_blocks(n, block_size):
     iteration i runs items block_range(i, per_band, n, block_size): the iterations visit BANDS bands
     of the blocks in turn, RUN consecutive blocks of a band at a time.
 
-    Numba's prange gives each thread one contiguous range of iterations (a static schedule; under the
-    OpenMP layer parallel_chunksize does not change that, checked with get_thread_id). Rays and pixels
-    come in image order and their cost differs by region: the first half of the seed 000 setting's hit
-    pixels cost 1.4x the second (168 against 120 ms of CPU for their shadow rays), so split in halves
-    the step took ~1.17x as long as balanced. Dealt out band by band, any contiguous range of
-    iterations takes the same share of every band, whatever the thread count (which a cached kernel
-    cannot read: get_num_threads is a dynamic global). Dealt one block at a time, consecutive blocks
-    fell in different bands and the one-thread shadow step was 15% slower (cache misses), hence runs.
-    Results do not depend on the order.
+    Numba's prange gives each thread one contiguous range of iterations (a static schedule), while
+    rays come in image order with costs differing by region. Dealt out band by band, any contiguous
+    range takes the same share of every band, whatever the thread count (which a cached kernel cannot
+    read); runs of RUN blocks keep cache lines warm (docs/choices.md#interleaved-ray-blocks). Results
+    do not depend on the order.
     """
     n_blocks = (n + block_size - 1) // block_size
     per_band = (n_blocks + BANDS - 1) // BANDS
@@ -207,8 +199,7 @@ def trace_rays(tree, origins, directions, tmin, tmax, any_hit, out_t, out_prim, 
 @njit(cache=True)
 def _trace_block(tree, origins, directions, tmin, tmax, any_hit, start, stop, out_t, out_prim, out_u, out_v):
     """Rays start..stop-1 with one stack, the tree's arrays and each ray's origin and direction as
-    unowned views (array_views.py): with owned arrays and slices, one-thread camera rays on
-    suzanne-251k took 1.15-1.2x as long (the reference counts of the views, per ray)."""
+    unowned views (array_views.py; docs/choices.md#unowned-array-views)."""
     stack_node, stack_t, inv = np.empty(STACK_SIZE, np.int32), np.empty((STACK_SIZE, 3)), np.empty(3)
     flags = np.empty(LEAF_CHUNK, np.uint8)
     views = (unowned(tree[0]), unowned(tree[1]), unowned(tree[2]), unowned(tree[3]), unowned(tree[4]),

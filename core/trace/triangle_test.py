@@ -9,12 +9,11 @@ points "up, or right if horizontal". That is a symbolic perturbation of the ray 
 offset, so exactly one triangle of a closed fan owns each edge and vertex: no ray hits twice.
 Everything is in float64 on float32 vertices; zero-area triangles (det == 0) never hit.
 
-Most triangles a ray meets in a leaf fail at the first step: their three edge values straddle zero.
+Most triangles a ray meets in a leaf fail at the first step: their edge values straddle zero.
 `leaf_candidates` makes that step for a run of a leaf's triangles at once, from the leaf-ordered copy
-(leaf_triangles.py), in a loop LLVM vectorises (seed 000 §4 tests a packet of rays against one triangle
-with SIMD; here one ray meets several triangles, as Embree's multi-triangle leaves do). Its values are
-the scalar test's, bit for bit (same operations, no fast-math), so the full test runs only on the
-triangles it keeps and the hits do not change.
+(leaf_triangles.py), in a loop LLVM vectorises (one ray against several triangles, as Embree's
+multi-triangle leaves; seed 000 §4 uses SIMD across rays instead). Its values are the scalar test's,
+bit for bit (same operations, no fast-math), so the hits do not change.
 """
 import numpy as np
 from numba import njit
@@ -54,9 +53,8 @@ def intersect_triangle(tri, o, kx, ky, kz, sx, sy, sz):
 @njit(cache=True, inline="always")
 def intersect_leaf_triangle(leaf_tris, j, o, kx, ky, kz, sx, sy, sz):
     """intersect_triangle on column j of the leaf-ordered copy (leaf_triangles.py): the same float32
-    vertices, so the same result. The traversal reads this copy, which the screen has just brought into
-    cache: read from the (N, 3, 3) array by triangle index, the full tests of the seed 000 setting's
-    camera rays took 1.5x as long (32 against 21 ms of one thread's 152-163 ms; a cache miss each)."""
+    vertices, so the same result, read from the cache lines the screen has just loaded
+    (docs/choices.md#leaf-ordered-triangle-copy)."""
     ox, oy, oz = o[at(kx)], o[at(ky)], o[at(kz)]
     j = at(j)  # unsigned indices: no wraparound code (array_views.at)
     ax, ay, az = _sheared(leaf_tris[at(kx), j], leaf_tris[at(ky), j], leaf_tris[at(kz), j], ox, oy, oz, sx, sy)
@@ -107,7 +105,7 @@ def _straddles(u, v, w):
     return ((u < 0.0) | (v < 0.0) | (w < 0.0)) & ((u > 0.0) | (v > 0.0) | (w > 0.0))
 
 
-LEAF_CHUNK = 32  # triangles leaf_candidates screens at once (one flags buffer; 8-64 measured alike)
+LEAF_CHUNK = 32  # triangles leaf_candidates screens at once (one flags buffer)
 
 
 @njit(cache=True, inline="always")
@@ -117,7 +115,7 @@ def leaf_candidates(leaf_tris, lo, hi, o, kx, ky, kz, sx, sy, flags):
 
     leaf_tris is (9, R) float32, row 3 v + k holding coordinate k of vertex v (leaf_triangles.py).
     The index is unsigned: with a signed one Numba wraps negative indices, and LLVM then gathers the
-    loads instead of reading them as vectors (measured: slower than the scalar loop)."""
+    loads instead of reading them as vectors (slower than the scalar loop)."""
     ox, oy, oz = o[kx], o[ky], o[kz]
     found = 0
     for i in range(lo, hi):
@@ -143,13 +141,11 @@ def _gamma(n):
 @njit(cache=True, inline="always")
 def _t_rounding(ax, ay, bx, by, cx, cy, az, bz, cz, sx, sy, sz, u, v, w, det):
     """A bound on the rounding error of t, from pbrt-v3's watertight test (Pharr, Jakob and Humphreys,
-    §3.9.6): a t below it may be 0 or negative. pbrt bounds the shear term sx * z by the scaled z
-    (|sx| <= 1); ours is applied to the unscaled z (sz only scales t) and bounded by |sx| |z|, which
-    keeps the bound tight for tiny directions: with pbrt's form a ray along 2e-16 * (0, -1, 0) lost a
-    real hit at t = 1.4e15, and one 1e30 away along 1e-15 * (0, 0, -1) its hit at t = 1e45. Without
-    it a ray starting exactly on a triangle (tmin 0) reported that triangle at t ~ 1e-17, and, in the
-    tree, sometimes instead of its true closest hit (outside QA; the renderer's offset ray starts stay
-    far above it)."""
+    §3.9.6): a t below it may be 0 or negative. pbrt bounds the shear term sx * z by the scaled z;
+    here it applies to the unscaled z (sz only scales t), bounded by |sx| |z|, which stays tight for
+    tiny directions (pbrt's form lost a real hit at t = 1.4e15 for a ray along 2e-16 * (0, -1, 0)).
+    Without it a ray starting exactly on a triangle (tmin 0) reported that triangle at t ~ 1e-17,
+    sometimes instead of its true closest hit (the renderer's offset ray starts stay far above it)."""
     shear_z = max(abs(az), abs(bz), abs(cz))  # the shear adds sx * z: unscaled z, times |sx| <= 1
     max_z = shear_z * abs(sz)  # t's z values are scaled by sz (huge for a tiny direction)
     max_x = max(abs(ax), abs(bx), abs(cx))
