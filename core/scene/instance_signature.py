@@ -1,17 +1,14 @@
 """What a frame's instances were, so the next frame can tell which parts of space changed.
 
-A signature lists every instance that has something to hit, for some ray, as a row of bytes (a
-digest of its mesh's key and fingerprint, its object-to-world matrix, how its triangles were rounded:
-in object space under its own tree, or to float32 in a soup relative to the soup's anchor, and which
-rays it stops and whether it is a holdout: ray_visibility.py) with its world box, in the coordinates
-the scene was built in (minus `origin`, see scene_builder.py). The rounding is part of the row
-because kept pixels keep their hit points and ray starts: an unchanged object re-rounded (the soup
-re-anchored, or the object moved between the soup and a tree of its own) shifts its surface by a
-float32 ulp, enough to put a kept ray start behind it, so it counts as changed. Two frames'
-signatures give the boxes where geometry may differ (`changed_boxes`): the boxes of rows present in
-only one of them, i.e. instances that moved, deformed, appeared or vanished, each at its old and its
-new place. Everything outside those boxes is the same triangles at the same places in both frames,
-which is what lets the renderer keep pixels whose rays stay outside them (pixel_reuse.py).
+A signature lists every instance that has something to hit, for some ray, as a row of bytes (a digest
+of its mesh's key and fingerprint, its object-to-world matrix, how its triangles were rounded, and its
+ray visibility: ray_visibility.py) with its world box, in the scene's coordinates (minus `origin`).
+The rounding is in the row because kept pixels keep their hit points and ray starts: an unchanged
+object re-rounded (soup re-anchored, or moved between the soup and its own tree) shifts its surface by
+a float32 ulp, enough to put a kept ray start behind it. `changed_boxes` gives the boxes of rows present
+in only one of two frames (instances that moved, deformed, appeared or vanished, at their old and new
+places); outside them both frames hold the same triangles, so pixel_reuse.py keeps pixels whose rays
+stay outside them.
 
 Rows compare as sets: an instance duplicated exactly where another one is adds no new surface.
 """
@@ -65,8 +62,7 @@ def _with_soup_rounding(boxes, rounding, origin):
     """A soup member's triangles are stored in float32 relative to its soup's anchor, so its surface may
     lie up to half a float32 step of |vertex - anchor| outside its exact box: grown by a whole step
     (2^-23 of the farthest corner's distance from the anchor). pixel_reuse's own pad is relative to
-    the camera and missed it: a small object 300 units from the anchor and 4 from the camera kept
-    its pixels after it vanished (outside review)."""
+    the camera and misses this for a small object far from the anchor but near the camera."""
     soup = rounding[:, 0] == 1.0
     if not soup.any():
         return boxes

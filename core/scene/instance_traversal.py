@@ -8,9 +8,8 @@ ray transformed by its world-to-object matrix without normalising the direction,
 t is the same in both spaces (an affine map keeps it) and the best hit so far is passed on as tmax:
 a mesh is searched only in front of what is already known (Wald 2004, seed 000 §5).
 
-trace_scene is inlined into its callers: a call that passes the scene's 19 arrays costs an atomic
-reference-count increment and decrement per array, which measured 0.2-0.4 us a ray (camera rays on
-suzanne-251k, a flat tree as one instance: +50% against the flat traversal; inlined: +10%).
+trace_scene is inlined into its callers: a call passing the scene's arrays costs a reference-count
+increment and decrement per array, per ray (docs/choices.md#inline-the-scene-traversal).
 """
 import numpy as np
 from numba import njit, prange
@@ -86,9 +85,8 @@ def trace_scene(scene, o, d, tmin, tmax, any_hit, ray_mask, scratch):
     there: prim is then trace_ray's suspended value (< NO_HIT) and instance the one it stopped in.
     `scratch` comes from new_scratch() and is reused across rays.
 
-    trace_instance is called from one place only, the top leaf loop, because trace_ray is inlined
-    there (traversal.py says why): a flat tree, one instance in a one-leaf top, goes through that loop
-    too, only without the top's clip, which its own tree makes."""
+    trace_instance is called from the top leaf loop only, where trace_ray is inlined (traversal.py):
+    a flat tree, one instance in a one-leaf top, goes through that loop too, without the top's clip."""
     axis, split, child, count, items, root_box = scene[0], scene[1], scene[2], scene[3], scene[4], scene[5]
     visibility = scene[19]
     if items.shape[0] == 0:
@@ -171,9 +169,7 @@ def _object_normal(tri):
 @njit(cache=True, inline="always")
 def hit_surface(scene, inst, prim):
     """What the hit frame needs of instance inst's triangle prim, fetched and computed once per hit:
-    (triangle (3, 3), world-to-object rows (3, 4), inverse_parts of them, object-space normal e1 x e2).
-    onto_triangle_plane, world_normal and surface_error_scale each took them afresh (the normal three
-    times, the matrix's cofactors four times)."""
+    (triangle (3, 3), world-to-object rows (3, 4), inverse_parts of them, object-space normal e1 x e2)."""
     tri = scene[16][scene[10][scene[7][inst]] + prim]
     a = rows(scene[6], inst, inst + 1)[0]
     return tri, a, inverse_parts(a), _object_normal(tri)
@@ -235,16 +231,13 @@ def surface_error_scale(surface, p, n):
     triangle test's t carries near it: the largest of
     - sum |n_k| |p_k|: p's world coordinates round to their own ulps, seen along the normal;
     - the same for the object-space point q = a p + a_t and the projection's operands q - v0, as a
-      world distance (an object-space offset along the object normal n_o is |a^T n_o| / |n_o| times
-      shorter in world, so a shear that stretches along the normal makes it longer: on a plane
-      stretched 1e5 times along its own normal, AO rays left from under it without the q - v0 term,
-      found by an outside review);
+      world distance (an object-space offset along n_o is |a^T n_o| / |n_o| times shorter in world, so
+      a shear stretching along the normal makes it longer: a plane stretched 1e5 times along it);
     - the triangle's reach from p (largest world coordinate difference to a vertex): the triangle test
-      works on vertex-minus-origin differences (on a floor 1e4 wide seen 1e-3 across, an AO ray offset
-      by p's magnitude alone hit the floor it left at t ~ 1e-12, outside QA).
-    Not max |p_k|: a floor at z = 0 but x = 5e5 would lift ray starts by 5e5 roundings' worth and
-    carry them through a roof 1e-4 above (outside QA), where its height's ulps are what count. Nor the
-    camera ray's |o| and t |d|: their error moves p along the ray, which the projection takes out."""
+      works on vertex-minus-origin differences (a floor 1e4 wide seen 1e-3 across).
+    Not max |p_k|: a floor at z = 0 but x = 5e5 would lift ray starts through a roof 1e-4 above, where
+    its height's ulps are what count. Nor the camera ray's |o| and t |d|: their error moves p along
+    the ray, which the projection takes out."""
     tri, a, parts, (nx, ny, nz) = surface
     world = abs(n[0] * p[0]) + abs(n[1] * p[1]) + abs(n[2] * p[2])
     qx, qy, qz = _object_point(a, p)

@@ -9,9 +9,7 @@ every instance that any ray kind meets. An instance with neither ray bit is neve
 
 HOLDOUT is not a ray kind but a property of what camera rays find (Blender's Holdout, as Cycles applies
 it): a pixel whose camera ray hits a holdout instance is left empty, alpha 0 like the background, while
-the instance still occludes and shadows everything else. Measured with Cycles (bpy 5.0.1, AO pass and
-alpha of one scene with and without a holdout cube, same seed): the cube's pixels became alpha 0 and
-AO 0, every other pixel was bit-identical, so the cube still darkened the floor's AO.
+the instance still occludes and shadows everything else (docs/choices.md#holdout-as-cycles-applies-it).
 """
 import numpy as np
 

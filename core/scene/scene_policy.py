@@ -13,14 +13,12 @@ visits several objects' trees where one flat tree would have separated their tri
 - if the remaining static single objects overlap heavily (OVERLAP_LIMIT, see `overlap_depth`), they
   go to the soup too;
 - an instance whose matrix cannot be inverted (zero scale) can only be flattened.
-Figures behind SMALL_OBJECT and OVERLAP_LIMIT: benchmarks/bench_two_level.py and docs/choices.md.
+SMALL_OBJECT and OVERLAP_LIMIT: docs/choices.md#soup-thresholds (benchmarks/bench_two_level.py).
 
-A soup stores its members' world triangles in float32 relative to an anchor, so a member loses the
-float32 precision of its distance from that anchor: a 1 cm sphere 5,000 units from the centre of a
-soup that also holds a ground 2e5 wide lost a fifth of its radius (outside review). `soup_zones`
-therefore splits a soup into zones: members near the soup's anchor against their size stay in its
-main tree, and the others go to zones anchored near them, so that no member lies more than
-PRECISION_RATIO of its own diagonals from its anchor.
+A soup stores its members' world triangles in float32 relative to an anchor, so a member far from it
+against its own size loses shape. `soup_zones` therefore keeps members near the anchor in the main
+tree and puts the others in zones anchored near them: no member lies more than PRECISION_RATIO of its
+own diagonals from its anchor.
 """
 import numpy as np
 
@@ -31,10 +29,9 @@ LAYOUTS = ("auto", "two_level", "flat")
 SMALL_OBJECT = 1024
 OVERLAP_LIMIT = 0.5
 OVERLAP_SAMPLE = 2048  # boxes compared against all others when there are more (seeded sample)
-# A soup member's vertices lie within this many of its own box diagonals of its soup's anchor, so float32
-# rounds them by at most 2^-24 * 16384 = 2^-10 (1e-3) of the member's size (its own tree: ~2^-24), under
-# a pixel until the member spans a thousand. The render pays for having zones (1.2-1.9x), the build for
-# their number: benchmarks/bench_zones.py, README "Two-level scenes".
+# A soup member's vertices lie within this many of its own box diagonals of its anchor, so float32
+# rounds them by at most 2^-24 * 16384 = 2^-10 of the member's size (its own tree: ~2^-24), under a
+# pixel until the member spans a thousand. Zones cost render and build time (docs/choices.md#soup-zones).
 PRECISION_RATIO = 16384.0
 
 
@@ -86,17 +83,13 @@ def soup_zones(boxes, before=None, split=True):
     anchor last frame, or None; split False: the main zone alone (the "flat" layout, lazy builds).
 
     The main zone is anchored by `main_anchor` and keeps every member whose farthest box corner is
-    within PRECISION_RATIO of its diagonals of that anchor (members without extent too: they have
-    nothing to round); the anchor is found again after members leave, until none does, and then every
-    member it is near enough for is in, so that next frame, given it as `before`, the zone is the same.
-    The rest, smallest first, join the nearest zone anchor within (PRECISION_RATIO - 1/2) of their
-    diagonals of their box's centre, or else anchor a new zone at the centre of the grid cell holding
-    theirs, of the largest power-of-two size C with (sqrt(3)/2) C within that: either way no vertex is
-    more than PRECISION_RATIO diagonals from its anchor. Joining keeps neighbours of different sizes in
-    one zone (a zone is one more top-level instance for rays to visit, and overlaps the main zone).
-    Zones depend on this frame's boxes alone, so an unchanged soup keeps them; a smaller member
-    arriving nearby can move a larger one to its new zone, which re-rounds that member (its kept
-    pixels are traced again: instance_signature.py).
+    within PRECISION_RATIO of its diagonals of that anchor (members without extent too); the anchor is
+    found again after members leave, until none does, and then every member it is near enough for is
+    in, so that next frame, given it as `before`, the zone is the same. The rest, smallest first, join
+    the nearest zone anchor within (PRECISION_RATIO - 1/2) of their diagonals of their box's centre, or
+    else anchor a new zone at the centre of the grid cell holding theirs, of the largest power-of-two
+    size C with (sqrt(3)/2) C within that: either way no vertex is more than PRECISION_RATIO diagonals
+    from its anchor. Zones depend on this frame's boxes alone, so an unchanged soup keeps them.
     """
     lo, hi = boxes[:, :3], boxes[:, 3:]
     filled = (lo <= hi).all(axis=1)

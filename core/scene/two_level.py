@@ -241,8 +241,8 @@ def build_top_level(boxes, opts):
     sub = np.ascontiguousarray(boxes[keep])
     bounds = np.concatenate([sub[:, :3].min(axis=0), sub[:, 3:].max(axis=0)]).astype(np.float32)
     if len(keep) == 1 or half_area(bounds) == 0.0:
-        # One box, or every box on one point or line (instances scaled to ~1e-17, outside review: no area
-        # for the SAH to divide by, it raised ZeroDivisionError, and no split would separate rays): a leaf.
+        # One box, or every box on one point or line (instances scaled to ~1e-17): no area for the SAH
+        # to divide by, and no split would separate rays: a leaf.
         axis, split, child, count, _ = empty_arrays()
         count[0] = len(keep)
         return axis, split, child, count, keep, bounds
