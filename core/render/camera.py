@@ -126,13 +126,9 @@ def _pixel_indices(pixels, width, height):
 @functools.lru_cache(maxsize=8)
 def tiled_pixels(width, height, tile=TILE):
     """Every row-major pixel index once, tile by tile (tile x tile squares, row-major within a tile and
-    across tiles; edge tiles are cut short). Read-only and kept per size: every frame of an animation
-    asks for the same order (the sort took ~4 ms at 640 x 480).
-
-    Rays traced in this order are coherent within each block a traversal task takes (64 rays: one 8 x 8
-    tile), so they walk the same nodes and triangles while those are in cache. On the seed 000 setting
-    (suzanne-251k, 640 x 480) camera rays traced 13-16% faster in 8 x 8 tiles than in rows (4, 8 and 16
-    within 3% of each other), and shadow rays from the hit points inherit the order.
+    across tiles; edge tiles are cut short). Read-only and kept per size: every frame asks for the same
+    order. Rays in this order are coherent within each traversal task (one 8 x 8 tile), so they walk
+    the same nodes while those are in cache (docs/choices.md#tiled-ray-order).
     """
     tiles_across = (width + tile - 1) // tile
     tile_of_pixel = (np.arange(height) // tile)[:, None] * tiles_across + (np.arange(width) // tile)[None, :]
@@ -144,8 +140,7 @@ def tiled_pixels(width, height, tile=TILE):
 @njit(cache=True, parallel=True)
 def _pixel_rays(x, y, rot, position, perspective, pixels, origins, directions):
     """Rays for row-major pixel indices `pixels`, from the image-plane coordinates x (W,) and y (H,). A
-    kernel because numpy's meshgrid, stack and matrix product took 30-40 ms at 640 x 480, a tenth of the
-    seed 000 setting's time to image."""
+    kernel because numpy's meshgrid, stack and matrix product took a tenth of a preview's time to image."""
     width = x.shape[0]
     for r in prange(pixels.shape[0]):
         i, j = pixels[r] // width, pixels[r] % width

@@ -11,12 +11,9 @@ Value of a pixel whose camera ray hits (geometric normal N turned to face the ca
 - "ao+shadow": AO * (ambient + (1 - ambient) * S), ambient 0.25 by default: shadows from the lights
   over an occlusion-darkened ambient term.
 Background pixels are 0 with alpha 0; hit pixels have alpha 1. Row 0 is the top row.
-In a scene with per-instance ray visibility (ray_visibility.py), camera rays meet only the instances
-visible to camera rays, and AO and shadow rays only those visible to shadow rays, as in Cycles; a pixel
-whose camera ray hits a holdout instance is background (alpha 0), as Cycles' Holdout makes it.
-`image(denoise=True)` / `render_preview(..., denoise=True)` filter the estimate with core.denoise (edge-
-avoiding à-trous, guided by the per-pixel sample variance; background and alpha unchanged); the raw
-estimate stays the default.
+With per-instance ray visibility (ray_visibility.py) camera rays meet only instances visible to camera
+rays, AO and shadow rays only those visible to shadow rays, and a holdout hit is background, as in
+Cycles. `image(denoise=True)` filters the estimate with core.denoise; the raw estimate is the default.
 
 Sampling is deterministic for a seed. With an error target, a pixel stops once it has at least
 `min_samples` samples and the standard error of its mean (from the sample variance, floored by Laplace's
@@ -51,7 +48,7 @@ class PreviewRender:
     """A progressive preview: call `step()` until `done`, read `image()` at any time.
 
     `tree` is a KdTree or a TwoLevelScene; a KdTree is traced as a one-instance scene with the
-    identity matrix, so both take the same kernels (the overhead is measured in docs/choices.md).
+    identity matrix, so both take the same kernels.
 
     Settings: mode ("ao", "shadow", "ao+shadow"), samples (per pixel), ao_distance, lights (core.Light),
     seed (any integer, taken modulo 2^32), sampler ("sobol" or "random"), error_target (None: off),
@@ -245,10 +242,9 @@ class PreviewRender:
         n = self.counts[self.active].astype(np.float64)
         mean = self.sums[self.active].mean(axis=1) / n
         var = np.maximum(self.sq_sums[self.active] / n - mean * mean, 0.0) * n / np.maximum(n - 1, 1)
-        # Laplace's rule of succession: after n samples, a visibility outcome not yet seen still has
-        # probability 1 / (n + 2), so a sample's variance is at least q (1 - q) for that q. Without this
-        # floor a pixel whose first samples all agreed had variance 0 and stopped at min_samples: at a
-        # target of 0.02, 5% of the hit pixels of a test scene ended more than 3 targets off.
+        # Laplace's rule of succession: after n samples, an outcome not yet seen still has probability
+        # 1 / (n + 2), so a sample's variance is at least q (1 - q) for that q. Without this floor a
+        # pixel whose first samples all agreed had variance 0 and stopped at min_samples.
         q = 1.0 / (n + 2.0)
         var = np.maximum(var, q * (1.0 - q))
         converged = np.sqrt(var / n) < self.error_target

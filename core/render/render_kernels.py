@@ -1,28 +1,21 @@
 """The sampling kernel: for each pixel still sampling, add AO and/or light samples to its sums.
 
 One sample of a pixel is one cosine-weighted AO ray (mode ao), one shadow ray per light facing the
-surface (mode shadow), or both multiplied (mode ao+shadow). Every ray is an any-hit query through the
-same traversal as everything else, of kind SHADOW_RAYS (as Cycles traces its AO rays: an instance
-with shadow rays off neither occludes nor shadows, ray_visibility.py), via the scene's instances (a
-flat tree is one instance with the identity, see two_level.as_two_level). Sample k of pixel p
-depends only on (p, k, seed), so adding samples in any batches gives the same sums as one big batch.
+surface (mode shadow), or both multiplied (mode ao+shadow). Every ray is an any-hit query of kind
+SHADOW_RAYS (Cycles traces AO rays as shadow rays, ray_visibility.py) through the scene's instances.
+Sample k of pixel p depends only on (p, k, seed), so samples added in any batches give the same sums.
 
-On a lazy tree a ray may stop at an unbuilt subtree (traversal.py). The pixel then puts its sums back
-as they were before the batch and reports the subtree; the caller builds it and redoes the batch for
-that pixel, which by the rule above gives exactly the eager tree's sums.
+On a lazy tree a ray may stop at an unbuilt subtree: the pixel restores its sums and reports the
+subtree; the caller builds it and redoes the batch, which by the rule above gives the eager sums.
 
-Ray memo (pixel reuse across frames, pixel_reuse.py): every AO and shadow ray's visibility is kept as
-one bit, at bit s * (1 + lights) + use of its pixel's row (when samples * (1 + lights) <= MEMO_BITS).
-A pixel continued from last frame (same hit point) takes last frame's bit for every ray that cannot
-meet a changed box, and traces only the others: the same bit, hence the same sums. `known[i]` is how
-many of its bits last frame traced: with an error target a pixel may have stopped after fewer samples
-than this frame gives it, and the bits of samples it never took hold nothing (outside QA found frames
-continued with an error target differing from full renders by up to 0.34 before this count).
+Ray memo (pixel_reuse.py): every AO and shadow ray's visibility is one bit, at bit s * (1 + lights) +
+use of its pixel's row (when samples * (1 + lights) <= MEMO_BITS). A pixel continued from last frame
+takes last frame's bit for every ray that cannot meet a changed box and traces the others: the same
+bit, hence the same sums. `known[i]` counts the bits last frame traced (with an error target a pixel
+may have stopped early, and bits of samples it never took hold nothing).
 
-Repeated rays: a light without extent (lights.DELTA) gives every sample of a pixel the same shadow ray,
-so with the memo on, samples after the first take sample 0's bit instead of tracing it again (counted
-in `repeated`, not in `rays`). In shadow mode with hard lights that is one shadow ray a light per pixel
-instead of one a sample. Without the memo (too many bits) every sample traces its ray, as before.
+Repeated rays: a light without extent (lights.DELTA) gives every sample the same shadow ray, so with the
+memo on, samples after the first take sample 0's bit (counted in `repeated`, not in `rays`).
 """
 import numpy as np
 from numba import njit, prange
@@ -70,11 +63,9 @@ def add_samples(scene, points, normals, starts, pixels, active, first, count, mo
 @njit(cache=True)
 def _sample_pixels(scene, points, normals, starts, pixels, active, start, stop, first, count, mode, ao_distance,
                    ambient, lights, sampler, seed, dim1, sums, sq_sums, counts, rays, status, memo):
-    """Pixels active[start:stop], sharing one set of scratch buffers: allocating them per pixel cost
-    ~25% of a one-sample step (kept out of the parallel loop body: Numba's parfor analysis does not
-    cope with the inlined tuple code of the samplers). The scene and the memo go to the per-ray code
-    as unowned views (array_views.py): with the owned arrays a one-sample shadow step took 1.5x as long
-    as tracing the same rays alone."""
+    """Pixels active[start:stop], sharing one set of scratch buffers (kept out of the parallel loop
+    body: Numba's parfor analysis does not cope with the samplers' inlined tuple code). The scene and
+    the memo go to the per-ray code as unowned views (docs/choices.md#sampling-kernel-scratch-and-views)."""
     scene = unowned_scene(scene)
     memo = (unowned(memo[0]), unowned(memo[1]), unowned(memo[2]), unowned(memo[3]), unowned(memo[4]))
     points, normals, starts = unowned(points), unowned(normals), unowned(starts)
@@ -94,11 +85,8 @@ def _sample_pixel(scene, points, normals, starts, pixels, i, first, count, mode,
     """All of one pixel's new samples. Returns NO_HIT, or the suspended prim of a ray that reached an
     unbuilt subtree, after restoring the pixel's sums.
 
-    A sample's rays (its AO ray, then one per light) go through one loop with one inlined traversal.
-    (A non-inlined call to it measured 4-10% slower in the seed 000 setting: it passes ~40 arrays.)
-
-    The pixel's point, normal and ray start (and each light's row below) are unowned views (array_views.py):
-    a slice would update its parent's shared reference count, from both threads, on every ray."""
+    A sample's rays (its AO ray, then one per light) go through one loop with one inlined traversal,
+    and the pixel's point, normal, ray start and light rows are unowned views (array_views.py)."""
     point, normal, origin = rows(points, i, i + 1)[0], rows(normals, i, i + 1)[0], rows(starts, i, i + 1)[0]
     ps = pixel_seed(pixels[i], seed)
     before = (sums[i, 0], sums[i, 1], sums[i, 2], sq_sums[i], rays[i], memo[3][i], memo[4][i])
@@ -157,9 +145,7 @@ def _ray_of_use(use, lights, point, normal, ao_distance, sampler, ps, s, dim1, d
         return ao_distance, 1.0
     light = rows(lights, use - 1, use)[0]
     # A light without extent ignores its sample numbers (lights.DELTA), so none are drawn: Owen-scrambled
-    # Sobol costs three nested scrambles a ray. Seed 000's shadow step alone (add_samples, 201,371
-    # shadow rays), paired in one process against the code before, 15 pairs: 0.948x on two threads
-    # (126 against 138 ms), 0.965x on one.
+    # Sobol costs three nested scrambles a ray (docs/choices.md#no-samples-for-delta-lights).
     u1, u2 = (0.0, 0.0) if light[DELTA] != 0.0 else sample_2d(sampler, ps, s, use, dim1)
     dist, mask = sample_light(light, point, u1, u2, direction)
     cos_nl = normal[0] * direction[0] + normal[1] * direction[1] + normal[2] * direction[2]
@@ -246,8 +232,7 @@ def surface_frames(scene, origins, directions, t, inst, prim, hit_index, points,
 @njit(cache=True, parallel=True)
 def assemble_image(pixels, sums, counts, img):
     """Each hit pixel's mean (0 before its first sample) and alpha 1 into the flat (H*W, 4) float32
-    image `img`, zero elsewhere: one pass instead of numpy's temporaries and fancy-indexed writes,
-    which took 13 ms (median) for the 211,884 hit pixels of the seed 000 setting. The same division."""
+    image `img`, zero elsewhere: one pass instead of numpy's temporaries and fancy-indexed writes."""
     for i in prange(pixels.shape[0]):
         p = pixels[i]
         n = max(counts[i], 1)
