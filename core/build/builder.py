@@ -23,8 +23,7 @@ def build_kdtree(triangles, **options):
     intersection_cost, empty_bonus, cost_ratio, clip, skip, top, threads, lazy, memory_limit, ...), each
     validated. With lazy=True only the top of the tree is built now and the rest as rays reach it (lazy.py).
     Raises ValueError naming the first bad triangle or setting, or memory.MemoryLimitError (a ValueError)
-    when the estimated peak memory is above memory_limit.
-    """
+    when the estimated peak memory is above memory_limit."""
     opts = make_options(options)
     check_build_memory(triangles, opts)
     tris = as_triangles(triangles)

@@ -31,8 +31,7 @@ class DeferredSubtrees:
 
     Subtree k is node `node[k]` of the tree (axis UNBUILT, child k) with references
     prims/boxes[start[k]:start[k+1]], box `box[k]`, depth `depth[k]` and room `room[k]` (subtree.py).
-    Plain arrays: it pickles.
-    """
+    Plain arrays: it pickles."""
 
     def __init__(self, subtrees, axis, child, params, speculative):
         parts = [s[5:] for s in subtrees]

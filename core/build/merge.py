@@ -11,9 +11,7 @@ from ..trace.layout import LEAF, UNBUILT
 
 def merge_tree(top_nodes, subtrees):
     """One set of flat arrays (axis, split, child, count, leaf_prims) from the top and the subtrees.
-
-    Deferred subtrees (lazy builds) are numbered globally in task order.
-    """
+    Deferred subtrees (lazy builds) are numbered globally in task order."""
     n_top = len(top_nodes)
     axis = np.empty(n_top, np.int8)
     split = np.zeros(n_top, np.float32)

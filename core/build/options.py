@@ -72,8 +72,7 @@ class BuildOptions:
         Given, a node is split only when the rays expected to enter it save more than the split costs
         to build (sah.beats_leaf; seed 003 §3.5). Fewer than REFINE_RAYS_PER_TRIANGLE rays a triangle
         also turn `clip`, `snap` and the all-axes search off (KdTree.options keeps the options as
-        given; BuildOptions.params says what the build used).
-    """
+        given; BuildOptions.params says what the build used)."""
 
     builder: str = "binned"
     bins: int = 32

@@ -69,8 +69,7 @@ def partition_in_place(tris, prims, boxes, start, end, axis, pos, planar_left, c
     Right references are compacted in place (each reference makes at most one right one, so writes
     never pass reads); left ones go to [end, end+nl) and are then moved down. The caller guarantees room
     for 2 * (end - start) references from `start`. Returns (n_right, n_left).
-    The left child ends up on top of the pool, so building it first lets it grow freely (seed 000 §3.5).
-    """
+    The left child ends up on top of the pool, so building it first lets it grow freely (seed 000 §3.5)."""
     box_l, box_r = scratch[3], scratch[4]
     w_right = start
     w_left = end

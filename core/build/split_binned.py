@@ -57,10 +57,8 @@ def _bin(x, lo, scale, top):
 @njit(cache=True)
 def best_binned_split(min_bins, max_bins, weight, node_box, params):
     """Cheapest split among the bin boundaries: (cost, axis, position); axis -1 if none is valid.
-
     The node's extents are computed once and each candidate swaps in only its two cut extents
-    (split_cost would re-read the box twice per candidate); this loop runs (bins - 1) x 3 times a node.
-    """
+    (split_cost would re-read the box twice per candidate); this loop runs (bins - 1) x 3 times a node."""
     nbins = min_bins.shape[1]
     inv_area = 1.0 / half_area(node_box)
     e = extents(node_box)

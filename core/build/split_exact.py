@@ -16,9 +16,7 @@ from .sah import split_cost, valid_position
 @njit(cache=True)
 def exact_split(boxes, start, end, node_box, params, scratch):
     """Cheapest split of the node: (cost, axis, position, planar_left); axis -1 if none is valid.
-
-    `scratch` is a float32 buffer of at least 3 * (end - start) values.
-    """
+    `scratch` is a float32 buffer of at least 3 * (end - start) values."""
     n = end - start
     inv_area = 1.0 / half_area(node_box)
     best_cost, best_axis, best_pos, best_planar_left = np.inf, -1, np.float32(0.0), False

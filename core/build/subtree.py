@@ -37,8 +37,7 @@ def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, root_room, p
     Returns the node arrays (axis, split, child, count; see layout.py) with local indices, node 0 being
     the subtree's root, and the leaf triangle indices; then the deferred subtrees (none unless
     params.defer_size > 0): (d_node, d_start, d_depth, d_box, d_prims, d_boxes, d_room), deferred subtree
-    k being local node d_node[k] (whose child is k) with references d_prims/d_boxes[d_start[k]:d_start[k+1]].
-    """
+    k being local node d_node[k] (whose child is k) with references d_prims/d_boxes[d_start[k]:d_start[k+1]]."""
     stack_size = params.max_depth - root_depth + 2
     stack_node = np.empty(stack_size, np.int32)
     stack_range = np.empty((stack_size, 2), np.int64)

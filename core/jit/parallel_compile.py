@@ -146,8 +146,7 @@ class RenderingKernelsHelper:
     `__init__` (which imports bpy) does not run there. It inherits sys.path, writes core's kernels to
     the folder this process reads them from (kernel_cache.CORE_CACHE_FOLDER_VARIABLE), runs one
     thread, and its error output is kept for `outcome`: a helper that fails costs nothing but its
-    time, since this process then compiles whatever is missing itself.
-    """
+    time, since this process then compiles whatever is missing itself."""
 
     def __init__(self, denoise=False):
         self._errors = tempfile.TemporaryFile()  # the helper's stderr: its last line names a failure

@@ -23,8 +23,7 @@ class Camera:
         then spans width by height * pixel_aspect pixel widths, and "larger dimension" above means
         larger in that extent, as Blender's sensor fit AUTO compares resolution times pixel aspect
         (BKE_camera_params_compute_viewplane): an anamorphic frame keeps its pixel count and is
-        stretched on display.
-    """
+        stretched on display."""
 
     def __init__(self, matrix_world, fov=None, *, ortho_scale=None, clip_start=0.0, clip_end=np.inf,
                  shift=(0.0, 0.0), pixel_aspect=1.0):
@@ -72,11 +71,9 @@ class Camera:
 
     def rays(self, width, height, pixels=None):
         """Rays through pixel centres, row 0 at the top: (origins, directions, tmin, tmax), (R, 3).
-
         `pixels`: the row-major pixel indices to make rays for, in that order (default: every pixel in
         row-major order; see tiled_pixels). Directions have unit length along the view axis, so
-        tmin/tmax are the clip distances.
-        """
+        tmin/tmax are the clip distances."""
         check_image_size(width, height)
         left, right, bottom, top = self.image_plane(width, height)
         x = left + (np.arange(width) + 0.5) / width * (right - left)
@@ -128,8 +125,7 @@ def tiled_pixels(width, height, tile=TILE):
     """Every row-major pixel index once, tile by tile (tile x tile squares, row-major within a tile and
     across tiles; edge tiles are cut short). Read-only and kept per size: every frame asks for the same
     order. Rays in this order are coherent within each traversal task (one 8 x 8 tile), so they walk
-    the same nodes while those are in cache (docs/choices.md#tiled-ray-order).
-    """
+    the same nodes while those are in cache (docs/choices.md#tiled-ray-order)."""
     tiles_across = (width + tile - 1) // tile
     tile_of_pixel = (np.arange(height) // tile)[:, None] * tiles_across + (np.arange(width) // tile)[None, :]
     order = np.argsort(tile_of_pixel.ravel(), kind="stable")  # stable: row-major within a tile

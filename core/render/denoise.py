@@ -70,8 +70,7 @@ def denoise_pixels(width, height, pixels, points, normals, sums, sq_sums, counts
     pixels (M,): flat indices of the hit pixels; points, normals (M, 3): their hit points and geometric
     normals; sums (M, 3), sq_sums (M,) (of the grey value), counts (M,): the per-pixel sample sums.
     variance_decay: the variance of a pixel's mean is taken to fall as n^-(1 + variance_decay) (0 for
-    independent samples, 0.5 for scrambled Sobol; see the module docstring).
-    """
+    independent samples, 0.5 for scrambled Sobol; see the module docstring)."""
     width, height = int(width), int(height)
     n = width * height
     pixels = _checked_pixels(n, pixels, points, normals, sums, sq_sums, counts)

@@ -1,25 +1,18 @@
 """Preview images: ambient occlusion, shadows, or both, accumulated progressively.
 
 Value of a pixel whose camera ray hits (geometric normal N turned to face the camera):
-- "ao": the fraction of the cosine-weighted hemisphere around N that is unoccluded within
-  `ao_distance`: AO = (1/pi) * integral of V(w) * cos(theta) dw, estimated with cosine-weighted rays.
-- "shadow": S = (1/L) * sum over the L lights of colour_l * V_l * max(0, N.L_l) * mask_l, with L_l
-  sampled over the light's extent (radius, sun angle, area shape) and mask_l the spot cone (Cycles'
-  smoothstep blend) or the area light's front side within its spread (shading._light_mask). No
-  distance falloff and no power: every light gets the same weight, so S is in [0, 1] for colours in
-  [0, 1] and shows where each light reaches, whatever its units.
-- "ao+shadow": AO * (ambient + (1 - ambient) * S), ambient 0.25 by default: shadows from the lights
-  over an occlusion-darkened ambient term.
-Background pixels are 0 with alpha 0; hit pixels have alpha 1. Row 0 is the top row.
-With per-instance ray visibility (ray_visibility.py) camera rays meet only instances visible to camera
-rays, AO and shadow rays only those visible to shadow rays, and a holdout hit is background, as in
-Cycles. `image(denoise=True)` filters the estimate with core.denoise; the raw estimate is the default.
+- "ao": AO = (1/pi) * integral of V(w) cos(theta) dw over the hemisphere within `ao_distance`,
+  estimated with cosine-weighted rays.
+- "shadow": S = (1/L) * sum over the L lights of colour_l * V_l * max(0, N.L_l) * mask_l, L_l sampled
+  over the light's extent, mask_l the spot cone or area light's spread (shading._light_mask). No
+  falloff and no power: S is in [0, 1] and shows where each light reaches, whatever its units.
+- "ao+shadow": AO * (ambient + (1 - ambient) * S): shadows over an occlusion-darkened ambient term.
+Background pixels are 0 with alpha 0; hit pixels have alpha 1. Row 0 is the top row. Ray visibility
+and holdouts apply as in Cycles (ray_visibility.py); `image(denoise=True)` filters with core.denoise.
 
-Sampling is deterministic for a seed. With an error target, a pixel stops once it has at least
-`min_samples` samples and the standard error of its mean (from the sample variance, floored by Laplace's
-rule of succession so that samples that all agreed do not count as certainty) is below the target.
-Convergence is checked only at multiples of CHECK_EVERY samples, so the image does not depend on how the
-caller batches its steps.
+Sampling is deterministic for a seed. With an error target, a pixel stops once it has `min_samples`
+samples and its mean's standard error (the sample variance floored by Laplace's rule of succession)
+is below the target, checked at multiples of CHECK_EVERY samples so batching does not change the image.
 """
 from time import perf_counter
 
@@ -57,8 +50,7 @@ class PreviewRender:
     previous: the last frame's `pixel_state()`. With the same camera, lights and settings, and a scene
     from the same SceneBuilder (whose instance signature says what changed), pixels whose rays cannot
     reach changed geometry are kept as they were (pixel_reuse.py): the image is the full render's,
-    `pixels_reused` and `rays_reused` say what that saved. Anything else renders from scratch.
-    """
+    `pixels_reused` and `rays_reused` say what that saved. Anything else renders from scratch."""
 
     def __init__(self, tree, camera, width, height, *, mode="ao", samples=16, ao_distance=1.0, lights=(),
                  seed=0, sampler="sobol", error_target=None, min_samples=8, ambient=0.25, threads=None,

@@ -50,8 +50,7 @@ def add_samples(scene, points, normals, starts, pixels, active, first, count, mo
     samples, or the suspended prim of the unbuilt subtree that stopped it (lazy trees; sums untouched).
     memo = (bits (M, B) uint8, known (M,) int64, boxes (K, 6), reused (M,) int64, repeated (M,) int64):
     see the module docstring; reused[i] counts the rays whose bit was taken from last frame, repeated[i]
-    the rays of lights without extent that took sample 0's bit (not counted in rays[i]).
-    """
+    the rays of lights without extent that took sample 0's bit (not counted in rays[i])."""
     n = active.shape[0]
     iterations, per_band = interleaved_blocks(n, PIXELS_PER_TASK)  # balances image regions (traversal.py)
     for i in prange(iterations):

@@ -21,8 +21,7 @@ def offset_origin(p, n, error_scale, out):
     far too large (it carried rays through a roof 0.2 above a floor 1e4 from the origin). 2^-40 of the
     error scale clears the surface by 8192 float64 roundings at any magnitude; an absolute floor biased
     AO between planes at small scales, and a bound from max |p_k| alone lifted starts through thin roofs
-    far from the origin.
-    """
+    far from the origin."""
     step = error_scale * OFFSET_RELATIVE
     for k in range(3):
         out[k] = p[k] + n[k] * step
@@ -40,8 +39,7 @@ def short_of_light(p, direction, dist):
     Cycles moves the light end off the light (ray_offset(ls->P, ls->Ng)); here the ray stops 2^-32 of
     (dist + the light point's largest coordinate) short of it: 2^21 float64 roundings, far more than
     the triangle test's t carries there, far less than float32 geometry can place between a surface and
-    the light. A sun's rays (dist inf) are unchanged.
-    """
+    the light. A sun's rays (dist inf) are unchanged."""
     if dist == np.inf:
         return dist
     largest = 0.0

@@ -90,8 +90,7 @@ class SceneBuilder:
     layout: "auto" (scene_policy.plan_soup), "two_level" (every mesh its own tree) or "flat"
     (everything in one soup tree, one per visibility if they differ: the single-tree baseline, which
     has no zones, so a member far from the tree's centre against its own size loses float32
-    precision there; the lazy build's layout). Other keywords are BuildOptions.
-    """
+    precision there; the lazy build's layout). Other keywords are BuildOptions."""
 
     def __init__(self, layout="auto", **options):
         if layout not in LAYOUTS:

@@ -37,10 +37,8 @@ PRECISION_RATIO = 16384.0
 
 def plan_soup(layout, mesh_triangles, mesh_bounds, mesh_of, o2w, dynamic):
     """(I,) bool: which instances are merged into the soup.
-
     mesh_triangles (M,) triangle counts; mesh_bounds (M, 6) object-space boxes; mesh_of (I,);
-    o2w (I, 4, 4) float64; dynamic (M,) bool: the mesh changed or moved in an earlier frame.
-    """
+    o2w (I, 4, 4) float64; dynamic (M,) bool: the mesh changed or moved in an earlier frame."""
     if layout not in LAYOUTS:
         raise ValueError(f"layout must be one of {LAYOUTS}, got {layout!r}")
     singular = ~invertible(o2w) if len(o2w) else np.zeros(0, bool)
@@ -59,10 +57,8 @@ def plan_soup(layout, mesh_triangles, mesh_bounds, mesh_of, o2w, dynamic):
 
 def overlap_depth(boxes):
     """Mean over boxes of the share of each box's volume that other boxes cover, summed over them.
-
     0 for disjoint objects; k when every object is covered k times over (e.g. 1 for pairs that fill
-    each other's box). Boxes are padded by 0.1% of the scene's diagonal so flat objects have volume.
-    """
+    each other's box). Boxes are padded by 0.1% of the scene's diagonal so flat objects have volume."""
     diag = np.linalg.norm(boxes[:, 3:].max(axis=0) - boxes[:, :3].min(axis=0))
     lo, hi = boxes[:, :3] - 1e-3 * diag, boxes[:, 3:] + 1e-3 * diag
     volume = np.prod(hi - lo, axis=1)
@@ -89,8 +85,7 @@ def soup_zones(boxes, before=None, split=True):
     the nearest zone anchor within (PRECISION_RATIO - 1/2) of their diagonals of their box's centre, or
     else anchor a new zone at the centre of the grid cell holding theirs, of the largest power-of-two
     size C with (sqrt(3)/2) C within that: either way no vertex is more than PRECISION_RATIO diagonals
-    from its anchor. Zones depend on this frame's boxes alone, so an unchanged soup keeps them.
-    """
+    from its anchor. Zones depend on this frame's boxes alone, so an unchanged soup keeps them."""
     lo, hi = boxes[:, :3], boxes[:, 3:]
     filled = (lo <= hi).all(axis=1)
     size = np.zeros(len(boxes))

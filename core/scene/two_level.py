@@ -34,8 +34,7 @@ class TwoLevelScene:
     `world_to_object` (I, 3, 4) float64; `world_boxes` (I, 6) float32 (rounded outward);
     `top` (axis, split, child, count, items, bounds) of the top-level tree; `build_ms` (top level only);
     `visibility` (I,) uint8 ray_visibility bits, checked by build_two_level (None: every instance stops
-    every ray).
-    """
+    every ray)."""
 
     def __init__(self, meshes, mesh_of, object_to_world, world_to_object, world_boxes, top, build_ms,
                  visibility=None):
@@ -111,8 +110,7 @@ def build_two_level(meshes, mesh_of, matrices, visibility=None, **options):
     meshes: list of KdTree (object space); mesh_of: (I,) index of each instance's mesh; matrices:
     (I, 4, 4) object-to-world; visibility: (I,) ray_visibility bits, which kinds of rays each instance
     stops (None: all of them). Keyword options are BuildOptions for the top-level tree (its
-    references are boxes, so `clip` is ignored). Raises ValueError naming a bad instance.
-    """
+    references are boxes, so `clip` is ignored). Raises ValueError naming a bad instance."""
     lazy = [i for i, m in enumerate(meshes) if isinstance(m, KdTree) and m.lazy]
     if lazy and len(meshes) > 1:
         raise ValueError(f"mesh {lazy[0]} is a lazy tree: a two-level scene with several meshes takes eagerly "
@@ -230,11 +228,9 @@ def _round_up(x):
 
 def build_top_level(boxes, opts):
     """(axis, split, child, count, items, bounds) of a kd-tree over instance boxes.
-
     The triangle builder already sees only boxes when it does not clip (seed 000's builder is "not
     restricted to a certain primitive type"), so it is reused as is with clip off; boxes straddling a
-    plane are referenced from both sides. Instances with an empty box are left out.
-    """
+    plane are referenced from both sides. Instances with an empty box are left out."""
     keep = np.flatnonzero(boxes[:, 0] <= boxes[:, 3]).astype(np.int32)
     if len(keep) == 0:
         return (*empty_arrays(), np.zeros(6, np.float32))

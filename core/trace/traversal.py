@@ -61,8 +61,7 @@ def trace_ray(tree, o, d, tmin, tmax, any_hit, stack_node, stack_t, inv, flags):
 
     Inlined into its callers (the flat kernel below, and through instance_traversal.trace_scene the
     scene's ray kernel and the sampling kernel): a call per ray cost more than the extra compile time
-    (docs/choices.md#inline-the-traversal).
-    """
+    (docs/choices.md#inline-the-traversal)."""
     axis, split, child, count, leaf_prims, _, root_box, leaf_tris, base = tree
     for k in range(3):
         inv[k] = 1.0 / d[k] if d[k] != 0.0 else 0.0
@@ -110,8 +109,7 @@ def _descend(node, a, pos, left, oa, da, inv_a, t0, t1, t_exit, stack_node, stac
 
     t_exit bounds where a closest hit lets the search stop: everything still on the stack starts at
     or after it. A ray lying in the plane pushes a sibling covering the same interval, so below it the
-    bound drops to t0.
-    """
+    bound drops to t0."""
     if da == 0.0:
         if oa < pos:
             return left, t1, t_exit, sp
@@ -169,8 +167,7 @@ def interleaved_blocks(n, block_size):
     rays come in image order with costs differing by region. Dealt out band by band, any contiguous
     range takes the same share of every band, whatever the thread count (which a cached kernel cannot
     read); runs of RUN blocks keep cache lines warm (docs/choices.md#interleaved-ray-blocks). Results
-    do not depend on the order.
-    """
+    do not depend on the order."""
     n_blocks = (n + block_size - 1) // block_size
     per_band = (n_blocks + BANDS - 1) // BANDS
     per_band = (per_band + RUN - 1) // RUN * RUN

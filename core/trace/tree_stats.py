@@ -16,9 +16,7 @@ from .layout import LEAF, UNBUILT
 @njit(cache=True)
 def walk_stats(axis, split, child, count, root_box, traversal_cost, intersection_cost):
     """(sah_cost, leaves, empty_leaves, max_depth, references, inner_area, leaf_area_refs, unbuilt).
-
-    Leaves and references count built leaves only; `unbuilt` counts unbuilt subtrees (lazy trees).
-    """
+    Leaves and references count built leaves only; `unbuilt` counts unbuilt subtrees (lazy trees)."""
     n = axis.shape[0]
     if n == 0:
         return 0.0, 0, 0, 0, 0, 0.0, 0.0, 0
