@@ -1,16 +1,11 @@
 """What a frame's instances were, so the next frame can tell which parts of space changed.
 
-A signature lists every instance that has something to hit, for some ray, as a row of bytes (a digest
-of its mesh's key and fingerprint, its object-to-world matrix, how its triangles were rounded, and its
-ray visibility: ray_visibility.py) with its world box, in the scene's coordinates (minus `origin`).
-The rounding is in the row because kept pixels keep their hit points and ray starts: an unchanged
-object re-rounded (soup re-anchored, or moved between the soup and its own tree) shifts its surface by
-a float32 ulp, enough to put a kept ray start behind it. `changed_boxes` gives the boxes of rows present
-in only one of two frames (instances that moved, deformed, appeared or vanished, at their old and new
-places); outside them both frames hold the same triangles, so pixel_reuse.py keeps pixels whose rays
-stay outside them.
-
-Rows compare as sets: an instance duplicated exactly where another one is adds no new surface.
+A signature lists every instance that some ray can hit as a row of bytes (a digest of its mesh's key
+and fingerprint, its object-to-world matrix, how its triangles were rounded, its ray visibility) with
+its world box, minus `origin`. The rounding is in the row because kept pixels keep their ray starts,
+and an unchanged object re-rounded (soup re-anchored) moves its surface by a float32 ulp.
+`changed_boxes` gives the boxes of rows present in only one of two frames; outside them both frames
+hold the same triangles (pixel_reuse.py). Rows compare as sets.
 """
 import hashlib
 from typing import NamedTuple

@@ -1,15 +1,11 @@
 """Tracing a ray through a two-level scene: the top-level tree over instances, then, for each instance
 in a top leaf, the mesh's own tree in object space through the one kd-tree traversal (trace_ray).
 
-The top level is walked with the traversal's own steps (clip_to_box, _descend, _push) and its stop
-rules; only the leaf test differs: an instance test instead of a triangle test, skipped for an
-instance that does not stop rays of the ray's kind (ray_visibility.py). Each instance gets the
-ray transformed by its world-to-object matrix without normalising the direction, so the ray parameter
-t is the same in both spaces (an affine map keeps it) and the best hit so far is passed on as tmax:
-a mesh is searched only in front of what is already known (Wald 2004, seed 000 §5).
-
-trace_scene is inlined into its callers: a call passing the scene's arrays costs a reference-count
-increment and decrement per array, per ray (docs/choices.md#inline-the-scene-traversal).
+The top level is walked with the traversal's own steps and stop rules; only the leaf test differs: an
+instance test, skipped for an instance that does not stop the ray's kind (ray_visibility.py). The ray
+is carried into object space by the world-to-object matrix without normalising the direction, so t is
+the same in both spaces and the best hit so far is passed on as tmax (Wald 2004, seed 000 §5).
+trace_scene is inlined into its callers (docs/choices.md#inline-the-scene-traversal).
 """
 import numpy as np
 from numba import njit, prange
@@ -39,8 +35,7 @@ def new_scratch():
 def unowned_scene(scene):
     """The scene tuple (two_level.TwoLevelScene.arrays: 6 top-level arrays, world-to-object matrices,
     mesh of each instance, 11 packed mesh arrays, ray visibility of each instance) as unowned views,
-    made once per block of rays: with owned arrays, the code inlined per ray took and dropped
-    references to them (array_views.py)."""
+    made once per block of rays (array_views.py)."""
     s = scene
     return (unowned(s[0]), unowned(s[1]), unowned(s[2]), unowned(s[3]), unowned(s[4]), unowned(s[5]),
             unowned(s[6]), unowned(s[7]), unowned(s[8]), unowned(s[9]), unowned(s[10]), unowned(s[11]),
@@ -83,10 +78,8 @@ def trace_scene(scene, o, d, tmin, tmax, any_hit, ray_mask, scratch):
     the instances whose visibility shares a bit with `ray_mask` (the ray's kind, ray_visibility.py);
     instance and prim are -1 on a miss. A ray that reaches an unbuilt subtree of a lazy mesh tree stops
     there: prim is then trace_ray's suspended value (< NO_HIT) and instance the one it stopped in.
-    `scratch` comes from new_scratch() and is reused across rays.
-
-    trace_instance is called from the top leaf loop only, where trace_ray is inlined (traversal.py):
-    a flat tree, one instance in a one-leaf top, goes through that loop too, without the top's clip."""
+    `scratch` comes from new_scratch() and is reused across rays. A flat tree (one instance in a
+    one-leaf top) goes through the same leaf loop, without the top's clip."""
     axis, split, child, count, items, root_box = scene[0], scene[1], scene[2], scene[3], scene[4], scene[5]
     visibility = scene[19]
     if items.shape[0] == 0:
@@ -259,12 +252,11 @@ def surface_error_scale(surface, p, n):
 def onto_triangle_plane(surface, p):
     """Move hit point p (in place) along its triangle's normal onto the triangle's plane.
 
-    p = o + t d inherits t's error, and the triangle test's t is a ratio of terms of the size of the
-    triangle's reach R that cancel down to its width w across the ray: an error of about eps R^2 / w.
-    On a box 7e4 long and 0.7 wide the hit point sat 9e-8 below its face, past the offset (2^-40 R,
-    shading.py), and AO rays started under it: dark speckles. The distance to the plane,
-    (q - v0) . n, has an error of only eps R, as a point rebuilt from barycentrics has (pbrt,
-    Pharr et al., 3rd ed. §3.9), so the offset clears it. Done in object space, where the triangle is."""
+    p = o + t d inherits t's error, and t is a ratio of terms of the size of the triangle's reach R
+    that cancel down to its width w across the ray: an error of about eps R^2 / w, which can exceed the
+    ray offset on long thin triangles (AO rays starting under the face). The distance to the plane,
+    (q - v0) . n, errs by only eps R, as a point rebuilt from barycentrics (pbrt-v3 §3.9), so the offset
+    clears it. Done in object space, where the triangle is."""
     tri, a, parts, (nx, ny, nz) = surface
     qx, qy, qz = _object_point(a, p)
     nn = nx * nx + ny * ny + nz * nz

@@ -1,22 +1,13 @@
 """Building two-level scenes frame after frame, keeping every tree whose input did not change.
 
-The caller names each mesh with a key stable across frames (e.g. an object's name) and a fingerprint
-that changes whenever its geometry does (e.g. a CRC of its vertex and index bytes). Then:
-- a mesh with the same key and fingerprint keeps its object-space tree however its instances moved;
-  only the top level over instance boxes is rebuilt;
-- a mesh whose fingerprint changed (it deforms) is rebuilt and counts as dynamic from then on; given
-  the frame's ray count (`build(rays=...)`) its trees are built for that many rays (BuildOptions.rays),
-  since each serves one frame;
-- the soup (scene_policy.py: small or overlapping static objects in one flat tree per visibility) is
-  kept while its members' keys, fingerprints and matrices are unchanged. Its triangles are stored
-  relative to an anchor (scene_policy.main_anchor) and placed by a translation, so a moving camera
-  never rebuilds it; members small against it go to zones of their own (scene_policy.soup_zones);
-- a single-use mesh whose matrix or visibility changed counts as dynamic too (it leaves the soup);
-- instances that stop different kinds of rays (ray_visibility.py) go to different soups, since the
-  traversal tells kinds apart per instance; an instance that stops no ray is left out.
-Trees of keys absent from a frame are dropped; `reuse=False` rebuilds everything in the same layout.
-Every scene carries the instances' signature (instance_signature.py) for pixel reuse.
-
+Each mesh has a key stable across frames (an object's name) and a fingerprint that changes with its
+geometry (a CRC of its vertex and index bytes). A mesh with an unchanged key and fingerprint keeps its
+object-space tree however its instances move: only the top level is rebuilt. A mesh whose fingerprint
+changed is rebuilt and counts as dynamic from then on (built for the frame's `rays`, since each tree
+serves one frame), as does a single-use mesh whose matrix or visibility changed. The soup
+(scene_policy.py) is kept while its members' keys, fingerprints and matrices are unchanged; it is stored
+relative to an anchor and placed by a translation, so a moving camera never rebuilds it. Instances that
+stop different kinds of rays (ray_visibility.py) go to different soups. `reuse=False` rebuilds all.
 Precision: every matrix is shifted by minus `origin` (the camera position) in float64 before anything
 is rounded, and mesh trees are in object space, so nothing far from the origin loses precision.
 """
@@ -86,11 +77,9 @@ class CallerIds(NamedTuple):
 
 class SceneBuilder:
     """Builds a TwoLevelScene per frame, reusing trees across calls (see the module docstring).
-
-    layout: "auto" (scene_policy.plan_soup), "two_level" (every mesh its own tree) or "flat"
-    (everything in one soup tree, one per visibility if they differ: the single-tree baseline, which
-    has no zones, so a member far from the tree's centre against its own size loses float32
-    precision there; the lazy build's layout). Other keywords are BuildOptions."""
+    layout: "auto" (scene_policy.plan_soup), "two_level" (every mesh its own tree) or "flat" (one soup
+    tree per visibility, no zones: the single-tree baseline and the lazy build's layout). Other
+    keywords are BuildOptions."""
 
     def __init__(self, layout="auto", **options):
         if layout not in LAYOUTS:

@@ -2,23 +2,13 @@
 makes one per ray visibility, see scene_builder.py).
 
 Seed 000 §5: a tree per object under a top-level tree "works really well in case of large number of
-non-deforming objects" but gives "ambiguous results" otherwise: where object boxes overlap, a ray
-visits several objects' trees where one flat tree would have separated their triangles. So:
-
-- a mesh placed by several instances always keeps its own tree (flattening copies it per instance);
-- objects that changed (deformed or moved) in an earlier frame stay separate, so the static rest is not
-  rebuilt with them (seed 000 §5's static/dynamic separation);
-- static single objects below SMALL_OBJECT triangles go to the soup: a tree of their own saves little
-  and costs a top-level leaf and a ray transform;
-- if the remaining static single objects overlap heavily (OVERLAP_LIMIT, see `overlap_depth`), they
-  go to the soup too;
-- an instance whose matrix cannot be inverted (zero scale) can only be flattened.
-SMALL_OBJECT and OVERLAP_LIMIT: docs/choices.md#soup-thresholds (benchmarks/bench_two_level.py).
-
-A soup stores its members' world triangles in float32 relative to an anchor, so a member far from it
-against its own size loses shape. `soup_zones` therefore keeps members near the anchor in the main
-tree and puts the others in zones anchored near them: no member lies more than PRECISION_RATIO of its
-own diagonals from its anchor.
+non-deforming objects" but gives "ambiguous results" otherwise: where object boxes overlap, a ray visits
+several trees where one flat tree would have separated their triangles. So a mesh placed by several
+instances keeps its own tree; objects that changed in an earlier frame stay separate (seed 000 §5's
+static/dynamic separation); static single objects below SMALL_OBJECT triangles, and the rest when they
+overlap heavily (OVERLAP_LIMIT, `overlap_depth`), go to the soup (docs/choices.md#soup-thresholds);
+an instance whose matrix cannot be inverted can only be flattened. A soup stores float32 triangles
+relative to an anchor, so `soup_zones` puts members far from it against their size in zones of their own.
 """
 import numpy as np
 
@@ -125,11 +115,9 @@ def _near(boxes, size, anchor):
 
 def main_anchor(boxes, before=None):
     """The point a soup's main zone's float32 triangles are relative to, given its members' world boxes
-    (K, 6, all filled): the last anchor `before` while it lies within the members' box grown by the
-    box's diagonal, else the box's centre. Re-anchoring re-rounds every member, which costs kept
-    pixels near all of them (instance_signature.py), so an object leaving or joining the soup should
-    not move it (the grown box keeps it for a flat ground, whose own box a centre above it is never
-    inside). `before` is also dropped where a vertex would lie beyond float32's range of it."""
+    (K, 6, all filled): the last anchor `before` while it lies within the members' box grown by its
+    diagonal (and within float32's range of every vertex), else the box's centre. Re-anchoring
+    re-rounds every member and so costs kept pixels (instance_signature.py)."""
     if len(boxes) == 0:
         return np.zeros(3) if before is None else before
     lo, hi = boxes[:, :3].min(axis=0), boxes[:, 3:].max(axis=0)
