@@ -16,14 +16,11 @@ class Camera:
     fov: full field of view in radians along the larger image dimension (Blender's sensor fit AUTO).
     ortho_scale: width of the view along the larger image dimension (Blender's `ortho_scale`).
     clip_start, clip_end: distances along the view axis; geometry outside is not seen.
-    shift: (x, y) lens shift in units of the larger image dimension's view extent (Blender's shift_x and
-        shift_y with sensor fit AUTO): the image plane moves by shift times its larger extent, so the
-        view direction of the image centre changes while the camera stays put (architectural shots).
-    pixel_aspect: a pixel's height over its width (Blender's pixel_aspect_y / pixel_aspect_x). The image
-        then spans width by height * pixel_aspect pixel widths, and "larger dimension" above means
-        larger in that extent, as Blender's sensor fit AUTO compares resolution times pixel aspect
-        (BKE_camera_params_compute_viewplane): an anamorphic frame keeps its pixel count and is
-        stretched on display."""
+    shift: (x, y) lens shift in units of the larger image dimension's view extent (Blender's shift_x,
+        shift_y): the image plane moves, the camera stays put.
+    pixel_aspect: a pixel's height over its width (Blender's pixel_aspect_y / pixel_aspect_x); the image
+        spans width by height * pixel_aspect pixel widths, and "larger dimension" is larger in that
+        extent, as in Blender's BKE_camera_params_compute_viewplane."""
 
     def __init__(self, matrix_world, fov=None, *, ortho_scale=None, clip_start=0.0, clip_end=np.inf,
                  shift=(0.0, 0.0), pixel_aspect=1.0):

@@ -13,15 +13,11 @@ OFFSET_RELATIVE = 2.0 ** -40  # ray start offset / the hit point's error scale: 
 @njit(cache=True, inline="always")
 def offset_origin(p, n, error_scale, out):
     """Move a hit point off its surface along the normal by OFFSET_RELATIVE times its error scale
-    (instance_traversal.surface_error_scale: the magnitudes whose rounding puts the point off its plane).
-
-    Wachter and Binder, "A Fast and Robust Method for Avoiding Self-Intersection" (Ray Tracing Gems,
-    ch. 6): offset by a bound on the hit point's error, so the offset scales with the point's magnitude.
-    Their 2^-15 relative bounds a float32 hit point; ours is float64 on float32 vertices, where that is
-    far too large (it carried rays through a roof 0.2 above a floor 1e4 from the origin). 2^-40 of the
-    error scale clears the surface by 8192 float64 roundings at any magnitude; an absolute floor biased
-    AO between planes at small scales, and a bound from max |p_k| alone lifted starts through thin roofs
-    far from the origin."""
+    (instance_traversal.surface_error_scale), after Wachter and Binder, "A Fast and Robust Method for
+    Avoiding Self-Intersection" (Ray Tracing Gems, ch. 6): the offset scales with the point's error.
+    Their 2^-15 bounds a float32 hit point; ours is float64 on float32 vertices, where that carried rays
+    through thin roofs. 2^-40 clears the surface by 8192 float64 roundings at any magnitude; an absolute
+    floor biased AO at small scales, and a bound from max |p_k| alone failed far from the origin."""
     step = error_scale * OFFSET_RELATIVE
     for k in range(3):
         out[k] = p[k] + n[k] * step
@@ -33,13 +29,11 @@ LIGHT_END_RELATIVE = 2.0 ** -32  # how far short of a sampled light point a shad
 @njit(cache=True, inline="always")
 def short_of_light(p, direction, dist):
     """A shadow ray's tmax: the distance from p to the sampled light point, less a step off the light.
-
-    A light lying on a surface (an area light flush with a ceiling, a point light on a floor's plane)
-    is reached at t = dist, where that surface is met too, within rounding: it would shadow everything.
-    Cycles moves the light end off the light (ray_offset(ls->P, ls->Ng)); here the ray stops 2^-32 of
-    (dist + the light point's largest coordinate) short of it: 2^21 float64 roundings, far more than
-    the triangle test's t carries there, far less than float32 geometry can place between a surface and
-    the light. A sun's rays (dist inf) are unchanged."""
+    A light lying on a surface (an area light flush with a ceiling) is reached at t = dist, where that
+    surface is met too, within rounding, and would shadow everything. Cycles moves the light end off the
+    light (ray_offset(ls->P, ls->Ng)); here the ray stops 2^-32 of (dist + the light point's largest
+    coordinate) short: 2^21 float64 roundings, far more than the triangle test's t carries, far less
+    than float32 geometry can place between a surface and the light. A sun's rays are unchanged."""
     if dist == np.inf:
         return dist
     largest = 0.0

@@ -53,7 +53,7 @@ def trace_scene_all(scene, origins, directions, tmin, tmax, any_hit, threads, ra
 def trace_valid_rays(scene, o, d, lo, hi, any_hit, threads, ray_mask=ALL_RAYS):
     """trace_scene_all without the input checks, for rays that are valid by construction: C-contiguous
     float64, finite, non-zero directions, 0 <= lo <= hi (a Camera's rays). The checks are several passes
-    over the arrays, nearly as long as making the rays."""
+    over the arrays (docs/choices.md#unchecked-camera-rays)."""
     scene = as_two_level(scene)
     n = len(o)
     t, u, v = np.empty(n), np.empty(n), np.empty(n)
