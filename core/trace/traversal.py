@@ -51,17 +51,11 @@ def clip_to_box(box, o, d, inv, tmin, tmax):
 @njit(cache=True, inline="always")
 def trace_ray(tree, o, d, tmin, tmax, any_hit, stack_node, stack_t, inv, flags):
     """(t, prim, u, v) of the closest hit in (tmin, tmax), or of any hit if `any_hit`; prim -1 on a miss.
-
-    On a lazily built tree a ray that reaches an unbuilt subtree stops there and returns
-    prim = suspended_prim(subtree) (<= -2): front to back, that subtree is exactly one the eager tree's
-    traversal would enter, so the caller builds it and traces the ray again (lazy.py, seed 003 §3).
-    `stack_node`, `stack_t`, `inv` (3 floats) and `flags` (LEAF_CHUNK uint8) are the caller's
-    scratch, reused across rays. A leaf's triangles are screened LEAF_CHUNK at a time by their edge
-    signs (triangle_test.leaf_candidates), and only those kept get the full test, on the same copy.
-
-    Inlined into its callers (the flat kernel below, and through instance_traversal.trace_scene the
-    scene's ray kernel and the sampling kernel): a call per ray cost more than the extra compile time
-    (docs/choices.md#inline-the-traversal)."""
+    On a lazy tree a ray reaching an unbuilt subtree returns prim = suspended_prim(subtree) (<= -2):
+    front to back, the eager traversal would enter that subtree, so the caller builds it and retraces
+    (lazy.py, seed 003 §3). `stack_node`, `stack_t`, `inv` (3) and `flags` (LEAF_CHUNK uint8) are the
+    caller's scratch. Leaves are screened LEAF_CHUNK triangles at a time (leaf_candidates) before the
+    full test. Inlined into its callers (docs/choices.md#inline-the-traversal)."""
     axis, split, child, count, leaf_prims, _, root_box, leaf_tris, base = tree
     for k in range(3):
         inv[k] = 1.0 / d[k] if d[k] != 0.0 else 0.0
@@ -162,12 +156,9 @@ def interleaved_blocks(n, block_size):
     """(iterations, per_band) of a prange over the blocks of block_size items among n, in which
     iteration i runs items block_range(i, per_band, n, block_size): the iterations visit BANDS bands
     of the blocks in turn, RUN consecutive blocks of a band at a time.
-
-    Numba's prange gives each thread one contiguous range of iterations (a static schedule), while
-    rays come in image order with costs differing by region. Dealt out band by band, any contiguous
-    range takes the same share of every band, whatever the thread count (which a cached kernel cannot
-    read); runs of RUN blocks keep cache lines warm (docs/choices.md#interleaved-ray-blocks). Results
-    do not depend on the order."""
+    Numba's prange gives each thread one contiguous range (a static schedule) and ray costs differ by
+    image region; dealt band by band, any contiguous range takes the same share of every band whatever
+    the thread count (docs/choices.md#interleaved-ray-blocks). Results do not depend on the order."""
     n_blocks = (n + block_size - 1) // block_size
     per_band = (n_blocks + BANDS - 1) // BANDS
     per_band = (per_band + RUN - 1) // RUN * RUN

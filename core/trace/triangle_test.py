@@ -1,19 +1,15 @@
 """Watertight ray/triangle intersection (Woop, Benthin and Wald 2013, JCGT 2(1)), with an exact tie rule.
 
-The ray is sheared so it runs along +z from the origin; each vertex is transformed once, and the three
-edge functions are 2D cross products of transformed vertices. A shared edge is computed from the same
-two transformed vertices in both triangles, so the two values are exact negatives: no ray slips between
-neighbours. Woop et al. accept zero edge values, so a ray through an edge or vertex hits every triangle
-sharing it; here a zero is accepted only when the edge direction (oriented so the inside is on its left)
-points "up, or right if horizontal". That is a symbolic perturbation of the ray by a fixed infinitesimal
-offset, so exactly one triangle of a closed fan owns each edge and vertex: no ray hits twice.
-Everything is in float64 on float32 vertices; zero-area triangles (det == 0) never hit.
+The ray is sheared to run along +z from the origin; the edge functions are 2D cross products of the
+transformed vertices, so a shared edge gives exact negatives in its two triangles: no ray slips between
+neighbours. Woop et al. accept zero edge values (a ray through an edge hits both triangles); here a zero
+counts only when the edge direction (inside on its left) points "up, or right if horizontal": a
+symbolic perturbation of the ray, so exactly one triangle of a closed fan owns each edge and vertex.
+Float64 on float32 vertices; zero-area triangles (det == 0) never hit.
 
-Most triangles a ray meets in a leaf fail at the first step: their edge values straddle zero.
-`leaf_candidates` makes that step for a run of a leaf's triangles at once, from the leaf-ordered copy
-(leaf_triangles.py), in a loop LLVM vectorises (one ray against several triangles, as Embree's
-multi-triangle leaves; seed 000 §4 uses SIMD across rays instead). Its values are the scalar test's,
-bit for bit (same operations, no fast-math), so the hits do not change.
+`leaf_candidates` makes the first step, where most triangles fail (edge values straddling zero), for a
+run of a leaf's triangles at once from the leaf-ordered copy, in a loop LLVM vectorises (one ray, many
+triangles, as Embree's multi-triangle leaves). Same operations, no fast-math: the hits do not change.
 """
 import numpy as np
 from numba import njit
