@@ -1,20 +1,14 @@
 """Numba's on-disk kernel cache, invalidated by any change to core's sources, not just the kernel's file.
 
-Numba stamps a cached kernel with its own source file only (numba 0.68). Core's kernels inline
-functions from other files (`trace_rays` inlines `intersect_triangle`), so an edit to the callee alone
-left stale machine code running the old callee. `register` puts a locator in front of Numba's own
-(`CacheImpl._locator_classes`, internal; numba is pinned): for a kernel in a registered folder or its
-subfolders it keeps Numba's location and adds the digest of all of core's sources to the stamp, so a
-mismatch discards the index and recompiles. Kernels elsewhere are untouched.
-
-Several processes may compile into one cache at once (the first-render helper, two Blender sessions,
-CI). Numba's `IndexDataCacheFile.save` reads the index, adds an entry and writes it back, so two
-writers could lose an entry or share a data file name; `register` wraps that save, for registered
-kernels' folders only, in an exclusive file lock (`locked_cache_folder`).
-
-Numba picks a kernel's cache folder at decoration but re-reads NUMBA_CACHE_DIR before every compile,
-so a helper must be told where this process reads: CORE_CACHE_FOLDER_VARIABLE holds a JSON object from
-each kernel folder (relative to core, e.g. "render") to its cache folder.
+Numba stamps a cached kernel with its own source file only (numba 0.68), but core's kernels inline
+functions from other files, so an edit to a callee alone left stale machine code running. `register`
+puts a locator in front of Numba's own (`CacheImpl._locator_classes`, internal; numba is pinned) that
+keeps Numba's location for kernels in a registered folder (or below) and adds the digest of all of
+core's sources to the stamp: a mismatch recompiles. Numba's `IndexDataCacheFile.save` reads, extends
+and rewrites the index, so concurrent writers (the first-render helper, two Blender sessions) could lose
+or mix entries: `register` wraps it in an exclusive file lock (`locked_cache_folder`) for registered
+folders. Numba re-reads NUMBA_CACHE_DIR before every compile, so a helper is told where this process
+reads: CORE_CACHE_FOLDER_VARIABLE, JSON from each kernel folder relative to core to its cache folder.
 """
 import functools
 import json

@@ -2,15 +2,11 @@
 Numba's on-disk cache while this process builds the tree (compiling the builder's kernels) and then
 makes the camera pass (compiling the camera rays' traversal; their hit frames load the helper's).
 
-With an empty cache a first render compiles every kernel one at a time; all go to the same cache
-(cache=True), so a second process can compile one set while this one compiles the other
-(docs/choices.md#compile-helper-process). The helper compiles surface_frames first, then the sampling
-kernel, the image and the denoiser if the render will filter. The sets do not overlap, but a kernel
-this process needs before the helper has saved it is compiled here too. Numba rewrites a function's
-cache index whole on each save, so kernel_cache.py serializes saves with a file lock. The helper traces
-a hand-made one-leaf tree (no builder kernel runs); the one-instance scene wrapping (two_level.as_two_level)
-is compiled here before it starts. Pixel-reuse kernels need a SceneBuilder and compile on the first
-continued frame.
+All kernels go to the same cache (cache=True), so a second process can compile one set while this one
+compiles the other (docs/choices.md#compile-helper-process): the helper compiles surface_frames first,
+then the sampling kernel, the image and the denoiser if asked; a kernel needed here before the helper
+saved it is compiled here too (kernel_cache.py locks index saves). The helper traces a hand-made
+one-leaf tree, so no builder kernel runs there. Pixel-reuse kernels compile on the first continued frame.
 """
 import os
 import subprocess
@@ -77,12 +73,10 @@ def compile_camera_pass() -> None:
 
 class _SamplingOnly(PreviewRender):
     """A render that makes up its camera hits without tracing camera rays, so their traversal does not
-    compile in the helper: the camera looks straight down at the square's plane z = 0, so every ray meets
-    it at t = 3 / -d_z, and the hit frames come from the real surface_frames (on the square's first
-    triangle, whose plane it is), which compiles here. The arrays have the real pass's types (int32
-    instance and triangle indices, int64 pixel indices, float64 rays, depths and (M, 3) frames, all
-    C-contiguous and writable): Numba compiles one version per type signature, and the real render must
-    find this one in the cache."""
+    compile in the helper: the camera looks straight down at the plane z = 0 (t = 3 / -d_z), and the
+    real surface_frames makes the hit frames. The arrays have the real pass's types (int32 instance and
+    triangle indices, int64 pixel indices, float64 rays, depths and (M, 3) frames, C-contiguous and
+    writable): Numba compiles one version per type signature, and the real render must find this one."""
 
     def _camera_hits(self, traced):
         origins, directions, _, _ = self.camera.rays(self.width, self.height, traced)
@@ -110,12 +104,10 @@ HELPER_TIMEOUT = 900.0  # seconds: a guard against a helper that never ends, far
 
 @contextmanager
 def rendering_kernels_alongside(denoise=False):
-    """Compile the rendering kernels in a helper process while the `with` block runs (a build), when the
-    cache does not hold the sampling kernel yet and HELPER_SWITCH is not "0" (`denoise`: the render
-    will filter its image, so the helper compiles the denoiser too); yields the helper or None. On
-    leaving, run the camera pass here (compiling its rays' traversal), then wait for
-    the helper (at most HELPER_TIMEOUT); if the block raised, end the helper at once. Either way no
-    helper runs afterwards."""
+    """Compile the rendering kernels in a helper process while the `with` block runs (a build), unless
+    the cache holds the sampling kernel or HELPER_SWITCH is "0" (`denoise`: compile the denoiser too);
+    yields the helper or None. On leaving, run the camera pass here, then wait for the helper (at most
+    HELPER_TIMEOUT); if the block raised, end it at once. No helper runs afterwards."""
     helper = None
     if os.environ.get(HELPER_SWITCH, "1") != "0" and not rendering_kernels_cached():
         compile_scene_wrapping()
@@ -140,13 +132,11 @@ def rendering_kernels_alongside(denoise=False):
 class RenderingKernelsHelper:
     """The helper process; start it once compile_scene_wrapping() has run here.
 
-    The helper imports core under this process's module name (in Blender an extension's core is
-    `bl_ext.<repo>.<id>.core`): Numba files cached kernels by source file, but a kernel's pickled
-    environment names its module. Parent packages are stubbed in the helper, so the add-on's
-    `__init__` (which imports bpy) does not run there. It inherits sys.path, writes core's kernels to
-    the folder this process reads them from (kernel_cache.CORE_CACHE_FOLDER_VARIABLE), runs one
-    thread, and its error output is kept for `outcome`: a helper that fails costs nothing but its
-    time, since this process then compiles whatever is missing itself."""
+    It imports core under this process's module name (in Blender `bl_ext.<repo>.<id>.core`), since a
+    kernel's pickled environment names its module; parent packages are stubbed so the add-on's
+    `__init__` (which imports bpy) does not run. It writes to the folders this process reads from
+    (kernel_cache.CORE_CACHE_FOLDER_VARIABLE), runs one thread and keeps its stderr for `outcome`: a
+    failed helper costs only its time, as this process compiles whatever is missing."""
 
     def __init__(self, denoise=False):
         self._errors = tempfile.TemporaryFile()  # the helper's stderr: its last line names a failure
