@@ -29,50 +29,41 @@ REFINE_RAYS_PER_TRIANGLE = 4
 class BuildOptions:
     """Settings of the kd-tree builder.
 
-    builder: "binned" (min-max binned SAH, seed 000 §3.3-3.4), "exact" (O(N log N) event sweep
-        everywhere, seed 004 §3.1: the quality reference) or "median" (spatial median of the longest
-        axis, the SAH deciding only when to stop: the cheap baseline).
+    builder: "binned" (min-max binned SAH, seed 000 §3.3-3.4), "exact" (O(N log N) event sweep, seed
+        004 §3.1: the quality reference) or "median" (spatial median, the SAH only deciding when to stop).
     bins: min-max bins per axis for "binned" (seed 000 found 32 sufficient).
-    exact_below: "binned" takes the exact sweep in nodes of at most this many references (seed 000
-        switches at `bins`); 0, binning everywhere (docs/choices.md#binning-everywhere).
-    snap: "binned" also tries the box boundaries nearest its best bin boundary, below the parallel
-        top levels (split_binned.snap_to_boundaries; docs/choices.md#snap-planes-to-box-boundaries).
-    split_axes: "all" (bin x, y and z) or "longest" (below the top levels, the longest axis as fast
-        BVH builders do (Wald 2007), the other two only where it offers no plane better than a leaf).
-        Nodes of at most exact_below references sweep all three either way.
+    exact_below: "binned" sweeps exactly in nodes of at most this many references (seed 000 switches at
+        `bins`; 0: binning everywhere, docs/choices.md#binning-everywhere).
+    snap: "binned" also tries the box boundaries nearest its best bin boundary below the top levels
+        (split_binned.snap_to_boundaries; docs/choices.md#snap-planes-to-box-boundaries).
+    split_axes: "all" or "longest" (below the top levels bin the longest axis, as fast BVH builders do
+        (Wald 2007), and the other two only where it offers no plane better than a leaf).
     leaf_size: nodes with at most this many references become leaves without trying a split.
     max_depth: None means 1.2*log2(N) + 2 (seed 003 §3.5), capped at 60.
-    traversal_cost, intersection_cost: SAH constants (one traversal step, one ray/triangle test);
-        0.3 since leaves screen triangles in a vectorised loop (docs/choices.md#sah-intersection-cost).
-    empty_bonus: fraction of the intersection cost forgiven when one child is empty, in [0, 1)
+    traversal_cost, intersection_cost: SAH costs of one traversal step and one ray/triangle test
+        (docs/choices.md#sah-intersection-cost).
+    empty_bonus: share of the intersection cost forgiven for an empty child, in [0, 1)
         (docs/choices.md#empty-space-bonus).
-    cost_ratio: a node stays a leaf when the best split costs more than cost_ratio times the leaf
+    cost_ratio: a node stays a leaf when its best split costs more than cost_ratio times the leaf
         (seed 003 §3.5 uses 0.9 to favour time to image).
-    clip: tighten straddling triangles' boxes by clipping them to each child ("perfect splits",
-        seed 002 and Havran); off uses the triangle box cut by the plane.
-    skip: adaptive primitive skipping while binning large nodes (every log10(n)-th reference,
-        seed 000 §3.3).
-    top: the parallel top levels: "sah" (data-parallel binned SAH at every top node) or "clustering"
-        (seed 000 §4.1: equal-count sub-domains from one high-resolution binning).
+    clip: clip straddling triangles to each child for tight boxes ("perfect splits", seed 002, Havran).
+    skip: while binning large nodes bin every log10(n)-th reference (seed 000 §3.3).
+    top: the parallel top levels: "sah" (binned SAH at every top node) or "clustering" (seed 000 §4.1:
+        equal-count sub-domains from one high-resolution binning).
     threads: worker threads; None uses every core Numba sees.
-    lazy: on-demand construction (seed 003 §3): build the top now, defer every node of at most
-        `lazy_subtree_size` references until a ray first enters it; the result equals the eager tree.
-    lazy_subtree_size: the largest deferred subtree, in references; smaller builds more levels
-        eagerly but defers in finer pieces (docs/choices.md#lazy-subtree-size).
-    lazy_speculative: also build each requested subtree's neighbours in build order (seed 003 §4's
-        speculative building: fewer suspend/build/retrace rounds for some unneeded building).
-    memory_limit: bytes; a build whose estimated peak (memory.py), or whose pools while splitting,
-        exceed it raises memory.MemoryLimitError (a ValueError) before allocating more. None: no limit.
-    duplication_budget: references per starting triangle the tree may make by splitting straddlers,
-        spent evenly along every path: the root's room is this value, each split divides it by its
-        duplication (n_left + n_right) / n, a node with room below 1 becomes a leaf. It stops dense
-        coplanar triangles, whose flat nodes' children share their area so every split pays, from
-        splitting to max_depth (docs/choices.md#duplication-budget). None: no budget.
-    rays: how many rays the tree will answer (one render: core.frame_ray_count). None: no build term.
-        Given, a node is split only when the rays expected to enter it save more than the split costs
-        to build (sah.beats_leaf; seed 003 §3.5). Fewer than REFINE_RAYS_PER_TRIANGLE rays a triangle
-        also turn `clip`, `snap` and the all-axes search off (KdTree.options keeps the options as
-        given; BuildOptions.params says what the build used)."""
+    lazy: on-demand construction (seed 003 §3): defer every node of at most `lazy_subtree_size`
+        references until a ray first enters it; results equal the eager tree's.
+    lazy_subtree_size: the largest deferred subtree, in references (docs/choices.md#lazy-subtree-size).
+    lazy_speculative: also build each requested subtree's neighbours in build order (seed 003 §4).
+    memory_limit: bytes; a build whose estimated peak (memory.py) or pools exceed it raises
+        memory.MemoryLimitError (a ValueError) before allocating more. None: no limit.
+    duplication_budget: references per starting triangle that splitting straddlers may make, spent
+        evenly along every path (subtree.py); stops dense coplanar triangles from splitting to max_depth
+        (docs/choices.md#duplication-budget). None: no budget.
+    rays: how many rays the tree will answer (one render: core.frame_ray_count). Given, a node is split
+        only when the rays expected to enter it save more than the split costs to build (sah.beats_leaf,
+        seed 003 §3.5); below REFINE_RAYS_PER_TRIANGLE a triangle it also turns `clip`, `snap` and the
+        all-axes search off (BuildOptions.params says what the build used). None: no build term."""
 
     builder: str = "binned"
     bins: int = 32

@@ -1,25 +1,16 @@
 """Edge-avoiding à-trous denoising of a preview estimate, guided by its per-pixel sample variance.
 
-The filter is the edge-avoiding à-trous wavelet transform of Dammertz et al. 2010 (HPG): `iterations`
-passes of a 5x5 B3-spline kernel whose taps are 2^i pixels apart in pass i (four passes: a 61x61
-footprint, 25 taps a pass). Each tap is weighted by SVGF's edge-stopping functions (Schied et al. 2017),
-without its temporal part:
+Dammertz et al. 2010's edge-avoiding à-trous wavelet transform: `iterations` passes of a 5x5 B3-spline
+kernel with taps 2^i pixels apart in pass i, each tap weighted by SVGF's edge-stopping functions
+(Schied et al. 2017) without the temporal part:
 - normal: max(0, N_p . N_q) ^ sigma_normal on the geometric normals;
-- plane: exp(-|N_p . (X_q - X_p)| / (sigma_plane * f_p * r)): q's distance from p's tangent plane
-  against p's pixel footprint f_p (world distance to its nearest 4-neighbour hit) times the tap
-  distance r in pixels; scale invariant, like SVGF's screen-space depth gradient;
+- plane: exp(-|N_p . (X_q - X_p)| / (sigma_plane * f_p * r)), f_p p's pixel footprint (world distance
+  to its nearest 4-neighbour hit), r the tap distance in pixels: scale invariant;
 - luminance: exp(-|l_p - l_q| / (sigma_luminance * sqrt(var_p))), var_p the variance of p's estimate,
-  propagated through the passes as var' = sum w^2 var / (sum w)^2 (SVGF eq. 4-5).
-
-The luminance weight averages neighbours only when their estimates differ by a few standard errors,
-so the filter fades out as the image converges. var_p is the per-sample variance of the grey value
-pooled over p's 5x5 neighbourhood (not across normal or plane edges: at a few samples a pixel's own
-variance is often 0, as SVGF also estimates it spatially), divided by n_p ** (1 + variance_decay):
-a scrambled Sobol mean's error falls faster than 1/n (Mitchell 1996: n^-3/2 for a 2-D visibility
-integrand; docs/choices.md#sobol-variance-decay).
-
-Background pixels (no hit) and pixels without samples are never read and stay exactly 0; alpha is
-1 on hit pixels and 0 elsewhere, as in the raw image. Deterministic (no atomics, no random numbers).
+  propagated as var' = sum w^2 var / (sum w)^2 (SVGF eq. 4-5), so the filter fades out as it converges.
+var_p is the grey value's per-sample variance pooled over p's 5x5 neighbourhood (a pixel's own is often
+0 at few samples), divided by n_p ** (1 + variance_decay) (docs/choices.md#sobol-variance-decay).
+Pixels without hit or samples stay exactly 0, alpha is 1 on hit pixels; deterministic (no atomics).
 """
 import numpy as np
 from numba import njit, prange

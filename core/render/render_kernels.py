@@ -1,21 +1,16 @@
 """The sampling kernel: for each pixel still sampling, add AO and/or light samples to its sums.
 
-One sample of a pixel is one cosine-weighted AO ray (mode ao), one shadow ray per light facing the
-surface (mode shadow), or both multiplied (mode ao+shadow). Every ray is an any-hit query of kind
-SHADOW_RAYS (Cycles traces AO rays as shadow rays, ray_visibility.py) through the scene's instances.
-Sample k of pixel p depends only on (p, k, seed), so samples added in any batches give the same sums.
+One sample is one cosine-weighted AO ray (mode ao), one shadow ray per light facing the surface (mode
+shadow), or both multiplied (ao+shadow). Every ray is an any-hit query of kind SHADOW_RAYS (Cycles
+traces AO rays as shadow rays). Sample k of pixel p depends only on (p, k, seed), so any batching gives
+the same sums; on a lazy tree a pixel stopped at an unbuilt subtree restores its sums and redoes the
+batch once the subtree is built.
 
-On a lazy tree a ray may stop at an unbuilt subtree: the pixel restores its sums and reports the
-subtree; the caller builds it and redoes the batch, which by the rule above gives the eager sums.
-
-Ray memo (pixel_reuse.py): every AO and shadow ray's visibility is one bit, at bit s * (1 + lights) +
-use of its pixel's row (when samples * (1 + lights) <= MEMO_BITS). A pixel continued from last frame
-takes last frame's bit for every ray that cannot meet a changed box and traces the others: the same
-bit, hence the same sums. `known[i]` counts the bits last frame traced (with an error target a pixel
-may have stopped early, and bits of samples it never took hold nothing).
-
-Repeated rays: a light without extent (lights.DELTA) gives every sample the same shadow ray, so with the
-memo on, samples after the first take sample 0's bit (counted in `repeated`, not in `rays`).
+Ray memo (pixel_reuse.py): each ray's visibility is bit s * (1 + lights) + use of its pixel's row (when
+samples * (1 + lights) <= MEMO_BITS). A continued pixel takes last frame's bit for every ray that
+cannot meet a changed box, so its sums are the same; `known[i]` counts the bits last frame traced.
+A light without extent (lights.DELTA) gives every sample the same shadow ray: with the memo on, later
+samples take sample 0's bit (counted in `repeated`, not in `rays`).
 """
 import numpy as np
 from numba import njit, prange
@@ -134,10 +129,9 @@ def _sample_pixel(scene, points, normals, starts, pixels, i, first, count, mode,
 @njit(cache=True, inline="always")
 def _ray_of_use(use, lights, point, normal, ao_distance, sampler, ps, s, dim1, direction):
     """The ray of one use of sample s: its direction (into `direction`), its tmax and its weight.
-    USE_AO: a cosine-weighted direction about the normal within ao_distance, weight 1. Light k (use
-    1 + k): a direction to a sampled point of the light and the distance to it (a step short of it,
-    shading.short_of_light), weight
-    max(0, N.L) * mask (spot cone, area light's front side); weight 0 needs no ray."""
+    USE_AO: cosine-weighted about the normal within ao_distance, weight 1. Light k (use 1 + k): toward a
+    sampled light point, tmax a step short of it (shading.short_of_light), weight max(0, N.L) * mask;
+    weight 0 needs no ray."""
     if use == USE_AO:
         u1, u2 = sample_2d(sampler, ps, s, use, dim1)
         cosine_direction(normal, u1, u2, direction)
@@ -163,9 +157,8 @@ def _restore(sums, sq_sums, rays, memo, i, before, prim):
 @njit(cache=True, inline="always")
 def _repeats(lights, use, s, memo):
     """Whether sample s's ray of this use repeats sample 0's, whose bit the memo holds: a light without
-    extent, a later sample, and a memo row. Sample 0's bit is this frame's by then, traced or kept from
-    last frame: every frame samples its pixels in order from 0 (PreviewRender._continue restarts the
-    pixels it does not keep at sample 0), and a lazy tree's redo repeats the same batch."""
+    extent, a later sample, and a memo row. Sample 0's bit is this frame's by then: every frame samples
+    its pixels in order from 0, and a lazy tree's redo repeats the same batch."""
     return use != USE_AO and s > 0 and lights[use - 1, DELTA] != 0.0 and memo[0].shape[1] > 0
 
 

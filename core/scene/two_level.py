@@ -1,12 +1,9 @@
 """The two-level scene (seed 000 §5; Wald 2004): one kd-tree per mesh in object space, instances that
 place the meshes with affine matrices, and a top-level kd-tree over the instances' world boxes.
 
-Rays are carried into each instance's object space by its world-to-object matrix (float64) and traced
-with the one kd-tree traversal (instance_traversal.py). An object that only moves keeps its tree: only
-the top level, which is built over boxes, is rebuilt (scene_builder.py does that across frames).
-
-The mesh trees are packed into one set of contiguous arrays with per-mesh offsets, so the kernels take
-plain arrays (no typed lists) and a mesh's tree is a set of array views (`mesh_tree`).
+Rays reach each instance's object space by its world-to-object matrix (float64) and the one kd-tree
+traversal (instance_traversal.py); an object that only moves keeps its tree. The mesh trees are packed
+into contiguous arrays with per-mesh offsets, so kernels take plain arrays (`mesh_tree` views).
 """
 from time import perf_counter
 
