@@ -1,10 +1,9 @@
 """On-demand (lazy) construction (seed 003 §3): deferred subtrees are built when rays first reach them.
 
-A lazy `build_kdtree` builds the top levels and every node down to `lazy_subtree_size` references;
-smaller nodes stay UNBUILT (layout.py) with their references kept here. A ray that reaches an unbuilt
-node stops and reports it; the caller builds all requested subtrees at once, in parallel, exactly as
-the eager build would (subtree.py), splices them in (merge.py) and retraces only the stopped rays.
-Results are therefore identical to the eager tree's. Seed 003 interleaves building and tracing in one
+Nodes of at most `lazy_subtree_size` references stay UNBUILT (layout.py), their references kept here.
+A ray reaching one stops and reports it; the caller builds all requested subtrees at once, in
+parallel, exactly as the eager build would (subtree.py), splices them in (merge.py) and retraces the
+stopped rays, so results equal the eager tree's. Seed 003 interleaves building and tracing in one
 GPU task pool; on a few CPU cores this alternation keeps one traversal and one builder.
 """
 from time import perf_counter

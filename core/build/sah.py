@@ -41,11 +41,9 @@ def improves_on_leaf(cost, n, params):
 @njit(cache=True, inline="always")
 def beats_leaf(cost, n, node_box, params):
     """True when a split of this cost is worth more than keeping `n` references in a leaf. With a
-    ray count (params.rays_per_area > 0) it must also pay for itself: the rays expected to enter the
-    node (rays x its area / the root's) times the cost it saves each of them must exceed the build
-    work, BUILD_COST_PER_REFERENCE traversal steps per reference (seed 003 §3.5 terminates for time
-    to image). Only the node's own split is weighed, both ways: the subtree below it saves and costs
-    more, roughly in proportion."""
+    ray count (params.rays_per_area > 0) the rays expected to enter the node (rays x its area / the
+    root's) times the cost saved each must also exceed the build work, BUILD_COST_PER_REFERENCE steps a
+    reference (seed 003 §3.5 terminates for time to image); only the node's own split is weighed."""
     if not improves_on_leaf(cost, n, params):
         return False
     leaf = params.intersection_cost * n

@@ -2,11 +2,9 @@
 Numba's on-disk cache while this process builds the tree (compiling the builder's kernels) and then
 makes the camera pass (compiling the camera rays' traversal; their hit frames load the helper's).
 
-All kernels go to the same cache (cache=True), so a second process can compile one set while this one
-compiles the other (docs/choices.md#compile-helper-process): the helper compiles surface_frames first,
-then the sampling kernel, the image and the denoiser if asked; a kernel needed here before the helper
-saved it is compiled here too (kernel_cache.py locks index saves). The helper traces a hand-made
-one-leaf tree, so no builder kernel runs there. Pixel-reuse kernels compile on the first continued frame.
+The helper compiles surface_frames first, then the sampling kernel, the image and the denoiser if
+asked, into the shared cache (docs/choices.md#compile-helper-process); a kernel needed here before it
+is saved is compiled here too. Pixel-reuse kernels compile on the first continued frame.
 """
 import os
 import subprocess
@@ -66,8 +64,7 @@ def _hand_made_render(render_class):
 
 def compile_camera_pass() -> None:
     """The camera pass, run here after the build: a PreviewRender's constructor traces the camera rays
-    (compiling their traversal here) and makes their hit frames (surface_frames, which the helper
-    compiles first: loaded here when it has saved it, else compiled here too), and samples nothing."""
+    and makes their hit frames (surface_frames: loaded if the helper saved it, else compiled here)."""
     _hand_made_render(PreviewRender)
 
 
@@ -89,10 +86,8 @@ class _SamplingOnly(PreviewRender):
 
 
 def compile_rendering_kernels(denoise=False) -> None:
-    """What the helper runs: the camera hits' frames, AO and shadow samples of the hand-made tree (AO
-    rays that hit and miss, shadow rays), the image, and the denoiser if asked. Resolutions, modes and
-    sample counts are runtime values, so this compiles what every render uses but the camera rays'
-    traversal."""
+    """What the helper runs: hit frames, AO and shadow samples (rays that hit and miss), the image and
+    the denoiser if asked; sizes, modes and sample counts are runtime values, so one render covers all."""
     render = _hand_made_render(_SamplingOnly)
     render.step(render.target_samples)
     render.image(denoise=denoise)
@@ -130,13 +125,11 @@ def rendering_kernels_alongside(denoise=False):
 
 
 class RenderingKernelsHelper:
-    """The helper process; start it once compile_scene_wrapping() has run here.
-
-    It imports core under this process's module name (in Blender `bl_ext.<repo>.<id>.core`), since a
-    kernel's pickled environment names its module; parent packages are stubbed so the add-on's
-    `__init__` (which imports bpy) does not run. It writes to the folders this process reads from
-    (kernel_cache.CORE_CACHE_FOLDER_VARIABLE), runs one thread and keeps its stderr for `outcome`: a
-    failed helper costs only its time, as this process compiles whatever is missing."""
+    """The helper process; start it once compile_scene_wrapping() has run here. It imports core under
+    this process's module name (in Blender `bl_ext.<repo>.<id>.core`: a kernel's pickled environment
+    names its module), with parent packages stubbed so the add-on's bpy-importing `__init__` does not
+    run; writes where this process reads (kernel_cache.CORE_CACHE_FOLDER_VARIABLE); runs one thread and
+    keeps its stderr for `outcome`. A failed helper costs only its time."""
 
     def __init__(self, denoise=False):
         self._errors = tempfile.TemporaryFile()  # the helper's stderr: its last line names a failure
@@ -181,10 +174,8 @@ class RenderingKernelsHelper:
         return f"failed (exit code {code}" + (f": {lines[-1]})" if lines else ")")
 
 
-# The helper's whole program (argv: core's module name, its folder, "1" to compile the denoiser): stub
-# core's parent packages, so that `bl_ext.<repo>.<id>.core` imports without the add-on's __init__, then
-# compile. On POSIX a thread ends it once its parent is gone (reparented: getppid changes), so a
-# parent that could not stop it (it ended with os._exit, or crashed) does not leave it compiling.
+# The helper's program (argv: core's module name, its folder, "1" for the denoiser): stub core's parent
+# packages, then compile; on POSIX a thread ends it once its parent is gone (getppid changes).
 _HELPER_CODE = """
 import importlib, os, sys, threading, time, types
 from pathlib import Path

@@ -68,14 +68,11 @@ def soup_zones(boxes, before=None, split=True):
     empty). boxes (K, 6): the members' world boxes (inverted when empty); before: the main zone's
     anchor last frame, or None; split False: the main zone alone (the "flat" layout, lazy builds).
 
-    The main zone is anchored by `main_anchor` and keeps every member whose farthest box corner is
-    within PRECISION_RATIO of its diagonals of that anchor (members without extent too); the anchor is
-    found again after members leave, until none does, and then every member it is near enough for is
-    in, so that next frame, given it as `before`, the zone is the same. The rest, smallest first, join
-    the nearest zone anchor within (PRECISION_RATIO - 1/2) of their diagonals of their box's centre, or
-    else anchor a new zone at the centre of the grid cell holding theirs, of the largest power-of-two
-    size C with (sqrt(3)/2) C within that: either way no vertex is more than PRECISION_RATIO diagonals
-    from its anchor. Zones depend on this frame's boxes alone, so an unchanged soup keeps them."""
+    The main zone, anchored by `main_anchor`, keeps every member whose farthest box corner is within
+    PRECISION_RATIO of its diagonals of the anchor (re-found until no member leaves, then every member
+    near enough rejoins, so next frame the zone is the same). The rest, smallest first, join the nearest
+    zone anchor within (PRECISION_RATIO - 1/2) diagonals of their box's centre, or anchor a new zone at
+    the centre of the power-of-two grid cell holding theirs; zones depend on this frame's boxes alone."""
     lo, hi = boxes[:, :3], boxes[:, 3:]
     filled = (lo <= hi).all(axis=1)
     size = np.zeros(len(boxes))

@@ -100,10 +100,8 @@ def trace_ray(tree, o, d, tmin, tmax, any_hit, stack_node, stack_t, inv, flags):
 @njit(cache=True, inline="always")
 def _descend(node, a, pos, left, oa, da, inv_a, t0, t1, t_exit, stack_node, stack_t, sp):
     """Step into an inner node: (next node, its t1, its exit bound, stack size), pushing the far child.
-
-    t_exit bounds where a closest hit lets the search stop: everything still on the stack starts at
-    or after it. A ray lying in the plane pushes a sibling covering the same interval, so below it the
-    bound drops to t0."""
+    t_exit bounds where a closest hit lets the search stop (everything on the stack starts at or after
+    it); a ray lying in the plane pushes a sibling over the same interval, so below it it drops to t0."""
     if da == 0.0:
         if oa < pos:
             return left, t1, t_exit, sp
