@@ -1,18 +1,14 @@
 """Numba's inliner copies a callee's IR one block at a time, and so its whole variable scope once per
 block; `install` makes it copy the scope once per callee. Same machine code, half the compile time.
 
-Core inlines its hot paths (inline="always", e.g. traversal.trace_ray into the sampling kernel). Each
-block holds the function's Scope, so `InlineWorker.inline_ir`'s `copy_ir` (a deepcopy per block) costs
-blocks x variables copies, growing at every nesting level (Numba issue #8989,
-docs/choices.md#share-the-inlined-callee-scope). `install` gives `copy_ir` one memo per callee scope
-for one `inline_ir` (both the untyped and the typed pass's inlining), so a callee's blocks share one
-copied scope; `inline_ir` then renames the copies into the caller's scope, so nothing downstream can
-tell them apart (tests/test_inline_copy.py checks the LLVM IR is byte-identical).
-
-The shim replaces `copy` in numba.core.inline_closurecall only (numba 0.68.1, pinned). Memos live for
-one `inline_ir` only: kept for a whole `inline_function`, which may compile other functions, they
-handed a second inlining of a cached @overload IR already-renamed blocks (tests/test_inline_copy.py
-keeps that case). The patch is process-wide and relies on Numba's global compiler lock.
+Core inlines its hot paths (inline="always"). Each block holds the function's Scope, so
+`InlineWorker.inline_ir`'s `copy_ir` (a deepcopy per block) costs blocks x variables copies, growing
+with every nesting level (Numba issue #8989; docs/choices.md#share-the-inlined-callee-scope). `install`
+gives `copy_ir` one memo per callee scope for one `inline_ir`, so a callee's blocks share one copied
+scope, which `inline_ir` renames into the caller's as before: the LLVM IR is byte-identical
+(tests/test_inline_copy.py). The shim replaces `copy` in numba.core.inline_closurecall only (numba
+0.68.1, pinned); memos live for one `inline_ir` only (a whole `inline_function` may compile other
+functions, whose inlining must not see renamed blocks). Process-wide; relies on the compiler lock.
 """
 import copy
 import functools

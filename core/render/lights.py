@@ -150,11 +150,8 @@ def _has_no_extent(kind, row):
 def _spot_frame(direction, axes):
     """(U, V, W, |r2|): the rows r0, r1 of the inverse of the spot's object axes and W = -r2 / |r2|,
     so that for a direction t towards the light, (t.U, t.V, -(t.W) |r2|) are its coordinates in the
-    object's frame (shading._light_mask), as Cycles' spot_light_to_local takes them with the light's
-    inverse transform. For orthogonal axes that is (X / |X|^2, Y / |Y|^2, the direction, 1 / |Z|);
-    for sheared ones (a spot under a non-uniformly scaled parent, rotated) only the inverse puts the
-    cone where Cycles does.
-    Without axes, any orthonormal frame around the direction (a round cone)."""
+    object's frame (shading._light_mask), as Cycles' spot_light_to_local takes them: only the inverse
+    puts a sheared spot's cone where Cycles does. Without axes, any orthonormal frame (a round cone)."""
     if axes is None:
         u = np.cross(direction, (1.0, 0.0, 0.0) if abs(direction[0]) < 0.9 else (0.0, 1.0, 0.0))
         u /= np.linalg.norm(u)

@@ -58,10 +58,8 @@ class KdTree:
 
     def stats(self):
         """Triangles, nodes, leaves, empty leaves, depth, references, SAH cost, build time and more.
-
-        On a lazy tree the figures describe the tree as built so far: `nodes`, `leaves`, `references`
-        count built nodes only; `sah_cost` counts each unbuilt subtree as a leaf of its references;
-        `build_ms` is the eager part, `lazy_build_ms` the on-demand building so far (see README)."""
+        On a lazy tree, the tree as built so far (unbuilt subtrees cost as leaves of their references;
+        `lazy_build_ms` is the on-demand building so far)."""
         if self._stats is None:
             self._stats = self._compute_stats()
         return dict(self._stats)
