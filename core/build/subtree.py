@@ -3,17 +3,12 @@
 Each thread builds one subtree after the parallel top levels (seed 000 §4). Nodes come off an explicit
 stack, left child first; a node's references live in one pool (partition.py keeps the left child on
 top), so the pool's live part is the pending right siblings plus the current node: no per-node allocation.
-
 A lazy build (params.defer_size > 0, seed 003 §3) marks nodes of at most defer_size references UNBUILT
-and copies their references out. A node's split and partition depend only on its references (in
-order), box, depth and room, so building it later from those gives exactly the eager subtree.
-
-A node's room is its share of params.duplication_budget (options.py): the root's is the budget, each
-split divides it by its duplication (n_left + n_right) / n, room below 1 makes a leaf. Children's
-budgets (room x references) add up to the parent's, so leaves hold at most twice the budget's references.
-
-A split that leaves every reference in both children separates nothing and only copies them: the node
-becomes a leaf instead (the SAH never picks one, but forced splits did and grew without bound).
+and copies their references out; a node's split depends only on its references (in order), box, depth
+and room, so building it later gives exactly the eager subtree. A node's room is its share of
+params.duplication_budget: each split divides it by its duplication (n_left + n_right) / n, and room
+below 1 makes a leaf, so leaves hold at most twice the budget's references. A split that leaves every
+reference in both children separates nothing: the node becomes a leaf instead.
 """
 from concurrent.futures import ThreadPoolExecutor
 
@@ -32,12 +27,10 @@ from .split_choice import NO_SPLIT, choose_split
 @njit(cache=True, nogil=True)
 def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, root_room, params):
     """Build the subtree over the first `n_refs` references of (prims, boxes) inside `root_box`, its
-    root at depth `root_depth` with room `root_room` (module docstring).
-
-    Returns the node arrays (axis, split, child, count; see layout.py) with local indices, node 0 being
-    the subtree's root, and the leaf triangle indices; then the deferred subtrees (none unless
-    params.defer_size > 0): (d_node, d_start, d_depth, d_box, d_prims, d_boxes, d_room), deferred subtree
-    k being local node d_node[k] (whose child is k) with references d_prims/d_boxes[d_start[k]:d_start[k+1]]."""
+    root at depth `root_depth` with room `root_room`. Returns the node arrays (axis, split, child, count;
+    layout.py) with local indices (node 0 the root), the leaf triangle indices, and the deferred subtrees
+    (d_node, d_start, d_depth, d_box, d_prims, d_boxes, d_room): subtree k is local node d_node[k] (child k)
+    with references d_prims/d_boxes[d_start[k]:d_start[k+1]]."""
     stack_size = params.max_depth - root_depth + 2
     stack_node = np.empty(stack_size, np.int32)
     stack_range = np.empty((stack_size, 2), np.int64)

@@ -1,12 +1,10 @@
 """Sub-array views that cost no reference counting, for views made once per ray in parallel kernels.
 
-A Numba slice (`a[i:j]`) holds a reference to its parent: making and dropping it is an atomic increment
-and decrement of one shared counter, whose cache line bounces between threads when made per ray
-(docs/choices.md#unowned-array-views). `rows` builds the same C-contiguous view from the data pointer,
-with no owner: valid only while the caller holds the parent array, as every caller here does (the
-scene's arrays outlive the kernel call). `unowned` views a whole array so; kernels convert the arrays
-they hand to per-ray inlined code once per block of rays, since even reading an array out of a tuple
-can cost the same atomic pair.
+A Numba slice (`a[i:j]`) references its parent: an atomic increment and decrement of one shared counter
+whose cache line bounces between threads when made per ray (docs/choices.md#unowned-array-views).
+`rows` builds the same C-contiguous view from the data pointer with no owner: valid only while the
+caller holds the parent, as every caller here does. `unowned` views a whole array so; kernels convert
+the arrays they hand to per-ray inlined code once per block of rays.
 """
 import numpy as np
 from numba import carray, njit, types
