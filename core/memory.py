@@ -1,9 +1,8 @@
 """Peak memory of a build and of a render, estimated from sizes alone, before anything is allocated.
 
-A scene too big for the machine should fail with a message naming the estimate, the limit and what to
-change, not be killed half-way through a build. The figures are peak resident-memory growth per
-triangle and per pixel (`benchmarks/bench_memory.py --calibrate`, docs/reliability.md) times a margin:
-the build's working set grows linearly with the triangle count, the renderer's buffers with the pixels.
+A scene too big for the machine fails with a message naming the estimate, the limit and what to change,
+instead of being killed half-way. The figures are peak RSS growth per triangle and per pixel
+(`benchmarks/bench_memory.py --calibrate`, docs/reliability.md) times MARGIN.
 """
 import ctypes
 import os

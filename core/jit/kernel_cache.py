@@ -1,14 +1,12 @@
 """Numba's on-disk kernel cache, invalidated by any change to core's sources, not just the kernel's file.
 
 Numba stamps a cached kernel with its own source file only (numba 0.68), but core's kernels inline
-functions from other files, so an edit to a callee alone left stale machine code running. `register`
-puts a locator in front of Numba's own (`CacheImpl._locator_classes`, internal; numba is pinned) that
-keeps Numba's location for kernels in a registered folder (or below) and adds the digest of all of
-core's sources to the stamp: a mismatch recompiles. Numba's `IndexDataCacheFile.save` reads, extends
-and rewrites the index, so concurrent writers (the first-render helper, two Blender sessions) could lose
-or mix entries: `register` wraps it in an exclusive file lock (`locked_cache_folder`) for registered
-folders. Numba re-reads NUMBA_CACHE_DIR before every compile, so a helper is told where this process
-reads: CORE_CACHE_FOLDER_VARIABLE, JSON from each kernel folder relative to core to its cache folder.
+functions from other files. `register` puts a locator before Numba's own (`CacheImpl._locator_classes`,
+internal; numba is pinned) that adds the digest of all of core's sources to the stamp of every kernel
+in a registered folder or below, and wraps `IndexDataCacheFile.save` (read, extend, rewrite the index)
+in a file lock (`locked_cache_folder`), since several processes may compile into one cache. Numba
+re-reads NUMBA_CACHE_DIR before every compile, so a helper is told where this process reads:
+CORE_CACHE_FOLDER_VARIABLE, JSON from each kernel folder relative to core to its cache folder.
 """
 import functools
 import json

@@ -1,9 +1,8 @@
 """Running kernels on a chosen number of threads, and putting the old number back afterwards.
 
-OMP_WAIT_POLICY=PASSIVE (unless the user set it): with Numba's OpenMP layer idle workers spin after every
-parallel region, and where another process holds a core they starve the working ones during the build's
-many short regions (docs/choices.md#passive-openmp-waiting). The runtime reads it at the first parallel
-kernel, so it is set here, at import.
+OMP_WAIT_POLICY=PASSIVE unless set: idle OpenMP workers otherwise spin after each of the build's many
+short parallel regions (docs/choices.md#passive-openmp-waiting). Read at the first parallel kernel, so
+it is set here, at import.
 """
 import os
 from contextlib import contextmanager

@@ -1,14 +1,12 @@
 """Keeping last frame's pixels whose rays cannot meet anything that changed.
 
-With the last frame's camera, lights and settings, a pixel's samples are exactly last frame's unless
-one of its rays can reach a changed box (instance_signature.py), since sample k of pixel p depends only
-on (p, k, seed) and what its rays hit. Per pixel, conservatively: the camera ray is the segment from
-clip start to the hit (or clip end); AO rays lie in a sphere of radius ao_distance about the ray start;
-shadow rays end within the light's radius (point, spot) or half-diagonal (area) of its centre, so the
-segment to the centre against the box grown by that much covers them; a sun's rays stay within
-D sin(angle/2) of its axis at distance D. A pixel that passes keeps its sums, samples and convergence;
-the others restart from sample 0, so the image is the full render's. Many changed boxes are merged into
-at most MAX_BOXES unions (more conservative, O(pixels x MAX_BOXES)).
+With the last frame's camera, lights and settings, a pixel's samples are last frame's unless one of its
+rays can reach a changed box (instance_signature.py): sample k of pixel p depends only on (p, k, seed)
+and what its rays hit. Conservatively: the camera ray is the segment from clip start to the hit; AO
+rays lie within ao_distance of the ray start; shadow rays end within the light's radius (point, spot)
+or half-diagonal (area) of its centre, so the segment to the centre against the grown box covers them;
+a sun's rays stay within D sin(angle/2) of its axis at distance D. Other pixels restart from sample 0,
+so the image is the full render's. Changed boxes merge into at most MAX_BOXES unions.
 """
 from typing import NamedTuple
 

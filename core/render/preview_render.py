@@ -1,18 +1,14 @@
 """Preview images: ambient occlusion, shadows, or both, accumulated progressively.
 
-Value of a pixel whose camera ray hits (geometric normal N turned to face the camera):
-- "ao": AO = (1/pi) * integral of V(w) cos(theta) dw over the hemisphere within `ao_distance`,
-  estimated with cosine-weighted rays.
-- "shadow": S = (1/L) * sum over the L lights of colour_l * V_l * max(0, N.L_l) * mask_l, L_l sampled
-  over the light's extent, mask_l the spot cone or area light's spread (shading._light_mask). No
-  falloff and no power: S is in [0, 1] and shows where each light reaches, whatever its units.
-- "ao+shadow": AO * (ambient + (1 - ambient) * S): shadows over an occlusion-darkened ambient term.
-Background pixels are 0 with alpha 0; hit pixels have alpha 1. Row 0 is the top row. Ray visibility
-and holdouts apply as in Cycles (ray_visibility.py); `image(denoise=True)` filters with core.denoise.
-
-Sampling is deterministic for a seed. With an error target, a pixel stops once it has `min_samples`
-samples and its mean's standard error (the sample variance floored by Laplace's rule of succession)
-is below the target, checked at multiples of CHECK_EVERY samples so batching does not change the image.
+Value of a hit pixel (geometric normal N facing the camera), background 0 with alpha 0, row 0 on top:
+- "ao": AO = (1/pi) * integral of V(w) cos(theta) dw within `ao_distance`, by cosine-weighted rays.
+- "shadow": S = (1/L) * sum over lights of colour_l * V_l * max(0, N.L_l) * mask_l, L_l sampled over
+  the light's extent, mask_l its cone or spread (shading._light_mask); no falloff or power, so S shows
+  where each light reaches whatever its units.
+- "ao+shadow": AO * (ambient + (1 - ambient) * S).
+Deterministic for a seed. With an error target a pixel stops after `min_samples` once its standard
+error (sample variance floored by Laplace's rule of succession) is below it, checked every CHECK_EVERY
+samples so batching does not change the image.
 """
 from time import perf_counter
 

@@ -172,9 +172,8 @@ class SceneBuilder:
         return scene, report
 
     def _lazy_plan(self, soup, mesh_of):
-        """A lazy build has to be the scene's one tree (build_two_level takes no lazy tree among several
-        meshes): one mesh kept apart (placed by any number of instances) or one soup. Where the plan
-        gives more, "auto" merges everything, as "flat" does; "two_level" is refused, naming the meshes."""
+        """A lazy build has to be the scene's one tree: one mesh kept apart or one soup. Where the plan gives
+        more, "auto" merges everything, as "flat" does; "two_level" is refused, naming the meshes."""
         apart = sorted(set(mesh_of[~soup].tolist()))
         if len(apart) + bool(soup.any()) <= 1:
             return soup
@@ -201,9 +200,8 @@ class SceneBuilder:
             self._placements[key] = (o2w[inst], visibility[inst])
 
     def _mesh_trees(self, meshes, mesh_of, instanced, reuse, rays):
-        """Object-space trees of the meshes instanced this frame, kept or built; (trees, new mesh_of for
-        the instanced instances, built count, kept count). A deforming mesh's tree is built for `rays`
-        rays, unless the builder's own options give a count."""
+        """Object-space trees of the meshes instanced this frame, kept or built: (trees, new mesh_of of the
+        instanced instances, built count, kept count); a deforming mesh's tree is built for `rays` rays."""
         used = np.unique(mesh_of[instanced])
         index = np.full(len(meshes), -1, np.int64)
         index[used] = np.arange(len(used))
@@ -222,9 +220,8 @@ class SceneBuilder:
         return trees, index[mesh_of[instanced]], rebuilt, len(used) - rebuilt
 
     def _soup_zones(self, soup, visibility, world_boxes):
-        """(key, members, anchor) of each soup tree: one per visibility (the usual one first) and, in
-        the "auto" layout, per zone of it (scene_policy.soup_zones; not for a lazy build, which has to
-        be one tree); key (visibility, None) for the main zone, (visibility, anchor) for the others."""
+        """(key, members, anchor) of each soup tree: one per visibility (the usual one first) and, in "auto"
+        and eager builds, per zone (scene_policy.soup_zones); key (visibility, None | anchor)."""
         out = []
         for kind in sorted(set(visibility[soup].tolist()), key=lambda k: (k != ALL_RAYS, -k)):
             group = np.flatnonzero(soup & (visibility == kind))
@@ -238,9 +235,8 @@ class SceneBuilder:
         return out
 
     def _soup_tree(self, meshes, mesh_of, o2w, members, reuse, key, anchor):
-        """(signature, tree, anchor) of the soup `key`: the members' world triangles relative to
-        `anchor`; last frame's soup of that key itself when the members' keys, fingerprints and
-        matrices are the same (its anchor is then `anchor` too: same members, same boxes)."""
+        """(signature, tree, anchor) of the soup `key`, its members' world triangles relative to `anchor`; last
+        frame's soup itself when the members' keys, fingerprints and matrices are unchanged."""
         signature = [(meshes[mesh_of[i]].key, meshes[mesh_of[i]].fingerprint, o2w[i].tobytes()) for i in members]
         before = self._soups.get(key)
         if reuse and before is not None and before[0] == signature:
@@ -337,10 +333,9 @@ class PlacementRangeError(ValueError):
 
 
 def _check_world_extent(world_boxes, mesh_of, origin, checked):
-    """A PlacementRangeError naming the first `checked` instance (rays meet it, its mesh is not empty)
-    whose matrix carries its mesh beyond float32's range from `origin`, and listing all of them: its
-    world triangles (a soup's, or the top level's boxes) would be inf. world_boxes (I, 6): the
-    instances' world boxes."""
+    """A PlacementRangeError naming the first `checked` instance (rays meet it, its mesh is not empty) whose
+    matrix carries its mesh beyond float32's range from `origin` (its world triangles would be inf), and
+    listing all of them. world_boxes (I, 6): the instances' world boxes."""
     shifted = world_boxes - np.concatenate([origin, origin])
     with np.errstate(invalid="ignore"):
         beyond = np.flatnonzero(checked & ~(np.abs(shifted) <= FLOAT32_MAX).all(axis=1))
