@@ -1,11 +1,9 @@
 """Exact-enough clipping of a triangle to a box, for "perfect splits".
 
-A straddling triangle goes to both children, each with the box of its part inside that child (Havran's
-split clipping; seed 002 clips the triangle to the plane, then the node box: the same region). Tighter
-boxes mean fewer references further down and empty children cut off sooner.
-Robustness: the polygon is clipped in float64 and its box rounded *outward* to float32, then cut to the
-clip box, so the stored box always contains the true part and a ray hitting the triangle finds it in a
-leaf it visits.
+A straddler's box in each child is the box of its part inside that child (Havran's split clipping;
+seed 002), so fewer references go further down and empty space is cut off sooner. Robustness: clipped
+in float64, the box rounded *outward* to float32 and cut to the clip box, so it always contains the true
+part and a ray hitting the triangle finds it in a leaf it visits.
 """
 import numpy as np
 from numba import njit

@@ -1,10 +1,9 @@
 """The surface area heuristic: cost of a split, and whether a split beats a leaf.
 
-Cost of splitting a node with box B at `pos` on `axis` into children L and R (seed 001 eq. 5; pbrt):
+Splitting box B at `pos` into L and R costs (seed 001 eq. 5; pbrt), bonus = empty_bonus for an empty child:
     C = Ct + Ci * (1 - bonus) * (A(L) * nL + A(R) * nR) / A(B)
-where bonus is `empty_bonus` when one child is empty and 0 otherwise. A leaf costs Ci * n. A node is
-split only when the best C < cost_ratio * Ci * n (seed 003 §3.5 uses cost_ratio 0.9) and, when the build
-is told how many rays the tree will answer, when the split saves them more than it costs to build.
+A leaf costs Ci * n; a node splits when the best C < cost_ratio * Ci * n (seed 003 §3.5) and, given a
+ray count, the split saves its rays more than it costs to build.
 """
 from numba import njit
 

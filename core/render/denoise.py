@@ -57,11 +57,9 @@ def denoise_pixels(width, height, pixels, points, normals, sums, sq_sums, counts
                    sigma_luminance=SIGMA_LUMINANCE, sigma_normal=SIGMA_NORMAL, sigma_plane=SIGMA_PLANE,
                    variance_decay=0.0, threads=None):
     """The denoised (H, W, 4) float32 image of a PreviewRender's accumulators (row 0 at the top).
-
-    pixels (M,): flat indices of the hit pixels; points, normals (M, 3): their hit points and geometric
-    normals; sums (M, 3), sq_sums (M,) (of the grey value), counts (M,): the per-pixel sample sums.
-    variance_decay: the variance of a pixel's mean is taken to fall as n^-(1 + variance_decay) (0 for
-    independent samples, 0.5 for scrambled Sobol; see the module docstring)."""
+    pixels (M,): flat indices of the hit pixels; points, normals (M, 3); sums (M, 3), sq_sums (M,) (of the
+    grey value), counts (M,): the per-pixel sample sums; variance_decay: a pixel mean's variance falls as
+    n^-(1 + variance_decay) (0 for independent samples, 0.5 for scrambled Sobol)."""
     width, height = int(width), int(height)
     n = width * height
     pixels = _checked_pixels(n, pixels, points, normals, sums, sq_sums, counts)

@@ -1,10 +1,8 @@
 """The one kd-tree traversal: front to back with a bounded stack, for closest hit and any hit.
 
-Classic recursive-descent traversal in iterative form (seed 004 §6, Havran's TA_B^rec; pbrt): each inner
-node splits the ray's current interval [t0, t1] at the plane; the near child is visited first and the
-far one pushed. An any-hit query returns at its first hit; a closest-hit query stops once its best hit
-lies inside the interval of the leaf just finished, since everything still on the stack is farther.
-
+Recursive-descent traversal in iterative form (seed 004 §6, Havran's TA_B^rec; pbrt): each inner node
+splits the ray's interval [t0, t1] at the plane, visits the near child and pushes the far one. Any hit
+returns at the first hit; closest hit stops once its best hit lies inside the finished leaf's interval.
 Robustness without NaN paths:
 - A zero direction component (either sign of zero) never divides: the ray stays on its origin's side,
   and a ray lying in the plane visits both children. Both then cover the same interval, so the
