@@ -1,12 +1,10 @@
 """The parallel top of the tree: data-parallel splitting of the few large nodes near the root.
 
-Near the root there are few nodes and many references, so each node's work is spread over the cores:
-binning (each thread bins its slice, the counters are summed, seed 000 §4) and partition (each thread
-classifies its slice; a prefix sum places its output). At about `TASKS_PER_THREAD` x threads nodes the
-top stops; each becomes a task whose subtree one thread builds, merged afterwards (seed 000 §4.1).
-Top planes: "sah", the binned SAH at every top node (as good as the sequential tree), or "clustering",
-seed 000 §4.1's approximate object median of the longest axis from 512 x threads min-max bins. Seed 000
-bins once for all levels; here each top node is re-binned, so both strategies share one binning kernel.
+Near the root each node's binning (per-thread counters, summed; seed 000 §4) and partition (per-thread
+slices placed by a prefix sum) are spread over the cores, until about `TASKS_PER_THREAD` x threads
+nodes; each becomes a task whose subtree one thread builds (seed 000 §4.1). Planes: "sah", the binned
+SAH at every top node, or "clustering", seed 000 §4.1's approximate object median of the longest axis
+from 512 x threads bins (re-binned per node here, so both share one binning kernel).
 """
 import heapq
 

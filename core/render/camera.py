@@ -10,17 +10,14 @@ TILE = 8  # tiled_pixels: 8 x 8 = 64 rays, one traversal task (traversal.RAYS_PE
 
 
 class Camera:
-    """A perspective (`fov`) or orthographic (`ortho_scale`) camera.
+    """A perspective (`fov`) or orthographic (`ortho_scale`) camera, in Blender's terms.
 
-    matrix_world: 4x4 camera-to-world matrix (Blender's `camera.matrix_world`).
-    fov: full field of view in radians along the larger image dimension (Blender's sensor fit AUTO).
-    ortho_scale: width of the view along the larger image dimension (Blender's `ortho_scale`).
-    clip_start, clip_end: distances along the view axis; geometry outside is not seen.
-    shift: (x, y) lens shift in units of the larger image dimension's view extent (Blender's shift_x,
-        shift_y): the image plane moves, the camera stays put.
-    pixel_aspect: a pixel's height over its width (Blender's pixel_aspect_y / pixel_aspect_x); the image
-        spans width by height * pixel_aspect pixel widths, and "larger dimension" is larger in that
-        extent, as in Blender's BKE_camera_params_compute_viewplane."""
+    matrix_world: 4x4 camera-to-world matrix. fov: full field of view in radians along the larger image
+    dimension (sensor fit AUTO). ortho_scale: the view's width along that dimension. clip_start, clip_end:
+    distances along the view axis. shift: (x, y) lens shift in units of the larger dimension's view extent
+    (the image plane moves, the camera stays put). pixel_aspect: a pixel's height over its width; the image
+    spans width by height * pixel_aspect pixel widths, and "larger" compares those, as Blender's
+    BKE_camera_params_compute_viewplane does."""
 
     def __init__(self, matrix_world, fov=None, *, ortho_scale=None, clip_start=0.0, clip_end=np.inf,
                  shift=(0.0, 0.0), pixel_aspect=1.0):

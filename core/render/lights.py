@@ -1,8 +1,7 @@
 """Lights mirroring Blender's point, sun, spot and area lights, packed into rows for the kernels.
 
-Soft shadows come from sampling the light's extent: a point or spot light's radius (a disk facing the
-shaded point), a sun's angular diameter (a cone of directions), an area light's shape. A light made
-with cast_shadow=False (Blender's "Cast Shadow" off) lights every surface facing it: no shadow ray.
+Soft shadows come from sampling the light's extent (a point or spot light's radius, a sun's angular
+diameter, an area light's shape); cast_shadow=False lights every surface facing it without a shadow ray.
 """
 import numpy as np
 

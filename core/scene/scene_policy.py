@@ -1,14 +1,12 @@
-"""Which instances keep their own tree and which are merged into a flat "soup" tree (SceneBuilder
-makes one per ray visibility, see scene_builder.py).
+"""Which instances keep their own tree and which are merged into a flat "soup" tree (one per ray
+visibility, scene_builder.py).
 
-Seed 000 §5: a tree per object under a top-level tree "works really well in case of large number of
-non-deforming objects" but gives "ambiguous results" otherwise: where object boxes overlap, a ray visits
-several trees where one flat tree would have separated their triangles. So a mesh placed by several
-instances keeps its own tree; objects that changed in an earlier frame stay separate (seed 000 §5's
-static/dynamic separation); static single objects below SMALL_OBJECT triangles, and the rest when they
-overlap heavily (OVERLAP_LIMIT, `overlap_depth`), go to the soup (docs/choices.md#soup-thresholds);
-an instance whose matrix cannot be inverted can only be flattened. A soup stores float32 triangles
-relative to an anchor, so `soup_zones` puts members far from it against their size in zones of their own.
+Seed 000 §5: per-object trees under a top-level tree work "really well" for many non-deforming objects
+but give "ambiguous results" where object boxes overlap (a ray visits several trees). So meshes placed
+by several instances and objects that changed in an earlier frame keep their own trees (seed 000 §5's
+static/dynamic separation); static single objects below SMALL_OBJECT triangles, and all of them when
+they overlap beyond OVERLAP_LIMIT, go to the soup (docs/choices.md#soup-thresholds), as do instances
+whose matrix cannot be inverted. `soup_zones` keeps float32 soup members near their anchor.
 """
 import numpy as np
 
