@@ -26,11 +26,9 @@ NODE_BYTES = 13  # axis, split, child, count (layout.py)
 
 
 class DeferredSubtrees:
-    """The subtrees a lazy build left for later, and what has been built of them since.
-
-    Subtree k is node `node[k]` of the tree (axis UNBUILT, child k) with references
-    prims/boxes[start[k]:start[k+1]], box `box[k]`, depth `depth[k]` and room `room[k]` (subtree.py).
-    Plain arrays: it pickles."""
+    """The subtrees a lazy build left for later, and what has been built of them since: subtree k is node
+    `node[k]` (axis UNBUILT, child k) with references prims/boxes[start[k]:start[k+1]], box `box[k]`,
+    depth `depth[k]` and room `room[k]`. Plain arrays: it pickles."""
 
     def __init__(self, subtrees, axis, child, params, speculative):
         parts = [s[5:] for s in subtrees]
@@ -62,9 +60,8 @@ class DeferredSubtrees:
                 "deferred_bytes": int(self.prims.nbytes + self.boxes.nbytes)}
 
     def select(self, requested):
-        """The unbuilt subtrees to build for these requests: the requested ones and, if speculative,
-        their neighbours in depth-first build order (usually a sibling or cousin; seed 003 §4
-        "speculative unlocking")."""
+        """The unbuilt subtrees to build for these requests: the requested ones and, if speculative, their
+        neighbours in build order (usually a sibling or cousin; seed 003 §4 "speculative unlocking")."""
         ids = np.unique(requested)
         if self.speculative:
             ids = np.unique(np.clip(np.concatenate([ids - 1, ids, ids + 1]), 0, self.total - 1))

@@ -138,9 +138,8 @@ class Light:
 
 
 def _has_no_extent(kind, row):
-    """A point or spot light of radius 0, or a sun whose half angle's cosine rounds to 1: every sample
-    of it is the same ray (shading.sample_light's point is the centre, or its sun cone has no width, so
-    the sample numbers move nothing), so none are drawn and later samples repeat the first one's."""
+    """A point or spot light of radius 0, or a sun whose half angle's cosine rounds to 1: every sample of it
+    is the same ray, so none are drawn and later samples repeat the first one's."""
     if kind in (POINT, SPOT):
         return row[7] <= 0.0
     return kind == SUN and row[8] == 1.0

@@ -1,16 +1,13 @@
 """The sampling kernel: for each pixel still sampling, add AO and/or light samples to its sums.
 
 One sample is one cosine-weighted AO ray (mode ao), one shadow ray per light facing the surface (mode
-shadow), or both multiplied (ao+shadow). Every ray is an any-hit query of kind SHADOW_RAYS (Cycles
-traces AO rays as shadow rays). Sample k of pixel p depends only on (p, k, seed), so any batching gives
-the same sums; on a lazy tree a pixel stopped at an unbuilt subtree restores its sums and redoes the
-batch once the subtree is built.
-
-Ray memo (pixel_reuse.py): each ray's visibility is bit s * (1 + lights) + use of its pixel's row (when
-samples * (1 + lights) <= MEMO_BITS). A continued pixel takes last frame's bit for every ray that
-cannot meet a changed box, so its sums are the same; `known[i]` counts the bits last frame traced.
-A light without extent (lights.DELTA) gives every sample the same shadow ray: with the memo on, later
-samples take sample 0's bit (counted in `repeated`, not in `rays`).
+shadow), or both multiplied (ao+shadow), each an any-hit query of kind SHADOW_RAYS (as Cycles traces
+AO rays). Sample k of pixel p depends only on (p, k, seed), so any batching gives the same sums; a
+lazy tree's stopped pixel restores its sums and redoes the batch once the subtree is built.
+Ray memo (pixel_reuse.py): ray (s, use) keeps its visibility in bit s * (1 + lights) + use of its
+pixel's row (when that fits in MEMO_BITS); a continued pixel takes last frame's bit for every ray that
+cannot meet a changed box (`known[i]`: bits last frame traced), and a light without extent
+(lights.DELTA) repeats sample 0's bit in later samples (counted in `repeated`, not `rays`).
 """
 import numpy as np
 from numba import njit, prange

@@ -90,12 +90,10 @@ def sample_light(light, p, u1, u2, out_dir):
 
 @njit(cache=True, inline="always")
 def _light_mask(light, kind, to_light):
-    """Spot cone with Cycles' smoothstep blend, taken in the light object's frame (lights.py,
-    _spot_frame: a non-uniform scale makes it elliptical); area lights emit only to their front (-Z)
-    side, and with a Spread below 180 degrees only into a cone around their normal, weighted as
-    Cycles' soft-box grid weights it (area_light_spread_attenuation: tan(spread/2) - tan(a) for light
-    leaving at angle a from the normal), divided by its value along the normal so the mask stays in
-    [0, 1]. Cycles' Spread of 0 keeps a direction within 0.05 degrees of the normal."""
+    """Spot cone with Cycles' smoothstep blend, in the light object's frame (lights._spot_frame). Area
+    lights emit to their front (-Z) only, and with a Spread below 180 degrees into a cone weighted as
+    Cycles' area_light_spread_attenuation (tan(spread/2) - tan(a) at angle a from the normal), divided by
+    its value along the normal to stay in [0, 1]; a Spread of 0 keeps directions within 0.05 degrees."""
     cos_a = -(to_light[0] * light[4] + to_light[1] * light[5] + to_light[2] * light[6])
     if kind == SPOT:
         x = to_light[0] * light[11] + to_light[1] * light[12] + to_light[2] * light[13]

@@ -1,11 +1,9 @@
 """What a frame's instances were, so the next frame can tell which parts of space changed.
 
-A signature lists every instance that some ray can hit as a row of bytes (a digest of its mesh's key
-and fingerprint, its object-to-world matrix, how its triangles were rounded, its ray visibility) with
-its world box, minus `origin`. The rounding is in the row because kept pixels keep their ray starts,
-and an unchanged object re-rounded (soup re-anchored) moves its surface by a float32 ulp.
-`changed_boxes` gives the boxes of rows present in only one of two frames; outside them both frames
-hold the same triangles (pixel_reuse.py). Rows compare as sets.
+A row of bytes per instance some ray can hit: a digest of its mesh's key and fingerprint, its matrix,
+how its triangles were rounded (re-rounding moves a surface by an ulp, enough to put a kept ray start
+behind it) and its ray visibility, with its world box minus `origin`. `changed_boxes`: the boxes of
+rows present in only one of two frames; outside them both frames hold the same triangles.
 """
 import hashlib
 from typing import NamedTuple
