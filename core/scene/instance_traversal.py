@@ -219,18 +219,14 @@ def _row_magnitude(a, k, p):
 
 @njit(cache=True, inline="always")
 def surface_error_scale(surface, p, n):
-    """A magnitude whose float64 rounding bounds how far hit point p, once moved onto its triangle's
-    plane (onto_triangle_plane), may lie off that plane along unit normal n, and the rounding the
-    triangle test's t carries near it: the largest of
+    """A magnitude whose float64 rounding bounds how far hit point p, moved onto its triangle's plane, may
+    lie off it along unit normal n, and the rounding of the triangle test's t near it: the largest of
     - sum |n_k| |p_k|: p's world coordinates round to their own ulps, seen along the normal;
-    - the same for the object-space point q = a p + a_t and the projection's operands q - v0, as a
-      world distance (an object-space offset along n_o is |a^T n_o| / |n_o| times shorter in world, so
-      a shear stretching along the normal makes it longer: a plane stretched 1e5 times along it);
-    - the triangle's reach from p (largest world coordinate difference to a vertex): the triangle test
-      works on vertex-minus-origin differences (a floor 1e4 wide seen 1e-3 across).
-    Not max |p_k|: a floor at z = 0 but x = 5e5 would lift ray starts through a roof 1e-4 above, where
-    its height's ulps are what count. Nor the camera ray's |o| and t |d|: their error moves p along
-    the ray, which the projection takes out."""
+    - the same for the object-space point q = a p + a_t and the operands q - v0, as a world distance
+      (|a^T n_o| / |n_o| times shorter, so a shear stretching along the normal makes it longer);
+    - the triangle's reach from p: the triangle test works on vertex-minus-origin differences.
+    Not max |p_k| (a floor far along x would lift ray starts through a roof just above it), nor the
+    camera ray's |o| and t |d|, whose error moves p along the ray, which the projection takes out."""
     tri, a, parts, (nx, ny, nz) = surface
     world = abs(n[0] * p[0]) + abs(n[1] * p[1]) + abs(n[2] * p[2])
     qx, qy, qz = _object_point(a, p)

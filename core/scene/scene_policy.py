@@ -65,12 +65,10 @@ def soup_zones(boxes, before=None, split=True):
     """The zones of one soup, as a list of (member rows, anchor), the main zone first (its rows may be
     empty). boxes (K, 6): the members' world boxes (inverted when empty); before: the main zone's
     anchor last frame, or None; split False: the main zone alone (the "flat" layout, lazy builds).
-
-    The main zone, anchored by `main_anchor`, keeps every member whose farthest box corner is within
-    PRECISION_RATIO of its diagonals of the anchor (re-found until no member leaves, then every member
-    near enough rejoins, so next frame the zone is the same). The rest, smallest first, join the nearest
-    zone anchor within (PRECISION_RATIO - 1/2) diagonals of their box's centre, or anchor a new zone at
-    the centre of the power-of-two grid cell holding theirs; zones depend on this frame's boxes alone."""
+    The main zone (`main_anchor`) keeps every member whose farthest box corner is within PRECISION_RATIO
+    of its diagonals of the anchor, re-found until stable so next frame's zone is the same. The rest,
+    smallest first, join the nearest zone anchor within (PRECISION_RATIO - 1/2) diagonals of their
+    centre, or anchor a new zone at the centre of the power-of-two grid cell holding it."""
     lo, hi = boxes[:, :3], boxes[:, 3:]
     filled = (lo <= hi).all(axis=1)
     size = np.zeros(len(boxes))

@@ -1,15 +1,12 @@
 """Watertight ray/triangle intersection (Woop, Benthin and Wald 2013, JCGT 2(1)), with an exact tie rule.
 
-The ray is sheared to run along +z from the origin; the edge functions are 2D cross products of the
-transformed vertices, so a shared edge gives exact negatives in its two triangles: no ray slips between
-neighbours. Woop et al. accept zero edge values (a ray through an edge hits both triangles); here a zero
-counts only when the edge direction (inside on its left) points "up, or right if horizontal": a
-symbolic perturbation of the ray, so exactly one triangle of a closed fan owns each edge and vertex.
-Float64 on float32 vertices; zero-area triangles (det == 0) never hit.
-
-`leaf_candidates` makes the first step, where most triangles fail (edge values straddling zero), for a
-run of a leaf's triangles at once from the leaf-ordered copy, in a loop LLVM vectorises (one ray, many
-triangles, as Embree's multi-triangle leaves). Same operations, no fast-math: the hits do not change.
+The ray is sheared to run along +z; edge functions are 2D cross products of the transformed vertices,
+so a shared edge gives exact negatives in its two triangles: no ray slips between neighbours. A zero
+edge value counts only when the edge direction (inside on its left) points "up, or right if
+horizontal": a symbolic perturbation, so exactly one triangle of a closed fan owns each edge and
+vertex (Woop et al. accept every zero). Float64 on float32 vertices; zero-area triangles never hit.
+`leaf_candidates` screens a run of a leaf's triangles at once (most fail there: edge values straddle
+zero) from the leaf-ordered copy in a loop LLVM vectorises, with the same operations (no fast-math).
 """
 import numpy as np
 from numba import njit
