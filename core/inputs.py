@@ -144,12 +144,10 @@ def _as_limit(name, value, count):
 
 
 def hit_distances_as_float32(t, prim, tmin=0.0, tmax=np.inf):
-    """The float64 hit distances as the float32 `t` queries return. A hit beyond float32's range
-    raises ValueError naming the first such ray (inf would read as a miss; only rays whose direction is
-    tiny against the distance travelled get there). A positive t below float32's smallest subnormal
-    becomes that subnormal, not 0, which is outside the open interval (tmin, tmax). Likewise a t that
-    rounds onto or past the ray's tmin or tmax (scalars or (R,) arrays) moves one float32 step back
-    inside, so a caller filtering on t < tmax keeps it."""
+    """The float64 hit distances as the float32 `t` queries return. A hit beyond float32's range raises
+    ValueError naming the first such ray (inf would read as a miss). A positive t below float32's smallest
+    subnormal becomes that subnormal, not 0, and a t that rounds onto or past the ray's tmin or tmax
+    (scalars or (R,) arrays) moves one float32 step back inside the open interval."""
     with np.errstate(over="ignore"):
         out = t.astype(np.float32)
     hit = prim >= 0

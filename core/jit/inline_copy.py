@@ -1,14 +1,12 @@
 """Numba's inliner copies a callee's IR one block at a time, and so its whole variable scope once per
 block; `install` makes it copy the scope once per callee. Same machine code, half the compile time.
 
-Core inlines its hot paths (inline="always"). Each block holds the function's Scope, so
-`InlineWorker.inline_ir`'s `copy_ir` (a deepcopy per block) costs blocks x variables copies, growing
-with every nesting level (Numba issue #8989; docs/choices.md#share-the-inlined-callee-scope). `install`
-gives `copy_ir` one memo per callee scope for one `inline_ir`, so a callee's blocks share one copied
-scope, which `inline_ir` renames into the caller's as before: the LLVM IR is byte-identical
-(tests/test_inline_copy.py). The shim replaces `copy` in numba.core.inline_closurecall only (numba
-0.68.1, pinned); memos live for one `inline_ir` only (a whole `inline_function` may compile other
-functions, whose inlining must not see renamed blocks). Process-wide; relies on the compiler lock.
+`InlineWorker.inline_ir`'s `copy_ir` deep-copies each block with the function's Scope: blocks x
+variables copies at every nesting level of core's inline="always" hot paths (Numba issue #8989;
+docs/choices.md#share-the-inlined-callee-scope). The shim (replacing `copy` in
+numba.core.inline_closurecall only; numba 0.68.1 pinned) gives `copy_ir` one memo per callee scope for
+one `inline_ir`, never longer, since an inlining may compile other functions; the LLVM IR is
+byte-identical (tests/test_inline_copy.py). Process-wide; relies on Numba's global compiler lock.
 """
 import copy
 import functools

@@ -1,15 +1,12 @@
 """Building two-level scenes frame after frame, keeping every tree whose input did not change.
 
 Each mesh has a key stable across frames (an object's name) and a fingerprint that changes with its
-geometry (a CRC of its vertex and index bytes). A mesh with an unchanged key and fingerprint keeps its
-object-space tree however its instances move: only the top level is rebuilt. A mesh whose fingerprint
-changed is rebuilt and counts as dynamic from then on (built for the frame's `rays`, since each tree
-serves one frame), as does a single-use mesh whose matrix or visibility changed. The soup
-(scene_policy.py) is kept while its members' keys, fingerprints and matrices are unchanged; it is stored
-relative to an anchor and placed by a translation, so a moving camera never rebuilds it. Instances that
-stop different kinds of rays (ray_visibility.py) go to different soups. `reuse=False` rebuilds all.
-Precision: every matrix is shifted by minus `origin` (the camera position) in float64 before anything
-is rounded, and mesh trees are in object space, so nothing far from the origin loses precision.
+geometry (a CRC of its bytes). An unchanged mesh keeps its object-space tree however its instances
+move; a changed one is rebuilt and counts as dynamic from then on (built for the frame's `rays`), as
+does a single-use mesh that moved. The soup (scene_policy.py) is kept while its members' keys,
+fingerprints and matrices are unchanged, stored relative to an anchor so a moving camera never
+rebuilds it; each ray visibility gets its own soup. Every matrix is shifted by minus `origin` (the
+camera position) in float64 before anything is rounded, so nothing far from the origin loses precision.
 """
 from time import perf_counter
 from typing import Hashable, NamedTuple
