@@ -56,9 +56,8 @@ def _bin(x, lo, scale, top):
 
 @njit(cache=True)
 def best_binned_split(min_bins, max_bins, weight, node_box, params):
-    """Cheapest split among the bin boundaries: (cost, axis, position); axis -1 if none is valid.
-    The node's extents are computed once and each candidate swaps in only its two cut extents
-    (split_cost would re-read the box twice per candidate); this loop runs (bins - 1) x 3 times a node."""
+    """Cheapest split among the bin boundaries: (cost, axis, position); axis -1 if none is valid. The
+    node's extents are computed once, each candidate swapping in only its two cut extents."""
     nbins = min_bins.shape[1]
     inv_area = 1.0 / half_area(node_box)
     e = extents(node_box)
@@ -156,10 +155,8 @@ def snap_to_boundaries(boxes, start, end, node_box, params, cost, axis, pos):
 def _nearest_boundaries(boxes, start, end, axis, pos, step):
     """The box boundaries nearest to pos strictly below and above it within one bin, each with the
     references left of it, right of it and lying in it: ((below, left, right, planar), (above, ...)).
-    One pass: it counts exactly at pos and, for the running nearest boundary on each side, the
-    references that begin, end and lie there; no boundary lies strictly between it and pos, so its
-    counts follow from those at pos. With no boundary within the bin, the candidate is the bin's edge,
-    which snap_to_boundaries rejects."""
+    One pass: exact counts at pos plus, for the running nearest boundary each side, what begins, ends and
+    lies there (nothing lies between it and pos). Without a boundary in the bin, the bin's edge (rejected)."""
     below, above = pos - step, pos + step
     left_of_pos = right_of_pos = begin_at_pos = end_at_pos = 0
     begin_below = end_below = planar_below = begin_above = end_above = planar_above = 0

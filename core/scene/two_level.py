@@ -102,12 +102,10 @@ def _summed(per_mesh):
 
 
 def build_two_level(meshes, mesh_of, matrices, visibility=None, **options):
-    """The top level over prebuilt object-space mesh trees.
-
-    meshes: list of KdTree (object space); mesh_of: (I,) index of each instance's mesh; matrices:
-    (I, 4, 4) object-to-world; visibility: (I,) ray_visibility bits, which kinds of rays each instance
-    stops (None: all of them). Keyword options are BuildOptions for the top-level tree (its
-    references are boxes, so `clip` is ignored). Raises ValueError naming a bad instance."""
+    """The top level over prebuilt object-space mesh trees: meshes (KdTrees), mesh_of (I,) mesh of each
+    instance, matrices (I, 4, 4) object-to-world, visibility (I,) ray_visibility bits (None: all rays).
+    Keywords are BuildOptions for the top level (boxes: `clip` is ignored); a bad instance raises
+    a ValueError naming it."""
     lazy = [i for i, m in enumerate(meshes) if isinstance(m, KdTree) and m.lazy]
     if lazy and len(meshes) > 1:
         raise ValueError(f"mesh {lazy[0]} is a lazy tree: a two-level scene with several meshes takes eagerly "
