@@ -74,7 +74,7 @@ def as_rays(origins, directions):
     if zero.any():
         raise ValueError(f"ray {int(np.flatnonzero(zero)[0])} has a zero direction vector")
     # t is in units of the direction and returned as float32: a direction this short would put
-    # hits at t beyond float32's range (found by hypothesis with subnormal directions).
+    # hits at t beyond float32's range (subnormal directions).
     short = np.abs(d).max(axis=1) < MIN_DIRECTION
     if short.any():
         bad = int(np.flatnonzero(short)[0])

@@ -10,7 +10,7 @@ import os
 import numpy as np
 
 MB = 1 << 20
-MARGIN = 1.25  # measured peaks vary by scene (references per triangle); the limit is a promise
+MARGIN = 1.25  # peaks vary by scene (references per triangle); the limit is a promise
 
 # Peak RSS growth of build_kdtree per input triangle, not counting the triangle array, for the worst
 # calibration scene (dense coplanar cards; docs/choices.md#build-memory-per-triangle).

@@ -104,8 +104,7 @@ def denoise_pixels(width, height, pixels, points, normals, sums, sq_sums, counts
 @njit(cache=True, inline="always")
 def _exp_neg(e):
     """exp(-e) for 0 <= e <= _CUTOFF as (1 - e/128)^128: seven multiplications, within 0.4% of exp at
-    e = 1 and 3% at e = 4 (weights that small hardly matter), and ~3x cheaper than exp in this loop,
-    which is the filter's cost."""
+    e = 1 and 3% at e = 4 (weights that small hardly matter), and cheaper than exp in the filter's loop."""
     t = 1.0 - e * (1.0 / 128.0)
     t *= t
     t *= t
@@ -120,7 +119,7 @@ def _exp_neg(e):
 def _neg_log(c):
     """-log(c) for exp(-_CUTOFF / sigma_normal) <= c <= 1 by its series in x = 1 - c to the cubic term:
     within 0.7% where it is used (x <= 0.27 at SVGF's sigma_n = 128), and three multiplications instead
-    of a log or of c ** 128 by squaring (a loop of eight steps per tap, ~30% of a pass)."""
+    of a log or of c ** 128 by squaring (eight steps per tap)."""
     x = 1.0 - c
     return x * (1.0 + x * (0.5 + x * (1.0 / 3.0)))
 
