@@ -104,7 +104,8 @@ def denoise_pixels(width, height, pixels, points, normals, sums, sq_sums, counts
 @njit(cache=True, inline="always")
 def _exp_neg(e):
     """exp(-e) for 0 <= e <= _CUTOFF as (1 - e/128)^128: seven multiplications, within 0.4% of exp at
-    e = 1 and 3% at e = 4 (weights that small hardly matter), and cheaper than exp in the filter's loop."""
+    e = 1 and 3% at e = 4 (weights that small hardly matter), and cheaper than exp in the filter's loop
+    (docs/choices.md#approximate-exp-and-log-in-the-denoiser)."""
     t = 1.0 - e * (1.0 / 128.0)
     t *= t
     t *= t

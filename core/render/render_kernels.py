@@ -221,7 +221,7 @@ def surface_frames(scene, origins, directions, t, inst, prim, hit_index, points,
 @njit(cache=True, parallel=True)
 def assemble_image(pixels, sums, counts, img):
     """Each hit pixel's mean (0 before its first sample) and alpha 1 into the flat (H*W, 4) float32
-    image `img`, zero elsewhere: one pass instead of numpy's temporaries and fancy-indexed writes."""
+    image `img`, zero elsewhere, in one pass (docs/choices.md#one-pass-image-assembly)."""
     for i in prange(pixels.shape[0]):
         p = pixels[i]
         n = max(counts[i], 1)
