@@ -10,10 +10,8 @@ from numba import njit, prange
 @njit(cache=True, parallel=True)
 def triangle_boxes(tris):
     """Boxes of all triangles, and which triangles have non-zero area.
-
     Zero-area triangles (all three cross-product components exactly zero) can never be hit (the
-    watertight test rejects them), so the builder leaves them out of the tree altogether.
-    """
+    watertight test rejects them), so the builder leaves them out of the tree altogether."""
     n = tris.shape[0]
     boxes = np.empty((n, 6), np.float32)
     keep = np.empty(n, np.bool_)

@@ -45,7 +45,7 @@ def as_triangles(triangles):
     """Triangles as a C-contiguous (N, 3, 3) float32 array of finite vertex positions."""
     try:
         arr = np.asarray(triangles)
-    except ValueError as error:  # ragged nested lists: numpy's message named no argument (outside review)
+    except ValueError as error:  # ragged nested lists: numpy's message names no argument
         raise ValueError(f"triangles must be an (N, 3, 3) array of numbers (N triangles, 3 vertices, xyz): "
                          f"{error}") from None
     if arr.ndim != 3 or arr.shape[1:] != (3, 3):
@@ -74,7 +74,7 @@ def as_rays(origins, directions):
     if zero.any():
         raise ValueError(f"ray {int(np.flatnonzero(zero)[0])} has a zero direction vector")
     # t is in units of the direction and returned as float32: a direction this short would put
-    # hits at t beyond float32's range (found by hypothesis with subnormal directions).
+    # hits at t beyond float32's range (subnormal directions).
     short = np.abs(d).max(axis=1) < MIN_DIRECTION
     if short.any():
         bad = int(np.flatnonzero(short)[0])
@@ -85,10 +85,10 @@ def as_rays(origins, directions):
 
 def without_negligible_components(d):
     """Directions (..., 3) with every component below NEGLIGIBLE_COMPONENT times the largest set to 0.
-    Such a component turns the ray by under 1e-180 radians, but its reciprocal overflows (a plane test
-    then computes 0 * inf) and the triangle test's shear term underflows to 0 on one triangle and not its
-    neighbour: a ray along (-5e-324, 1, 0) starting on a split plane slipped through a closed cube
-    (outside QA). A zero component is a case every step handles."""
+    Such a component turns the ray by under 1e-180 radians, but its reciprocal overflows (0 * inf in a
+    plane test) and the triangle test's shear term underflows on one triangle and not its neighbour,
+    so a ray starting on a split plane could slip through a closed mesh. A zero component is a case
+    every step handles."""
     negligible = np.abs(d) < NEGLIGIBLE_COMPONENT * np.abs(d).max(axis=-1, keepdims=True)
     return np.where(negligible, 0.0, d) if negligible.any() else d
 
@@ -144,15 +144,10 @@ def _as_limit(name, value, count):
 
 
 def hit_distances_as_float32(t, prim, tmin=0.0, tmax=np.inf):
-    """The float64 hit distances as the float32 `t` queries return. A hit beyond float32's range
-    raises ValueError naming the first such ray (inf would read as a miss; only rays whose direction is
-    tiny against the distance travelled, e.g. 1e-15 long and 1e30 away, get there). A positive t below
-    float32's smallest subnormal becomes that subnormal, not 0: 0 is outside the open interval (tmin,
-    tmax), and near 0 float32's precision is absolute (hypothesis found a ray 3.5e-46 behind a triangle
-    with a subnormal vertex, which used to fail its whole batch). Likewise a t that rounds onto or past
-    the ray's tmin or tmax (checked limits, scalars or (R,) arrays) moves one float32 step back inside:
-    a hit at 1 - 1e-9 with tmax 1 came back as t = 1.0 (outside review), which a caller filtering on
-    t < tmax dropped."""
+    """The float64 hit distances as the float32 `t` queries return. A hit beyond float32's range raises
+    ValueError naming the first such ray (inf would read as a miss). A positive t below float32's smallest
+    subnormal becomes that subnormal, not 0, and a t that rounds onto or past the ray's tmin or tmax
+    (scalars or (R,) arrays) moves one float32 step back inside the open interval."""
     with np.errstate(over="ignore"):
         out = t.astype(np.float32)
     hit = prim >= 0

@@ -19,13 +19,9 @@ from .top_levels import build_top_levels
 
 def build_kdtree(triangles, **options):
     """Build a kd-tree over an (N, 3, 3) array of triangle vertex positions.
-
-    Keyword options are those of `BuildOptions` (builder, bins, leaf_size, max_depth, traversal_cost,
-    intersection_cost, empty_bonus, cost_ratio, clip, skip, top, threads, lazy, memory_limit, ...), each
-    validated. With lazy=True only the top of the tree is built now and the rest as rays reach it (lazy.py).
-    Raises ValueError naming the first bad triangle or setting, or memory.MemoryLimitError (a ValueError)
-    when the estimated peak memory is above memory_limit.
-    """
+    Keyword options are `BuildOptions`' fields, each validated; with lazy=True only the top is built now
+    (lazy.py). Raises ValueError naming the first bad triangle or setting, or memory.MemoryLimitError
+    (a ValueError) when the estimated peak memory is above memory_limit."""
     opts = make_options(options)
     check_build_memory(triangles, opts)
     tris = as_triangles(triangles)

@@ -1,14 +1,9 @@
 """Exact-enough clipping of a triangle to a box, for "perfect splits".
 
-A triangle straddling a split plane goes to both children. Its box in each child is the box of the part
-of the triangle inside that child (Havran's split clipping; seed 002 intersects the whole triangle with
-the plane and then with the node box, which is the same region). Tighter boxes mean fewer references
-further down and empty children cut off sooner.
-
-Robustness: the polygon is clipped in float64 and its box is rounded *outward* to float32 and then
-intersected with the clip box, so the stored box always contains the true part of the triangle (a
-float64 rounding error is far below one float32 ulp). A ray hitting the triangle therefore always finds
-it in a leaf it visits.
+A straddler's box in each child is the box of its part inside that child (Havran's split clipping;
+seed 002), so fewer references go further down and empty space is cut off sooner. Robustness: clipped
+in float64, the box rounded *outward* to float32 and cut to the clip box, so it always contains the true
+part and a ray hitting the triangle finds it in a leaf it visits.
 """
 import numpy as np
 from numba import njit

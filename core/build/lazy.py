@@ -1,17 +1,10 @@
 """On-demand (lazy) construction (seed 003 §3): deferred subtrees are built when rays first reach them.
 
-A lazy `build_kdtree` builds the parallel top levels and, inside each task, every node down to
-`lazy_subtree_size` references; smaller nodes are left UNBUILT (layout.py) and their references are kept
-here. Queries and renders trace all their rays through the one traversal; a ray that reaches an
-unbuilt node stops there and reports it. The caller then builds all the requested subtrees at once,
-in parallel, one thread per subtree, exactly like the eager subtrees (subtree.py), splices them into the
-flat arrays (merge.py) and traces only the suspended rays again, from the start.
-
-The traversal enters a subtree only where the eager traversal would, and a deferred subtree is built
-exactly as the eager build builds it, so every result is identical to the eager tree's and only the
-subtrees some ray needs get built. Seed 003 interleaves building and tracing in one GPU task pool;
-on a few CPU cores this simple alternation (trace everything, build the requested batch, retrace
-those rays) keeps one traversal and one builder, at the price of a few rounds per query.
+Nodes of at most `lazy_subtree_size` references stay UNBUILT (layout.py), their references kept here.
+A ray reaching one stops and reports it; the caller builds all requested subtrees at once, in
+parallel, exactly as the eager build would (subtree.py), splices them in (merge.py) and retraces the
+stopped rays, so results equal the eager tree's. Seed 003 interleaves building and tracing in one
+GPU task pool; on a few CPU cores this alternation keeps one traversal and one builder.
 """
 from time import perf_counter
 
@@ -26,22 +19,16 @@ from ..jit.threads import thread_count
 from .top_levels import Task
 
 
-# When one round asks for at least this share of the unbuilt subtrees, the rest is built with them:
-# such a scene is mostly visible, and each further round costs a retrace of the stopped rays and a
-# smaller, less parallel batch. Measured on suzanne-251k (no occlusion, 512x512, 4 AO samples): the
-# rounds asked for 66/118, 40/52, 10/12 and 2/2 subtrees; building all at the first round removes
-# three retraces (benchmarks/bench_lazy.py). Occluded scenes ask for a few per cent and are unaffected.
+# When one round asks for at least this share of the unbuilt subtrees, build the rest with them: the
+# scene is mostly visible, and each further round costs a retrace (docs/choices.md#lazy-build-all-share).
 BUILD_ALL_SHARE = 0.5
 NODE_BYTES = 13  # axis, split, child, count (layout.py)
 
 
 class DeferredSubtrees:
-    """The subtrees a lazy build left for later, and what has been built of them since.
-
-    Subtree k is node `node[k]` of the tree (axis UNBUILT, child k) with references
-    prims/boxes[start[k]:start[k+1]], box `box[k]`, depth `depth[k]` and room `room[k]` (subtree.py).
-    Plain arrays: it pickles.
-    """
+    """The subtrees a lazy build left for later, and what has been built of them since: subtree k is node
+    `node[k]` (axis UNBUILT, child k) with references prims/boxes[start[k]:start[k+1]], box `box[k]`,
+    depth `depth[k]` and room `room[k]`. Plain arrays: it pickles."""
 
     def __init__(self, subtrees, axis, child, params, speculative):
         parts = [s[5:] for s in subtrees]
@@ -73,9 +60,8 @@ class DeferredSubtrees:
                 "deferred_bytes": int(self.prims.nbytes + self.boxes.nbytes)}
 
     def select(self, requested):
-        """The unbuilt subtrees to build for these requests: the requested ones and, if speculative,
-        their neighbours in depth-first build order (usually a sibling or cousin; seed 003 §4
-        "speculative unlocking")."""
+        """The unbuilt subtrees to build for these requests: the requested ones and, if speculative, their
+        neighbours in build order (usually a sibling or cousin; seed 003 §4 "speculative unlocking")."""
         ids = np.unique(requested)
         if self.speculative:
             ids = np.unique(np.clip(np.concatenate([ids - 1, ids, ids + 1]), 0, self.total - 1))
@@ -112,10 +98,8 @@ def build_requested(tree, requested, threads=None):
 
 def _check_memory_limit(tree, subtrees):
     """Refuse a round whose subtrees would grow the tree past its memory_limit, before splicing them
-    (the tree stays as it was, and usable). Each subtree's own build checks its pools against its
-    share of the limit, with a 1 MB floor for tiny builds (memory.MIN_SUBTREE_BUDGET); a lazy tree's
-    subtrees are all small, so the floors added up: an outside review's lazy tree grew to 46 MB under a
-    20 MiB limit that the eager build of the same triangles kept."""
+    (the tree stays usable). Each subtree's own check has a 1 MB floor (memory.MIN_SUBTREE_BUDGET),
+    and a lazy tree's many small subtrees would add those floors up past the limit."""
     limit = tree.options.memory_limit
     if limit is None:
         return

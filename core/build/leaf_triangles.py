@@ -1,10 +1,8 @@
 """The tree's triangles copied into leaf order, one float32 row per vertex coordinate.
 
-A leaf's triangles are then consecutive in memory, nine rows of them, so the edge-sign screen of
-triangle_test.leaf_candidates reads them as vectors (seed 004 §4.7 lays nodes out for the cache the
-same way; Embree's leaves hold their triangles' vertices the same way). Row 3 v + k holds coordinate k
-of vertex v; column j is the triangle leaf_prims[j]. It costs 36 bytes a reference, kept beside the
-(N, 3, 3) triangles, which the full test, normals and statistics read by triangle index.
+A leaf's triangles are consecutive, nine rows of them, so triangle_test.leaf_candidates reads them as
+vectors (as Embree's leaves hold their vertices). Row 3 v + k holds coordinate k of vertex v; column j
+is triangle leaf_prims[j]. 36 bytes a reference, beside the (N, 3, 3) triangles read by index.
 """
 import numpy as np
 from numba import njit, prange

@@ -1,8 +1,7 @@
 """Joining the top levels and the concurrently built subtrees into one flat tree (seed 000 §4.1).
 
-Top nodes keep their indices; each task's subtree root replaces its task slot and the rest of the
-subtree is appended, with child indices and leaf offsets shifted. A lazy tree later splices the
-subtrees it builds on demand into their UNBUILT slots the same way (lazy.py).
+Each task's subtree root replaces its task slot and the rest is appended, child indices and leaf
+offsets shifted; a lazy tree splices its on-demand subtrees into their UNBUILT slots the same way.
 """
 import numpy as np
 
@@ -11,9 +10,7 @@ from ..trace.layout import LEAF, UNBUILT
 
 def merge_tree(top_nodes, subtrees):
     """One set of flat arrays (axis, split, child, count, leaf_prims) from the top and the subtrees.
-
-    Deferred subtrees (lazy builds) are numbered globally in task order.
-    """
+    Deferred subtrees (lazy builds) are numbered globally in task order."""
     n_top = len(top_nodes)
     axis = np.empty(n_top, np.int8)
     split = np.zeros(n_top, np.float32)

@@ -20,12 +20,8 @@ SPLIT_AXES = ("all", "longest")
 DEPTH_LIMIT = 60
 
 
-# Clipping straddlers, snapping planes to box boundaries and searching all three axes refine splits
-# at extra build work per reference. Time to image with clip and snap off, against on (rays given,
-# 640 x 480, docs/choices.md): 0.91x at 0.6 rays a triangle, 0.94x at 2.4, 1.00x at 6.1, 1.08x at 21.
-# A per-node rule (rays entering the node per reference, as beats_leaf estimates them) still lost
-# 4-7% at 21: AO rays start on the surface, and the deep nodes there see more rays than rays from
-# outside would. Searching the longest axis first as well: 0.80-0.95x more at 0.6-3.7.
+# Below this many rays a triangle, clipping, snapping and the all-axes search cost more build time
+# than they save in tracing (docs/choices.md#refinement-off-below-4-rays-a-triangle).
 REFINE_RAYS_PER_TRIANGLE = 4
 
 
@@ -33,75 +29,41 @@ REFINE_RAYS_PER_TRIANGLE = 4
 class BuildOptions:
     """Settings of the kd-tree builder.
 
-    builder: "binned" (min-max binned SAH, seed 000 §3.3-3.4, exact sweep in small nodes), "exact"
-        (O(N log N) event sweep everywhere, seed 004 §3.1: the quality reference) or "median" (spatial
-        median of the longest axis, with the SAH deciding only when to stop: the cheap baseline).
+    builder: "binned" (min-max binned SAH, seed 000 §3.3-3.4), "exact" (O(N log N) event sweep, seed
+        004 §3.1: the quality reference) or "median" (spatial median, the SAH only deciding when to stop).
     bins: min-max bins per axis for "binned" (seed 000 found 32 sufficient).
-    exact_below: "binned" switches to the exact sweep in nodes with at most this many references.
-        Seed 000 switches at `bins`. Measured on suzanne-251k (docs/choices.md): switching at 16/32/64 lowers
-        the SAH cost by 0.6/2.8/4.6% but makes the build 26/41/88% slower and time to image no
-        better, so the default is 0 (binning everywhere; 32 bins resolve small nodes nearly exactly).
-    snap: "binned" also tries, below the parallel top levels, the box boundaries nearest to its best
-        bin boundary and keeps the cheapest plane (split_binned.snap_to_boundaries): grids and height
-        fields stop paying for planes between their vertex lines (docs/choices.md: a wave-modified grid went
-        from 7.6 to 1.1 references a triangle and built ~5x faster; suzanne-251k's SAH cost -7%).
-    split_axes: "all" (the binned SAH searches x, y and z) or "longest" (below the parallel top levels,
-        the node's longest axis, as fast BVH builders bin (Wald 2007, "On fast construction of
-        SAH-based bounding volume hierarchies"), and the other two only where it offers no plane
-        better than a leaf: a third of the binning in most nodes, for somewhat worse splits). Nodes
-        of at most exact_below references take the exact sweep over all three either way.
+    exact_below: "binned" sweeps exactly in nodes of at most this many references (seed 000 switches at
+        `bins`; 0: binning everywhere, docs/choices.md#binning-everywhere).
+    snap: "binned" also tries the box boundaries nearest its best bin boundary below the top levels
+        (split_binned.snap_to_boundaries; docs/choices.md#snap-planes-to-box-boundaries).
+    split_axes: "all" or "longest" (below the top levels bin the longest axis, as fast BVH builders do
+        (Wald 2007), and the other two only where it offers no plane better than a leaf).
     leaf_size: nodes with at most this many references become leaves without trying a split.
     max_depth: None means 1.2*log2(N) + 2 (seed 003 §3.5), capped at 60.
-    traversal_cost, intersection_cost: SAH constants (cost of one traversal step and of one
-        ray/triangle test). 0.3 since leaves screen their triangles in a vectorised loop
-        (triangle_test.leaf_candidates), swept end to end (docs/choices.md): lower values helped
-        dense soups and many samples a little more but lost with few rays a triangle; 1.5 before.
-    empty_bonus: fraction of the intersection cost forgiven when one child is empty, in [0, 1).
-        0.2, measured: with pbrt's 0.5 the SAH spends the depth budget cutting off empty space and
-        leaves of 64+ triangles at the depth limit (SAH cost 83 against 29 on suzanne-251k).
-    cost_ratio: a node stays a leaf when the best split costs more than cost_ratio times the leaf
+    traversal_cost, intersection_cost: SAH costs of one traversal step and one ray/triangle test
+        (docs/choices.md#sah-intersection-cost).
+    empty_bonus: share of the intersection cost forgiven for an empty child, in [0, 1)
+        (docs/choices.md#empty-space-bonus).
+    cost_ratio: a node stays a leaf when its best split costs more than cost_ratio times the leaf
         (seed 003 §3.5 uses 0.9 to favour time to image).
-    clip: tighten the boxes of straddling triangles by clipping the triangle to each child ("perfect
-        splits", seed 002 and Havran); off uses the triangle box cut by the plane.
-    skip: adaptive primitive skipping while binning large nodes (every log10(n)-th reference,
-        seed 000 §3.3).
-    top: how the parallel top levels are split: "sah" (data-parallel binned SAH at every top node) or
-        "clustering" (seed 000 §4.1: equal-count sub-domains from one high-resolution binning).
+    clip: clip straddling triangles to each child for tight boxes ("perfect splits", seed 002, Havran).
+    skip: while binning large nodes bin every log10(n)-th reference (seed 000 §3.3).
+    top: the parallel top levels: "sah" (binned SAH at every top node) or "clustering" (seed 000 §4.1:
+        equal-count sub-domains from one high-resolution binning).
     threads: worker threads; None uses every core Numba sees.
-    lazy: on-demand construction (seed 003 §3): build the top of the tree now and defer every node
-        of at most `lazy_subtree_size` references; a deferred subtree is built (exactly as the eager
-        build would build it) when a query or render first sends a ray into it. Results are identical
-        to the eager tree's; it pays when rays see only part of the scene (seed 003 §5.3).
-    lazy_subtree_size: the largest deferred subtree, in references. Smaller builds more levels
-        eagerly (each one a pass over all references) but defers in finer pieces, so less is built
-        around what the rays reach; larger the opposite. 4096 measured best (README, bench_lazy.py).
-    lazy_speculative: also build, with each requested subtree, its neighbours in depth-first build
-        order (the previous and next deferred subtree, usually its sibling or a cousin): seed 003 §4's
-        speculative building, trading some unneeded building for fewer suspend/build/retrace rounds.
-    memory_limit: bytes; a build whose estimated peak memory (memory.py) is above this raises
-        memory.MemoryLimitError (a ValueError) before allocating anything, and so does a build whose
-        pools outgrow their share of it while splitting (settings that force splits, such as a huge
-        cost_ratio with leaf_size 1 and a deep max_depth). None: no limit.
-    duplication_budget: how many references, per triangle it starts with, the tree may make by
-        splitting straddling triangles into both children, spent evenly along every path: a node's
-        room starts at this value at the root, each split divides it by that split's duplication
-        (n_left + n_right) / n, and a node whose room is below 1 becomes a leaf. Leaves then hold
-        at most twice this many references a triangle. The SAH weighs only tracing: where triangles
-        lie flat in one plane and overlap densely (cards on a floor at z = 0), a flat node's children
-        share its area exactly, so every split pays and the build went on to max_depth (outside QA:
-        50,000 such triangles made 1,246 references a triangle, 3.5 GB, 36 s). With 16 the ordinary
-        scenes of benchmarks/bench_duplication.py build the trees they build without it; where it
-        binds, tracing pays (docs/choices.md). None: no budget.
-    rays: how many rays the tree will answer (for one render: core.frame_ray_count, e.g. width x
-        height x 2 for camera rays plus one shadow ray a pixel). None: as many as it takes, no build
-        term. Given, a node is split only when the rays expected to enter it save more than the
-        split costs to build (sah.beats_leaf): time to image rather than traversal speed decides where
-        the tree stops, as seed 003 §3.5 tunes its termination for. Few rays a triangle, a shallower
-        tree; many, the same tree as None. Fewer than REFINE_RAYS_PER_TRIANGLE rays a triangle also
-        turn `clip` and `snap` off and set `split_axes` to "longest", whatever they were given as:
-        their build work per reference is repaid only by many rays. (KdTree.options keeps the
-        options as given; BuildOptions.params says what the build used.)
-    """
+    lazy: on-demand construction (seed 003 §3): defer every node of at most `lazy_subtree_size`
+        references until a ray first enters it; results equal the eager tree's.
+    lazy_subtree_size: the largest deferred subtree, in references (docs/choices.md#lazy-subtree-size).
+    lazy_speculative: also build each requested subtree's neighbours in build order (seed 003 §4).
+    memory_limit: bytes; a build whose estimated peak (memory.py) or pools exceed it raises
+        memory.MemoryLimitError (a ValueError) before allocating more. None: no limit.
+    duplication_budget: references per starting triangle that splitting straddlers may make, spent
+        evenly along every path (subtree.py); stops dense coplanar triangles from splitting to max_depth
+        (docs/choices.md#duplication-budget). None: no budget.
+    rays: how many rays the tree will answer (one render: core.frame_ray_count). Given, a node is split
+        only when the rays expected to enter it save more than the split costs to build (sah.beats_leaf,
+        seed 003 §3.5); below REFINE_RAYS_PER_TRIANGLE a triangle it also turns `clip`, `snap` and the
+        all-axes search off (BuildOptions.params says what the build used). None: no build term."""
 
     builder: str = "binned"
     bins: int = 32

@@ -1,11 +1,9 @@
 """Distributing a node's references to its children.
 
-Rules, exact in float32 (no epsilon): a reference goes left when its box ends at or before the plane,
-right when it begins at or after it, and to both when it straddles. A reference lying in the plane
-(zero extent exactly at the split) goes to the side the split chose (seed 004 §4.1's problem, solved by
-the exact sweep). A ray hitting such a triangle crosses the plane there, so both children's ray
-intervals contain the hit and either side finds it. Straddlers are clipped to each child ("perfect
-splits", see clipping.py); a side where the clipped triangle is empty does not get it.
+Exact in float32 (no epsilon): a reference goes left when its box ends at or before the plane, right
+when it begins at or after it, both when it straddles. One lying in the plane goes to the side the split
+chose (seed 004 §4.1's problem): a ray hitting it crosses the plane there, so either side finds it.
+Straddlers are clipped to each child (clipping.py); a side where the clipped triangle is empty lacks it.
 """
 import numpy as np
 from numba import njit
@@ -65,12 +63,9 @@ def split_reference(tri, box, axis, pos, clip, scratch, out_left, out_right):
 @njit(cache=True)
 def partition_in_place(tris, prims, boxes, start, end, axis, pos, planar_left, clip, scratch):
     """Split references [start, end) into right ones at [start, start+nr) and left ones right after.
-
-    Right references are compacted in place (each reference makes at most one right one, so writes
-    never pass reads); left ones go to [end, end+nl) and are then moved down. The caller guarantees room
-    for 2 * (end - start) references from `start`. Returns (n_right, n_left).
-    The left child ends up on top of the pool, so building it first lets it grow freely (seed 000 §3.5).
-    """
+    Right ones are compacted in place (each makes at most one, so writes never pass reads); left ones go
+    to [end, end+nl), then move down; the caller leaves room for 2 * (end - start) from `start`. Returns
+    (n_right, n_left). The left child ends on top of the pool, so built first it grows freely (seed 000 §3.5)."""
     box_l, box_r = scratch[3], scratch[4]
     w_right = start
     w_left = end

@@ -1,8 +1,7 @@
 """Memory pools: arrays allocated once with room to spare and grown geometrically when full.
 
-Seed 000 §3.5 keeps chunk lists with a moving end pointer; a growable array with the same "commit at
-the end" discipline does the same job in Numba: allocation happens a handful of times per build, never
-per node.
+Seed 000 §3.5's chunk lists with a moving end pointer, as growable arrays: a handful of allocations
+per build, never one per node.
 """
 import numpy as np
 from numba import njit

@@ -1,10 +1,9 @@
 """The surface area heuristic: cost of a split, and whether a split beats a leaf.
 
-Cost of splitting a node with box B at `pos` on `axis` into children L and R (seed 001 eq. 5; pbrt):
+Splitting box B at `pos` into L and R costs (seed 001 eq. 5; pbrt), bonus = empty_bonus for an empty child:
     C = Ct + Ci * (1 - bonus) * (A(L) * nL + A(R) * nR) / A(B)
-where bonus is `empty_bonus` when one child is empty and 0 otherwise. A leaf costs Ci * n. A node is
-split only when the best C < cost_ratio * Ci * n (seed 003 §3.5 uses cost_ratio 0.9) and, when the build
-is told how many rays the tree will answer, when the split saves them more than it costs to build.
+A leaf costs Ci * n; a node splits when the best C < cost_ratio * Ci * n (seed 003 §3.5) and, given a
+ray count, the split saves its rays more than it costs to build.
 """
 from numba import njit
 
@@ -27,9 +26,8 @@ def cost_of_areas(area_left, area_right, inv_area, n_left, n_right, params):
     return params.traversal_cost + params.intersection_cost * (1.0 - bonus) * weighted
 
 
-# Building a split costs about this many traversal steps per reference of the node: the build's
-# ~33 ns a reference and level (one thread, suzanne-251k) against ~19-31 ns a SAH unit of tracing;
-# 2, 4 and 8 timed within noise of each other (docs/choices.md, "rays").
+# Building a split costs about this many traversal steps per reference of the node
+# (docs/choices.md#build-cost-per-reference).
 BUILD_COST_PER_REFERENCE = 4.0
 
 
@@ -42,11 +40,9 @@ def improves_on_leaf(cost, n, params):
 @njit(cache=True, inline="always")
 def beats_leaf(cost, n, node_box, params):
     """True when a split of this cost is worth more than keeping `n` references in a leaf. With a
-    ray count (params.rays_per_area > 0) it must also pay for itself: the rays expected to enter the
-    node (rays x its area / the root's) times the cost it saves each of them must exceed the build
-    work, BUILD_COST_PER_REFERENCE traversal steps per reference (seed 003 §3.5 terminates for time
-    to image). Only the node's own split is weighed, both ways: the subtree below it saves and costs
-    more, roughly in proportion."""
+    ray count (params.rays_per_area > 0) the rays expected to enter the node (rays x its area / the
+    root's) times the cost saved each must also exceed the build work, BUILD_COST_PER_REFERENCE steps a
+    reference (seed 003 §3.5 terminates for time to image); only the node's own split is weighed."""
     if not improves_on_leaf(cost, n, params):
         return False
     leaf = params.intersection_cost * n

@@ -1,11 +1,9 @@
 """Min-max binning and the SAH evaluated from the bins (seed 000 §3.3-3.4).
 
-Each reference updates one counter where its box begins and one where it ends, per axis, so binning is a
-single pass whose cost does not depend on the number of bins, and the counts left and right of every bin
-boundary are exact up to the bin resolution whatever the box sizes. Adaptive skipping (seed 000 §3.3)
-bins only every `stride`-th reference and weights the counts by `stride`; it is used only in large
-nodes, and a sampled count of zero is not trusted to mean an empty side (no empty bonus): granting it
-made the builder cut "empty" slivers that were not empty until it ran out of depth.
+Each reference increments one counter where its box begins and one where it ends, per axis: one pass
+whatever the bin count, with exact counts left and right of every bin boundary. Adaptive skipping
+(seed 000 §3.3) bins every `stride`-th reference of large nodes and weights counts by `stride`; a
+sampled zero is not trusted as an empty side (no empty bonus), or the builder cuts "empty" slivers.
 """
 import numpy as np
 from numba import njit
@@ -58,14 +56,8 @@ def _bin(x, lo, scale, top):
 
 @njit(cache=True)
 def best_binned_split(min_bins, max_bins, weight, node_box, params):
-    """Cheapest split among the bin boundaries: (cost, axis, position); axis -1 if none is valid.
-
-    Planar references are counted where their bins put them; the partition then places them exactly.
-    With weight > 1 (skipping) an empty-looking side is counted as holding one reference.
-    The node's extents are computed once and each candidate only swaps in its two cut extents
-    (split_cost would re-read the box twice per candidate): the same arithmetic, 1.4x faster, and
-    this loop runs (bins - 1) x 3 times in every node that may split (~0.6 us a node before).
-    """
+    """Cheapest split among the bin boundaries: (cost, axis, position); axis -1 if none is valid. The
+    node's extents are computed once, each candidate swapping in only its two cut extents."""
     nbins = min_bins.shape[1]
     inv_area = 1.0 / half_area(node_box)
     e = extents(node_box)
@@ -113,9 +105,8 @@ def skip_stride(n, params):
 def binned_split(boxes, start, end, node_box, params, min_bins, max_bins):
     """Bin the node's references and return the best binned split (cost, axis, position, planar_left),
     refined to the nearest box boundaries when every reference was binned (`snap_to_boundaries`).
-    With params.longest_axis_only, the node's longest axis first, and all three only when it offers
-    no plane better than a leaf: triangles running the cell's length (a cylinder along it) leave the
-    longest axis nothing to split, and without this the whole mesh became one leaf (outside review)."""
+    With params.longest_axis_only, the longest axis first, and all three only when it offers no plane
+    better than a leaf (a cylinder along the cell's length gives the longest axis nothing to split)."""
     stride = skip_stride(end - start, params)
     cost, axis, pos = np.inf, -1, np.float32(0.0)
     if params.longest_axis_only:
@@ -139,13 +130,11 @@ def _clear(min_bins, max_bins):
 
 @njit(cache=True)
 def snap_to_boundaries(boxes, start, end, node_box, params, cost, axis, pos):
-    """Try the box boundaries nearest to the binned plane on each side (within one bin) and keep the
-    cheapest of the three, counted exactly. Why: bin boundaries fall between the vertex lines of grids
-    and height fields, so the binned plane cuts a row of triangles that a plane on the nearest vertex
-    line would not; each cut triangle is referenced twice, and on a wave-modified grid the builder
-    reached 7.6 references a triangle. Evaluating the SAH exactly at a few event positions next to the
-    binned optimum follows Hunt, Mark and Stoll 2006 (sampled SAH, refined near its minimum). Planar
-    references lying on a candidate go to the cheaper side (planar_left), as in the exact sweep."""
+    """Try the box boundaries nearest the binned plane on each side (within one bin) and keep the
+    cheapest of the three, counted exactly. Bin boundaries fall between the vertex lines of grids and
+    height fields, so the binned plane cuts a row of triangles a vertex-line plane would not
+    (docs/choices.md#snap-planes-to-box-boundaries); refining a sampled SAH near its minimum follows Hunt,
+    Mark and Stoll 2006. Planar references on a candidate go to the cheaper side, as in the exact sweep."""
     step = (np.float64(node_box[axis + 3]) - node_box[axis]) / params.bins
     near = _nearest_boundaries(boxes, start, end, axis, pos, step)
     best = (cost, axis, pos, False)
@@ -166,12 +155,8 @@ def snap_to_boundaries(boxes, start, end, node_box, params, cost, axis, pos):
 def _nearest_boundaries(boxes, start, end, axis, pos, step):
     """The box boundaries nearest to pos strictly below and above it within one bin, each with the
     references left of it, right of it and lying in it: ((below, left, right, planar), (above, ...)).
-
-    One pass, where there were two (one to find them, one to count at them): it counts exactly at
-    pos and, for the running nearest boundary on each side, the references that begin, end and lie
-    there. No boundary falls strictly between the nearest one and pos, so the counts at it follow
-    from those at pos. Where no boundary lies within the bin, the candidate is the bin's edge, which
-    snap_to_boundaries rejects or which no boundary reaches."""
+    One pass: exact counts at pos plus, for the running nearest boundary each side, what begins, ends and
+    lies there (nothing lies between it and pos). Without a boundary in the bin, the bin's edge (rejected)."""
     below, above = pos - step, pos + step
     left_of_pos = right_of_pos = begin_at_pos = end_at_pos = 0
     begin_below = end_below = planar_below = begin_above = end_above = planar_above = 0

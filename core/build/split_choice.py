@@ -14,9 +14,7 @@ NO_SPLIT = -1
 @njit(cache=True)
 def choose_split(boxes, start, end, node_box, depth, params, min_bins, max_bins, scratch):
     """(axis, position, planar_left) of the node's split; axis is NO_SPLIT when it becomes a leaf.
-
-    "binned" switches to the exact sweep at `exact_below` references (seed 000 §3.4).
-    """
+    "binned" switches to the exact sweep at `exact_below` references (seed 000 §3.4)."""
     n = end - start
     if n <= params.leaf_size or depth >= params.max_depth:
         return NO_SPLIT, np.float32(0.0), False

@@ -1,10 +1,9 @@
 """Exact SAH by sweeping sorted events (seed 004 §3.1; Wald and Havran 2006).
 
-Per axis, references are events: a start and an end where the box has extent, or one planar event
-where it has none (a triangle lying in a plane of that axis). The sweep visits every distinct position
-once, in order, knowing how many references end, lie, and start there; planar references at the
-candidate plane are tried on both sides and the cheaper side is kept (seed 004 §4.1 solves the same
-problem by widening planar boxes; this rule is exact and needs no epsilon).
+Per axis, a reference is a start and an end event where its box has extent, or one planar event where
+it has none. The sweep visits each distinct position once, counting references that end, lie and start
+there; planar references at a candidate plane go to the cheaper side (seed 004 §4.1 widens planar
+boxes instead; this rule is exact and needs no epsilon).
 """
 import numpy as np
 from numba import njit
@@ -16,9 +15,7 @@ from .sah import split_cost, valid_position
 @njit(cache=True)
 def exact_split(boxes, start, end, node_box, params, scratch):
     """Cheapest split of the node: (cost, axis, position, planar_left); axis -1 if none is valid.
-
-    `scratch` is a float32 buffer of at least 3 * (end - start) values.
-    """
+    `scratch` is a float32 buffer of at least 3 * (end - start) values."""
     n = end - start
     inv_area = 1.0 / half_area(node_box)
     best_cost, best_axis, best_pos, best_planar_left = np.inf, -1, np.float32(0.0), False

@@ -1,26 +1,14 @@
 """Sequential construction of one subtree, iteratively and depth first, from pooled memory.
 
-This is the work each thread does after the parallel top levels (seed 000 §4: "each thread builds a
-sub-tree"). Nodes are processed from an explicit stack, left child first; a node's references live in
-one reference pool (partition.py keeps the left child on top), so the pool's live part is the pending
-right siblings plus the current node and never needs per-node allocation.
-
-A lazy build (params.defer_size > 0, seed 003 §3) stops at nodes of at most defer_size references:
-such a node is marked UNBUILT and its references are copied out. Building it later with build_subtree
-from those references (in the same order), its box, its depth and its room gives exactly the subtree
-the eager build makes there, because a node's split choice and partition depend on nothing else.
-
-A node's room is its share of params.duplication_budget (options.py): the root's is the budget, each
-split divides it by the split's duplication (n_left + n_right) / n for both children, and a node with
-room below 1 becomes a leaf. The children's budgets (room x references) then add up to the parent's,
-so leaves hold at most twice the budget's references (a leaf made for lack of room holds no more than
-its parent, which had room), however the SAH judges the splits.
-
-A split that leaves every reference in both children separates nothing and only copies them: the node
-becomes a leaf instead. The SAH never takes such a split (the children's areas add up to more than the
-node's), but forced splits did (cost_ratio far above 1 with no duplication budget): an outside review's
-3,000 triangles of 20 distinct ones gained ~1.4x references a level, 382 a triangle at depth 28, and at
-max_depth 60 ran out of memory.
+Each thread builds one subtree after the parallel top levels (seed 000 §4). Nodes come off an explicit
+stack, left child first; a node's references live in one pool (partition.py keeps the left child on
+top), so the pool's live part is the pending right siblings plus the current node: no per-node allocation.
+A lazy build (params.defer_size > 0, seed 003 §3) marks nodes of at most defer_size references UNBUILT
+and copies their references out; a node's split depends only on its references (in order), box, depth
+and room, so building it later gives exactly the eager subtree. A node's room is its share of
+params.duplication_budget: each split divides it by its duplication (n_left + n_right) / n, and room
+below 1 makes a leaf, so leaves hold at most twice the budget's references. A split that leaves every
+reference in both children separates nothing: the node becomes a leaf instead.
 """
 from concurrent.futures import ThreadPoolExecutor
 
@@ -39,13 +27,10 @@ from .split_choice import NO_SPLIT, choose_split
 @njit(cache=True, nogil=True)
 def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, root_room, params):
     """Build the subtree over the first `n_refs` references of (prims, boxes) inside `root_box`, its
-    root at depth `root_depth` with room `root_room` (module docstring).
-
-    Returns the node arrays (axis, split, child, count; see layout.py) with local indices, node 0 being
-    the subtree's root, and the leaf triangle indices; then the deferred subtrees (none unless
-    params.defer_size > 0): (d_node, d_start, d_depth, d_box, d_prims, d_boxes, d_room), deferred subtree
-    k being local node d_node[k] (whose child is k) with references d_prims/d_boxes[d_start[k]:d_start[k+1]].
-    """
+    root at depth `root_depth` with room `root_room`. Returns the node arrays (axis, split, child, count;
+    layout.py) with local indices (node 0 the root), the leaf triangle indices, and the deferred subtrees
+    (d_node, d_start, d_depth, d_box, d_prims, d_boxes, d_room): subtree k is local node d_node[k] (child k)
+    with references d_prims/d_boxes[d_start[k]:d_start[k+1]]."""
     stack_size = params.max_depth - root_depth + 2
     stack_node = np.empty(stack_size, np.int32)
     stack_range = np.empty((stack_size, 2), np.int64)

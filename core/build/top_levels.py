@@ -1,17 +1,10 @@
 """The parallel top of the tree: data-parallel splitting of the few large nodes near the root.
 
-Near the root there are few nodes and many references, so the work inside each node is spread over the
-cores: binning (each thread bins its own slice and the counters are summed, seed 000 §4) and the
-partition (each thread classifies its slice; a prefix sum places its output). The top stops at about
-`TASKS_PER_THREAD` x threads nodes; those become tasks whose subtrees are built concurrently, one
-thread each, and merged into one flat tree (seed 000 §4.1).
-
-Two ways to choose the top planes:
-- "sah": the binned SAH at every top node, so the top is as good as the sequential tree.
-- "clustering": seed 000 §4.1's initial clustering, the approximate object median of the longest axis
-  from high-resolution min-max bins (512 x threads bins), giving sub-domains with equal counts.
-  Seed 000 bins once and re-uses the bins at every level; here each top node is re-binned (log2 of the
-  task count extra passes, each parallel), which keeps one binning kernel for both strategies.
+Near the root each node's binning (per-thread counters, summed; seed 000 §4) and partition (per-thread
+slices placed by a prefix sum) are spread over the cores, until about `TASKS_PER_THREAD` x threads
+nodes; each becomes a task whose subtree one thread builds (seed 000 §4.1). Planes: "sah", the binned
+SAH at every top node, or "clustering", seed 000 §4.1's approximate object median of the longest axis
+from 512 x threads bins (re-binned per node here, so both share one binning kernel).
 """
 import heapq
 
@@ -54,9 +47,7 @@ class Task:
 
 def build_top_levels(tris, prims, boxes, root_box, params, strategy, threads):
     """Split the largest open nodes in parallel until there are enough tasks for `threads` threads.
-
-    Returns (top nodes, tasks); tasks are sorted largest first.
-    """
+    Returns (top nodes, tasks); tasks are sorted largest first."""
     nodes = [TopNode()]
     if threads == 1 or len(prims) < PARALLEL_MIN_REFS:
         nodes[0].task = 0

@@ -1,36 +1,13 @@
 """Numba's on-disk kernel cache, invalidated by any change to core's sources, not just the kernel's file.
 
-Numba stamps a cached kernel with its own source file only (numba 0.68: a hash of that file's
-contents). Core's kernels inline functions from other files: `trace.traversal.trace_rays` inlines
-`trace.triangle_test.intersect_triangle`. After an update that edits the callee but not the caller, the
-caller's stamp still matches and the stale machine code runs the old callee. That happened: a
-test run picked up a `trace_rays` cached before the triangle test's t rounding bound was added,
-and rays leaving a surface hit it again. The cache must therefore be keyed by all of core.
-
-Numba has no public hook for that, so `register` puts a locator in front of Numba's own
-(`numba.core.caching.CacheImpl._locator_classes`, internal; the numba version is pinned): for a
-kernel in a registered folder it keeps the location Numba would choose (NUMBA_CACHE_DIR,
-`__pycache__` or the user cache) and adds the digest of core's sources to the stamp. A stamp
-mismatch makes Numba discard that cache index and compile afresh. Kernels elsewhere are untouched. A
-registered folder covers its subfolders: every kernel in core's subpackages is stamped with the digest
-of all of core.
-
-Several processes may compile core's kernels into one cache at once: the first-render helper
-(parallel_compile.py) beside a build, two Blender sessions, CI runs. Numba writes each file
-atomically (a temporary name, then a rename), but it adds an overload to a function's index by
-reading the index, adding the entry and writing it back, then writing the entry's data file
-(`IndexDataCacheFile.save`). Two writers of one index could lose an entry, or both pick the same
-data file name for different signatures, so that one key's entry loads the other's machine code.
-`register` therefore also wraps that save, for the cache folders of registered kernels only, in an
-exclusive lock on a file in the folder (`locked_cache_folder`), which makes the read-add-write one step.
-
-A helper process must write core's kernels exactly where this process reads them. Re-deriving the
-folder from the environment is not enough: Numba picks a kernel's folder when it is decorated, but
-re-reads NUMBA_CACHE_DIR before every compile, so a variable set after core's import (a test module
-did) pointed a helper at another cache, where it compiled while this process compiled again.
-CORE_CACHE_FOLDER_VARIABLE, set for the helper (parallel_compile.py), names core's folders outright:
-a JSON object from each kernel folder (relative to core, e.g. "render") to the cache folder this process
-gave its kernels.
+Numba stamps a cached kernel with its own source file only (numba 0.68), but core's kernels inline
+functions from other files. `register` puts a locator before Numba's own (`CacheImpl._locator_classes`,
+internal; numba is pinned) that adds the digest of all of core's sources, subpackages included, to the
+stamp of every kernel in a registered folder or below, and wraps `IndexDataCacheFile.save` (read,
+extend, rewrite the index) in a file lock (`locked_cache_folder`), since several processes may compile
+into one cache. Numba re-reads NUMBA_CACHE_DIR before every compile, so a helper is told where this
+process reads: CORE_CACHE_FOLDER_VARIABLE, JSON from each kernel folder relative to core to its cache
+folder.
 """
 import functools
 import json

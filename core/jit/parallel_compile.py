@@ -2,37 +2,9 @@
 Numba's on-disk cache while this process builds the tree (compiling the builder's kernels) and then
 makes the camera pass (compiling the camera rays' traversal; their hit frames load the helper's).
 
-Why: with an empty cache a first render compiles every kernel, one at a time, in one process: 135 s
-for the demo's first frame on a 2-core AVX2 host (`benchmarks/bench_compile.py --helper off`,
-2026-11-27), ~50 s of it the builder's kernels, ~40 s the sampling kernel (`add_samples` with its
-inlined traversal, sampler and light sampling), ~20 s the camera rays' traversal and ~11 s
-surface_frames. All go to the same cache (cache=True), so a second process can compile one set while
-this one compiles the others; the render then loads what the helper wrote. The split: the helper
-compiles surface_frames (the camera hits' frames, first), the sampling kernel, the image and the
-denoiser if the render will filter; this process compiles the builder's kernels, then the camera
-rays' traversal, and by then surface_frames is in the cache. This process still sets the first frame
-(the helper's ~55 s end first). Measured (`bench_compile.py --helper on --runs 1`, three runs each,
-alternating with the split before, in which this process also compiled surface_frames, idle host,
-2026-11-27): first frame 76.6 / 80.8 / 69.9 s against 97.5 / 79.6 / 73.7 s (paired 0.79x, 1.02x,
-0.95x); this process's compile time 77 / 82 / 70 s against 97 / 79 / 73 s, surface_frames' 10-14 s
-gone from it but the rest slower while the helper shares the two cores. Earlier: 82 s against 135 s
-in one process (the split before); before Numba's inliner copied a callee's scope once
-(inline_copy.py) the sampling kernel took ~82 s and the split measured 86 s against 187 s; a split
-in which the helper also traced the camera rays made the first frame wait 117 s for it; before that,
-the helper rendered everything (98 s against 138 s).
-
-The two sets do not overlap, but both processes may still compile one function: any kernel this
-process needs before the helper has saved it, it compiles as well.
-Numba's cache index of a function is rewritten whole by each writer
-(numba.core.caching.IndexDataCacheFile.save: read the index, add the entry, write it back), so two
-processes adding overloads at once could lose or mismatch an entry; kernel_cache.py serializes those
-saves with a file lock. The helper traces a tree made by hand (one leaf: no builder kernel runs), and
-the one builder step that rendering a tree takes, wrapping it as a one-instance scene
-(two_level.as_two_level, the top level's kernels), is compiled here before the helper starts, so the
-helper only loads it.
-
-Pixel-reuse kernels (a frame continued from the one before) are not in either set: they need a
-SceneBuilder's signature, i.e. the builder; they compile on the first continued frame, as before.
+The helper compiles surface_frames first, then the sampling kernel, the image and the denoiser if
+asked, into the shared cache (docs/choices.md#compile-helper-process); a kernel needed here before it
+is saved is compiled here too. Pixel-reuse kernels compile on the first continued frame.
 """
 import os
 import subprocess
@@ -92,19 +64,16 @@ def _hand_made_render(render_class):
 
 def compile_camera_pass() -> None:
     """The camera pass, run here after the build: a PreviewRender's constructor traces the camera rays
-    (compiling their traversal here) and makes their hit frames (surface_frames, which the helper
-    compiles first: loaded here when it has saved it, else compiled here too), and samples nothing."""
+    and makes their hit frames (surface_frames: loaded if the helper saved it, else compiled here)."""
     _hand_made_render(PreviewRender)
 
 
 class _SamplingOnly(PreviewRender):
     """A render that makes up its camera hits without tracing camera rays, so their traversal does not
-    compile in the helper: the camera looks straight down at the square's plane z = 0, so every ray meets
-    it at t = 3 / -d_z, and the hit frames come from the real surface_frames (on the square's first
-    triangle, whose plane it is), which compiles here. The arrays have the real pass's types (int32
-    instance and triangle indices, int64 pixel indices, float64 rays, depths and (M, 3) frames, all
-    C-contiguous and writable): Numba compiles one version per type signature, and the real render must
-    find this one in the cache."""
+    compile in the helper: the camera looks straight down at the plane z = 0 (t = 3 / -d_z), and the
+    real surface_frames makes the hit frames. The arrays have the real pass's types (int32 instance and
+    triangle indices, int64 pixel indices, float64 rays, depths and (M, 3) frames, C-contiguous and
+    writable): Numba compiles one version per type signature, and the real render must find this one."""
 
     def _camera_hits(self, traced):
         origins, directions, _, _ = self.camera.rays(self.width, self.height, traced)
@@ -117,10 +86,8 @@ class _SamplingOnly(PreviewRender):
 
 
 def compile_rendering_kernels(denoise=False) -> None:
-    """What the helper runs: the camera hits' frames, AO and shadow samples of the hand-made tree (AO
-    rays that hit and miss, shadow rays), the image, and the denoiser if asked. Resolutions, modes and
-    sample counts are runtime values, so this compiles what every render uses but the camera rays'
-    traversal."""
+    """What the helper runs: hit frames, AO and shadow samples (rays that hit and miss), the image and
+    the denoiser if asked; sizes, modes and sample counts are runtime values, so one render covers all."""
     render = _hand_made_render(_SamplingOnly)
     render.step(render.target_samples)
     render.image(denoise=denoise)
@@ -132,12 +99,10 @@ HELPER_TIMEOUT = 900.0  # seconds: a guard against a helper that never ends, far
 
 @contextmanager
 def rendering_kernels_alongside(denoise=False):
-    """Compile the rendering kernels in a helper process while the `with` block runs (a build), when the
-    cache does not hold the sampling kernel yet and HELPER_SWITCH is not "0" (`denoise`: the render
-    will filter its image, so the helper compiles the denoiser too); yields the helper or None. On
-    leaving, run the camera pass here (compiling its rays' traversal), then wait for
-    the helper (at most HELPER_TIMEOUT); if the block raised, end the helper at once. Either way no
-    helper runs afterwards."""
+    """Compile the rendering kernels in a helper process while the `with` block runs (a build), unless
+    the cache holds the sampling kernel or HELPER_SWITCH is "0" (`denoise`: compile the denoiser too);
+    yields the helper or None. On leaving, run the camera pass here, then wait for the helper (at most
+    HELPER_TIMEOUT); if the block raised, end it at once. No helper runs afterwards."""
     helper = None
     if os.environ.get(HELPER_SWITCH, "1") != "0" and not rendering_kernels_cached():
         compile_scene_wrapping()
@@ -160,16 +125,11 @@ def rendering_kernels_alongside(denoise=False):
 
 
 class RenderingKernelsHelper:
-    """The helper process; start it once compile_scene_wrapping() has run here.
-
-    The helper imports core under this process's module name (in Blender an extension's core is
-    `bl_ext.<repo>.<id>.core`): Numba files cached kernels by source file, but a kernel's pickled
-    environment names its module. Parent packages are stubbed in the helper, so the add-on's
-    `__init__` (which imports bpy) does not run there. It inherits sys.path, writes core's kernels to
-    the folder this process reads them from (kernel_cache.CORE_CACHE_FOLDER_VARIABLE), runs one
-    thread, and its error output is kept for `outcome`: a helper that fails costs nothing but its
-    time, since this process then compiles whatever is missing itself.
-    """
+    """The helper process; start it once compile_scene_wrapping() has run here. It imports core under
+    this process's module name (in Blender `bl_ext.<repo>.<id>.core`: a kernel's pickled environment
+    names its module), with parent packages stubbed so the add-on's bpy-importing `__init__` does not
+    run; writes where this process reads (kernel_cache.CORE_CACHE_FOLDER_VARIABLE); runs one thread and
+    keeps its stderr for `outcome`. A failed helper costs only its time."""
 
     def __init__(self, denoise=False):
         self._errors = tempfile.TemporaryFile()  # the helper's stderr: its last line names a failure
@@ -214,10 +174,8 @@ class RenderingKernelsHelper:
         return f"failed (exit code {code}" + (f": {lines[-1]})" if lines else ")")
 
 
-# The helper's whole program (argv: core's module name, its folder, "1" to compile the denoiser): stub
-# core's parent packages, so that `bl_ext.<repo>.<id>.core` imports without the add-on's __init__, then
-# compile. On POSIX a thread ends it once its parent is gone (reparented: getppid changes), so a
-# parent that could not stop it (it ended with os._exit, or crashed) does not leave it compiling.
+# The helper's program (argv: core's module name, its folder, "1" for the denoiser): stub core's parent
+# packages, then compile; on POSIX a thread ends it once its parent is gone (getppid changes).
 _HELPER_CODE = """
 import importlib, os, sys, threading, time, types
 from pathlib import Path

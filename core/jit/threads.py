@@ -1,12 +1,8 @@
 """Running kernels on a chosen number of threads, and putting the old number back afterwards.
 
-Why OMP_WAIT_POLICY=PASSIVE (unless the user set it): with Numba's OpenMP layer (plain Python; inside
-Blender bpy's TBB layer is used instead) idle worker threads spin after every parallel region. The build
-runs many short parallel regions near the root, and on a machine where another process holds a core the
-spinning threads starve the working ones: the 2-thread build of suzanne-251k took 414-422 ms with one
-core busy, 296-304 ms with passive waiting, and 198-219 ms either way on an idle machine (medians of 5).
-The variable is read when the OpenMP runtime starts, at the first parallel kernel, so it is set here,
-at import, before any kernel runs.
+OMP_WAIT_POLICY=PASSIVE unless set: idle OpenMP workers otherwise spin after each of the build's many
+short parallel regions (docs/choices.md#passive-openmp-waiting). Read at the first parallel kernel, so
+it is set here, at import.
 """
 import os
 from contextlib import contextmanager

@@ -10,21 +10,14 @@ TILE = 8  # tiled_pixels: 8 x 8 = 64 rays, one traversal task (traversal.RAYS_PE
 
 
 class Camera:
-    """A perspective (`fov`) or orthographic (`ortho_scale`) camera.
+    """A perspective (`fov`) or orthographic (`ortho_scale`) camera, in Blender's terms.
 
-    matrix_world: 4x4 camera-to-world matrix (Blender's `camera.matrix_world`).
-    fov: full field of view in radians along the larger image dimension (Blender's sensor fit AUTO).
-    ortho_scale: width of the view along the larger image dimension (Blender's `ortho_scale`).
-    clip_start, clip_end: distances along the view axis; geometry outside is not seen.
-    shift: (x, y) lens shift in units of the larger image dimension's view extent (Blender's shift_x and
-        shift_y with sensor fit AUTO): the image plane moves by shift times its larger extent, so the
-        view direction of the image centre changes while the camera stays put (architectural shots).
-    pixel_aspect: a pixel's height over its width (Blender's pixel_aspect_y / pixel_aspect_x). The image
-        then spans width by height * pixel_aspect pixel widths, and "larger dimension" above means
-        larger in that extent, as Blender's sensor fit AUTO compares resolution times pixel aspect
-        (BKE_camera_params_compute_viewplane): an anamorphic frame keeps its pixel count and is
-        stretched on display.
-    """
+    matrix_world: 4x4 camera-to-world matrix. fov: full field of view in radians along the larger image
+    dimension (sensor fit AUTO). ortho_scale: the view's width along that dimension. clip_start, clip_end:
+    distances along the view axis. shift: (x, y) lens shift in units of the larger dimension's view extent
+    (the image plane moves, the camera stays put). pixel_aspect: a pixel's height over its width; the image
+    spans width by height * pixel_aspect pixel widths, and "larger" compares those, as Blender's
+    BKE_camera_params_compute_viewplane does."""
 
     def __init__(self, matrix_world, fov=None, *, ortho_scale=None, clip_start=0.0, clip_end=np.inf,
                  shift=(0.0, 0.0), pixel_aspect=1.0):
@@ -72,11 +65,9 @@ class Camera:
 
     def rays(self, width, height, pixels=None):
         """Rays through pixel centres, row 0 at the top: (origins, directions, tmin, tmax), (R, 3).
-
         `pixels`: the row-major pixel indices to make rays for, in that order (default: every pixel in
         row-major order; see tiled_pixels). Directions have unit length along the view axis, so
-        tmin/tmax are the clip distances.
-        """
+        tmin/tmax are the clip distances."""
         check_image_size(width, height)
         left, right, bottom, top = self.image_plane(width, height)
         x = left + (np.arange(width) + 0.5) / width * (right - left)
@@ -126,14 +117,9 @@ def _pixel_indices(pixels, width, height):
 @functools.lru_cache(maxsize=8)
 def tiled_pixels(width, height, tile=TILE):
     """Every row-major pixel index once, tile by tile (tile x tile squares, row-major within a tile and
-    across tiles; edge tiles are cut short). Read-only and kept per size: every frame of an animation
-    asks for the same order (the sort took ~4 ms at 640 x 480).
-
-    Rays traced in this order are coherent within each block a traversal task takes (64 rays: one 8 x 8
-    tile), so they walk the same nodes and triangles while those are in cache. On the seed 000 setting
-    (suzanne-251k, 640 x 480) camera rays traced 13-16% faster in 8 x 8 tiles than in rows (4, 8 and 16
-    within 3% of each other), and shadow rays from the hit points inherit the order.
-    """
+    across tiles; edge tiles are cut short). Read-only and kept per size: every frame asks for the same
+    order. Rays in this order are coherent within each traversal task (one 8 x 8 tile), so they walk
+    the same nodes while those are in cache (docs/choices.md#tiled-ray-order)."""
     tiles_across = (width + tile - 1) // tile
     tile_of_pixel = (np.arange(height) // tile)[:, None] * tiles_across + (np.arange(width) // tile)[None, :]
     order = np.argsort(tile_of_pixel.ravel(), kind="stable")  # stable: row-major within a tile
@@ -144,8 +130,7 @@ def tiled_pixels(width, height, tile=TILE):
 @njit(cache=True, parallel=True)
 def _pixel_rays(x, y, rot, position, perspective, pixels, origins, directions):
     """Rays for row-major pixel indices `pixels`, from the image-plane coordinates x (W,) and y (H,). A
-    kernel because numpy's meshgrid, stack and matrix product took 30-40 ms at 640 x 480, a tenth of the
-    seed 000 setting's time to image."""
+    kernel because numpy's meshgrid, stack and matrix product took a tenth of a preview's time to image."""
     width = x.shape[0]
     for r in prange(pixels.shape[0]):
         i, j = pixels[r] // width, pixels[r] % width

@@ -1,42 +1,16 @@
 """Edge-avoiding à-trous denoising of a preview estimate, guided by its per-pixel sample variance.
 
-The filter is the edge-avoiding à-trous wavelet transform of Dammertz et al. 2010 ("Edge-Avoiding
-À-Trous Wavelet Transform for fast Global Illumination Filtering", HPG 2010): `iterations` passes of a
-5x5 B3-spline kernel (1/16, 1/4, 3/8, 1/4, 1/16) whose taps are 2^i pixels apart in pass i, so four
-passes (the default) cover a 61x61 footprint for 25 taps per pixel and pass. Each tap is weighted by
-edge-stopping functions, as in SVGF (Schied et al. 2017, "Spatiotemporal Variance-Guided Filtering",
-HPG 2017), without its temporal part (exp is evaluated as (1 - x/128)^128, see _exp_neg):
-
-- normal: max(0, N_p . N_q) ^ sigma_normal on the geometric normals (SVGF: sigma_n = 128), evaluated as
-  exp(-sigma_n * -log c) with -log c by its cubic series (_neg_log) so the three weights share one exp;
-- plane: exp(-|N_p . (X_q - X_p)| / (sigma_plane * f_p * r)), the distance of q's hit point from p's
-  tangent plane against p's pixel footprint f_p (the world distance to its nearest 4-neighbour hit)
-  times the tap's distance r in pixels. Both lengths scale with the scene, so the weight is scale
-  invariant; SVGF's screen-space depth gradient plays the same role. A plane seen at a grazing angle
-  keeps its neighbours (they lie on the plane), a silhouette over a far surface does not;
-- luminance: exp(-|l_p - l_q| / (sigma_luminance * sqrt(var_p))), var_p the variance of pixel p's
-  estimate, propagated through the passes as var' = sum w^2 var / (sum w)^2 (SVGF eq. 4-5).
-
-The luminance weight is what keeps the filter honest: two neighbours are only averaged when their
-estimates differ by no more than a few standard errors, and the standard error falls with the sample
-count, so the filter fades out as the image converges (the README gives the measured bias). The
-variance of pixel p's estimate is the per-sample variance of the grey value pooled over p's 5x5
-neighbourhood (neighbours across a normal or plane edge do not pool) divided by n_p ** (1 + variance_decay):
-
-- pooled, because at one sample per pixel a pixel's own sample variance does not exist, and at a few
-  samples it is often 0 (all samples agree), which would stop the filter where the noise is worst
-  (SVGF estimates variance spatially for the same reason while its history is short). Shrinking it
-  toward the pixel's own variance as samples add up measured worse on suzanne-251k at 4-64 spp;
-- variance_decay, because the 1/n of independent samples overstates the error of a scrambled Sobol
-  mean: for a 2-D visibility integrand with a smooth occlusion boundary, stratified sampling's variance
-  falls as n^-3/2 (Mitchell 1996, "Consequences of stratified sampling in graphics"; measured: the
-  raw Sobol RMSE falls as n^-0.72..0.76 on suzanne-251k and on the tests' box scene). With decay 0 the
-  filter trusted a 4-10x too large error at 64-1024 Sobol samples and made converged images worse
-  (box scene, 1024 spp: RMSE 0.0047 against 0.0012 raw); PreviewRender passes 0.5 for "sobol", 0 for
-  "random".
-
-Background pixels (no hit) and pixels without samples are never read and stay exactly 0; alpha is
-1 on hit pixels and 0 elsewhere, as in the raw image. Deterministic (no atomics, no random numbers).
+Dammertz et al. 2010's edge-avoiding à-trous wavelet transform: `iterations` passes of a 5x5 B3-spline
+kernel with taps 2^i pixels apart in pass i, each tap weighted by SVGF's edge-stopping functions
+(Schied et al. 2017) without the temporal part:
+- normal: max(0, N_p . N_q) ^ sigma_normal on the geometric normals;
+- plane: exp(-|N_p . (X_q - X_p)| / (sigma_plane * f_p * r)), f_p p's pixel footprint (world distance
+  to its nearest 4-neighbour hit), r the tap distance in pixels: scale invariant;
+- luminance: exp(-|l_p - l_q| / (sigma_luminance * sqrt(var_p))), var_p the variance of p's estimate,
+  propagated as var' = sum w^2 var / (sum w)^2 (SVGF eq. 4-5), so the filter fades out as it converges.
+var_p is the grey value's per-sample variance pooled over p's 5x5 neighbourhood (a pixel's own is often
+0 at few samples), divided by n_p ** (1 + variance_decay) (docs/choices.md#sobol-variance-decay).
+Pixels without hit or samples stay exactly 0, alpha is 1 on hit pixels; deterministic (no atomics).
 """
 from typing import NamedTuple
 
@@ -46,8 +20,7 @@ from numba import njit, prange
 from ..jit.threads import thread_count
 from ..trace.traversal import block_range, interleaved_blocks
 
-ITERATIONS = 4  # 5x5 taps at spacing 1, 2, 4, 8 pixels: a 61x61 footprint (Dammertz et al. use 5 passes;
-# on suzanne-251k a fifth pass changed the RMSE by under 1% at 1-64 spp and costs a fifth of the time)
+ITERATIONS = 4  # taps 1, 2, 4, 8 pixels apart: a 61x61 footprint (docs/choices.md#four-denoise-passes)
 SIGMA_LUMINANCE = 4.0  # SVGF's sigma_l
 SIGMA_NORMAL = 128.0  # SVGF's sigma_n
 SIGMA_PLANE = 1.0  # tangent-plane distance allowed per pixel footprint per pixel of tap distance
@@ -55,9 +28,7 @@ SOBOL_VARIANCE_DECAY = 0.5  # stratified sampling of a 2-D visibility: variance 
 _HUGE = 1e30  # stands for an infinite ratio without producing inf (0 * inf would be NaN)
 _ROUNDING = 1e-7  # luminance differences this small relative to the value are equal (see atrous_pass)
 _CUTOFF = 40.0  # taps with weight below exp(-40) are skipped
-# Rows are dealt to the threads band by band (traversal.interleaved_blocks): with one contiguous half
-# each, the thread whose half held more of the object did most of the filtering (a pass took 38 ms on
-# 2 threads against 48 on one for suzanne-251k at 512x512).
+# Rows go to the threads band by band (traversal.interleaved_blocks; docs/choices.md#denoise-rows-in-bands)
 ROWS_PER_TASK = 2
 # fast maths without 'nnan' / 'ninf' / 'reassoc': the guards above rely on IEEE comparisons, and the
 # sums keep their order, so the image is the same for any thread count
@@ -97,12 +68,9 @@ def _checked_pixels(n, pixels, points, normals, sums, sq_sums, counts):
 def denoise_pixels(width, height, pixels, points, normals, sums, sq_sums, counts, *, variance_decay=0.0,
                    threads=None, settings=FilterSettings()):
     """The denoised (H, W, 4) float32 image of a PreviewRender's accumulators (row 0 at the top).
-
-    pixels (M,): flat indices of the hit pixels; points, normals (M, 3): their hit points and geometric
-    normals; sums (M, 3), sq_sums (M,) (of the grey value), counts (M,): the per-pixel sample sums.
-    variance_decay: the variance of a pixel's mean is taken to fall as n^-(1 + variance_decay) (0 for
-    independent samples, 0.5 for scrambled Sobol; see the module docstring). settings: FilterSettings.
-    """
+    pixels (M,): flat indices of the hit pixels; points, normals (M, 3); sums (M, 3), sq_sums (M,) (of the
+    grey value), counts (M,): the per-pixel sample sums; variance_decay: a pixel mean's variance falls as
+    n^-(1 + variance_decay) (0 for independent samples, 0.5 for scrambled Sobol); settings: FilterSettings."""
     iterations, sigma_luminance, sigma_normal, sigma_plane = settings
     width, height = int(width), int(height)
     n = width * height
@@ -148,8 +116,8 @@ def denoise_pixels(width, height, pixels, points, normals, sums, sq_sums, counts
 @njit(cache=True, inline="always")
 def _exp_neg(e):
     """exp(-e) for 0 <= e <= _CUTOFF as (1 - e/128)^128: seven multiplications, within 0.4% of exp at
-    e = 1 and 3% at e = 4 (weights that small hardly matter), and ~3x cheaper than exp in this loop,
-    which is the filter's cost."""
+    e = 1 and 3% at e = 4 (weights that small hardly matter), and cheaper than exp in the filter's loop
+    (docs/choices.md#approximate-exp-and-log-in-the-denoiser)."""
     t = 1.0 - e * (1.0 / 128.0)
     t *= t
     t *= t
@@ -164,7 +132,7 @@ def _exp_neg(e):
 def _neg_log(c):
     """-log(c) for exp(-_CUTOFF / sigma_normal) <= c <= 1 by its series in x = 1 - c to the cubic term:
     within 0.7% where it is used (x <= 0.27 at SVGF's sigma_n = 128), and three multiplications instead
-    of a log or of c ** 128 by squaring (a loop of eight steps per tap, ~30% of a pass)."""
+    of a log or of c ** 128 by squaring (eight steps per tap)."""
     x = 1.0 - c
     return x * (1.0 + x * (0.5 + x * (1.0 / 3.0)))
 

@@ -1,8 +1,7 @@
 """Lights mirroring Blender's point, sun, spot and area lights, packed into rows for the kernels.
 
-Soft shadows come from sampling the light's extent: a point or spot light's radius (a disk facing the
-shaded point), a sun's angular diameter (a cone of directions), an area light's shape. A light made
-with cast_shadow=False (Blender's "Cast Shadow" off) lights every surface facing it: no shadow ray.
+Soft shadows come from sampling the light's extent (a point or spot light's radius, a sun's angular
+diameter, an area light's shape); cast_shadow=False lights every surface facing it without a shadow ray.
 """
 import numpy as np
 
@@ -27,7 +26,7 @@ class Light:
         rgb = _floats(color)
         if rgb.shape != (3,) or not np.isfinite(rgb).all() or (rgb < 0).any():
             raise ValueError(f"light color must be 3 finite non-negative numbers (r, g, b), got {color!r}")
-        if (rgb > COLOR_MAX).any():  # the image is float32: a larger colour made inf pixels (outside review)
+        if (rgb > COLOR_MAX).any():  # the image is float32: a larger colour made inf pixels
             raise ValueError(f"light color components must be at most {COLOR_MAX:.4g} (the float32 image's "
                              f"range), got {color!r}")
         color = rgb
@@ -57,7 +56,7 @@ class Light:
              color=(1.0, 1.0, 1.0), cast_shadow=True, axes=None):
         """axes: optional 3x3 matrix whose columns are the light object's X, Y, Z axes in world space,
         scale included (Blender's matrix_world.to_3x3()), with `direction` along minus its Z. The
-        cone is then measured in the object's own frame, as Cycles does (spot_light_to_local): a
+        cone is then taken in the object's own frame, as Cycles does (spot_light_to_local): a
         non-uniform scale makes it elliptical."""
         if not 0.0 < as_number("spot_size", spot_size) <= np.pi:
             raise ValueError(f"spot_size must be in (0, pi], got {spot_size}")
@@ -139,9 +138,8 @@ class Light:
 
 
 def _has_no_extent(kind, row):
-    """A point or spot light of radius 0, or a sun whose half angle's cosine rounds to 1: every sample
-    of it is the same ray (shading.sample_light's point is the centre, or its sun cone has no width, so
-    the sample numbers move nothing), so none are drawn and later samples repeat the first one's."""
+    """A point or spot light of radius 0, or a sun whose half angle's cosine rounds to 1: every sample of it
+    is the same ray, so none are drawn and later samples repeat the first one's."""
     if kind in (POINT, SPOT):
         return row[7] <= 0.0
     return kind == SUN and row[8] == 1.0
@@ -150,11 +148,8 @@ def _has_no_extent(kind, row):
 def _spot_frame(direction, axes):
     """(U, V, W, |r2|): the rows r0, r1 of the inverse of the spot's object axes and W = -r2 / |r2|,
     so that for a direction t towards the light, (t.U, t.V, -(t.W) |r2|) are its coordinates in the
-    object's frame (shading._light_mask), as Cycles' spot_light_to_local takes them with the light's
-    inverse transform. For orthogonal axes that is (X / |X|^2, Y / |Y|^2, the direction, 1 / |Z|);
-    for sheared ones (a spot under a non-uniformly scaled parent, rotated) only the inverse puts the
-    cone where Cycles does (outside review: 1,457 of 6,912 pixels differed with the scaled axes).
-    Without axes, any orthonormal frame around the direction (a round cone)."""
+    object's frame (shading._light_mask), as Cycles' spot_light_to_local takes them: only the inverse
+    puts a sheared spot's cone where Cycles does. Without axes, any orthonormal frame (a round cone)."""
     if axes is None:
         u = np.cross(direction, (1.0, 0.0, 0.0) if abs(direction[0]) < 0.9 else (0.0, 1.0, 0.0))
         u /= np.linalg.norm(u)

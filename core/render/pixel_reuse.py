@@ -1,21 +1,12 @@
 """Keeping last frame's pixels whose rays cannot meet anything that changed.
 
-Sample k of pixel p depends only on (p, k, seed) and on what its rays hit (render_kernels.py). So
-when the camera, the lights and every setting are those of the last frame, a pixel's samples are
-exactly last frame's unless one of its rays can reach a changed box (instance_signature.py: where
-an instance moved, deformed, appeared or vanished). Per pixel, conservatively:
-- the camera ray: the segment from clip start to the hit (or to clip end for a miss);
-- AO rays start at the pixel's ray start (the offset hit point) and are at most ao_distance long: a sphere;
-- a shadow ray runs from the offset hit point to a point sampled on the light: within the light's
-  radius (point, spot) or half-diagonal (area) of its centre, so the segment to the centre against
-  the box grown by that much covers every such ray; a sun's rays leave within angle/2 of its axis,
-  so within distance D of the point they stay within D sin(angle/2) of the axis (D: the box's
-  farthest corner).
-A pixel that passes keeps its sums, sample count and convergence; the others are sampled again from
-sample 0, so the image is the one a full render of this frame gives.
-
-Many changed boxes (e.g. particles) are merged into at most MAX_BOXES unions, which only makes the
-test more conservative and keeps it O(pixels x MAX_BOXES).
+With the last frame's camera, lights and settings, a pixel's samples are last frame's unless one of its
+rays can reach a changed box (instance_signature.py): sample k of pixel p depends only on (p, k, seed)
+and what its rays hit. Conservatively: the camera ray is the segment from clip start to the hit; AO
+rays lie within ao_distance of the ray start; shadow rays end within the light's radius (point, spot)
+or half-diagonal (area) of its centre, so the segment to the centre against the grown box covers them;
+a sun's rays stay within D sin(angle/2) of its axis at distance D. Other pixels restart from sample 0,
+so the image is the full render's. Changed boxes merge into at most MAX_BOXES unions.
 """
 from typing import NamedTuple
 

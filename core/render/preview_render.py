@@ -1,28 +1,14 @@
 """Preview images: ambient occlusion, shadows, or both, accumulated progressively.
 
-Value of a pixel whose camera ray hits (geometric normal N turned to face the camera):
-- "ao": the fraction of the cosine-weighted hemisphere around N that is unoccluded within
-  `ao_distance`: AO = (1/pi) * integral of V(w) * cos(theta) dw, estimated with cosine-weighted rays.
-- "shadow": S = (1/L) * sum over the L lights of colour_l * V_l * max(0, N.L_l) * mask_l, with L_l
-  sampled over the light's extent (radius, sun angle, area shape) and mask_l the spot cone (Cycles'
-  smoothstep blend) or the area light's front side within its spread (shading._light_mask). No
-  distance falloff and no power: every light gets the same weight, so S is in [0, 1] for colours in
-  [0, 1] and shows where each light reaches, whatever its units.
-- "ao+shadow": AO * (ambient + (1 - ambient) * S), ambient 0.25 by default: shadows from the lights
-  over an occlusion-darkened ambient term.
-Background pixels are 0 with alpha 0; hit pixels have alpha 1. Row 0 is the top row.
-In a scene with per-instance ray visibility (ray_visibility.py), camera rays meet only the instances
-visible to camera rays, and AO and shadow rays only those visible to shadow rays, as in Cycles; a pixel
-whose camera ray hits a holdout instance is background (alpha 0), as Cycles' Holdout makes it.
-`image(denoise=True)` / `render_preview(..., denoise=True)` filter the estimate with core.denoise (edge-
-avoiding à-trous, guided by the per-pixel sample variance; background and alpha unchanged); the raw
-estimate stays the default.
-
-Sampling is deterministic for a seed. With an error target, a pixel stops once it has at least
-`min_samples` samples and the standard error of its mean (from the sample variance, floored by Laplace's
-rule of succession so that samples that all agreed do not count as certainty) is below the target.
-Convergence is checked only at multiples of CHECK_EVERY samples, so the image does not depend on how the
-caller batches its steps.
+Value of a hit pixel (geometric normal N facing the camera), background 0 with alpha 0, row 0 on top:
+- "ao": AO = (1/pi) * integral of V(w) cos(theta) dw within `ao_distance`, by cosine-weighted rays.
+- "shadow": S = (1/L) * sum over lights of colour_l * V_l * max(0, N.L_l) * mask_l, L_l sampled over
+  the light's extent, mask_l its cone or spread (shading._light_mask); no falloff or power, so S shows
+  where each light reaches whatever its units.
+- "ao+shadow": AO * (ambient + (1 - ambient) * S).
+Deterministic for a seed. With an error target a pixel stops after `min_samples` once its standard
+error (sample variance floored by Laplace's rule of succession) is below it, checked every CHECK_EVERY
+samples so batching does not change the image.
 """
 from time import perf_counter
 
@@ -53,7 +39,7 @@ class PreviewRender:
     """A progressive preview: call `step()` until `done`, read `image()` at any time.
 
     `tree` is a KdTree or a TwoLevelScene; a KdTree is traced as a one-instance scene with the
-    identity matrix, so both take the same kernels (the overhead is measured in docs/choices.md).
+    identity matrix, so both take the same kernels.
 
     Settings: a RenderOptions (`options`, default RenderOptions()), and/or its fields as keywords (mode,
     samples, ao_distance, lights, seed, sampler, error_target, min_samples, ambient, threads), which
@@ -62,8 +48,7 @@ class PreviewRender:
     previous: the last frame's `pixel_state()`. With the same camera, lights and settings, and a scene
     from the same SceneBuilder (whose instance signature says what changed), pixels whose rays cannot
     reach changed geometry are kept as they were (pixel_reuse.py): the image is the full render's,
-    `pixels_reused` and `rays_reused` say what that saved. Anything else renders from scratch.
-    """
+    `pixels_reused` and `rays_reused` say what that saved. Anything else renders from scratch."""
 
     def __init__(self, tree, camera, width, height, options=None, *, previous=None, **settings):
         _check_frame(tree, camera, width, height)
@@ -248,10 +233,9 @@ class PreviewRender:
         n = self.counts[self.active].astype(np.float64)
         mean = self.sums[self.active].mean(axis=1) / n
         var = np.maximum(self.sq_sums[self.active] / n - mean * mean, 0.0) * n / np.maximum(n - 1, 1)
-        # Laplace's rule of succession: after n samples, a visibility outcome not yet seen still has
-        # probability 1 / (n + 2), so a sample's variance is at least q (1 - q) for that q. Without this
-        # floor a pixel whose first samples all agreed had variance 0 and stopped at min_samples: at a
-        # target of 0.02, 5% of the hit pixels of a test scene ended more than 3 targets off.
+        # Laplace's rule of succession: after n samples, an outcome not yet seen still has probability
+        # 1 / (n + 2), so a sample's variance is at least q (1 - q) for that q. Without this floor a
+        # pixel whose first samples all agreed had variance 0 and stopped at min_samples.
         q = 1.0 / (n + 2.0)
         var = np.maximum(var, q * (1.0 - q))
         converged = np.sqrt(var / n) < self.error_target

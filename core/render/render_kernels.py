@@ -1,28 +1,13 @@
 """The sampling kernel: for each pixel still sampling, add AO and/or light samples to its sums.
 
-One sample of a pixel is one cosine-weighted AO ray (mode ao), one shadow ray per light facing the
-surface (mode shadow), or both multiplied (mode ao+shadow). Every ray is an any-hit query through the
-same traversal as everything else, of kind SHADOW_RAYS (as Cycles traces its AO rays: an instance
-with shadow rays off neither occludes nor shadows, ray_visibility.py), via the scene's instances (a
-flat tree is one instance with the identity, see two_level.as_two_level). Sample k of pixel p
-depends only on (p, k, seed), so adding samples in any batches gives the same sums as one big batch.
-
-On a lazy tree a ray may stop at an unbuilt subtree (traversal.py). The pixel then puts its sums back
-as they were before the batch and reports the subtree; the caller builds it and redoes the batch for
-that pixel, which by the rule above gives exactly the eager tree's sums.
-
-Ray memo (pixel reuse across frames, pixel_reuse.py): every AO and shadow ray's visibility is kept as
-one bit, at bit s * (1 + lights) + use of its pixel's row (when samples * (1 + lights) <= MEMO_BITS).
-A pixel continued from last frame (same hit point) takes last frame's bit for every ray that cannot
-meet a changed box, and traces only the others: the same bit, hence the same sums. `known[i]` is how
-many of its bits last frame traced: with an error target a pixel may have stopped after fewer samples
-than this frame gives it, and the bits of samples it never took hold nothing (outside QA found frames
-continued with an error target differing from full renders by up to 0.34 before this count).
-
-Repeated rays: a light without extent (lights.DELTA) gives every sample of a pixel the same shadow ray,
-so with the memo on, samples after the first take sample 0's bit instead of tracing it again (counted
-in `repeated`, not in `rays`). In shadow mode with hard lights that is one shadow ray a light per pixel
-instead of one a sample. Without the memo (too many bits) every sample traces its ray, as before.
+One sample is one cosine-weighted AO ray (mode ao), one shadow ray per light facing the surface (mode
+shadow), or both multiplied (ao+shadow), each an any-hit query of kind SHADOW_RAYS (as Cycles traces
+AO rays). Sample k of pixel p depends only on (p, k, seed), so any batching gives the same sums; a
+lazy tree's stopped pixel restores its sums and redoes the batch once the subtree is built.
+Ray memo (pixel_reuse.py): ray (s, use) keeps its visibility in bit s * (1 + lights) + use of its
+pixel's row (when that fits in MEMO_BITS); a continued pixel takes last frame's bit for every ray that
+cannot meet a changed box (`known[i]`: bits last frame traced), and a light without extent
+(lights.DELTA) repeats sample 0's bit in later samples (counted in `repeated`, not `rays`).
 """
 from typing import NamedTuple
 
@@ -110,11 +95,9 @@ def add_samples(scene, frames, active, batch, lights, acc, status, memo):
 
 @njit(cache=True)
 def _sample_pixels(scene, frames, active, start, stop, batch, lights, acc, status, memo):
-    """Pixels active[start:stop], sharing one set of scratch buffers: allocating them per pixel cost
-    ~25% of a one-sample step (kept out of the parallel loop body: Numba's parfor analysis does not
-    cope with the inlined tuple code of the samplers). The scene and the memo go to the per-ray code
-    as unowned views (array_views.py): with the owned arrays a one-sample shadow step took 1.5x as long
-    as tracing the same rays alone."""
+    """Pixels active[start:stop], sharing one set of scratch buffers (kept out of the parallel loop
+    body: Numba's parfor analysis does not cope with the samplers' inlined tuple code). The scene and
+    the memo go to the per-ray code as unowned views (docs/choices.md#sampling-kernel-scratch-and-views)."""
     scene = unowned_scene(scene)
     memo = RayMemo(unowned(memo.bits), unowned(memo.known), unowned(memo.boxes), unowned(memo.reused),
                    unowned(memo.repeated))
@@ -133,11 +116,8 @@ def _sample_pixel(scene, frames, i, batch, lights, acc, scratch, direction, memo
     """All of one pixel's new samples. Returns NO_HIT, or the suspended prim of a ray that reached an
     unbuilt subtree, after restoring the pixel's sums.
 
-    A sample's rays (its AO ray, then one per light) go through one loop with one inlined traversal.
-    (A non-inlined call to it measured 4-10% slower in the seed 000 setting: it passes ~40 arrays.)
-
-    The pixel's point, normal and ray start (and each light's row below) are unowned views (array_views.py):
-    a slice would update its parent's shared reference count, from both threads, on every ray."""
+    A sample's rays (its AO ray, then one per light) go through one loop with one inlined traversal,
+    and the pixel's point, normal, ray start and light rows are unowned views (array_views.py)."""
     first, count, mode, seed = batch.first, batch.count, batch.mode, batch.seed
     ao_distance, ambient, sampler, dim1 = batch.ao_distance, batch.ambient, batch.sampler, batch.dim1
     sums, sq_sums, counts, rays = acc.sums, acc.sq_sums, acc.counts, acc.rays
@@ -190,19 +170,16 @@ def _sample_pixel(scene, frames, i, batch, lights, acc, scratch, direction, memo
 @njit(cache=True, inline="always")
 def _ray_of_use(use, lights, point, normal, ao_distance, sampler, ps, s, dim1, direction):
     """The ray of one use of sample s: its direction (into `direction`), its tmax and its weight.
-    USE_AO: a cosine-weighted direction about the normal within ao_distance, weight 1. Light k (use
-    1 + k): a direction to a sampled point of the light and the distance to it (a step short of it,
-    shading.short_of_light), weight
-    max(0, N.L) * mask (spot cone, area light's front side); weight 0 needs no ray."""
+    USE_AO: cosine-weighted about the normal within ao_distance, weight 1. Light k (use 1 + k): toward a
+    sampled light point, tmax a step short of it (shading.short_of_light), weight max(0, N.L) * mask;
+    weight 0 needs no ray."""
     if use == USE_AO:
         u1, u2 = sample_2d(sampler, ps, s, use, dim1)
         cosine_direction(normal, u1, u2, direction)
         return ao_distance, 1.0
     light = rows(lights, use - 1, use)[0]
     # A light without extent ignores its sample numbers (lights.DELTA), so none are drawn: Owen-scrambled
-    # Sobol costs three nested scrambles a ray. Seed 000's shadow step alone (add_samples, 201,371
-    # shadow rays), paired in one process against the code before, 15 pairs: 0.948x on two threads
-    # (126 against 138 ms), 0.965x on one.
+    # Sobol costs three nested scrambles a ray (docs/choices.md#no-samples-for-delta-lights).
     u1, u2 = (0.0, 0.0) if light[DELTA] != 0.0 else sample_2d(sampler, ps, s, use, dim1)
     dist, mask = sample_light(light, point, u1, u2, direction)
     cos_nl = normal[0] * direction[0] + normal[1] * direction[1] + normal[2] * direction[2]
@@ -221,9 +198,8 @@ def _restore(sums, sq_sums, rays, memo, i, before, prim):
 @njit(cache=True, inline="always")
 def _repeats(lights, use, s, memo):
     """Whether sample s's ray of this use repeats sample 0's, whose bit the memo holds: a light without
-    extent, a later sample, and a memo row. Sample 0's bit is this frame's by then, traced or kept from
-    last frame: every frame samples its pixels in order from 0 (PreviewRender._continue restarts the
-    pixels it does not keep at sample 0), and a lazy tree's redo repeats the same batch."""
+    extent, a later sample, and a memo row. Sample 0's bit is this frame's by then: every frame samples
+    its pixels in order from 0, and a lazy tree's redo repeats the same batch."""
     return use != USE_AO and s > 0 and lights[use - 1, DELTA] != 0.0 and memo.bits.shape[1] > 0
 
 
@@ -289,8 +265,7 @@ def surface_frames(scene, origins, directions, t, inst, prim, hit_index, points,
 @njit(cache=True, parallel=True)
 def assemble_image(pixels, sums, counts, img):
     """Each hit pixel's mean (0 before its first sample) and alpha 1 into the flat (H*W, 4) float32
-    image `img`, zero elsewhere: one pass instead of numpy's temporaries and fancy-indexed writes,
-    which took 13 ms (median) for the 211,884 hit pixels of the seed 000 setting. The same division."""
+    image `img`, zero elsewhere, in one pass (docs/choices.md#one-pass-image-assembly)."""
     for i in prange(pixels.shape[0]):
         p = pixels[i]
         n = max(counts[i], 1)

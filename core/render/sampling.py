@@ -1,12 +1,10 @@
 """Sample points: Owen-scrambled, shuffled Sobol (low discrepancy) or independent random numbers.
 
-Low discrepancy: Burley 2020, "Practical Hash-based Owen Scrambling" (JCGT 9(4)). The 2D Sobol set
-(van der Corput and Sobol's second dimension) is Owen-scrambled with a hash-based nested uniform
-scramble, and the sample index itself is scrambled too (shuffled), both seeded per pixel and per use
-(AO, each light), which decorrelates pixels and uses while keeping every power-of-two prefix of a
-pixel's samples stratified.
-Random: a per-(pixel, sample, use) hash: independent uniform numbers, for comparison.
-Everything is pure integer arithmetic on 32-bit values kept in int64, so it is deterministic.
+Low discrepancy: Burley 2020, "Practical Hash-based Owen Scrambling" (JCGT 9(4)): the 2D Sobol set
+Owen-scrambled by a hash-based nested uniform scramble, its sample index shuffled too, both seeded per
+pixel and use (AO, each light): pixels and uses decorrelate and every power-of-two prefix stays
+stratified. Random: a per-(pixel, sample, use) hash, for comparison. Pure integer arithmetic on
+32-bit values in int64, so deterministic.
 """
 import numpy as np
 from numba import njit

@@ -13,17 +13,11 @@ OFFSET_RELATIVE = 2.0 ** -40  # ray start offset / the hit point's error scale: 
 @njit(cache=True, inline="always")
 def offset_origin(p, n, error_scale, out):
     """Move a hit point off its surface along the normal by OFFSET_RELATIVE times its error scale
-    (instance_traversal.surface_error_scale: the magnitudes whose rounding puts the point off its plane).
-
-    Wachter and Binder, "A Fast and Robust Method for Avoiding Self-Intersection" (Ray Tracing Gems,
-    ch. 6): offset by a bound on the hit point's error, so that the offset scales with the point's
-    magnitude. Their 256 float32 ulps (2^-15 relative) bound a float32 hit point; ours are computed in
-    float64 on float32 vertices, so that offset was ~2^29 times too large, and at 1e4 units from the
-    origin (0.3 units) it carried shadow and AO rays through a roof 0.2 above a floor. 2^-40 of the
-    error scale clears the surface by 8192 float64 roundings at any magnitude; an absolute floor (2^-16
-    once) biased AO between planes at scale 1e-3. 2^-32 of max |p_k| (once) lifted starts on a floor at
-    x = 5e5 by 1.2e-4, through a roof 1e-4 above it (outside QA).
-    """
+    (instance_traversal.surface_error_scale), after Wachter and Binder, "A Fast and Robust Method for
+    Avoiding Self-Intersection" (Ray Tracing Gems, ch. 6): the offset scales with the point's error.
+    Their 2^-15 bounds a float32 hit point; ours is float64 on float32 vertices, where that carried rays
+    through thin roofs. 2^-40 clears the surface by 8192 float64 roundings at any magnitude; an absolute
+    floor biased AO at small scales, and a bound from max |p_k| alone failed far from the origin."""
     step = error_scale * OFFSET_RELATIVE
     for k in range(3):
         out[k] = p[k] + n[k] * step
@@ -35,16 +29,11 @@ LIGHT_END_RELATIVE = 2.0 ** -32  # how far short of a sampled light point a shad
 @njit(cache=True, inline="always")
 def short_of_light(p, direction, dist):
     """A shadow ray's tmax: the distance from p to the sampled light point, less a step off the light.
-
-    A light lying on a surface (an area light flush with a ceiling or a window's wall, a point light on
-    a floor's plane) is reached at t = dist, where the surface it lies on is met too, within rounding:
-    it shadowed everything (an outside review: a room lit by a ceiling-flush panel came out black, a
-    wall-flush one speckled). Cycles moves the light end off the light (ray_offset(ls->P, ls->Ng) in its
-    shadow-ray setup); here the ray stops 2^-32 of (dist + the light point's largest coordinate) short
-    of it: 2^21 float64 roundings of those magnitudes, far more than the triangle test's t carries
-    there, and far less than float32 geometry can place between a surface and the light. A sun's rays
-    (dist inf) are unchanged.
-    """
+    A light lying on a surface (an area light flush with a ceiling) is reached at t = dist, where that
+    surface is met too, within rounding, and would shadow everything. Cycles moves the light end off the
+    light (ray_offset(ls->P, ls->Ng)); here the ray stops 2^-32 of (dist + the light point's largest
+    coordinate) short: 2^21 float64 roundings, far more than the triangle test's t carries, far less
+    than float32 geometry can place between a surface and the light. A sun's rays are unchanged."""
     if dist == np.inf:
         return dist
     largest = 0.0
@@ -82,7 +71,7 @@ def sample_light(light, p, u1, u2, out_dir):
         _cone_direction(light, u1, u2, out_dir)
         return np.inf, 1.0
     # The sampled point goes into out_dir first and becomes the direction in place: no array is
-    # allocated per shadow ray (sample_light 45 -> 33 ns a call).
+    # allocated per shadow ray.
     if kind == AREA:
         _area_point(light, u1, u2, out_dir)
     else:
@@ -101,12 +90,10 @@ def sample_light(light, p, u1, u2, out_dir):
 
 @njit(cache=True, inline="always")
 def _light_mask(light, kind, to_light):
-    """Spot cone with Cycles' smoothstep blend, measured in the light object's frame (lights.py,
-    _spot_frame: a non-uniform scale makes it elliptical); area lights emit only to their front (-Z)
-    side, and with a Spread below 180 degrees only into a cone around their normal, weighted as
-    Cycles' soft-box grid weights it (area_light_spread_attenuation: tan(spread/2) - tan(a) for light
-    leaving at angle a from the normal), divided by its value along the normal so the mask stays in
-    [0, 1]. Cycles' Spread of 0 keeps a direction within 0.05 degrees of the normal."""
+    """Spot cone with Cycles' smoothstep blend, in the light object's frame (lights._spot_frame). Area
+    lights emit to their front (-Z) only, and with a Spread below 180 degrees into a cone weighted as
+    Cycles' area_light_spread_attenuation (tan(spread/2) - tan(a) at angle a from the normal), divided by
+    its value along the normal to stay in [0, 1]; a Spread of 0 keeps directions within 0.05 degrees."""
     cos_a = -(to_light[0] * light[4] + to_light[1] * light[5] + to_light[2] * light[6])
     if kind == SPOT:
         x = to_light[0] * light[11] + to_light[1] * light[12] + to_light[2] * light[13]

@@ -1,19 +1,9 @@
 """What a frame's instances were, so the next frame can tell which parts of space changed.
 
-A signature lists every instance that has something to hit, for some ray, as a row of bytes (a
-digest of its mesh's key and fingerprint, its object-to-world matrix, how its triangles were rounded:
-in object space under its own tree, or to float32 in a soup relative to the soup's anchor, and which
-rays it stops and whether it is a holdout: ray_visibility.py) with its world box, in the coordinates
-the scene was built in (minus `origin`, see scene_builder.py). The rounding is part of the row
-because kept pixels keep their hit points and ray starts: an unchanged object re-rounded (the soup
-re-anchored, or the object moved between the soup and a tree of its own) shifts its surface by a
-float32 ulp, enough to put a kept ray start behind it, so it counts as changed. Two frames'
-signatures give the boxes where geometry may differ (`changed_boxes`): the boxes of rows present in
-only one of them, i.e. instances that moved, deformed, appeared or vanished, each at its old and its
-new place. Everything outside those boxes is the same triangles at the same places in both frames,
-which is what lets the renderer keep pixels whose rays stay outside them (pixel_reuse.py).
-
-Rows compare as sets: an instance duplicated exactly where another one is adds no new surface.
+A row of bytes per instance some ray can hit: a digest of its mesh's key and fingerprint, its matrix,
+how its triangles were rounded (re-rounding moves a surface by an ulp, enough to put a kept ray start
+behind it) and its ray visibility, with its world box minus `origin`. `changed_boxes`: the boxes of
+rows present in only one of two frames; outside them both frames hold the same triangles.
 """
 import hashlib
 from typing import NamedTuple
@@ -65,8 +55,7 @@ def _with_soup_rounding(boxes, rounding, origin):
     """A soup member's triangles are stored in float32 relative to its soup's anchor, so its surface may
     lie up to half a float32 step of |vertex - anchor| outside its exact box: grown by a whole step
     (2^-23 of the farthest corner's distance from the anchor). pixel_reuse's own pad is relative to
-    the camera and missed it: a small object 300 units from the anchor and 4 from the camera kept
-    its pixels after it vanished (outside review)."""
+    the camera and misses this for a small object far from the anchor but near the camera."""
     soup = rounding[:, 0] == 1.0
     if not soup.any():
         return boxes

@@ -1,16 +1,11 @@
 """Tracing a ray through a two-level scene: the top-level tree over instances, then, for each instance
 in a top leaf, the mesh's own tree in object space through the one kd-tree traversal (trace_ray).
 
-The top level is walked with the traversal's own steps (clip_to_box, _descend, _push) and its stop
-rules; only the leaf test differs: an instance test instead of a triangle test, skipped for an
-instance that does not stop rays of the ray's kind (ray_visibility.py). Each instance gets the
-ray transformed by its world-to-object matrix without normalising the direction, so the ray parameter
-t is the same in both spaces (an affine map keeps it) and the best hit so far is passed on as tmax:
-a mesh is searched only in front of what is already known (Wald 2004, seed 000 §5).
-
-trace_scene is inlined into its callers: a call that passes the scene's 20 arrays costs an atomic
-reference-count increment and decrement per array, which measured 0.2-0.4 us a ray (camera rays on
-suzanne-251k, a flat tree as one instance: +50% against the flat traversal; inlined: +10%).
+The top level is walked with the traversal's own steps and stop rules; only the leaf test differs: an
+instance test, skipped for an instance that does not stop the ray's kind (ray_visibility.py). The ray
+is carried into object space by the world-to-object matrix without normalising the direction, so t is
+the same in both spaces and the best hit so far is passed on as tmax (Wald 2004, seed 000 §5).
+trace_scene is inlined into its callers (docs/choices.md#inline-the-scene-traversal).
 """
 import numpy as np
 from numba import njit, prange
@@ -39,8 +34,8 @@ def new_scratch():
 
 @njit(cache=True, inline="always")
 def unowned_scene(s):
-    """The SceneArrays (two_level.TwoLevelScene.arrays) as unowned views, made once per block of rays:
-    with owned arrays, the code inlined per ray took and dropped references to them (array_views.py)."""
+    """The SceneArrays (two_level.TwoLevelScene.arrays) as unowned views, made once per block of rays
+    (array_views.py)."""
     return SceneArrays(unowned(s.top_axis), unowned(s.top_split), unowned(s.top_child), unowned(s.top_count),
                        unowned(s.top_items), unowned(s.top_bounds), unowned(s.world_to_object), unowned(s.mesh_of),
                        unowned(s.node_start), unowned(s.ref_start), unowned(s.tri_start), unowned(s.axis),
@@ -85,11 +80,8 @@ def trace_scene(scene, o, d, tmin, tmax, any_hit, ray_mask, scratch):
     the instances whose visibility shares a bit with `ray_mask` (the ray's kind, ray_visibility.py);
     instance and prim are -1 on a miss. A ray that reaches an unbuilt subtree of a lazy mesh tree stops
     there: prim is then trace_ray's suspended value (< NO_HIT) and instance the one it stopped in.
-    `scratch` comes from new_scratch() and is reused across rays.
-
-    trace_instance is called from one place only, the top leaf loop, because trace_ray is inlined
-    there (traversal.py says why): a flat tree, one instance in a one-leaf top, goes through that loop
-    too, only without the top's clip, which its own tree makes."""
+    `scratch` comes from new_scratch() and is reused across rays. A flat tree (one instance in a
+    one-leaf top) goes through the same leaf loop, without the top's clip."""
     axis, split, child, count = scene.top_axis, scene.top_split, scene.top_child, scene.top_count
     items, root_box, visibility = scene.top_items, scene.top_bounds, scene.visibility
     if items.shape[0] == 0:
@@ -173,9 +165,7 @@ def _object_normal(tri):
 @njit(cache=True, inline="always")
 def hit_surface(scene, inst, prim):
     """What the hit frame needs of instance inst's triangle prim, fetched and computed once per hit:
-    (triangle (3, 3), world-to-object rows (3, 4), inverse_parts of them, object-space normal e1 x e2).
-    onto_triangle_plane, world_normal and surface_error_scale each took them afresh (the normal three
-    times, the matrix's cofactors four times)."""
+    (triangle (3, 3), world-to-object rows (3, 4), inverse_parts of them, object-space normal e1 x e2)."""
     tri = scene.triangles[scene.tri_start[scene.mesh_of[inst]] + prim]
     a = rows(scene.world_to_object, inst, inst + 1)[0]
     return tri, a, inverse_parts(a), _object_normal(tri)
@@ -232,21 +222,14 @@ def _row_magnitude(a, k, p):
 
 @njit(cache=True, inline="always")
 def surface_error_scale(surface, p, n):
-    """A magnitude whose float64 rounding bounds how far hit point p, once moved onto its triangle's
-    plane (onto_triangle_plane), may lie off that plane along unit normal n, and the rounding the
-    triangle test's t carries near it: the largest of
+    """A magnitude whose float64 rounding bounds how far hit point p, moved onto its triangle's plane, may
+    lie off it along unit normal n, and the rounding of the triangle test's t near it: the largest of
     - sum |n_k| |p_k|: p's world coordinates round to their own ulps, seen along the normal;
-    - the same for the object-space point q = a p + a_t and the projection's operands q - v0, as a
-      world distance (an object-space offset along the object normal n_o is |a^T n_o| / |n_o| times
-      shorter in world, so a shear that stretches along the normal makes it longer: on a plane
-      stretched 1e5 times along its own normal, AO rays left from under it without the q - v0 term,
-      found by an outside review);
-    - the triangle's reach from p (largest world coordinate difference to a vertex): the triangle test
-      works on vertex-minus-origin differences (on a floor 1e4 wide seen 1e-3 across, an AO ray offset
-      by p's magnitude alone hit the floor it left at t ~ 1e-12, outside QA).
-    Not max |p_k|: a floor at z = 0 but x = 5e5 would lift ray starts by 5e5 roundings' worth and
-    carry them through a roof 1e-4 above (outside QA), where its height's ulps are what count. Nor the
-    camera ray's |o| and t |d|: their error moves p along the ray, which the projection takes out."""
+    - the same for the object-space point q = a p + a_t and the operands q - v0, as a world distance
+      (|a^T n_o| / |n_o| times shorter, so a shear stretching along the normal makes it longer);
+    - the triangle's reach from p: the triangle test works on vertex-minus-origin differences.
+    Not max |p_k| (a floor far along x would lift ray starts through a roof just above it), nor the
+    camera ray's |o| and t |d|, whose error moves p along the ray, which the projection takes out."""
     tri, a, parts, (nx, ny, nz) = surface
     world = abs(n[0] * p[0]) + abs(n[1] * p[1]) + abs(n[2] * p[2])
     qx, qy, qz = _object_point(a, p)
@@ -268,12 +251,11 @@ def surface_error_scale(surface, p, n):
 def onto_triangle_plane(surface, p):
     """Move hit point p (in place) along its triangle's normal onto the triangle's plane.
 
-    p = o + t d inherits t's error, and the triangle test's t is a ratio of terms of the size of the
-    triangle's reach R that cancel down to its width w across the ray: an error of about eps R^2 / w.
-    On a box 7e4 long and 0.7 wide the hit point sat 9e-8 below its face, past the offset (2^-40 R,
-    shading.py), and AO rays started under it: dark speckles. The distance to the plane,
-    (q - v0) . n, has an error of only eps R, as a point rebuilt from barycentrics has (pbrt,
-    Pharr et al., 3rd ed. §3.9), so the offset clears it. Done in object space, where the triangle is."""
+    p = o + t d inherits t's error, and t is a ratio of terms of the size of the triangle's reach R
+    that cancel down to its width w across the ray: an error of about eps R^2 / w, which can exceed the
+    ray offset on long thin triangles (AO rays starting under the face). The distance to the plane,
+    (q - v0) . n, errs by only eps R, as a point rebuilt from barycentrics (pbrt-v3 §3.9), so the offset
+    clears it. Done in object space, where the triangle is."""
     tri, a, parts, (nx, ny, nz) = surface
     qx, qy, qz = _object_point(a, p)
     nn = nx * nx + ny * ny + nz * nz

@@ -1,17 +1,11 @@
 """Per-instance ray visibility: which kinds of rays an instance stops (Blender's Object > Visibility >
 Ray Visibility, as Cycles applies it).
 
-An instance's visibility is a bit set, and so is a ray's kind: the ray meets the instance only when
-the two share a bit. Camera rays carry CAMERA_RAYS; the renderer's AO and shadow rays carry SHADOW_RAYS,
-because Cycles traces its AO rays as shadow rays (benchmarks/cycles_ao.py cites the kernel source), so
-an object with shadow rays off neither shadows nor occludes. Plain queries carry ALL_RAYS: they meet
-every instance that any ray kind meets. An instance with neither ray bit is never hit.
-
-HOLDOUT is not a ray kind but a property of what camera rays find (Blender's Holdout, as Cycles applies
-it): a pixel whose camera ray hits a holdout instance is left empty, alpha 0 like the background, while
-the instance still occludes and shadows everything else. Measured with Cycles (bpy 5.0.1, AO pass and
-alpha of one scene with and without a holdout cube, same seed): the cube's pixels became alpha 0 and
-AO 0, every other pixel was bit-identical, so the cube still darkened the floor's AO.
+An instance's visibility is a bit set, and so is a ray's kind: they meet only when they share a bit.
+Camera rays carry CAMERA_RAYS; AO and shadow rays carry SHADOW_RAYS, as Cycles traces AO rays as shadow
+rays (benchmarks/cycles_ao.py); plain queries carry ALL_RAYS. HOLDOUT is not a ray kind: a pixel whose
+camera ray hits a holdout instance is left empty (alpha 0), while the instance still occludes and
+shadows (docs/choices.md#holdout-as-cycles-applies-it).
 """
 import numpy as np
 

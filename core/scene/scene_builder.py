@@ -1,29 +1,12 @@
 """Building two-level scenes frame after frame, keeping every tree whose input did not change.
 
-The caller names each mesh with a key that is stable across frames (e.g. an object's name) and a
-fingerprint that changes whenever its geometry does (e.g. a CRC of its vertex and index bytes). Then:
-- a mesh with the same key and fingerprint as last frame keeps its object-space tree, however its
-  instances moved; only the top level, built over instance boxes, is rebuilt;
-- a mesh whose fingerprint changed (it deforms) is rebuilt, and from then on counts as dynamic; given
-  the frame's ray count (`build(rays=...)`), its later trees are built for that many rays
-  (BuildOptions.rays), since each serves one frame; every other tree may serve many and is built
-  without it;
-- the soup (scene_policy.py: small or overlapping static objects merged into one flat tree per
-  visibility) is kept
-  while its members' keys, fingerprints and matrices are unchanged. Its triangles are stored relative
-  to an anchor (its centre, kept while it stays near the soup's box: scene_policy.main_anchor) and placed by a
-  translation, so a moving camera never rebuilds it; members small against the soup go to zones of
-  their own, anchored near them (scene_policy.soup_zones), so that float32 keeps their shape;
-- a single-use mesh whose matrix or visibility changed counts as dynamic too (it leaves the soup);
-- instances that stop different kinds of rays (ray_visibility.py) go to different soups, one per
-  visibility (holdout included), since the traversal tells kinds apart per instance, not per triangle;
-  an instance that stops no ray (neither ray bit) is left out.
-Trees of keys absent from a frame are dropped. `reuse=False` rebuilds everything (the same layout),
-so the two can be compared. Every scene carries the instances' signature (instance_signature.py), from
-which the renderer tells where the next frame's geometry changed (pixel reuse).
-
-Precision: every matrix is shifted by minus `origin` (the camera position) in float64 before anything
-is rounded, and mesh trees are in object space, so nothing far from the origin loses precision.
+Each mesh has a key stable across frames (an object's name) and a fingerprint that changes with its
+geometry (a CRC of its bytes). An unchanged mesh keeps its object-space tree however its instances
+move; a changed one is rebuilt and counts as dynamic from then on (built for the frame's `rays`), as
+does a single-use mesh that moved. The soup (scene_policy.py) is kept while its members' keys,
+fingerprints and matrices are unchanged, stored relative to an anchor so a moving camera never
+rebuilds it; each ray visibility gets its own soup. Every matrix is shifted by minus `origin` (the
+camera position) in float64 before anything is rounded, so nothing far from the origin loses precision.
 """
 from time import perf_counter
 from typing import Hashable, NamedTuple
@@ -91,12 +74,9 @@ class CallerIds(NamedTuple):
 
 class SceneBuilder:
     """Builds a TwoLevelScene per frame, reusing trees across calls (see the module docstring).
-
-    layout: "auto" (scene_policy.plan_soup), "two_level" (every mesh its own tree) or "flat"
-    (everything in one soup tree, one per visibility if they differ: the single-tree baseline, which
-    has no zones, so a member far from the tree's centre against its own size loses float32
-    precision there; the lazy build's layout). Other keywords are BuildOptions.
-    """
+    layout: "auto" (scene_policy.plan_soup), "two_level" (every mesh its own tree) or "flat" (one soup
+    tree per visibility, no zones: the single-tree baseline and the lazy build's layout). Other
+    keywords are BuildOptions."""
 
     def __init__(self, layout="auto", **options):
         if layout not in LAYOUTS:
@@ -189,10 +169,8 @@ class SceneBuilder:
         return scene, report
 
     def _lazy_plan(self, soup, mesh_of):
-        """A lazy build has to be the scene's one tree (build_two_level takes no lazy tree among several
-        meshes): one mesh kept apart (placed by any number of instances) or one soup. Where the plan
-        gives more, "auto" merges everything, as "flat" does; "two_level" is refused, naming the meshes
-        (outside review: "auto" failed naming an internal tree index as "mesh 0")."""
+        """A lazy build has to be the scene's one tree: one mesh kept apart or one soup. Where the plan gives
+        more, "auto" merges everything, as "flat" does; "two_level" is refused, naming the meshes."""
         apart = sorted(set(mesh_of[~soup].tolist()))
         if len(apart) + bool(soup.any()) <= 1:
             return soup
@@ -219,9 +197,8 @@ class SceneBuilder:
             self._placements[key] = (o2w[inst], visibility[inst])
 
     def _mesh_trees(self, meshes, mesh_of, instanced, reuse, rays):
-        """Object-space trees of the meshes instanced this frame, kept or built; (trees, new mesh_of for
-        the instanced instances, built count, kept count). A deforming mesh's tree is built for `rays`
-        rays, unless the builder's own options give a count."""
+        """Object-space trees of the meshes instanced this frame, kept or built: (trees, new mesh_of of the
+        instanced instances, built count, kept count); a deforming mesh's tree is built for `rays` rays."""
         used = np.unique(mesh_of[instanced])
         index = np.full(len(meshes), -1, np.int64)
         index[used] = np.arange(len(used))
@@ -240,9 +217,8 @@ class SceneBuilder:
         return trees, index[mesh_of[instanced]], rebuilt, len(used) - rebuilt
 
     def _soup_zones(self, soup, visibility, world_boxes):
-        """(key, members, anchor) of each soup tree: one per visibility (the usual one first) and, in
-        the "auto" layout, per zone of it (scene_policy.soup_zones; not for a lazy build, which has to
-        be one tree); key (visibility, None) for the main zone, (visibility, anchor) for the others."""
+        """(key, members, anchor) of each soup tree: one per visibility (the usual one first) and, in "auto"
+        and eager builds, per zone (scene_policy.soup_zones); key (visibility, None | anchor)."""
         out = []
         for kind in sorted(set(visibility[soup].tolist()), key=lambda k: (k != ALL_RAYS, -k)):
             group = np.flatnonzero(soup & (visibility == kind))
@@ -256,9 +232,8 @@ class SceneBuilder:
         return out
 
     def _soup_tree(self, meshes, mesh_of, o2w, members, reuse, key, anchor):
-        """(signature, tree, anchor) of the soup `key`: the members' world triangles relative to
-        `anchor`; last frame's soup of that key itself when the members' keys, fingerprints and
-        matrices are the same (its anchor is then `anchor` too: same members, same boxes)."""
+        """(signature, tree, anchor) of the soup `key`, its members' world triangles relative to `anchor`; last
+        frame's soup itself when the members' keys, fingerprints and matrices are unchanged."""
         signature = [(meshes[mesh_of[i]].key, meshes[mesh_of[i]].fingerprint, o2w[i].tobytes()) for i in members]
         before = self._soups.get(key)
         if reuse and before is not None and before[0] == signature:
@@ -301,11 +276,10 @@ def _gather(mesh):
 
 
 def _check_mesh(mesh):
-    """A ValueError naming the mesh for wrong shapes, an unhashable fingerprint, vertices that are not real
-    numbers, non-integer or out-of-range indices, and the first
-    triangle with a NaN or inf vertex (or the first such vertex, if no triangle uses one). All before
-    anything merges the mesh: in a soup a NaN spread to the merged meshes' common centre, and the error
-    named another triangle, all NaN (outside QA)."""
+    """A ValueError naming the mesh for wrong shapes, an unhashable fingerprint, vertices that are not
+    real numbers, non-integer or out-of-range indices, and the first triangle with a NaN or inf vertex
+    (or the first such vertex, if no triangle uses one). All before anything merges the mesh: in a soup
+    a NaN spreads to the merged meshes' common centre, and the error would name another triangle."""
     for name, a in (("vertices", mesh.vertices), ("triangles", mesh.triangles)):
         shape = np.shape(a)
         if not (len(shape) == 2 and shape[1] == 3) and not (name == "triangles" and np.size(a) == 0):
@@ -314,7 +288,7 @@ def _check_mesh(mesh):
         raise ValueError(f"mesh {mesh.key!r}: fingerprint must be hashable (e.g. an int such as a CRC of the vertex "
                          f"and index bytes), got {type(mesh.fingerprint).__name__}")
     tris, verts = np.asarray(mesh.triangles), np.asarray(mesh.vertices)
-    if not is_real_dtype(verts.dtype):  # as build_kdtree's triangles (outside review: complex parts were dropped)
+    if not is_real_dtype(verts.dtype):  # as build_kdtree's triangles (complex parts would be dropped)
         raise ValueError(f"mesh {mesh.key!r}: vertices must be real numbers (float32 or float64; integers are taken "
                          f"too), got dtype {verts.dtype}")
     if tris.size and tris.dtype.kind not in "iu":
@@ -356,11 +330,9 @@ class PlacementRangeError(ValueError):
 
 
 def _check_world_extent(world_boxes, mesh_of, origin, checked):
-    """A PlacementRangeError naming the first `checked` instance (rays meet it, its mesh is not empty)
-    whose matrix carries its mesh beyond float32's range (measured from `origin`), and listing all of
-    them: its world triangles (a soup's, or the top level's boxes) would be inf. world_boxes (I, 6):
-    the instances' world boxes. Outside QA: an instance moved 1e39 away was taken silently by one
-    layout and blamed on another instance's triangle by the other."""
+    """A PlacementRangeError naming the first `checked` instance (rays meet it, its mesh is not empty) whose
+    matrix carries its mesh beyond float32's range from `origin` (its world triangles would be inf), and
+    listing all of them. world_boxes (I, 6): the instances' world boxes."""
     shifted = world_boxes - np.concatenate([origin, origin])
     with np.errstate(invalid="ignore"):
         beyond = np.flatnonzero(checked & ~(np.abs(shifted) <= FLOAT32_MAX).all(axis=1))
@@ -374,9 +346,8 @@ def _check_world_extent(world_boxes, mesh_of, origin, checked):
 
 def _bounds(meshes):
     """(M, 6) float32 object-space boxes of the vertices the meshes' triangles use (inverted when a mesh
-    has none). Loose vertices do not count: one far from a small mesh (a Blender mesh's stray vertex)
-    chose the soup's anchor and zone from a box 1e6 wide and stored the mesh in float32 relative to a
-    point 5e5 away, which lost its 2 cm box altogether (outside review)."""
+    has none). Loose vertices do not count: a stray vertex far from a small mesh would pick the soup's
+    anchor and zone, and the mesh stored in float32 far from that anchor would lose its shape."""
     out = np.empty((len(meshes), 6), np.float32)
     for i, m in enumerate(meshes):
         v, tris = np.asarray(m.vertices, np.float32), np.asarray(m.triangles)

@@ -1,26 +1,12 @@
-"""Which instances keep their own tree and which are merged into a flat "soup" tree (SceneBuilder
-makes one per ray visibility, see scene_builder.py).
+"""Which instances keep their own tree and which are merged into a flat "soup" tree (one per ray
+visibility, scene_builder.py).
 
-Seed 000 §5: a tree per object under a top-level tree "works really well in case of large number of
-non-deforming objects" but gives "ambiguous results" otherwise: where object boxes overlap, a ray
-visits several objects' trees where one flat tree would have separated their triangles. So:
-
-- a mesh placed by several instances always keeps its own tree (flattening copies it per instance);
-- objects that changed (deformed or moved) in an earlier frame stay separate, so the static rest is not
-  rebuilt with them (seed 000 §5's static/dynamic separation);
-- static single objects below SMALL_OBJECT triangles go to the soup: a tree of their own saves little
-  and costs a top-level leaf and a ray transform;
-- if the remaining static single objects overlap heavily (OVERLAP_LIMIT, see `overlap_depth`), they
-  go to the soup too;
-- an instance whose matrix cannot be inverted (zero scale) can only be flattened.
-Figures behind SMALL_OBJECT and OVERLAP_LIMIT: benchmarks/bench_two_level.py and docs/choices.md.
-
-A soup stores its members' world triangles in float32 relative to an anchor, so a member loses the
-float32 precision of its distance from that anchor: a 1 cm sphere 5,000 units from the centre of a
-soup that also holds a ground 2e5 wide lost a fifth of its radius (outside review). `soup_zones`
-therefore splits a soup into zones: members near the soup's anchor against their size stay in its
-main tree, and the others go to zones anchored near them, so that no member lies more than
-PRECISION_RATIO of its own diagonals from its anchor.
+Seed 000 §5: per-object trees under a top-level tree work "really well" for many non-deforming objects
+but give "ambiguous results" where object boxes overlap (a ray visits several trees). So meshes placed
+by several instances and objects that changed in an earlier frame keep their own trees (seed 000 §5's
+static/dynamic separation); static single objects below SMALL_OBJECT triangles, and all of them when
+they overlap beyond OVERLAP_LIMIT, go to the soup (docs/choices.md#soup-thresholds), as do instances
+whose matrix cannot be inverted. `soup_zones` keeps float32 soup members near their anchor.
 """
 import numpy as np
 
@@ -31,19 +17,16 @@ LAYOUTS = ("auto", "two_level", "flat")
 SMALL_OBJECT = 1024
 OVERLAP_LIMIT = 0.5
 OVERLAP_SAMPLE = 2048  # boxes compared against all others when there are more (seeded sample)
-# A soup member's vertices lie within this many of its own box diagonals of its soup's anchor, so float32
-# rounds them by at most 2^-24 * 16384 = 2^-10 (1e-3) of the member's size (its own tree: ~2^-24), under
-# a pixel until the member spans a thousand. The render pays for having zones (1.2-1.9x), the build for
-# their number: benchmarks/bench_zones.py, README "Two-level scenes".
+# A soup member's vertices lie within this many of its own box diagonals of its anchor, so float32
+# rounds them by at most 2^-24 * 16384 = 2^-10 of the member's size (its own tree: ~2^-24), under a
+# pixel until the member spans a thousand. Zones cost render and build time (docs/choices.md#soup-zones).
 PRECISION_RATIO = 16384.0
 
 
 def plan_soup(layout, mesh_triangles, mesh_bounds, mesh_of, o2w, dynamic):
     """(I,) bool: which instances are merged into the soup.
-
     mesh_triangles (M,) triangle counts; mesh_bounds (M, 6) object-space boxes; mesh_of (I,);
-    o2w (I, 4, 4) float64; dynamic (M,) bool: the mesh changed or moved in an earlier frame.
-    """
+    o2w (I, 4, 4) float64; dynamic (M,) bool: the mesh changed or moved in an earlier frame."""
     if layout not in LAYOUTS:
         raise ValueError(f"layout must be one of {LAYOUTS}, got {layout!r}")
     singular = ~invertible(o2w) if len(o2w) else np.zeros(0, bool)
@@ -62,10 +45,8 @@ def plan_soup(layout, mesh_triangles, mesh_bounds, mesh_of, o2w, dynamic):
 
 def overlap_depth(boxes):
     """Mean over boxes of the share of each box's volume that other boxes cover, summed over them.
-
     0 for disjoint objects; k when every object is covered k times over (e.g. 1 for pairs that fill
-    each other's box). Boxes are padded by 0.1% of the scene's diagonal so flat objects have volume.
-    """
+    each other's box). Boxes are padded by 0.1% of the scene's diagonal so flat objects have volume."""
     diag = np.linalg.norm(boxes[:, 3:].max(axis=0) - boxes[:, :3].min(axis=0))
     lo, hi = boxes[:, :3] - 1e-3 * diag, boxes[:, 3:] + 1e-3 * diag
     volume = np.prod(hi - lo, axis=1)
@@ -84,20 +65,10 @@ def soup_zones(boxes, before=None, split=True):
     """The zones of one soup, as a list of (member rows, anchor), the main zone first (its rows may be
     empty). boxes (K, 6): the members' world boxes (inverted when empty); before: the main zone's
     anchor last frame, or None; split False: the main zone alone (the "flat" layout, lazy builds).
-
-    The main zone is anchored by `main_anchor` and keeps every member whose farthest box corner is
-    within PRECISION_RATIO of its diagonals of that anchor (members without extent too: they have
-    nothing to round); the anchor is found again after members leave, until none does, and then every
-    member it is near enough for is in, so that next frame, given it as `before`, the zone is the same.
-    The rest, smallest first, join the nearest zone anchor within (PRECISION_RATIO - 1/2) of their
-    diagonals of their box's centre, or else anchor a new zone at the centre of the grid cell holding
-    theirs, of the largest power-of-two size C with (sqrt(3)/2) C within that: either way no vertex is
-    more than PRECISION_RATIO diagonals from its anchor. Joining keeps neighbours of different sizes in
-    one zone (a zone is one more top-level instance for rays to visit, and overlaps the main zone).
-    Zones depend on this frame's boxes alone, so an unchanged soup keeps them; a smaller member
-    arriving nearby can move a larger one to its new zone, which re-rounds that member (its kept
-    pixels are traced again: instance_signature.py).
-    """
+    The main zone (`main_anchor`) keeps every member whose farthest box corner is within PRECISION_RATIO
+    of its diagonals of the anchor, re-found until stable so next frame's zone is the same. The rest,
+    smallest first, join the nearest zone anchor within (PRECISION_RATIO - 1/2) diagonals of their
+    centre, or anchor a new zone at the centre of the power-of-two grid cell holding it."""
     lo, hi = boxes[:, :3], boxes[:, 3:]
     filled = (lo <= hi).all(axis=1)
     size = np.zeros(len(boxes))
@@ -137,11 +108,9 @@ def _near(boxes, size, anchor):
 
 def main_anchor(boxes, before=None):
     """The point a soup's main zone's float32 triangles are relative to, given its members' world boxes
-    (K, 6, all filled): the last anchor `before` while it lies within the members' box grown by the
-    box's diagonal, else the box's centre. Re-anchoring re-rounds every member, which costs kept
-    pixels near all of them (instance_signature.py), so an object leaving or joining the soup should
-    not move it (the grown box keeps it for a flat ground, whose own box a centre above it is never
-    inside). `before` is also dropped where a vertex would lie beyond float32's range of it."""
+    (K, 6, all filled): the last anchor `before` while it lies within the members' box grown by its
+    diagonal (and within float32's range of every vertex), else the box's centre. Re-anchoring
+    re-rounds every member and so costs kept pixels (instance_signature.py)."""
     if len(boxes) == 0:
         return np.zeros(3) if before is None else before
     lo, hi = boxes[:, :3].min(axis=0), boxes[:, 3:].max(axis=0)

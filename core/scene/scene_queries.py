@@ -52,9 +52,8 @@ def trace_scene_all(scene, origins, directions, tmin, tmax, any_hit, threads, ra
 
 def trace_valid_rays(scene, o, d, lo, hi, any_hit, threads, ray_mask=ALL_RAYS):
     """trace_scene_all without the input checks, for rays that are valid by construction: C-contiguous
-    float64, finite, non-zero directions, 0 <= lo <= hi (a Camera's rays: it checks its matrix and fov).
-    The checks are several passes over the arrays: for 640 x 480 camera rays they took 31 ms of CPU
-    against 39-50 ms for making the rays (one loaded machine, same run)."""
+    float64, finite, non-zero directions, 0 <= lo <= hi (a Camera's rays). The checks are several passes
+    over the arrays (docs/choices.md#unchecked-camera-rays)."""
     scene = as_two_level(scene)
     n = len(o)
     t, u, v = np.empty(n), np.empty(n), np.empty(n)

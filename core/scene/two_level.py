@@ -1,13 +1,10 @@
 """The two-level scene (seed 000 §5; Wald 2004): one kd-tree per mesh in object space, instances that
 place the meshes with affine matrices, and a top-level kd-tree over the instances' world boxes.
 
-Rays are carried into each instance's object space by its world-to-object matrix (float64) and traced
-with the one kd-tree traversal (instance_traversal.py). An object that only moves keeps its tree: only
-the top level, which is built over boxes, is rebuilt (scene_builder.py does that across frames).
-
-The mesh trees are packed into one set of contiguous arrays with per-mesh offsets, so the kernels take
-plain arrays (no typed lists), all in one named tuple (SceneArrays), and a mesh's tree is a set of
-array views (instance_traversal.mesh_tree).
+Rays reach each instance's object space by its world-to-object matrix (float64) and the one kd-tree
+traversal (instance_traversal.py); an object that only moves keeps its tree. The mesh trees are packed
+into contiguous arrays with per-mesh offsets, so kernels take plain arrays, all in one named tuple
+(SceneArrays; `mesh_tree` views one mesh's tree).
 """
 from time import perf_counter
 from typing import NamedTuple
@@ -69,8 +66,7 @@ class TwoLevelScene:
     `world_to_object` (I, 3, 4) float64; `world_boxes` (I, 6) float32 (rounded outward);
     `top` (axis, split, child, count, items, bounds) of the top-level tree; `build_ms` (top level only);
     `visibility` (I,) uint8 ray_visibility bits, checked by build_two_level (None: every instance stops
-    every ray).
-    """
+    every ray)."""
 
     def __init__(self, meshes, mesh_of, object_to_world, world_to_object, world_boxes, top, build_ms,
                  visibility=None):
@@ -141,13 +137,10 @@ def _summed(per_mesh):
 
 
 def build_two_level(meshes, mesh_of, matrices, visibility=None, **options):
-    """The top level over prebuilt object-space mesh trees.
-
-    meshes: list of KdTree (object space); mesh_of: (I,) index of each instance's mesh; matrices:
-    (I, 4, 4) object-to-world; visibility: (I,) ray_visibility bits, which kinds of rays each instance
-    stops (None: all of them). Keyword options are BuildOptions for the top-level tree (its
-    references are boxes, so `clip` is ignored). Raises ValueError naming a bad instance.
-    """
+    """The top level over prebuilt object-space mesh trees: meshes (KdTrees), mesh_of (I,) mesh of each
+    instance, matrices (I, 4, 4) object-to-world, visibility (I,) ray_visibility bits (None: all rays).
+    Keywords are BuildOptions for the top level (boxes: `clip` is ignored); a bad instance raises
+    a ValueError naming it."""
     lazy = [i for i, m in enumerate(meshes) if isinstance(m, KdTree) and m.lazy]
     if lazy and len(meshes) > 1:
         raise ValueError(f"mesh {lazy[0]} is a lazy tree: a two-level scene with several meshes takes eagerly "
@@ -265,19 +258,17 @@ def _round_up(x):
 
 def build_top_level(boxes, opts):
     """(axis, split, child, count, items, bounds) of a kd-tree over instance boxes.
-
     The triangle builder already sees only boxes when it does not clip (seed 000's builder is "not
     restricted to a certain primitive type"), so it is reused as is with clip off; boxes straddling a
-    plane are referenced from both sides. Instances with an empty box are left out.
-    """
+    plane are referenced from both sides. Instances with an empty box are left out."""
     keep = np.flatnonzero(boxes[:, 0] <= boxes[:, 3]).astype(np.int32)
     if len(keep) == 0:
         return (*empty_arrays(), np.zeros(6, np.float32))
     sub = np.ascontiguousarray(boxes[keep])
     bounds = np.concatenate([sub[:, :3].min(axis=0), sub[:, 3:].max(axis=0)]).astype(np.float32)
     if len(keep) == 1 or half_area(bounds) == 0.0:
-        # One box, or every box on one point or line (instances scaled to ~1e-17, outside review: no area
-        # for the SAH to divide by, it raised ZeroDivisionError, and no split would separate rays): a leaf.
+        # One box, or every box on one point or line (instances scaled to ~1e-17): no area for the SAH
+        # to divide by, and no split would separate rays: a leaf.
         axis, split, child, count, _ = empty_arrays()
         count[0] = len(keep)
         return axis, split, child, count, keep, bounds

@@ -1,13 +1,10 @@
 """Sub-array views that cost no reference counting, for views made once per ray in parallel kernels.
 
-A Numba slice (`a[i:j]`) holds a reference to its parent's memory: creating and dropping it is an
-atomic increment and decrement of one shared counter. Made for every instance a ray visits, from two
-threads at once, those atomics made rendering a flat tree wrapped as a one-instance scene 1.4x slower
-(the counter's cache line bounces between cores). `rows` builds the same C-contiguous view from the
-data pointer instead, with no owner: valid only while the caller holds the parent array, which every
-caller here does (the scene's arrays outlive the kernel call). `unowned` views a whole array so:
-a kernel converts the arrays it hands to per-ray inlined code once per block of rays, because even
-reading an array out of a tuple or passing it to an inlined function can cost the same atomic pair.
+A Numba slice (`a[i:j]`) references its parent: an atomic increment and decrement of one shared counter
+whose cache line bounces between threads when made per ray (docs/choices.md#unowned-array-views).
+`rows` builds the same C-contiguous view from the data pointer with no owner: valid only while the
+caller holds the parent, as every caller here does. `unowned` views a whole array so; kernels convert
+the arrays they hand to per-ray inlined code once per block of rays.
 """
 import numpy as np
 from numba import carray, njit, types
@@ -45,8 +42,7 @@ def unowned(array):
 @njit(cache=True, inline="always")
 def at(i):
     """Index i (never negative where used) as Numba reads it without wraparound. A signed index gets
-    'if i < 0: i += length' at each access; in the traversal's node step that lands on the chain of
-    dependent loads (node -> axis -> the ray's component -> the split test -> the next node). With it
-    there, seed 000's camera and shadow rays took 0.94x as long and its render 0.905x
-    (benchmarks/bench_against_revision.py, 21 pairs, identical results; docs/choices.md)."""
+    'if i < 0: i += length' at each access, which in the node step lands on the chain of dependent
+    loads (node -> axis -> ray component -> split test -> next node)
+    (docs/choices.md#unsigned-indices-in-the-node-step)."""
     return np.uint64(i)

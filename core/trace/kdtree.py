@@ -15,8 +15,7 @@ class KdTree:
     `leaf_triangles` (9, R) float32, the triangles copied into leaf order (leaf_triangles.py);
     `options` (the BuildOptions used); `build_ms`; `dropped` (indices of zero-area triangles, which can
     never be hit and are left out); `deferred` (lazy builds: the subtrees not built yet, lazy.py; None
-    for an eager tree). Queries on a lazy tree build what they need, so its node arrays grow.
-    """
+    for an eager tree). Queries on a lazy tree build what they need, so its node arrays grow."""
 
     def __init__(self, triangles, bounds, nodes, options, build_ms, dropped, timings=None, deferred=None,
                  leaf_tris=None):
@@ -58,11 +57,8 @@ class KdTree:
 
     def stats(self):
         """Triangles, nodes, leaves, empty leaves, depth, references, SAH cost, build time and more.
-
-        On a lazy tree the figures describe the tree as built so far: `nodes`, `leaves`, `references`
-        count built nodes only; `sah_cost` counts each unbuilt subtree as a leaf of its references;
-        `build_ms` is the eager part, `lazy_build_ms` the on-demand building so far (see README).
-        """
+        On a lazy tree, the tree as built so far (unbuilt subtrees cost as leaves of their references;
+        `lazy_build_ms` is the on-demand building so far)."""
         if self._stats is None:
             self._stats = self._compute_stats()
         return dict(self._stats)

@@ -1,8 +1,8 @@
 """Closest-hit and any-hit queries over a KdTree: input checks, then one parallel kernel.
 
 A KdTree could also be queried as a one-instance scene (scene_queries.py, as the renderer does); the
-library's own queries keep the direct kernel, which skips the instance transform (camera rays on
-suzanne-251k measured 6-7% faster before both took unowned views, docs/choices.md)."""
+library's own queries keep the direct kernel, which skips the instance transform
+(docs/choices.md#direct-kernel-for-tree-queries)."""
 from typing import NamedTuple
 
 import numpy as np

@@ -1,10 +1,8 @@
 """The one kd-tree traversal: front to back with a bounded stack, for closest hit and any hit.
 
-Classic recursive-descent traversal in iterative form (seed 004 §6, Havran's TA_B^rec; pbrt): each inner
-node splits the ray's current interval [t0, t1] at the plane; the near child is visited first and the
-far one pushed. An any-hit query returns at its first hit; a closest-hit query stops once its best hit
-lies inside the interval of the leaf just finished, since everything still on the stack is farther.
-
+Recursive-descent traversal in iterative form (seed 004 §6, Havran's TA_B^rec; pbrt): each inner node
+splits the ray's interval [t0, t1] at the plane, visits the near child and pushes the far one. Any hit
+returns at the first hit; closest hit stops once its best hit lies inside the finished leaf's interval.
 Robustness without NaN paths:
 - A zero direction component (either sign of zero) never divides: the ray stays on its origin's side,
   and a ray lying in the plane visits both children. Both then cover the same interval, so the
@@ -51,22 +49,11 @@ def clip_to_box(box, o, d, inv, tmin, tmax):
 @njit(cache=True, inline="always")
 def trace_ray(tree, o, d, tmin, tmax, any_hit, stack_node, stack_t, inv, flags):
     """(t, prim, u, v) of the closest hit in (tmin, tmax), or of any hit if `any_hit`; prim -1 on a miss.
-
-    On a lazily built tree a ray that reaches an unbuilt subtree stops there and returns
-    prim = suspended_prim(subtree) (<= -2): front to back, that subtree is exactly one the eager tree's
-    traversal would enter, so the caller builds it and traces the ray again (lazy.py, seed 003 §3).
-    `stack_node`, `stack_t`, `inv` (3 floats) and `flags` (LEAF_CHUNK uint8) are the caller's
-    scratch, reused across rays. A leaf's triangles are screened LEAF_CHUNK at a time by their edge
-    signs (triangle_test.leaf_candidates), and only those kept get the full test, on the same copy.
-
-    Inlined into its callers, so three kernels hold a copy: the flat one below, and through
-    instance_traversal.trace_scene the scene's ray kernel and the renderer's sampling kernel. Called, it
-    cost a call per ray whose machine code begins with 13 reference-count calls (NRT_incref, one per
-    array argument; unowned views make them no-ops, but not free). Paired in one process against the
-    called version (seed 000's setting, results identical): camera rays 0.83x, shadow rays 0.85x, render
-    0.87x. The price is compile time: the sampling kernel compiled in ~82 s instead of 39 s,
-    ~36 s since Numba's inliner copies a callee's scope once (inline_copy.py).
-    """
+    On a lazy tree a ray reaching an unbuilt subtree returns prim = suspended_prim(subtree) (<= -2):
+    front to back, the eager traversal would enter that subtree, so the caller builds it and retraces
+    (lazy.py, seed 003 §3). `stack_node`, `stack_t`, `inv` (3) and `flags` (LEAF_CHUNK uint8) are the
+    caller's scratch. Leaves are screened LEAF_CHUNK triangles at a time (leaf_candidates) before the
+    full test. Inlined into its callers (docs/choices.md#inline-the-traversal)."""
     axis, split, child, count, leaf_prims = tree.axis, tree.split, tree.child, tree.count, tree.leaf_prims
     root_box, leaf_tris, base = tree.bounds, tree.leaf_triangles, tree.base
     for k in range(3):
@@ -112,12 +99,9 @@ def trace_ray(tree, o, d, tmin, tmax, any_hit, stack_node, stack_t, inv, flags):
 @njit(cache=True, inline="always")
 def _descend(node, a, pos, left, oa, da, inv_a, t0, t1, t_exit, stack, sp):
     """Step into an inner node: (next node, its t1, its exit bound, stack size), pushing the far child
-    onto stack = (stack_node, stack_t).
-
-    t_exit bounds where a closest hit lets the search stop: everything still on the stack starts at
-    or after it. A ray lying in the plane pushes a sibling covering the same interval, so below it the
-    bound drops to t0.
-    """
+    onto stack = (stack_node, stack_t). t_exit bounds where a closest hit lets the search stop
+    (everything on the stack starts at or after it); a ray lying in the plane pushes a sibling over the
+    same interval, so below it it drops to t0."""
     stack_node, stack_t = stack
     if da == 0.0:
         if oa < pos:
@@ -171,17 +155,9 @@ def interleaved_blocks(n, block_size):
     """(iterations, per_band) of a prange over the blocks of block_size items among n, in which
     iteration i runs items block_range(i, per_band, n, block_size): the iterations visit BANDS bands
     of the blocks in turn, RUN consecutive blocks of a band at a time.
-
-    Numba's prange gives each thread one contiguous range of iterations (a static schedule; under the
-    OpenMP layer parallel_chunksize does not change that, checked with get_thread_id). Rays and pixels
-    come in image order and their cost differs by region: the first half of the seed 000 setting's hit
-    pixels cost 1.4x the second (168 against 120 ms of CPU for their shadow rays), so split in halves
-    the step took ~1.17x as long as balanced. Dealt out band by band, any contiguous range of
-    iterations takes the same share of every band, whatever the thread count (which a cached kernel
-    cannot read: get_num_threads is a dynamic global). Dealt one block at a time, consecutive blocks
-    fell in different bands and the one-thread shadow step was 15% slower (cache misses), hence runs.
-    Results do not depend on the order.
-    """
+    Numba's prange gives each thread one contiguous range (a static schedule) and ray costs differ by
+    image region; dealt band by band, any contiguous range takes the same share of every band whatever
+    the thread count (docs/choices.md#interleaved-ray-blocks). Results do not depend on the order."""
     n_blocks = (n + block_size - 1) // block_size
     per_band = (n_blocks + BANDS - 1) // BANDS
     per_band = (per_band + RUN - 1) // RUN * RUN
@@ -210,8 +186,7 @@ def trace_rays(tree, origins, directions, tmin, tmax, any_hit, out_t, out_prim, 
 @njit(cache=True)
 def _trace_block(tree, origins, directions, tmin, tmax, any_hit, start, stop, out_t, out_prim, out_u, out_v):
     """Rays start..stop-1 with one stack, the tree's arrays and each ray's origin and direction as
-    unowned views (array_views.py): with owned arrays and slices, one-thread camera rays on
-    suzanne-251k took 1.15-1.2x as long (the reference counts of the views, per ray)."""
+    unowned views (array_views.py; docs/choices.md#unowned-array-views)."""
     stack_node, stack_t, inv = np.empty(STACK_SIZE, np.int32), np.empty((STACK_SIZE, 3)), np.empty(3)
     flags = np.empty(LEAF_CHUNK, np.uint8)
     views = TreeArrays(unowned(tree.axis), unowned(tree.split), unowned(tree.child), unowned(tree.count),

@@ -1,10 +1,7 @@
 """Statistics of a built tree, recomputed from the flat arrays alone.
 
-The SAH cost is the expected cost of a random ray through the tree under the SAH's assumptions
-(seed 001 eq. 6): traversal_cost * sum over inner nodes of A(node)/A(root) + intersection_cost * sum
-over leaves of A(leaf)/A(root) * count. Empty leaves cost nothing but their traversal step.
-An unbuilt subtree of a lazy tree is costed as a leaf of its references: the cost of the tree as it
-stands, not a bound on the finished tree's.
+SAH cost (seed 001 eq. 6): traversal_cost * sum over inner nodes of A(node)/A(root) + intersection_cost
+* sum over leaves of A(leaf)/A(root) * count; an unbuilt lazy subtree counts as a leaf of its references.
 """
 import numpy as np
 from numba import njit
@@ -16,9 +13,7 @@ from .layout import LEAF, UNBUILT
 @njit(cache=True)
 def walk_stats(axis, split, child, count, root_box, traversal_cost, intersection_cost):
     """(sah_cost, leaves, empty_leaves, max_depth, references, inner_area, leaf_area_refs, unbuilt).
-
-    Leaves and references count built leaves only; `unbuilt` counts unbuilt subtrees (lazy trees).
-    """
+    Leaves and references count built leaves only; `unbuilt` counts unbuilt subtrees (lazy trees)."""
     n = axis.shape[0]
     if n == 0:
         return 0.0, 0, 0, 0, 0, 0.0, 0.0, 0

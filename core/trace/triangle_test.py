@@ -1,20 +1,12 @@
 """Watertight ray/triangle intersection (Woop, Benthin and Wald 2013, JCGT 2(1)), with an exact tie rule.
 
-The ray is sheared so it runs along +z from the origin; each vertex is transformed once, and the three
-edge functions are 2D cross products of transformed vertices. A shared edge is computed from the same
-two transformed vertices in both triangles, so the two values are exact negatives: no ray slips between
-neighbours. Woop et al. accept zero edge values, so a ray through an edge or vertex hits every triangle
-sharing it; here a zero is accepted only when the edge direction (oriented so the inside is on its left)
-points "up, or right if horizontal". That is a symbolic perturbation of the ray by a fixed infinitesimal
-offset, so exactly one triangle of a closed fan owns each edge and vertex: no ray hits twice.
-Everything is in float64 on float32 vertices; zero-area triangles (det == 0) never hit.
-
-Most triangles a ray meets in a leaf fail at the first step: their three edge values straddle zero.
-`leaf_candidates` makes that step for a run of a leaf's triangles at once, from the leaf-ordered copy
-(leaf_triangles.py), in a loop LLVM vectorises (seed 000 §4 tests a packet of rays against one triangle
-with SIMD; here one ray meets several triangles, as Embree's multi-triangle leaves do). Its values are
-the scalar test's, bit for bit (same operations, no fast-math), so the full test runs only on the
-triangles it keeps and the hits do not change.
+The ray is sheared to run along +z; edge functions are 2D cross products of the transformed vertices,
+so a shared edge gives exact negatives in its two triangles: no ray slips between neighbours. A zero
+edge value counts only when the edge direction (inside on its left) points "up, or right if
+horizontal": a symbolic perturbation, so exactly one triangle of a closed fan owns each edge and
+vertex (Woop et al. accept every zero). Float64 on float32 vertices; zero-area triangles never hit.
+`leaf_candidates` screens a run of a leaf's triangles at once (most fail there: edge values straddle
+zero) from the leaf-ordered copy in a loop LLVM vectorises, with the same operations (no fast-math).
 """
 import numpy as np
 from numba import njit
@@ -54,9 +46,8 @@ def intersect_triangle(tri, o, kx, ky, kz, sx, sy, sz):
 @njit(cache=True, inline="always")
 def intersect_leaf_triangle(leaf_tris, j, o, kx, ky, kz, sx, sy, sz):
     """intersect_triangle on column j of the leaf-ordered copy (leaf_triangles.py): the same float32
-    vertices, so the same result. The traversal reads this copy, which the screen has just brought into
-    cache: read from the (N, 3, 3) array by triangle index, the full tests of the seed 000 setting's
-    camera rays took 1.5x as long (32 against 21 ms of one thread's 152-163 ms; a cache miss each)."""
+    vertices, so the same result, read from the cache lines the screen has just loaded
+    (docs/choices.md#leaf-ordered-triangle-copy)."""
     ox, oy, oz = o[at(kx)], o[at(ky)], o[at(kz)]
     j = at(j)  # unsigned indices: no wraparound code (array_views.at)
     ax, ay, az = _sheared(leaf_tris[at(kx), j], leaf_tris[at(ky), j], leaf_tris[at(kz), j], ox, oy, oz, sx, sy)
@@ -107,7 +98,7 @@ def _straddles(u, v, w):
     return ((u < 0.0) | (v < 0.0) | (w < 0.0)) & ((u > 0.0) | (v > 0.0) | (w > 0.0))
 
 
-LEAF_CHUNK = 32  # triangles leaf_candidates screens at once (one flags buffer; 8-64 measured alike)
+LEAF_CHUNK = 32  # triangles leaf_candidates screens at once (one flags buffer)
 
 
 @njit(cache=True, inline="always")
@@ -117,7 +108,7 @@ def leaf_candidates(leaf_tris, lo, hi, o, kx, ky, kz, sx, sy, flags):
 
     leaf_tris is (9, R) float32, row 3 v + k holding coordinate k of vertex v (leaf_triangles.py).
     The index is unsigned: with a signed one Numba wraps negative indices, and LLVM then gathers the
-    loads instead of reading them as vectors (measured: slower than the scalar loop)."""
+    loads instead of reading them as vectors (slower than the scalar loop)."""
     ox, oy, oz = o[kx], o[ky], o[kz]
     found = 0
     for i in range(lo, hi):
@@ -142,15 +133,13 @@ def _gamma(n):
 
 @njit(cache=True, inline="always")
 def _t_rounding(a, b, c, shear, edges, det):
-    """A bound on the rounding error of t (the sheared vertices a, b, c, the shear (sx, sy, sz), the
-    edge values (u, v, w) and their sum det), from pbrt-v3's watertight test (Pharr, Jakob and Humphreys,
-    §3.9.6): a t below it may be 0 or negative. pbrt bounds the shear term sx * z by the scaled z
-    (|sx| <= 1); ours is applied to the unscaled z (sz only scales t) and bounded by |sx| |z|, which
-    keeps the bound tight for tiny directions: with pbrt's form a ray along 2e-16 * (0, -1, 0) lost a
-    real hit at t = 1.4e15, and one 1e30 away along 1e-15 * (0, 0, -1) its hit at t = 1e45. Without
-    it a ray starting exactly on a triangle (tmin 0) reported that triangle at t ~ 1e-17, and, in the
-    tree, sometimes instead of its true closest hit (outside QA; the renderer's offset ray starts stay
-    far above it)."""
+    """A bound on the rounding error of t (sheared vertices a, b, c, the shear (sx, sy, sz), the edge
+    values (u, v, w) and their sum det), from pbrt-v3's watertight test (Pharr, Jakob and Humphreys,
+    §3.9.6): a t below it may be 0 or negative. pbrt bounds the shear term sx * z by the scaled z;
+    here it applies to the unscaled z (sz only scales t), bounded by |sx| |z|, which stays tight for
+    tiny directions (pbrt's form lost a real hit at t = 1.4e15 for a ray along 2e-16 * (0, -1, 0)).
+    Without it a ray starting exactly on a triangle (tmin 0) reported that triangle at t ~ 1e-17,
+    sometimes instead of its true closest hit (the renderer's offset ray starts stay far above it)."""
     (ax, ay, az), (bx, by, bz), (cx, cy, cz) = a, b, c
     sx, sy, sz = shear
     u, v, w = edges
