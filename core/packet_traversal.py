@@ -1,0 +1,353 @@
+"""Closest hits of coherent rays (camera rays) traced in packets of simd.LANES through a flat KdTree.
+
+Wald et al. 2001 ("Interactive Rendering with Coherent Ray Tracing", §3) trace neighbouring primary rays
+together: the packet walks the kd-tree once, each lane keeping its own [t0, t1]; at an inner node it
+goes to the near child only, or the far child only, when every active lane agrees, and otherwise visits
+both, pushing the far child with the lanes that enter it and their intervals. A leaf's triangles are
+tested against all its active lanes. That needs one sign per axis for the whole packet (it fixes which
+child is near), so a lane whose direction has another sign on some axis, or a zero component, leaves
+the packet and is traced by the single-ray kernel (traversal.trace_rays) afterwards.
+
+Results equal traversal.trace_ray's, hit for hit, because each lane makes the single-ray traversal's
+decisions with its arithmetic:
+- node steps are float64 lanes computing (split - o) / d and the 1e-9 relative widening exactly as
+  traversal._descend does (no contraction into FMAs), with the same near-only / far-only / both cases;
+  with strict direction signs no lane lies in a plane, so a lane's exit bound is its t1;
+- a lane finishes once its best hit lies within the leaf interval it just left, and stacked entries it
+  cannot improve on are dropped, as traversal._pop does;
+- leaves: the lanes' edge functions against each triangle are computed in float64 lanes with the
+  operations of triangle_test.leaf_candidates (Woop, Benthin and Wald 2013, "Watertight Ray/Triangle
+  Intersection"), so a lane is rejected only where the single-ray screen rejects it; the lanes left
+  take the single-ray test itself (triangle_test.intersect_leaf_triangle: tie rule, t rounding bound),
+  in leaf order. Packets whose lanes shear along different axes test every active lane that way.
+A lazy tree is handed to queries.intersect whole (an unbuilt node would stop the packet).
+"""
+import numpy as np
+from numba import njit, prange
+
+from . import simd as S
+from .array_views import at, rows, unowned
+from .inputs import as_ray_limits, as_rays, hit_distances_as_float32
+from .kdtree import KdTree
+from .layout import LEAF
+from .queries import Hits, intersect
+from .threads import thread_count
+from .traversal import STACK_SIZE, WIDEN, block_range, clip_to_box, interleaved_blocks, trace_rays
+from .triangle_test import intersect_leaf_triangle, ray_shear
+
+L = S.LANES
+TILE_SHAPE = (4, 2)  # a packet: 4 x 2 neighbouring pixels (width x height)
+PACKETS_PER_TASK = 8  # packets a parallel task traces with one stack
+
+# rows of the per-packet scratch `rays` (row r holds lane l at r * L + l)
+O, INV, T0, T1, TMIN, BEST, SX, SY, SZ = 0, 3, 6, 7, 8, 9, 10, 11, 12
+ROWS = 13
+
+
+def packet_order(width, height, tile_shape=TILE_SHAPE):
+    """Ray indices (image order, row-major, `width` columns) grouped in tiles of tile_shape pixels, one
+    packet of L lanes per tile, tiles in image order; -1 fills lanes of tiles cut by the image edge."""
+    tw, th = tile_shape
+    if tw * th != L:
+        raise ValueError(f"tile_shape must cover {L} pixels, got {tile_shape}")
+    tiles_x, tiles_y = -(-width // tw), -(-height // th)
+    ty, tx, ly, lx = np.meshgrid(np.arange(tiles_y), np.arange(tiles_x), np.arange(th), np.arange(tw),
+                                 indexing="ij")
+    x, y = tx * tw + lx, ty * th + ly
+    return np.where((x < width) & (y < height), y * width + x, -1).astype(np.int64).ravel()
+
+
+def intersect_packets(tree, origins, directions, width, tmin=0.0, tmax=np.inf, tile_shape=TILE_SHAPE,
+                      threads=None, stats=None):
+    """Closest hits as queries.intersect gives them (Hits), for rays in image order: ray k is pixel
+    (k // width, k % width). Neighbouring pixels are traced as packets; `stats`, a dict if given, gets
+    the number of packets and of rays traced singly."""
+    if not isinstance(tree, KdTree):
+        raise ValueError(f"tree must be a core.KdTree, got {type(tree).__name__}")
+    o, d = as_rays(origins, directions)
+    n = len(o)
+    if n % width:
+        raise ValueError(f"{n} rays do not fill rows of width {width}")
+    if tree.lazy:
+        return intersect(tree, o, d, tmin, tmax, threads)
+    lo, hi = as_ray_limits(tmin, tmax, n)
+    order = packet_order(width, n // width, tile_shape)
+    t, prim, u, v = np.empty(n), np.empty(n, np.int32), np.empty(n), np.empty(n)
+    single = np.zeros(n, np.uint8)
+    with thread_count(threads):
+        trace_packets(tree.arrays, o, d, lo, hi, order, t, prim, u, v, single)
+        rest = np.flatnonzero(single)
+        if len(rest):
+            out = [np.empty(len(rest)), np.empty(len(rest), np.int32), np.empty(len(rest)), np.empty(len(rest))]
+            trace_rays(tree.arrays, o[rest], d[rest], lo[rest], hi[rest], False, *out)
+            t[rest], prim[rest], u[rest], v[rest] = out
+    if stats is not None:
+        stats.update(packets=len(order) // L, single_rays=len(rest))
+    return Hits(hit_distances_as_float32(t, prim, lo, hi), prim, u.astype(np.float32), v.astype(np.float32))
+
+
+@njit(cache=True, parallel=True)
+def trace_packets(tree, origins, directions, tmin, tmax, order, out_t, out_prim, out_u, out_v, single):
+    """Trace the packets of `order` (L ray indices each) in parallel; rays that cannot join their
+    packet are left for the single-ray kernel with single[ray] = 1."""
+    n = order.shape[0] // L
+    iterations, per_band = interleaved_blocks(n, PACKETS_PER_TASK)
+    for i in prange(iterations):
+        start, stop = block_range(i, per_band, n, PACKETS_PER_TASK)
+        _trace_packet_block(tree, origins, directions, tmin, tmax, order, start, stop, out_t, out_prim, out_u,
+                            out_v, single)
+
+
+@njit(cache=True)
+def _trace_packet_block(tree, origins, directions, tmin, tmax, order, start, stop, out_t, out_prim, out_u,
+                        out_v, single):
+    """Packets start..stop-1 with one set of scratch arrays and the tree as unowned views (see
+    traversal._trace_block)."""
+    views = (unowned(tree[0]), unowned(tree[1]), unowned(tree[2]), unowned(tree[3]), unowned(tree[4]),
+             unowned(tree[5]), unowned(tree[6]), unowned(tree[7]), tree[8])
+    owned = (np.zeros(ROWS * L), np.zeros((L, 3)), np.zeros((L, 3), np.int64), np.empty(L, np.int32), np.empty(L),
+             np.empty(L), np.empty(STACK_SIZE, np.int32), np.empty(STACK_SIZE, np.int64), np.empty(STACK_SIZE * 2 * L))
+    # unowned views of everything the per-packet code takes: their reference counts are no-ops (array_views)
+    rays, lane_o, axes, prims, us, vs = (unowned(owned[0]), unowned(owned[1]), unowned(owned[2]), unowned(owned[3]),
+                                         unowned(owned[4]), unowned(owned[5]))
+    stack_node, stack_bits, stack_t = unowned(owned[6]), unowned(owned[7]), unowned(owned[8])
+    rays_in = (unowned(origins), unowned(directions), unowned(tmin), unowned(tmax), unowned(order))
+    out = (unowned(out_t), unowned(out_prim), unowned(out_u), unowned(out_v), unowned(single))
+    for p in range(start, stop):
+        lanes = rows(rays_in[4], p * L, p * L + L)
+        bits, signs, same_axes = _setup(views[6], rays_in[0], rays_in[1], rays_in[2], rays_in[3], lanes, rays, lane_o,
+                                        axes, prims, out[0], out[1], out[2], out[3], out[4])
+        if bits == 0:
+            continue
+        if _traverse(views, rays, lane_o, axes, same_axes, signs, bits, prims, us, vs, stack_node, stack_bits,
+                     stack_t):
+            _leave_to_single_rays(lanes, bits, out[4])
+        else:
+            _write(lanes, bits, rays, prims, us, vs, out[0], out[1], out[2], out[3])
+
+
+@njit(cache=True, inline="always")
+def _packet_signs(directions, lanes):
+    """Bit k set when most of the lanes' directions are positive on axis k (the packet's signs)."""
+    signs = 0
+    for k in range(3):
+        balance = 0
+        for l in range(L):
+            r = lanes[l]
+            if r >= 0:
+                balance += 1 if directions[r, k] > 0.0 else (-1 if directions[r, k] < 0.0 else 0)
+        signs |= (1 if balance >= 0 else 0) << k
+    return signs
+
+
+@njit(cache=True, inline="always")
+def _agrees(d, signs):
+    """Whether direction d is strictly positive on the packet's positive axes, negative on the others."""
+    ok = True
+    for k in range(3):
+        ok &= d[k] > 0.0 if (signs >> k) & 1 else d[k] < 0.0
+    return ok
+
+
+@njit(cache=True, inline="always")
+def _setup(root_box, origins, directions, tmin, tmax, lanes, rays, lane_o, axes, prims, out_t, out_prim, out_u,
+           out_v, single):
+    """Fill the scratch for one packet: (bits of the lanes traced, the packet's signs, whether all of
+    them shear along the same axes). Lanes that disagree go to single rays; lanes missing the root box
+    are written as misses here, as trace_ray returns them."""
+    signs = _packet_signs(directions, lanes)
+    rays[:] = 0.0
+    bits = 0
+    for l in range(L):
+        r = lanes[l]
+        if r < 0:
+            continue
+        o, d = rows(origins, r, r + 1)[0], rows(directions, r, r + 1)[0]
+        if not _agrees(d, signs):
+            single[r] = 1
+            continue
+        t0, t1 = _clip_lane(root_box, o, d, tmin[r], tmax[r])
+        if t0 > t1:
+            out_t[r], out_prim[r], out_u[r], out_v[r] = np.inf, -1, 0.0, 0.0
+            continue
+        _fill_lane(rays, lane_o, axes, l, o, d, t0, t1, tmin[r], tmax[r])
+        prims[l] = -1
+        bits |= 1 << l
+    return bits, signs, _same_axes(axes, bits)
+
+
+@njit(cache=True, inline="always")
+def _clip_lane(root_box, o, d, tmin, tmax):
+    inv = (1.0 / d[0], 1.0 / d[1], 1.0 / d[2])  # non-zero: the packet's lanes have strict signs
+    return clip_to_box(root_box, o, d, inv, tmin, tmax)
+
+
+@njit(cache=True, inline="always")
+def _fill_lane(rays, lane_o, axes, l, o, d, t0, t1, tmin, tmax):
+    for k in range(3):
+        rays[(O + k) * L + l] = o[k]
+        rays[(INV + k) * L + l] = 1.0 / d[k]
+        lane_o[l, k] = o[k]
+    kx, ky, kz, sx, sy, sz = ray_shear(d)
+    axes[l, 0], axes[l, 1], axes[l, 2] = kx, ky, kz
+    rays[T0 * L + l], rays[T1 * L + l], rays[TMIN * L + l], rays[BEST * L + l] = t0, t1, tmin, tmax
+    rays[SX * L + l], rays[SY * L + l], rays[SZ * L + l] = sx, sy, sz
+
+
+@njit(cache=True, inline="always")
+def _same_axes(axes, bits):
+    if bits == 0:
+        return True
+    first = S.count_trailing_zeros(bits)
+    same = True
+    for l in range(L):
+        if (bits >> l) & 1:
+            same &= axes[l, 0] == axes[first, 0] and axes[l, 2] == axes[first, 2]
+    return same
+
+
+@njit(cache=True, inline="always")
+def _traverse(tree, rays, lane_o, axes, same_axes, signs, bits, prims, us, vs, stack_node, stack_bits, stack_t):
+    """Walk the tree with the packet (module docstring); True if it met an unbuilt node (lazy tree)."""
+    axis, split, child, count, leaf_prims, _, _, leaf_tris, base = tree
+    t0, t1 = S.load(rays, T0 * L), S.load(rays, T1 * L)
+    node, m, sp, done, found = 0, bits, 0, 0, 0
+    while True:
+        a = axis[at(node)]
+        if a < LEAF:
+            node, m, t0, t1, sp = _node_step(rays, a, split[at(node)], child[at(node)], signs, m, t0, t1,
+                                             stack_node, stack_bits, stack_t, sp)
+            continue
+        if a != LEAF:
+            return True
+        first = child[at(node)]
+        found |= _leaf(leaf_tris, leaf_prims, base, first, first + count[at(node)], m, rays, lane_o, axes,
+                       same_axes, prims, us, vs)
+        done |= S.mask_bits(S.le(S.load(rays, BEST * L), t1)) & found & m  # as trace_ray: best_t <= t_exit
+        node, m, t0, t1, sp, done = _pop(rays, found, done, stack_node, stack_bits, stack_t, sp)
+        if node < 0:
+            return False
+
+
+@njit(cache=True, inline="always")
+def _node_step(rays, a, pos, left, signs, m, t0, t1, stack_node, stack_bits, stack_t, sp):
+    """traversal._descend for every active lane: (next node, its lanes, their t0 and t1, stack size).
+    The packet's sign on the axis fixes the first child; lanes entering both push the second."""
+    oa, inv_a, p = S.load(rays, (O + a) * L), S.load(rays, (INV + a) * L), S.splat_f64(pos)
+    ts = S.mul(S.sub(p, oa), inv_a)
+    slack = S.mul(S.splat_f64(WIDEN), S.vabs(ts))
+    near_only = S.mask_or(S.le(ts, S.splat_f64(0.0)), S.gt(ts, S.add(t1, slack)))
+    far_only = S.mask_andnot(S.lt(ts, S.sub(t0, slack)), near_only)
+    both = S.mask_not(S.mask_or(near_only, far_only))
+    positive = (signs >> a) & 1
+    near_first = S.mask_bits(S.lt(oa, p) if positive else S.gt(oa, p))
+    near_or_both, far_or_both = S.mask_bits(S.mask_or(near_only, both)), S.mask_bits(S.mask_or(far_only, both))
+    in_first = m & ((near_first & near_or_both) | (~near_first & far_or_both))
+    in_second = m & ((near_first & far_or_both) | (~near_first & near_or_both))
+    first, second = (left, left + 1) if positive else (left + 1, left)
+    ts = S.vmin(S.vmax(ts, t0), t1)  # where both: the split, clamped into [t0, t1] as _descend does
+    if in_first == 0:
+        return second, in_second, S.select(both, ts, t0), t1, sp
+    if in_second != 0:
+        stack_node[at(sp)], stack_bits[at(sp)] = second, in_second
+        S.store(stack_t, sp * 2 * L, S.select(both, ts, t0))
+        S.store(stack_t, sp * 2 * L + L, t1)
+        sp += 1
+    return first, in_first, t0, S.select(both, ts, t1), sp
+
+
+@njit(cache=True, inline="always")
+def _pop(rays, found, done, stack_node, stack_bits, stack_t, sp):
+    """The next stacked node with lanes still searching: (node, lanes, t0, t1, sp, done), node -1 when
+    none. As traversal._pop, a lane whose hit lies before an entry's start (less the slack) skips it;
+    without in-plane lanes that means it is done."""
+    best = S.load(rays, BEST * L)
+    while sp > 0:
+        sp -= 1
+        m = stack_bits[at(sp)] & ~done
+        if m == 0:
+            continue
+        t0, t1 = S.load(stack_t, sp * 2 * L), S.load(stack_t, sp * 2 * L + L)
+        skip = found & m & S.mask_bits(S.lt(best, S.sub(t0, S.mul(S.splat_f64(WIDEN), S.vabs(t0)))))
+        done |= skip
+        m &= ~skip
+        if m != 0:
+            return stack_node[at(sp)], m, t0, t1, sp, done
+    return -1, 0, best, best, 0, done
+
+
+@njit(cache=True, inline="always")
+def _leaf(leaf_tris, leaf_prims, base, first, end, m, rays, lane_o, axes, same_axes, prims, us, vs):
+    """Test the leaf's triangles against the active lanes m, in leaf order; bits of lanes whose best hit
+    changed. With shared shear axes, the vector screen picks the lanes the full test can hit."""
+    found = 0
+    kx, ky, kz = axes[S.count_trailing_zeros(m), 0], axes[S.count_trailing_zeros(m), 1], \
+        axes[S.count_trailing_zeros(m), 2]
+    ox, oy, oz = S.load(rays, (O + kx) * L), S.load(rays, (O + ky) * L), S.load(rays, (O + kz) * L)
+    sx, sy = S.load(rays, SX * L), S.load(rays, SY * L)
+    for j in range(first, end):
+        candidates = m
+        if same_axes:
+            candidates &= _screen(leaf_tris, base + j, kx, ky, kz, ox, oy, oz, sx, sy)
+        while candidates != 0:
+            l = S.count_trailing_zeros(candidates)
+            candidates &= candidates - 1
+            if _test_lane(leaf_tris, base + j, leaf_prims[at(j)], l, rays, lane_o, axes, prims, us, vs):
+                found |= 1 << l
+    return found
+
+
+@njit(cache=True, inline="always")
+def _test_lane(leaf_tris, column, prim, l, rays, lane_o, axes, prims, us, vs):
+    """The single-ray test of lane l against one leaf triangle; keeps the hit if closer (as trace_ray)."""
+    t, u, v = intersect_leaf_triangle(leaf_tris, column, rows(lane_o, l, l + 1)[0], axes[at(l), 0],
+                                      axes[at(l), 1], axes[at(l), 2], rays[at(SX * L + l)], rays[at(SY * L + l)],
+                                      rays[at(SZ * L + l)])
+    if rays[at(TMIN * L + l)] < t < rays[at(BEST * L + l)]:
+        rays[at(BEST * L + l)], prims[at(l)], us[at(l)], vs[at(l)] = t, prim, u, v
+        return True
+    return False
+
+
+@njit(cache=True, inline="always")
+def _screen(leaf_tris, j, kx, ky, kz, ox, oy, oz, sx, sy):
+    """Bits of the lanes whose edge values for triangle column j do not straddle zero: those
+    triangle_test.leaf_candidates keeps, computed with its operations lane by lane."""
+    ax, ay, az = _sheared(leaf_tris[at(kx), at(j)], leaf_tris[at(ky), at(j)], leaf_tris[at(kz), at(j)], ox, oy, oz,
+                          sx, sy)
+    bx, by, bz = _sheared(leaf_tris[at(3 + kx), at(j)], leaf_tris[at(3 + ky), at(j)], leaf_tris[at(3 + kz), at(j)],
+                          ox, oy, oz, sx, sy)
+    cx, cy, cz = _sheared(leaf_tris[at(6 + kx), at(j)], leaf_tris[at(6 + ky), at(j)], leaf_tris[at(6 + kz), at(j)],
+                          ox, oy, oz, sx, sy)
+    u = S.sub(S.mul(cx, by), S.mul(cy, bx))
+    v = S.sub(S.mul(ax, cy), S.mul(ay, cx))
+    w = S.sub(S.mul(bx, ay), S.mul(by, ax))
+    zero = S.splat_f64(0.0)
+    negative = S.mask_or(S.mask_or(S.lt(u, zero), S.lt(v, zero)), S.lt(w, zero))
+    positive = S.mask_or(S.mask_or(S.gt(u, zero), S.gt(v, zero)), S.gt(w, zero))
+    return ~S.mask_bits(S.mask_and(negative, positive))
+
+
+@njit(cache=True, inline="always")
+def _sheared(x, y, z, ox, oy, oz, sx, sy):
+    """triangle_test._sheared in lanes: (x - ox) - sx (z - oz), (y - oy) - sy (z - oz), z - oz."""
+    z = S.sub(S.splat_f64(z), oz)
+    return S.sub(S.sub(S.splat_f64(x), ox), S.mul(sx, z)), S.sub(S.sub(S.splat_f64(y), oy), S.mul(sy, z)), z
+
+
+@njit(cache=True, inline="always")
+def _leave_to_single_rays(lanes, bits, single):
+    for l in range(L):
+        if (bits >> l) & 1:
+            single[lanes[l]] = 1
+
+
+@njit(cache=True, inline="always")
+def _write(lanes, bits, rays, prims, us, vs, out_t, out_prim, out_u, out_v):
+    for l in range(L):
+        if (bits >> l) & 1:
+            r = lanes[l]
+            if prims[l] >= 0:
+                out_t[r], out_prim[r], out_u[r], out_v[r] = rays[BEST * L + l], prims[l], us[l], vs[l]
+            else:
+                out_t[r], out_prim[r], out_u[r], out_v[r] = np.inf, -1, 0.0, 0.0
