@@ -7,7 +7,9 @@ Usage: python benchmarks/bench_packets.py [--scene suzanne-251k] [--width 640 --
 In one process and one run: packets on 1 and 2 threads, core.intersect on 2 threads, embreex on 1 thread
 (its only mode: reference_tracers.py), each called once untimed, then --runs rounds taking the four in
 turn (so load from other processes falls on all of them alike); medians of wall time, with the
-process's CPU time beside them. Compile time is measured apart, in a child process with an empty Numba
+process's CPU time beside them. The *_kernel rows time the kernels alone (packet kernel plus the
+single-ray kernel for its leftovers; core's single-ray kernel), without the queries' input checks,
+which cost the same for both queries. Compile time is measured apart, in a child process with an empty Numba
 cache (the packet kernel's first call, and core.intersect's for scale). Agreement: hit triangles of
 the packets against core.intersect (expected identical) and against Embree (float32, its own ties).
 """
@@ -27,7 +29,9 @@ sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(HERE.parent))
 
 import core  # noqa: E402
-from core.packet_traversal import intersect_packets  # noqa: E402
+from core.packet_traversal import intersect_packets, packet_order, trace_packets  # noqa: E402
+from core.threads import thread_count  # noqa: E402
+from core.traversal import trace_rays  # noqa: E402
 from scenes import load_scene  # noqa: E402
 from workload import camera_workload  # noqa: E402
 
@@ -93,6 +97,9 @@ def main():
         "packets_2t": lambda: intersect_packets(tree, o, d, args.width, threads=2),
         "intersect_2t": lambda: core.intersect(tree, o, d, threads=2),
         "embree_1t": lambda: embree.closest(o, d),
+        "packets_kernel_1t": kernel_packets(tree, o, d, args.width, args.height, 1),
+        "packets_kernel_2t": kernel_packets(tree, o, d, args.width, args.height, 2),
+        "trace_rays_kernel_2t": kernel_single(tree, o, d, 2),
     }
     t = time.perf_counter()
     results = {name: fn() for name, fn in tracers.items()}  # untimed first calls (cache loads, warm-up)
@@ -119,6 +126,9 @@ def main():
             "packets_2t / intersect_2t": mrays["packets_2t"] / mrays["intersect_2t"],
             "packets_1t / intersect_2t": mrays["packets_1t"] / mrays["intersect_2t"],
             "intersect_2t / embree_1t": mrays["intersect_2t"] / mrays["embree_1t"],
+            "packets_kernel_1t / trace_rays_kernel_2t": mrays["packets_kernel_1t"] / mrays["trace_rays_kernel_2t"],
+            "packets_kernel_2t / trace_rays_kernel_2t": mrays["packets_kernel_2t"] / mrays["trace_rays_kernel_2t"],
+            "packets_kernel_1t / embree_1t": mrays["packets_kernel_1t"] / mrays["embree_1t"],
         },
         "single_ray_fraction": stats["single_rays"] / n, "packets": stats["packets"],
         "agreement_vs_intersect": agreement(packets.prim, packets.t, single.prim, single.t),
@@ -130,6 +140,40 @@ def main():
     Path(args.json).parent.mkdir(parents=True, exist_ok=True)
     Path(args.json).write_text(json.dumps(report, indent=1))
     print(f"written {args.json}")
+
+
+def kernel_packets(tree, o, d, width, height, threads):
+    """The packet kernel and the single-ray kernel for its leftovers, without the input checks and
+    conversions of the query functions (what a renderer's kernel would run)."""
+    n, order = len(o), packet_order(width, height)
+    lo, hi = np.zeros(n), np.full(n, np.inf)
+
+    def run():
+        out = (np.empty(n), np.empty(n, np.int32), np.empty(n), np.empty(n))
+        single = np.zeros(n, np.uint8)
+        with thread_count(threads):
+            trace_packets(tree.arrays, o, d, lo, hi, order, *out, single)
+            rest = np.flatnonzero(single)
+            if len(rest):
+                trace_rays(tree.arrays, o[rest], d[rest], lo[rest], hi[rest], False,
+                           *(a[rest].copy() for a in out))
+        return out
+
+    return run
+
+
+def kernel_single(tree, o, d, threads):
+    """core's single-ray kernel (traversal.trace_rays) without the query's checks and conversions."""
+    n = len(o)
+    lo, hi = np.zeros(n), np.full(n, np.inf)
+
+    def run():
+        out = (np.empty(n), np.empty(n, np.int32), np.empty(n), np.empty(n))
+        with thread_count(threads):
+            trace_rays(tree.arrays, o, d, lo, hi, False, *out)
+        return out
+
+    return run
 
 
 def print_report(r):

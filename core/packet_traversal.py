@@ -22,6 +22,8 @@ decisions with its arithmetic:
   in leaf order. Packets whose lanes shear along different axes test every active lane that way.
 A lazy tree is handed to queries.intersect whole (an unbuilt node would stop the packet).
 """
+import functools
+
 import numpy as np
 from numba import njit, prange
 
@@ -44,17 +46,21 @@ O, INV, T0, T1, TMIN, BEST, SX, SY, SZ = 0, 3, 6, 7, 8, 9, 10, 11, 12
 ROWS = 13
 
 
+@functools.lru_cache(maxsize=8)
 def packet_order(width, height, tile_shape=TILE_SHAPE):
     """Ray indices (image order, row-major, `width` columns) grouped in tiles of tile_shape pixels, one
-    packet of L lanes per tile, tiles in image order; -1 fills lanes of tiles cut by the image edge."""
-    tw, th = tile_shape
+    packet of L lanes per tile, tiles in image order; -1 fills lanes of tiles cut by the image edge.
+    Read-only and kept for the next frame of the same size (building it costs ~ms per 100k rays)."""
+    tw, th = tuple(tile_shape)
     if tw * th != L:
         raise ValueError(f"tile_shape must cover {L} pixels, got {tile_shape}")
     tiles_x, tiles_y = -(-width // tw), -(-height // th)
     ty, tx, ly, lx = np.meshgrid(np.arange(tiles_y), np.arange(tiles_x), np.arange(th), np.arange(tw),
                                  indexing="ij")
     x, y = tx * tw + lx, ty * th + ly
-    return np.where((x < width) & (y < height), y * width + x, -1).astype(np.int64).ravel()
+    order = np.where((x < width) & (y < height), y * width + x, -1).astype(np.int64).ravel()
+    order.flags.writeable = False
+    return order
 
 
 def intersect_packets(tree, origins, directions, width, tmin=0.0, tmax=np.inf, tile_shape=TILE_SHAPE,
@@ -71,7 +77,7 @@ def intersect_packets(tree, origins, directions, width, tmin=0.0, tmax=np.inf, t
     if tree.lazy:
         return intersect(tree, o, d, tmin, tmax, threads)
     lo, hi = as_ray_limits(tmin, tmax, n)
-    order = packet_order(width, n // width, tile_shape)
+    order = packet_order(int(width), n // width, tuple(tile_shape))
     t, prim, u, v = np.empty(n), np.empty(n, np.int32), np.empty(n), np.empty(n)
     single = np.zeros(n, np.uint8)
     with thread_count(threads):
