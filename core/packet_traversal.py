@@ -35,9 +35,10 @@ from .layout import LEAF
 from .queries import Hits, intersect
 from .threads import thread_count
 from .traversal import STACK_SIZE, WIDEN, block_range, clip_to_box, interleaved_blocks, trace_rays
-from .triangle_test import intersect_leaf_triangle, ray_shear
+from .triangle_test import GAMMA, intersect_leaf_triangle, ray_shear
 
 L = S.LANES
+G2, G3, G5 = (n * GAMMA / (1.0 - n * GAMMA) for n in (2, 3, 5))  # triangle_test._gamma(n), the same doubles
 TILE_SHAPE = (4, 2)  # a packet: 4 x 2 neighbouring pixels (width x height)
 PACKETS_PER_TASK = 8  # packets a parallel task traces with one stack
 
@@ -285,22 +286,106 @@ def _pop(rays, found, done, stack_node, stack_bits, stack_t, sp):
 @njit(cache=True, inline="always")
 def _leaf(leaf_tris, leaf_prims, base, first, end, m, rays, lane_o, axes, same_axes, prims, us, vs):
     """Test the leaf's triangles against the active lanes m, in leaf order; bits of lanes whose best hit
-    changed. With shared shear axes, the vector screen picks the lanes the full test can hit."""
+    changed. Lanes sharing shear axes are tested in vectors (_lanes_test); otherwise lane by lane."""
     found = 0
-    kx, ky, kz = axes[S.count_trailing_zeros(m), 0], axes[S.count_trailing_zeros(m), 1], \
-        axes[S.count_trailing_zeros(m), 2]
-    ox, oy, oz = S.load(rays, (O + kx) * L), S.load(rays, (O + ky) * L), S.load(rays, (O + kz) * L)
-    sx, sy = S.load(rays, SX * L), S.load(rays, SY * L)
     for j in range(first, end):
-        candidates = m
         if same_axes:
-            candidates &= _screen(leaf_tris, base + j, kx, ky, kz, ox, oy, oz, sx, sy)
+            found |= _lanes_test(leaf_tris, base + j, leaf_prims[at(j)], m, rays, lane_o, axes, prims, us, vs)
+            continue
+        candidates = m
         while candidates != 0:
             l = S.count_trailing_zeros(candidates)
             candidates &= candidates - 1
             if _test_lane(leaf_tris, base + j, leaf_prims[at(j)], l, rays, lane_o, axes, prims, us, vs):
                 found |= 1 << l
     return found
+
+
+@njit(cache=True, inline="always")
+def _lanes_test(leaf_tris, column, prim, m, rays, lane_o, axes, prims, us, vs):
+    """triangle_test._hit for the lanes m against one triangle, in float64 lanes with its operations in
+    its order (the sign flip by det's sign is exact and left out where it cannot change a bit), so each
+    lane gets the single-ray test's t. Lanes with an exactly zero edge value, where the tie rule
+    decides, take the single-ray test itself. Returns the bits of lanes whose best hit changed."""
+    l0 = S.count_trailing_zeros(m)
+    kx, ky, kz = axes[at(l0), 0], axes[at(l0), 1], axes[at(l0), 2]
+    ax, ay, az, bx, by, bz, cx, cy, cz = _sheared_triangle(leaf_tris, column, rays, kx, ky, kz)
+    u = S.sub(S.mul(cx, by), S.mul(cy, bx))
+    v = S.sub(S.mul(ax, cy), S.mul(ay, cx))
+    w = S.sub(S.mul(bx, ay), S.mul(by, ax))
+    zero = S.splat_f64(0.0)
+    negative = S.mask_or(S.mask_or(S.lt(u, zero), S.lt(v, zero)), S.lt(w, zero))
+    positive = S.mask_or(S.mask_or(S.gt(u, zero), S.gt(v, zero)), S.gt(w, zero))
+    candidates = m & ~S.mask_bits(S.mask_and(negative, positive))
+    if candidates == 0:
+        return 0
+    ties = candidates & S.mask_bits(S.mask_or(S.mask_or(S.eq(u, zero), S.eq(v, zero)), S.eq(w, zero)))
+    found = 0
+    while ties != 0:
+        l = S.count_trailing_zeros(ties)
+        ties &= ties - 1
+        if _test_lane(leaf_tris, column, prim, l, rays, lane_o, axes, prims, us, vs):
+            found |= 1 << l
+    candidates &= ~S.mask_bits(S.mask_or(S.mask_or(S.eq(u, zero), S.eq(v, zero)), S.eq(w, zero)))
+    if candidates == 0:
+        return found
+    det = S.add(S.add(u, v), w)
+    flip = S.select(S.gt(det, zero), S.splat_f64(1.0), S.splat_f64(-1.0))
+    u, v, w, det = S.mul(flip, u), S.mul(flip, v), S.mul(flip, w), S.mul(flip, det)
+    sz = S.load(rays, SZ * L)
+    t = S.div(S.mul(S.add(S.add(S.mul(u, az), S.mul(v, bz)), S.mul(w, cz)), sz), det)
+    best = S.load(rays, BEST * L)
+    inside = S.mask_and(S.lt(S.load(rays, TMIN * L), t), S.lt(t, best))
+    hits = candidates & S.mask_bits(S.mask_and(inside, S.gt(det, zero)))
+    if hits == 0:
+        return found
+    bound = _t_rounding(ax, ay, bx, by, cx, cy, az, bz, cz, S.load(rays, SX * L), S.load(rays, SY * L), sz, u, v,
+                        w, det)
+    hits &= S.mask_bits(S.gt(t, bound))
+    if hits == 0:
+        return found
+    S.store(rays, BEST * L, S.select(S.mask_from_bits(hits), t, best))
+    hu, hv = S.div(v, det), S.div(w, det)
+    found |= hits
+    while hits != 0:
+        l = S.count_trailing_zeros(hits)
+        hits &= hits - 1
+        prims[at(l)], us[at(l)], vs[at(l)] = prim, S.lane(hu, l), S.lane(hv, l)
+    return found
+
+
+@njit(cache=True, inline="always")
+def _sheared_triangle(leaf_tris, j, rays, kx, ky, kz):
+    """The three vertices of column j sheared along each lane's ray (triangle_test._sheared in lanes)."""
+    ox, oy, oz = S.load(rays, (O + kx) * L), S.load(rays, (O + ky) * L), S.load(rays, (O + kz) * L)
+    sx, sy = S.load(rays, SX * L), S.load(rays, SY * L)
+    a = _sheared(leaf_tris[at(kx), at(j)], leaf_tris[at(ky), at(j)], leaf_tris[at(kz), at(j)], ox, oy, oz, sx, sy)
+    b = _sheared(leaf_tris[at(3 + kx), at(j)], leaf_tris[at(3 + ky), at(j)], leaf_tris[at(3 + kz), at(j)], ox, oy,
+                 oz, sx, sy)
+    c = _sheared(leaf_tris[at(6 + kx), at(j)], leaf_tris[at(6 + ky), at(j)], leaf_tris[at(6 + kz), at(j)], ox, oy,
+                 oz, sx, sy)
+    return a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]
+
+
+@njit(cache=True, inline="always")
+def _max3_abs(a, b, c):
+    return S.vmax(S.vmax(S.vabs(a), S.vabs(b)), S.vabs(c))
+
+
+@njit(cache=True, inline="always")
+def _t_rounding(ax, ay, bx, by, cx, cy, az, bz, cz, sx, sy, sz, u, v, w, det):
+    """triangle_test._t_rounding in lanes, the same operations in the same order."""
+    shear_z = _max3_abs(az, bz, cz)
+    max_z = S.mul(shear_z, S.vabs(sz))
+    max_x, max_y = _max3_abs(ax, bx, cx), _max3_abs(ay, by, cy)
+    delta_z = S.mul(S.splat_f64(G3), max_z)
+    delta_x = S.mul(S.splat_f64(G5), S.add(max_x, S.mul(S.vabs(sx), shear_z)))
+    delta_y = S.mul(S.splat_f64(G5), S.add(max_y, S.mul(S.vabs(sy), shear_z)))
+    delta_e = S.mul(S.splat_f64(2.0), S.add(S.add(S.mul(S.mul(S.splat_f64(G2), max_x), max_y),
+                                                  S.mul(delta_y, max_x)), S.mul(delta_x, max_y)))
+    max_e = S.vmax(S.vmax(u, v), w)
+    total = S.add(S.add(S.mul(S.mul(S.splat_f64(G3), max_e), max_z), S.mul(delta_e, max_z)), S.mul(delta_z, max_e))
+    return S.div(S.mul(S.splat_f64(3.0), total), det)
 
 
 @njit(cache=True, inline="always")
@@ -313,25 +398,6 @@ def _test_lane(leaf_tris, column, prim, l, rays, lane_o, axes, prims, us, vs):
         rays[at(BEST * L + l)], prims[at(l)], us[at(l)], vs[at(l)] = t, prim, u, v
         return True
     return False
-
-
-@njit(cache=True, inline="always")
-def _screen(leaf_tris, j, kx, ky, kz, ox, oy, oz, sx, sy):
-    """Bits of the lanes whose edge values for triangle column j do not straddle zero: those
-    triangle_test.leaf_candidates keeps, computed with its operations lane by lane."""
-    ax, ay, az = _sheared(leaf_tris[at(kx), at(j)], leaf_tris[at(ky), at(j)], leaf_tris[at(kz), at(j)], ox, oy, oz,
-                          sx, sy)
-    bx, by, bz = _sheared(leaf_tris[at(3 + kx), at(j)], leaf_tris[at(3 + ky), at(j)], leaf_tris[at(3 + kz), at(j)],
-                          ox, oy, oz, sx, sy)
-    cx, cy, cz = _sheared(leaf_tris[at(6 + kx), at(j)], leaf_tris[at(6 + ky), at(j)], leaf_tris[at(6 + kz), at(j)],
-                          ox, oy, oz, sx, sy)
-    u = S.sub(S.mul(cx, by), S.mul(cy, bx))
-    v = S.sub(S.mul(ax, cy), S.mul(ay, cx))
-    w = S.sub(S.mul(bx, ay), S.mul(by, ax))
-    zero = S.splat_f64(0.0)
-    negative = S.mask_or(S.mask_or(S.lt(u, zero), S.lt(v, zero)), S.lt(w, zero))
-    positive = S.mask_or(S.mask_or(S.gt(u, zero), S.gt(v, zero)), S.gt(w, zero))
-    return ~S.mask_bits(S.mask_and(negative, positive))
 
 
 @njit(cache=True, inline="always")
