@@ -15,11 +15,12 @@ decisions with its arithmetic:
   with strict direction signs no lane lies in a plane, so a lane's exit bound is its t1;
 - a lane finishes once its best hit lies within the leaf interval it just left, and stacked entries it
   cannot improve on are dropped, as traversal._pop does;
-- leaves: the lanes' edge functions against each triangle are computed in float64 lanes with the
-  operations of triangle_test.leaf_candidates (Woop, Benthin and Wald 2013, "Watertight Ray/Triangle
-  Intersection"), so a lane is rejected only where the single-ray screen rejects it; the lanes left
-  take the single-ray test itself (triangle_test.intersect_leaf_triangle: tie rule, t rounding bound),
-  in leaf order. Packets whose lanes shear along different axes test every active lane that way.
+- leaves: each triangle is tested against the active lanes with the watertight test (Woop, Benthin and
+  Wald 2013, "Watertight Ray/Triangle Intersection") in float64 lanes, with triangle_test._hit's
+  operations in its order (edge values, det, t, the t rounding bound), so each lane gets the
+  single-ray t bit for bit; lanes with an exactly zero edge value, where the tie rule decides, take the
+  single-ray test itself (triangle_test.intersect_leaf_triangle), as do all lanes of a packet whose
+  lanes shear along different axes. Triangles are taken in leaf order, as trace_ray does.
 A lazy tree is handed to queries.intersect whole (an unbuilt node would stop the packet).
 """
 import functools
@@ -173,27 +174,22 @@ def _setup(root_box, origins, directions, tmin, tmax, lanes, rays, lane_o, axes,
         if not _agrees(d, signs):
             single[r] = 1
             continue
-        t0, t1 = _clip_lane(root_box, o, d, tmin[r], tmax[r])
+        inv = (1.0 / d[0], 1.0 / d[1], 1.0 / d[2])  # non-zero: the packet's lanes have strict signs
+        t0, t1 = clip_to_box(root_box, o, d, inv, tmin[r], tmax[r])
         if t0 > t1:
             out_t[r], out_prim[r], out_u[r], out_v[r] = np.inf, -1, 0.0, 0.0
             continue
-        _fill_lane(rays, lane_o, axes, l, o, d, t0, t1, tmin[r], tmax[r])
+        _fill_lane(rays, lane_o, axes, l, o, d, inv, t0, t1, tmin[r], tmax[r])
         prims[l] = -1
         bits |= 1 << l
     return bits, signs, _same_axes(axes, bits)
 
 
 @njit(cache=True, inline="always")
-def _clip_lane(root_box, o, d, tmin, tmax):
-    inv = (1.0 / d[0], 1.0 / d[1], 1.0 / d[2])  # non-zero: the packet's lanes have strict signs
-    return clip_to_box(root_box, o, d, inv, tmin, tmax)
-
-
-@njit(cache=True, inline="always")
-def _fill_lane(rays, lane_o, axes, l, o, d, t0, t1, tmin, tmax):
+def _fill_lane(rays, lane_o, axes, l, o, d, inv, t0, t1, tmin, tmax):
     for k in range(3):
         rays[(O + k) * L + l] = o[k]
-        rays[(INV + k) * L + l] = 1.0 / d[k]
+        rays[(INV + k) * L + l] = inv[k]
         lane_o[l, k] = o[k]
     kx, ky, kz, sx, sy, sz = ray_shear(d)
     axes[l, 0], axes[l, 1], axes[l, 2] = kx, ky, kz
