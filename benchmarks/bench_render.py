@@ -108,7 +108,8 @@ def sweep(scene, camera, ref, args):
     The machine's speed drifts by up to 1.5x over a long run (shared host), so each sample count is
     measured on its own, round-robin: run r of every method, Cycles' too, before run r + 1, and the
     median of --runs is kept. A method and the Cycles render it is compared with are timed minutes,
-    not half an hour, apart."""
+    not half an hour, apart. Every run's seconds go to sweep.runs, by (method, samples, error target)."""
+    sweep.runs = {}
     rows = []
     for spp in args.samples:
         times, images = {}, {}
@@ -359,6 +360,7 @@ def main():
         print(f"  {name:<22} {seconds:.3f} s median (build {build:.3f} s)")
     print(f"  ours on 1 thread / Embree on 1 thread: {seed000['rays=W*H*2, 1 thread'][0] / seed000[EMBREE][0]:.2f} "
           f"(Embree's time: its BVH build, camera and shadow queries only)")
+    Path(args.out).mkdir(parents=True, exist_ok=True)
     write_seed000(seed000_time_to_image.runs, args)
     if args.only_seed000:
         return
@@ -425,7 +427,7 @@ def write_seed000(runs, args):
         "scene": "suzanne-251k", "size": list(SEED000_SIZE), "light": list(SEED000_LIGHT),
         "what": "rebuild + camera rays + one shadow ray a hit to a point light", "reference": EMBREE,
         "configs": configs,
-    }, args.jit_seconds, args.quick)
+    }, args.jit_seconds, args.quick, args.out)
 
 
 def run_description(args):
