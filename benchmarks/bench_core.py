@@ -1,6 +1,6 @@
 """Core benchmark: build time, tree statistics and ray throughput per builder, against Embree and BVHTree.
 
-Usage: python benchmarks/bench_core.py [--scenes suzanne-251k,...] [--runs 5] [--sweep] [--no-refs]
+Usage: python benchmarks/bench_core.py [--scenes suzanne-251k,...] [--runs 5] [--sweep] [--no-refs] [--quick]
 
 Prints one table per scene. Build times are medians of --runs builds after a warm-up build by each
 builder that absorbs the JIT compile (reported on its own line); throughputs are medians of --runs
@@ -8,6 +8,10 @@ traces. Embree (embreex, single-threaded: see reference_tracers.py; --runs trace
 call, as ours) and Blender's BVHTree (Python loop over ray_cast, measured on a subset) trace the same
 rays in the same run; ratios are ours divided by theirs. Peak build memory is
 measured in a child process per builder (ru_maxrss growth over the loaded scene).
+
+Writes benchmarks/out/bench_core.json (benchmarks/results.py: every run of each figure, its median, Embree's
+runs of the same rays, the JIT time and the host); benchmarks/report.py renders the docs' tables from it.
+--quick (suzanne-251k only, 3 runs, no memory or BVHTree children) checks that the benchmark works.
 """
 import argparse
 import json
@@ -23,6 +27,7 @@ sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(HERE.parent))
 
 import core  # noqa: E402
+import results  # noqa: E402
 from scenes import load_scene  # noqa: E402
 from workload import ao_workload, camera_workload  # noqa: E402
 
@@ -47,13 +52,19 @@ SWEEP = {
 
 
 def median_time(fn, runs):
+    times, result = timed_runs(fn, runs)
+    return float(np.median(times)), result
+
+
+def timed_runs(fn, runs):
+    """(seconds of each of `runs` calls, the last call's result)."""
     times = []
     result = None
     for _ in range(runs):
         t = time.perf_counter()
         result = fn()
         times.append(time.perf_counter() - t)
-    return float(np.median(times)), result
+    return times, result
 
 
 def peak_build_bytes_per_triangle(scene_name, options):
@@ -79,10 +90,11 @@ def peak_build_bytes_per_triangle(scene_name, options):
 
 
 def bench_builder(scene, label, options, cam, ao, runs, memory):
-    build_s, tree = median_time(lambda: core.build_kdtree(scene.triangles, **options), runs)
+    build_runs, tree = timed_runs(lambda: core.build_kdtree(scene.triangles, **options), runs)
     stats = tree.stats()
-    cam_s, _ = median_time(lambda: core.intersect(tree, *cam), runs)
-    ao_s, _ = median_time(lambda: core.occluded(tree, *ao, tmax=1.0), runs)
+    cam_runs, _ = timed_runs(lambda: core.intersect(tree, *cam), runs)
+    ao_runs, _ = timed_runs(lambda: core.occluded(tree, *ao, tmax=1.0), runs)
+    build_s, cam_s, ao_s = (float(np.median(r)) for r in (build_runs, cam_runs, ao_runs))
     row = {
         "builder": label,
         "build_ms": build_s * 1e3,
@@ -98,6 +110,7 @@ def bench_builder(scene, label, options, cam, ao, runs, memory):
     }
     if memory:
         row["peak B/tri"] = peak_build_bytes_per_triangle(scene.name, options)
+    row["_runs"] = {"build_s": build_runs, "cam_s": cam_runs, "ao_s": ao_runs}
     return row
 
 
@@ -106,11 +119,13 @@ def bench_references(scene, cam, ao, runs, bvh_subset=20000):
     embree = EmbreeTracer(scene.triangles)
     embree.closest(*cam)  # untimed first calls, as ours are warmed (outside review: the first call took
     embree.occluded(*ao, 1.0)  # 154 ms against 52-86 ms after, and was the median of one run)
-    cam_s, _ = median_time(lambda: embree.closest(*cam), runs)
-    ao_s, _ = median_time(lambda: embree.occluded(*ao, 1.0), runs)
+    cam_runs, _ = timed_runs(lambda: embree.closest(*cam), runs)
+    ao_runs, _ = timed_runs(lambda: embree.occluded(*ao, 1.0), runs)
+    cam_s, ao_s = float(np.median(cam_runs)), float(np.median(ao_runs))
     refs = {"embree": {"build_ms": embree.commit_seconds * 1e3, "cam Mrays/s": len(cam[0]) / cam_s / 1e6,
-                       "ao Mrays/s": len(ao[0]) / ao_s / 1e6}}
-    refs["bvhtree"] = _bvhtree_in_child(scene.name, bvh_subset)
+                       "ao Mrays/s": len(ao[0]) / ao_s / 1e6, "_runs": {"cam_s": cam_runs, "ao_s": ao_runs}}}
+    if bvh_subset:
+        refs["bvhtree"] = _bvhtree_in_child(scene.name, bvh_subset)
     return refs
 
 
@@ -136,12 +151,13 @@ def _bvhtree_in_child(scene_name, subset):
 
 
 def print_table(rows, refs):
-    cols = list(rows[0].keys())
+    cols = [c for c in rows[0] if not c.startswith("_")]
     print(" | ".join(f"{c:>12}" for c in cols))
     for r in rows:
-        print(" | ".join(f"{v:>12.3f}" if isinstance(v, float) else f"{v!s:>12}" for v in r.values()))
+        print(" | ".join(f"{r[c]:>12.3f}" if isinstance(r[c], float) else f"{r[c]!s:>12}" for c in cols))
     for name, ref in refs.items():
-        print(f"{name}: " + ", ".join(f"{k} {v:.3f}" if isinstance(v, float) else f"{k} {v}" for k, v in ref.items()))
+        print(f"{name}: " + ", ".join(f"{k} {v:.3f}" if isinstance(v, float) else f"{k} {v}"
+                                      for k, v in ref.items() if not k.startswith("_")))
         if "cam Mrays/s" not in ref:
             continue
         for r in rows[:len(BUILDERS)]:
@@ -159,8 +175,13 @@ def main():
     ap.add_argument("--config", action="append", default=[],
                     help="extra binned configuration, e.g. 'empty_bonus=0.2,max_depth=30' (repeatable)")
     ap.add_argument("--only-configs", action="store_true", help="measure only the --config rows")
-    ap.add_argument("--json", help="write all rows to this file")
+    ap.add_argument("--json", help="also write all rows to this file (the old flat format)")
+    ap.add_argument("--quick", action="store_true",
+                    help="suzanne-251k, 3 runs, no memory or BVHTree children: checks the benchmark works")
+    ap.add_argument("--out", default=str(results.OUT_DIR), help="folder of bench_core.json")
     args = ap.parse_args()
+    if args.quick:
+        args.scenes, args.runs, args.no_memory = "suzanne-251k", min(args.runs, 3), True
 
     t = time.perf_counter()
     for options in BUILDERS.values():  # each builder's kernels (outside review: exact's first build compiled)
@@ -168,9 +189,10 @@ def main():
     tiny = core.build_kdtree(np.eye(3, dtype=np.float32)[None])
     core.intersect(tiny, np.zeros((1, 3)), np.ones((1, 3)))
     core.occluded(tiny, np.zeros((1, 3)), np.ones((1, 3)))
-    print(f"JIT compile / cache load and warm-up: {time.perf_counter() - t:.2f} s (not in any figure below)")
+    jit_seconds = time.perf_counter() - t
+    print(f"JIT compile / cache load and warm-up: {jit_seconds:.2f} s (not in any figure below)")
 
-    everything = {}
+    everything, scenes_out = {}, {}
     for name in args.scenes.split(","):
         scene = load_scene(name)
         cam = camera_workload(scene)
@@ -184,11 +206,43 @@ def main():
         configs.update({c: parse_config(c) for c in args.config})
         rows = [bench_builder(scene, label, opts, cam, ao, args.runs, not args.no_memory and label in BUILDERS)
                 for label, opts in configs.items()]
-        refs = {} if args.no_refs else bench_references(scene, cam, ao, args.runs)
+        refs = {} if args.no_refs else bench_references(scene, cam, ao, args.runs, 0 if args.quick else 20000)
         print_table(rows, refs)
         everything[name] = {"rows": rows, "refs": refs}
+        scenes_out[name] = scene_results(scene, cam, ao, rows, refs)
     if args.json:
         Path(args.json).write_text(json.dumps(everything, indent=1))
+    results.write("bench_core", {"runs": args.runs, "scenes": scenes_out}, jit_seconds, args.quick, args.out)
+
+
+def scene_results(scene, cam, ao, rows, refs):
+    """One scene's figures for bench_core.json: per builder the build time, SAH cost, tree statistics and
+    camera and AO throughput (every run and the median), Embree's runs of the same rays as the reference."""
+    embree = refs.get("embree")
+    rates = lambda n, seconds: [n / s / 1e6 for s in seconds]  # noqa: E731
+    builders = {}
+    for r in rows:
+        runs = r["_runs"]
+        entry = {
+            "build_ms": results.figure([s * 1e3 for s in runs["build_s"]], unit="ms"),
+            "camera_mrays": results.figure(rates(len(cam[0]), runs["cam_s"]),
+                                           embree and rates(len(cam[0]), embree["_runs"]["cam_s"]), "Mrays/s"),
+            "ao_mrays": results.figure(rates(len(ao[0]), runs["ao_s"]),
+                                       embree and rates(len(ao[0]), embree["_runs"]["ao_s"]), "Mrays/s"),
+            **{key: r[col] for key, col in (("sah_cost", "sah"), ("nodes", "nodes"), ("leaves", "leaves"),
+                                            ("max_depth", "depth"), ("references_per_triangle", "refs/tri"),
+                                            ("peak_bytes_per_triangle", "peak B/tri")) if col in r},
+        }
+        builders[r["builder"]] = entry
+    out = {"triangles": len(scene.triangles), "camera_rays": len(cam[0]), "ao_rays": len(ao[0]),
+           "threads": core_threads(), "builders": builders}
+    if embree:
+        out["embree"] = {"build_ms": embree["build_ms"], "threads": 1,
+                         "camera_mrays": results.figure(rates(len(cam[0]), embree["_runs"]["cam_s"]), unit="Mrays/s"),
+                         "ao_mrays": results.figure(rates(len(ao[0]), embree["_runs"]["ao_s"]), unit="Mrays/s")}
+    if "bvhtree" in refs:
+        out["bvhtree"] = refs["bvhtree"]
+    return out
 
 
 def parse_config(text):

@@ -21,6 +21,7 @@ HERE = Path(__file__).resolve().parent
 sys.path[:0] = [str(HERE), str(HERE.parent)]
 
 import core  # noqa: E402
+import results  # noqa: E402
 from scenes import load_scene  # noqa: E402
 
 
@@ -56,13 +57,15 @@ def dense_soup(n=100000, seed=1):
 
 
 def measure(tris, runs, **options):
+    """(references a triangle, SAH cost, leaves, median build ms, every build's ms)."""
     times = []
     for _ in range(runs):
         t = time.perf_counter()
         tree = core.build_kdtree(tris, **options)
         times.append(time.perf_counter() - t)
     s = tree.stats()
-    return s["references"] / len(tris), s["sah_cost"], s["leaves"], 1e3 * float(np.median(times))
+    return (s["references"] / len(tris), s["sah_cost"], s["leaves"], 1e3 * float(np.median(times)),
+            [1e3 * t for t in times])
 
 
 def main(argv=None):
@@ -70,10 +73,13 @@ def main(argv=None):
     parser.add_argument("--cards", type=int, default=50000)
     parser.add_argument("--unbounded-cards", type=int, default=20000)
     parser.add_argument("--runs", type=int, default=3)
+    parser.add_argument("--out", default=str(results.OUT_DIR), help="folder of bench_duplication.json")
     args = parser.parse_args(argv)
     t = time.perf_counter()
     core.build_kdtree(cards(500))
-    print(f"compile (first build): {time.perf_counter() - t:.1f} s")
+    jit_seconds = time.perf_counter() - t
+    print(f"compile (first build): {jit_seconds:.1f} s")
+    rows = []
     scenes = [(f"cards-{args.cards // 1000}k, z = 0", cards(args.cards), cards(args.unbounded_cards)),
               ("fan-20k, z = 0", fan(), None), ("fan-20k, tilted", fan(tilted=True), None),
               ("suzanne-251k", load_scene("suzanne-251k").triangles, None),
@@ -86,8 +92,12 @@ def main(argv=None):
             label = name
             if budget is None and unbounded_tris is not None:
                 tris, label = unbounded_tris, name.replace(f"{args.cards // 1000}k", f"{args.unbounded_cards // 1000}k")
-            per_triangle, sah, leaves, ms = measure(tris, args.runs, duplication_budget=budget)
+            per_triangle, sah, leaves, ms, all_ms = measure(tris, args.runs, duplication_budget=budget)
             print(f"{label:22s} {str(budget):>6s} {per_triangle:9.2f} {sah:9.3f} {leaves:9,d} {ms:9.0f}", flush=True)
+            rows.append({"scene": label, "triangles": len(tris), "budget": budget,
+                         "references_per_triangle": per_triangle, "sah_cost": sah, "leaves": int(leaves),
+                         "build_ms": results.figure(all_ms, unit="ms")})
+    results.write("bench_duplication", {"runs": args.runs, "rows": rows}, jit_seconds, out_dir=args.out)
 
 
 if __name__ == "__main__":

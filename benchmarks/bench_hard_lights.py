@@ -21,6 +21,7 @@ HERE = Path(__file__).resolve().parent
 sys.path[:0] = [str(HERE), str(HERE.parent)]
 
 import core  # noqa: E402
+import results as bench_results  # noqa: E402
 from core.render.lights import DELTA  # noqa: E402
 from scenes import load_scene  # noqa: E402
 
@@ -43,6 +44,7 @@ def main():
     ap.add_argument("--mode", default="shadow", choices=["shadow", "ao+shadow"])
     ap.add_argument("--lights", type=int, default=1)
     ap.add_argument("--runs", type=int, default=7)
+    ap.add_argument("--out", default=str(bench_results.OUT_DIR), help="folder of bench_hard_lights.json")
     args = ap.parse_args()
     scene = load_scene(args.scene)
     camera = core.Camera(scene.camera_matrix, scene.camera_fov)
@@ -51,6 +53,7 @@ def main():
     tree = core.build_kdtree(scene.triangles)
     t = time.perf_counter()
     core.render_preview(tree, camera, 8, 8, **settings)
+    jit_seconds = time.perf_counter() - t
     print(f"JIT compile / cache load: {time.perf_counter() - t:.2f} s (excluded); {args.scene}, {WIDTH}x{HEIGHT}, "
           f"{args.mode}, {args.samples} spp, {args.lights} point light(s) of radius 0")
     times = {True: [], False: []}
@@ -66,6 +69,13 @@ def main():
         print(f"  {name:<22} {np.median(times[repeat]) * 1e3:7.0f} ms median   rays traced "
               f"{results[repeat].rays_traced:,}")
     print(f"  ratio (paired) {ratio:.3f}; identical images: {same}")
+    bench_results.write("bench_hard_lights", {
+        "scene": args.scene, "size": [WIDTH, HEIGHT], "mode": args.mode, "samples": args.samples,
+        "lights": args.lights, "identical_images": bool(same), "paired_ratio": float(ratio),
+        "repeated": {"seconds": bench_results.figure(times[True], times[False]),
+                     "rays_traced": int(results[True].rays_traced)},
+        "every_sample": {"seconds": bench_results.figure(times[False]), "rays_traced": int(results[False].rays_traced)},
+    }, jit_seconds, out_dir=args.out)
 
 
 if __name__ == "__main__":

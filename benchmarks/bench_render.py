@@ -22,6 +22,12 @@ Before any timing, every method runs once untimed (JIT compile and cache load, r
    rebuilt from scratch each time; median time to image, with the default build, with the build told
    the frame's ray count (BuildOptions.rays), the latter on one thread, and Embree's build and queries
    of the same frame on one thread as the reference, in alternating runs.
+
+Results as JSON (benchmarks/results.py, rendered into the docs by benchmarks/report.py):
+benchmarks/out/bench_seed000.json (part 4: every run, medians, Embree's runs) and, unless --only-seed000,
+benchmarks/out/bench_render.json (parts 2-3: the rows, the ratios against Cycles, the settings).
+--quick (128x128, 1, 4 and 16 spp, one run, a 1024-spp reference, three seed 000 runs) checks that the
+benchmark works; its figures are not comparable with a full run's.
 """
 import argparse
 import csv
@@ -38,6 +44,7 @@ HERE = Path(__file__).resolve().parent
 sys.path[:0] = [str(HERE), str(HERE.parent)]
 
 import core  # noqa: E402
+import results  # noqa: E402
 from core.render.denoise import SOBOL_VARIANCE_DECAY  # noqa: E402
 from core.jit.sources_digest import sources_digest  # noqa: E402
 from scenes import DATA_DIR, blend_path, load_scene  # noqa: E402
@@ -101,7 +108,8 @@ def sweep(scene, camera, ref, args):
     The machine's speed drifts by up to 1.5x over a long run (shared host), so each sample count is
     measured on its own, round-robin: run r of every method, Cycles' too, before run r + 1, and the
     median of --runs is kept. A method and the Cycles render it is compared with are timed minutes,
-    not half an hour, apart."""
+    not half an hour, apart. Every run's seconds go to sweep.runs, by (method, samples, error target)."""
+    sweep.runs = {}
     rows = []
     for spp in args.samples:
         times, images = {}, {}
@@ -114,6 +122,7 @@ def sweep(scene, camera, ref, args):
                 images[CYCLES], seconds = cycles_image(scene, ref, args, spp)
                 times.setdefault(CYCLES, []).append(seconds)
         for method in times:
+            sweep.runs[(method, spp, None)] = times[method]
             rows.append({"method": method, "samples": spp, "seconds": float(np.median(times[method])),
                          "rmse": rmse(images[method], ref)})
             print(f"  {method:>32} spp {spp:>4}: {rows[-1]['seconds']:8.3f} s  RMSE {rows[-1]['rmse']:.5f}",
@@ -121,6 +130,7 @@ def sweep(scene, camera, ref, args):
     for target in args.error_targets:  # adaptive: pixels stop once their standard error is below target
         runs = [one_render(scene, camera, args.size, {}, max(args.samples), "sobol", args.ao_distance,
                            error_target=target) for _ in range(args.runs)]
+        sweep.runs[("kd binned sobol adaptive", max(args.samples), target)] = [r[0] for r in runs]
         rows.append({"method": "kd binned sobol adaptive", "samples": max(args.samples),
                      "seconds": float(np.median([r[0] for r in runs])), "rmse": rmse(runs[-1][1], ref),
                      "error_target": target})
@@ -269,6 +279,7 @@ def seed000_time_to_image(scene, runs, size=SEED000_SIZE):
             core.render_preview(tree, camera, size[0], size[1], samples=1, mode="shadow", lights=[light],
                                 threads=configs[name].get("threads"))
             times[name].append(time.perf_counter() - t)
+    seed000_time_to_image.runs = {name: {"seconds": times[name], "build_seconds": builds[name]} for name in times}
     return {name: (float(np.median(times[name])), float(np.median(builds[name]))) for name in times}
 
 
@@ -322,9 +333,13 @@ def main():
     ap.add_argument("--only-seed000", action="store_true")
     ap.add_argument("--out", default=str(HERE / "out"))
     ap.add_argument("--replot", action="store_true", help="only redraw OUT's plot from OUT/render_sweep.csv")
+    ap.add_argument("--quick", action="store_true",
+                    help="128x128, 1/4/16 spp, 1 run, 3 seed 000 runs: checks the benchmark and its JSON work")
     args = ap.parse_args()
     if args.replot:
         return replot(Path(args.out))
+    if args.quick:
+        args.size, args.runs, args.samples, args.error_targets = 128, 1, "1,4,16", "0.05"
     args.samples = [int(s) for s in args.samples.split(",")]
     args.error_targets = [float(s) for s in args.error_targets.split(",") if s]
     out = Path(args.out)
@@ -340,11 +355,13 @@ def main():
 
     print("seed 000 Table 3 setting (640x480, camera + 1 shadow ray, rebuild); paper: 0.235 s on 1 core, "
           f"0.062 s on 4 cores (2007); target <= 0.15 s; {numba.get_num_threads()} threads unless said:")
-    seed000 = seed000_time_to_image(scene, max(args.runs, 5))
+    seed000 = seed000_time_to_image(scene, 3 if args.quick else max(args.runs, 5))
     for name, (seconds, build) in seed000.items():
         print(f"  {name:<22} {seconds:.3f} s median (build {build:.3f} s)")
     print(f"  ours on 1 thread / Embree on 1 thread: {seed000['rays=W*H*2, 1 thread'][0] / seed000[EMBREE][0]:.2f} "
           f"(Embree's time: its BVH build, camera and shadow queries only)")
+    Path(args.out).mkdir(parents=True, exist_ok=True)
+    write_seed000(seed000_time_to_image.runs, args)
     if args.only_seed000:
         return
 
@@ -354,14 +371,15 @@ def main():
     ref = reference_image(scene, camera, args.size, args.reference_samples, args.ao_distance)
     rows = sweep(scene, camera, ref, args)
     fronts = our_fronts(rows)
-    print(f"\ndenoiser bias at convergence: RMSE(denoised reference, reference) = "
-          f"{denoiser_bias(scene, camera, ref, args):.5f}")
+    bias = denoiser_bias(scene, camera, ref, args)
+    print(f"\ndenoiser bias at convergence: RMSE(denoised reference, reference) = {bias:.5f}")
     by = {(r["method"], r["samples"]): r for r in rows}
     print("\nLow discrepancy against random (binned), RMSE ratio random / sobol:")
     for spp in args.samples:
         a, b = by.get(("kd binned sobol", spp)), by.get(("kd binned random", spp))
         if a and b:
             print(f"  {spp:>4} spp: {b['rmse'] / a['rmse']:.2f}x")
+    ratios_out = []
     if not args.no_cycles:
         crow = [r for r in rows if r["method"] == CYCLES]
         default = pareto([r for r in rows if r["method"] == DEFAULT_METHOD])
@@ -372,6 +390,9 @@ def main():
         print(f"  {'':>44} {'ours raw':>12} {'ours denoised':>14} {'ours default':>14}")
         for r in crow:
             ratios = [ratio_text(front, r) for front in (*fronts.values(), default)]
+            ratios_out.append({"cycles_samples": r["samples"], "cycles_rmse": r["rmse"],
+                               "cycles_seconds": r["seconds"], "ours_raw": ratios[0],
+                               "ours_denoised": ratios[1], "ours_default": ratios[2]})
             print(f"  Cycles {r['samples']:>4} spp (RMSE {r['rmse']:.4f}, {r['seconds']:6.2f} s): "
                   f"{ratios[0]:>12} {ratios[1]:>14} {ratios[2]:>14}")
     with open(out / "render_sweep.csv", "w", newline="") as f:
@@ -381,8 +402,32 @@ def main():
     meta = run_description(args)
     (out / "render_sweep.json").write_text(json.dumps(meta, indent=1))
     plot(rows, fronts, out / "render_rmse_vs_time.png", plot_title(meta))
+    sweep_runs = sweep.runs
+    results.write("bench_render", {
+        "scene": "suzanne-251k", "size": args.size, "ao_distance": args.ao_distance, "runs": args.runs,
+        "reference_samples": args.reference_samples, "samples": args.samples, "cycles": not args.no_cycles,
+        "cycles_threads": args.threads, "core_sources": meta["core_sources"],
+        "rows": [{**r, "all_seconds": sweep_runs.get((r["method"], r["samples"], r.get("error_target")))}
+                 for r in rows],
+        "time_ratio_at_equal_rmse": ratios_out, "denoiser_bias_rmse": bias,
+    }, args.jit_seconds, args.quick, out)
     print(f"\nwrote {out / 'render_sweep.csv'}, {out / 'render_sweep.json'} (the run's settings) and "
           f"{out / 'render_rmse_vs_time.png'}")
+
+
+def write_seed000(runs, args):
+    """bench_seed000.json: per configuration every run's time to image and build time, their medians,
+    and the Embree reference of the same runs."""
+    embree = runs[EMBREE]
+    configs = {}
+    for name, r in runs.items():
+        configs[name] = {"seconds": results.figure(r["seconds"], None if name == EMBREE else embree["seconds"]),
+                         "build_seconds": results.figure(r["build_seconds"])}
+    results.write("bench_seed000", {
+        "scene": "suzanne-251k", "size": list(SEED000_SIZE), "light": list(SEED000_LIGHT),
+        "what": "rebuild + camera rays + one shadow ray a hit to a point light", "reference": EMBREE,
+        "configs": configs,
+    }, args.jit_seconds, args.quick, args.out)
 
 
 def run_description(args):

@@ -30,6 +30,9 @@ import core  # noqa: E402
 from core.scene.scene_policy import overlap_depth  # noqa: E402
 from core.scene.two_level import transformed_boxes  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import results  # noqa: E402
+
 
 def sphere(n_lat, n_lon, rng, noise=0.05):
     """A closed lat-long sphere of radius ~1 with radial noise: (vertices, triangles)."""
@@ -107,6 +110,7 @@ def main(argv=None):
     parser.add_argument("--size", type=int, default=512)
     parser.add_argument("--samples", type=int, default=16)
     parser.add_argument("--only", nargs="*", help="scene names to run")
+    parser.add_argument("--out", default=str(results.OUT_DIR), help="folder of bench_two_level.json")
     args = parser.parse_args(argv)
     rng = np.random.default_rng(0)
     all_scenes = scenes(rng)
@@ -114,7 +118,9 @@ def main(argv=None):
     small = all_scenes["apart"]
     time_to_image("two_level", ([small[0][0]], [0], small[2][:1]), camera_for([small[0][0]], [0], small[2][:1])[0],
                   0.5, 16, 1)
-    print(f"JIT compile / cache load (warm-up, excluded): {time.perf_counter() - t:.1f} s")
+    jit_seconds = time.perf_counter() - t
+    print(f"JIT compile / cache load (warm-up, excluded): {jit_seconds:.1f} s")
+    out = {}
     print(f"{'scene':10} {'triangles':>10} {'overlap':>8} {'layout':>10} {'meshes':>7} {'build ms':>9} "
           f"{'render ms':>10} {'total ms':>9} {'vs flat':>8}")
     for name, inputs in all_scenes.items():
@@ -133,10 +139,18 @@ def main(argv=None):
             totals[layout] = np.median([r[0] + r[1] for r in runs])
             images[layout] = runs[0][2]
             n_meshes = len(runs[0][3].meshes)
+            out.setdefault(name, {"triangles": int(n_tris), "overlap_depth": float(depth), "layouts": {}})
+            out[name]["layouts"][layout] = {
+                "meshes": n_meshes, "build_ms": results.figure([r[0] for r in runs], unit="ms"),
+                "render_ms": results.figure([r[1] for r in runs], unit="ms"),
+                "total_ms": results.figure([r[0] + r[1] for r in runs], unit="ms")}
             print(f"{name:10} {n_tris:>10,} {depth:>8.2f} {layout:>10} {n_meshes:>7} {build:>9.0f} {render:>10.0f} "
                   f"{totals[layout]:>9.0f} {totals[layout] / totals['flat']:>7.2f}x", flush=True)
         rmse = np.sqrt(np.mean((images["two_level"][..., :3] - images["flat"][..., :3]) ** 2))
         print(f"{'':10} image: {images['flat'][..., 3].mean():.0%} of pixels hit, RMSE two_level vs flat {rmse:.5f}")
+        out[name]["rmse_two_level_vs_flat"] = float(rmse)
+    results.write("bench_two_level", {"size": args.size, "samples": args.samples, "runs": args.runs,
+                                      "scenes": out}, jit_seconds, out_dir=args.out)
 
 
 if __name__ == "__main__":

@@ -22,6 +22,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import core  # noqa: E402
 from core.scene import scene_policy  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import results  # noqa: E402
+
 CUBE_FACES = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1], [2, 3, 7], [2, 7, 6],
                        [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])
 
@@ -62,12 +65,15 @@ def main():
     parser.add_argument("--ground", type=float, nargs="+", default=[1000.0, 10000.0])
     parser.add_argument("--ratios", type=float, nargs="+", default=[scene_policy.PRECISION_RATIO])
     parser.add_argument("--runs", type=int, default=3)
+    parser.add_argument("--out", default=str(results.OUT_DIR), help="folder of bench_zones.json")
     args = parser.parse_args()
     default_ratio = scene_policy.PRECISION_RATIO
     start = time.perf_counter()
     for layout in ("flat", "auto"):  # compile or load the kernels
         measure(*clutter(100.0, count=2000), layout, 1)
-    print(f"kernels compiled or loaded in {time.perf_counter() - start:.1f} s (not counted below)")
+    jit_seconds = time.perf_counter() - start
+    print(f"kernels compiled or loaded in {jit_seconds:.1f} s (not counted below)")
+    out = []
     for ground in args.ground:
         meshes, matrices, camera = clutter(ground)
         _, flat_build, flat_renders = measure(meshes, matrices, camera, "flat", args.runs)
@@ -79,10 +85,16 @@ def main():
         flat_renders += measure(meshes, matrices, camera, "flat", args.runs)[2]  # before and after the others
         flat_render = float(np.median(flat_renders))
         print(f"ground {ground:g} m: flat  build {flat_build:7.0f} ms  render {flat_render:5.0f} ms")
+        entry = {"ground_m": ground, "flat": {"build_ms": flat_build,
+                                              "render_ms": results.figure(flat_renders, unit="ms")}, "auto": []}
         for ratio, zones, build, renders in rows:
             render = float(np.median(renders))
             print(f"  auto, ratio {ratio:7g}: {zones - 1:5d} zones  build {build:7.0f} ms  render {render:5.0f} ms"
                   f"  ({render / flat_render:.2f}x flat's)")
+            entry["auto"].append({"precision_ratio": ratio, "zones": int(zones - 1), "build_ms": build,
+                                  "render_ms": results.figure(renders, flat_renders, "ms")})
+        out.append(entry)
+    results.write("bench_zones", {"runs": args.runs, "grounds": out}, jit_seconds, out_dir=args.out)
 
 
 if __name__ == "__main__":

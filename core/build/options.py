@@ -35,15 +35,15 @@ class BuildOptions:
     exact_below: "binned" sweeps exactly in nodes of at most this many references (seed 000 switches at
         `bins`; 0: binning everywhere, docs/choices.md#binning-everywhere).
     snap: "binned" also tries the box boundaries nearest its best bin boundary below the top levels
-        (split_binned.snap_to_boundaries; docs/choices.md#snap-planes-to-box-boundaries).
+        (split_binned.snap_to_boundaries; docs/choices.md#snapping-to-box-boundaries-snap-on).
     split_axes: "all" or "longest" (below the top levels bin the longest axis, as fast BVH builders do
         (Wald 2007), and the other two only where it offers no plane better than a leaf).
     leaf_size: nodes with at most this many references become leaves without trying a split.
     max_depth: None means 1.2*log2(N) + 2 (seed 003 §3.5), capped at 60.
     traversal_cost, intersection_cost: SAH costs of one traversal step and one ray/triangle test
-        (docs/choices.md#sah-intersection-cost).
+        (docs/choices.md#intersection-cost-03).
     empty_bonus: share of the intersection cost forgiven for an empty child, in [0, 1)
-        (docs/choices.md#empty-space-bonus).
+        (docs/choices.md#empty-space-bonus-02).
     cost_ratio: a node stays a leaf when its best split costs more than cost_ratio times the leaf
         (seed 003 §3.5 uses 0.9 to favour time to image).
     clip: clip straddling triangles to each child for tight boxes ("perfect splits", seed 002, Havran).
@@ -53,13 +53,13 @@ class BuildOptions:
     threads: worker threads; None uses every core Numba sees.
     lazy: on-demand construction (seed 003 §3): defer every node of at most `lazy_subtree_size`
         references until a ray first enters it; results equal the eager tree's.
-    lazy_subtree_size: the largest deferred subtree, in references (docs/choices.md#lazy-subtree-size).
+    lazy_subtree_size: the largest deferred subtree, in references (docs/choices.md#lazy-building-subtrees-of-4096-references-no-speculation).
     lazy_speculative: also build each requested subtree's neighbours in build order (seed 003 §4).
     memory_limit: bytes; a build whose estimated peak (memory.py) or pools exceed it raises
         memory.MemoryLimitError (a ValueError) before allocating more. None: no limit.
     duplication_budget: references per starting triangle that splitting straddlers may make, spent
         evenly along every path (subtree.py); stops dense coplanar triangles from splitting to max_depth
-        (docs/choices.md#duplication-budget). None: no budget.
+        (docs/choices.md#duplication-budget-16). None: no budget.
     rays: how many rays the tree will answer (one render: core.frame_ray_count). Given, a node is split
         only when the rays expected to enter it save more than the split costs to build (sah.beats_leaf,
         seed 003 §3.5); below REFINE_RAYS_PER_TRIANGLE a triangle it also turns `clip`, `snap` and the

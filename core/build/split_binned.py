@@ -133,7 +133,7 @@ def snap_to_boundaries(boxes, start, end, node_box, params, cost, axis, pos):
     """Try the box boundaries nearest the binned plane on each side (within one bin) and keep the
     cheapest of the three, counted exactly. Bin boundaries fall between the vertex lines of grids and
     height fields, so the binned plane cuts a row of triangles a vertex-line plane would not
-    (docs/choices.md#snap-planes-to-box-boundaries); refining a sampled SAH near its minimum follows Hunt,
+    (docs/choices.md#snapping-to-box-boundaries-snap-on); refining a sampled SAH near its minimum follows Hunt,
     Mark and Stoll 2006. Planar references on a candidate go to the cheaper side, as in the exact sweep."""
     step = (np.float64(node_box[axis + 3]) - node_box[axis]) / params.bins
     near = _nearest_boundaries(boxes, start, end, axis, pos, step)

@@ -3,7 +3,7 @@ block; `install` makes it copy the scope once per callee. Same machine code, hal
 
 `InlineWorker.inline_ir`'s `copy_ir` deep-copies each block with the function's Scope: blocks x
 variables copies at every nesting level of core's inline="always" hot paths (Numba issue #8989;
-docs/choices.md#share-the-inlined-callee-scope). The shim (replacing `copy` in
+docs/choices.md#numbas-inliner-copies-a-callees-scope-once). The shim (replacing `copy` in
 numba.core.inline_closurecall only; numba 0.68.1 pinned) gives `copy_ir` one memo per callee scope for
 one `inline_ir`, never longer, since an inlining may compile other functions; the LLVM IR is
 byte-identical (tests/test_inline_copy.py). Process-wide; relies on Numba's global compiler lock.

@@ -3,7 +3,7 @@ Numba's on-disk cache while this process builds the tree (compiling the builder'
 makes the camera pass (compiling the camera rays' traversal; their hit frames load the helper's).
 
 The helper compiles surface_frames first, then the sampling kernel, the image and the denoiser if
-asked, into the shared cache (docs/choices.md#compile-helper-process); a kernel needed here before it
+asked, into the shared cache (docs/choices.md#the-first-renders-compile-on-two-cores); a kernel needed here before it
 is saved is compiled here too. Pixel-reuse kernels compile on the first continued frame.
 """
 import os

@@ -119,7 +119,7 @@ def tiled_pixels(width, height, tile=TILE):
     """Every row-major pixel index once, tile by tile (tile x tile squares, row-major within a tile and
     across tiles; edge tiles are cut short). Read-only and kept per size: every frame asks for the same
     order. Rays in this order are coherent within each traversal task (one 8 x 8 tile), so they walk
-    the same nodes while those are in cache (docs/choices.md#tiled-ray-order)."""
+    the same nodes while those are in cache (docs/choices.md#pixels-traced-in-8-x-8-tiles)."""
     tiles_across = (width + tile - 1) // tile
     tile_of_pixel = (np.arange(height) // tile)[:, None] * tiles_across + (np.arange(width) // tile)[None, :]
     order = np.argsort(tile_of_pixel.ravel(), kind="stable")  # stable: row-major within a tile

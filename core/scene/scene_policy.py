@@ -19,7 +19,7 @@ OVERLAP_LIMIT = 0.5
 OVERLAP_SAMPLE = 2048  # boxes compared against all others when there are more (seeded sample)
 # A soup member's vertices lie within this many of its own box diagonals of its anchor, so float32
 # rounds them by at most 2^-24 * 16384 = 2^-10 of the member's size (its own tree: ~2^-24), under a
-# pixel until the member spans a thousand. Zones cost render and build time (docs/choices.md#soup-zones).
+# pixel until the member spans a thousand. Zones cost render and build time (docs/choices.md#soup-zones-at-16384-box-diagonals).
 PRECISION_RATIO = 16384.0
 
 

@@ -44,5 +44,5 @@ def at(i):
     """Index i (never negative where used) as Numba reads it without wraparound. A signed index gets
     'if i < 0: i += length' at each access, which in the node step lands on the chain of dependent
     loads (node -> axis -> ray component -> split test -> next node)
-    (docs/choices.md#unsigned-indices-in-the-node-step)."""
+    (docs/choices.md#unsigned-indices-in-the-traversal)."""
     return np.uint64(i)

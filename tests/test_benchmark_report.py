@@ -1,0 +1,68 @@
+"""benchmarks/report.py renders the docs' figure tables from benchmark JSON: checked on a small fixture
+(tests/fixtures/benchmarks/), for the tables' content, not for any timing."""
+import importlib.util
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+FIXTURE = ROOT / "tests" / "fixtures" / "benchmarks"
+
+
+@pytest.fixture(scope="module")
+def report():
+    spec = importlib.util.spec_from_file_location("report", ROOT / "benchmarks" / "report.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def rows_of(block):
+    return [line for line in block.splitlines() if line.startswith("| ")]
+
+
+def test_the_readme_table_holds_each_headline_figure_beside_its_reference(report):
+    block = report.figures_block(report.load(FIXTURE))
+    rows = rows_of(block)
+    assert rows[0] == "| figure | KD Preview | reference, same run |"
+    assert "| kd-tree build (binned SAH), 251,906 triangles | 160 ms (SAH cost 16.50) | Embree BVH build 40.0 ms |" in rows
+    assert "| camera rays, 2 threads (262,144 rays) | 2.50 Mrays/s | Embree, 1 thread: 10.00 Mrays/s (0.25x) |" in rows
+    assert any(r.startswith("| seed 000's setting") and "0.210 s" in r and "0.110 s (1.91x)" in r for r in rows)
+    assert any("Cycles at 16 spp" in r and "raw 0.600, denoised 0.300" in r for r in rows)
+    assert "Example CPU 9000, 2 cores" in block and "2030-01-02 03:04 UTC" in block and "Quick run" not in block
+
+
+def test_the_benchmark_tables_list_every_builder_configuration_and_run(report):
+    data = report.load(FIXTURE)
+    core_rows = rows_of(report.bench_core_block(data))
+    assert [r.split(" | ")[0] for r in core_rows[2:]] == ["| binned", "| median", "| Embree (embreex, 1 thread)"]
+    assert core_rows[2].split(" | ")[6] == "127"  # peak bytes a triangle
+    seed_rows = rows_of(report.bench_seed000_block(data))
+    assert "| rays=W*H*2 | 0.210 s | 0.050 s | 3 | 0.200, 0.210, 0.220 |" in seed_rows
+    render = report.bench_render_block(data)
+    assert rows_of(render)[0] == "| method | 1 spp | 4 spp | 16 spp |"
+    assert any(r.startswith("| cycles ao pass |") for r in rows_of(render))
+    assert "| 4 | 0.1000 | 0.50 | 0.700 | 0.450 | 0.800 |" in rows_of(render)
+
+
+def test_blocks_are_replaced_between_their_markers_only(report, tmp_path):
+    doc = tmp_path / "doc.md"
+    doc.write_text("# Title\n\nprose\n<!-- figures:begin -->\nstale\n<!-- figures:end -->\nafter\n")
+    text = report.render(doc, {"figures": report.figures_block}, report.load(FIXTURE))
+    assert text.startswith("# Title\n\nprose\n<!-- figures:begin -->\n| figure |")
+    assert text.endswith("<!-- figures:end -->\nafter\n") and "stale" not in text
+    doc.write_text(text)  # rendering again changes nothing
+    assert report.render(doc, {"figures": report.figures_block}, report.load(FIXTURE)) == text
+
+
+def test_missing_results_say_which_command_makes_them(report, tmp_path):
+    assert "bench_core.py" in report.figures_block(report.load(tmp_path))
+    assert "--only-seed000" in report.bench_seed000_block({})
+
+
+def test_check_mode_fails_when_the_committed_tables_differ_from_the_json(report):
+    assert report.main(["--check", "--results", str(FIXTURE)]) == 1  # the fixture is not the committed run
+
+
+def test_the_committed_tables_are_what_the_committed_json_gives(report):
+    assert report.main(["--check"]) == 0, "run: python benchmarks/report.py"
