@@ -36,9 +36,9 @@ def test_plain_cube_world_positions(scene):
 
 
 def test_objects_in_edit_mode_give_their_edited_triangles(scene):
-    """Outside QA: an object in Edit Mode evaluates to a wrapper around its edit mesh; the preview read
-    no triangles from it (the object being modelled vanished) or, with a modifier, failed (KeyError:
-    no "position" attribute). The edit, not yet written back to the mesh, must show, as in Cycles."""
+    """An object in Edit Mode evaluates to a wrapper around its edit mesh, which has no "position"
+    attribute to read: the object being modelled must not vanish, nor fail with a modifier (KeyError).
+    The edit, not yet written back to the mesh, must show, as in Cycles."""
     plain = scenes.add_cube("Plain", location=(0, 0, 0))
     smooth = scenes.add_cube("Smooth", location=(5, 0, 0))
     subdivision = smooth.modifiers.new("Subdivision", "SUBSURF")

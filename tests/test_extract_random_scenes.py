@@ -119,8 +119,8 @@ class _RandomScene:
 # Known gaps: an instancer with Show Instancer off in the viewport yields no entry of its own, so under
 # geometry-nodes instances (whose levels number instances, not collection members) nothing tells its
 # instances from a sibling's: seed 134 (a render-hidden carrier's), seed 256 (a collection's
-# render-hidden member reached through a carrier beside one that names it directly). README, "What
-# the preview sees". Strict: a fix makes these fail until they are taken off the list.
+# render-hidden member reached through a carrier beside one that names it directly). See
+# docs/extraction.md#known-gaps. Strict: a fix makes these fail until they are taken off the list.
 KNOWN_GAPS = {134, 256}
 
 

@@ -2,7 +2,8 @@
 
 The preview reads the viewport's depsgraph and decides which of its entries a render makes; a render
 engine gets the render-mode depsgraph, which has decided already. Each scene here nests instancers in a
-way an outside review found the two disagreeing (Cycles agreed with the render depsgraph each time).
+way where the two can disagree (Cycles agreed with the render depsgraph each time). The rules are in
+docs/extraction.md#instances; what stays open is in docs/extraction.md#known-gaps.
 """
 from __future__ import annotations
 
@@ -126,7 +127,8 @@ def test_an_instanced_instancer_hides_itself_and_makes_its_instances(scene, kind
 @pytest.mark.parametrize("kind, method", [("EMITTER", "DOT"), ("EMITTER", "NONE"), ("HAIR", "PATH"), ("HAIR", "RENDER")])
 def test_particles_not_displayed_as_rendered_are_named(scene, kind, method):
     """Blender makes particles' object instances in the viewport only when they display as Rendered;
-    a render always does. The preview cannot show them; it names them (it said nothing, outside review)."""
+    a render always does. The preview cannot show them, so it names them rather than leave them out in
+    silence."""
     pebble = scenes.add_cube("Pebble", scale=0.1, location=(0, 0, -30))
     emitter = scenes.add_particle_emitter("Emitter", count=10, obj=pebble)
     settings = emitter.particle_systems[0].settings
@@ -157,7 +159,7 @@ def test_a_metaball_never_updated_in_the_viewport_is_named(scene, update):
 @pytest.mark.parametrize("keep_curve", [False, True])
 def test_a_curves_object_whose_nodes_make_a_mesh_is_named_only_for_what_is_left(scene, keep_curve):
     """A hair curves object whose geometry nodes turn a curve into a tube: the tube is triangles, which
-    the preview shows, so "is hair curves, not triangles: left out" was wrong (outside review). With the
+    the preview shows, so no "is hair curves, not triangles: left out" warning is due. With the
     curve kept beside the tube, that curve is named."""
     hair = scenes.link(bpy.data.objects.new("Hair", bpy.data.hair_curves.new("Hair")))
     tree = bpy.data.node_groups.new("Tube", "GeometryNodeTree")
@@ -185,7 +187,7 @@ def test_a_curves_object_whose_nodes_make_a_mesh_is_named_only_for_what_is_left(
 def test_a_member_showing_itself_only_in_renders_is_named_for_its_own_mesh(scene):
     """A vertex-instancing member of an instanced collection with Show Instancer off for the viewport
     and on for renders: the viewport makes its instances but not its own mesh, which a render shows.
-    The warning blamed a collection disabled in viewports and named its instances (outside review)."""
+    The warning names that mesh, not a collection disabled in viewports or its instances."""
     inner = scenes.new_collection("Inner", exclude=True)
     parent = scenes.add_mesh("Parent", [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)], [(0, 1, 2, 3)], collection=inner)
     parent.instance_type = "VERTS"
@@ -212,8 +214,8 @@ EARLIER_SCENES = (
 
 @pytest.mark.parametrize("build", [b for _, b in EARLIER_SCENES], ids=[n for n, _ in EARLIER_SCENES])
 def test_earlier_reviews_scenes_match_a_render_depsgraph(scene, build):
-    """The scenes of earlier outside reviews (each checked against Cycles by pixel counts, and by
-    test_extract_visibility.py's expected instances) against a render's own depsgraph, object by object."""
+    """The nested-instancer scenes of test_extract_visibility.py (each checked against Cycles by pixel
+    counts, and by that file's expected instances) against a render's own depsgraph, object by object."""
     build()
     assert differences(extract_scene(), render_entries()) == []  # two of them render nothing, as the preview
 
@@ -222,8 +224,7 @@ def test_earlier_reviews_scenes_match_a_render_depsgraph(scene, build):
 @pytest.mark.parametrize("route", ["collection instance", "object info"])
 def test_a_vertex_parents_child_in_a_render_disabled_collection_is_not_copied(scene, route, below):
     """A render's depsgraph holds no object of a render-disabled collection, or of one below it, so a
-    vertex parent has no such child to copy (outside reviews against Cycles: 159 pixels where Cycles
-    drew none)."""
+    vertex parent has no such child to copy (a copy of it is 159 pixels where Cycles draws none)."""
     hidden = bpy.data.collections.new("Hidden")
     hidden.hide_render = True
     holder = hidden
@@ -250,7 +251,7 @@ def test_a_vertex_parents_child_in_a_render_disabled_collection_is_not_copied(sc
 @pytest.mark.parametrize("kind", ["text", "curve"])
 def test_object_info_of_a_render_hidden_curve_or_text_shows_nothing(scene, kind):
     """Object Info (As Instance) shows a render-hidden mesh, but not a render-hidden text or curve
-    (outside review against Cycles: 187 pixels where Cycles drew none)."""
+    (a copy of it is 187 pixels where Cycles draws none)."""
     source = (scenes.add_text("Source", "Ab", location=(0, 0, -30)) if kind == "text"
               else scenes.add_bevel_curve("Source", location=(0, 0, -30)))
     source.hide_render = True
@@ -264,7 +265,7 @@ def test_object_info_of_a_render_hidden_curve_or_text_shows_nothing(scene, kind)
 def test_separate_children_set_by_the_modifiers_input_is_read(scene, separate):
     """Collection Info's Separate Children fed from the modifier's own input: off, the collection is
     instanced whole and a render leaves its render-hidden member out; on, each child object is a
-    reference and renders (outside review: the preview kept the member either way)."""
+    reference and renders. The preview must follow the input, not keep the member either way."""
     rocks = _collection_with_hidden_member()
     tree = bpy.data.node_groups.new("Scatter", "GeometryNodeTree")
     tree.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
@@ -283,7 +284,7 @@ def test_separate_children_set_by_the_modifiers_input_is_read(scene, separate):
 
 def test_members_hidden_in_renders_too_are_not_named_as_shown_by_one(scene):
     """A member with Show Instancer off for the viewport and for renders shows its own mesh in neither:
-    it was named as 'a final render shows it' (outside review)."""
+    it must not be named as 'a final render shows it'."""
     inner = scenes.new_collection("Inner", exclude=True)
     parent = scenes.add_mesh("Parent", [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)], [(0, 1, 2, 3)], collection=inner)
     parent.instance_type = "VERTS"
@@ -296,8 +297,8 @@ def test_members_hidden_in_renders_too_are_not_named_as_shown_by_one(scene):
 
 def test_an_emitter_picking_members_inside_an_instanced_collection_is_named(scene):
     """Particles giving each particle one member of a collection with a render-hidden member pick
-    differently in a render (among the render-visible members): named at the top level, and now inside
-    an instanced collection too (outside review: no word there)."""
+    differently in a render (among the render-visible members): named at the top level, and inside
+    an instanced collection too."""
     rocks = _collection_with_hidden_member()
     inner = scenes.new_collection("Inner", exclude=True)
     emitter = scenes.add_particle_emitter("Emitter", count=4, collection=rocks, whole_collection=False, size=2.0)
@@ -312,8 +313,8 @@ def test_an_emitter_picking_members_inside_an_instanced_collection_is_named(scen
 def test_members_are_numbered_with_the_viewport_hidden_ones(scene, viewport_hidden_first):
     """Two instancers of one collection inside an instanced one, the first render-hidden, neither with
     an entry of its own (Show Instancer off in the viewport): their copies are told apart by the member
-    index, which counts every member, viewport-hidden ones too (outside review: with one ahead of
-    them the hidden instancer's copy passed)."""
+    index, which counts every member, viewport-hidden ones too (counting only the shown ones, a
+    viewport-hidden member ahead of them lets the hidden instancer's copy through)."""
     rocks = scenes.new_collection("Rocks", exclude=True)
     scenes.add_cube("Rock", scale=0.3, collection=rocks)
     inner = scenes.new_collection("Inner", exclude=True)
@@ -333,10 +334,10 @@ def test_members_are_numbered_with_the_viewport_hidden_ones(scene, viewport_hidd
 @pytest.mark.parametrize("order", [(True, False), (False, True)])
 def test_a_group_called_twice_with_other_switches_is_read_twice(scene, order):
     """A node group feeding its Collection and Separate Children inputs to a Collection Info node,
-    called with the same collection, once separated and once whole: the walk read the group once, so
-    the second call's way was lost (outside review). Both are read now, in either order. (Which copy
-    of the render-hidden member a render keeps, the separated call's, the preview cannot tell from the
-    other's: README, the gaps left open.)"""
+    called with the same collection, once separated and once whole: each call is read with its own
+    switches, in either order (a walk that read the group once would lose the second call's). (Which
+    copy of the render-hidden member a render keeps, the separated call's, the preview cannot tell from
+    the other's: docs/extraction.md#known-gaps.)"""
     rocks = _collection_with_hidden_member()
     group = bpy.data.node_groups.new("Pick", "GeometryNodeTree")
     group.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
@@ -364,7 +365,7 @@ def test_a_group_called_twice_with_other_switches_is_read_twice(scene, order):
 
 def test_a_point_cloud_whose_nodes_make_instances_is_not_named(scene):
     """A point cloud whose nodes put an instance of a mesh on new points: everything renders as
-    triangles, so "is a point cloud, not triangles: left out" was wrong (outside review)."""
+    triangles, so no "is a point cloud, not triangles: left out" warning is due."""
     rock = scenes.add_cube("Rock", scale=0.2, location=(0, 0, -30))
     cloud = scenes.link(bpy.data.objects.new("Cloud", bpy.data.pointclouds.new("Cloud")))
     tree = bpy.data.node_groups.new("Scatter", "GeometryNodeTree")
@@ -386,9 +387,8 @@ def test_a_point_cloud_whose_nodes_make_instances_is_not_named(scene):
 @pytest.mark.parametrize("sibling", [False, True])
 def test_a_nested_instancer_disabled_in_viewports_is_named_once(scene, sibling):
     """A collection instancer inside an instanced collection, disabled in viewports: its copies are
-    missing from the preview. With a visible sibling instancing the same collection nothing named them
-    (outside review: 1 copy against a render's 2); now the instancer is named, once, and not again
-    through its members."""
+    missing from the preview (with a visible sibling instancing the same collection: 1 copy against a
+    render's 2). The instancer is named, once, and not again through its members."""
     leaf = scenes.new_collection("Leaf", exclude=True)
     scenes.add_cube("LeafCube", scale=0.3, collection=leaf)
     branch = scenes.new_collection("Branch", exclude=True)

@@ -42,11 +42,11 @@ def test_render_hidden_and_non_renderable_objects_left_out(scene):
 
 @pytest.mark.parametrize("via_modifier_input", [False, True])
 def test_collection_info_instances_follow_the_collection_rule(scene, via_modifier_input):
-    """Measured with Cycles (README): a collection that a Collection Info node instances whole is
+    """Measured with Cycles (docs/choices.md#collections-instanced-by-nodes-or-particles-follow-the-collection-instance-rule): a collection that a Collection Info node instances whole is
     expanded like a collection instance in a render, so its render-hidden members (own flag or a
     hidden child collection) are not rendered; with Separate Children on a child object is an object
     reference and is rendered, a child collection is expanded like a collection instance and its
-    render-hidden members are not (QA: the preview drew them), and a hidden object that an Object
+    render-hidden members are not (the preview must not draw them), and a hidden object that an Object
     Info node names is rendered."""
     source = scenes.new_collection("Src", exclude=True)
     scenes.add_cube("Shown", collection=source)
@@ -86,10 +86,10 @@ def _mixed_collection():
 
 
 def test_particles_rendering_a_whole_collection_follow_the_collection_rule(scene):
-    """Measured with Cycles (QA part_whole.blend and /tmp checks): particles rendering a collection
-    whole expand it like a collection instance, leaving out its render-hidden members (own flag, a
-    hidden child collection, a hidden member of a visible child collection); the preview drew them.
-    Particles rendering one render-hidden object still show it, as before."""
+    """Measured with Cycles (docs/choices.md#collections-instanced-by-nodes-or-particles-follow-the-collection-instance-rule):
+    particles rendering a collection whole expand it like a collection instance, leaving out its
+    render-hidden members (own flag, a hidden child collection, a hidden member of a visible child
+    collection), and so does the preview. Particles rendering one render-hidden object still show it."""
     source = _mixed_collection()
     pebble = scenes.add_cube("Pebble", scale=0.1, location=(50, 0, 0))
     pebble.hide_render = True
@@ -105,8 +105,8 @@ def test_particles_rendering_a_whole_collection_follow_the_collection_rule(scene
 
 def test_particles_picking_collection_members_leave_render_hidden_ones_out_and_warn(scene):
     """With Whole Collection off each particle gets one member: the viewport picks among all the
-    members it shows, a final render among the render-visible ones only (QA part_pick.blend: the
-    preview drew render-hidden spheres where Cycles drew cubes on other particles). The preview
+    members it shows, a final render among the render-visible ones only (Cycles draws cubes on
+    particles where the viewport's pick puts render-hidden spheres). The preview
     cannot reproduce the render's pick: it leaves the render-hidden members out and says so. A pick
     among members that are all render-visible is the render's and stays quiet."""
     source = _mixed_collection()
@@ -129,8 +129,8 @@ def test_particles_picking_collection_members_leave_render_hidden_ones_out_and_w
 def test_separated_child_collections_on_points_follow_the_collection_rule(scene):
     """Collection Info with Separate Children on, picked by Instance on Points (point i gets child i
     modulo 4): a final render expands a child collection like a collection instance, leaving out a
-    render-hidden child collection and a render-hidden member of a visible one (QA
-    gn_sep_child.blend, Cycles), while a render-hidden child object, an object reference, is drawn.
+    render-hidden child collection and a render-hidden member of a visible one (as
+    Cycles does), while a render-hidden child object, an object reference, is drawn.
     The pick is over the unfiltered children in both, so the points keep their objects."""
     _mixed_collection()
     scenes.add_collection_points_host("Points", bpy.data.collections["Src"], count=8)
@@ -194,8 +194,8 @@ def test_a_collection_fed_to_a_nested_group_follows_the_collection_rule(scene, v
 @pytest.mark.parametrize("instance_type", ["VERTS", "FACES"])
 def test_a_child_of_a_vertex_or_face_instancing_parent_shows_only_as_its_instances(scene, instance_type):
     """Blender hides such a child at its own place in a final render (the viewport shows it there):
-    a parent with two faces instances the child twice, and the original is left out (outside QA:
-    rendered as an extra object, against Cycles)."""
+    a parent with two faces instances the child twice, and the original is left out, as Cycles
+    leaves it out (kept, it would be an extra object)."""
     parent = scenes.add_mesh("Parent", [(0, 0, 0), (1, 0, 0), (1, 1, 0), (4, 0, 0), (5, 0, 0), (5, 1, 0)],
                              [(0, 1, 2), (3, 4, 5)])
     parent.instance_type = instance_type
@@ -203,7 +203,7 @@ def test_a_child_of_a_vertex_or_face_instancing_parent_shows_only_as_its_instanc
     child = scenes.add_cube("Child", scale=0.2, location=(0, 0, 3))
     child.parent = parent
     source = scenes.new_collection("Source", exclude=True)  # a collection instancer as a child: its own
-    scenes.add_cube("Unit", scale=0.1, collection=source)  # instances go with it (outside review)
+    scenes.add_cube("Unit", scale=0.1, collection=source)  # instances go with it
     scenes.add_collection_instance("Holder", source, location=(0, 0, 9)).parent = parent
     result = extract_scene()
     copies = 6 if instance_type == "VERTS" else 2
@@ -234,9 +234,9 @@ def _plate_and_instances_group(source):
 def test_show_instancer_for_render_alone_decides_whether_an_instancer_shows_itself(scene, kind, viewport, render):
     """Blender's rule for a final render (BKE_object_visibility, render mode): an object that instances
     things shows itself iff Show Instancer > Render is on; the viewport's flag, which the viewport
-    depsgraph applies, changes nothing. Outside review against Cycles: a geometry-nodes carrier
-    (is_instancer False) with Render off still showed its own plate, and an instancer with Viewport off
-    and Render on was left out with a warning calling it hidden in the viewport."""
+    depsgraph applies, changes nothing. Checked against Cycles: a geometry-nodes carrier
+    (is_instancer False) with Render off shows its own plate, and an instancer with Viewport off and
+    Render on shows itself (no warning calling it hidden in the viewport)."""
     plate = scenes.add_mesh("Plate", [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)], [(0, 1, 2, 3)],
                             location=(0, 0, 2))
     cube = scenes.add_cube("Cube", scale=0.2, location=(0, 0, 2))
@@ -283,9 +283,9 @@ def test_a_carrier_instancing_only_empties_or_lights_is_an_instancer(scene, sour
 
 @pytest.mark.parametrize("instance_type", ["VERTS", "FACES"])
 def test_a_child_disabled_in_renders_is_not_instanced_on_vertices_or_faces(scene, instance_type):
-    """Outside QA against Cycles: Blender instances the children that the depsgraph holds, and a render's
+    """Checked against Cycles: Blender instances the children that the depsgraph holds, and a render's
     leaves out a child disabled in renders (object_dupli.cc, make_child_duplis), so a final render shows
-    no copies of it; the viewport's depsgraph the preview reads still made them."""
+    no copies of it, though the viewport's depsgraph the preview reads makes them."""
     parent = scenes.add_mesh("Parent", [(0, 0, 0), (1, 0, 0), (1, 1, 0), (4, 0, 0), (5, 0, 0), (5, 1, 0)],
                              [(0, 1, 2), (3, 4, 5)])
     parent.instance_type = instance_type
@@ -300,9 +300,9 @@ def test_a_child_disabled_in_renders_is_not_instanced_on_vertices_or_faces(scene
 
 @pytest.mark.parametrize("nested_instancer_hidden", [False, True])
 def test_collection_info_follows_nested_collection_instances(scene, nested_instancer_hidden):
-    """Outside QA against Cycles: a Collection Info node instancing a collection that holds an empty
-    instancing a second collection showed the second's members disabled in renders (they were taken
-    for objects the node instances directly). A render expands the nesting as a collection instance:
+    """Checked against Cycles: a Collection Info node instancing a collection that holds an empty
+    instancing a second collection must not show the second's members disabled in renders (they are
+    not objects the node instances directly). A render expands the nesting as a collection instance:
     the inner collection's render-visible members only, and none when the inner instancer is disabled
     in renders."""
     inner = scenes.new_collection("Inner", exclude=True)
@@ -326,7 +326,7 @@ def _leaf_centres(result: ExtractedScene, name: str) -> list[tuple[float, ...]]:
 @pytest.mark.parametrize("top", scenes.TWO_PATH_TOPS)
 @pytest.mark.parametrize("hidden_path", scenes.TWO_PATH_HIDINGS)
 def test_an_object_reached_by_a_visible_and_a_render_hidden_path_is_made_once(scene, top, hidden_path):
-    """Outside review against Cycles: 'Mid' holds an empty instancing 'LeafC' (Leaf) at x = -3 and
+    """Checked against Cycles: 'Mid' holds an empty instancing 'LeafC' (Leaf) at x = -3 and
     another at x = +3 that a render does not make (Disable in Renders, or in a render-hidden child
     collection); Blender makes no instances from a render-hidden object (object_dupli.cc,
     get_dupli_generator) nor from a hidden child collection's members, but the viewport's depsgraph
@@ -343,10 +343,10 @@ def test_an_object_reached_by_a_visible_and_a_render_hidden_path_is_made_once(sc
 @pytest.mark.parametrize("source_kind", scenes.OBJECT_INFO_SOURCES)
 def test_an_object_info_source_hidden_from_renders_brings_its_own_mesh_but_not_its_instances(
         scene, source_kind, hidden):
-    """Outside review against Cycles: an Object Info node (As Instance) of a render-hidden object
+    """Checked against Cycles: an Object Info node (As Instance) of a render-hidden object
     still shows that object's own mesh in a render, but not the instances the object makes itself
-    (Blender makes none from a render-hidden object, at any depth); the preview drew them (~1,100
-    pixels each). With the source visible both show."""
+    (Blender makes none from a render-hidden object, at any depth; drawn, they are ~1,100 pixels
+    each). With the source visible both show."""
     scenes.add_object_info_of_instancer(source_kind, hidden)
     own, made = {"collection instancer": ([], ["X"]), "vertex-instancing parent": (["Source"], ["X"] * 3),
                  "nodes carrier": ([], ["Source"] * 2)}[source_kind]  # a carrier's instances are its own entries
@@ -357,8 +357,8 @@ def test_an_object_info_source_hidden_from_renders_brings_its_own_mesh_but_not_i
 
 @pytest.mark.parametrize("first_layer_renders", [True, False])
 def test_background_scenes_are_rendered_through_their_render_view_layer(scene, first_layer_renders):
-    """Outside QA against Cycles: a render shows the objects of the scene's Background Scene (and of
-    that one's, chained) as the depsgraph holds them; the preview left them out with no warning. A
+    """Checked against Cycles: a render shows the objects of the scene's Background Scene (and of
+    that one's, chained) as the depsgraph holds them, and so does the preview. A
     background scene contributes its first view layer enabled for rendering (else its first), with
     that layer's exclusions and Disable in Renders; checked against Cycles with either layer enabled.
     (Switching `use` after an evaluation crashed the bpy module's next one, so each case is set up
@@ -464,7 +464,7 @@ def test_a_group_called_many_times_with_the_same_inputs_is_read_once(scene, monk
 def test_a_hidden_instancer_of_a_collection_does_not_decide_for_a_visible_one(scene, hidden_path):
     """The path walk remembers per instanced collection which members make nothing: a render-hidden
     top-level instancer of the same collection walked first must decide nothing for a visible one
-    (outside review, with the hidden child collection: 69 pixels of a copy Cycles does not draw)."""
+    (with the hidden child collection, a wrong decision draws 69 pixels of a copy Cycles does not)."""
     scenes.add_two_path_scene("collection instance", hidden_path)
     bpy.data.objects["Top"].hide_render = True
     scenes.add_collection_instance("Later", bpy.data.collections["Mid"], location=(0, 9, 0))
@@ -475,25 +475,25 @@ def test_a_hidden_instancer_of_a_collection_does_not_decide_for_a_visible_one(sc
 
 @pytest.mark.parametrize("hidden_first", [True, False])
 def test_a_hidden_source_does_not_hide_nested_instances_beside_it(scene, hidden_first):
-    """Outside review against Cycles (0 against 183 pixels): a geometry-nodes level that holds no
-    object yields no entry, so the hidden Object Info source's entry looked like an ancestor of the
-    nested copies after it; an ancestor is believed only when the copies' levels continue its own."""
+    """Checked against Cycles by pixel counts: a geometry-nodes level that holds no object
+    yields no entry, so the hidden Object Info source's entry can look like an ancestor of the nested
+    copies after it; an ancestor is believed only when the copies' levels continue its own."""
     scenes.add_hidden_source_beside_nested_instances(hidden_first)
     assert sorted(instances_by_host(extract_scene()).get("Host", [])) == ["X"] * 4
 
 
 def test_a_hidden_member_named_directly_shows_once(scene):
-    """Outside review against Cycles (124 against 36 pixels): render-hidden X named by an Object Info
+    """Checked against Cycles by pixel counts: render-hidden X named by an Object Info
     node renders, but not where a collection instance on its path skips it."""
     scenes.add_hidden_member_named_and_nested()
     assert _leaf_centres(extract_scene(), "X") == [(-3.0, 0.0, 0.0)]
 
 
 def test_separate_children_with_a_hidden_and_a_visible_instancer_of_one_collection(scene):
-    """Outside review against Cycles (0 against 61 pixels): geometry nodes number a collection member's
+    """Checked against Cycles by pixel counts: geometry nodes number a collection member's
     own instances from its index + 1, so the copies under the visible instancer (in child collection
-    'Sub') also continued the levels of the render-hidden one beside 'Sub'; only an entry's parent
-    decides now."""
+    'Sub') also continue the levels of the render-hidden one beside 'Sub'; only an entry's parent
+    decides."""
     leaf_collection = scenes.new_collection("LeafC", exclude=True)
     scenes.add_cube("Leaf", scale=0.3, collection=leaf_collection)
     top = scenes.new_collection("TopC", exclude=True)

@@ -43,7 +43,7 @@ def test_viewport_hidden_and_non_triangle_objects_are_named(scene):
 def test_hidden_instancers_and_viewport_disabled_members_are_named(scene):
     """A collection instancer hidden in the viewport takes its instances with it, and a member of an
     instanced collection disabled in viewports is not evaluated for the instances: a final render
-    shows both, so the preview names them (outside QA: 970 triangles went missing in silence)."""
+    shows both, so the preview names them rather than leave their triangles out in silence."""
     source = scenes.new_collection("Source", exclude=True)
     scenes.add_cube("Unit", collection=source)
     scenes.add_cube("Member", location=(2, 0, 0), collection=source).hide_viewport = True
@@ -62,10 +62,10 @@ def test_hidden_instancers_and_viewport_disabled_members_are_named(scene):
 
 @pytest.mark.parametrize("host", ["particles", "collection instance"])
 def test_members_no_render_makes_are_not_named_as_missing(scene, host):
-    """Outside review against Cycles (hit masks equal): particles render a collection's objects but do
+    """Checked against Cycles (hit masks equal): particles render a collection's objects but do
     not expand the collection instances among them (object_dupli.cc makes no nested instances for
-    particles), and no render instances a metaball; the preview left both out, as a render does,
-    yet warned that each 'is not instanced in the viewport ... a final render shows them'."""
+    particles), and no render instances a metaball; the preview leaves both out, as a render does,
+    and must not warn that each 'is not instanced in the viewport ... a final render shows them'."""
     leaf_collection = scenes.new_collection("LeafC", exclude=True)
     scenes.add_cube("Leaf", scale=0.2, collection=leaf_collection)
     rendered = scenes.new_collection("Rendered", exclude=True)
@@ -203,7 +203,7 @@ def test_a_collection_info_node_the_output_does_not_use_names_nothing(scene):
 
 
 def test_a_view_layer_not_enabled_for_rendering_is_named(scene):
-    """Outside review: the preview renders the window's view layer; a final render writes only the
+    """The preview renders the window's view layer; a final render writes only the
     layers enabled for rendering, so a disabled one gets a warning (and renders as before)."""
     scenes.add_cube("Box")
     bpy.context.view_layer.use = False
@@ -233,7 +233,7 @@ def test_background_scene_objects_hidden_in_the_viewport_are_named(scene):
 
 def test_geometry_that_is_not_triangles_inside_mesh_objects_is_named(scene):
     """Geometry nodes that turn a mesh into points, and hair particles drawn as strands: Cycles
-    renders both, the preview cannot trace them and says so (outside QA: left out in silence)."""
+    renders both, the preview cannot trace them and says so rather than leave them out in silence."""
     points = scenes.add_cube("Pointy")
     group = bpy.data.node_groups.new("ToPoints", "GeometryNodeTree")
     group.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
@@ -279,8 +279,8 @@ def _evaluation_warnings(result: ExtractedScene) -> list[str]:
 
 
 def test_settings_a_render_evaluates_differently_are_named_in_one_warning(scene):
-    """Outside review against Cycles: each of these changed the image by 230-2,200 pixels of 19,200
-    with no word from the preview, which reads the viewport's evaluation."""
+    """Checked against Cycles: each of these changes the image by 230-2,200 pixels of 19,200, and the
+    preview, which reads the viewport's evaluation, names them (docs/extraction.md#viewport-evaluation-against-render-evaluation)."""
     subdivided = scenes.add_cube("Subdivided")
     subdivision = subdivided.modifiers.new("Subdivision", "SUBSURF")
     subdivision.levels, subdivision.render_levels = 0, 3
@@ -342,8 +342,8 @@ def _culling_warnings(result: ExtractedScene) -> list[str]:
 
 
 def test_objects_cycles_may_cull_are_named(scene):
-    """Outside review: with Simplify's Camera Culling on, Cycles left out a cube just outside the view
-    whose shadow the preview drew over 13% of the floor, with no word."""
+    """With Simplify's Camera Culling on, Cycles leaves out a cube just outside the view whose shadow
+    the preview draws over 13% of the floor; the preview names such objects (docs/extraction.md#known-gaps)."""
     camera = scenes.add_camera()
     scene.camera = camera
     culled = scenes.add_cube("Culled")
@@ -373,8 +373,8 @@ def test_objects_cycles_may_cull_are_named(scene):
 
 
 def test_a_view_layer_with_surfaces_filtered_out_renders_no_triangles(scene):
-    """Outside review: with View Layer > Filter > Surfaces off Cycles renders no surface (0 hit pixels
-    of the 1,069 it renders with it on); the preview drew them all."""
+    """With View Layer > Filter > Surfaces off Cycles renders no surface (0 hit pixels of the 1,069
+    it renders with it on), and neither does the preview."""
     scenes.add_cube("Box")
     assert extract_scene().triangle_count == 12
     bpy.context.view_layer.use_solid = False
@@ -385,8 +385,8 @@ def test_a_view_layer_with_surfaces_filtered_out_renders_no_triangles(scene):
 
 
 def test_instances_of_a_hidden_vertex_parent_in_a_collection_are_not_named_as_missing(scene):
-    """Outside review: a render-hidden vertex-instancing parent inside an instanced collection makes no
-    copies of its child in a render (Cycles: none), yet the child was named as 'not instanced in the
+    """A render-hidden vertex-instancing parent inside an instanced collection makes no copies of its
+    child in a render (Cycles: none), so the child must not be named as 'not instanced in the
     viewport ... a final render shows them'."""
     source = scenes.new_collection("K", exclude=True)
     parent = scenes.add_mesh("VParent", [(0, 0, 0), (1, 0, 0), (0, 1, 0)], [(0, 1, 2)], collection=source)
@@ -400,8 +400,8 @@ def test_instances_of_a_hidden_vertex_parent_in_a_collection_are_not_named_as_mi
 
 
 def test_subdivision_levels_simplify_caps_alike_are_not_named(scene):
-    """Outside review: Subdivision 1 against 3 levels under Simplify's 0 and 0 evaluates to 0 levels
-    either way (Cycles' mask equals the preview's), yet was named."""
+    """Subdivision 1 against 3 levels under Simplify's 0 and 0 evaluates to 0 levels either way
+    (Cycles' mask equals the preview's), so it is not named."""
     scenes.add_cube("Capped").modifiers.new("Subdivision", "SUBSURF").render_levels = 3
     scene.render.use_simplify = True
     scene.render.simplify_subdivision = scene.render.simplify_subdivision_render = 0
