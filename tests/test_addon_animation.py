@@ -127,8 +127,8 @@ def _fail_at_frame_3(scene):
 
 
 def test_a_failed_animation_puts_the_preview_and_its_figures_back(addon, tmp_path):
-    """Outside review: an animation that failed at frame 3 left frame 2 in the preview image (its frames
-    pass through it on their way to disk) under the panel's figures of the render before. The frames
+    """An animation that fails at frame 3 must not leave frame 2 in the preview image (its frames pass
+    through it on their way to disk) under the panel's figures of the render before. The frames
     written stay on disk; the preview is the one before the run."""
     scene = half_plane_scene()
     _fail_at_frame_3(scene)

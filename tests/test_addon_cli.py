@@ -149,7 +149,7 @@ def test_cli_takes_the_files_saved_settings_and_options_override_them(tmp_path, 
     (["render", "--out", "X", "--frames", "1-5:0"], 1, "bad frame range '1-5:0': the step must be 1 or more, got 0"),
     (["render", "--out", "X", "--frames", "1,x"], 1, "bad frame range 'x': use N, A-B or A-B:STEP, or a comma list"),
     (["render", "--out", "X", "--frames", ""], 1, "bad frame range '': no frames"),  # not the scene's range
-    # the flag typed, then the setting behind it (outside review: only the setting's name was given)
+    # the flag typed, then the setting behind it (the setting's name alone is not what the user typed)
     (["render", "--out", "X", "--resolution", "0"], 1,
      "--resolution: resolution_percentage must be an integer from 1 to 100"),
     (["render", "--out", "X", "--leaf-size", "0"], 1, "--leaf-size: leaf_size must be an integer from 1"),
@@ -172,7 +172,7 @@ def test_usage_and_setting_errors_exit_nonzero_with_the_message(tmp_path, capsys
 
 @pytest.mark.parametrize("content", [b"", b"garbage\n", b"BLEND", b"\x89PNG\r\n\x1a\n" + bytes(64)])
 def test_a_file_that_is_no_blend_is_named_and_blender_says_nothing(tmp_path, capfd, content):
-    """Outside QA: Blender's own "File format is not supported" went to stdout ahead of our error."""
+    """Blender's own "File format is not supported" must not go to stdout ahead of our error."""
     path = tmp_path / "scene.blend"
     path.write_bytes(content)
     assert cli.execute(["render", str(path), "--out", str(tmp_path / "o")]) == 1
@@ -182,8 +182,8 @@ def test_a_file_that_is_no_blend_is_named_and_blender_says_nothing(tmp_path, cap
 
 
 def test_messages_name_the_program_as_it_was_run(tmp_path, capsys):
-    """Outside QA: under `python -m kd_addon` errors said "kdpreview:" (the Blender command's name),
-    argparse's usage errors the program's name."""
+    """Under `python -m kd_addon` errors name that program, as argparse's usage errors do, not
+    "kdpreview:" (the Blender command's name)."""
     assert cli.main(["render", str(tmp_path / "missing.blend"), "--out", str(tmp_path / "o")]) == 1
     assert capsys.readouterr().err.startswith(f"python -m kd_addon: error: no such .blend file: {tmp_path}")
     assert cli.execute(["render", str(tmp_path / "missing.blend"), "--out", str(tmp_path / "o")]) == 1
@@ -207,8 +207,8 @@ def test_scene_errors_exit_nonzero_with_the_message(tmp_path, capsys):
 
 
 def test_frames_outside_the_scene_range_render_with_a_note(tmp_path, capsys):
-    """Outside review: --frames beyond the scene's range rendered without a word (a typo goes unseen);
-    they still render, as Blender goes to any frame, with a note naming them."""
+    """--frames beyond the scene's range render, as Blender goes to any frame, with a note naming them
+    (without it a typo goes unseen)."""
     floor_scene(40, 30)
     scene = bpy.context.scene
     scene.frame_start, scene.frame_end, name = 1, 5, scene.name  # the file's reload removes this scene
@@ -245,7 +245,8 @@ def test_frames_with_nothing_visible_are_transparent_and_the_sequence_goes_on(tm
 
 
 def test_unwritable_output_folder_is_named_before_a_frame_renders(tmp_path, capsys):
-    """Outside QA: found only when frame 1 was written, after its render (minutes on a first run)."""
+    """Checked before any render: otherwise the problem shows only when frame 1 is written, after its
+    render (minutes on a first run)."""
     blocker = tmp_path / "a_file"
     blocker.write_text("not a folder")
     assert cli.execute(["render", "--frames", "1", "--out", str(blocker / "sub"), *SMALL]) == 1
@@ -266,7 +267,8 @@ def test_report_that_cannot_be_written_is_not_blamed_on_a_frame(tmp_path, capsys
 
 @pytest.mark.parametrize("warm", [False, True])
 def test_a_first_run_says_that_it_compiles(tmp_path, capsys, monkeypatch, warm):
-    """Outside QA: a first run printed the table header, then nothing for minutes, and looked hung."""
+    """A first run says it compiles: otherwise it prints the table header, then nothing for minutes,
+    and looks hung."""
     monkeypatch.setattr(corelib, "cache_is_warm", lambda: warm)
     assert cli.execute(["render", "--frames", "1", "--out", str(tmp_path), *SMALL]) == 0
     assert ("compiling the kernels takes a few minutes" in capsys.readouterr().out) is not warm

@@ -92,7 +92,8 @@ def test_property_group_mirrors_settings(addon):
 
 
 def test_every_integer_the_panel_accepts_is_a_valid_setting(addon):
-    """Outside QA: the panel let Leaf Size and Memory Limit take values that the render then refused."""
+    """The panel's bounds match the render's checks: no value the panel takes (Leaf Size, Memory Limit,
+    ...) is refused by the render."""
     settings = bpy.context.scene.kd_preview
     for prop in settings.bl_rna.properties:
         if prop.type != "INT":
@@ -126,8 +127,8 @@ def test_bad_frame_ranges_are_named(text):
 @pytest.mark.parametrize("text, named", [("1048573-1048576", 1048576), ("2000000", 2000000), ("-1048580", -1048580),
                                           ("1-200000000000", 200000000000), ("5,-1048575-0", -1048575)])
 def test_frames_blender_cannot_go_to_are_named_before_any_list_is_made(text, named):
-    """Blender's frame_set clamps frames beyond +-1048574 silently: the preview rendered the last frame
-    again under each requested name, and a huge range was listed in full first (outside QA)."""
+    """Blender's frame_set clamps frames beyond +-1048574 silently, so such frames would render the last
+    frame again under each requested name (and a huge range would be listed in full first)."""
     with pytest.raises(PreviewError, match=f"frame {named} is outside Blender's frame range"):
         parse_frames(text)
     assert parse_frames("1048570-1048574:4") == [1048570, 1048574] and parse_frames("-1048574") == [-1048574]

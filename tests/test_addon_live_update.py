@@ -53,8 +53,8 @@ def test_live_update_renders_an_edit_once_edits_pause(addon):
 
 
 def test_live_update_renders_settings_set_by_a_script_and_its_own_switching_on(addon):
-    """Outside QA (Blender 5.2.2): a setting set from Python makes no depsgraph update, so Live Update
-    did not render it; nor did switching Live Update on. Settings now schedule the render themselves."""
+    """A setting set from Python makes no depsgraph update (Blender 5.2.2), so Live Update would not
+    render it, nor would switching Live Update on: settings schedule the render themselves."""
     timers = bpy.app.timers
     scene = half_plane_scene()
     if timers.is_registered(live_update.render_edits):

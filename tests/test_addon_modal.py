@@ -114,9 +114,9 @@ def test_modal_render_ticks_to_the_end(modal, monkeypatch):
 
 
 def test_an_operator_called_after_it_finished_leaves_the_next_run_alone(modal):
-    """Outside QA (Blender 5.2, Render In: New Window): the finish opened the render window inside
-    modal(), and Blender kept calling the finished operator; its next timer event published its frame
-    again, printed its report again and marked the next, running render as not running."""
+    """With Render In: New Window (Blender 5.2) a finish that opens the render window inside modal()
+    makes Blender keep calling the finished operator; its next timer event must not publish its frame
+    again, print its report again or mark the next, running render as not running."""
     scene = half_plane_scene()
     first = driver(KDPREVIEW_OT_render)
     first.invoke(modal, None)
@@ -168,7 +168,7 @@ def test_esc_during_animation_restores_the_frame(modal, tmp_path):
 
 def test_esc_during_animation_keeps_the_previous_preview(modal, tmp_path):
     """The frames written pass through the preview image; Esc puts back the one shown before the run
-    (outside review: the last frame written stayed, under the figures of the run before)."""
+    (not the last frame written, under the figures of the run before)."""
     scene = half_plane_scene()
     bpy.ops.kdpreview.render()
     before, last_run = preview_pixels().copy(), modal.window_manager.kd_preview_state.last_run
@@ -312,9 +312,9 @@ def test_modal_animation_runs_every_frame(modal, tmp_path):
 
 
 def test_live_update_leaves_the_restored_start_frame_of_an_animation_unrendered(modal, tmp_path, monkeypatch):
-    """Outside QA (Blender 5.2.2): after Render Animation with Live Update on, setting the start frame
-    again made the frame handler render it synchronously (598 ms of frozen UI), though the preview
-    already showed it: the job was released before the frame was set. The preview stays as it was."""
+    """After Render Animation with Live Update on, setting the start frame again must not make the frame
+    handler render it synchronously (598 ms of frozen UI in Blender 5.2.2), as the preview already shows
+    it: the job is released only after the frame is set. The preview stays as it was."""
     scene = half_plane_scene()
     scene.frame_start, scene.frame_end, scene.frame_current = 1, 2, 5
     scene.kd_preview.output_dir = str(tmp_path)
@@ -333,9 +333,9 @@ def test_live_update_leaves_the_restored_start_frame_of_an_animation_unrendered(
 
 
 def test_a_modal_animation_renders_the_scene_it_was_invoked_for(modal, tmp_path):
-    """Outside QA: Render Animation invoked for another scene than the window's (a script's
-    temp_override) read the window scene's depsgraph at each later tick, so its frames showed the
-    window scene's objects under the other scene's name and camera."""
+    """Render Animation invoked for another scene than the window's (a script's temp_override) reads
+    that scene's depsgraph at every tick, not the window scene's, whose objects would otherwise show
+    under the other scene's name and camera."""
     half_plane_scene()  # the window's scene: a ground quad and a box, 14 triangles
     other = bpy.data.scenes.new("Other")
     other.camera = bpy.context.scene.camera
@@ -386,9 +386,9 @@ def test_a_bug_inside_a_modal_tick_ends_the_run_and_the_next_render_works(modal,
 
 
 def test_disabling_the_addon_mid_render_ends_the_run(modal):
-    """Blender drops an unregistered operator's modal handler without calling cancel(): the job stayed
-    claimed, and after re-enabling every render said "already running" until a restart (outside QA
-    in Blender 5.2.2). Disabling now ends the run as Esc would."""
+    """Blender drops an unregistered operator's modal handler without calling cancel(), which would
+    leave the job claimed, and after re-enabling every render would say "already running" until a
+    restart (Blender 5.2.2). Disabling ends the run as Esc would."""
     half_plane_scene()
     op = driver(KDPREVIEW_OT_render)
     op.invoke(modal, None)
@@ -523,9 +523,9 @@ def test_an_edit_leaves_a_live_render_of_the_same_image_and_a_users_render_runni
 
 
 def test_a_frame_change_during_a_render_renders_after_it_or_instead_of_a_live_one(addon, monkeypatch):
-    """Outside QA (Blender 5.2.2): moving to frame 2 while a live render of frame 1 ran left the preview
-    on frame 1 for good: the frame handler stays out while a job runs, and a frame change alone makes
-    no depsgraph update list. Now it leaves the frame to the edit timer."""
+    """Moving to frame 2 while a live render of frame 1 runs must not leave the preview on frame 1 for
+    good: the frame handler stays out while a job runs, and a frame change alone makes no depsgraph
+    update list (Blender 5.2.2), so the handler leaves the frame to the edit timer."""
     scene = half_plane_scene()
     box = bpy.data.objects["Box"]
     for frame, x in ((1, -2.0), (2, -1.0), (3, -3.0)):

@@ -50,7 +50,7 @@ def test_registering_again_re_registers():
     scenes.reset()
     kd_addon.register()
     try:
-        kd_addon.register()  # outside QA: Blender's ValueError "already registered as a subclass"
+        kd_addon.register()  # twice: no Blender ValueError "already registered as a subclass"
         assert registered_names() == {cls.__name__ for cls in CLASSES}
         assert len(our_handlers()) == len(HANDLER_KINDS)
         assert bpy.ops.kdpreview.render.poll() is not None
@@ -176,7 +176,7 @@ def test_cli_command_registration_round_trip():
 
 def test_the_cache_is_warm_only_once_the_sampling_kernel_is_compiled_for_this_python(tmp_path, monkeypatch):
     """The first run's status says "Loading" only when the longest kernel is cached for this Python:
-    the first index file appears seconds into a compile of minutes (outside QA)."""
+    the first index file appears seconds into a compile of minutes."""
     import sys
 
     import core.render.render_kernels
@@ -213,7 +213,7 @@ def test_numba_cache_folder_follows_the_core_sources(tmp_path):
 
 def test_a_blend_relative_output_folder_sets_without_a_warning():
     """The default output folder is "//kd_preview/"; where Blender knows blend-relative paths (4.5 on)
-    setting one warned 'does not support blend relative "//" prefix' (outside QA, Blender 5.2)."""
+    setting one must not warn 'does not support blend relative "//" prefix' (as in Blender 5.2)."""
     import warnings
 
     scenes.reset()

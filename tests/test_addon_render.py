@@ -69,8 +69,8 @@ def test_modes_with_lights(addon):
 
 def test_lights_blender_accepts_but_that_emit_nothing_are_left_out_by_name(addon):
     """Negative power, zero area size, a zero-scale area light, a black light, a Cycles light portal
-    (outside QA: both lit the floor and halved the real light's share of S, where Cycles' image is the
-    sun's alone): Blender takes them all. Mode ao ignores lights; the shadow modes leave such lights
+    (traced, some of them would light the floor and halve the real light's share of S, where Cycles'
+    image is the sun's alone): Blender takes them all. Mode ao ignores lights; the shadow modes leave such lights
     out with a warning that names each, and stop (naming them) only when no light is left. A sun of
     Blender's largest angle (180 degrees) is usable."""
     scene = half_plane_scene()
@@ -112,8 +112,8 @@ def test_lights_blender_accepts_but_that_emit_nothing_are_left_out_by_name(addon
 
 
 def test_a_scenes_only_light_dimmed_to_nothing_darkens_that_frame_alone(addon):
-    """Outside QA: a sun whose Emission Strength is animated 1 -> 0 -> 1 stopped the whole animation at
-    frame 2 ("needs a light"). Frame 2 now renders black with a warning (Cycles' image is black too),
+    """A sun whose Emission Strength is animated 1 -> 0 -> 1 must not stop the whole animation at
+    frame 2 ("needs a light"). Frame 2 renders black with a warning (Cycles' image is black too),
     and frame 3, lit again, renders anew and equals frame 1 (frame 2's image is not reused)."""
     scene = half_plane_scene()
     scene.kd_preview.mode = "shadow"
@@ -275,7 +275,7 @@ def test_errors_leave_the_previous_image_and_report(addon):
 def test_a_light_hidden_in_the_viewport_is_named(addon):
     """The viewport's depsgraph does not evaluate a light hidden there, so the preview cannot use it
     (a final render does): a warning names it in modes with lights, and when it was the only light
-    the error says so instead of "no render-visible light" (outside QA)."""
+    the error says so instead of "no render-visible light"."""
     scene = half_plane_scene()
     scene.kd_preview.mode = "shadow"
     config = make_config(scene.kd_preview)
@@ -335,7 +335,7 @@ def test_one_job_at_a_time(addon):
 
 
 def test_a_users_image_named_kd_preview_is_left_alone(addon):
-    """Found by outside QA: a user's own (byte) image called "KD Preview" was silently renamed."""
+    """A user's own (byte) image called "KD Preview" is not renamed or written over."""
     half_plane_scene()
     mine = bpy.data.images.new(IMAGE_NAME, 4, 4)
     mine.pixels[:] = [0.5] * 64

@@ -100,8 +100,8 @@ def test_no_scene_camera_is_named(scene):
 
 
 def test_the_scene_camera_a_problem_is_found_in_is_named(scene):
-    """Outside QA: with timeline markers switching cameras, "panoramic cameras are not supported" did
-    not say which camera."""
+    """With timeline markers switching cameras, "panoramic cameras are not supported" must say which
+    camera."""
     cam = scenes.add_camera()
     cam.name, cam.data.type, scene.camera = "Shot 2", "PANO", cam
     with pytest.raises(PreviewError, match="^scene camera 'Shot 2': panoramic cameras are not supported"):
@@ -275,8 +275,8 @@ def test_render_hidden_lights_are_left_out(scene):
 
 
 def test_lights_of_a_background_scene_are_read(scene):
-    """Outside QA: Cycles lights the scene with its Background Scene's sun (mean 0.77 against 0.05
-    without); the preview found no light and shadow mode failed."""
+    """Cycles lights the scene with its Background Scene's sun (mean 0.77 against 0.05 without), so
+    the preview reads the Background Scene's lights too (without them shadow mode finds no light)."""
     background = bpy.data.scenes.new("Set")
     scene.background_set = background
     scenes.link(bpy.data.objects.new("SetSun", bpy.data.lights.new("SetSun", "SUN")), background.collection)
@@ -300,8 +300,8 @@ def test_a_background_scene_light_hidden_in_the_viewport_is_named(scene):
 
 
 def test_instanced_lights_are_read_at_their_instances(scene):
-    """A light inside an instanced collection lights the scene in Cycles (found by outside QA: the
-    preview used to ignore it): one light per render-visible instance, at the instance's place."""
+    """A light inside an instanced collection lights the scene in Cycles, so the preview reads it:
+    one light per render-visible instance, at the instance's place."""
     source = scenes.new_collection("Rig", exclude=True)  # excluded: only its instances render
     lamp = scenes.link(bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", "POINT")), source)
     lamp.location = (1.0, 0.0, 2.0)
@@ -317,8 +317,8 @@ def test_instanced_lights_are_read_at_their_instances(scene):
 @pytest.mark.parametrize("hidden", ["light", "child collection"])
 def test_an_instanced_light_the_viewport_does_not_make_is_named(scene, hidden):
     """A light member of an instanced collection, disabled in viewports (or in a child collection that
-    is): Cycles lights the scene with it (outside review: 153 pixels), the viewport makes none, and
-    nothing said so. A render-hidden one is left out in both, so not named."""
+    is): Cycles lights the scene with it (153 pixels), the viewport makes none, so the preview names
+    it. A render-hidden one is left out in both, so not named."""
     source = scenes.new_collection("Rig", exclude=True)
     holder = source
     if hidden == "child collection":
@@ -339,7 +339,7 @@ def test_an_instanced_light_the_viewport_does_not_make_is_named(scene, hidden):
 
 def test_an_instancers_diffuse_switch_darkens_its_lights(scene):
     """Cycles ANDs an instance's ray visibility with its instancer's: an instancer with Diffuse off
-    leaves its lights dark on diffuse surfaces (outside review: 0 against 120 pixels); the light's own
+    leaves its lights dark on diffuse surfaces (0 lit pixels against 120 with it on); the light's own
     switch does the same, and a light with both on lights."""
     source = scenes.new_collection("Rig", exclude=True)
     scenes.link(bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", "POINT")), source)

@@ -141,9 +141,9 @@ os._exit(0)  # as `python -m kd_addon` ends after Ctrl-C: the helper is never st
 @pytest.mark.slow
 @pytest.mark.skipif(os.name == "nt", reason="the helper watches its parent's pid (POSIX getppid)")
 def test_the_helper_ends_when_its_parent_is_gone(tmp_path):
-    """Outside QA: Ctrl-C during a first run's compile left the helper compiling for ~70 s after the
-    command line had exited. The helper lives while its parent does and ends within a second or two
-    once the parent is gone without stopping it."""
+    """The helper lives while its parent does and ends within a second or two once the parent is gone
+    without stopping it: otherwise Ctrl-C during a first run's compile would leave it compiling for
+    ~70 s after the command line has exited."""
     core_folder = tmp_path / "pkg" / "core"
     (core_folder / "jit").mkdir(parents=True)
     for folder in (core_folder, core_folder.parent, core_folder / "jit"):
