@@ -80,7 +80,7 @@ def test_ray_limits(tree):
         core.intersect(tree, o, d, tmax=np.ones(4))
     with pytest.raises(ValueError, match="tmax of ray 0 is NaN"):
         core.intersect(tree, o, d, tmax=np.array([np.nan, 1, 1]))
-    for name in ("tmin", "tmax"):  # None became NaN, and a string was parsed (outside QA)
+    for name in ("tmin", "tmax"):  # None must not become NaN, nor a string be parsed
         for bad in (None, "0.5"):
             with pytest.raises(ValueError, match=f"{name} must be a number or an array of numbers, got {bad!r}"):
                 core.intersect(tree, o, d, **{name: bad})
@@ -114,7 +114,7 @@ def _box_mesh():
     (lambda t: core.build_scene([_box_mesh()], [2], np.eye(4)[None]), "instance 0 names mesh 2, but there are 1"),
     (lambda t: core.build_scene([_box_mesh()], [-1], np.eye(4)[None]), "instance 0 names mesh -1"),
     (lambda t: core.build_scene([_box_mesh()] * 2, np.array([0, 2**32 + 1]), np.stack([np.eye(4)] * 2)),
-     "instance 1 names mesh 4294967297"),  # wrapped to mesh 1 by the int32 cast (outside review)
+     "instance 1 names mesh 4294967297"),  # an int32 cast would wrap it to mesh 1
     (lambda t: core.build_two_level([t], np.array([-2**32]), np.eye(4)[None]), "instance 0 names mesh -4294967296"),
     (lambda t: core.build_scene([_box_mesh()], [0], np.full((1, 4, 4), np.nan)), "instance 0 has a non-finite matrix"),
     (lambda t: core.build_scene([_box_mesh()], [0, 0], np.eye(4)[None]), r"matrices must have shape \(2, 4, 4\)"),
@@ -132,7 +132,7 @@ def _box_mesh():
      "must be affine"),
     (lambda t: core.Camera(np.diag([1.0, 1.0, 0.0, 1.0]), 0.5), "singular"),
     (lambda t: core.Camera(np.array([[1, 1, 0, 0], [0, 1e-12, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]]), 0.5), "singular"),
-    # found by outside QA: these raised TypeErrors or messages that named no setting
+    # each names its setting (not a bare TypeError, or a message that names none)
     (lambda t: core.intersect(t, np.zeros((1, 3)), np.ones((1, 3)), threads=1.5), "threads must be None or an integer"),
     (lambda t: core.render_preview(t, core.Camera(np.eye(4), 0.5), 4, 4, ambient="0.5"), r"ambient must be in \[0, 1\]"),
     (lambda t: core.render_preview(t, core.Camera(np.eye(4), 0.5), 4, 4, mode="shadow",
@@ -141,12 +141,12 @@ def _box_mesh():
     (lambda t: core.Light.sun((0, 0, -1), color="red"), r"light color must be 3 finite .* got 'red'"),
     (lambda t: core.build_kdtree([[[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 0, 0], [1, 0]]]),
      r"triangles must be an \(N, 3, 3\) array of numbers"),  # ragged: numpy's own message named nothing
-    # outside review: a colour beyond float32 made inf pixels
+    # a colour beyond float32 would make inf pixels
     (lambda t: core.Light.point((0, 0, 3), color=(1e39, 1, 1)), r"light color components must be at most 3\.403e\+38"),
     (lambda t: core.build_scene([(np.zeros((4, 2)), np.array([[0, 1, 2]]))], [0], np.eye(4)[None]),
      r"mesh 0: vertices must have shape \(N, 3\), got \(4, 2\)"),
     (lambda t: core.build_kdtree(np.zeros((1, 3, 3)), memory_limit=0), "memory_limit"),
-    # a second outside review: settings of the wrong type raised TypeError or numpy's ambiguity error
+    # settings of the wrong type: named, not a TypeError or numpy's ambiguity error
     (lambda t: core.Camera(np.eye(4), "wide"), "camera fov must be a number, got 'wide'"),
     (lambda t: core.Camera(np.eye(4), np.array([0.5, 0.6])), "camera fov must be a number"),
     (lambda t: core.Camera(np.eye(4), 0.5, clip_end="far"), "camera clip_end must be a number"),
@@ -157,7 +157,7 @@ def _box_mesh():
     (lambda t: core.Light.sun((0, 0, -1), angle=None), "sun angle must be a number"),
     (lambda t: core.Light.area(np.array([[1, 1, 0, 0], [0, 0, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]])),
      "parallel axes"),
-    # a third outside review: accepted, or rejected without naming the argument
+    # refused, naming the argument
     (lambda t: core.Light.area(np.diag([1.0, 1.0, 1.0, 2.0])), r"must be affine \(bottom row 0 0 0 1\)"),
     (lambda t: core.Light.area(np.array([[1, 0, 1, 0], [0, 1, 0, 0], [0, 0, 0, 0], [0, 0, 0, 1.0]])),
      "emits along its own plane"),
@@ -223,8 +223,9 @@ def test_hits_beyond_float32s_range_of_t_are_named_and_tiny_ones_kept():
 
 
 def test_a_hit_t_rounding_onto_the_intervals_ends_is_moved_inside():
-    """Outside review: a hit at t = 1 - 1e-9 with tmax 1 came back as float32 t = 1.0, outside the open
-    interval (tmin, tmax), so a caller filtering on t < tmax lost it. Likewise at tmin."""
+    """A hit at t = 1 - 1e-9 with tmax 1 rounds to float32 t = 1.0, outside the open interval
+    (tmin, tmax), where a caller filtering on t < tmax would lose it: it is moved inside. Likewise at
+    tmin."""
     tree = core.build_kdtree(np.array([[[-1, -1, 0], [1, -1, 0], [0, 1, 0]]], np.float32))
     down = np.array([[0.0, 0.0, -1.0]])
     for query in (core.intersect, core.intersect_scene):
@@ -257,8 +258,8 @@ def test_progressive_calls_name_bad_arguments(tree):
 
 @pytest.mark.parametrize("layout", ["auto", "flat", "two_level"])
 def test_a_non_finite_vertex_names_its_mesh_and_triangle_in_every_layout(layout):
-    """Found by outside QA: in a soup the NaN spread to the merged meshes and the error named
-    triangle 0 of the soup, all NaN."""
+    """The error names the caller's mesh and triangle, also in a soup, where merging would otherwise
+    spread the NaN and name triangle 0 of the soup."""
     good, bad = _box_mesh(), _box_mesh()
     bad[0][16, 2] = np.nan  # vertex 16: triangle 5's second vertex
     with pytest.raises(ValueError, match=r"mesh 1: triangle 5 has a non-finite vertex coordinate \(NaN or inf\): "
@@ -270,8 +271,8 @@ def test_a_non_finite_vertex_names_its_mesh_and_triangle_in_every_layout(layout)
 
 
 def test_a_vertex_beyond_float32_range_is_named_as_such():
-    """Found by outside QA: a finite float64 vertex of 1e39 was cast to float32 first, which warned and
-    made it inf, and the error then called it "non-finite (NaN or inf)"."""
+    """A finite float64 vertex of 1e39 is named as beyond float32's range, not as "non-finite (NaN or
+    inf)" (which a cast to float32 first would make it, with a warning)."""
     tris = np.random.default_rng(2).normal(size=(4, 3, 3))
     tris[2, 1, 0] = 1e39
     with warnings.catch_warnings():
@@ -290,7 +291,7 @@ def test_a_vertex_beyond_float32_range_is_named_as_such():
                                         ((4, 4, "ao", 2.7), "samples"), ((4, 4, "ao", "16"), "samples"),
                                         ((4, 4, "shadow", 16, []), "light"), ((4, 4, "sky", 16), "mode")])
 def test_frame_ray_count_refuses_what_the_renderer_refuses(args, word):
-    """Outside QA: it returned -272, 16, 48, 272 and 16 for the first five."""
+    """Unchecked, it would return -272, 16, 48, 272 and 16 for the first five."""
     with pytest.raises(ValueError, match=word):
         core.frame_ray_count(*args)
 
@@ -312,7 +313,7 @@ def denoise_inputs(pixels, counts=(1, 1)):
                                                   ([0, 1], (1, -3), "counts must be >= 0"),
                                                   ([0, 1], (1,), r"counts must have shape \(2,\)")])
 def test_denoise_pixels_names_bad_inputs(pixels, counts, word):
-    """Outside QA: a negative index wrapped round and lit the last pixel, a negative count passed."""
+    """A negative index must not wrap round and light the last pixel, nor a negative count pass."""
     with pytest.raises(ValueError, match=word):
         core.denoise_pixels(*denoise_inputs(pixels, counts))
     assert core.denoise_pixels(*denoise_inputs([0, 3]))[..., 3].tolist() == [[1.0, 0.0], [0.0, 1.0]]
@@ -331,7 +332,7 @@ def test_scene_builder_inputs_that_are_not_mesh_inputs_or_hashable_keys_are_name
         builder.build([(v, f)], [0], np.eye(4)[None])
     with pytest.raises(ValueError, match="mesh keys must be hashable"):
         builder.build([core.MeshInput(["unhashable"], v, f, 0)], [0], np.eye(4)[None])
-    for fingerprint in (np.zeros(3), [1, 2]):  # outside review: an array failed on the second frame, unnamed
+    for fingerprint in (np.zeros(3), [1, 2]):  # an array would fail only on the second frame, unnamed
         with pytest.raises(ValueError, match=f"mesh 'm': fingerprint must be hashable .*got {type(fingerprint).__name__}"):
             builder.build([core.MeshInput("m", v, f, fingerprint)], [0], np.eye(4)[None])
 
@@ -339,18 +340,18 @@ def test_scene_builder_inputs_that_are_not_mesh_inputs_or_hashable_keys_are_name
 @pytest.mark.parametrize("vertices, dtype", [(np.eye(3) + 5j, "complex128"), (np.eye(3, dtype=bool), "bool"),
                                              (np.eye(3).astype(str), "<U32")])
 def test_scene_vertices_that_are_not_real_numbers_are_named(vertices, dtype):
-    """Outside review: build_scene dropped complex vertices' imaginary parts, took bools and failed in
-    numpy on strings; build_kdtree names all three."""
+    """build_scene names complex, bool and string vertices, as build_kdtree does (rather than drop
+    imaginary parts, take bools or fail in numpy on strings)."""
     with pytest.raises(ValueError, match=f"mesh 0: vertices must be real numbers .*got dtype {dtype}"):
         core.build_scene([(vertices, np.array([[0, 1, 2]]))], [0], np.eye(4)[None])
 
 
 @pytest.mark.parametrize("layout", ["auto", "two_level", "flat"])
 def test_a_lazy_scene_is_one_tree_or_a_named_refusal(layout):
-    """A lazy build has to be the scene's one tree. Outside review: layout "auto" kept a mesh placed
-    twice apart from the soup of the others, and the build failed naming internal tree 0 as "mesh 0"
-    (the caller's mesh 1 was meant). "auto" and "flat" now merge everything into one lazy tree, which
-    answers as the eager scene does; "two_level" is refused naming the caller's meshes."""
+    """A lazy build has to be the scene's one tree. Layout "auto" would keep a mesh placed twice apart
+    from the soup of the others, and a refusal must name the caller's mesh, not an internal tree.
+    "auto" and "flat" merge everything into one lazy tree, which answers as the eager scene does;
+    "two_level" is refused naming the caller's meshes."""
     tri = (np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32), np.array([[0, 1, 2]]))
     quad = (np.array([[0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]], np.float32), np.array([[0, 1, 2], [0, 2, 3]]))
     mats = np.stack([np.eye(4)] * 3)
@@ -370,7 +371,7 @@ def test_a_lazy_scene_is_one_tree_or_a_named_refusal(layout):
 
 @pytest.mark.parametrize("layout", ["two_level", "flat"])
 def test_an_instance_placed_beyond_float32s_range_is_named(layout):
-    """Outside QA: an instance moved 1e39 away was taken silently (two_level) or blamed on the other
+    """An instance moved 1e39 away is named, neither taken silently (two_level) nor blamed on the other
     instance's finite triangle (flat). Measured from the origin given, the same place is fine."""
     v, f = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float), np.array([[0, 1, 2]])
     far = np.eye(4)

@@ -201,9 +201,9 @@ def test_progressive_render_with_error_target_identical_to_eager():
 
 
 def test_a_lazy_tree_keeps_its_memory_limit_while_it_grows():
-    """Outside review: with forced splits the eager build of these triangles stops at memory_limit,
-    but the lazy tree built every subtree its rays reached, each within a 1 MB floor of its own, and
-    grew to 46 MB under a 20 MiB limit. A round that would pass the limit is refused before it is
+    """With forced splits the eager build of these triangles stops at memory_limit; the lazy tree,
+    building every subtree its rays reach, each within a 1 MB floor of its own, would grow to 46 MB
+    under a 20 MiB limit. A round that would pass the limit is refused before it is
     spliced in; the tree still answers within it (fewer rays reach fewer subtrees)."""
     rng = np.random.default_rng(2)
     centres = rng.random((20000, 1, 3))

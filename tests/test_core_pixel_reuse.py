@@ -228,9 +228,9 @@ def test_unfinished_render_has_no_state():
 
 def test_object_leaving_the_soup_keeps_no_stale_pixels():
     """A cube rises off a floor (layout auto: all three objects start in the soup; the cube leaves it
-    when it first moves). Found by outside QA: the soup was re-centred on the floor and wall, which
-    re-rounded the floor by a float32 ulp and left kept ray starts under it, so from the second move on
-    kept pixels near the cube saw the floor itself and turned dark (up to 0.5 of AO)."""
+    when it first moves). Re-centring the soup on the floor and wall would re-round the floor by a
+    float32 ulp and leave kept ray starts under it, so from the second move on kept pixels near the
+    cube would see the floor itself and turn dark (up to 0.5 of AO)."""
     floor = (np.array([[-6, -6, 0], [6, -6, 0], [6, 6, 0], [-6, 6, 0]], float) + (0.1, 0.3, 0.0), GROUND[1])
     wall = (np.array([[-6, 4, 0], [6, 4, 0], [6, 4, 3], [-6, 4, 3]], float), GROUND[1])
     meshes = [MeshInput("floor", *floor, 0), MeshInput("wall", *wall, 0), MeshInput("cube", *cube(0.3), 0)]
@@ -250,8 +250,8 @@ def test_a_far_soup_member_that_vanishes_leaves_no_stale_pixels(change):
     """A 1-unit cube 300 units from the centre of a 1,000-unit ground, both in the soup, stored in
     float32 relative to the ground's centre: the cube's front face is rounded by up to 1.5e-5 towards
     the camera 4 units away, more than the changed box's pad for rounding relative to the camera
-    (~6e-6). When the cube vanished or moved away, its pixels' camera segments ended short of its
-    padded box and kept last frame's hits on it (outside review: 484 of 1,778 pixels showed the cube).
+    (~6e-6). When the cube vanishes or moves away, its pixels' camera segments must not end short of
+    its padded box and keep last frame's hits on it (484 of 1,778 pixels would show the cube).
     The ground's x offset is the one of [0.1, 0.2] that rounds the face furthest towards the camera."""
     x = 300.0
     offset = min(np.linspace(0.1, 0.2, 4001),

@@ -86,8 +86,9 @@ def test_far_from_origin_and_extreme_scales(offset, scale, rng):
 def test_rays_leaving_lattice_faces_hit_the_next_plane(options, rng):
     """Analytic reference: inside the lattice every integer plane is a wall, so a ray starting on
     one (on a face, an edge or a vertex) first hits the nearest integer plane strictly ahead of it,
-    never the face it leaves (t is in the open interval (0, tmax)). Outside QA found ~1 ray in 1000
-    reporting its own face at t ~ 1e-17, sometimes instead of its true hit."""
+    never the face it leaves (t is in the open interval (0, tmax)). Without the triangle test's rounding
+    bound ~1 ray in 1000 reports its own face at t ~ 1e-17, sometimes instead of its true hit
+    (docs/reliability.md#property-tests)."""
     n_cells = 4
     tree = core.build_kdtree(lattice(n_cells), **options)
     n = 20000

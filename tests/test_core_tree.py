@@ -286,8 +286,8 @@ def _cylinder_along_x(segments, length=10.0):
 
 def test_split_axes_longest_falls_back_to_all_axes_where_the_longest_cannot_split():
     """A cylinder of full-length triangles along x: no plane across x helps, so the builder searches
-    y and z after all and the tree is as good as the all-axes one (before the fallback it was one leaf
-    of every triangle, and a few-ray build traced 50x slower, outside review)."""
+    y and z after all and the tree is as good as the all-axes one (without the fallback it is one leaf
+    of every triangle, and a few-ray build traces 50x slower)."""
     tris = _cylinder_along_x(256)
     longest = core.build_kdtree(tris, split_axes="longest", threads=1).stats()
     everything = core.build_kdtree(tris, split_axes="all", threads=1).stats()
@@ -327,8 +327,8 @@ def flat_overlapping_cards(rng, n):
                                      pytest.param({"builder": "median"}, id="median")])
 def test_densely_overlapping_flat_triangles_stay_within_the_duplication_budget(options):
     """A flat node's children share its area exactly, so the SAH finds every split of such cards
-    worth it and, without a budget, split on towards max_depth (outside QA: 1,246 references a
-    triangle and 3.5 GB for 50,000 cards). The budget holds the leaves to at most twice its
+    worth it and, without a budget, split on towards max_depth (1,246 references a
+    triangle and 3.5 GB for 50,000 cards; docs/choices.md#duplication-budget-16). The budget holds the leaves to at most twice its
     references a triangle, and the tree still answers exactly (brute force)."""
     rng = np.random.default_rng(11)
     tris = flat_overlapping_cards(rng, 3000)

@@ -154,8 +154,8 @@ def _ground_and_small_spheres():
 
 @pytest.mark.parametrize("layout", ["auto", "flat"])
 def test_small_soup_members_far_from_its_centre_keep_their_shape(layout):
-    """A 1 cm sphere 5,000 units from the centre of a soup that also holds a ground 2e5 wide lost a fifth
-    of its radius in float32 (outside review); "auto" gives such members zones anchored near them.
+    """A 1 cm sphere 5,000 units from the centre of a soup that also holds a ground 2e5 wide loses a fifth
+    of its radius in float32 in the soup's frame; "auto" gives such members zones anchored near them.
     Reference: the exact world triangles (float64 from the float32 object-space vertices), tested
     relative to the camera; rays through the central half of each sphere's disc, not grazing it."""
     meshes, mats = _ground_and_small_spheres()
@@ -288,8 +288,8 @@ def test_degenerate_inputs():
 @pytest.mark.parametrize("layout", ["two_level", "auto"])
 def test_instance_boxes_on_one_line_build_one_leaf(layout):
     """Ten instances of a triangle scaled by 1e-17 along a line: in float64 their boxes have no extent
-    across it, so the top level's root box has no area, which the SAH divides by (ZeroDivisionError,
-    outside review). Now one leaf; with a unit-size instance added the top level splits as usual."""
+    across it, so the top level's root box has no area, which the SAH divides by (a ZeroDivisionError
+    unless handled). They make one leaf; with a unit-size instance added the top level splits as usual."""
     triangle = (np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0.]]), np.array([[0, 1, 2]]))
     mats = np.stack([np.eye(4)] * 11)
     mats[:10, :3, :3] *= 1e-17

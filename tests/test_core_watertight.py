@@ -89,8 +89,8 @@ def test_subdivided_cube_exact_vertices_and_edges(options):
 @pytest.mark.parametrize("options", BUILDERS)
 def test_negligible_direction_components_do_not_slip_through(options):
     """Rays from split planes x = 0 and z = 0 (the subdivided cube's) with a subnormal or tiny x
-    component: 1 / d[x] overflowed, the shear term underflowed to 0 on one side of the plane only,
-    and a ray along (-5e-324, 1, 0) passed through the near face to the far one (outside QA). Such
+    component: 1 / d[x] overflows, the shear term underflows to 0 on one side of the plane only,
+    and a ray along (-5e-324, 1, 0) could pass through the near face to the far one. Such
     components are made 0; every ray hits the near face y = -1 at t = 2, as the one-leaf tree says."""
     cube = subdivided_cube(8)
     tree = core.build_kdtree(cube, **options)
@@ -108,7 +108,7 @@ def test_negligible_direction_components_do_not_slip_through(options):
 @pytest.mark.parametrize("tiny", [-5e-324, 5e-324, -1e-310])
 def test_a_camera_axis_with_a_negligible_component_does_not_slip_through(tiny, builder):
     """The same ray from a camera: an orthographic camera looking along (tiny, 1, 0) from the split
-    plane x = 0 sends its centre ray there (outside review: the renderer's camera rays took the far
+    plane x = 0 sends its centre ray there (uncleaned, the renderer's camera ray takes the far
     face, t = 4). Its axes are cleaned like query rays; the first hit is the near face, depth 2."""
     cube = subdivided_cube(8)
     scene = core.build_scene([(cube.reshape(-1, 3), np.arange(3 * len(cube)).reshape(-1, 3))], [0], np.eye(4)[None],

@@ -66,7 +66,7 @@ print(json.dumps({{"llvm": llvm, "copies": copies[0], "result": result}}))
 """
 
 
-# The outside review's case: the typed pass inlines a cached @overload IR twice into g, which compiles
+# A failing case: the typed pass inlines a cached @overload IR twice into g, which compiles
 # while f is being inlined (isinstance makes the untyped inliner type f's body). Memos kept across that
 # whole inlining handed the second inlining the first one's renamed blocks: the compile failed.
 TYPED_TWICE = PREAMBLE + """

@@ -103,8 +103,9 @@ def test_cancel_callback_during_tracing_returns_at_once(addon):
 
 
 def test_denoising_runs_on_the_worker_and_says_so(addon, monkeypatch):
-    """Found by outside QA: Denoise's first use compiled its kernels (~11 s) inside result(), on
-    Blender's main thread, under a frozen "Tracing: 8/8 samples": Esc was not seen until it ended."""
+    """Denoise's first use compiles its kernels (~11 s): on the worker, with a status saying so, not
+    inside result() on Blender's main thread under a frozen "Tracing: 8/8 samples", where Esc would
+    not be seen until it ended."""
     scene = half_plane_scene()
     scene.kd_preview.denoise = True
     job = pipeline.FrameJob(scene, bpy.context.evaluated_depsgraph_get(), make_config(scene.kd_preview))
@@ -213,10 +214,10 @@ def test_ctrl_c_on_the_command_line_exits_at_once_mid_render(tmp_path):
 
 
 def test_ctrl_c_stops_blenders_command_whose_sigint_handler_python_cannot_see(tmp_path):
-    """Inside Blender (`blender -b --command kdpreview`) SIGINT's handler is Blender's own C one: the
-    render ran on to exit 0 after Ctrl-C, and a second Ctrl-C killed Blender without a report (outside
-    QA on a real Blender 5.2.2). tests/blender_sigint_like.py sets up SIGINT that way: two Ctrl-C
-    mid-animation now exit 130 at once, with the frames written so far and their report."""
+    """Inside Blender (`blender -b --command kdpreview`) SIGINT's handler is Blender's own C one: left to it, the
+    render runs on to exit 0 after Ctrl-C, and a second Ctrl-C kills Blender without a report (Blender
+    5.2.2). tests/blender_sigint_like.py sets up SIGINT that way: two Ctrl-C mid-animation exit 130 at
+    once, with the frames written so far and their report."""
     out = tmp_path / "out"
     proc = subprocess.Popen([PYTHON, str(REPO / "tests" / "blender_sigint_like.py"), "render", "--demo",
                              "--out", str(out), "--frames", "1-200", "--resolution", "10", "--samples", "64"],
@@ -238,9 +239,9 @@ def _command_line(out, frames, samples, extra=()):
 
 
 def test_sigterm_mid_animation_ends_like_ctrl_c_with_an_incomplete_report(tmp_path):
-    """SIGTERM (`timeout`, `kill`, a farm stopping a job) killed the command line at once, so report.json
-    still described an earlier run of that folder (outside review). Now: exit 143, the frames written
-    are kept and listed in a report marked incomplete, no partial file left."""
+    """SIGTERM (`timeout`, `kill`, a farm stopping a job) ends a run as Ctrl-C does, so report.json
+    does not describe an earlier run of that folder: exit 143, the frames written are kept and listed
+    in a report marked incomplete, no partial file left."""
     out = tmp_path / "out"
     proc = _command_line(out, "1-200", 64)
     code, seconds, err = interrupt(proc, rows=1, signum=signal.SIGTERM)
@@ -279,8 +280,8 @@ def test_a_killed_rerun_leaves_a_report_of_its_own_frames(tmp_path):
 
 @pytest.mark.parametrize("delay", [0.3, 0.6])
 def test_ctrl_c_while_bpy_is_imported_is_not_lost(tmp_path, delay):
-    """Importing bpy (~0.6 s) swallowed a KeyboardInterrupt, so Ctrl-C in a command line's first half
-    second was lost and every frame rendered (outside QA). Now it exits with 130 and renders nothing."""
+    """Importing bpy (~0.6 s) swallows a KeyboardInterrupt, so Ctrl-C in a command line's first half
+    second would be lost and every frame rendered: it exits with 130 and renders nothing."""
     proc = subprocess.Popen([PYTHON, "-m", "kd_addon", "render", "--out", str(tmp_path / "out"), "--frames", "1-4",
                              "--samples", "4"], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
@@ -336,8 +337,8 @@ def test_interrupt_flag_off_the_main_thread_leaves_sigint_alone():
 
 
 def test_a_sequence_stopped_early_still_reports_the_frames_it_wrote(addon, tmp_path):
-    """Found by outside QA: after Ctrl-C the written frames had no report.json. Closing a sequence
-    that stopped early writes one for them, marked incomplete; a finished one is marked complete."""
+    """Frames written before Ctrl-C get a report.json: closing a sequence that stopped early writes
+    one for them, marked incomplete; a finished one is marked complete."""
     import json
     from kd_addon.sequence import SequenceJob
 
@@ -350,7 +351,7 @@ def test_a_sequence_stopped_early_still_reports_the_frames_it_wrote(addon, tmp_p
     stopped.close(Cancelled("cancelled"))  # what the command line and the operator do on cancel
     report = json.loads((tmp_path / "stopped" / "report.json").read_text())
     assert (report["complete"], report["frames_requested"], len(report["frames"])) == (False, 3, 1)
-    assert report["stopped"] == {"frame": 2, "reason": "cancelled"}  # outside review: it said not why
+    assert report["stopped"] == {"frame": 2, "reason": "cancelled"}  # and says why
     assert report["frames"][0]["file"] == "frame_0001.png" and scene.frame_current == 1
     failed = SequenceJob(scene, config, [4, 5, 6], tmp_path / "failed", depsgraph)
     while len(failed.results) < 2:

@@ -73,9 +73,9 @@ def test_memory_limit_within_bounds_builds_the_same_tree():
 
 def test_memory_limit_holds_while_splitting_past_the_sah():
     """Forced splits (cost_ratio 100, leaf_size 1, a deep max_depth) duplicate the references that
-    meet at a sphere's vertices: 320 triangles made 3.3M nodes and 165 MB under a 32 MiB limit
-    (outside QA), until splits that separate nothing became leaves (subtree.py): 26,861 nodes, 34
-    references a triangle, ~0.8 MB of tree. Without the duplication budget the subtree's pools are
+    meet at a sphere's vertices: 320 triangles make 3.3M nodes and 165 MB if splits that separate
+    nothing are taken, 26,861 nodes, 34 references a triangle, ~0.8 MB of tree as they make leaves
+    (subtree.py; docs/choices.md#a-split-that-separates-nothing-makes-a-leaf). Without the duplication budget the subtree's pools are
     checked after every split, so under a limit below that the build stops with the settings named;
     with the default budget (at most 32 references a triangle) or the default cost ratio it builds."""
     tris = mesh_triangles(*icosphere(2))
@@ -90,10 +90,11 @@ def test_memory_limit_holds_while_splitting_past_the_sah():
 
 
 def test_forced_splits_of_coincident_triangles_stop_where_nothing_is_separated():
-    """Outside review: 3,000 triangles, 20 distinct, with cost_ratio 2 and no duplication budget gained
-    ~1.4x references a level (382 a triangle at depth 28; max_depth 60 ran out of memory), since no
-    plane separates copies of a triangle and the forced split was taken anyway. A split that leaves
-    every reference in both children is a leaf now; the tree still answers exactly."""
+    """3,000 triangles, 20 distinct, with cost_ratio 2 and no duplication budget: no plane separates
+    copies of a triangle, and taking the forced split anyway gains ~1.4x references a level (382 a
+    triangle at depth 28; max_depth 60 runs out of memory). A split that leaves every reference in
+    both children makes a leaf (docs/choices.md#a-split-that-separates-nothing-makes-a-leaf); the tree
+    still answers exactly."""
     rng = np.random.default_rng(0)
     centres = rng.random((20, 1, 3))
     distinct = (centres + (rng.random((20, 3, 3)) - 0.5) * 0.3).astype(np.float32)
@@ -106,8 +107,8 @@ def test_forced_splits_of_coincident_triangles_stop_where_nothing_is_separated()
 
 
 def test_the_parallel_top_levels_do_not_copy_coincident_triangles():
-    """Outside review: top="clustering" (seed 000's object median, which asks no cost) split 40,000
-    copies of one triangle into 23 nodes holding 280,000 references; "sah" made one leaf."""
+    """top="clustering" (seed 000's object median, which asks no cost) would split 40,000 copies of
+    one triangle into 23 nodes holding 280,000 references; with it, as with "sah", they stay 40,000."""
     tris = np.repeat(np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0]]], np.float32), 40_000, axis=0)
     for top in ("sah", "clustering"):
         assert core.build_kdtree(tris, threads=2, top=top).stats()["references"] == 40_000

@@ -59,8 +59,8 @@ def test_memory_limit_exits_nonzero_before_rendering(tmp_path, capsys):
 
 def test_a_frame_beyond_the_machines_memory_is_refused_without_a_limit(addon, tmp_path, capsys, monkeypatch):
     """No memory limit set: a frame whose pixel buffers are above the machine's physical memory is
-    refused with a message before anything is built (outside QA: a 20000 x 20000 frame built its tree,
-    then core's own check escaped as a traceback). The machine is made small so the test is cheap."""
+    refused with a message before anything is built (not after building the tree, by core's own check
+    as a traceback; docs/choices.md#without-a-memory-limit-only-the-pixel-buffers-are-checked). The machine is made small so the test is cheap."""
     floor_scene(400, 300)
     blend = tmp_path / "scene.blend"
     bpy.ops.wm.save_as_mainfile(filepath=str(blend))
@@ -103,8 +103,8 @@ def test_non_finite_objects_are_named_and_nothing_else_changes(addon):
     verts = [(0.3 * x, 0.3 * y, 0.3 * z) for x, y, z in scenes.CUBE_VERTS]
     verts[5] = (math.inf, 0.3, -0.3)
     scenes.add_mesh("Exploded", verts, scenes.CUBE_FACES, location=(-2, 1, 1))
-    # Transforms no placement can use (outside QA: the whole frame failed with core's "instance 1 has
-    # a non-finite matrix", naming no object): a NaN location, and an instancer's NaN rotation.
+    # Transforms no placement can use, named by object (not core's "instance 1 has a non-finite
+    # matrix" failing the whole frame): a NaN location, and an instancer's NaN rotation.
     scenes.add_cube("Lost", scale=0.3, location=(-2, 1, 1)).location.x = math.nan
     source = scenes.new_collection("Source", exclude=True)
     scenes.add_cube("Member", scale=0.3, collection=source)
@@ -121,8 +121,8 @@ def test_non_finite_objects_are_named_and_nothing_else_changes(addon):
 
 
 def test_objects_placed_beyond_float32s_range_are_named_and_left_out(addon):
-    """Outside review: a scale keyed to 3e38 on one frame stopped the animation with core's traceback
-    naming "instance 2". Such a placement is left out and named, as a non-finite one is, and the rest
+    """A scale keyed to 3e38 on one frame must not stop the animation with core's traceback naming
+    "instance 2". Such a placement is left out and named, as a non-finite one is, and the rest
     of the frame renders as it would without it."""
     scene = half_plane_scene()
     reference = render(scene)

@@ -24,8 +24,8 @@ def test_point_light_cosine_falloff():
 
 @pytest.mark.parametrize("offset", [0.0, 1e4])
 def test_a_point_light_on_the_ceilings_plane_lights_the_floor(offset):
-    """Outside review: a light lying on a surface's plane was blocked by it (every shadow ray ends where
-    the surface is met, within rounding), so a room came out black. The ray now stops a step short of
+    """A light lying on a surface's plane must not be blocked by it (every shadow ray would end where
+    the surface is met, within rounding, and a room come out black). The ray stops a step short of
     the light (shading.short_of_light), as Cycles' does: the floor gets the bare N.L falloff."""
     h = 3.0
     shift = np.array([offset, -offset, 0.0])
@@ -133,8 +133,8 @@ def test_sheared_spot_cone_follows_the_inverse_of_its_axes():
     """A spot under a non-uniformly scaled parent, rotated: its axes are not orthogonal. Cycles takes a
     direction into the light's frame with the inverse transform (spot_light_to_local), so a floor point
     p is inside when z / |l| > cos(size/2) for l = A^-1 (p - c) with z = -l_z. The scaled-axes shortcut,
-    exact only for orthogonal axes, put the cone elsewhere (outside review against Cycles: 1,457 of
-    6,912 pixels differed; the inverse matched Cycles' mask up to the edge pixels)."""
+    exact only for orthogonal axes, puts the cone elsewhere (checked against Cycles: 1,457 of
+    6,912 pixels differ; the inverse matches Cycles' mask up to the edge pixels)."""
     size, c = np.radians(40), np.array([0.0, 0.0, 2.0])
     parent = np.diag([2.5, 1.0, 1.0])
     ry, rz = np.radians(30), np.radians(40)
@@ -258,8 +258,8 @@ def test_an_area_lights_spread_narrows_it_as_cycles_soft_box_does(spread_degrees
     """A tiny area light at height h over a bare floor, Spread s: light leaving it at angle a from
     its normal is weighted max(0, 1 - tan a / tan(s/2)) (Cycles' soft-box grid, normalised to 1 along
     the normal), so a floor point at distance r from its foot gets N.L times that, a = atan(r / h).
-    With Spread 180 degrees (the default) it is N.L alone. (Outside QA: a 10-degree spread lit the
-    whole floor, where Cycles lights a spot.)"""
+    With Spread 180 degrees (the default) it is N.L alone. (Checked against Cycles: a 10-degree spread
+    lights a spot, not the whole floor.)"""
     h, spread = 2.0, np.radians(spread_degrees)
     tree = core.build_kdtree(floor(0.0))
     camera = look_down((0.0, 0.0, 3.0), fov=1.6)

@@ -28,7 +28,7 @@ def test_a_hair_thin_gap_far_out_in_x_and_y_stays_closed(center):
     """A floor at z = 0 with a roof 1e-4 above it, far from the origin in x and y only (georeferenced
     coordinates), in a flat world-space tree. z stays near 0, so float32 holds the gap exactly, and
     what puts a hit point off its plane is the rounding of its z, not of its x: ray starts offset by
-    2^-32 of max |p_k| rose 1.2e-4 at x = 5e5, above the roof (outside QA: fully lit, AO 1). Shadow 0
+    2^-32 of max |p_k| would rise 1.2e-4 at x = 5e5, above the roof (fully lit, AO 1). Shadow 0
     under a sun; AO (h/r)^2 with r = 1e-3."""
     h, r = float(np.float32(1e-4)), 1e-3
     tris = np.concatenate([floor(0.0, half=50.0, center=center), floor(h, half=50.0, center=center)])
@@ -94,7 +94,7 @@ def test_a_plane_stretched_along_its_own_normal_has_no_acne(stretch):
     plane's normal, as a child rotated under a parent scaled along one axis does: the world surface is
     the same plane. Projecting a hit point onto its plane in object space rounds (q - v0) . n_o, which
     the stretch magnifies along the world normal; without that term in the offset, rays started under
-    the plane and the tiny neighbours caught them (outside review: AO 0.53-0.70). AO exactly 1."""
+    the plane and the tiny neighbours caught them (AO 0.53-0.70). AO exactly 1."""
     n = np.array([1.0, 2.0, 3.0])
     u = n / np.linalg.norm(n)
     e1, e2, z, k = np.array([1.0, 1.0, -1.0]), np.array([-2.0, 1.0, 0.0]), np.zeros(3), 2.0 ** -33
@@ -130,7 +130,7 @@ def test_ao_between_planes_is_right_at_tiny_scales(scale):
 def test_huge_triangles_seen_up_close_have_no_acne(half, view):
     """Two triangles half x half wide seen `view` across (plus one far away, so the tree's box is not
     flat): the triangle test's t carries rounding of the vertices' size, and an offset scaled by the
-    hit point's magnitude alone let AO rays hit the floor they left (outside QA: AO 0.83-0.87 for
+    hit point's magnitude alone lets AO rays hit the floor they left (AO 0.83-0.87 for
     half / view >= 1e7). Open floor: AO exactly 1; a ceiling view/2 above: AO (h/r)^2."""
     far = np.array([[[500, 500, 50], [501, 500, 50], [500, 501, 50]]], float)
     camera = core.Camera(np.eye(4) + np.pad([[view / 4]], ((2, 1), (3, 0))), ortho_scale=view)
@@ -149,7 +149,7 @@ def test_long_thin_box_is_fully_unoccluded(length, layout):
     """Nothing can occlude a convex object's own surface, so a lone box has AO exactly 1. A box
     `length` long and 0.7 wide: its hit points, computed as o + t d, carried t's error of about
     eps length^2 / width and sat below their face by more than the offset, so AO rays started inside
-    the box (outside QA: dark speckles from length 3e4 on, in the world-space tree). "flat" puts the
+    the box (dark speckles from length 3e4 on, in the world-space tree). "flat" puts the
     long triangles in world space; "two_level" keeps a unit cube under a scaling matrix. At 1e7 the
     float64 triangle test's own t error (~0.03) puts a few camera hits on the wrong face: its limit."""
     matrix = np.diag([length, 0.35, 0.35, 1.0])
