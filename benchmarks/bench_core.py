@@ -117,8 +117,8 @@ def bench_builder(scene, label, options, cam, ao, runs, memory):
 def bench_references(scene, cam, ao, runs, bvh_subset=20000):
     from reference_tracers import EmbreeTracer
     embree = EmbreeTracer(scene.triangles)
-    embree.closest(*cam)  # untimed first calls, as ours are warmed (outside review: the first call took
-    embree.occluded(*ao, 1.0)  # 154 ms against 52-86 ms after, and was the median of one run)
+    embree.closest(*cam)  # untimed first calls, as ours are warmed (a first call takes ~154 ms
+    embree.occluded(*ao, 1.0)  # against 52-86 ms after, and would be the median of a one-run benchmark)
     cam_runs, _ = timed_runs(lambda: embree.closest(*cam), runs)
     ao_runs, _ = timed_runs(lambda: embree.occluded(*ao, 1.0), runs)
     cam_s, ao_s = float(np.median(cam_runs)), float(np.median(ao_runs))
@@ -184,7 +184,7 @@ def main():
         args.scenes, args.runs, args.no_memory = "suzanne-251k", min(args.runs, 3), True
 
     t = time.perf_counter()
-    for options in BUILDERS.values():  # each builder's kernels (outside review: exact's first build compiled)
+    for options in BUILDERS.values():  # each builder's kernels, so no timed build compiles
         core.build_kdtree(load_scene("suzanne-251k").triangles, **options)
     tiny = core.build_kdtree(np.eye(3, dtype=np.float32)[None])
     core.intersect(tiny, np.zeros((1, 3)), np.ones((1, 3)))

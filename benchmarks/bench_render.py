@@ -61,7 +61,7 @@ BUILD_CONFIGS = {
 
 def reference_path(scene, size, samples, ao_distance):
     """Where the converged reference image is cached: keyed by core's sources too, so a change to the
-    renderer (ray offsets, sampling) makes a new one instead of reusing a stale one (outside review)."""
+    renderer (ray offsets, sampling) makes a new one instead of reusing a stale one."""
     digest = sources_digest(HERE.parent / "core")
     return DATA_DIR / f"ref_{scene.name}_{size}_{samples}spp_ao{ao_distance}_core-{digest}.npy"
 
@@ -234,8 +234,8 @@ def warm_up(scene, camera, args):
     """One untimed 8x8 run of every method (each builder over the whole scene: its parallel top levels
     use kernels a small scene does not; the denoiser, the random sampler, the adaptive mode), shadow
     mode, and unless --no-cycles or --only-seed000 one small Cycles render, so no timed run compiles
-    (outside review: the exact builder's first build took 58 s with an empty cache, the denoised rows'
-    first runs paid their compile)."""
+    (with an empty cache the exact builder's first build takes 58 s, and the denoised rows' first runs
+    would pay their compile)."""
     tree = core.build_kdtree(scene.triangles)
     core.render_preview(tree, camera, 8, 8, samples=1, mode="shadow", lights=[core.Light.point((0, 0, 3))])
     if args.only_seed000:
@@ -258,7 +258,7 @@ def seed000_time_to_image(scene, runs, size=SEED000_SIZE):
     (time, build time) of the default build and of a build told the frame's ray count (the `rays`
     option: one camera and at most one shadow ray a pixel), and of the latter on one thread, and the
     same frame's rays through Embree (seed000_embree), all in alternating runs: the reference measured
-    in the same run (outside review: the figure was compared with the 2007 paper's only)."""
+    in the same run, not only the 2007 paper's figure."""
     camera = core.Camera(scene.camera_matrix, scene.camera_fov)
     light = core.Light.point(SEED000_LIGHT)
     rays = core.frame_ray_count(*size, "shadow", 1, [light])

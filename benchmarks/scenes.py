@@ -61,8 +61,8 @@ import numpy as np
 DATA_DIR = Path(__file__).resolve().parent / "data"
 
 # Bump when the content of a scene changes: stale caches are rebuilt. 2: the .blend holds Suzanne's
-# Subdivision applied (Cycles evaluated the live modifier inside its timed render: ~0.15 s of its
-# 2-spp time, outside review; our side starts from the cached triangles).
+# Subdivision applied (Cycles would evaluate a live modifier inside its timed render: ~0.15 s of its
+# 2-spp time; our side starts from the cached triangles).
 FORMAT_VERSION = 2
 
 # Blender's default camera: 50 mm lens on a 36 mm sensor, sensor fit AUTO.
