@@ -186,9 +186,10 @@ def test_esc_during_animation_keeps_the_previous_preview(modal, tmp_path):
 
 
 def test_esc_during_an_animation_frames_kernel_call_restores_the_frame_without_evaluating_the_scene(modal, tmp_path):
-    """Esc while a frame's build still ran put the start frame back with frame_set, which evaluates the
-    scene beside the worker's call (the crash of background.SCENE_READ_WAIT). Now only the frame is
-    set then; the scene is evaluated at it once read, as frame_set would have."""
+    """Esc while a frame's build still runs puts the start frame back without frame_set, which would
+    evaluate the scene beside the worker's call (the crash of background.SCENE_READ_WAIT;
+    docs/choices.md#the-scene-is-read-only-between-kernel-calls). Only the frame is set then; the
+    scene is evaluated at it once read, as frame_set would have."""
     scene = half_plane_scene()
     box = bpy.data.objects["Box"]
     for frame, x in ((1, -2.0), (7, -1.0)):
@@ -468,9 +469,10 @@ def test_the_edit_timer_reads_the_scene_only_between_kernel_calls(addon, monkeyp
 @pytest.mark.parametrize("operator_cls", [KDPREVIEW_OT_render, KDPREVIEW_OT_render_animation])
 def test_a_run_started_beside_a_cancelled_runs_kernel_call_reads_the_scene_after_it(modal, monkeypatch, tmp_path,
                                                                                     operator_cls):
-    """A Render clicked while a cancelled run's build still ran evaluated the depsgraph at invoke (and
-    Render Animation set its first frame at its first tick), beside the worker's call: the crash of
-    SCENE_READ_WAIT. Now the run waits, saying so, and reads the scene once the call has ended."""
+    """A Render clicked while a cancelled run's build still runs must not evaluate the depsgraph at
+    invoke (nor Render Animation set its first frame at its first tick) beside the worker's call: the
+    crash of SCENE_READ_WAIT (docs/choices.md#the-scene-is-read-only-between-kernel-calls). The run
+    waits, saying so, and reads the scene once the call has ended."""
     scene = half_plane_scene()
     scene.frame_start, scene.frame_end = 2, 2
     scene.kd_preview.output_dir = str(tmp_path)

@@ -178,7 +178,7 @@ def test_scene_camera_and_query_inputs_are_named(tree, call, message):
 
 
 def test_a_tiny_camera_scale_is_ignored_like_any_other_scale(tree):
-    """Blender ignores a camera's object scale; a uniform 1e-5 used to be refused as singular."""
+    """Blender ignores a camera's object scale; a uniform 1e-5 is not refused as singular."""
     m = np.diag([1e-5, 1e-5, 1e-5, 1.0])
     m[:3, 3] = (0.0, 0.0, 3.0)
     unit = m.copy()
