@@ -56,31 +56,56 @@ def _bin(x, lo, scale, top):
 
 @njit(cache=True)
 def best_binned_split(min_bins, max_bins, weight, node_box, params):
-    """Cheapest split among the bin boundaries: (cost, axis, position); axis -1 if none is valid. The
-    node's extents are computed once, each candidate swapping in only its two cut extents."""
+    """Cheapest split among the bin boundaries: (cost, axis, position); axis -1 if none is valid. Every
+    boundary's cost is computed first (_boundary_costs, a loop LLVM vectorizes), then the first cheapest
+    is taken axis by axis, boundary by boundary: the plane a scan comparing with `<` would take."""
     nbins = min_bins.shape[1]
+    costs = np.empty((3, nbins), np.float64)
+    counts = np.empty((2, nbins), np.float64)
+    for axis in range(3):
+        _boundary_costs(min_bins[axis], max_bins[axis], weight, node_box, axis, params, counts, costs[axis])
+    best_cost, best_axis, best_k = np.inf, -1, 0
+    for axis in range(3):
+        for k in range(1, nbins):
+            if costs[axis, k] < best_cost:
+                best_cost, best_axis, best_k = costs[axis, k], axis, k
+    if best_axis < 0:
+        return best_cost, best_axis, np.float32(0.0)
+    return best_cost, best_axis, _boundary(node_box, best_axis, best_k, nbins)
+
+
+@njit(cache=True, inline="always")
+def _boundary(node_box, axis, k, nbins):
+    """Bin boundary k on `axis` as the float32 plane a split stores."""
+    lo, hi = np.float64(node_box[axis]), np.float64(node_box[axis + 3])
+    return np.float32(lo + k * ((hi - lo) / nbins))
+
+
+@njit(cache=True)
+def _boundary_costs(min_bins, max_bins, weight, node_box, axis, params, counts, costs):
+    """costs[k]: the SAH cost of bin boundary k (1 <= k < nbins) on `axis`; inf at k = 0, where the
+    plane is not strictly inside the node, and on an axis not binned (every binned reference ends in a
+    bin). The running counts go to `counts` first so the cost loop has no loop-carried value."""
+    nbins = min_bins.shape[0]
+    costs[:] = np.inf
+    n_right = max_bins.sum()
+    if n_right == 0:
+        return
+    n_left = 0
+    for k in range(1, nbins):
+        n_left += min_bins[k - 1]
+        n_right -= max_bins[k - 1]
+        counts[0, k] = _estimate(n_left, weight)
+        counts[1, k] = _estimate(n_right, weight)
     inv_area = 1.0 / half_area(node_box)
     e = extents(node_box)
-    best_cost, best_axis, best_pos = np.inf, -1, np.float32(0.0)
-    for axis in range(3):
-        n_right = max_bins[axis].sum()
-        if n_right == 0:
-            continue  # an axis bin_longest_axis did not bin (every binned reference ends in a bin)
-        lo, hi = np.float64(node_box[axis]), np.float64(node_box[axis + 3])
-        step = (hi - lo) / nbins
-        n_left = 0
-        for k in range(1, nbins):
-            n_left += min_bins[axis, k - 1]
-            n_right -= max_bins[axis, k - 1]
-            pos = np.float32(lo + k * step)
-            if not valid_position(node_box, axis, pos):
-                continue
-            cost = cost_of_areas(cut_half_area(e, axis, np.float64(pos) - lo),
-                                 cut_half_area(e, axis, hi - np.float64(pos)), inv_area,
-                                 _estimate(n_left, weight), _estimate(n_right, weight), params)
-            if cost < best_cost:
-                best_cost, best_axis, best_pos = cost, axis, pos
-    return best_cost, best_axis, best_pos
+    lo, hi = np.float64(node_box[axis]), np.float64(node_box[axis + 3])
+    for k in range(1, nbins):
+        pos = _boundary(node_box, axis, k, nbins)
+        cost = cost_of_areas(cut_half_area(e, axis, np.float64(pos) - lo),
+                             cut_half_area(e, axis, hi - np.float64(pos)), inv_area,
+                             counts[0, k], counts[1, k], params)
+        costs[k] = cost if valid_position(node_box, axis, pos) else np.inf
 
 
 @njit(cache=True, inline="always")
