@@ -180,9 +180,9 @@ def snap_to_boundaries(boxes, start, end, node_box, params, cost, axis, pos):
 def _nearest_boundaries(boxes, start, end, axis, pos, step):
     """The box boundaries nearest to pos strictly below and above it within one bin, each with the
     references left of it, right of it and lying in it: ((below, left, right, planar), (above, ...)).
-    One pass: exact counts at pos plus, for the running nearest boundary each side, what begins, ends and
-    lies there (nothing lies between it and pos). Without a boundary in the bin, the bin's edge (rejected)."""
-    below, above = pos - step, pos + step
+    Two branch-free passes (LLVM vectorizes both): the nearest boundary each side, then the counts at
+    pos and at those two. Without a boundary in the bin, the bin's edge (rejected by the caller)."""
+    below, above = _nearest_values(boxes, start, end, axis, pos, step)
     left_of_pos = right_of_pos = begin_at_pos = end_at_pos = 0
     begin_below = end_below = planar_below = begin_above = end_above = planar_above = 0
     for i in range(start, end):
@@ -191,16 +191,23 @@ def _nearest_boundaries(boxes, start, end, axis, pos, step):
         right_of_pos += hi > pos
         begin_at_pos += lo == pos
         end_at_pos += hi == pos
-        for v in (lo, hi):
-            if below < v < pos:
-                below, begin_below, end_below, planar_below = v, 0, 0, 0
-            elif pos < v < above:
-                above, begin_above, end_above, planar_above = v, 0, 0, 0
         begin_below += lo == below
         end_below += hi == below
-        planar_below += lo == hi == below
+        planar_below += (lo == below) & (hi == below)
         begin_above += lo == above
         end_above += hi == above
-        planar_above += lo == hi == above
+        planar_above += (lo == above) & (hi == above)
     return ((below, left_of_pos - begin_below, right_of_pos + end_at_pos, planar_below),
             (above, left_of_pos + begin_at_pos, right_of_pos - end_above, planar_above))
+
+
+@njit(cache=True, inline="always")
+def _nearest_values(boxes, start, end, axis, pos, step):
+    """The largest box boundary in (pos - step, pos) and the smallest in (pos, pos + step); the
+    interval's far end where it holds none."""
+    below, above = pos - step, pos + step
+    for i in range(start, end):
+        for v in (boxes[i, axis], boxes[i, axis + 3]):
+            below = max(below, v) if v < pos else below
+            above = min(above, v) if v > pos else above
+    return below, above
