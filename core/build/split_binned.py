@@ -56,31 +56,56 @@ def _bin(x, lo, scale, top):
 
 @njit(cache=True)
 def best_binned_split(min_bins, max_bins, weight, node_box, params):
-    """Cheapest split among the bin boundaries: (cost, axis, position); axis -1 if none is valid. The
-    node's extents are computed once, each candidate swapping in only its two cut extents."""
+    """Cheapest split among the bin boundaries: (cost, axis, position); axis -1 if none is valid. Every
+    boundary's cost is computed first (_boundary_costs, a loop LLVM vectorizes), then the first cheapest
+    is taken axis by axis, boundary by boundary: the plane a scan comparing with `<` would take."""
     nbins = min_bins.shape[1]
+    costs = np.empty((3, nbins), np.float64)
+    counts = np.empty((2, nbins), np.float64)
+    for axis in range(3):
+        _boundary_costs(min_bins[axis], max_bins[axis], weight, node_box, axis, params, counts, costs[axis])
+    best_cost, best_axis, best_k = np.inf, -1, 0
+    for axis in range(3):
+        for k in range(1, nbins):
+            if costs[axis, k] < best_cost:
+                best_cost, best_axis, best_k = costs[axis, k], axis, k
+    if best_axis < 0:
+        return best_cost, best_axis, np.float32(0.0)
+    return best_cost, best_axis, _boundary(node_box, best_axis, best_k, nbins)
+
+
+@njit(cache=True, inline="always")
+def _boundary(node_box, axis, k, nbins):
+    """Bin boundary k on `axis` as the float32 plane a split stores."""
+    lo, hi = np.float64(node_box[axis]), np.float64(node_box[axis + 3])
+    return np.float32(lo + k * ((hi - lo) / nbins))
+
+
+@njit(cache=True)
+def _boundary_costs(min_bins, max_bins, weight, node_box, axis, params, counts, costs):
+    """costs[k]: the SAH cost of bin boundary k (1 <= k < nbins) on `axis`; inf at k = 0, where the
+    plane is not strictly inside the node, and on an axis not binned (every binned reference ends in a
+    bin). The running counts go to `counts` first so the cost loop has no loop-carried value."""
+    nbins = min_bins.shape[0]
+    costs[:] = np.inf
+    n_right = max_bins.sum()
+    if n_right == 0:
+        return
+    n_left = 0
+    for k in range(1, nbins):
+        n_left += min_bins[k - 1]
+        n_right -= max_bins[k - 1]
+        counts[0, k] = _estimate(n_left, weight)
+        counts[1, k] = _estimate(n_right, weight)
     inv_area = 1.0 / half_area(node_box)
     e = extents(node_box)
-    best_cost, best_axis, best_pos = np.inf, -1, np.float32(0.0)
-    for axis in range(3):
-        n_right = max_bins[axis].sum()
-        if n_right == 0:
-            continue  # an axis bin_longest_axis did not bin (every binned reference ends in a bin)
-        lo, hi = np.float64(node_box[axis]), np.float64(node_box[axis + 3])
-        step = (hi - lo) / nbins
-        n_left = 0
-        for k in range(1, nbins):
-            n_left += min_bins[axis, k - 1]
-            n_right -= max_bins[axis, k - 1]
-            pos = np.float32(lo + k * step)
-            if not valid_position(node_box, axis, pos):
-                continue
-            cost = cost_of_areas(cut_half_area(e, axis, np.float64(pos) - lo),
-                                 cut_half_area(e, axis, hi - np.float64(pos)), inv_area,
-                                 _estimate(n_left, weight), _estimate(n_right, weight), params)
-            if cost < best_cost:
-                best_cost, best_axis, best_pos = cost, axis, pos
-    return best_cost, best_axis, best_pos
+    lo, hi = np.float64(node_box[axis]), np.float64(node_box[axis + 3])
+    for k in range(1, nbins):
+        pos = _boundary(node_box, axis, k, nbins)
+        cost = cost_of_areas(cut_half_area(e, axis, np.float64(pos) - lo),
+                             cut_half_area(e, axis, hi - np.float64(pos)), inv_area,
+                             counts[0, k], counts[1, k], params)
+        costs[k] = cost if valid_position(node_box, axis, pos) else np.inf
 
 
 @njit(cache=True, inline="always")
@@ -155,9 +180,9 @@ def snap_to_boundaries(boxes, start, end, node_box, params, cost, axis, pos):
 def _nearest_boundaries(boxes, start, end, axis, pos, step):
     """The box boundaries nearest to pos strictly below and above it within one bin, each with the
     references left of it, right of it and lying in it: ((below, left, right, planar), (above, ...)).
-    One pass: exact counts at pos plus, for the running nearest boundary each side, what begins, ends and
-    lies there (nothing lies between it and pos). Without a boundary in the bin, the bin's edge (rejected)."""
-    below, above = pos - step, pos + step
+    Two branch-free passes (LLVM vectorizes both): the nearest boundary each side, then the counts at
+    pos and at those two. Without a boundary in the bin, the bin's edge (rejected by the caller)."""
+    below, above = _nearest_values(boxes, start, end, axis, pos, step)
     left_of_pos = right_of_pos = begin_at_pos = end_at_pos = 0
     begin_below = end_below = planar_below = begin_above = end_above = planar_above = 0
     for i in range(start, end):
@@ -166,16 +191,23 @@ def _nearest_boundaries(boxes, start, end, axis, pos, step):
         right_of_pos += hi > pos
         begin_at_pos += lo == pos
         end_at_pos += hi == pos
-        for v in (lo, hi):
-            if below < v < pos:
-                below, begin_below, end_below, planar_below = v, 0, 0, 0
-            elif pos < v < above:
-                above, begin_above, end_above, planar_above = v, 0, 0, 0
         begin_below += lo == below
         end_below += hi == below
-        planar_below += lo == hi == below
+        planar_below += (lo == below) & (hi == below)
         begin_above += lo == above
         end_above += hi == above
-        planar_above += lo == hi == above
+        planar_above += (lo == above) & (hi == above)
     return ((below, left_of_pos - begin_below, right_of_pos + end_at_pos, planar_below),
             (above, left_of_pos + begin_at_pos, right_of_pos - end_above, planar_above))
+
+
+@njit(cache=True, inline="always")
+def _nearest_values(boxes, start, end, axis, pos, step):
+    """The largest box boundary in (pos - step, pos) and the smallest in (pos, pos + step); the
+    interval's far end where it holds none."""
+    below, above = pos - step, pos + step
+    for i in range(start, end):
+        for v in (boxes[i, axis], boxes[i, axis + 3]):
+            below = max(below, v) if v < pos else below
+            above = min(above, v) if v > pos else above
+    return below, above

@@ -1,0 +1,61 @@
+"""Paired A/B of the default build (`core.build_kdtree(tris)`, no options) against a git revision's
+core, on 2 threads and on 1, in one process.
+
+Usage: python benchmarks/bench_build_against_revision.py [--base HEAD] [--scene suzanne-251k] [--pairs 9]
+
+bench_against_revision.py times the build told the rays (seed 000's setting), which turns clipping and
+snapping off; this one times the default build. The base's core is exported as `core_base` the same
+way (its kernels compiled afresh, excluded). Printed per thread count: medians of each version, the
+median of the per-pair ratios (this tree / base), each tree's SAH cost and whether the trees are equal.
+"""
+import argparse
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+from bench_against_revision import export_base
+
+import core  # noqa: E402  (bench_against_revision put the worktree on sys.path)
+from scenes import load_scene  # noqa: E402
+
+
+def paired(versions, triangles, threads, pairs):
+    """Per-version build times (ms) over `pairs` alternating pairs."""
+    times = {name: [] for name in versions}
+    for pair in range(pairs):
+        order = list(versions.items()) if pair % 2 == 0 else list(versions.items())[::-1]
+        for name, version in order:
+            t = time.perf_counter()
+            version.build_kdtree(triangles, threads=threads)
+            times[name].append((time.perf_counter() - t) * 1e3)
+    return {name: np.array(t) for name, t in times.items()}
+
+
+def main():
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
+    ap.add_argument("--base", default="HEAD")
+    ap.add_argument("--scene", default="suzanne-251k")
+    ap.add_argument("--pairs", type=int, default=9)
+    args = ap.parse_args()
+    triangles = load_scene(args.scene).triangles
+    with tempfile.TemporaryDirectory() as folder:
+        base = export_base(args.base, folder)
+        versions = {"this tree": core, f"base {args.base}": base}
+        t = time.perf_counter()
+        trees = {name: v.build_kdtree(triangles, threads=2) for name, v in versions.items()}
+        print(f"JIT compile / cache load: {time.perf_counter() - t:.1f} s (excluded); {args.scene}, {args.pairs} pairs")
+        same = all(np.array_equal(a, b) for a, b in zip(*(tr.node_arrays for tr in trees.values())))
+        print("SAH cost:", {n: round(tr.stats()["sah_cost"], 4) for n, tr in trees.items()}, "same tree:", same)
+        for threads in (2, 1):
+            for v in versions.values():
+                v.build_kdtree(triangles, threads=threads)
+            times = paired(versions, triangles, threads, args.pairs)
+            mine, theirs = times.values()
+            medians = "  ".join(f"{name} {np.median(t):6.1f} ms" for name, t in times.items())
+            print(f"threads {threads}: {medians}  ratio (paired) {np.median(mine / theirs):.3f}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
