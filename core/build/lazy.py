@@ -22,7 +22,7 @@ from .top_levels import Task
 # When one round asks for at least this share of the unbuilt subtrees, build the rest with them: the
 # scene is mostly visible, and each further round costs a retrace (docs/choices.md#lazy-build-all-share).
 BUILD_ALL_SHARE = 0.5
-NODE_BYTES = 13  # axis, split, child, count (layout.py)
+NODE_BYTES = 21  # axis, split, child, count and the packed record (layout.py)
 
 
 class DeferredSubtrees:
@@ -103,7 +103,7 @@ def _check_memory_limit(tree, subtrees):
     limit = tree.options.memory_limit
     if limit is None:
         return
-    held = sum(a.nbytes for a in tree.node_arrays) + tree.leaf_triangles.nbytes
+    held = sum(a.nbytes for a in tree.node_arrays) + tree.nodes.nbytes + tree.leaf_triangles.nbytes
     held += tree.deferred.prims.nbytes + tree.deferred.boxes.nbytes
     nodes = sum(len(s[0]) for s in subtrees)
     references = sum(len(s[4]) for s in subtrees)

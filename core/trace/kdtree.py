@@ -1,7 +1,9 @@
 """The built tree: flat contiguous arrays (see layout.py), its triangles, and its statistics."""
+from time import perf_counter
+
 import numpy as np
 
-from .layout import LEAF, NodeArrays, TreeArrays
+from .layout import LEAF, NodeArrays, TreeArrays, pack_nodes, split_view
 from ..build.leaf_triangles import leaf_triangles
 from .tree_stats import leaf_size_histogram, walk_stats
 
@@ -12,6 +14,7 @@ class KdTree:
     Attributes: `triangles` (N, 3, 3) float32; `bounds` (6,) float32 box of the triangles in the tree;
     `axis`, `split`, `child`, `count` (per node, layout.py) and `leaf_prims` (triangle indices), given
     as one NodeArrays;
+    `nodes` (N, 2) uint32, the same nodes packed into the records the traversals read (layout.pack_nodes);
     `leaf_triangles` (9, R) float32, the triangles copied into leaf order (leaf_triangles.py);
     `options` (the BuildOptions used); `build_ms`; `dropped` (indices of zero-area triangles, which can
     never be hit and are left out); `deferred` (lazy builds: the subtrees not built yet, lazy.py; None
@@ -29,12 +32,19 @@ class KdTree:
         self.timings = dict(timings or {})
         self.deferred = deferred
         self._stats = None
+        self._pack()
+
+    def _pack(self):
+        """Pack the node arrays into the traversal's records; its cost is timings['pack']."""
+        start = perf_counter()
+        self.nodes = pack_nodes(self.axis, self.split, self.child, self.count, len(self.leaf_prims))
+        self.timings["pack"] = self.timings.get("pack", 0.0) + (perf_counter() - start) * 1e3
 
     @property
     def arrays(self):
         """The TreeArrays the traversal kernels take (traversal.trace_ray)."""
-        return TreeArrays(self.axis, self.split, self.child, self.count, self.leaf_prims, self.triangles,
-                          self.bounds, self.leaf_triangles, 0)
+        return TreeArrays(self.nodes, split_view(self.nodes), self.leaf_prims, self.triangles, self.bounds,
+                          self.leaf_triangles, 0)
 
     @property
     def node_arrays(self):
@@ -45,6 +55,7 @@ class KdTree:
         previous = (self.leaf_prims, self.leaf_triangles)
         self.axis, self.split, self.child, self.count, self.leaf_prims = node_arrays
         self.leaf_triangles = leaf_triangles(self.triangles, self.leaf_prims, previous)
+        self._pack()  # the whole array: one parallel pass (docs/choices.md#compact-node-records)
         self._stats = None
 
     @property
@@ -68,8 +79,8 @@ class KdTree:
         sah, leaves, empty, depth, refs, _, _, unbuilt = walk_stats(
             self.axis, self.split, self.child, self.count, self.bounds, o.traversal_cost, o.intersection_cost)
         n = len(self.triangles)
-        nbytes = sum(a.nbytes for a in (self.axis, self.split, self.child, self.count, self.leaf_prims,
-                                         self.leaf_triangles))
+        nbytes = sum(a.nbytes for a in (self.axis, self.split, self.child, self.count, self.nodes,
+                                         self.leaf_prims, self.leaf_triangles))
         return {
             "triangles": n,
             "degenerate_dropped": len(self.dropped),

@@ -33,10 +33,11 @@ from . import simd as S
 from .array_views import at, rows, unowned
 from ..inputs import as_ray_limits, as_rays, hit_distances_as_float32
 from .kdtree import KdTree
-from .layout import LEAF, TreeArrays
+from .layout import LEAF, UNBUILT_COUNT
 from .queries import Hits, intersect
 from ..jit.threads import thread_count
-from .traversal import STACK_SIZE, WIDEN, block_range, clip_to_box, interleaved_blocks, trace_rays
+from .traversal import (STACK_SIZE, WIDEN, block_range, clip_to_box, interleaved_blocks, node_word, trace_rays,
+                        unowned_tree)
 from .triangle_test import GAMMA, intersect_leaf_triangle, ray_shear
 
 L = S.LANES
@@ -151,9 +152,7 @@ def trace_packets(tree, rays_in, out):
 def _trace_packet_block(tree, rays_in, out, start, stop):
     """Packets start..stop-1 with one set of scratch arrays and the tree as unowned views (see
     traversal._trace_block)."""
-    views = TreeArrays(unowned(tree.axis), unowned(tree.split), unowned(tree.child), unowned(tree.count),
-                       unowned(tree.leaf_prims), unowned(tree.triangles), unowned(tree.bounds),
-                       unowned(tree.leaf_triangles), tree.base)
+    views = unowned_tree(tree)
     owned = (np.zeros(ROWS * L), np.zeros((L, 3)), np.zeros((L, 3), np.int64), np.empty(L, np.int32), np.empty(L),
              np.empty(L), np.empty(STACK_SIZE, np.int32), np.empty(STACK_SIZE, np.int64), np.empty(STACK_SIZE * 2 * L))
     # unowned views of everything the per-packet code takes: their reference counts are no-ops (array_views)
@@ -253,22 +252,21 @@ def _same_axes(axes, bits):
 @njit(cache=True, inline="always")
 def _traverse(tree, sc, same_axes, signs, bits, stack):
     """Walk the tree with the packet (module docstring); True if it met an unbuilt node (lazy tree)."""
-    axis, split, child, count, leaf_prims = tree.axis, tree.split, tree.child, tree.count, tree.leaf_prims
+    nodes, node_split, leaf_prims = tree.nodes, tree.node_split, tree.leaf_prims
     leaf_tris, base = tree.leaf_triangles, tree.base
     rays, stack_node, stack_bits, stack_t = sc.rays, stack.node, stack.bits, stack.t
     t0, t1 = S.load(rays, T0 * L), S.load(rays, T1 * L)
     node, m, sp, done, found = 0, bits, 0, 0, 0
     while True:
-        a = axis[at(node)]
+        a, low = node_word(nodes, node)
         if a < LEAF:
-            node, m, t0, t1, sp = _node_step(rays, a, split[at(node)], child[at(node)], signs, m, t0, t1,
+            node, m, t0, t1, sp = _node_step(rays, a, node_split[at(node), 0], low, signs, m, t0, t1,
                                              stack_node, stack_bits, stack_t, sp)
             continue
-        if a != LEAF:
+        if low == UNBUILT_COUNT:
             return True
-        first = child[at(node)]
-        found |= _leaf(leaf_tris, leaf_prims, base + first, base + first + count[at(node)], first, m, sc,
-                       same_axes)
+        first = np.int64(nodes[at(node), 0])
+        found |= _leaf(leaf_tris, leaf_prims, base + first, base + first + low, first, m, sc, same_axes)
         done |= S.mask_bits(S.le(S.load(rays, BEST * L), t1)) & found & m  # as trace_ray: best_t <= t_exit
         node, m, t0, t1, sp, done = _pop(rays, found, done, stack_node, stack_bits, stack_t, sp)
         if node < 0:
