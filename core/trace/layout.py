@@ -80,11 +80,12 @@ def pack_nodes(axis, split, child, count, n_prims):
     """The (N, 2) uint32 node records (module docstring) of the node arrays; `n_prims`, the length of
     leaf_prims, bounds the leaf offsets. Raises ValueError when an index or count does not fit its field."""
     n = len(axis)
-    leaves = axis == LEAF
     if n > LOW_MASK + 1 or n_prims >= 1 << 32:
         raise ValueError(f"a kd-tree of {n:,} nodes and {n_prims:,} leaf references exceeds the compact node "
                          f"records' limits ({LOW_MASK + 1:,} nodes, {2 ** 32 - 1:,} references)")
-    if n and leaves.any() and count[leaves].max() >= UNBUILT_COUNT:
+    # a leaf holds at most n_prims triangles: only then is a scan over all nodes needed
+    leaves = axis == LEAF if n_prims >= UNBUILT_COUNT else np.zeros(0, bool)
+    if leaves.any() and count[leaves].max() >= UNBUILT_COUNT:
         raise ValueError(f"a kd-tree leaf holds {int(count[leaves].max()):,} triangles, more than the compact "
                          f"node records hold ({UNBUILT_COUNT - 1:,})")
     out = np.empty((n, 2), np.uint32)
