@@ -12,8 +12,8 @@ from numba import njit, prange
 
 from ..trace.array_views import at, rows, unowned
 from ..trace.layout import LEAF, NO_HIT, TreeArrays
-from ..trace.traversal import (RAY32, RAYS_PER_TASK, STACK_SIZE, _descend, _pop, block_range, clip_to_box,
-                        interleaved_blocks, node_word, ray_constants32, trace_ray)
+from ..trace.traversal import (RAYS_PER_TASK, STACK_SIZE, _descend, _pop, block_range, clip_to_box,
+                        interleaved_blocks, node_word, trace_ray)
 from ..trace.triangle_test import LEAF_CHUNK
 from .two_level import SceneArrays
 
@@ -21,18 +21,15 @@ from .two_level import SceneArrays
 @njit(cache=True)
 def new_scratch():
     """Per-thread buffers: the top level's stack and inverse direction, the mesh traversal's stack and
-    inverse direction, the object-space ray, the mesh traversal's leaf flags, and the float32 ray
-    constants (traversal.ray_constants32) of the top level and of the mesh traversal: five allocations
-    cut into unowned views, followed by the five owners that keep them alive."""
+    inverse direction, the object-space ray, and the mesh traversal's leaf flags: four allocations cut
+    into unowned views, followed by the four owners that keep them alive."""
     nodes = np.empty(2 * STACK_SIZE, np.int32)
     intervals = np.empty((2 * STACK_SIZE, 3))
     vectors = np.empty(12)
     flags = np.empty(LEAF_CHUNK, np.uint8)
-    ray32 = np.empty(2 * RAY32, np.float32)
     return (rows(nodes, 0, STACK_SIZE), rows(intervals, 0, STACK_SIZE), rows(vectors, 0, 3),
             rows(nodes, STACK_SIZE, 2 * STACK_SIZE), rows(intervals, STACK_SIZE, 2 * STACK_SIZE), rows(vectors, 3, 6),
-            rows(vectors, 6, 9), rows(vectors, 9, 12), rows(flags, 0, LEAF_CHUNK), rows(ray32, 0, RAY32),
-            rows(ray32, RAY32, 2 * RAY32), nodes, intervals, vectors, flags, ray32)
+            rows(vectors, 6, 9), rows(vectors, 9, 12), rows(flags, 0, LEAF_CHUNK), nodes, intervals, vectors, flags)
 
 
 @njit(cache=True, inline="always")
@@ -69,12 +66,11 @@ def _to_object(w2o, o, d, o_obj, d_obj):
 def trace_instance(scene, inst, o, d, tmin, tmax, any_hit, scratch):
     """(t, prim, u, v) of the ray against one instance, in (tmin, tmax); prim -1 on a miss."""
     stack_node, stack_t, inv, o_obj, d_obj, flags = scratch[3:9]
-    ray32 = scratch[10]
     _to_object(rows(scene.world_to_object, inst, inst + 1)[0], o, d, o_obj, d_obj)
     if d_obj[0] == 0.0 and d_obj[1] == 0.0 and d_obj[2] == 0.0:
         return np.inf, -1, 0.0, 0.0  # underflow of an extreme scale: nothing to trace
     return trace_ray(mesh_tree(scene, scene.mesh_of[inst]), o_obj, d_obj, tmin, tmax, any_hit, stack_node, stack_t,
-                     inv, flags, ray32)
+                     inv, flags)
 
 
 @njit(cache=True, inline="always")
@@ -89,7 +85,7 @@ def trace_scene(scene, o, d, tmin, tmax, any_hit, ray_mask, scratch):
     items, root_box, visibility = scene.top_items, scene.top_bounds, scene.visibility
     if items.shape[0] == 0:
         return np.inf, -1, -1, 0.0, 0.0
-    stack_node, stack_t, inv, ray32 = scratch[0], scratch[1], scratch[2], scratch[9]
+    stack_node, stack_t, inv = scratch[0], scratch[1], scratch[2]
     t0, t1 = tmin, tmax
     if not (items.shape[0] == 1 and node_word(nodes, 0)[0] == LEAF):
         for k in range(3):
@@ -97,14 +93,13 @@ def trace_scene(scene, o, d, tmin, tmax, any_hit, ray_mask, scratch):
         t0, t1 = clip_to_box(root_box, o, d, inv, tmin, tmax)
         if t0 > t1:
             return np.inf, -1, -1, 0.0, 0.0
-        ray_constants32(root_box, o, d, ray32)
     best_t, best_inst, best_prim, best_u, best_v = tmax, -1, -1, 0.0, 0.0
     node, sp, t_exit = 0, 0, t1
     while True:
         a, low = node_word(nodes, node)
         if a != LEAF:
-            node, t1, t_exit, sp = _descend(node, a, node_split[at(node), 0], low, (o, d, ray32), t0, t1, t_exit,
-                                            (stack_node, stack_t), sp)
+            node, t1, t_exit, sp = _descend(node, a, node_split[at(node), 0], low, o[at(a)], d[at(a)], inv[at(a)],
+                                            t0, t1, t_exit, (stack_node, stack_t), sp)
             continue
         first = np.int64(nodes[at(node), 0])
         for j in range(first, first + low):

@@ -8,13 +8,11 @@ tested against all its active lanes. That needs one sign per axis for the whole 
 child is near), so a lane whose direction has another sign on some axis, or a zero component, leaves
 the packet and is traced by the single-ray kernel (traversal.trace_rays) afterwards.
 
-Results equal traversal.trace_ray's, hit for hit: each lane visits every cell that may hold its hit and
-tests triangles as the single-ray traversal does:
-- node steps are float64 lanes computing (split - o) / d, widened by a relative 1e-9 (no contraction
-  into FMAs), with _descend's near-only / far-only / both cases. The single-ray step works in float32
-  with a wider, rigorous interval (traversal.ray_constants32), so the two may visit different extra
-  cells, never different cells that hold the closest hit; with strict direction signs no lane lies in
-  a plane, so a lane's exit bound is its t1;
+Results equal traversal.trace_ray's, hit for hit, because each lane makes the single-ray traversal's
+decisions with its arithmetic:
+- node steps are float64 lanes computing (split - o) / d and the 1e-9 relative widening exactly as
+  traversal._descend does (no contraction into FMAs), with the same near-only / far-only / both cases;
+  with strict direction signs no lane lies in a plane, so a lane's exit bound is its t1;
 - a lane finishes once its best hit lies within the leaf interval it just left, and stacked entries it
   cannot improve on are dropped, as traversal._pop does;
 - leaves: each triangle is tested against the active lanes with the watertight test (Woop, Benthin and

@@ -8,13 +8,8 @@ Robustness without NaN paths:
   and a ray lying in the plane visits both children. Both then cover the same interval, so the
   closest-hit stop test uses a separate exit bound that such a sibling caps at the interval's start.
 - A ray starting on a plane goes to the side its direction points to.
-- Whether a split plane lies ahead of the origin is decided by exact comparisons of the float64
-  origin with the float32 split, as are the in-plane and on-plane rules above.
-- The root box clip is float64, widened by a relative 1e-9 (float64 errors are ~1e-16). The node step
-  computes the plane's distance in float32 (ray_constants32) and widens it to an interval [lo, hi]
-  that surely holds the exact distance (its bound derived there); the near child ends at hi, the far
-  one starts at lo, so a ray grazing a node corner or an edge on a split plane visits every cell that
-  might own the hit (docs/choices.md#float32-node-arithmetic).
+- Interval tests are widened by a relative 1e-9 (float64 errors are ~1e-16), so a ray grazing a node
+  corner or an edge on a split plane visits every cell that might own the hit.
 """
 import numpy as np
 from numba import njit, prange
@@ -26,12 +21,6 @@ from .triangle_test import LEAF_CHUNK, intersect_leaf_triangle, leaf_candidates,
 STACK_SIZE = 64  # > DEPTH_LIMIT + 1: one pushed node per level
 RAYS_PER_TASK = 64
 WIDEN = 1e-9
-# The float32 node step's widening (ray_constants32): 8 float32 unit roundoffs (2**-24 each), twice
-# what the bound derived there needs, the rest covering the rounding of the widening itself.
-WIDEN32 = 2.0 ** -21
-TINY32 = 2.0 ** -126  # float32's smallest normal: absorbs the absolute error of subnormal results
-SAFE32 = 2.0 ** 60  # origins, boxes and |direction| components (and their inverses) within this: no overflow
-RAY32 = 12  # float32 per-ray constants: o, 1 / d, the widening's slope and offset, 3 each
 
 
 @njit(cache=True, inline="always")
@@ -58,12 +47,12 @@ def clip_to_box(box, o, d, inv, tmin, tmax):
 
 
 @njit(cache=True, inline="always")
-def trace_ray(tree, o, d, tmin, tmax, any_hit, stack_node, stack_t, inv, flags, ray32):
+def trace_ray(tree, o, d, tmin, tmax, any_hit, stack_node, stack_t, inv, flags):
     """(t, prim, u, v) of the closest hit in (tmin, tmax), or of any hit if `any_hit`; prim -1 on a miss.
     On a lazy tree a ray reaching an unbuilt subtree returns prim = suspended_prim(subtree) (<= -2):
     front to back, the eager traversal would enter that subtree, so the caller builds it and retraces
     (lazy.py, seed 003 §3). `stack_node`, `stack_t`, `inv` (3) and `flags` (LEAF_CHUNK uint8) are the
-    caller's scratch, and `ray32` (RAY32 float32) too. Leaves are screened LEAF_CHUNK triangles at a time (leaf_candidates) before the
+    caller's scratch. Leaves are screened LEAF_CHUNK triangles at a time (leaf_candidates) before the
     full test. Inlined into its callers (docs/choices.md#inline-the-traversal)."""
     nodes, node_split, leaf_prims = tree.nodes, tree.node_split, tree.leaf_prims
     root_box, leaf_tris, base = tree.bounds, tree.leaf_triangles, tree.base
@@ -72,15 +61,14 @@ def trace_ray(tree, o, d, tmin, tmax, any_hit, stack_node, stack_t, inv, flags, 
     t0, t1 = clip_to_box(root_box, o, d, inv, tmin, tmax)
     if t0 > t1 or nodes.shape[0] == 0:
         return np.inf, -1, 0.0, 0.0
-    ray_constants32(root_box, o, d, ray32)
     kx, ky, kz, sx, sy, sz = ray_shear(d)
     best_t, best_prim, best_u, best_v = tmax, -1, 0.0, 0.0
     node, sp, t_exit = 0, 0, t1
     while True:
         a, low = node_word(nodes, node)
         if a < LEAF:
-            node, t1, t_exit, sp = _descend(node, a, node_split[at(node), 0], low, (o, d, ray32), t0, t1, t_exit,
-                                            (stack_node, stack_t), sp)
+            node, t1, t_exit, sp = _descend(node, a, node_split[at(node), 0], low, o[at(a)], d[at(a)], inv[at(a)],
+                                            t0, t1, t_exit, (stack_node, stack_t), sp)
             continue
         first = np.int64(nodes[at(node), 0])
         if low == UNBUILT_COUNT:  # the one extra test, made only at leaves
@@ -117,56 +105,12 @@ def node_word(nodes, node):
 
 
 @njit(cache=True, inline="always")
-def ray_constants32(box, o, d, ray32):
-    """Fill ray32 with the float32 node step's per-ray constants: for each axis k, the origin o'_k and
-    1 / d_k rounded to float32 (i'_k), the widening's slope c_k = WIDEN32 |i'_k| and offset
-    e_k = c_k (|o'_k| + TINY32) + TINY32, so that err = c_k |p| + e_k bounds the error of
-    ts' = fl32(fl32(p - o'_k) * i'_k) against the exact (p - o_k) / d_k for a float32 split p.
-
-    The bound (Higham, "Accuracy and Stability of Numerical Algorithms", §2.2: fl(x) = x (1 + d) + h,
-    |d| <= u = 2**-24, |h| <= 2**-150 for a subnormal result; Ize, "Robust BVH Ray Traversal", JCGT
-    2(2), 2013 makes the same per-operation count for a box test): with S = |p| + |o|,
-    o' = o (1 + d1) + h1; i' = (1 / d)(1 + d0)(1 + d3), |d0| <= 2**-53 (the float64 division);
-    fl(p - o') = (p - o')(1 + d2), a subtraction's error is relative only; ts' = fl(p - o') i' (1 + d4) + h4.
-    So |ts' - ts| <= |1 / d| (|o d1| + |h1| + |p - o'| |d2| + |p - o'| (|d0| + |d3| + |d4|)) + |h4| + O(u^2)
-    <= 4 u |1 / d| S + |1 / d| 2**-149 + 2**-150 + O(u^2) S |1 / d|. WIDEN32 = 8 u gives twice the
-    first term; the rest of the margin covers the float32 rounding of c |p| + e, of e, of ts' -+ err and
-    the (1 + 2u) between |1 / d| and |i'|; TINY32 covers the absolute terms. Where the origin, the box
-    or a direction component lies outside SAFE32 (or its inverse does), float32 could overflow: the
-    ray gets err = inf, o' = i' = 0 (every plane ahead of it is straddled; never NaN)."""
-    safe = True
-    for k in range(6):
-        safe &= abs(box[k]) <= SAFE32
-    for k in range(3):
-        safe &= abs(o[k]) <= SAFE32 and (d[k] == 0.0 or 1.0 / SAFE32 <= abs(d[k]) <= SAFE32)
-    for k in range(3):
-        if safe and d[k] != 0.0:
-            o32, inv32 = np.float32(o[k]), np.float32(1.0 / d[k])
-            c = WIDEN32 * abs(np.float64(inv32))  # exact: a power of two times a normal float32
-            ray32[k], ray32[3 + k], ray32[6 + k] = o32, inv32, c
-            ray32[9 + k] = c * (abs(np.float64(o32)) + TINY32) + TINY32
-        else:
-            ray32[k], ray32[3 + k], ray32[6 + k], ray32[9 + k] = 0.0, 0.0, 0.0, np.inf
-
-
-@njit(cache=True, inline="always")
-def _plane_interval(pos, ray32, a):
-    """(lo, hi) float64 around the distance to the plane at float32 `pos` on axis a (ray_constants32)."""
-    ts = (pos - ray32[at(a)]) * ray32[at(3 + a)]
-    err = ray32[at(6 + a)] * abs(pos) + ray32[at(9 + a)]
-    return np.float64(ts - err), np.float64(ts + err)
-
-
-@njit(cache=True, inline="always")
-def _descend(node, a, pos, left, ray, t0, t1, t_exit, stack, sp):
+def _descend(node, a, pos, left, oa, da, inv_a, t0, t1, t_exit, stack, sp):
     """Step into an inner node: (next node, its t1, its exit bound, stack size), pushing the far child
-    onto stack = (stack_node, stack_t). ray = (o, d, ray32), the float64 ray and its float32 constants
-    (ray_constants32). t_exit bounds where a closest hit lets the search stop (everything on the stack
-    starts at or after it); a ray lying in the plane pushes a sibling over the same interval, so below
-    it it drops to t0."""
+    onto stack = (stack_node, stack_t). t_exit bounds where a closest hit lets the search stop
+    (everything on the stack starts at or after it); a ray lying in the plane pushes a sibling over the
+    same interval, so below it it drops to t0."""
     stack_node, stack_t = stack
-    o, d, ray32 = ray
-    oa, da = o[at(a)], d[at(a)]
     if da == 0.0:
         if oa < pos:
             return left, t1, t_exit, sp
@@ -174,18 +118,15 @@ def _descend(node, a, pos, left, ray, t0, t1, t_exit, stack, sp):
             return left + 1, t1, t_exit, sp
         sp = _push(stack_node, stack_t, sp, left + 1, t0, t1, t_exit)
         return left, t1, min(t_exit, t0), sp
-    below = oa < pos
-    near, far = (left, left + 1) if (below or (oa == pos and da < 0.0)) else (left + 1, left)
-    if not ((below and da > 0.0) or (oa > pos and da < 0.0)):  # the plane is not ahead: exact
+    near, far = (left, left + 1) if (oa < pos or (oa == pos and da < 0.0)) else (left + 1, left)
+    ts = (pos - oa) * inv_a
+    if ts <= 0.0 or ts > t1 + _slack(ts):
         return near, t1, t_exit, sp
-    lo, hi = _plane_interval(pos, ray32, a)
-    if lo > t1:
-        return near, t1, t_exit, sp
-    if hi < t0:
+    if ts < t0 - _slack(ts):
         return far, t1, t_exit, sp
-    lo, hi = max(lo, t0), min(hi, t1)
-    sp = _push(stack_node, stack_t, sp, far, lo, t1, t_exit)
-    return near, hi, min(t_exit, lo), sp
+    ts = min(max(ts, t0), t1)
+    sp = _push(stack_node, stack_t, sp, far, ts, t1, t_exit)
+    return near, ts, min(t_exit, ts), sp
 
 
 @njit(cache=True, inline="always")
@@ -262,12 +203,12 @@ def _trace_block(tree, origins, directions, tmin, tmax, any_hit, start, stop, ou
     """Rays start..stop-1 with one stack, the tree's arrays and each ray's origin and direction as
     unowned views (array_views.py; docs/choices.md#unowned-array-views)."""
     stack_node, stack_t, inv = np.empty(STACK_SIZE, np.int32), np.empty((STACK_SIZE, 3)), np.empty(3)
-    flags, ray32 = np.empty(LEAF_CHUNK, np.uint8), np.empty(RAY32, np.float32)
+    flags = np.empty(LEAF_CHUNK, np.uint8)
     views = unowned_tree(tree)
-    scratch = (unowned(stack_node), unowned(stack_t), unowned(inv), unowned(flags), unowned(ray32))
+    scratch = (unowned(stack_node), unowned(stack_t), unowned(inv), unowned(flags))
     for r in range(start, stop):
         t, prim, u, v = trace_ray(views, rows(origins, r, r + 1)[0], rows(directions, r, r + 1)[0], tmin[r],
-                                  tmax[r], any_hit, scratch[0], scratch[1], scratch[2], scratch[3], scratch[4])
+                                  tmax[r], any_hit, scratch[0], scratch[1], scratch[2], scratch[3])
         out_t[r] = t
         out_prim[r] = prim
         out_u[r] = u
