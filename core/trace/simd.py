@@ -175,9 +175,12 @@ def to_f32(typingctx, v):
 
 # -- arithmetic -------------------------------------------------------------------------------------
 
-def _binary(emit):
+def _binary(emit, kind=None):
+    """The typer of a lane-wise operation on two values of one type, a vector (or a `kind`) type."""
+    kind = kind or VectorType
+
     def typer(typingctx, a, b):
-        if not isinstance(a, VectorType) or a != b:
+        if not isinstance(a, kind) or a != b:
             return None
         return a(a, b), lambda context, builder, sig, args: emit(builder, *args)
 
@@ -274,20 +277,11 @@ def select(typingctx, mask, a, b):
     return a(mask, a, b), lambda context, builder, sig, args: builder.select(*args)
 
 
-def _mask_binary(emit):
-    def typer(typingctx, a, b):
-        if not isinstance(a, MaskType) or a != b:
-            return None
-        return a(a, b), lambda context, builder, sig, args: emit(builder, *args)
-
-    return typer
-
-
-mask_and = intrinsic(_mask_binary(lambda builder, a, b: builder.and_(a, b)))
+mask_and = intrinsic(_binary(lambda builder, a, b: builder.and_(a, b), MaskType))
 mask_and.__doc__ = "Lanes set in both masks."
-mask_or = intrinsic(_mask_binary(lambda builder, a, b: builder.or_(a, b)))
+mask_or = intrinsic(_binary(lambda builder, a, b: builder.or_(a, b), MaskType))
 mask_or.__doc__ = "Lanes set in either mask."
-mask_andnot = intrinsic(_mask_binary(lambda builder, a, b: builder.and_(a, builder.not_(b))))
+mask_andnot = intrinsic(_binary(lambda builder, a, b: builder.and_(a, builder.not_(b)), MaskType))
 mask_andnot.__doc__ = "Lanes set in a and not in b."
 
 
