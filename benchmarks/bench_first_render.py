@@ -1,13 +1,23 @@
-"""First-render latency of the add-on's pipeline: cold (empty Numba cache) and warm (cache filled).
+"""First-render latency: cold (empty Numba cache) and warm (cache filled), in a fresh process each time.
 
-Usage: python benchmarks/bench_first_render.py [--runs 3] [--frames 1-2]
+Usage: python benchmarks/bench_first_render.py [--runs 3] [--frames 1-2] [--how cli|blender|both]
+                                               [--source DIR ...] [--idle]
 
-Each run is a fresh `python -m kd_addon render` process on the built-in demo scene, the way a user's first
-render in a new Blender session goes. "cold" points NUMBA_CACHE_DIR at an empty folder, so every kernel is
-compiled; "warm" re-uses the folder the cold run filled, so kernels are only loaded. Printed per mode
-(medians over --runs): the first frame's total (extract + build + trace, from report.json, which is where
-compile or load time lands), the second frame's total (nothing left to compile: the steady state), and the
-process's wall time (Python start, `import bpy`, demo scene, both frames, PNG writing).
+"cli": a fresh `python -m kd_addon render` on the built-in demo scene; printed per cache state (medians
+over --runs): the first frame's total (from report.json), the second frame's (the steady state) and
+the process's wall time.
+
+"blender": a fresh bpy-module process as a new user's Blender: the factory startup scene (cube, light,
+camera), the add-on registered (as when the extension is enabled), then Render (`kdpreview.render`) at
+once, mode ao+shadow, default settings otherwise. Printed: the seconds from registering to the image
+(what the user waits for), the frame's own total as the panel reports it, the time the frame waited
+for the kernels' compile and load (reported apart from the frame), its Mrays/s, and the Numba compiles
+this process ran during Render (the rest ran in other processes). `--idle` waits for the background
+compile before clicking Render (a user who enables the add-on and renders minutes later).
+
+`--source` takes one or more checkouts (default: this one), e.g. `--source /work/main .` to compare a
+revision before this change with it in the same run: runs alternate between sources, cold then warm
+on one cache folder each time.
 """
 import argparse
 import json
@@ -22,34 +32,90 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 
+BLENDER_CHILD = r"""
+import json, sys, time
+sys.path.insert(0, sys.argv[1])
+import bpy
+from numba.core import event
+compiles = []
+class Listener(event.Listener):
+    def on_start(self, ev): compiles.append(ev.data["dispatcher"].py_func.__qualname__)
+    def on_end(self, ev): pass
+bpy.ops.wm.read_homefile(use_factory_startup=True)
+import kd_addon
+t0 = time.perf_counter()
+kd_addon.register()
+register_ms = (time.perf_counter() - t0) * 1e3
+if sys.argv[2] == "idle":
+    from kd_addon import kernel_warmup
+    kernel_warmup.wait()
+event.register("numba:compile", Listener())
+bpy.context.scene.kd_preview.mode = "ao+shadow"
+t1 = time.perf_counter()
+assert bpy.ops.kdpreview.render() == {"FINISHED"}
+click_s = time.perf_counter() - t1
+last = json.loads(bpy.context.window_manager.kd_preview_state.last_run)
+print("RESULT " + json.dumps(dict(register_ms=register_ms, enable_to_image_s=time.perf_counter() - t0,
+      click_to_image_s=click_s, frame_ms=last["total_ms"], kernels_ms=last.get("compile_ms", 0.0)
+      + last.get("load_ms", 0.0), mrays=last["mrays_per_s"], compiles_here=len(compiles))))
+kd_addon.unregister()
+"""
 
-def run_once(cache_dir, frames):
-    """(first frame total ms, second frame total ms, wall s) of one fresh process."""
+
+def run_cli(source, cache_dir, frames):
+    """(first frame total ms, second frame total ms, wall s) of one fresh `python -m kd_addon` process."""
     with tempfile.TemporaryDirectory() as out:
-        env = dict(os.environ, NUMBA_CACHE_DIR=str(cache_dir))
+        env = dict(os.environ, NUMBA_CACHE_DIR=str(cache_dir), PYTHONPATH=str(source))
         start = time.perf_counter()
         subprocess.run([sys.executable, "-m", "kd_addon", "render", "--frames", frames, "--out", out],
-                       cwd=ROOT, env=env, check=True, capture_output=True, text=True)
+                       cwd=source, env=env, check=True, capture_output=True, text=True)
         wall = time.perf_counter() - start
         rows = json.loads((Path(out) / "report.json").read_text())["frames"]
     return rows[0]["total_ms"], rows[-1]["total_ms"], wall
+
+
+def run_blender(source, cache_dir, idle):
+    """The RESULT dict of one fresh bpy-module process (see the module docstring)."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache_dir), PYTHONPATH=str(source))
+    proc = subprocess.run([sys.executable, "-c", BLENDER_CHILD, str(source), "idle" if idle else "at-once"],
+                          cwd=source, env=env, capture_output=True, text=True)
+    if proc.returncode != 0:
+        sys.exit(proc.stdout[-3000:] + proc.stderr[-3000:])
+    return json.loads(next(line for line in proc.stdout.splitlines() if line.startswith("RESULT "))[7:])
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--frames", default="1-2")
+    ap.add_argument("--how", choices=["cli", "blender", "both"], default="both")
+    ap.add_argument("--source", nargs="+", default=[str(ROOT)])
+    ap.add_argument("--idle", action="store_true")
     args = ap.parse_args()
-    results = {"cold": [], "warm": []}
-    for _ in range(args.runs):
-        with tempfile.TemporaryDirectory() as cache:
-            results["cold"].append(run_once(cache, args.frames))
-            results["warm"].append(run_once(cache, args.frames))
-    print(f"demo scene, frames {args.frames}, {args.runs} runs each (medians)")
-    print(f"{'cache':>6} {'first frame ms':>15} {'next frame ms':>14} {'process wall s':>15}")
-    for mode, rows in results.items():
-        first, steady, wall = np.median(np.array(rows), axis=0)
-        print(f"{mode:>6} {first:>15.0f} {steady:>14.0f} {wall:>15.1f}")
+    sources = [Path(s).resolve() for s in args.source]
+    hows = ["cli", "blender"] if args.how == "both" else [args.how]
+    results = {(how, s, c): [] for how in hows for s in sources for c in ("cold", "warm")}
+    for run in range(args.runs):
+        for source in sources if run % 2 == 0 else sources[::-1]:
+            for how in hows:
+                with tempfile.TemporaryDirectory() as cache:
+                    for cache_state in ("cold", "warm"):
+                        row = (run_cli(source, cache, args.frames) if how == "cli"
+                               else run_blender(source, cache, args.idle))
+                        print(f"run {run + 1} {how} {source} {cache_state}: {row}", flush=True)
+                        results[how, source, cache_state].append(row)
+    print(f"\n{args.runs} runs each (medians)")
+    for (how, source, cache_state), rows in results.items():
+        if how == "cli":
+            first, steady, wall = np.median(np.array(rows), axis=0)
+            print(f"cli     {cache_state} {source}: first frame {first:.0f} ms, next frame {steady:.0f} ms, "
+                  f"process {wall:.1f} s (demo scene, frames {args.frames})")
+        else:
+            med = {key: float(np.median([r[key] for r in rows])) for key in rows[0]}
+            print(f"blender {cache_state} {source}: enable to image {med['enable_to_image_s']:.1f} s "
+                  f"(register {med['register_ms']:.0f} ms), frame {med['frame_ms']:.0f} ms, kernels "
+                  f"{med['kernels_ms'] / 1e3:.1f} s apart from it, {med['mrays']:.2f} Mrays/s, "
+                  f"{med['compiles_here']:.0f} compiles in Blender's process" + (" (idle first)" if args.idle else ""))
 
 
 if __name__ == "__main__":

@@ -2,7 +2,8 @@
 
 Only registration lives here; the logic lives in the modules beside it.
 Nothing imported here touches core or numba (corelib imports them on the first
-render), so enabling the add-on is instant.
+render), so enabling the add-on is instant; it starts the kernels' first compile in a separate
+process (kernel_warmup.py), shown in the status bar and the panel until it is done.
 """
 
 import atexit
@@ -15,10 +16,11 @@ if sys.argv[:1] == ["-m"]:  # `python -m kd_addon`, while Python locates __main_
 
 import bpy  # noqa: E402
 
-from . import cli, image_keeping, live_update, operators, panel, properties, tree_cache  # noqa: E402
+from . import (cli, image_keeping, kernel_warmup, live_update, operators, panel, properties,  # noqa: E402
+               tree_cache, warmup_display)
 
 # Registration order: settings before the operators and panel that use them.
-MODULES = (properties, operators, panel, live_update, image_keeping, cli)
+MODULES = (properties, operators, panel, live_update, image_keeping, cli, warmup_display)
 _registered = False
 
 
@@ -28,6 +30,7 @@ def register():
     global _registered
     unregister()  # nothing when not registered
     _registered = True  # before the modules: unregister() then undoes a registration that failed halfway
+    kernel_warmup.start()  # first: the display's timer runs only while a compile does
     for module in MODULES:
         module.register()
     if not bpy.app.binary_path:  # the bpy module (Blender itself unregisters at quit)

@@ -73,7 +73,8 @@ def build_parser(prog: str = COMMAND_ID) -> argparse.ArgumentParser:
     render.add_argument("--demo", action="store_true", help="render the built-in animated demo scene")
     render.add_argument("--scene", help="the scene to render, by name (default: the file's current scene)")
     s = argparse.SUPPRESS
-    render.add_argument("--mode", default=s, help=f"ao, shadow or ao+shadow (default {DEFAULTS.mode})")
+    render.add_argument("--mode", default=s, help=f"ao, shadow, ao+shadow or auto (ao+shadow when a light emits, else ao; "
+                                               f"default {DEFAULTS.mode})")
     render.add_argument("--samples", type=int, default=s, help=f"samples per pixel (default {DEFAULTS.samples})")
     render.add_argument("--ao-distance", dest="ao_distance", type=float, default=s,
                         help=f"AO ray length (default {DEFAULTS.ao_distance})")
@@ -179,6 +180,10 @@ def _print_row(prog, result, path) -> None:
                        f"{result.rays_reused:,}", f"{result.pixels_reused:,}",
                        f"{result.tree_stats.get('nodes', 0):,}", result.objects_rebuilt, result.objects_reused,
                        "reused" if result.image_reused else "new"), flush=True)
+    if result.compile_ms or result.load_ms:
+        compiled = f"compiled in {result.compile_ms / 1e3:.1f} s (first use), " if result.compile_ms else ""
+        print(f"kernels: {compiled}loaded in {result.load_ms / 1e3:.1f} s; not in frame {result.frame}'s times or "
+              "Mrays/s", flush=True)
     for warning in result.warnings:  # e.g. an object left out for non-finite vertices
         print(f"{prog}: warning: frame {result.frame}: {warning}", file=sys.stderr, flush=True)
 
@@ -244,8 +249,9 @@ def _run(args, cancelled) -> int:
         print(f"KD Preview: scene '{scene.name}', {len(frames)} frame(s), mode {config.settings.mode}, "
               f"{config.settings.samples} samples, {config.resolution_percentage}% resolution -> {args.out}")
         if not corelib.cache_is_warm():  # else a first run looks hung for minutes
-            print(f"First run with these sources and this Python: compiling the kernels takes a few minutes "
-                  f"before frame 1 (kept in {corelib.numba_cache_dir()})", flush=True)
+            print(f"First run with these sources and this Python: compiling the kernels (first use) takes a "
+                  f"minute or more before frame 1; its time is printed apart from the frame's (kept in "
+                  f"{corelib.numba_cache_dir()})", flush=True)
         print(HEADER, flush=True)  # piped, it would wait for the first frame: minutes on a first run
         _run_claimed(job, cancelled)
     except PreviewError as error:

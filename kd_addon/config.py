@@ -12,7 +12,7 @@ from dataclasses import asdict, dataclass, fields
 
 from .errors import PreviewError
 
-MODES = ("ao", "shadow", "ao+shadow")
+MODES = ("auto", "ao", "shadow", "ao+shadow")
 BUILDERS = ("binned", "exact", "median")  # core.build.options.BUILDERS (a test keeps them equal)
 OUTPUT_FORMATS = {"PNG": ".png", "OPEN_EXR": ".exr"}
 MAX_SAMPLES = 65536
@@ -34,7 +34,8 @@ class SettingsError(PreviewError, ValueError):
 class Settings:
     """Every user-facing render setting with its default (0 means "automatic" where noted).
 
-    mode: "ao", "shadow" or "ao+shadow".
+    mode: "ao", "shadow", "ao+shadow" or "auto": ao+shadow when a scene light emits, else ao, decided
+        each frame (docs/choices.md#automatic-mode-ao-and-shadows-where-a-light-emits).
     samples: samples per pixel (AO directions / light samples).
     ao_distance: AO ray length in scene units; also how far occluders darken.
     resolution_percentage: percent of the scene's base render resolution (resolution_x/y; the
@@ -58,7 +59,7 @@ class Settings:
         the frame before (turns off tree and image reuse; for comparisons and benchmarks).
     """
 
-    mode: str = "ao"
+    mode: str = "auto"
     samples: int = 16
     ao_distance: float = 1.0
     resolution_percentage: int = 50
@@ -77,6 +78,9 @@ class Settings:
 
 
 DEFAULTS = Settings()
+AUTOMATIC = "auto"  # report_settings' word for a setting the add-on decides
+AUTOMATIC_WHEN = {"mode": "auto", "max_depth": 0, "threads": 0}  # the value that means automatic
+OFF_WHEN = {"error_target": 0.0, "memory_limit_mb": 0}  # the value that means off
 SETTING_NAMES = tuple(f.name for f in fields(Settings))
 
 
@@ -111,8 +115,20 @@ class RenderConfig:
         return OUTPUT_FORMATS[self.settings.output_format]
 
     def as_dict(self) -> dict:
-        """The user settings, for reports."""
+        """The user settings as set (0 for automatic), for the image key."""
         return asdict(self.settings)
+
+    def report_settings(self) -> dict:
+        """The user settings for report.json, in one convention: a setting left to the add-on is
+        "auto" (mode, max_depth, threads), one turned off is null (error_target, memory_limit_mb); what
+        "auto" chose is recorded beside it (the run's threads, each frame's mode and tree depth)."""
+        values = asdict(self.settings)
+        for name, value in values.items():
+            if name in AUTOMATIC_WHEN and value == AUTOMATIC_WHEN[name]:
+                values[name] = AUTOMATIC
+            elif name in OFF_WHEN and value == OFF_WHEN[name]:
+                values[name] = None
+        return values
 
 
 def make_config(source) -> RenderConfig:

@@ -16,13 +16,14 @@ from __future__ import annotations
 
 import collections
 import contextlib
+import importlib
 import threading
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import background, corelib, memory_limit, scene_input, tree_cache
+from . import background, corelib, kernel_warmup, memory_limit, scene_input, tree_cache
 from .background import BackgroundCall
 from .config import RenderConfig, frame_size
 from .errors import Cancelled, PreviewError
@@ -33,6 +34,7 @@ KERNEL_LOCK = threading.Lock()
 POLL_SECONDS = 0.05  # longest a tick waits for the worker: the bound on cancel latency
 COMPILING_STATUS = "Compiling kernels (first run)…"
 LOADING_STATUS = "Loading compiled kernels (first run)…"
+WARMUP_WAIT_NOTE = ": the render starts when they are ready"  # after kernel_warmup's "compiling kernels …"
 DENOISE_COMPILING_STATUS = "Compiling the denoiser (first use)…"
 WAITING_STATUS = "Waiting for the cancelled run to end…"  # its kernel call: short, for the progress bar
 _kernels_ready = False  # set once a frame has traced in this process: no compile cost left
@@ -70,6 +72,9 @@ class FrameResult:
     tree_stats: dict = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     compile_helper: str | None = None  # a first frame's helper process (core/jit/parallel_compile.py): its outcome
+    mode: str = ""  # the mode rendered: the setting, or what "auto" chose
+    compile_ms: float = 0.0  # waited for the kernels' background compile (kernel_warmup.py); not in total_ms
+    load_ms: float = 0.0  # loading the compiled kernels into this process before the frame; not in total_ms
 
     @property
     def height(self) -> int:
@@ -87,8 +92,9 @@ class FrameResult:
         """Everything but the image, JSON-ready (report rows, the panel's last-run box)."""
         row = {k: getattr(self, k) for k in (
             "frame", "width", "height", "triangles", "objects", "lights", "extract_ms", "build_ms",
-            "trace_ms", "total_ms", "rays", "rays_saved", "mrays_per_s", "samples", "first_run", "objects_rebuilt",
-            "objects_reused", "image_reused", "pixels_reused", "rays_reused", "compile_helper")}
+            "trace_ms", "total_ms", "rays", "rays_saved", "mrays_per_s", "samples", "first_run", "mode", "objects_rebuilt",
+            "objects_reused", "image_reused", "pixels_reused", "rays_reused", "compile_helper", "compile_ms",
+            "load_ms")}
         # Not the tree stats' build_ms (the sum over trees, kept ones included): the row's is the frame's.
         row["tree"] = {k: _plain(v) for k, v in self.tree_stats.items() if k != "build_ms"}
         row["warnings"] = list(self.warnings)
@@ -129,6 +135,9 @@ class FrameJob:
         self._reused_image = None
         self._finished = None  # (image, lazy tree's stats or None, PixelState) once the worker made the image
         self._pending: BackgroundCall | None = None  # the kernel call running on the worker
+        self._kernel_ms = {"compile_ms": 0.0, "load_ms": 0.0}  # timed apart from the frame (_await_kernels)
+        self._kernels_checked = False
+        self.mode = None  # the mode this frame renders in: the setting, "auto" resolved (_resolved_mode)
 
     # -- state the operators show ------------------------------------------
 
@@ -151,6 +160,9 @@ class FrameJob:
     def status(self) -> str:
         if background.abandoned_work_running(besides=self._pending):
             return WAITING_STATUS  # a cancelled run's build or denoiser compile holds the kernel lock
+        warmup = kernel_warmup.status()
+        if not _kernels_ready and warmup.state == kernel_warmup.COMPILING:
+            return warmup.text + WARMUP_WAIT_NOTE
         if not _kernels_ready:
             return LOADING_STATUS if corelib.cache_is_warm() else COMPILING_STATUS
         if self.renderer is None:
@@ -171,6 +183,8 @@ class FrameJob:
             pending, self._pending = self._pending, None
             pending.result()  # the worker's exception, if any, is raised here
         elif self.renderer is None and self._reused_image is None:
+            if self._await_kernels():
+                return False
             if not background.wait_for_work(POLL_SECONDS):
                 return False  # a cancelled run's kernel call still runs: read the scene after it
             if callable(self.depsgraph):
@@ -181,6 +195,37 @@ class FrameJob:
         elif self.renderer is not None and not self.done:
             self.finish()
         return self.done
+
+    def _await_kernels(self) -> bool:
+        """A process's first frame: wait (POLL_SECONDS at a time) for the kernels' background compile,
+        starting it if nothing did (kernel_warmup), then load them on the worker; both are timed apart
+        from the frame (compile_ms, load_ms), so its figures are a warm frame's. True while waiting.
+        Without a warm-up (switched off, or it failed) the frame compiles what it needs as before."""
+        if _kernels_ready or self._kernels_checked:
+            return False
+        t0 = time.perf_counter()
+        warmup = kernel_warmup.start()
+        if warmup.state == kernel_warmup.COMPILING:
+            warmup = kernel_warmup.wait(timeout=POLL_SECONDS)
+            self._kernel_ms["compile_ms"] += _ms_since(t0)
+            if warmup.state == kernel_warmup.COMPILING:
+                return True
+        self._kernels_checked = True
+        if warmup.state != kernel_warmup.READY:
+            return False
+        t1 = time.perf_counter()
+        core = corelib.load_core()  # on this thread, as prepare() imports it
+        self._kernel_ms["load_ms"] += _ms_since(t1)
+        self._pending = BackgroundCall(KERNEL_LOCK, self._load_kernels, core)
+        return True
+
+    def _load_kernels(self, core) -> None:
+        """On the worker: run core's made-up frames, which load every kernel of a default frame."""
+        global _kernels_ready, _reuse_kernels_ready
+        t0 = time.perf_counter()
+        importlib.import_module(core.__name__ + ".jit.first_frame").compile_first_frames()
+        self._kernel_ms["load_ms"] += _ms_since(t0)
+        self._first_run, _kernels_ready, _reuse_kernels_ready = False, True, True
 
     def prepare(self) -> None:
         """Camera, lights and meshes from the scene (here: bpy is not thread-safe); then the last image
@@ -197,7 +242,7 @@ class FrameJob:
         self._image_key = read.image_key
         self._timings["other_ms"] += _ms_since(t0) - self._timings["extract_ms"]
         self._info = dict(triangles=extracted.triangle_count, objects=extracted.object_count,
-                          lights=len(inputs.lights), frame=extracted.frame,
+                          lights=len(inputs.lights), frame=extracted.frame, mode=self.mode,
                           warnings=inputs.warnings + extracted.warnings + read.unapplied)
         if reuse and self._state.image is not None and self._state.image_key == self._image_key:
             self._reused_image = self._state.image
@@ -216,10 +261,11 @@ class FrameJob:
         inputs = self._scene_inputs()
         extracted = self._extract()
         core = corelib.load_core()
+        self.mode = _resolved_mode(core, self.config.settings.mode, inputs.lights)
         meshes, mesh_of, matrices, visibility = tree_cache.mesh_inputs(core, extracted)
         visibility, unapplied = self._lazy_visibility(core, extracted, visibility)
         # an AO image does not depend on the lights: animated lights must not stop its reuse
-        lights = inputs.lights if self.config.settings.mode != "ao" else []
+        lights = inputs.lights if self.mode != "ao" else []
         key = tree_cache.image_key(meshes, mesh_of, matrices, visibility, inputs.camera.keywords(), lights,
                                    (inputs.width, inputs.height), self.config.as_dict())
         return _SceneRead(inputs, extracted, (meshes, mesh_of, matrices, visibility), unapplied, key)
@@ -238,7 +284,7 @@ class FrameJob:
     def _build_and_start(self, core, instances, placed, origin, reuse, camera, lights, width, height) -> None:
         """On the worker, holding KERNEL_LOCK: the scene, then the renderer. `placed`: the extracted
         instances, in the order of `instances`' rows."""
-        options = self.config.render_options
+        options = self._render_options()
         rays = core.frame_ray_count(width, height, options["mode"], options["samples"], lights)
         # A process's first frame: with an empty kernel cache a helper process compiles the sampling
         # kernel while this one builds and then compiles the camera pass (core/jit/parallel_compile.py); the
@@ -262,7 +308,7 @@ class FrameJob:
         inputs = scene_input.read_scene(self.scene, self.depsgraph, width, height, lights=uses_lights)
         if not uses_lights:
             return inputs
-        if not inputs.lights:
+        if not inputs.lights and self.config.settings.mode != "auto":  # "auto" renders AO then
             raise PreviewError(f"mode '{self.config.settings.mode}' needs a light, but scene '{self.scene.name}' "
                                + ("has no light the preview can see: " + "; ".join(inputs.hidden_lights)
                                   if inputs.hidden_lights else "has no render-visible light: add one or use mode 'ao'"))
@@ -278,7 +324,7 @@ class FrameJob:
             camera = core.Camera(**inputs.camera.keywords()).translated(offset)
         except ValueError as error:  # core's own checks, e.g. clip start >= clip end
             raise PreviewError(f"the scene's camera cannot be used: {error}") from None
-        if self.config.settings.mode == "ao":
+        if self.mode == "ao":
             return camera, []
         lights, left_out, unapplied = [], [], []
         for light in inputs.lights:
@@ -296,6 +342,10 @@ class FrameJob:
             lights = [core.Light.sun((0.0, 0.0, -1.0), color=(0.0, 0.0, 0.0), cast_shadow=False)]
         return camera, lights
 
+    def _render_options(self) -> dict:
+        """The config's render options with this frame's mode ("auto" resolved)."""
+        return dict(self.config.render_options, mode=self.mode)
+
     def _start_tracing(self, core, scene, camera, lights, width, height, previous) -> None:
         """The renderer (its constructor traces the camera rays: trace time), continued from the last
         frame's pixels where their rays cannot reach what changed; the first such frame of a process
@@ -303,7 +353,7 @@ class FrameJob:
         global _reuse_kernels_ready
         t0 = time.perf_counter()
         try:
-            options = core.RenderOptions(lights=lights, **self.config.render_options)
+            options = core.RenderOptions(lights=lights, **self._render_options())
             self.renderer = core.PreviewRender(scene, camera, width, height, options, previous=previous)
         except ValueError as error:  # core's own checks (its MemoryLimitError is one): a message, not a traceback
             raise PreviewError(f"the frame cannot be rendered: {error}") from None
@@ -377,7 +427,7 @@ class FrameJob:
         t = self._timings
         if self._reused_image is not None:
             return FrameResult(image=self._reused_image.copy(), extract_ms=t["extract_ms"], build_ms=0.0, trace_ms=0.0,
-                               total_ms=sum(t.values()), rays=0, rays_saved=0, first_run=False,
+                               total_ms=sum(t.values()), rays=0, rays_saved=0, first_run=False, **self._kernel_ms,
                                pixels_reused=int((self._reused_image[..., 3] > 0).sum()), **self._info)
         image, lazy_stats, pixels = self._finished
         if lazy_stats is not None:
@@ -386,7 +436,7 @@ class FrameJob:
                              total_ms=sum(t.values()), rays=int(self.renderer.rays_traced),
                              rays_saved=int(self.renderer.rays_saved), samples=int(self.renderer.samples_done),
                              first_run=self._first_run, pixels_reused=int(self.renderer.pixels_reused),
-                             rays_reused=int(self.renderer.rays_reused), **self._info)
+                             rays_reused=int(self.renderer.rays_reused), **self._kernel_ms, **self._info)
         self._state.image_key, self._state.image, self._state.pixels = self._image_key, image.copy(), pixels
         self._state.info = dict(samples=result.samples, tree_stats=result.tree_stats,
                                 rays_reused=result.rays + result.rays_reused)
@@ -437,6 +487,20 @@ def run_job(job, cancel=None, progress=None) -> None:
             progress(job.progress, job.status)
         if done:
             return
+
+
+def _resolved_mode(core, mode: str, lights: list) -> str:
+    """`mode`, with "auto" made "ao+shadow" when one of the scene's lights emits (_usable_light) and
+    "ao" otherwise (docs/choices.md#automatic-mode-ao-and-shadows-where-a-light-emits)."""
+    if mode != "auto":
+        return mode
+    for light in lights:
+        try:
+            _usable_light(core, light)
+        except ValueError:
+            continue
+        return "ao+shadow"
+    return "ao"
 
 
 def _usable_light(core, light: scene_input.LightInput):

@@ -35,9 +35,12 @@ class KDPreviewSettings(bpy.types.PropertyGroup):
 
     mode: EnumProperty(
         name="Mode", default=DEFAULTS.mode,
-        items=[("ao", "Ambient Occlusion", "Occlusion within AO Distance"),
-               ("shadow", "Shadows", "Direct light from the scene's lights, with shadows"),
-               ("ao+shadow", "AO + Shadows", "Both, multiplied")], update=_setting_changed)
+        # Numbered: files saved before "auto" keep their mode (an enum is saved as its number).
+        items=[("auto", "Automatic", "AO + Shadows when one of the scene's lights emits, else Ambient Occlusion",
+                "NONE", 3),
+               ("ao", "Ambient Occlusion", "Occlusion within AO Distance", "NONE", 0),
+               ("shadow", "Shadows", "Direct light from the scene's lights, with shadows", "NONE", 1),
+               ("ao+shadow", "AO + Shadows", "Both, multiplied", "NONE", 2)], update=_setting_changed)
     samples: IntProperty(name="Samples", description="Samples per pixel", default=DEFAULTS.samples,
                          min=1, max=MAX_SAMPLES, soft_max=1024, update=_setting_changed)
     ao_distance: FloatProperty(name="AO Distance", description="Length of ambient-occlusion rays",

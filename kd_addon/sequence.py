@@ -8,13 +8,13 @@ from __future__ import annotations
 
 import json
 import os
-import platform
 import re
 import tempfile
 import time
 from pathlib import Path
 
 from . import background, output
+from .run_record import run_record
 from .config import RenderConfig
 from .errors import Cancelled, PreviewError
 from .pipeline import FrameJob, FrameResult
@@ -22,7 +22,9 @@ from .pipeline import FrameJob, FrameResult
 REPORT_NAME = "report.json"
 REPORT_INTERVAL = 1.0  # seconds: how often a running sequence rewrites its report at most
 TOTAL_KEYS = ("triangles", "extract_ms", "build_ms", "trace_ms", "total_ms", "rays", "rays_saved", "rays_reused",
-              "pixels_reused", "objects_rebuilt", "objects_reused")
+              "pixels_reused", "objects_rebuilt", "objects_reused", "compile_ms", "load_ms")
+TIMINGS_NOTE = ("extract, build, trace and total times and Mrays/s leave out the kernels' compile and load "
+                "(compile_ms, load_ms), which a process's first frame waits for")
 
 
 def frame_filename(frame: int, extension: str) -> str:
@@ -119,6 +121,7 @@ class SequenceJob:
         self._made_folders: list[Path] | None = None  # at the first tick: once the job holds the claim
         self._start_frame = scene.frame_current
         self._t0 = time.perf_counter()
+        self._started_at = time.time()  # report.json's start time
         self.report_path: Path | None = None
         self._reported = 0  # frames the last report written lists
         self._stopped: dict | None = None  # what stopped an unfinished sequence (close), for its report
@@ -240,7 +243,7 @@ class SequenceJob:
     def _write_report(self) -> None:
         self.totals = summarize(self.results, (time.perf_counter() - self._t0) * 1e3)
         self.report_path = write_report(self.out_dir, self.scene_name(), self.config, self.results, self.files,
-                                        self.totals, len(self.frames), self._stopped)
+                                        self.totals, len(self.frames), self._stopped, started_at=self._started_at)
         self._reported = len(self.results)
 
 
@@ -265,10 +268,12 @@ def summarize(results: list[FrameResult], wall_ms: float) -> dict:
 
 
 def write_report(out_dir: Path, scene_name: str, config: RenderConfig, results: list[FrameResult],
-                 files: list[Path], totals: dict, frames_requested: int, stopped: dict | None = None) -> Path:
-    """Write `report.json` (settings, one row per frame, totals) and return its path. `complete` is
-    False when fewer frames than requested were written (a cancelled or failed sequence, or one still
-    running); `stopped` ({"frame", "reason"}), when given, says where and why it ended."""
+                 files: list[Path], totals: dict, frames_requested: int, stopped: dict | None = None, *,
+                 started_at: float | None = None) -> Path:
+    """Write `report.json` (the run: input file, versions, threads, CPU, start; the settings; one row
+    per frame; totals) and return its path. `complete` is False when fewer frames than requested were
+    written (a cancelled or failed sequence, or one still running); `stopped` ({"frame", "reason"}),
+    when given, says where and why it ended; `started_at`: the run's start, time.time() (default: now)."""
     first = results[0]
     report = {
         "scene": scene_name,
@@ -276,12 +281,11 @@ def write_report(out_dir: Path, scene_name: str, config: RenderConfig, results: 
         **({"stopped": stopped} if stopped is not None else {}),
         "frames_requested": frames_requested,
         "resolution": [first.width, first.height],
-        "settings": config.as_dict(),
-        "build_options": config.build_options,
-        "render_options": config.render_options,
+        "run": run_record(time.time() if started_at is None else started_at, config.settings.threads),
+        "settings": config.report_settings(),
+        "timings": TIMINGS_NOTE,
         "frames": [dict(r.summary(), file=p.name) for r, p in zip(results, files)],
         "totals": totals,
-        "machine": {"python": platform.python_version(), "platform": platform.platform()},
     }
     path = Path(out_dir) / REPORT_NAME
     partial = output.partial_path(path)  # renamed over the report: never half a file

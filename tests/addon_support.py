@@ -84,6 +84,7 @@ def half_plane_scene(*, offset=(0.0, 0.0, 0.0), size=(64, 32)):
     settings = getattr(scene, "kd_preview", None)
     if settings is not None:
         settings.resolution_percentage, settings.samples, settings.ao_distance = 100, 8, 1.0
+        settings.mode = "ao"  # the checks below are AO's (the default, "auto", would add the sun's shadows)
     return scene
 
 

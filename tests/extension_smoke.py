@@ -8,7 +8,8 @@ Prints one JSON line of facts for the test to check; any failed step raises (non
 
     --kernels-from DIR  before the render, copy the kernel files in DIR into the installed core's
                         Numba folders (kernels an earlier run of this script compiled: see
-                        test_addon_extension.py)
+                        test_addon_extension.py); the kernels' background compile, which enabling
+                        starts, is switched off until they are in place (KD_PREVIEW_WARMUP)
     --kernels-to DIR    after the render, copy the installed core's kernel files into DIR, one
                         subfolder per folder of core ("." for core itself, "render", ...)
 """
@@ -35,7 +36,13 @@ def install(zip_path: str) -> dict:
     assert bpy.ops.extensions.package_install_files(
         filepath=zip_path, repo="user_default", enable_on_install=True) == {"FINISHED"}
     assert enabled(), "not enabled after install"
-    return {"numba_after_enable": "numba" in sys.modules, "core_after_enable": MODULE + ".core" in sys.modules}
+    return {"numba_after_enable": "numba" in sys.modules, "core_after_enable": MODULE + ".core" in sys.modules,
+            "warmup_after_enable": warmup().status().state}
+
+
+def warmup():
+    """The installed add-on's kernel_warmup module."""
+    return importlib.import_module(MODULE + ".kd_addon.kernel_warmup")
 
 
 def render_default_scene() -> dict:
@@ -43,7 +50,8 @@ def render_default_scene() -> dict:
     scene = bpy.context.scene
     scene.render.resolution_x, scene.render.resolution_y = 1920, 1080
     settings = scene.kd_preview
-    settings.resolution_percentage, settings.samples, settings.mode = 5, 2, "ao+shadow"
+    settings.resolution_percentage, settings.samples = 5, 2
+    assert settings.mode == "auto"  # the default: ao+shadow, since the scene has a light
     assert bpy.ops.kdpreview.render() == {"FINISHED"}
     image = bpy.data.images["KD Preview"]
     pixels = np.empty(len(image.pixels), np.float32)
@@ -121,12 +129,16 @@ def main(argv: list[str]) -> None:
     parser.add_argument("--kernels-from", type=Path)
     parser.add_argument("--kernels-to", type=Path)
     args = parser.parse_args(argv)
+    if args.kernels_from is not None:
+        os.environ["KD_PREVIEW_WARMUP"] = "0"
     facts = install(args.zip_path)
     kernels = installed_kernel_folders()
     if args.kernels_from is not None:
         load_kernels(args.kernels_from, kernels)
+        del os.environ["KD_PREVIEW_WARMUP"]  # the render starts it: it finds them
     facts["kernel_files_before"] = kernel_files(installed_cache_folder())
     facts.update(render_default_scene())
+    facts["warmup_after_render"] = warmup().status().state
     facts["kernel_files_after"] = kernel_files(installed_cache_folder())
     if args.kernels_to is not None:
         save_kernels(kernels, args.kernels_to)

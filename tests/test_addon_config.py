@@ -19,9 +19,25 @@ def test_defaults_map_to_core_keywords():
     cfg = make_config(SimpleNamespace())
     assert cfg.build_options == {"builder": "binned", "leaf_size": 2, "bins": 32, "max_depth": None, "threads": None,
                                  "lazy": False}
-    assert cfg.render_options == {"mode": "ao", "samples": 16, "ao_distance": 1.0, "error_target": None,
+    assert cfg.render_options == {"mode": "auto", "samples": 16, "ao_distance": 1.0, "error_target": None,
                                   "threads": None, "seed": 0}
     assert cfg.resolution_percentage == 50 and cfg.file_extension == ".png"
+
+
+def test_the_report_writes_automatic_as_auto_and_off_as_null():
+    """report.json's one convention: "auto" for a setting the add-on decides, null for one turned off,
+    the value itself otherwise (the render options' None and the settings' 0 were two conventions)."""
+    defaults = make_config(SimpleNamespace()).report_settings()
+    assert {k: defaults[k] for k in ("mode", "max_depth", "threads", "error_target", "memory_limit_mb")} == {
+        "mode": "auto", "max_depth": "auto", "threads": "auto", "error_target": None, "memory_limit_mb": None}
+    assert {k: v for k, v in defaults.items() if k not in config.AUTOMATIC_WHEN and k not in config.OFF_WHEN} == {
+        k: v for k, v in make_config(SimpleNamespace()).as_dict().items()
+        if k not in config.AUTOMATIC_WHEN and k not in config.OFF_WHEN}
+    chosen = make_config(SimpleNamespace(mode="ao", max_depth=20, threads=2, error_target=0.01,
+                                         memory_limit_mb=512)).report_settings()
+    assert (chosen["mode"], chosen["max_depth"], chosen["threads"], chosen["error_target"],
+            chosen["memory_limit_mb"]) == ("ao", 20, 2, 0.01, 512)
+    assert set(defaults) == set(config.SETTING_NAMES)
 
 
 def test_denoise_is_off_by_default_and_not_a_render_keyword():
@@ -43,7 +59,7 @@ def test_zero_means_automatic_and_values_pass_through():
 
 
 @pytest.mark.parametrize("name, value, words", [
-    ("mode", "normals", "mode must be one of ao, shadow, ao+shadow"),
+    ("mode", "normals", "mode must be one of auto, ao, shadow, ao+shadow"),
     ("builder", "sah", "builder must be one of binned, exact, median"),
     ("samples", 0, "samples must be an integer from 1"),
     ("samples", 2.5, "samples must be an integer"),

@@ -33,13 +33,14 @@ from tests.addon_support import REPO, run_python
 
 from kd_addon import corelib  # noqa: E402
 
-ZIP_NAME = "kd_preview-0.1.0-linux_x64.zip"
+PYTHON = f"{sys.version_info[0]}.{sys.version_info[1]}"
+ZIP_NAME = f"kd_preview-0.1.0-linux_x64-py{sys.version_info[0]}{sys.version_info[1]}.zip"  # this Python's zip
 SMOKE = REPO / "tests" / "extension_smoke.py"
 ZIP_CODE = ("core/", "kd_addon/", "wheels/", "__init__.py", "blender_manifest.toml")  # what decides the kernels
 
 
 def build_zip(tmp_path):
-    proc = run_python([str(REPO / "tools" / "build_extension.py"), "--platforms", "linux-x64",
+    proc = run_python([str(REPO / "tools" / "build_extension.py"), "--platforms", "linux-x64", "--pythons", PYTHON,
                        "--out", str(tmp_path / "dist"), "--stage", str(tmp_path / "stage")])
     assert proc.returncode == 0, proc.stdout + proc.stderr
     return tmp_path / "dist" / ZIP_NAME
@@ -66,6 +67,10 @@ def test_extension_builds_installs_renders_and_uninstalls(tmp_path):
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     facts = json.loads(next(line for line in proc.stdout.splitlines() if line.startswith("FACTS "))[6:])
     assert facts["numba_after_enable"] is False and facts["core_after_enable"] is False
+    assert facts["warmup_after_render"] == "ready" and facts["last_run"]["mode"] == "ao+shadow"  # "auto", a light
+    wheels = sorted("-".join(Path(n).name.split("-")[0:3:2]) for n in names if n.endswith(".whl"))
+    tag = "cp" + PYTHON.replace(".", "")
+    assert wheels == [f"llvmlite-{tag}", f"numba-{tag}"]  # this Python's only
     assert facts["core_module"] == "bl_ext.user_default.kd_preview.core"
     user_folder = user / "extensions" / ".user" / "user_default" / "kd_preview"  # extension_path_user
     # one folder per version of core's sources (Numba does not see a changed callee in another file)
@@ -76,11 +81,14 @@ def test_extension_builds_installs_renders_and_uninstalls(tmp_path):
         assert facts["kernel_files_before"], f"nothing was copied from {kept}"
         assert facts["kernel_files_after"] == facts["kernel_files_before"], (
             f"the installed extension compiled kernels the ones kept in {kept} should have served")
-        assert facts["last_run"].get("compile_helper") is None
+        assert facts["last_run"].get("compile_helper") is None and facts["last_run"]["compile_ms"] == 0
     else:
-        # an empty cache: the rendering kernels compiled in a helper process that imported the installed
-        # core under its extension name beside the build (core/jit/parallel_compile.py), and it succeeded
-        assert facts["kernel_files_before"] == {} and facts["last_run"]["compile_helper"] == "finished"
+        # an empty cache: enabling started the kernels' compile in a process that imported the installed
+        # core under its extension name (kernel_warmup.py, core/jit/first_frame.py); the render waited for
+        # it, then loaded them: the frame compiled nothing itself (no helper of its own)
+        assert facts["kernel_files_before"] == {} and facts["warmup_after_enable"] == "compiling"
+        assert facts["last_run"]["compile_ms"] > 0 and facts["last_run"].get("compile_helper") is None
+        assert facts["last_run"]["first_run"] is False
     assert facts["enabled_after_uninstall"] is False and facts["files_after_uninstall"] is False
     assert facts["scene_prop_after_uninstall"] is False
     if not warm:  # only after a run that passed, and only a set the next run will take as warm

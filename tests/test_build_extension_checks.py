@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import importlib.util
 import sys
+import tomllib
+import zipfile
 from pathlib import Path
 
 import pytest
@@ -105,3 +107,57 @@ def test_a_wheel_appears_in_the_cache_only_whole(tmp_path, monkeypatch):
     assert seen_during_download == [[]]  # nothing under the wheel's name while it was being written
     assert (cache / target.filename).read_bytes() == b"whole wheel"
     assert sorted(p.name for p in cache.iterdir()) == [target.filename]  # the private folder is gone
+
+
+def plan(platforms=None, pythons=None):
+    args = build_extension.parse_args(["--source", str(REPO)] + (["--platforms", platforms] if platforms else [])
+                                      + (["--pythons", pythons] if pythons else []))
+    return build_extension.plan_build(args)
+
+
+def test_one_zip_per_platform_and_python():
+    """Each zip carries one Python's numba and llvmlite: Linux 3.11, 3.13 and 3.14, the others 3.11 and 3.13."""
+    assert plan("linux-x64").zips == [("linux-x64", "3.11"), ("linux-x64", "3.13"), ("linux-x64", "3.14")]
+    assert sorted(plan().zips) == sorted([("linux-x64", "3.11"), ("linux-x64", "3.13"), ("linux-x64", "3.14"),
+                                          ("windows-x64", "3.11"), ("windows-x64", "3.13"),
+                                          ("macos-arm64", "3.11"), ("macos-arm64", "3.13")])
+    only = plan("linux-x64,windows-x64", "3.13")
+    assert only.zips == [("linux-x64", "3.13"), ("windows-x64", "3.13")]
+    assert sorted(w.filename.split("-")[0] for w in only.wheels) == ["llvmlite", "llvmlite", "numba", "numba"]
+    assert {w.python_version for w in only.wheels} == {"3.13"}
+
+
+def test_a_python_no_blender_bundles_is_refused():
+    with pytest.raises(build_extension.BuildError, match="no Blender bundles Python 3.12"):
+        plan("linux-x64", "3.12")
+
+
+def test_each_zip_names_the_blender_versions_of_its_python():
+    """4.2 up to (not including) 5.1 bundle 3.11; 5.1 and later 3.13: the ranges meet without a gap."""
+    text = (REPO / "blender_manifest.toml").read_text()
+    py311 = tomllib.loads(build_extension.versions_text(text, "3.11"))
+    py313 = tomllib.loads(build_extension.versions_text(text, "3.13"))
+    assert (py311["blender_version_min"], py311["blender_version_max"]) == ("4.2.0", "5.1.0")
+    assert py313["blender_version_min"] == py311["blender_version_max"] and "blender_version_max" not in py313
+    assert py311["wheels"] == tomllib.loads(text)["wheels"]  # nothing else changes
+
+
+def fake_zip(path, wheels, python, versions=None):
+    text = build_extension.versions_text((REPO / "blender_manifest.toml").read_text(), versions or python)
+    with zipfile.ZipFile(path, "w") as zf:
+        zf.writestr("__init__.py", "")
+        zf.writestr("blender_manifest.toml", text)
+        for name in wheels:
+            zf.writestr(name.lstrip("./"), b"wheel")
+    return path
+
+
+def test_a_zip_with_another_pythons_wheel_or_versions_is_broken(tmp_path):
+    good = [wheel("numba", "cp311"), wheel("llvmlite", "cp311")]
+    build_extension.check_zip(fake_zip(tmp_path / "good.zip", good, "3.11"), "linux-x64", "3.11")  # passes
+    with pytest.raises(build_extension.BuildError, match="another platform or Python: numba-0.68.1-cp313"):
+        build_extension.check_zip(fake_zip(tmp_path / "mixed.zip", good + [wheel("numba", "cp313")], "3.11"),
+                                  "linux-x64", "3.11")
+    with pytest.raises(build_extension.BuildError, match="gives Blender 5.1.0 to None, not 4.2.0 to 5.1.0"):
+        build_extension.check_zip(fake_zip(tmp_path / "versions.zip", good, "3.11", versions="3.13"),
+                                  "linux-x64", "3.11")

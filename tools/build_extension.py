@@ -1,18 +1,23 @@
 #!/usr/bin/env python3
-"""Build the KD Preview extension zips, one per platform, with numba and llvmlite bundled.
+"""Build the KD Preview extension zips, one per platform and Blender Python, with numba and llvmlite
+bundled for that Python only (a zip with every Python's wheels was three times as large).
 
 Steps:
   1. download the numba and llvmlite wheels that ``blender_manifest.toml`` lists
-     (only for the chosen platforms) into a cache folder, skipping files already there;
-  2. copy the repository (minus what the manifest's ``[build] paths_exclude_pattern`` leaves out)
-     into a staging folder and put the wheels under its ``wheels/``, so no large file lands in the repo;
-  3. validate the manifest strictly with Blender's own ``blender_ext.py validate`` (shipped in the
-     ``bpy`` module) plus our own checks (every wheel exists, each platform has numba AND llvmlite);
-  4. build the per-platform zips with ``blender_ext.py build --split-platforms``, exactly what
-     ``blender --command extension build --split-platforms`` runs;
-  5. open every zip and fail unless it holds its platform's numba and llvmlite wheels.
+     (only for the chosen platforms and Pythons) into a cache folder, skipping files already there;
+  2. for each platform and Python: copy the repository (minus what the manifest's ``[build]
+     paths_exclude_pattern`` leaves out) into a staging folder, put that Python's wheels under its
+     ``wheels/`` and limit its manifest to them, with the Blender versions that bundle that Python
+     (``blender_version_min`` / ``blender_version_max``, BLENDER_RANGES), so Blender refuses a zip
+     made for another Python;
+  3. validate the staged manifest strictly with Blender's own ``blender_ext.py validate`` (shipped in
+     the ``bpy`` module) plus our own checks (every wheel exists, each platform has numba AND llvmlite
+     for every official Blender Python);
+  4. build the zip with ``blender_ext.py build``, what ``blender --command extension build`` runs;
+  5. open every zip and fail unless it holds exactly its platform's and Python's numba and llvmlite
+     wheels and its manifest's Blender versions.
 
-Usage: python tools/build_extension.py [--platforms linux-x64,windows-x64] [--out dist]
+Usage: python tools/build_extension.py [--platforms linux-x64,windows-x64] [--pythons 3.11] [--out dist]
 Needs only the standard library, pip, and the ``bpy`` module installed (for blender_ext.py).
 """
 
@@ -38,6 +43,10 @@ REQUIRED_DISTS = ("numba", "llvmlite")
 # needs wheels for both; a platform may carry more (linux-x64: 3.14, which Linux distributions' own
 # Blender packages use, Debian's 5.2.2 among them).
 BLENDER_PYTHONS = ("3.11", "3.13")
+# The Blender versions of each Python's zip: [min, max), as the manifest's fields mean them (max: the
+# first version not supported; None: no upper bound). 3.14 is Linux distributions' Python for Blender
+# 5.1 and later (Debian's 5.2.2); its zip overlaps the 3.13 one and is told apart by its name.
+BLENDER_RANGES = {"3.11": ("4.2.0", "5.1.0"), "3.13": ("5.1.0", None), "3.14": ("5.1.0", None)}
 FORBIDDEN_DISTS = ("numpy",)  # Blender ships its own numpy; bundling one breaks bpy.
 REQUIRED_ZIP_FILES = ("__init__.py", MANIFEST)
 OS_PREFIXES = (("manylinux", "linux"), ("musllinux", "linux"), ("linux", "linux"),
@@ -206,8 +215,9 @@ def copy_tree(source: Path, stage: Path, matcher, skip: set[Path]) -> None:
                 shutil.copy2(os.path.join(dirpath, name), target)
 
 
-def subset_manifest_text(text: str, platforms: list[str], wheels: list[Wheel]) -> str:
-    """Rewrite the top-level `platforms` and `wheels` arrays to list only the chosen ones."""
+def subset_manifest_text(text: str, platforms: list[str], wheels: list[Wheel], python: str | None = None) -> str:
+    """Rewrite the top-level `platforms` and `wheels` arrays to list only the chosen ones; with `python`,
+    set `blender_version_min` (and `blender_version_max`, when bounded) to its BLENDER_RANGES entry."""
     def replace(key: str, values: list[str], text: str) -> str:
         body = ", ".join('"{}"'.format(v) for v in values)
         new, count = re.subn(r"(?ms)^{}\s*=\s*\[.*?\]".format(key), "{} = [{}]".format(key, body), text, count=1)
@@ -215,12 +225,25 @@ def subset_manifest_text(text: str, platforms: list[str], wheels: list[Wheel]) -
             raise BuildError("could not find the `{} = [...]` array in the manifest".format(key))
         return new
     text = replace("platforms", platforms, text)
-    return replace("wheels", [w.path for w in wheels], text)
+    text = replace("wheels", [w.path for w in wheels], text)
+    return text if python is None else versions_text(text, python)
+
+
+def versions_text(text: str, python: str) -> str:
+    """The manifest text with the Blender versions whose bundled Python is `python`."""
+    low, high = BLENDER_RANGES[python]
+    fields = 'blender_version_min = "{}"'.format(low) + ('\nblender_version_max = "{}"'.format(high) if high else "")
+    text = re.sub(r"(?m)^blender_version_max\s*=.*\n?", "", text)
+    new, count = re.subn(r"(?m)^blender_version_min\s*=.*$", fields, text, count=1)
+    if count != 1:
+        raise BuildError("could not find `blender_version_min = ...` in the manifest")
+    return new
 
 
 def stage_source(source: Path, stage: Path, cache: Path, platforms: list[str],
-                 wheels: list[Wheel], matcher, skip: set[Path]) -> None:
-    """Fill stage with the repo files, the chosen wheels and a manifest limited to the chosen platforms."""
+                 wheels: list[Wheel], matcher, skip: set[Path], python: str | None = None) -> None:
+    """Fill stage with the repo files, the chosen wheels and a manifest limited to the chosen platforms
+    (and, with `python`, to the Blender versions that bundle it)."""
     if stage.exists():
         shutil.rmtree(stage)
     stage.mkdir(parents=True)
@@ -230,7 +253,7 @@ def stage_source(source: Path, stage: Path, cache: Path, platforms: list[str],
         target.parent.mkdir(parents=True, exist_ok=True)
         shutil.copy2(cache / wheel.filename, target)
     text = (source / MANIFEST).read_text(encoding="utf-8")
-    (stage / MANIFEST).write_text(subset_manifest_text(text, platforms, wheels), encoding="utf-8")
+    (stage / MANIFEST).write_text(subset_manifest_text(text, platforms, wheels, python), encoding="utf-8")
     staged = load_manifest(stage / MANIFEST)
     if staged.get("platforms") != platforms or staged.get("wheels") != [w.path for w in wheels]:
         raise BuildError("the staged manifest's platforms/wheels came out wrong: {} {}".format(
@@ -290,64 +313,96 @@ def check_staged_files(stage: Path, wheels: list[Wheel]) -> None:
 # -----------------------------------------------------------------------------
 # Steps 4 and 5: build, then check each zip.
 
-def zip_name(manifest: dict, platform: str) -> str:
-    """The file name `build --split-platforms` gives a platform's zip."""
-    return "{}-{}-{}.zip".format(manifest["id"], manifest["version"], platform.replace("-", "_"))
+def zip_name(manifest: dict, platform: str, python: str) -> str:
+    """A zip's file name: the name `build --split-platforms` gives a platform's zip, with its Python
+    ("kd_preview-0.1.0-linux_x64-py311.zip")."""
+    return "{}-{}-{}-py{}.zip".format(manifest["id"], manifest["version"], platform.replace("-", "_"),
+                                      python.replace(".", ""))
 
 
-def check_zip(path: Path, platform: str) -> None:
-    """Fail unless the zip holds the add-on files and exactly its platform's numba and llvmlite wheels,
-    one of each for each Python version."""
+def check_zip(path: Path, platform: str, python: str) -> None:
+    """Fail unless the zip holds the add-on files, exactly one numba and one llvmlite wheel, both for
+    its platform and Python, and a manifest with that Python's Blender versions."""
     if not path.is_file():
         raise BuildError("expected zip was not built: {}".format(path))
     with zipfile.ZipFile(path) as zf:
         names = zf.namelist()
+        manifest = tomllib.loads(zf.read(MANIFEST).decode("utf-8")) if MANIFEST in names else {}
     missing = [f for f in REQUIRED_ZIP_FILES if f not in names]
-    wheel_names = [os.path.basename(n) for n in names if n.endswith(".whl")]
-    foreign = [w for w in wheel_names if platform not in parse_wheel(w).platforms | {"any"}]
-    errors = ["missing {}".format(f) for f in missing] + platform_wheel_errors(platform, wheel_names)
-    errors += ["holds a wheel for another platform: {}".format(w) for w in foreign]
+    wheels = [parse_wheel(os.path.basename(n)) for n in names if n.endswith(".whl")]
+    errors = ["missing {}".format(f) for f in missing]
+    errors += ["holds a wheel for another platform or Python: {}".format(w.filename) for w in wheels
+               if platform not in w.platforms | {"any"} or w.python_version != python]
+    for dist in REQUIRED_DISTS:
+        found = [w.filename for w in wheels if w.dist == dist]
+        if len(found) != 1:
+            errors.append("needs exactly one {} wheel, found {}".format(dist, found or "none"))
+    low, high = BLENDER_RANGES[python]
+    if (manifest.get("blender_version_min"), manifest.get("blender_version_max")) != (low, high):
+        errors.append("its manifest gives Blender {} to {}, not {} to {} (Python {})".format(
+            manifest.get("blender_version_min"), manifest.get("blender_version_max"), low, high, python))
     if errors:
         raise BuildError("{} is broken:\n  {}".format(path.name, "\n  ".join(errors)))
 
 
-def stage_and_validate(args: argparse.Namespace, blender_ext: Path, tags: Path) -> tuple[dict, list[str], Path]:
-    """Steps 1 to 3: check the manifest, fetch the wheels, stage; return (manifest, platforms, stage)."""
-    source, cache = Path(args.source).resolve(), Path(args.cache).resolve()
+@dataclass(frozen=True)
+class Plan:
+    """What one build makes: the manifest, the zips' (platform, Python) pairs and their wheels."""
+
+    manifest: dict
+    zips: list[tuple[str, str]]
+    wheels: list[Wheel]
+
+
+def plan_build(args: argparse.Namespace) -> Plan:
+    """Check the manifest and pick the (platform, Python) zips to build (--platforms, --pythons)."""
+    source = Path(args.source).resolve()
     if not (source / MANIFEST).is_file():
         raise BuildError("no {} in {}".format(MANIFEST, source))
     manifest = load_manifest(source / MANIFEST)
     platforms = parse_platforms(args.platforms, manifest)
     wheels = wheels_for_platforms(check_manifest(manifest, platforms), platforms)
-    fetch_wheels(wheels, cache)
-    patterns = manifest.get("build", {}).get("paths_exclude_pattern") or DEFAULT_EXCLUDES
-    matcher = load_path_matcher(blender_ext, patterns)
-    stage = Path(args.stage).resolve() / manifest["id"]
-    stage_source(source, stage, cache, platforms, wheels, matcher, skip={cache, Path(args.out).resolve()})
+    wanted = [p.strip() for p in (args.pythons or "").split(",") if p.strip()]
+    unknown = [p for p in wanted if p not in BLENDER_RANGES]
+    if unknown:
+        raise BuildError("--pythons: no Blender bundles Python {} (known: {})".format(
+            ", ".join(unknown), ", ".join(BLENDER_RANGES)))
+    zips = [(platform, python) for platform in platforms
+            for python in python_versions([w for w in wheels if platform in w.platforms])
+            if not wanted or python in wanted]
+    if not zips:
+        raise BuildError("no zip to build: no wheels for Python {} on {}".format(", ".join(wanted), ", ".join(platforms)))
+    return Plan(manifest, zips, [w for w in wheels if any(w.python_version == py and pl in w.platforms
+                                                              for pl, py in zips)])
+
+
+def build_zip(args: argparse.Namespace, plan: Plan, platform: str, python: str, blender_ext: Path,
+              tags: Path) -> Path:
+    """Steps 2 to 5 for one platform and Python: stage, validate, build, check; return the zip."""
+    source, cache, out = Path(args.source).resolve(), Path(args.cache).resolve(), Path(args.out).resolve()
+    wheels = [w for w in plan.wheels if platform in w.platforms and w.python_version == python]
+    patterns = plan.manifest.get("build", {}).get("paths_exclude_pattern") or DEFAULT_EXCLUDES
+    stage = Path(args.stage).resolve() / plan.manifest["id"]
+    stage_source(source, stage, cache, [platform], wheels, load_path_matcher(blender_ext, patterns),
+                 skip={cache, out}, python=python)
     check_staged_files(stage, wheels)
-    print(run_blender_ext(blender_ext, ["validate", "--valid-tags", str(tags), str(stage)]))
-    return manifest, platforms, stage
-
-
-def build_zips(manifest: dict, platforms: list[str], stage: Path, out: Path,
-               blender_ext: Path, tags: Path) -> list[Path]:
-    """Steps 4 and 5: build one zip per platform into out, then check and validate each one."""
+    run_blender_ext(blender_ext, ["validate", "--valid-tags", str(tags), str(stage)])
     out.mkdir(parents=True, exist_ok=True)  # blender_ext.py does not create it.
-    run_blender_ext(blender_ext, ["build", "--source-dir", str(stage), "--output-dir", str(out),
-                                  "--split-platforms", "--valid-tags", str(tags)])
-    zips = [out / zip_name(manifest, p) for p in platforms]
-    for path, platform in zip(zips, platforms):
-        check_zip(path, platform)
-        run_blender_ext(blender_ext, ["validate", "--valid-tags", str(tags), str(path)])
-    return zips
+    path = out / zip_name(plan.manifest, platform, python)
+    run_blender_ext(blender_ext, ["build", "--source-dir", str(stage), "--output-filepath", str(path),
+                                  "--valid-tags", str(tags)])
+    check_zip(path, platform, python)
+    run_blender_ext(blender_ext, ["validate", "--valid-tags", str(tags), str(path)])
+    return path
 
 
 def build(args: argparse.Namespace) -> list[Path]:
     """Run all the steps; return the built zips."""
     blender_ext = find_blender_ext()
     tags = find_valid_tags(blender_ext)
-    manifest, platforms, stage = stage_and_validate(args, blender_ext, tags)
-    return build_zips(manifest, platforms, stage, Path(args.out).resolve(), blender_ext, tags)
+    plan = plan_build(args)
+    fetch_wheels(plan.wheels, Path(args.cache).resolve())
+    return [build_zip(args, plan, platform, python, blender_ext, tags) for platform, python in plan.zips]
 
 
 def parse_platforms(text: str | None, manifest: dict) -> list[str]:
@@ -363,6 +418,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     """Command-line options."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--platforms", help="comma-separated subset, e.g. linux-x64 (default: all in the manifest)")
+    parser.add_argument("--pythons", help="comma-separated Pythons, e.g. 3.11 (default: every one with wheels)")
     parser.add_argument("--out", default=str(REPO_ROOT / "dist"), help="output folder (default: dist/)")
     parser.add_argument("--cache", default=str(REPO_ROOT / "build" / "wheels_cache"),
                         help="wheel download cache (default: build/wheels_cache/)")
@@ -381,7 +437,12 @@ def main(argv: list[str] | None = None) -> int:
         print("build_extension: ERROR: {}".format(ex), file=sys.stderr)
         return 1
     for path in zips:
-        print("built {} ({:.1f} MiB)".format(path, path.stat().st_size / 2**20))
+        with zipfile.ZipFile(path) as zf:
+            manifest = tomllib.loads(zf.read(MANIFEST).decode("utf-8"))
+        versions = "Blender {} to {}".format(manifest["blender_version_min"],
+                                             "before " + manifest["blender_version_max"]
+                                             if "blender_version_max" in manifest else "any later")
+        print("built {} ({:.1f} MiB; {})".format(path, path.stat().st_size / 2**20, versions))
     return 0
 
 

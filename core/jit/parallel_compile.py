@@ -11,6 +11,7 @@ import subprocess
 import sys
 import tempfile
 from contextlib import contextmanager
+from pathlib import Path
 
 import numpy as np
 
@@ -174,26 +175,5 @@ class RenderingKernelsHelper:
         return f"failed (exit code {code}" + (f": {lines[-1]})" if lines else ")")
 
 
-# The helper's program (argv: core's module name, its folder, "1" for the denoiser): stub core's parent
-# packages, then compile; on POSIX a thread ends it once its parent is gone (getppid changes).
-_HELPER_CODE = """
-import importlib, os, sys, threading, time, types
-from pathlib import Path
-
-def _end_when_orphaned(parent_pid):
-    while os.getppid() == parent_pid:
-        time.sleep(0.5)
-    os._exit(1)
-
-if os.name != "nt":  # a parent that ended without stopping the helper (os._exit after Ctrl-C, a crash)
-    parent_pid = int(os.environ.get("KD_PREVIEW_HELPER_PARENT", os.getppid()))
-    threading.Thread(target=_end_when_orphaned, args=(parent_pid,), daemon=True).start()
-name, parent = sys.argv[1], Path(sys.argv[2]).parent
-parts = name.split(".")
-for depth in range(len(parts) - 1, 0, -1):
-    stub = types.ModuleType(".".join(parts[:depth]))
-    stub.__path__ = [str(parent)]
-    sys.modules.setdefault(stub.__name__, stub)
-    parent = parent.parent
-importlib.import_module(name + ".jit.parallel_compile").compile_rendering_kernels(sys.argv[3] == "1")
-"""
+# The helper's program (argv: core's module name, its folder, "1" for the denoiser): helper_program.py.
+_HELPER_CODE = (Path(__file__).with_name("helper_program.py")).read_text(encoding="utf-8")

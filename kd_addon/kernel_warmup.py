@@ -1,0 +1,158 @@
+"""The kernels' first compile, started in the background when the add-on is enabled.
+
+A first render on a machine compiles Numba kernels for about a minute. `start()` (register() calls it)
+begins that at once in a separate process, which runs a made-up first and second frame
+(core/jit/first_frame.py, with its own helper process for the rendering kernels: the same two-core
+split as a first render, docs/choices.md#the-first-renders-compile-on-two-cores) into the add-on's
+Numba cache; a render then waits for it and only loads the kernels. A process, not a thread: the
+compile is Python code, and Python running beside Blender's depsgraph evaluation crashed the bpy
+module (docs/choices.md#the-scene-is-read-only-between-kernel-calls); it also leaves Blender's UI
+its own interpreter lock. Nothing here imports numba or core, so registering stays instant.
+
+The process ends when Blender does (it watches its parent; atexit stops it too); Numba writes each
+cache file under a temporary name and renames it, so an interrupted compile leaves no broken kernel.
+Disabling the add-on lets a running compile finish: it only fills the cache. KD_PREVIEW_WARMUP=0
+turns the warm-up off (then a first render compiles as before: pipeline.FrameJob).
+
+API for the UI and a render engine: start(), status() -> WarmupStatus (state, elapsed seconds,
+message; `.text` is the line to show), wait(cancel=None, timeout=None).
+"""
+
+from __future__ import annotations
+
+import atexit
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+
+from . import corelib
+
+NOT_STARTED, COMPILING, READY, FAILED = "not started", "compiling", "ready", "failed"
+SWITCH = "KD_PREVIEW_WARMUP"  # "0": no background compile
+TASK = "jit.first_frame:compile_first_frames"
+POLL_SECONDS = 0.05
+
+
+@dataclass(frozen=True)
+class WarmupStatus:
+    """state: NOT_STARTED, COMPILING, READY or FAILED; elapsed: seconds since the compile started (its
+    length once it ended; 0 when the cache was already warm); message: why it failed."""
+
+    state: str
+    elapsed: float = 0.0
+    message: str = ""
+
+    @property
+    def text(self) -> str:
+        """What the panel, the status bar and a render's stats line show ("" when nothing to say)."""
+        if self.state == COMPILING:
+            return f"compiling kernels (first use) {self.elapsed:.0f}s"
+        if self.state == FAILED:
+            return f"kernel compile failed: {self.message}"
+        return ""
+
+
+class _Warmup:
+    """The one warm-up of this process (module state: it outlives a disable and re-enable)."""
+
+    def __init__(self):
+        self.process: subprocess.Popen | None = None
+        self.errors = None  # the process's stderr, for the failure message
+        self.started_at = 0.0
+        self.ended_at: float | None = None
+        self.state, self.message = NOT_STARTED, ""
+
+    def observe(self) -> WarmupStatus:
+        if self.state == COMPILING:
+            code = self.process.poll()
+            if code is not None:
+                self.ended_at = time.perf_counter()
+                self.state, self.message = (READY, "") if code == 0 else (FAILED, _failure(code, self.errors))
+        end = time.perf_counter() if self.ended_at is None else self.ended_at
+        return WarmupStatus(self.state, end - self.started_at if self.started_at else 0.0, self.message)
+
+
+_warmup = _Warmup()
+
+
+def status() -> WarmupStatus:
+    """Where the warm-up stands now (cheap: polls the process, never blocks)."""
+    return _warmup.observe()
+
+
+def start() -> WarmupStatus:
+    """Begin compiling the kernels in the background unless they are cached, a compile already runs or
+    ran, or KD_PREVIEW_WARMUP is "0"; returns status(). Never raises: a warm-up that cannot start is
+    FAILED, and a render then compiles in its own process as it would without one."""
+    if _warmup.state in (COMPILING, READY) or os.environ.get(SWITCH, "1") == "0":
+        return status()
+    try:
+        if corelib.cache_is_warm():
+            _warmup.state, _warmup.message = READY, ""
+            return status()
+        _warmup.errors = tempfile.TemporaryFile()
+        _warmup.process = _spawn(_warmup.errors)
+    except (OSError, ValueError, subprocess.SubprocessError) as error:
+        _warmup.state, _warmup.message = FAILED, f"could not start the compile process: {error}"
+        return status()
+    _warmup.started_at, _warmup.ended_at, _warmup.state = time.perf_counter(), None, COMPILING
+    return status()
+
+
+def _spawn(errors) -> subprocess.Popen:
+    """The compile process: core/jit/helper_program.py running TASK, writing where this process's
+    kernels will be read (corelib.numba_cache_dir), with this process's module path (Blender's
+    extension site-packages hold the bundled numba)."""
+    cache = corelib.numba_cache_dir()
+    cache.mkdir(parents=True, exist_ok=True)
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), KD_PREVIEW_HELPER_PARENT=str(os.getpid()),
+               PYTHONPATH=os.pathsep.join(p for p in sys.path if p and os.path.isdir(p)))
+    program = (corelib.CORE_FOLDER / "jit" / "helper_program.py").read_text(encoding="utf-8")
+    return subprocess.Popen([sys.executable, "-c", program, corelib.core_module_name(), str(corelib.CORE_FOLDER),
+                             "0", TASK], env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                            stderr=errors, creationflags=getattr(subprocess, "CREATE_NO_WINDOW", 0))
+
+
+def _failure(code: int, errors) -> str:
+    """The failed process's last line of stderr, with the fix when numba is missing (a zip built for
+    another Blender's Python: tools/build_extension.py builds one a Python)."""
+    errors.seek(0)
+    lines = errors.read().decode(errors="replace").strip().splitlines()
+    last = lines[-1] if lines else f"exit code {code}"
+    if "No module named 'numba'" in last or "No module named 'llvmlite'" in last:
+        python = f"{sys.version_info[0]}.{sys.version_info[1]}"
+        return (f"numba is not installed for this Blender's Python {python}: install the KD Preview zip built "
+                f"for Python {python} (README, Install)")
+    return last
+
+
+def wait(cancel=None, timeout: float | None = None) -> WarmupStatus:
+    """Wait while the warm-up compiles: until it ends, `cancel()` returns True (polled every
+    POLL_SECONDS) or `timeout` seconds pass; returns status() then."""
+    deadline = None if timeout is None else time.perf_counter() + timeout
+    while True:
+        now = status()
+        if now.state != COMPILING or (cancel is not None and cancel()):
+            return now
+        if deadline is not None and time.perf_counter() >= deadline:
+            return now
+        try:
+            _warmup.process.wait(POLL_SECONDS if deadline is None else
+                                 max(0.0, min(POLL_SECONDS, deadline - time.perf_counter())))
+        except subprocess.TimeoutExpired:
+            pass
+
+
+def stop() -> None:
+    """End a running compile (this process is exiting); what it saved stays valid."""
+    process = _warmup.process
+    if process is not None and process.poll() is None:
+        process.kill()
+        process.wait()
+        _warmup.state, _warmup.message, _warmup.ended_at = FAILED, "stopped", time.perf_counter()
+
+
+atexit.register(stop)

@@ -1,0 +1,63 @@
+"""The default mode, "auto": AO + Shadows where one of the scene's lights emits, AO where none does
+(docs/choices.md#automatic-mode-ao-and-shadows-where-a-light-emits). Each image is checked against the
+same frame rendered in the mode "auto" should have picked, which is an independent render."""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+import pytest
+
+from kd_addon import pipeline
+from kd_addon.config import DEFAULTS, make_config
+from kd_addon.errors import PreviewError
+from kd_addon.properties import KDPreviewSettings
+from tests.addon_support import half_plane_scene
+
+
+def render(scene, mode):
+    scene.kd_preview.mode = mode
+    return pipeline.render_frame(scene, bpy.context.evaluated_depsgraph_get(), make_config(scene.kd_preview))
+
+
+def test_the_default_mode_is_auto():
+    assert DEFAULTS.mode == "auto" and KDPreviewSettings.bl_rna.properties["mode"].default == "auto"
+
+
+def test_files_saved_before_auto_keep_their_mode():
+    """An enum is saved as its number: the modes a file could hold before "auto" keep theirs."""
+    items = KDPreviewSettings.bl_rna.properties["mode"].enum_items
+    assert {item.identifier: item.value for item in items} == {"auto": 3, "ao": 0, "shadow": 1, "ao+shadow": 2}
+
+
+def test_auto_renders_ao_and_shadows_when_a_light_emits(addon):
+    scene = half_plane_scene()
+    assert scene.kd_preview.bl_rna.properties["mode"].default == "auto"
+    auto, chosen = render(scene, "auto"), render(scene, "ao+shadow")
+    assert auto.mode == "ao+shadow" and chosen.mode == "ao+shadow"
+    np.testing.assert_array_equal(auto.image, chosen.image)
+    assert not np.array_equal(auto.image, render(scene, "ao").image)  # the sun's shadows are in it
+
+
+@pytest.mark.parametrize("lights", ["none", "dark"])
+def test_auto_renders_ao_when_no_light_emits(addon, lights):
+    """No light at all, or only one that emits nothing (power 0): AO, with no error; the explicit
+    shadow modes still say what is missing."""
+    scene = half_plane_scene()
+    sun = bpy.data.objects["Sun"]
+    if lights == "none":
+        bpy.data.objects.remove(sun)
+    else:
+        sun.data.energy = 0.0
+    auto = render(scene, "auto")
+    assert auto.mode == "ao" and not [w for w in auto.warnings if "light" in w]
+    np.testing.assert_array_equal(auto.image, render(scene, "ao").image)
+    if lights == "none":
+        with pytest.raises(PreviewError, match="mode 'ao\\+shadow' needs a light"):
+            render(scene, "ao+shadow")
+
+
+def test_ao_stays_a_choice(addon):
+    scene = half_plane_scene()
+    result = render(scene, "ao")
+    assert result.mode == "ao" and result.summary()["mode"] == "ao"
