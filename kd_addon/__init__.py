@@ -2,8 +2,8 @@
 
 Only registration lives here; the logic lives in the modules beside it.
 Nothing imported here touches core or numba (corelib imports them on the first
-render), so enabling the add-on is instant; it starts the kernels' first compile in a separate
-process (kernel_warmup.py), shown in the status bar and the panel until it is done.
+render), so enabling the add-on is instant; with Blender's UI it starts the kernels' first compile in
+a separate process (kernel_warmup.py), shown in the status bar and the panel until it is done.
 """
 
 import atexit
@@ -30,12 +30,20 @@ def register():
     global _registered
     unregister()  # nothing when not registered
     _registered = True  # before the modules: unregister() then undoes a registration that failed halfway
-    kernel_warmup.start()  # first: the display's timer runs only while a compile does
+    if compiles_at_enable():
+        kernel_warmup.start()  # before the modules: the display's timer runs only while a compile does
     for module in MODULES:
         module.register()
     if not bpy.app.binary_path:  # the bpy module (Blender itself unregisters at quit)
         atexit.unregister(_unregister_at_exit)  # once, however often the add-on is registered
         atexit.register(_unregister_at_exit)
+
+
+def compiles_at_enable() -> bool:
+    """Whether enabling starts the kernels' compile: with Blender's UI only. A background run (`blender
+    -b`, the bpy module) may never render a preview, and a batch job's CPU is not taken for it; its first
+    preview render starts the compile itself and waits for it (pipeline.FrameJob)."""
+    return not bpy.app.background
 
 
 def unregister():

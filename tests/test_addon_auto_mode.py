@@ -11,7 +11,6 @@ import pytest
 from kd_addon import pipeline
 from kd_addon.config import DEFAULTS, make_config
 from kd_addon.errors import PreviewError
-from kd_addon.properties import KDPreviewSettings
 from tests.addon_support import half_plane_scene
 
 
@@ -20,19 +19,18 @@ def render(scene, mode):
     return pipeline.render_frame(scene, bpy.context.evaluated_depsgraph_get(), make_config(scene.kd_preview))
 
 
-def test_the_default_mode_is_auto():
-    assert DEFAULTS.mode == "auto" and KDPreviewSettings.bl_rna.properties["mode"].default == "auto"
+def test_the_default_mode_is_auto(addon):
+    assert DEFAULTS.mode == "auto" and bpy.context.scene.kd_preview.mode == "auto"
 
 
-def test_files_saved_before_auto_keep_their_mode():
+def test_files_saved_before_auto_keep_their_mode(addon):
     """An enum is saved as its number: the modes a file could hold before "auto" keep theirs."""
-    items = KDPreviewSettings.bl_rna.properties["mode"].enum_items
+    items = bpy.context.scene.kd_preview.bl_rna.properties["mode"].enum_items
     assert {item.identifier: item.value for item in items} == {"auto": 3, "ao": 0, "shadow": 1, "ao+shadow": 2}
 
 
 def test_auto_renders_ao_and_shadows_when_a_light_emits(addon):
     scene = half_plane_scene()
-    assert scene.kd_preview.bl_rna.properties["mode"].default == "auto"
     auto, chosen = render(scene, "auto"), render(scene, "ao+shadow")
     assert auto.mode == "ao+shadow" and chosen.mode == "ao+shadow"
     np.testing.assert_array_equal(auto.image, chosen.image)

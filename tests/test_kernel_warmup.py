@@ -112,10 +112,23 @@ def test_the_compile_process_runs_core_under_the_add_ons_module_name(warmup, mon
                                               f"{tmp_path / 'cache' / 'core-x'}")
 
 
-def test_registering_starts_it_and_stays_quick(warmup, monkeypatch):
-    """Enabling the add-on starts the compile and does not wait for it (nor import numba's kernels)."""
+def test_registering_in_background_mode_starts_nothing(warmup, monkeypatch):
+    """A background run (`blender -b`, this bpy module) may never render a preview: no compile at enable."""
     import kd_addon
 
+    monkeypatch.setattr(kernel_warmup, "_spawn", lambda errors: pytest.fail("a process was started"))
+    kd_addon.register()
+    try:
+        assert warmup.status().state == warmup.NOT_STARTED
+    finally:
+        kd_addon.unregister()
+
+
+def test_registering_with_the_ui_starts_it_and_stays_quick(warmup, monkeypatch):
+    """With Blender's UI, enabling the add-on starts the compile and does not wait for it."""
+    import kd_addon
+
+    monkeypatch.setattr(kd_addon, "compiles_at_enable", lambda: True)
     fake_compile(monkeypatch, "import time; time.sleep(30)")
     t0 = time.perf_counter()
     kd_addon.register()
