@@ -97,11 +97,11 @@ def test_a_report_that_fails_on_the_last_frame_is_written_when_the_sequence_clos
     real = sequence.write_report
     calls = []
 
-    def flaky(out_dir, scene_name, config, results, *rest):
+    def flaky(out_dir, scene_name, config, results, *rest, **keywords):
         calls.append(len(results))
         if len(calls) <= 2:  # frame 1's report (disk full), then frame 2's (a signal)
             raise (PreviewError("disk full") if len(calls) == 1 else KeyboardInterrupt)
-        return real(out_dir, scene_name, config, results, *rest)
+        return real(out_dir, scene_name, config, results, *rest, **keywords)
 
     monkeypatch.setattr(sequence, "write_report", flaky)
     job = sequence.SequenceJob(scene, make_config(scene.kd_preview), [1, 2], tmp_path / "seq",
