@@ -160,13 +160,24 @@ def test_lazy_build_setting_renders_the_same_image_and_skips_hidden_geometry(add
     assert not eager.tree_stats.get("lazy")
 
 
-def test_first_frame_continuing_another_is_marked_as_a_first_run(addon, monkeypatch):
-    """A process's first frame compiles or loads the tracing kernels, its first continued frame the
-    pixel-reuse ones: both carry first_run (the CLI's "*"), later frames do not."""
+@pytest.mark.parametrize("warmup", ["on", "off"])
+def test_first_frame_continuing_another_is_marked_as_a_first_run(addon, monkeypatch, warmup):
+    """Without the kernels' compile process (KD_PREVIEW_WARMUP=0), a process's first frame compiles or
+    loads the tracing kernels, its first continued frame the pixel-reuse ones: both carry first_run (the
+    CLI's "*"), later frames do not. With it, the first frame loads them all before its own work and
+    reports that apart (load_ms): no frame carries first_run."""
+    from kd_addon import kernel_warmup
+
     scene = animated_scene()
     tree_cache.clear()
     monkeypatch.setattr(pipeline, "_kernels_ready", False)
     monkeypatch.setattr(pipeline, "_reuse_kernels_ready", False)
+    monkeypatch.setattr(kernel_warmup, "_warmup", kernel_warmup._Warmup())
+    monkeypatch.setenv(kernel_warmup.SWITCH, "1" if warmup == "on" else "0")
     frames = [render(scene, f) for f in (1, 2, 3)]
-    assert [r.first_run for r in frames] == [True, True, False]
     assert frames[1].pixels_reused > 0
+    if warmup == "off":
+        assert [r.first_run for r in frames] == [True, True, False] and frames[0].load_ms == 0
+    else:
+        assert [r.first_run for r in frames] == [False, False, False]
+        assert frames[0].load_ms > 0 and frames[1].load_ms == 0 and frames[1].compile_ms == 0
