@@ -19,7 +19,9 @@ renders minutes later).
 
 `--source` takes one or more checkouts (default: this one), e.g. `--source /work/main .` to compare a
 revision before this change with it in the same run: runs alternate between sources, cold then warm
-on one cache folder each time.
+on one cache folder each time (`--cache DIR`: a folder already filled). `--warmup both` alternates KD_PREVIEW_WARMUP=1 and 0 (the kernels loaded
+before the frame and reported apart, or loaded by the frame itself as before), and `--warm-only` skips
+the cold runs (one cold run fills the cache first, unmeasured).
 """
 import argparse
 import json
@@ -77,9 +79,9 @@ def run_cli(source, cache_dir, frames):
     return rows[0]["total_ms"], rows[-1]["total_ms"], wall
 
 
-def run_blender(source, cache_dir, idle):
+def run_blender(source, cache_dir, idle, warmup="1"):
     """The RESULT dict of one fresh bpy-module process (see the module docstring)."""
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache_dir), PYTHONPATH=str(source))
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache_dir), PYTHONPATH=str(source), KD_PREVIEW_WARMUP=warmup)
     proc = subprocess.run([sys.executable, "-c", BLENDER_CHILD, str(source), "idle" if idle else "at-once"],
                           cwd=source, env=env, capture_output=True, text=True)
     if proc.returncode != 0:
@@ -94,31 +96,50 @@ def main():
     ap.add_argument("--how", choices=["cli", "blender", "both"], default="both")
     ap.add_argument("--source", nargs="+", default=[str(ROOT)])
     ap.add_argument("--idle", action="store_true")
+    ap.add_argument("--warmup", choices=["on", "off", "both"], default="on")
+    ap.add_argument("--warm-only", action="store_true")
+    ap.add_argument("--cache", help="with --warm-only: a Numba cache folder that already holds the kernels")
     args = ap.parse_args()
+    if args.warm_only and args.how != "blender":
+        ap.error("--warm-only measures the blender way only (--how blender)")
     sources = [Path(s).resolve() for s in args.source]
     hows = ["cli", "blender"] if args.how == "both" else [args.how]
-    results = {(how, s, c): [] for how in hows for s in sources for c in ("cold", "warm")}
-    for run in range(args.runs):
-        for source in sources if run % 2 == 0 else sources[::-1]:
-            for how in hows:
-                with tempfile.TemporaryDirectory() as cache:
-                    for cache_state in ("cold", "warm"):
-                        row = (run_cli(source, cache, args.frames) if how == "cli"
-                               else run_blender(source, cache, args.idle))
-                        print(f"run {run + 1} {how} {source} {cache_state}: {row}", flush=True)
-                        results[how, source, cache_state].append(row)
+    switches = {"on": ["1"], "off": ["0"], "both": ["1", "0"]}[args.warmup]
+    states = ["warm"] if args.warm_only else ["cold", "warm"]
+    results = {(how, s, c, w): [] for how in hows for s in sources for c in states for w in switches}
+    with tempfile.TemporaryDirectory() as scratch:
+        shared = args.cache or scratch
+        if args.warm_only and not args.cache:
+            for source in sources:
+                run_blender(source, shared, False)
+        for run in range(args.runs):
+            for source in sources if run % 2 == 0 else sources[::-1]:
+                for how in hows:
+                    for switch in switches if run % 2 == 0 else switches[::-1]:
+                        measure(args, results, run, how, source, switch, shared if args.warm_only else None, states)
     print(f"\n{args.runs} runs each (medians)")
-    for (how, source, cache_state), rows in results.items():
-        if how == "cli":
+    for (how, source, cache_state, switch), rows in results.items():
+        if how == "cli":  # (KD_PREVIEW_WARMUP: the command line's frame starts the compile itself either way)
             first, steady, wall = np.median(np.array(rows), axis=0)
             print(f"cli     {cache_state} {source}: first frame {first:.0f} ms, next frame {steady:.0f} ms, "
                   f"process {wall:.1f} s (demo scene, frames {args.frames})")
         else:
             med = {key: float(np.median([r[key] for r in rows])) for key in rows[0]}
-            print(f"blender {cache_state} {source}: enable to image {med['enable_to_image_s']:.1f} s "
-                  f"(register {med['register_ms']:.0f} ms), frame {med['frame_ms']:.0f} ms, kernels "
+            print(f"blender {cache_state} {source} KD_PREVIEW_WARMUP={switch}: enable to image "
+                  f"{med['enable_to_image_s']:.1f} s (register {med['register_ms']:.0f} ms), frame {med['frame_ms']:.0f} ms, kernels "
                   f"{med['kernels_ms'] / 1e3:.1f} s apart from it, {med['mrays']:.2f} Mrays/s, "
                   f"{med['compiles_here']:.0f} compiles in Blender's process" + (" (idle first)" if args.idle else ""))
+
+
+def measure(args, results, run, how, source, switch, cache, states):
+    """One cold and one warm run on a new cache folder, or (`cache` given) one warm run on it."""
+    with tempfile.TemporaryDirectory() as fresh:
+        for cache_state in states:
+            folder = cache or fresh
+            row = (run_cli(source, folder, args.frames) if how == "cli"
+                   else run_blender(source, folder, args.idle, switch))
+            print(f"run {run + 1} {how} {source} {cache_state} KD_PREVIEW_WARMUP={switch}: {row}", flush=True)
+            results[how, source, cache_state, switch].append(row)
 
 
 if __name__ == "__main__":
