@@ -162,3 +162,31 @@ def test_a_render_started_meanwhile_waits_visibly_and_keeps_the_compile_apart(wa
     assert seen[0].endswith(": the render starts when they are ready")
     assert result.compile_ms >= 1000.0 and result.load_ms > 0 and result.first_run is False
     assert result.summary()["compile_ms"] == result.compile_ms
+
+
+class Layout:
+    """A stand-in for a panel's or the status bar's layout: the labels drawn."""
+
+    def __init__(self):
+        self.labels = []
+
+    def label(self, text, icon="NONE"):
+        self.labels.append((text, icon))
+
+
+def test_the_status_bar_and_panel_show_the_compile_until_ready(warmup, monkeypatch):
+    from kd_addon import warmup_display
+
+    drawn = Layout()
+    warmup_display.draw_status(drawn)
+    assert drawn.labels == []  # nothing started: nothing to say
+    fake_compile(monkeypatch, "import time; time.sleep(1)")
+    warmup.start()
+    warmup_display.draw_status(drawn)
+    assert drawn.labels == [("compiling kernels (first use) 0s", "TIME")]
+    assert warmup_display._redraw() == warmup_display.REDRAW_SECONDS  # keeps the seconds moving
+    warmup.wait()
+    assert warmup_display._redraw() is None  # the timer ends with the compile
+    drawn = Layout()
+    warmup_display.draw_status(drawn)
+    assert drawn.labels == []
