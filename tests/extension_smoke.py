@@ -2,7 +2,7 @@
 frame through the operator, disable, re-enable and uninstall it. Run in its own process (by
 test_addon_extension.py) with BLENDER_USER_RESOURCES pointing at an empty temp folder:
 
-    BLENDER_USER_RESOURCES=/tmp/u python tests/extension_smoke.py kd_preview-0.1.0-linux_x64.zip
+    BLENDER_USER_RESOURCES=/tmp/u python tests/extension_smoke.py kd_preview-0.1.0-linux_x64-py311.zip
 
 Prints one JSON line of facts for the test to check; any failed step raises (non-zero exit).
 
