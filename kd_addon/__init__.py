@@ -15,10 +15,10 @@ if sys.argv[:1] == ["-m"]:  # `python -m kd_addon`, while Python locates __main_
 
 import bpy  # noqa: E402
 
-from . import cli, image_keeping, live_update, operators, panel, properties, tree_cache  # noqa: E402
+from . import cli, engine, image_keeping, live_update, operators, panel, properties, tree_cache  # noqa: E402
 
-# Registration order: settings before the operators and panel that use them.
-MODULES = (properties, operators, panel, live_update, image_keeping, cli)
+# Registration order: settings before the operators, panels and render engine that use them.
+MODULES = (properties, operators, panel, engine, live_update, image_keeping, cli)
 _registered = False
 
 
