@@ -75,7 +75,7 @@ def render_through_engine(folder: Path) -> dict:
 
 
 def engine_registered() -> bool:
-    return any(getattr(e, "bl_idname", None) == "KD_PREVIEW" for e in bpy.types.RenderEngine.__subclasses__())
+    return bpy.types.RenderEngine.bl_rna_get_subclass_py("KD_PREVIEW") is not None
 
 
 def installed_cache_folder() -> Path:

@@ -69,8 +69,7 @@ def results(monkeypatch):
 
 def test_engine_is_listed_and_its_panels_poll_on_it(addon):
     scene = bpy.context.scene
-    engines = {e.bl_idname: e.bl_label for e in bpy.types.RenderEngine.__subclasses__() if hasattr(e, "bl_idname")}
-    assert engines.get("KD_PREVIEW") == "KD Preview"
+    assert bpy.types.RenderEngine.bl_rna_get_subclass_py("KD_PREVIEW").bl_label == "KD Preview"
     with pytest.raises(TypeError):  # the engine list refuses an engine not in it...
         scene.render.engine = "KD_PREVIEW_NOT_REGISTERED"
     scene.render.engine = "KD_PREVIEW"  # ... and takes this one
@@ -79,6 +78,9 @@ def test_engine_is_listed_and_its_panels_poll_on_it(addon):
     assert panel.bl_context == "render" and panel.COMPAT_ENGINES == {"KD_PREVIEW"}
     assert "KD_PREVIEW" in bpy.types.RENDER_PT_color_management.COMPAT_ENGINES
     assert hasattr(bpy.types, "KDPREVIEW_PT_panel")  # the sidebar panel stays
+    addon.unregister()
+    assert bpy.types.RenderEngine.bl_rna_get_subclass_py("KD_PREVIEW") is None
+    assert "KD_PREVIEW" not in bpy.types.RENDER_PT_color_management.COMPAT_ENGINES
 
 
 def test_still_render_writes_the_panels_image_to_the_output_path(addon, tmp_path, results):
