@@ -30,7 +30,6 @@ class KDPreviewRenderEngine(bpy.types.RenderEngine):
     bl_idname = ENGINE_ID
     bl_label = "KD Preview"
     bl_use_preview = False  # no material previews: the preview shades no material
-    bl_use_postprocess = True  # the compositor and sequencer run on the result
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)

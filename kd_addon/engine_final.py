@@ -158,8 +158,10 @@ class FinalRender:
         """Fill the RenderResult; Blender writes it (output path and format) and shows it."""
         for name, channels, ids, *_ in PASSES:
             if name in images:
-                self.engine.add_pass(name, channels, ids)
-        result = self.engine.begin_result(0, 0, view.width, view.height)
+                self.engine.add_pass(name, channels, ids, layer=self.depsgraph.view_layer.name)
+        # Blender calls render() once per view layer, each with its own depsgraph: fill that layer only
+        layer_name = self.depsgraph.view_layer.name
+        result = self.engine.begin_result(0, 0, view.width, view.height, layer=layer_name)
         layer = result.layers[0]
         layer.passes["Combined"].rect.foreach_set(to_rect(combined))
         for name, image in images.items():

@@ -100,7 +100,8 @@ def orthographic_window(left, right, bottom, top, near, far):
 
 
 def viewport_view_matrix():
-    return (Matrix.Translation((1.0, -2.0, 3.0)) @ Matrix.Rotation(0.7, 4, "X") @ Matrix.Rotation(-0.4, 4, "Z")).inverted()
+    to_world = Matrix.Translation((1.0, -2.0, 3.0)) @ Matrix.Rotation(0.7, 4, "X") @ Matrix.Rotation(-0.4, 4, "Z")
+    return to_world.inverted()
 
 
 def test_a_perspective_viewport_with_an_offset_frame():

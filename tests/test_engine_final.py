@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from kd_addon import engine_final, tree_cache
-from kd_addon.engine import KDPreviewRenderEngine
 from tests import bpy_scenes as scenes
-from tests.addon_support import add_quad, add_sun, check_half_plane_image, exr_channels, half_plane_scene, preview_pixels
+from tests.addon_support import (add_quad, add_sun, check_half_plane_image, exr_channels, half_plane_scene,
+                                 preview_pixels)
 
 
 def engine_scene(tmp_path, *, exr=True, name="frame"):
@@ -268,3 +268,29 @@ def test_a_render_only_modifier_and_sun_light(addon, tmp_path, results):
     add_sun("Sun2")
     assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
     assert results[0].triangles > 14
+
+
+def test_every_view_layer_enabled_for_rendering_gets_its_own_image(addon, tmp_path):
+    """Blender renders each view layer with its own depsgraph: a layer excluding the box's collection
+    shows no box, the other does, each in its own layer of the multilayer EXR."""
+    scene = engine_scene(tmp_path)
+    boxes = scenes.new_collection("Boxes")
+    box = bpy.data.objects["Box"]
+    for collection in box.users_collection:
+        collection.objects.unlink(box)
+    boxes.objects.link(box)
+    second = scene.view_layers.new("NoBox")
+    second.layer_collection.children["Boxes"].exclude = True
+    settings = scene.render.image_settings
+    if hasattr(settings, "media_type"):  # Blender 5.0 on
+        settings.media_type = "MULTI_LAYER_IMAGE"
+    settings.file_format, settings.exr_codec = "OPEN_EXR_MULTILAYER", "NONE"
+    assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
+    channels = exr_channels(str(tmp_path / "frame.exr"))
+    first = channels[f"{scene.view_layers[0].name}.Combined.R"]
+    without = channels["NoBox.Combined.R"]
+    box_top = (slice(14, 18), slice(14, 18))  # the box's top face, AO 1 there; open ground too without it
+    ground_beside = (slice(14, 18), slice(20, 22))  # ground beside the box's wall: darker with the box
+    assert first[ground_beside].mean() < without[ground_beside].mean() - 0.05
+    assert np.array_equal(channels["NoBox.Combined.A"], channels[f"{scene.view_layers[0].name}.Combined.A"])
+    assert first[box_top].min() > 0.0
