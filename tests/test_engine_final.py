@@ -294,3 +294,36 @@ def test_every_view_layer_enabled_for_rendering_gets_its_own_image(addon, tmp_pa
     assert first[ground_beside].mean() < without[ground_beside].mean() - 0.05
     assert np.array_equal(channels["NoBox.Combined.A"], channels[f"{scene.view_layers[0].name}.Combined.A"])
     assert first[box_top].min() > 0.0
+
+
+def _composite_pass(scene, name):
+    """The compositor's output: the Render Layers node's `name` socket (Blender 5.0 on: the scene's
+    compositing node group's Group Output; before: the scene's node tree's Composite node)."""
+    if hasattr(scene, "compositing_node_group"):
+        tree = bpy.data.node_groups.new("KD Compositing", "CompositorNodeTree")
+        tree.interface.new_socket("Image", in_out="OUTPUT", socket_type="NodeSocketColor")
+        scene.compositing_node_group = tree
+        output = tree.nodes.new("NodeGroupOutput")
+    else:
+        scene.use_nodes = True
+        tree = scene.node_tree
+        tree.nodes.clear()
+        output = tree.nodes.new("CompositorNodeComposite")
+    layers = tree.nodes.new("CompositorNodeRLayers")
+    layers.scene = scene
+    tree.links.new(layers.outputs[name], output.inputs[0])
+    scene.render.use_compositing = True
+
+
+def test_the_compositor_reads_a_named_pass(addon, tmp_path):
+    """update_render_passes names the AO pass for the Render Layers node: routed to the output, the
+    written image is the AO term."""
+    scene = engine_scene(tmp_path)
+    scene.kd_preview.mode = "ao+shadow"
+    scene.view_layers[0].use_pass_ambient_occlusion = True
+    _composite_pass(scene, "AO")
+    assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
+    written = read_rgba(tmp_path / "frame.exr")
+    ao = panel_image(scene, mode="ao")
+    assert np.allclose(written[..., :3], ao[..., :3], atol=1e-6)
+    assert not np.allclose(written[..., :3], panel_image(scene)[..., :3], atol=1e-3)  # not the Combined image
