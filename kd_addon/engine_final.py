@@ -68,14 +68,15 @@ def crop_camera(camera: CameraInput, width: int, height: int, region: tuple[int,
     return replace(camera, ortho_scale=float(sub_larger), shift=shift)
 
 
-def final_view(scene, depsgraph, width: int, height: int) -> FrameView:
-    """The frame a final render makes: the scene camera at width x height (the scene's resolution and
-    %), cut to the Render Region (Blender pastes a region without Crop back into the whole frame)."""
-    camera, _ = read_camera(scene, depsgraph, width, height)
+def final_view(scene, depsgraph, width: int, height: int) -> tuple[FrameView, list[str]]:
+    """(the frame a final render makes, the camera's warnings): the scene camera at width x height (the
+    scene's resolution and %), cut to the Render Region (Blender pastes a region without Crop back into
+    the whole frame)."""
+    camera, warnings = read_camera(scene, depsgraph, width, height)
     region = border_region(scene.render, width, height)
     if region is None:
-        return FrameView(width, height, camera)
-    return FrameView(region[2], region[3], crop_camera(camera, width, height, region))
+        return FrameView(width, height, camera), warnings
+    return FrameView(region[2], region[3], crop_camera(camera, width, height, region)), warnings
 
 
 def to_rect(image: np.ndarray) -> np.ndarray:
@@ -103,7 +104,8 @@ class FinalRender:
         """Render the frame; a PreviewError is reported (no traceback), a cancel writes nothing."""
         try:
             config = make_config(self.scene.kd_preview)
-            view = final_view(self.scene, self.depsgraph, self.engine.resolution_x, self.engine.resolution_y)
+            view, camera_warnings = final_view(self.scene, self.depsgraph, self.engine.resolution_x,
+                                               self.engine.resolution_y)
             passes = requested_passes(self.depsgraph.view_layer)
             result = self._frame(config, view, "", "Combined")
             images = self._pass_images(config, view, result, passes)
@@ -114,10 +116,13 @@ class FinalRender:
             self.engine.report({"ERROR"}, f"KD Preview: {error}")
             self.engine.error_set(f"KD Preview: {error}")
             return
-        for warning in result.warnings:
-            self.engine.report({"WARNING"}, f"KD Preview: {warning}")
+        for warning in camera_warnings + result.warnings:
+            self._report_warning(warning)
         self._write(view, result.image, images)
         self.engine.update_stats("", stats_line(result))
+
+    def _report_warning(self, text: str) -> None:
+        self.engine.report({"WARNING"}, f"KD Preview: {text}")
 
     def _frame(self, config, view: FrameView, lane: str, label: str) -> FrameResult:
         """One FrameJob to the end, polling test_break between its short ticks."""
@@ -150,7 +155,7 @@ class FinalRender:
             try:
                 images[name] = self._frame(term_config, view, f"pass:{term}", f"{name} pass").image[..., :channels]
             except PreviewError as error:  # e.g. a Shadow pass in a scene without lights
-                self.engine.report({"WARNING"}, f"KD Preview: the {name} pass is left black: {error}")
+                self._report_warning(f"the {name} pass is left black: {error}")
                 images[name] = np.zeros((view.height, view.width, channels), np.float32)
         return images
 

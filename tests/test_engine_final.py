@@ -327,3 +327,16 @@ def test_the_compositor_reads_a_named_pass(addon, tmp_path):
     ao = panel_image(scene, mode="ao")
     assert np.allclose(written[..., :3], ao[..., :3], atol=1e-6)
     assert not np.allclose(written[..., :3], panel_image(scene)[..., :3], atol=1e-3)  # not the Combined image
+
+
+def test_warnings_are_reported_with_the_frame(addon, tmp_path, monkeypatch):
+    """What the preview does not apply (here the camera's depth of field) is reported, and the frame is
+    written."""
+    scene = engine_scene(tmp_path)
+    scene.camera.data.dof.use_dof = True
+    reported = []
+    monkeypatch.setattr(engine_final.FinalRender, "_report_warning",
+                        lambda self, text: reported.append(text))
+    assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
+    assert any("depth of field" in text for text in reported)
+    assert (tmp_path / "frame.exr").is_file()
