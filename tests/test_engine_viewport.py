@@ -5,16 +5,18 @@ its test skips with the reason."""
 from __future__ import annotations
 
 import time
+from types import SimpleNamespace
 
 import bpy
 import numpy as np
 import pytest
+from mathutils import Matrix
 
-from kd_addon import tree_cache
+from kd_addon import engine, tree_cache
 from kd_addon.config import make_config
 from kd_addon.engine_viewport import ViewportSession, camera_from_matrices, changes_image, update_rows
 from kd_addon.pipeline import FrameJob, FrameView, run_job
-from tests.addon_support import half_plane_scene
+from tests.addon_support import half_plane_scene, preview_pixels
 from tests.test_engine_camera import orthographic_window, perspective_window, viewport_view_matrix
 
 
@@ -24,7 +26,6 @@ def view_of(window, width=48, height=30) -> FrameView:
 
 def top_view(width=48, height=24, left=-5.0) -> FrameView:
     """An orthographic view straight down on half_plane_scene, like its camera's."""
-    from mathutils import Matrix
     view = Matrix.Translation((0.0, 0.0, 10.0)).inverted()
     window = orthographic_window(left, left + 8.0, -2.0, 2.0, -50.0, 50.0)
     return FrameView(width, height, camera_from_matrices(view, window, width, height))
@@ -173,7 +174,6 @@ def test_drawing_needs_a_gpu_context(addon):
         reason = f"no GPU context here ({error})"
         print(f"SKIPPED drawing test: {reason}")
         pytest.skip(reason)
-    from kd_addon.engine import draw_image
 
     class Engine:
         texture = None
@@ -184,7 +184,39 @@ def test_drawing_needs_a_gpu_context(addon):
         def unbind_display_space_shader(self):
             pass
 
-    engine = Engine()
+    fake_engine = Engine()
     image = np.random.default_rng(0).random((6, 8, 4)).astype(np.float32)
-    draw_image(engine, bpy.context.scene, image, 16, 12)
-    assert engine.texture[0] is image and engine.texture[1].width == 8 and engine.texture[1].height == 6
+    engine.draw_image(fake_engine, bpy.context.scene, image, 16, 12)
+    texture = fake_engine.texture[1]
+    assert fake_engine.texture[0] is image and (texture.width, texture.height) == (8, 6)
+
+
+def test_view_draw_glue_without_drawing(addon, monkeypatch):
+    """KDPreviewRenderEngine.view_update / view_draw on stand-ins for the engine and a region (the GPU
+    upload replaced): the region's size at the tab's Resolution %, its matrices as the camera, redraws
+    asked for until the image has all its samples, the status in the stats line."""
+    scene = half_plane_scene()
+    scene.kd_preview.resolution_percentage = 50
+    drawn, stats, redraws = [], [], []
+    monkeypatch.setattr(engine, "draw_image", lambda eng, sc, image, w, h: drawn.append((image.shape, w, h)))
+    fake = SimpleNamespace(session=None, update_stats=lambda a, b: stats.append(b),
+                           tag_redraw=lambda: redraws.append(1))
+    view = Matrix.Translation((0.0, 0.0, 10.0)).inverted()
+    window = Matrix(orthographic_window(-4.0, 4.0, -2.0, 2.0, -50.0, 50.0))
+    context = SimpleNamespace(region=SimpleNamespace(width=96, height=48),
+                              region_data=SimpleNamespace(view_matrix=view, window_matrix=window))
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    engine.KDPreviewRenderEngine.view_update(fake, context, depsgraph)
+    deadline = time.monotonic() + 900.0
+    while fake.session.job is not None or not drawn:
+        assert time.monotonic() < deadline
+        engine.KDPreviewRenderEngine.view_draw(fake, context, bpy.context.evaluated_depsgraph_get())
+    assert drawn[-1] == ((24, 48, 4), 96, 48)
+    assert redraws and "8 samples" in stats[-1]
+    # the same view as half_plane_scene's camera: the panel's image of it
+    scene.kd_preview.resolution_percentage = 100
+    scene.render.resolution_x, scene.render.resolution_y = 48, 24
+    assert bpy.ops.kdpreview.render() == {"FINISHED"}
+    panel = preview_pixels()
+    assert np.array_equal(fake.session.image[..., 3], panel[..., 3])
+    assert np.abs(fake.session.image - panel).max() < 1e-4
