@@ -16,11 +16,11 @@ if sys.argv[:1] == ["-m"]:  # `python -m kd_addon`, while Python locates __main_
 
 import bpy  # noqa: E402
 
-from . import (cli, image_keeping, kernel_warmup, live_update, operators, panel, properties,  # noqa: E402
-               tree_cache, warmup_display)
+from . import (cli, engine, image_keeping, kernel_warmup, live_update, operators, panel,  # noqa: E402
+               properties, tree_cache, warmup_display)
 
-# Registration order: settings before the operators and panel that use them.
-MODULES = (properties, operators, panel, live_update, image_keeping, cli, warmup_display)
+# Registration order: settings before the operators, panels and render engine that use them.
+MODULES = (properties, operators, panel, engine, live_update, image_keeping, cli, warmup_display)
 _registered = False
 
 

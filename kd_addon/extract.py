@@ -2,9 +2,12 @@
 
 Everything Cycles renders as triangles is read from ``depsgraph.object_instances``: meshes after
 modifiers, armatures, shape keys and geometry nodes, and the tessellated meshes of curves, text,
-surfaces and metaballs. The preview reads the viewport's depsgraph, so it sees the viewport's
-evaluation (Subdivision "Levels Viewport", geometry nodes' "Is Viewport") and misses objects hidden
-in the viewport; the render's visibility rules are applied on top and what is missing is named.
+surfaces and metaballs. The panel, command line and Live Update read the viewport's depsgraph, so they
+see the viewport's evaluation (Subdivision "Levels Viewport", geometry nodes' "Is Viewport") and miss
+objects hidden in the viewport; the render's visibility rules are applied on top and what is missing is
+named. A final render through the render engine (engine_final.py) hands over the render's own depsgraph
+(``depsgraph.mode == "RENDER"``): it has evaluated and chosen everything as the render does, so its
+entries are taken as they are, only ray visibility applied, and nothing viewport-related is warned about.
 
 The work is split by job: scene_records.py (the records, no bpy), mesh_reading.py (a mesh into
 numpy), render_visibility.py (what a final render shows), scene_walk.py (entries into records) and
@@ -36,12 +39,13 @@ def extract_scene(depsgraph: bpy.types.Depsgraph | None = None) -> ExtractedScen
     if depsgraph is None:
         depsgraph = bpy.context.evaluated_depsgraph_get()
     vis = RenderVisibility(depsgraph)
-    walker = EntryReader(vis)
+    render_mode = depsgraph.mode == "RENDER"
+    walker = EntryReader(vis, render_mode)
     instances = [r for r in map(walker.read, depsgraph.object_instances) if r is not None]
     instances = walker.without_hidden_carriers(instances)
     surfaces_off = surfaces_off_warnings(depsgraph.view_layer)
     evaluated = {ob.original.as_pointer() for ob in depsgraph.objects}
-    flag_hidden = hidden_by_viewport_flag_only(depsgraph, evaluated, walker.instanced_by)
+    flag_hidden = [] if render_mode else hidden_by_viewport_flag_only(depsgraph, evaluated, walker.instanced_by)
     shown = [ob for ob in flag_hidden if ob.type == "MESH" and ob.show_instancer_for_render and vis.scene_object(ob)]
     instances += [r for r in map(walker.read, (SelfEntry(ob.evaluated_get(depsgraph)) for ob in shown))
                   if r is not None]
@@ -55,8 +59,8 @@ def extract_scene(depsgraph: bpy.types.Depsgraph | None = None) -> ExtractedScen
         warnings=(surfaces_off + unused_layer_warnings(depsgraph) + walker.geometries.warnings
                   + list(walker.non_finite_placements.values()) + list(walker.not_triangles.values())
                   + left_out_warnings(depsgraph, vis, walker.instanced_by, viewport_shown, walker.paths.blocked,
-                                    walker.meshed)
-                  + viewport_evaluation_warning(shown_objects, depsgraph.scene)
+                                    walker.meshed, render_mode)
+                  + ([] if render_mode else viewport_evaluation_warning(shown_objects, depsgraph.scene))
                   + culling_warning(shown_objects, depsgraph.scene)),
         extract_ms=(time.perf_counter() - t0) * 1e3,
         frame=depsgraph.scene.frame_current,

@@ -52,28 +52,30 @@ def objects_shown(depsgraph, vis: RenderVisibility, instances: list[Instance]) -
 
 def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: RenderVisibility, instanced_by: dict[int, set[int]],
                       evaluated: set[int], not_made: set[int] = frozenset(),
-                      meshed: set[str] = frozenset()) -> list[str]:
+                      meshed: set[str] = frozenset(), render_mode: bool = False) -> list[str]:
     """A warning per render-visible thing a final render shows and the preview leaves out: objects
     hidden in the viewport or not triangles, collection instancers hidden there, members disabled in
     viewports of collections rendered whole, and hair strands. `instanced_by`: the originals the
     depsgraph instanced, by original instancer. `evaluated`: pointers of the originals the viewport
     shows (those only its Show Instancer flag keeps out included). `not_made`: originals instanced
     on a path a render does not make (dupli_paths.py). `meshed`: names of the originals whose own
-    geometry gave triangles (a point cloud whose nodes output a mesh is named only for the rest)."""
+    geometry gave triangles (a point cloud whose nodes output a mesh is named only for the rest).
+    `render_mode`: the depsgraph is a final render's own, which leaves nothing out for being hidden
+    in the viewport: only what is not triangles and hair strands are named."""
     warnings = []
     instancers = {}
     for ob in rendered_layers_objects(depsgraph):
         kind = ob.type
         if kind in TRIANGLE_TYPES and ob.as_pointer() in evaluated:
             if len(ob.particle_systems):
-                warnings += _strand_warnings(ob, vis) + _pick_warnings(ob, vis)
-            for collection in _collections_rendered_whole(ob, vis):
+                warnings += _strand_warnings(ob, vis) + ([] if render_mode else _pick_warnings(ob, vis))
+            for collection in [] if render_mode else _collections_rendered_whole(ob, vis):
                 instancers.setdefault(collection.as_pointer(), (collection, []))[1].append(ob)
             continue  # the common case first, cheapest
         if ob.instance_type == "COLLECTION" and ob.instance_collection is not None and vis.scene_object(ob):
-            if ob.as_pointer() in evaluated:
+            if ob.as_pointer() in evaluated and not render_mode:
                 instancers.setdefault(ob.instance_collection.as_pointer(), (ob.instance_collection, []))[1].append(ob)
-            elif ray_visible(ob):
+            elif ray_visible(ob) and not render_mode:
                 warnings.append(f"object '{ob.name}' is hidden in the viewport (eye icon, Disable in Viewports or a "
                                 f"hidden collection): the preview leaves out the instances of collection "
                                 f"'{ob.instance_collection.name}' it makes, a final render shows them")
@@ -88,7 +90,7 @@ def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: RenderVisibility, ins
                 else:
                     warnings.append(f"object '{ob.name}' is {NOT_TRIANGLES[kind]}: the preview shows the triangles its "
                                     f"geometry nodes make and leaves the rest out")
-            else:
+            elif not render_mode:
                 what = ("it and the instances it makes" if ob.instance_type in INSTANCING_PARENT_TYPES
                         or len(ob.particle_systems) else "it")
                 warnings.append(f"object '{ob.name}' is hidden in the viewport (eye icon, Disable in Viewports or "

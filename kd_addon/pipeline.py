@@ -75,6 +75,7 @@ class FrameResult:
     mode: str = ""  # the mode rendered: the setting, or what "auto" chose
     compile_ms: float = 0.0  # waited for the kernels' background compile (kernel_warmup.py); not in total_ms
     load_ms: float = 0.0  # loading the compiled kernels into this process before the frame; not in total_ms
+    depth: np.ndarray | None = None  # (H, W) view-axis distance of each pixel's hit, inf where nothing is hit
 
     @property
     def height(self) -> int:
@@ -106,6 +107,14 @@ def _plain(value):
     return value.item() if isinstance(value, np.generic) else value
 
 
+@dataclass(frozen=True)
+class FrameView:
+    """A frame's size in pixels and its camera, set by the caller instead of read from the scene."""
+    width: int
+    height: int
+    camera: scene_input.CameraInput
+
+
 @dataclass
 class _SceneRead:
     """What a frame renders, read from the scene on the main thread."""
@@ -122,10 +131,18 @@ class FrameJob:
     The first ticks read the scene (once no cancelled run's kernel call still runs:
     background.SCENE_READ_WAIT) and build the tree on the worker; later ticks add one sample per
     unconverged pixel. `depsgraph`: the evaluated depsgraph, or a function returning it when read.
+
+    A render engine sets the rest: `view` the frame's size and camera where they are not the scene
+    camera's at the panel's resolution (a final render's region, the viewport's view), `group` and
+    `lane` the trees and last image it continues from (tree_cache.state_for), `poll_seconds` the
+    longest a tick waits for the worker.
     """
 
-    def __init__(self, scene, depsgraph, config: RenderConfig):
+    def __init__(self, scene, depsgraph, config: RenderConfig, *, view: FrameView | None = None,
+                 group: str = "", lane: str = "", poll_seconds: float | None = None):
         self.scene, self.depsgraph, self.config = scene, depsgraph, config
+        self.view, self.group, self.lane = view, group, lane
+        self.poll_seconds = POLL_SECONDS if poll_seconds is None else poll_seconds
         self.renderer = None
         self._timings = {"extract_ms": 0.0, "build_ms": 0.0, "trace_ms": 0.0, "other_ms": 0.0}
         self._info: dict = {}
@@ -139,6 +156,7 @@ class FrameJob:
         self._kernels_checked = False
         self._waiting_since = None  # when the first tick found the kernels' compile running
         self.mode = None  # the mode this frame renders in: the setting, "auto" resolved (_resolved_mode)
+        self._depth = None  # the finished image's depth_image
 
     # -- state the operators show ------------------------------------------
 
@@ -179,14 +197,14 @@ class FrameJob:
         """Do the next short piece of work (at most POLL_SECONDS of waiting for the worker, or
         reading the scene); return True when the frame is finished."""
         if self._pending is not None:
-            if not self._pending.wait(POLL_SECONDS):
+            if not self._pending.wait(self.poll_seconds):
                 return False
             pending, self._pending = self._pending, None
             pending.result()  # the worker's exception, if any, is raised here
         elif self.renderer is None and self._reused_image is None:
             if self._await_kernels():
                 return False
-            if not background.wait_for_work(POLL_SECONDS):
+            if not background.wait_for_work(self.poll_seconds):
                 return False  # a cancelled run's kernel call still runs: read the scene after it
             if callable(self.depsgraph):
                 self.depsgraph = self.depsgraph()
@@ -236,7 +254,7 @@ class FrameJob:
         read = self._read_scene()
         core = corelib.load_core()
         inputs, extracted = read.inputs, read.extracted
-        self._state = tree_cache.state_for(self.scene, core, self.config.build_options)
+        self._state = tree_cache.state_for(self.scene, core, self.config.build_options, self.group, self.lane)
         reuse = not self.config.settings.rebuild_all
         memory_limit.check_frame(extracted.triangle_count, inputs.width, inputs.height, self.config,
                                  keeps_previous=reuse and self._state.pixels is not None)
@@ -304,9 +322,13 @@ class FrameJob:
 
     def _scene_inputs(self) -> scene_input.SceneInputs:
         render = self.scene.render
-        width, height = frame_size(render.resolution_x, render.resolution_y, self.config.resolution_percentage)
+        if self.view is None:
+            width, height = frame_size(render.resolution_x, render.resolution_y, self.config.resolution_percentage)
+        else:
+            width, height = self.view.width, self.view.height
         uses_lights = self.config.settings.mode != "ao"  # lights do not change an AO image
-        inputs = scene_input.read_scene(self.scene, self.depsgraph, width, height, lights=uses_lights)
+        inputs = scene_input.read_scene(self.scene, self.depsgraph, width, height, lights=uses_lights,
+                                        camera=None if self.view is None else self.view.camera)
         if not uses_lights:
             return inputs
         if not inputs.lights and self.config.settings.mode != "auto":  # "auto" renders AO then
@@ -396,6 +418,18 @@ class FrameJob:
         return self._state.builder.build(meshes, mesh_of, matrices, origin=origin, reuse=reuse,
                                          visibility=visibility, rays=rays)
 
+    def current_image(self) -> np.ndarray | None:
+        """The image so far (H, W, 4) while no kernel call runs (the viewport's progressive display;
+        Numba's parallel layer takes one kernel launch at a time), else None."""
+        if self._pending is not None or not KERNEL_LOCK.acquire(blocking=False):
+            return None
+        try:
+            if self._reused_image is not None:
+                return self._reused_image
+            return None if self.renderer is None else self.renderer.image()
+        finally:
+            KERNEL_LOCK.release()
+
     def step(self) -> None:
         """One more sample per unconverged pixel, on the worker."""
         self._pending = BackgroundCall(KERNEL_LOCK, self._step_once)
@@ -418,6 +452,7 @@ class FrameJob:
         image = np.array(self.renderer.image(denoise=self.config.denoise), dtype=np.float32, copy=True)
         lazy = self.renderer.scene.lazy_tree is not None  # then the stats of what the rays made it build
         self._finished = (image, self.renderer.scene.stats() if lazy else None, self.renderer.pixel_state())
+        self._depth = depth_image(self.renderer)
         self._timings["other_ms"] += _ms_since(t0)
         _denoiser_ready = _denoiser_ready or self.config.denoise
 
@@ -427,9 +462,10 @@ class FrameJob:
             raise RuntimeError("FrameJob.result() called before the frame finished")
         t = self._timings
         if self._reused_image is not None:
+            depth = None if self._state.depth is None else self._state.depth.copy()
             return FrameResult(image=self._reused_image.copy(), extract_ms=t["extract_ms"], build_ms=0.0, trace_ms=0.0,
                                total_ms=sum(t.values()), rays=0, rays_saved=0, first_run=False, **self._kernel_ms,
-                               pixels_reused=int((self._reused_image[..., 3] > 0).sum()), **self._info)
+                               pixels_reused=int((self._reused_image[..., 3] > 0).sum()), depth=depth, **self._info)
         image, lazy_stats, pixels = self._finished
         if lazy_stats is not None:
             self._info["tree_stats"] = lazy_stats
@@ -437,8 +473,10 @@ class FrameJob:
                              total_ms=sum(t.values()), rays=int(self.renderer.rays_traced),
                              rays_saved=int(self.renderer.rays_saved), samples=int(self.renderer.samples_done),
                              first_run=self._first_run, pixels_reused=int(self.renderer.pixels_reused),
-                             rays_reused=int(self.renderer.rays_reused), **self._kernel_ms, **self._info)
+                             rays_reused=int(self.renderer.rays_reused), depth=self._depth, **self._kernel_ms,
+                             **self._info)
         self._state.image_key, self._state.image, self._state.pixels = self._image_key, image.copy(), pixels
+        self._state.depth = self._depth.copy()
         self._state.info = dict(samples=result.samples, tree_stats=result.tree_stats,
                                 rays_reused=result.rays + result.rays_reused)
         return result
@@ -502,6 +540,14 @@ def _resolved_mode(core, mode: str, lights: list) -> str:
             continue
         return "ao+shadow"
     return "ao"
+
+
+def depth_image(renderer) -> np.ndarray:
+    """(H, W) float32 view-axis distance of every pixel's camera hit, inf where none: the camera's ray
+    directions have unit length along the view axis (core.Camera.rays), so a hit's t is its depth."""
+    depth = np.full(renderer.height * renderer.width, np.inf, np.float32)
+    depth[renderer.pixels] = renderer.depths
+    return depth.reshape(renderer.height, renderer.width)
 
 
 def _usable_light(core, light: scene_input.LightInput):

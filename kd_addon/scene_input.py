@@ -286,17 +286,21 @@ def diffuse_switched_off(ob, instancer=None) -> str:
     return ""
 
 
-def read_scene(scene, depsgraph, width: int, height: int, lights: bool = True) -> SceneInputs:
+def read_scene(scene, depsgraph, width: int, height: int, lights: bool = True,
+               camera: CameraInput | None = None) -> SceneInputs:
     """Camera and lights of the evaluated scene for a width x height preview (`lights` False: an AO
-    frame, which needs none, so lights hidden in the viewport are not looked for)."""
+    frame, which needs none, so lights hidden in the viewport are not looked for). `camera`: the view
+    a render engine set (its region or the viewport's), instead of the scene camera's whole frame.
+    A render depsgraph holds the lights hidden in the viewport, so none is missed there."""
     warnings = []
-    if scene.render.use_border:  # a final render crops or blanks outside the region
+    if scene.render.use_border and camera is None:  # a final render crops or blanks outside the region
         warnings.append("the Render Region (Output > Format) is ignored by the preview: it renders the whole frame")
     if scene.render.use_motion_blur:
         warnings.append("motion blur is ignored by the preview: it renders the frame's instant")
-    camera, camera_warnings = read_camera(scene, depsgraph, width, height)
+    camera, camera_warnings = read_camera(scene, depsgraph, width, height) if camera is None else (camera, [])
     visibility = RenderVisibility(depsgraph)  # one table for the lights read and the hidden ones
     instanced: set[int] = set()
     read = read_lights(depsgraph, visibility, instanced)
+    viewport = lights and depsgraph.mode != "RENDER"
     return SceneInputs(camera, read, width, height, warnings + camera_warnings,
-                       hidden_light_warnings(depsgraph, visibility, instanced) if lights else [])
+                       hidden_light_warnings(depsgraph, visibility, instanced) if viewport else [])

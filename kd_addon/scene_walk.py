@@ -27,8 +27,12 @@ class EntryReader:
     object) pair and each entry touches only the few attributes that can differ between instances.
     """
 
-    def __init__(self, vis: RenderVisibility):
+    def __init__(self, vis: RenderVisibility, render_mode: bool = False):
         self.vis = vis
+        # A render's own depsgraph (a render engine's) has applied the render's visibility, instancing
+        # paths and Show Instancer already: its entries are taken as they are (show_self), and only the
+        # ray flags, Holdout and Indirect Only, which a depsgraph does not apply, are read.
+        self.render_mode = render_mode
         self.geometries = GeometryReader()
         self._verdicts: dict[tuple[int, int], tuple[str, str | None, bool, bool, bool] | None] = {}
         self.instanced_by: dict[int, set[int]] = {}  # instancer (original) -> the originals it instanced
@@ -46,7 +50,10 @@ class EntryReader:
         goes through `paths`, in the depsgraph's order (dupli_paths.py)."""
         ob = inst.object
         parent = inst.parent if inst.is_instance else None
-        if not self.paths.made_by_render(inst, ob, parent):
+        if self.render_mode:
+            if not inst.show_self:
+                return None
+        elif not self.paths.made_by_render(inst, ob, parent):
             return None
         mesh = ob.data
         if not isinstance(mesh, bpy.types.Mesh):
@@ -114,7 +121,7 @@ class EntryReader:
             holdout = owner.holdout_get(view_layer=self.vis.view_layer)
             if not holdout and owner.indirect_only_get(view_layer=self.vis.view_layer):
                 camera = False  # Indirect Only hides from camera rays; a holdout stays a holdout
-            visible = (camera or shadow) and entry_visible(self.vis, parent, ob)
+            visible = (camera or shadow) and (self.render_mode or entry_visible(self.vis, parent, ob))
             instancer = parent.original.name if parent is not None else None
             if parent is not None:  # once per (object, instancer): no extra cost per entry
                 self._note_instanced(parent, ob)

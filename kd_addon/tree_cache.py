@@ -4,8 +4,11 @@ Each mesh gets a key stable across frames (mesh name, first object placing it, i
 occurrence), but a tree is reused only when the mesh's fingerprint (scene_records.geometry_fingerprint)
 is unchanged, so a key mix-up costs a rebuild, never a wrong image. `image_key` digests everything
 that affects the pixels; an unchanged key reuses the last image, and core keeps the last frame's
-pixels whose rays cannot reach what changed. State lives per scene (`session_uid`), shared by every
-way of rendering; `clear()` drops it all.
+pixels whose rays cannot reach what changed. State lives per scene (`session_uid`) and per `group` of
+trees: the panel, the command line and final renders share the default group; the viewport's Rendered
+shading, whose depsgraph evaluates geometry as the viewport does, keeps its own trees so the two never
+rebuild each other's. Within a group each `lane` (an extra pass's term) keeps its own last image and
+pixels over the group's trees. `clear()` drops it all.
 """
 
 from __future__ import annotations
@@ -31,25 +34,31 @@ class SceneState:
     image: np.ndarray | None = None
     info: dict = field(default_factory=dict)
     pixels: object = None  # the last finished frame's core PixelState (pixel reuse)
+    depth: np.ndarray | None = None  # the last finished image's view-axis depth per pixel (H, W)
 
 
-_states: dict[int, SceneState] = {}
+_builders: dict[tuple, tuple[dict, object]] = {}  # (scene uid, group) -> (build options, core.SceneBuilder)
+_states: dict[tuple, SceneState] = {}  # (scene uid, group, lane) -> its state
 
 
-def state_for(scene, core, build_options: dict) -> SceneState:
-    """The scene's state; a fresh one when the build options changed (trees built otherwise differ)."""
+def state_for(scene, core, build_options: dict, group: str = "", lane: str = "") -> SceneState:
+    """The state of the scene's `group` and `lane`; fresh trees when the build options changed (trees
+    built otherwise differ)."""
     uid = getattr(scene, "session_uid", None) or id(scene)
-    state = _states.get(uid)
-    if state is None or state.build_options != build_options:
+    kept = _builders.get((uid, group))
+    if kept is None or kept[0] != build_options:
         # A lazy tree must be the scene's one mesh tree (core.build_two_level): one flat tree then.
         layout = "flat" if build_options.get("lazy") else "auto"
-        state = SceneState(core.SceneBuilder(layout, **build_options), dict(build_options))
-        _states[uid] = state
+        kept = _builders[(uid, group)] = (dict(build_options), core.SceneBuilder(layout, **build_options))
+    state = _states.get((uid, group, lane))
+    if state is None or state.builder is not kept[1]:
+        state = _states[(uid, group, lane)] = SceneState(kept[1], dict(build_options))
     return state
 
 
 def clear() -> None:
     """Forget every scene's trees and images (frees their memory)."""
+    _builders.clear()
     _states.clear()
 
 

@@ -41,5 +41,5 @@ if [ "${1:-}" = "--setup-only" ]; then
   exit 0
 fi
 exec "$venv/bin/python" -m pytest -p no:cacheprovider tests/test_addon_*.py \
-  tests/test_extract*.py \
+  tests/test_extract*.py tests/test_engine_*.py \
   tests/test_reliability_cancel.py tests/test_reliability_scenes.py "$@"

@@ -1,6 +1,6 @@
 """Install the built extension zip into a throwaway Blender user folder, enable it, render one small
-frame through the operator, disable, re-enable and uninstall it. Run in its own process (by
-test_addon_extension.py) with BLENDER_USER_RESOURCES pointing at an empty temp folder:
+frame through the operator and one through the render engine, disable, re-enable and uninstall it. Run in
+its own process (by test_addon_extension.py) with BLENDER_USER_RESOURCES pointing at an empty temp folder:
 
     BLENDER_USER_RESOURCES=/tmp/u python tests/extension_smoke.py kd_preview-0.1.0-linux_x64-py311.zip
 
@@ -68,6 +68,24 @@ def render_default_scene() -> dict:
     }
 
 
+def render_through_engine(folder: Path) -> dict:
+    """The same scene through the KD_PREVIEW render engine (F12's operator), written as a PNG: Blender's
+    own pipeline at the scene's resolution and % (5 % of 1920 x 1080)."""
+    scene = bpy.context.scene
+    scene.render.engine = "KD_PREVIEW"
+    scene.render.resolution_percentage = 5
+    scene.render.image_settings.file_format = "PNG"
+    scene.render.filepath = str(folder / "engine_still")
+    assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
+    written = folder / "engine_still.png"
+    image = bpy.data.images.load(str(written))
+    return {"engine_file_written": written.is_file(), "engine_image_size": list(image.size)}
+
+
+def engine_registered() -> bool:
+    return bpy.types.RenderEngine.bl_rna_get_subclass_py("KD_PREVIEW") is not None
+
+
 def installed_cache_folder() -> Path:
     """The installed add-on's versioned Numba cache folder (its corelib)."""
     return importlib.import_module(MODULE + ".kd_addon.corelib").numba_cache_dir()
@@ -113,7 +131,7 @@ def load_kernels(source: Path, folders: dict) -> None:
 
 def toggle_and_uninstall() -> dict:
     bpy.ops.preferences.addon_disable(module=MODULE)
-    assert not hasattr(bpy.types.Scene, "kd_preview") and not enabled()
+    assert not hasattr(bpy.types.Scene, "kd_preview") and not enabled() and not engine_registered()
     bpy.ops.preferences.addon_enable(module=MODULE)
     assert hasattr(bpy.types.Scene, "kd_preview") and enabled()
     repos = [repo.module for repo in bpy.context.preferences.extensions.repos]
@@ -139,6 +157,7 @@ def main(argv: list[str]) -> None:
     facts["kernel_files_before"] = kernel_files(installed_cache_folder())
     facts.update(render_default_scene())
     facts["warmup_after_render"] = warmup().status().state
+    facts.update(render_through_engine(Path(os.environ["BLENDER_USER_RESOURCES"])))
     facts["kernel_files_after"] = kernel_files(installed_cache_folder())
     if args.kernels_to is not None:
         save_kernels(kernels, args.kernels_to)

@@ -13,6 +13,8 @@ import bpy
 import numpy as np
 
 _captured: list = []
+_extracted: list = []  # kd_addon.extract.extract_scene of the render's depsgraph, when asked for
+_extract = [False]
 
 
 class CaptureEngine(bpy.types.RenderEngine):
@@ -21,6 +23,9 @@ class CaptureEngine(bpy.types.RenderEngine):
 
     def render(self, depsgraph):
         _captured[:] = list(_mesh_entries(depsgraph))
+        if _extract[0]:
+            from kd_addon.extract import extract_scene
+            _extracted[:] = [extract_scene(depsgraph)]
         render = depsgraph.scene.render
         scale = render.resolution_percentage / 100
         result = self.begin_result(0, 0, int(render.resolution_x * scale), int(render.resolution_y * scale))
@@ -47,6 +52,18 @@ def _mesh_entries(depsgraph):
         corners = np.array([t.vertices[:] for t in mesh.loop_triangles], np.int64)
         matrix = np.array(inst.matrix_world, np.float64)
         yield orig.name, parent.name if parent else None, co[corners] @ matrix[:3, :3].T + matrix[:3, 3]
+
+
+def extraction_in_render(scene: bpy.types.Scene | None = None):
+    """(kd_addon.extract.extract_scene of a final render's own depsgraph, as the render engine reads it,
+    the render's mesh entries)."""
+    _extract[0] = True
+    try:
+        entries = render_entries(scene)
+    finally:
+        _extract[0] = False
+    extracted = _extracted.pop()
+    return extracted, entries
 
 
 def render_entries(scene: bpy.types.Scene | None = None) -> list:

@@ -76,6 +76,7 @@ def test_extension_builds_installs_renders_and_uninstalls(tmp_path):
     # one folder per version of core's sources (Numba does not see a changed callee in another file)
     assert facts["numba_cache_dir"] == str(user_folder / "numba_cache" / f"core-{corelib.source_digest()}")
     assert facts["size"] == [96, 54] and 0.02 < facts["hit_fraction"] < 0.6
+    assert facts["engine_file_written"] and facts["engine_image_size"] == [96, 54]
     assert facts["last_run"]["triangles"] == 12 and facts["last_run"]["lights"] == 1
     if warm:  # every kernel loaded from the cache, none compiled or saved again, and no helper started
         assert facts["kernel_files_before"], f"nothing was copied from {kept}"

@@ -1,0 +1,181 @@
+"""A final render through the render engine (F12, Ctrl-F12, `blender -b f.blend -E KD_PREVIEW -f/-a`).
+
+Blender drives it: it sets the frame, hands `render()` the render's own depsgraph (extraction reads it as
+it is: extract.py), and writes the RenderResult filled here to the output path in the scene's format,
+frame by frame for an animation. The frame is the existing pipeline's FrameJob (trees and pixels kept
+across consecutive frames, tree_cache.py) at the scene's resolution and %, for the scene camera cropped to
+the Render Region. The result is opened only once the frame is finished, so a cancel (test_break, polled
+every pipeline.POLL_SECONDS) or an error leaves no partial image to write.
+
+Passes: Combined (RGBA, alpha 1 where a surface is hit) always; with the view layer's passes on, Depth
+(view-axis distance), AO and Shadow: the mode's own term is the Combined image, the other term is traced
+as a second job over the same trees (its own lane of tree_cache, so each keeps its pixels across frames).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from .config import make_config
+from .errors import Cancelled, PreviewError
+from .pipeline import FrameJob, FrameResult, FrameView, claim, release
+from .scene_input import CameraInput, read_camera
+
+# (pass name, channels, channel ids, Blender's pass type, the view layer switch that asks for it)
+PASSES = (("AO", 3, "RGB", "COLOR", "use_pass_ambient_occlusion"),
+          ("Shadow", 3, "RGB", "COLOR", "use_pass_shadow"),
+          ("Depth", 1, "Z", "VALUE", "use_pass_z"))
+TERM_OF_PASS = {"AO": "ao", "Shadow": "shadow"}
+NO_HIT_DEPTH = 1e10  # what Blender's Depth pass holds where nothing is hit
+
+
+def requested_passes(view_layer) -> list[tuple]:
+    """The PASSES rows the view layer asks for."""
+    return [row for row in PASSES if getattr(view_layer, row[4], False)]
+
+
+def border_region(render, width: int, height: int) -> tuple[int, int, int, int] | None:
+    """(x, y from the top, w, h) in pixels of the Render Region of a width x height frame, None without
+    one; Blender rounds the region's edges down (its render result is that size, checked by a test)."""
+    if not render.use_border:
+        return None
+    x0, x1 = int(render.border_min_x * width), int(render.border_max_x * width)
+    y0, y1 = int(render.border_min_y * height), int(render.border_max_y * height)  # from the bottom
+    if x1 <= x0 or y1 <= y0:
+        raise PreviewError("the Render Region (Output > Format) is empty: widen it or turn Render Region off")
+    return x0, height - y1, x1 - x0, y1 - y0
+
+
+def crop_camera(camera: CameraInput, width: int, height: int, region: tuple[int, int, int, int]) -> CameraInput:
+    """The camera whose w x h image is the `region` (x, y from the top, w, h) of `camera`'s width x height
+    image, pixel for pixel: the same pixel size, the image plane cut to the region (core.Camera's
+    image_plane: extents along the larger side, the shift in units of it)."""
+    x, y, w, h = region
+    tall = height * camera.pixel_aspect  # core.Camera._half_extent
+    half = np.tan(camera.fov / 2.0) if camera.fov is not None else camera.ortho_scale / 2.0
+    half_w, half_h = (half, half * tall / width) if width >= tall else (half * width / tall, half)
+    larger = 2.0 * max(half_w, half_h)
+    left = camera.shift[0] * larger - half_w + x * 2.0 * half_w / width
+    top = camera.shift[1] * larger + half_h - y * 2.0 * half_h / height
+    sub_w, sub_h = w * 2.0 * half_w / width, h * 2.0 * half_h / height
+    sub_larger = max(sub_w, sub_h)
+    shift = ((left + sub_w / 2.0) / sub_larger, (top - sub_h / 2.0) / sub_larger)
+    if camera.fov is not None:
+        return replace(camera, fov=float(2.0 * np.arctan(sub_larger / 2.0)), shift=shift)
+    return replace(camera, ortho_scale=float(sub_larger), shift=shift)
+
+
+def final_view(scene, depsgraph, width: int, height: int) -> tuple[FrameView, list[str]]:
+    """(the frame a final render makes, the camera's warnings): the scene camera at width x height (the
+    scene's resolution and %), cut to the Render Region (Blender pastes a region without Crop back into
+    the whole frame)."""
+    camera, warnings = read_camera(scene, depsgraph, width, height)
+    region = border_region(scene.render, width, height)
+    if region is None:
+        return FrameView(width, height, camera), warnings
+    return FrameView(region[2], region[3], crop_camera(camera, width, height, region)), warnings
+
+
+def to_rect(image: np.ndarray) -> np.ndarray:
+    """An (H, W, C) image with row 0 at the top as the flat float32 array a RenderPass's rect takes
+    (rows from the bottom)."""
+    return np.ascontiguousarray(image[::-1], np.float32).reshape(-1)
+
+
+def stats_line(result: FrameResult) -> str:
+    """The engine's stats line: frame size, triangles, build and trace times, speed."""
+    first = " (includes kernel compile)" if result.first_run else ""
+    reused = " | image reused" if result.image_reused else ""
+    return (f"KD Preview | {result.width}x{result.height} | {result.triangles:,} triangles | build "
+            f"{result.build_ms:.1f} ms | trace {result.trace_ms:.1f} ms{first} | {result.mrays_per_s:.2f} Mrays/s"
+            f"{reused}")
+
+
+class FinalRender:
+    """One render() call: the frame, its passes, and the RenderResult."""
+
+    def __init__(self, engine, depsgraph):
+        self.engine, self.depsgraph, self.scene = engine, depsgraph, depsgraph.scene
+
+    def run(self) -> None:
+        """Render the frame; a PreviewError is reported (no traceback), a cancel writes nothing."""
+        try:
+            config = make_config(self.scene.kd_preview)
+            view, camera_warnings = final_view(self.scene, self.depsgraph, self.engine.resolution_x,
+                                               self.engine.resolution_y)
+            passes = requested_passes(self.depsgraph.view_layer)
+            result = self._frame(config, view, "", "Combined")
+            images = self._pass_images(config, view, result, passes)
+        except Cancelled:
+            self.engine.update_stats("", "KD Preview | cancelled")
+            return
+        except PreviewError as error:
+            self.engine.report({"ERROR"}, f"KD Preview: {error}")
+            self.engine.error_set(f"KD Preview: {error}")
+            return
+        for warning in camera_warnings + result.warnings:
+            self._report_warning(warning)
+        self._write(view, result.image, images)
+        self.engine.update_stats("", stats_line(result))
+
+    def _report_warning(self, text: str) -> None:
+        self.engine.report({"WARNING"}, f"KD Preview: {text}")
+
+    def _frame(self, config, view: FrameView, lane: str, label: str) -> FrameResult:
+        """One FrameJob to the end, polling test_break between its short ticks."""
+        job = FrameJob(self.scene, self.depsgraph, config, view=view, lane=lane)
+        claim(job)  # no panel or Live Update run beside it (a frame change during an animation render)
+        try:
+            t0 = time.perf_counter()
+            while not job.tick():
+                if self.engine.test_break():
+                    raise Cancelled("cancelled")
+                self.engine.update_progress(job.progress)
+                self.engine.update_stats("", f"KD Preview | {label} | {job.status} | {time.perf_counter() - t0:.1f} s")
+            return job.result()
+        finally:
+            release(job)
+
+    def _pass_images(self, config, view: FrameView, result: FrameResult, passes: list[tuple]) -> dict:
+        """{pass name: (H, W, C) image} of the requested passes."""
+        images = {}
+        for name, channels, *_ in passes:
+            if name == "Depth":
+                depth = result.depth if result.depth is not None else np.full((view.height, view.width), np.inf)
+                images[name] = np.where(np.isfinite(depth), depth, NO_HIT_DEPTH)[..., None]
+                continue
+            term = TERM_OF_PASS[name]
+            if config.settings.mode == term:
+                images[name] = result.image[..., :channels]
+                continue
+            term_config = make_config(replace(config.settings, mode=term))
+            try:
+                images[name] = self._frame(term_config, view, f"pass:{term}", f"{name} pass").image[..., :channels]
+            except PreviewError as error:  # e.g. a Shadow pass in a scene without lights
+                self._report_warning(f"the {name} pass is left black: {error}")
+                images[name] = np.zeros((view.height, view.width, channels), np.float32)
+        return images
+
+    def _write(self, view: FrameView, combined: np.ndarray, images: dict) -> None:
+        """Fill the RenderResult; Blender writes it (output path and format) and shows it."""
+        for name, channels, ids, *_ in PASSES:
+            if name in images:
+                self.engine.add_pass(name, channels, ids, layer=self.depsgraph.view_layer.name)
+        # Blender calls render() once per view layer, each with its own depsgraph: fill that layer only
+        layer_name = self.depsgraph.view_layer.name
+        result = self.engine.begin_result(0, 0, view.width, view.height, layer=layer_name)
+        layer = result.layers[0]
+        layer.passes["Combined"].rect.foreach_set(to_rect(combined))
+        for name, image in images.items():
+            layer.passes[name].rect.foreach_set(to_rect(image))
+        self.engine.end_result(result)
+
+
+def update_render_passes(engine, scene, view_layer) -> None:
+    """Name the passes the compositor's Render Layers node offers for this engine."""
+    engine.register_pass(scene, view_layer, "Combined", 4, "RGBA", "COLOR")
+    for name, channels, ids, kind, _ in requested_passes(view_layer):
+        engine.register_pass(scene, view_layer, name, channels, ids, kind)

@@ -1,0 +1,342 @@
+"""Final renders through the KD_PREVIEW render engine (bpy.ops.render.render, as F12 / Ctrl-F12 / `-E`).
+
+The reference for pixels is the sidebar panel's render of the same frame (kd_addon.operators through the
+viewport's depsgraph, a path the engine shares only the tracer with): with the camera, size and settings
+equal, both images must be equal. Files are read back with the tests' own EXR reader, not Blender.
+"""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+import pytest
+
+from kd_addon import engine_final, tree_cache
+from tests import bpy_scenes as scenes
+from tests.addon_support import (add_quad, add_sun, check_half_plane_image, exr_channels, half_plane_scene,
+                                 preview_pixels)
+
+
+def engine_scene(tmp_path, *, exr=True, name="frame"):
+    """half_plane_scene (64 x 32 at 100 %) on the engine, writing an uncompressed RGBA EXR (or PNG)."""
+    scene = half_plane_scene()
+    scene.render.engine = "KD_PREVIEW"
+    scene.render.resolution_percentage = 100
+    settings = scene.render.image_settings
+    if exr:
+        settings.file_format, settings.color_mode, settings.exr_codec = "OPEN_EXR", "RGBA", "NONE"
+    else:
+        settings.file_format = "PNG"
+    scene.render.filepath = str(tmp_path / name)
+    return scene
+
+
+def read_rgba(path) -> np.ndarray:
+    """(H, W, 4), row 0 at the top, of a single-layer EXR."""
+    channels = exr_channels(str(path))
+    return np.stack([channels[c] for c in "RGBA"], axis=-1)
+
+
+def panel_image(scene, **settings) -> np.ndarray:
+    """The sidebar panel's render of the scene at its scene resolution (kd_preview.resolution_percentage
+    set to the scene's), with `settings` set for it and put back afterwards; nothing reused."""
+    settings = {"rebuild_all": True} | settings  # its own trees and image, none kept from the engine's frames
+    kept = {name: getattr(scene.kd_preview, name) for name in settings}
+    for name, value in settings.items():
+        setattr(scene.kd_preview, name, value)
+    scene.kd_preview.resolution_percentage = scene.render.resolution_percentage
+    try:
+        assert bpy.ops.kdpreview.render() == {"FINISHED"}
+        return preview_pixels()
+    finally:
+        for name, value in kept.items():
+            setattr(scene.kd_preview, name, value)
+
+
+@pytest.fixture
+def results(monkeypatch):
+    """The FrameResults of the engine's frames, in order (spied on its stats line)."""
+    seen = []
+    original = engine_final.stats_line
+
+    def spy(result):
+        seen.append(result)
+        return original(result)
+
+    monkeypatch.setattr(engine_final, "stats_line", spy)
+    return seen
+
+
+def test_engine_is_listed_and_its_panels_poll_on_it(addon):
+    scene = bpy.context.scene
+    assert bpy.types.RenderEngine.bl_rna_get_subclass_py("KD_PREVIEW").bl_label == "KD Preview"
+    with pytest.raises(TypeError):  # the engine list refuses an engine not in it...
+        scene.render.engine = "KD_PREVIEW_NOT_REGISTERED"
+    scene.render.engine = "KD_PREVIEW"  # ... and takes this one
+    assert scene.render.engine == "KD_PREVIEW"
+    panel = bpy.types.KDPREVIEW_PT_render_settings
+    assert panel.bl_context == "render" and panel.COMPAT_ENGINES == {"KD_PREVIEW"}
+    assert "KD_PREVIEW" in bpy.types.RENDER_PT_color_management.COMPAT_ENGINES
+    assert hasattr(bpy.types, "KDPREVIEW_PT_panel")  # the sidebar panel stays
+    addon.unregister()
+    assert bpy.types.RenderEngine.bl_rna_get_subclass_py("KD_PREVIEW") is None
+    assert "KD_PREVIEW" not in bpy.types.RENDER_PT_color_management.COMPAT_ENGINES
+
+
+def test_still_render_writes_the_panels_image_to_the_output_path(addon, tmp_path, results):
+    scene = engine_scene(tmp_path)
+    assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
+    written = read_rgba(tmp_path / "frame.exr")
+    check_half_plane_image(written)
+    assert np.array_equal(written, panel_image(scene))
+    assert results[0].rays > 0 and results[0].triangles == 14
+
+
+def test_png_and_the_scenes_resolution_percentage(addon, tmp_path):
+    scene = engine_scene(tmp_path, exr=False)
+    scene.render.resolution_percentage = 50
+    assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
+    image = bpy.data.images.load(str(tmp_path / "frame.png"))
+    assert tuple(image.size) == (32, 16)
+
+
+@pytest.mark.parametrize("crop", [True, False])
+def test_render_region_renders_the_frames_pixels_there(addon, tmp_path, crop):
+    """The region's pixels are the whole frame's there: the same surfaces hit (alpha, exact) and, as the
+    samples of a pixel depend on its index in the image, AO equal in the mean. A strip over the top right
+    breaks the symmetry in y. (engine_final.crop_camera's rays are checked exactly in test_engine_camera.py.)"""
+    scene = engine_scene(tmp_path)
+    scene.kd_preview.samples = 32
+    add_quad("Strip", 2.0, 0.75, location=(2.0, 1.25, 0.0))  # x in [0, 4], y in [0.5, 2]: rows 0-11, right half
+    bpy.ops.render.render(write_still=True)
+    whole = read_rgba(tmp_path / "frame.exr")
+    assert whole[:12, 40:, 3].all() and not whole[12:, 40:, 3].any()
+    render = scene.render
+    render.use_border, render.use_crop_to_border = True, crop
+    render.border_min_x, render.border_max_x, render.border_min_y, render.border_max_y = 0.25, 0.7, 0.2, 0.9
+    scene.render.filepath = str(tmp_path / "region")
+    assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
+    region = read_rgba(tmp_path / "region.exr")
+    x, y, w, h = engine_final.border_region(render, 64, 32)
+    assert (x, y, w, h) == (16, 4, 28, 22)  # 0.9 * 32 = 28.8 -> 28 (from the bottom), 0.2 * 32 -> 6
+    inside = region if crop else region[y:y + h, x:x + w]
+    assert inside.shape == (h, w, 4)
+    assert np.array_equal(inside[..., 3], whole[y:y + h, x:x + w, 3])
+    assert abs(inside[..., 0].mean() - whole[y:y + h, x:x + w, 0].mean()) < 0.01
+    if not crop:
+        outside = np.ones((32, 64), bool)
+        outside[y:y + h, x:x + w] = False
+        assert (region[outside] == 0.0).all()
+
+
+def test_animation_writes_the_frame_range_by_step_and_reuses_trees(addon, tmp_path, results):
+    scene = engine_scene(tmp_path, name="anim_")
+    box = bpy.data.objects["Box"]
+    box.location.x = -2.5
+    box.keyframe_insert("location", frame=1)
+    box.location.x = -1.5
+    box.keyframe_insert("location", frame=5)
+    scene.frame_start, scene.frame_end, scene.frame_step = 1, 5, 2
+    tree_cache.clear()
+    assert bpy.ops.render.render(animation=True) == {"FINISHED"}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["anim_0001.exr", "anim_0003.exr", "anim_0005.exr"]
+    assert [r.frame for r in results] == [1, 3, 5]
+    assert results[0].objects_rebuilt == 2
+    # moved, not edited: once the builder knows the box moves (core.SceneBuilder), both trees are kept,
+    # and so are the pixels whose rays cannot reach the box
+    assert (results[2].objects_rebuilt, results[2].objects_reused) == (0, 2)
+    assert results[2].pixels_reused > 0
+    first, last = read_rgba(tmp_path / "anim_0001.exr"), read_rgba(tmp_path / "anim_0005.exr")
+    assert not np.array_equal(first, last)
+    scene.frame_set(5)
+    assert np.array_equal(last, panel_image(scene))  # a kept pixel is the pixel a fresh render makes
+
+
+def test_passes_reach_the_render_result_and_a_multilayer_exr(addon, tmp_path):
+    scene = engine_scene(tmp_path)
+    layer = scene.view_layers[0]
+    layer.use_pass_ambient_occlusion = layer.use_pass_shadow = layer.use_pass_z = True
+    scene.kd_preview.mode = "ao+shadow"
+    settings = scene.render.image_settings
+    if hasattr(settings, "media_type"):  # Blender 5.0 on
+        settings.media_type = "MULTI_LAYER_IMAGE"
+    settings.file_format, settings.exr_codec = "OPEN_EXR_MULTILAYER", "NONE"
+    assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
+    channels = exr_channels(str(tmp_path / "frame.exr"))
+    prefix = f"{layer.name}."
+
+    def rgb(name):
+        return np.stack([channels[f"{prefix}{name}.{c}"] for c in "RGB"], axis=-1)
+
+    combined = np.stack([channels[f"{prefix}Combined.{c}"] for c in "RGBA"], axis=-1)
+    assert np.array_equal(combined, panel_image(scene))
+    assert np.array_equal(rgb("AO"), panel_image(scene, mode="ao")[..., :3])
+    assert np.array_equal(rgb("Shadow"), panel_image(scene, mode="shadow")[..., :3])
+    depth = channels[f"{prefix}Depth.Z"]
+    hit = combined[..., 3] > 0
+    # camera at z = 10 looking down: the ground (z = 0) at 10, the box's top (z = 1) at 9, nothing else
+    assert np.allclose(depth[hit][np.abs(depth[hit] - 9.0) > 1e-3], 10.0, atol=1e-4)
+    assert (np.abs(depth[hit] - 9.0) < 1e-3).any()
+    assert (depth[~hit] == engine_final.NO_HIT_DEPTH).all()
+    assert not np.array_equal(rgb("AO"), rgb("Shadow"))
+
+
+class FakeEngine:
+    """The RenderEngine calls FinalRender makes, recorded; test_break True from its `breaks_at`-th poll."""
+
+    def __init__(self, width, height, breaks_at):
+        self.resolution_x, self.resolution_y, self.breaks_at = width, height, breaks_at
+        self.polls, self.calls = 0, []
+
+    def test_break(self):
+        self.polls += 1
+        return self.polls >= self.breaks_at
+
+    def __getattr__(self, name):  # update_stats, update_progress, report, begin_result, ...
+        return lambda *args, **kwargs: self.calls.append(name)
+
+
+@pytest.mark.parametrize("breaks_at", [1, 2, 4])
+def test_cancel_mid_frame_hands_blender_no_result(addon, tmp_path, breaks_at):
+    """test_break is polled between the frame's short ticks (scene read, build, each sample); once it
+    says stop, no result is opened, so Blender has nothing to write (with Esc it writes nothing at all:
+    its own break flag is set), and the scene is as it was."""
+    scene = engine_scene(tmp_path)
+    scene.kd_preview.samples = 64
+    objects_before = sorted(ob.name for ob in scene.objects)
+    fake = FakeEngine(64, 32, breaks_at)
+    engine_final.FinalRender(fake, bpy.context.evaluated_depsgraph_get()).run()
+    assert fake.polls == breaks_at
+    assert "begin_result" not in fake.calls and "end_result" not in fake.calls and "report" not in fake.calls
+    assert sorted(ob.name for ob in scene.objects) == objects_before
+    assert bpy.ops.render.render(write_still=True) == {"FINISHED"}  # the cancelled job left no claim behind
+    check_half_plane_image(read_rgba(tmp_path / "frame.exr"))
+
+
+def test_an_error_is_reported_not_raised_and_writes_nothing(addon, tmp_path):
+    scene = engine_scene(tmp_path)
+    bpy.data.objects.remove(bpy.data.objects["Sun"])
+    scene.kd_preview.mode = "shadow"
+    try:
+        bpy.ops.render.render(write_still=True)
+    except RuntimeError as error:  # Blender turns the engine's ERROR report into the operator's error
+        assert "needs a light" in str(error) and "Traceback" not in str(error)
+    assert not (tmp_path / "frame.exr").exists()
+
+
+def _occluder_scene(tmp_path, mode):
+    """engine_scene with a wall beside the box that casts a shadow and darkens the ground's AO."""
+    scene = engine_scene(tmp_path)
+    scene.kd_preview.mode = mode
+    wall = scenes.add_cube("Wall", scale=0.5, location=(-3.2, 0.0, 0.5))
+    wall.scale = (0.2, 1.5, 1.0)
+    bpy.data.objects["Sun"].rotation_euler = (0.0, 0.8, 0.0)
+    return scene, wall
+
+
+@pytest.mark.parametrize("mode", ["ao", "shadow"])
+def test_an_object_disabled_in_viewports_is_in_the_final_render(addon, tmp_path, mode):
+    """The panel reads the viewport's depsgraph, which has no such object; the engine reads the render's."""
+    scene, wall = _occluder_scene(tmp_path, mode)
+    with_wall = panel_image(scene)
+    wall.hide_viewport = True
+    without_wall = panel_image(scene)
+    assert not np.array_equal(with_wall, without_wall)  # the wall changes the image (its shadow, its AO)
+    assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
+    assert np.array_equal(read_rgba(tmp_path / "frame.exr"), with_wall)
+
+
+def test_a_render_only_subdivision_level_is_traced(addon, tmp_path, results):
+    scene = engine_scene(tmp_path)
+    box = bpy.data.objects["Box"]
+    subsurf = box.modifiers.new("Subdivision", "SUBSURF")
+    subsurf.levels, subsurf.render_levels = 0, 2
+    assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
+    assert results[0].triangles == 2 + 6 * 16 * 2  # ground quad + the cube's 6 faces at level 2
+    assert not any("viewport" in w for w in results[0].warnings)
+    panel_image(scene)
+    last = bpy.context.window_manager.kd_preview_state.last_run
+    assert '"triangles": 14' in last  # the panel traces the viewport's level 0
+
+
+def test_a_render_only_modifier_and_sun_light(addon, tmp_path, results):
+    """A modifier shown in renders only (Solidify here) is applied by the final render."""
+    engine_scene(tmp_path)
+    ground = bpy.data.objects["Ground"]
+    solidify = ground.modifiers.new("Solidify", "SOLIDIFY")
+    solidify.show_viewport, solidify.show_render = False, True
+    add_sun("Sun2")
+    assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
+    assert results[0].triangles > 14
+
+
+def test_every_view_layer_enabled_for_rendering_gets_its_own_image(addon, tmp_path):
+    """Blender renders each view layer with its own depsgraph: a layer excluding the box's collection
+    shows no box, the other does, each in its own layer of the multilayer EXR."""
+    scene = engine_scene(tmp_path)
+    boxes = scenes.new_collection("Boxes")
+    box = bpy.data.objects["Box"]
+    for collection in box.users_collection:
+        collection.objects.unlink(box)
+    boxes.objects.link(box)
+    second = scene.view_layers.new("NoBox")
+    second.layer_collection.children["Boxes"].exclude = True
+    settings = scene.render.image_settings
+    if hasattr(settings, "media_type"):  # Blender 5.0 on
+        settings.media_type = "MULTI_LAYER_IMAGE"
+    settings.file_format, settings.exr_codec = "OPEN_EXR_MULTILAYER", "NONE"
+    assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
+    channels = exr_channels(str(tmp_path / "frame.exr"))
+    first = channels[f"{scene.view_layers[0].name}.Combined.R"]
+    without = channels["NoBox.Combined.R"]
+    box_top = (slice(14, 18), slice(14, 18))  # the box's top face, AO 1 there; open ground too without it
+    ground_beside = (slice(14, 18), slice(20, 22))  # ground beside the box's wall: darker with the box
+    assert first[ground_beside].mean() < without[ground_beside].mean() - 0.05
+    assert np.array_equal(channels["NoBox.Combined.A"], channels[f"{scene.view_layers[0].name}.Combined.A"])
+    assert first[box_top].min() > 0.0
+
+
+def _composite_pass(scene, name):
+    """The compositor's output: the Render Layers node's `name` socket (Blender 5.0 on: the scene's
+    compositing node group's Group Output; before: the scene's node tree's Composite node)."""
+    if hasattr(scene, "compositing_node_group"):
+        tree = bpy.data.node_groups.new("KD Compositing", "CompositorNodeTree")
+        tree.interface.new_socket("Image", in_out="OUTPUT", socket_type="NodeSocketColor")
+        scene.compositing_node_group = tree
+        output = tree.nodes.new("NodeGroupOutput")
+    else:
+        scene.use_nodes = True
+        tree = scene.node_tree
+        tree.nodes.clear()
+        output = tree.nodes.new("CompositorNodeComposite")
+    layers = tree.nodes.new("CompositorNodeRLayers")
+    layers.scene = scene
+    tree.links.new(layers.outputs[name], output.inputs[0])
+    scene.render.use_compositing = True
+
+
+def test_the_compositor_reads_a_named_pass(addon, tmp_path):
+    """update_render_passes names the AO pass for the Render Layers node: routed to the output, the
+    written image is the AO term."""
+    scene = engine_scene(tmp_path)
+    scene.kd_preview.mode = "ao+shadow"
+    scene.view_layers[0].use_pass_ambient_occlusion = True
+    _composite_pass(scene, "AO")
+    assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
+    written = read_rgba(tmp_path / "frame.exr")
+    ao = panel_image(scene, mode="ao")
+    assert np.allclose(written[..., :3], ao[..., :3], atol=1e-6)
+    assert not np.allclose(written[..., :3], panel_image(scene)[..., :3], atol=1e-3)  # not the Combined image
+
+
+def test_warnings_are_reported_with_the_frame(addon, tmp_path, monkeypatch):
+    """What the preview does not apply (here the camera's depth of field) is reported, and the frame is
+    written."""
+    scene = engine_scene(tmp_path)
+    scene.camera.data.dof.use_dof = True
+    reported = []
+    monkeypatch.setattr(engine_final.FinalRender, "_report_warning",
+                        lambda self, text: reported.append(text))
+    assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
+    assert any("depth of field" in text for text in reported)
+    assert (tmp_path / "frame.exr").is_file()
