@@ -265,10 +265,12 @@ def summarize(results: list[FrameResult], wall_ms: float) -> dict:
 
 
 def write_report(out_dir: Path, scene_name: str, config: RenderConfig, results: list[FrameResult],
-                 files: list[Path], totals: dict, frames_requested: int, stopped: dict | None = None) -> Path:
+                 files: list[Path], totals: dict, frames_requested: int, stopped: dict | None = None,
+                 extra: dict | None = None) -> Path:
     """Write `report.json` (settings, one row per frame, totals) and return its path. `complete` is
     False when fewer frames than requested were written (a cancelled or failed sequence, or one still
-    running); `stopped` ({"frame", "reason"}), when given, says where and why it ended."""
+    running); `stopped` ({"frame", "reason"}), when given, says where and why it ended; `extra`: more
+    top-level sections (a cluster run's "farm": workers, chunks, retries)."""
     first = results[0]
     report = {
         "scene": scene_name,
@@ -282,6 +284,7 @@ def write_report(out_dir: Path, scene_name: str, config: RenderConfig, results: 
         "frames": [dict(r.summary(), file=p.name) for r, p in zip(results, files)],
         "totals": totals,
         "machine": {"python": platform.python_version(), "platform": platform.platform()},
+        **(extra or {}),
     }
     path = Path(out_dir) / REPORT_NAME
     partial = output.partial_path(path)  # renamed over the report: never half a file
