@@ -1,0 +1,126 @@
+"""The cluster path's cost against the in-process command line, and the time on N machines.
+
+Renders the demo's frames (kd_addon/demo_scene.py, 24 by default) with `python -m kd_addon render --demo` in
+process and with `--local-workers 1` (one worker process given every core: the same compute, so the
+difference is the cluster path's own cost: starting the worker process, its imports and kernel load, the
+scene opened again for each chunk, each chunk's fresh first frame, and the frames' trip through the
+scheduler), alternating, --runs times. Figures, medians:
+
+- per-frame overhead: (cluster run's wall time - in-process run's) / frames, for whole processes, and for
+  the render alone (report.json's wall_ms: from the first frame's start, after the cluster is up);
+- the measured chunk times (scene opening + render, from report.json's "farm" section), scheduled in
+  order onto N machines (each chunk to the first machine free, as the scheduler's queue does), plus the
+  measured fixed cost of a run: the projected time for N = 1, 2, 4, 8, 16 machines, for the frames
+  measured and for --shot frames (the measured chunks repeated).
+
+    python benchmarks/bench_farm.py [--frames 24] [--runs 3] [--resolution 50] [--samples 16] [--chunk-size 3]
+"""
+from __future__ import annotations
+
+import argparse
+import heapq
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from benchmarks import results  # noqa: E402
+
+MACHINES = (1, 2, 4, 8, 16)
+
+
+def render(out: Path, args, farm: bool) -> tuple[float, dict]:
+    """(process wall seconds, report.json) of one run."""
+    command = [sys.executable, "-m", "kd_addon", "render", "--demo", "--frames", f"1-{args.frames}", "--out",
+               str(out), "--resolution", str(args.resolution), "--samples", str(args.samples)]
+    if farm:
+        command += ["--local-workers", "1", "--chunk-size", str(args.chunk_size)]
+    t0 = time.perf_counter()
+    proc = subprocess.run(command, cwd=REPO, capture_output=True, text=True,
+                          env=dict(os.environ, PYTHONPATH=str(REPO)))
+    wall = time.perf_counter() - t0
+    if proc.returncode != 0:
+        sys.exit(f"{' '.join(command)} failed ({proc.returncode}):\n{proc.stderr[-3000:]}")
+    return wall, json.loads((out / "report.json").read_text())
+
+
+def makespan(chunk_seconds: list[float], machines: int) -> float:
+    """Chunks taken in order, each by the first machine to be free."""
+    free = [0.0] * machines
+    for seconds in chunk_seconds:
+        heapq.heappush(free, heapq.heappop(free) + seconds)
+    return max(free)
+
+
+def chunk_seconds(report: dict) -> list[float]:
+    return [(c["load_ms"] + c["render_ms"]) / 1e3 for c in report["farm"]["chunks"]]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--frames", type=int, default=24)
+    parser.add_argument("--runs", type=int, default=3)
+    parser.add_argument("--resolution", type=int, default=50)
+    parser.add_argument("--samples", type=int, default=16)
+    parser.add_argument("--chunk-size", dest="chunk_size", type=int, default=3)
+    parser.add_argument("--shot", type=int, default=240, help="frames of the longer shot projected")
+    args = parser.parse_args()
+    scratch = Path(tempfile.mkdtemp(prefix="bench_farm_"))
+    t0 = time.perf_counter()
+    render(scratch / "warm", args, farm=False)  # compiles the kernels if the cache is cold
+    jit_seconds = time.perf_counter() - t0
+    walls = {"in_process": [], "cluster": []}
+    render_walls = {"in_process": [], "cluster": []}
+    chunks, fixed = [], []
+    for run in range(args.runs):
+        for mode in ("in_process", "cluster") if run % 2 == 0 else ("cluster", "in_process"):
+            wall, report = render(scratch / f"{mode}{run}", args, farm=mode == "cluster")
+            walls[mode].append(wall)
+            render_walls[mode].append(report["totals"]["wall_ms"] / 1e3)
+            if mode == "cluster":
+                chunks.append(chunk_seconds(report))
+                fixed.append(wall - sum(chunk_seconds(report)))  # process, cluster start, client, transfers
+    frames = args.frames
+    overhead = [(c - i) / frames for c, i in zip(walls["cluster"], walls["in_process"])]
+    render_overhead = [(c - i) / frames for c, i in zip(render_walls["cluster"], render_walls["in_process"])]
+    median_chunks = [statistics.median(column) for column in zip(*chunks)]
+    fixed_s = statistics.median(fixed)
+    repeats = -(-args.shot // frames)
+    projected = {n: {"frames": fixed_s + makespan(median_chunks, n),
+                     "shot": fixed_s + makespan(median_chunks * repeats, n) * args.shot / (frames * repeats)}
+                 for n in MACHINES}
+    print(f"demo, {frames} frames at {args.resolution}% and {args.samples} samples, chunks of {args.chunk_size}, "
+          f"{args.runs} paired runs (medians):")
+    print(f"  in process:            {statistics.median(walls['in_process']):7.2f} s a run "
+          f"({statistics.median(render_walls['in_process']):.2f} s rendering)")
+    print(f"  cluster, 1 local worker: {statistics.median(walls['cluster']):7.2f} s a run "
+          f"({statistics.median(render_walls['cluster']):.2f} s from the first chunk's submission)")
+    print(f"  overhead a frame:      {statistics.median(overhead) * 1e3:7.1f} ms (whole processes), "
+          f"{statistics.median(render_overhead) * 1e3:.1f} ms (rendering only)")
+    print(f"  chunk times (open + render): {', '.join(f'{s:.2f}' for s in median_chunks)} s; fixed cost "
+          f"{fixed_s:.2f} s")
+    for n in MACHINES:
+        print(f"  projected on {n:2d} machine(s): {projected[n]['frames']:7.2f} s for {frames} frames, "
+              f"{projected[n]['shot']:8.1f} s for {args.shot}")
+    results.write("bench_farm", {
+        "frames": frames, "resolution": args.resolution, "samples": args.samples, "chunk_size": args.chunk_size,
+        "in_process_run": results.figure(walls["in_process"]),
+        "cluster_run": results.figure(walls["cluster"], walls["in_process"]),
+        "in_process_render": results.figure(render_walls["in_process"]),
+        "cluster_render": results.figure(render_walls["cluster"], render_walls["in_process"]),
+        "overhead_per_frame": results.figure(overhead),
+        "render_overhead_per_frame": results.figure(render_overhead),
+        "chunk_seconds": median_chunks, "fixed_seconds": fixed_s,
+        "projected_seconds": {str(n): v for n, v in projected.items()}, "shot_frames": args.shot,
+    }, jit_seconds, quick=args.runs < 3)
+
+
+if __name__ == "__main__":
+    main()
