@@ -22,20 +22,37 @@ def chunk_task():
 
 
 def run_chunk(spec: dict, blend_bytes=None) -> dict:
-    """Check this worker, then render the chunk `spec` describes (tasks.render_chunk)."""
-    from distributed import Queue, get_worker
+    """Render the chunk `spec` describes on this worker's bpy thread (bpy_thread), and wait for it."""
+    from distributed import get_client, get_worker
+
+    worker = get_worker()
+    return bpy_thread(worker).submit(checked_chunk, spec, blend_bytes, worker.address, get_client()).result()
+
+
+def bpy_thread(worker):
+    """The one thread of this worker process that runs bpy. bpy works in the thread that imported it and
+    crashes when another thread calls it (an operator from any other thread: SIGSEGV), so every chunk runs
+    on the same thread, whichever task thread Dask gives it."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    return worker.__dict__.setdefault("_kd_preview_bpy_thread",
+                                      ThreadPoolExecutor(1, thread_name_prefix="kd-preview-bpy"))
+
+
+def checked_chunk(spec: dict, blend_bytes, worker: str, client) -> dict:
+    """Check this worker, then render (tasks.render_chunk); on the bpy thread."""
+    from distributed import Queue
 
     forget_inherited_paths(spec["blender_paths"])
-    worker = get_worker().address
     problem = setup_problem(spec["package"], spec["digest"])
     if problem is not None:
         message = (f"worker {worker} (host {socket.gethostname()}, pid {os.getpid()}, Python {sys.executable}) "
                    f"cannot render: {problem}")
-        Queue(spec["queue"]).put({"kind": "setup-failed", "chunk": spec["chunk"], "worker": worker,
-                                  "error": message})
+        Queue(spec["queue"], client=client).put({"kind": "setup-failed", "chunk": spec["chunk"], "worker": worker,
+                                                 "error": message})
         raise RuntimeError(message)
     tasks = importlib.import_module(spec["package"] + ".farm.tasks")
-    return tasks.render_chunk(spec, blend_bytes)
+    return tasks.render_chunk(spec, blend_bytes, worker, client)
 
 
 def forget_inherited_paths(paths) -> None:

@@ -294,7 +294,7 @@ class FarmRun:
             timing = self.timings.get(index, {})
             chunks.append({"chunk": index, "frames": _span(frames), "count": len(frames),
                            "worker": timing.get("worker"), "load_ms": timing.get("load_ms"),
-                           "render_ms": timing.get("render_ms"), "wait_ms": timing.get("wait_ms"),
+                           "render_ms": timing.get("render_ms"),
                            "attempts": self.attempts[index]})
         return {"scheduler": self.args.dask or f"local cluster of {self.args.local_workers} worker(s)",
                 "workers_at_start": self.workers_at_start,

@@ -5,15 +5,17 @@ in process, so trees and pixels are reused across the chunk's frames and its fir
 build. Each frame, once written, goes to the client through the run's distributed.Queue (its encoded
 file's bytes and its report row) and its file is deleted; the task returns the chunk's timings. The
 client dedups frames by number, so a chunk rerun after a worker died may send its frames again.
-bpy holds one open file per process, so chunks on one worker process take turns (PROCESS_LOCK), however
-many task threads the worker has.
+bpy holds one open file per process, so chunks on one worker process take turns, however
+many task threads the worker has: every chunk runs on the process's one bpy thread.
 """
 
 from __future__ import annotations
 
+import atexit
 import hashlib
 import os
 import socket
+import sys
 import tempfile
 import threading
 import time
@@ -27,27 +29,42 @@ from ..errors import PreviewError
 from ..operators import depsgraph_source
 from ..sequence import SequenceJob
 
-PROCESS_LOCK = threading.Lock()
+def render_chunk(spec: dict, blend_bytes: bytes | None, worker: str, client) -> dict:
+    """Render spec["frames"] and stream them to spec["queue"]; return the chunk's timings. On the worker
+    process's bpy thread (bootstrap.bpy_thread); `client`: the worker's Dask client."""
+    from distributed import Event, Queue
 
-
-def render_chunk(spec: dict, blend_bytes: bytes | None = None) -> dict:
-    """Render spec["frames"] and stream them to spec["queue"]; return the chunk's timings."""
-    from distributed import Event, Queue, get_worker
-
-    queue, cancel = Queue(spec["queue"]), Event(spec["cancel"])
-    here = {"chunk": spec["chunk"], "attempt": uuid.uuid4().hex[:8], "worker": get_worker().address}
-    t0 = time.perf_counter()
-    with PROCESS_LOCK:
-        queue.put({"kind": "start", **here, "host": socket.gethostname(), "pid": os.getpid()})
-        started = time.perf_counter()
-        try:
-            load_ms, frames = _render(spec, blend_bytes, lambda message: queue.put({**here, **message}),
-                                      cancel.is_set)
-        except BaseException as error:  # noqa: B036  (the client names why an attempt ended)
-            queue.put({"kind": "failed", **here, "error": str(error) or type(error).__name__})
-            raise
-    return {**here, "frames": frames, "wait_ms": (started - t0) * 1e3, "load_ms": load_ms,
+    _skip_teardown_at_exit()
+    queue, cancel = Queue(spec["queue"], client=client), Event(spec["cancel"], client=client)
+    here = {"chunk": spec["chunk"], "attempt": uuid.uuid4().hex[:8], "worker": worker}
+    queue.put({"kind": "start", **here, "host": socket.gethostname(), "pid": os.getpid()})
+    started = time.perf_counter()
+    try:
+        load_ms, frames = _render(spec, blend_bytes, lambda message: queue.put({**here, **message}), cancel.is_set)
+    except BaseException as error:  # noqa: B036  (the client names why an attempt ended)
+        queue.put({"kind": "failed", **here, "error": str(error) or type(error).__name__})
+        raise
+    return {**here, "frames": frames, "load_ms": load_ms,
             "render_ms": (time.perf_counter() - started) * 1e3 - load_ms}
+
+
+_exit_hooked = False
+
+
+def _skip_teardown_at_exit() -> None:
+    """With bpy imported outside the main thread, the interpreter's teardown crashes (SIGSEGV after every
+    exit handler ran; docs/choices.md "bpy on one worker thread"). A worker process that rendered ends
+    at its last exit handler instead: os._exit, registered after bpy's, so run before it."""
+    global _exit_hooked
+    if not _exit_hooked:
+        atexit.register(_exit_now)
+        _exit_hooked = True
+
+
+def _exit_now() -> None:
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(0)
 
 
 def _render(spec: dict, blend_bytes, send, cancelled) -> tuple[float, int]:
