@@ -9,9 +9,10 @@ scheduler), alternating, --runs times. Figures, medians:
 - per-frame overhead: (cluster run's wall time - in-process run's) / frames, for whole processes, and for
   the render alone (report.json's wall_ms: from the first frame's start, after the cluster is up);
 - the measured chunk times (scene opening + render, from report.json's "farm" section), scheduled in
-  order onto N machines (each chunk to the first machine free, as the scheduler's queue does), plus the
-  measured fixed cost of a run: the projected time for N = 1, 2, 4, 8, 16 machines, for the frames
-  measured and for --shot frames (the measured chunks repeated).
+  order onto N machines (each chunk to the first machine free, as the scheduler's queue does), each
+  machine starting after the kernel load a new worker measured, plus the measured fixed cost of a run
+  (processes, cluster start, client): the projected time for N = 1, 2, 4, 8, 16 machines, for the frames
+  measured and for --shot frames (the measured chunks repeated). Transfers are taken as on the loopback.
 
     python benchmarks/bench_farm.py [--frames 24] [--runs 3] [--resolution 50] [--samples 16] [--chunk-size 3]
 """
@@ -51,9 +52,10 @@ def render(out: Path, args, farm: bool) -> tuple[float, dict]:
     return wall, json.loads((out / "report.json").read_text())
 
 
-def makespan(chunk_seconds: list[float], machines: int) -> float:
-    """Chunks taken in order, each by the first machine to be free."""
-    free = [0.0] * machines
+def makespan(chunk_seconds: list[float], machines: int, startup: float = 0.0) -> float:
+    """Chunks taken in order, each by the first machine to be free; every machine starts `startup`
+    seconds late (its kernels loading)."""
+    free = [startup] * machines
     for seconds in chunk_seconds:
         heapq.heappush(free, heapq.heappop(free) + seconds)
     return max(free)
@@ -61,6 +63,16 @@ def makespan(chunk_seconds: list[float], machines: int) -> float:
 
 def chunk_seconds(report: dict) -> list[float]:
     return [(c["load_ms"] + c["render_ms"]) / 1e3 for c in report["farm"]["chunks"]]
+
+
+def kernel_load_seconds(report: dict) -> float:
+    """The worker's first frame against the other chunks' first frames (fresh builds too, with the
+    kernels already loaded): what loading the compiled kernels from Numba's cache costs a new worker."""
+    firsts = {c["frames"][0] for c in report["farm"]["chunks"]}
+    rows = [r for r in report["frames"] if r["frame"] in firsts]
+    later = [r["total_ms"] for r in rows if not r["first_run"]]
+    first = [r["total_ms"] for r in rows if r["first_run"]]
+    return (statistics.median(first) - statistics.median(later)) / 1e3 if first and later else float("nan")
 
 
 def main() -> None:
@@ -78,7 +90,7 @@ def main() -> None:
     jit_seconds = time.perf_counter() - t0
     walls = {"in_process": [], "cluster": []}
     render_walls = {"in_process": [], "cluster": []}
-    chunks, fixed = [], []
+    chunks, fixed, loads = [], [], []
     for run in range(args.runs):
         for mode in ("in_process", "cluster") if run % 2 == 0 else ("cluster", "in_process"):
             wall, report = render(scratch / f"{mode}{run}", args, farm=mode == "cluster")
@@ -86,15 +98,17 @@ def main() -> None:
             render_walls[mode].append(report["totals"]["wall_ms"] / 1e3)
             if mode == "cluster":
                 chunks.append(chunk_seconds(report))
+                loads.append(kernel_load_seconds(report))
                 fixed.append(wall - sum(chunk_seconds(report)))  # process, cluster start, client, transfers
     frames = args.frames
     overhead = [(c - i) / frames for c, i in zip(walls["cluster"], walls["in_process"])]
     render_overhead = [(c - i) / frames for c, i in zip(render_walls["cluster"], render_walls["in_process"])]
     median_chunks = [statistics.median(column) for column in zip(*chunks)]
-    fixed_s = statistics.median(fixed)
+    fixed_s, load_s = statistics.median(fixed), statistics.median(loads)
+    warm_chunks = [median_chunks[0] - load_s, *median_chunks[1:]]  # every machine pays the load: startup
     repeats = -(-args.shot // frames)
-    projected = {n: {"frames": fixed_s + makespan(median_chunks, n),
-                     "shot": fixed_s + makespan(median_chunks * repeats, n) * args.shot / (frames * repeats)}
+    projected = {n: {"frames": fixed_s + makespan(warm_chunks, n, load_s),
+                     "shot": fixed_s + load_s + (makespan(warm_chunks * repeats, n) * args.shot / (frames * repeats))}
                  for n in MACHINES}
     print(f"demo, {frames} frames at {args.resolution}% and {args.samples} samples, chunks of {args.chunk_size}, "
           f"{args.runs} paired runs (medians):")
@@ -106,6 +120,8 @@ def main() -> None:
           f"{statistics.median(render_overhead) * 1e3:.1f} ms (rendering only)")
     print(f"  chunk times (open + render): {', '.join(f'{s:.2f}' for s in median_chunks)} s; fixed cost "
           f"{fixed_s:.2f} s")
+    print(f"  a new worker's kernel load from the cache (its first frame against later chunks' first frames): "
+          f"{statistics.median(loads):.2f} s")
     for n in MACHINES:
         print(f"  projected on {n:2d} machine(s): {projected[n]['frames']:7.2f} s for {frames} frames, "
               f"{projected[n]['shot']:8.1f} s for {args.shot}")
@@ -118,6 +134,7 @@ def main() -> None:
         "overhead_per_frame": results.figure(overhead),
         "render_overhead_per_frame": results.figure(render_overhead),
         "chunk_seconds": median_chunks, "fixed_seconds": fixed_s,
+        "worker_kernel_load": results.figure(loads),
         "projected_seconds": {str(n): v for n, v in projected.items()}, "shot_frames": args.shot,
     }, jit_seconds, quick=args.runs < 3)
 

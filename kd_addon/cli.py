@@ -118,7 +118,7 @@ def _add_farm_options(render) -> None:
                        help="start a Dask cluster of N worker processes on this machine for the run")
     farm.add_argument("--chunk-size", dest="chunk_size", type=int, default=0, metavar="FRAMES",
                       help="frames a task renders in a row, reusing trees and pixels (default 0 = automatic: "
-                           "about four chunks a worker, 2 to 12 frames each)")
+                           "about three chunks a worker, 2 to 24 frames each)")
     farm.add_argument("--ship-blend", dest="ship_blend", action="store_true",
                       help="send the .blend's bytes to the workers (for workers without a shared filesystem)")
     farm.add_argument("--connect-timeout", dest="connect_timeout", type=float, default=10.0, metavar="SECONDS",

@@ -49,10 +49,10 @@ def test_chunks_are_contiguous_and_cover_every_frame_once():
         farm_client.chunk_frames(frames, 0)
 
 
-@pytest.mark.parametrize("frames, workers, size", [(240, 2, 12), (24, 2, 3), (24, 8, 2), (1, 4, 1), (3, 1, 2),
-                                                   (40, 1, 10)])
+@pytest.mark.parametrize("frames, workers, size", [(240, 2, 24), (240, 8, 10), (24, 2, 4), (24, 8, 2), (1, 4, 1),
+                                                   (3, 1, 2), (40, 1, 14)])
 def test_automatic_chunk_size(frames, workers, size):
-    """About four chunks a worker, at least two frames (reuse) and at most twelve (a rerun's loss)."""
+    """About three chunks a worker, at least two frames (reuse) and at most 24 (a rerun's loss)."""
     assert farm_client.auto_chunk_size(frames, workers) == size
 
 

@@ -27,8 +27,11 @@ from ..sequence import frame_filename, prepare_folder, remove_empty_folders, sto
 from . import bootstrap, cluster
 from .progress import ProgressLine
 
-CHUNKS_PER_WORKER = 4  # enough to balance uneven frames; each chunk's first frame is a fresh build
-MIN_CHUNK, MAX_CHUNK = 2, 12  # frames: reuse needs two; a rerun after a worker died repeats at most this many
+# Automatic chunk size (docs/choices.md "Chunks of contiguous frames"): each chunk's first frame is a fresh
+# build, so chunks are long, yet a few a worker so the last ones balance out; reuse needs two frames, and a
+# chunk rerun after its worker died repeats at most MAX_CHUNK frames.
+CHUNKS_PER_WORKER = 3
+MIN_CHUNK, MAX_CHUNK = 2, 24
 POLL_SECONDS = 0.1  # wait between looks at an empty queue (and at the futures and the cancel flag)
 REPORT_INTERVAL = 1.0  # seconds between rewrites of report.json while the run goes on
 
