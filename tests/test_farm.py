@@ -347,6 +347,25 @@ def test_ctrl_c_cancels_the_chunks_and_reports_what_finished(cluster, tmp_path):
 
 
 @pytest.mark.slow
+def test_ctrl_c_in_a_terminal_stops_the_local_cluster_quietly(tmp_path):
+    """A terminal's Ctrl-C reaches the whole process group, the local workers too: exit 130 with the
+    report, and no worker's traceback."""
+    out = tmp_path / "local_cancelled"
+    proc = render_cli(["--demo", "--frames", "1-24", "--out", str(out), *SMALL, "--local-workers", "2",
+                       "--chunk-size", "12"], start_new_session=True)
+    try:
+        for line in proc.stdout:
+            if re.match(r"^\s*\*?\d+\s+[\d,]+\s", line):
+                break
+        os.killpg(proc.pid, signal.SIGINT)
+        code, _, err = finish(proc, timeout=60)
+    finally:
+        proc.kill()
+    assert code == 130 and "Traceback" not in err and "KeyboardInterrupt" not in err, err
+    assert json.loads((out / "report.json").read_text())["stopped"]["reason"] == "cancelled"
+
+
+@pytest.mark.slow
 def test_a_worker_killed_mid_chunk_loses_no_frame(cluster, tmp_path):
     """SIGKILL to the worker rendering a chunk, after it sent a frame: the scheduler reruns the chunk on
     the other worker; every frame is written once, and the report names the rerun."""

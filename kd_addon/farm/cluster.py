@@ -7,10 +7,12 @@ import logging
 import os
 import sys
 from contextlib import contextmanager
+from pathlib import Path
 
 from ..errors import PreviewError
 
 INSTALL_HINT = 'pip install -e ".[farm]"'
+LOCAL_WORKER_SETUP = Path(__file__).with_name("local_worker.py")
 
 
 def import_distributed():
@@ -54,7 +56,7 @@ def dask_client(address: str | None, local_workers: int | None, connect_timeout:
     # pool is sized by NUMBA_NUM_THREADS when the worker process starts).
     cluster = distributed.LocalCluster(n_workers=local_workers, threads_per_worker=1, processes=True,
                                        dashboard_address=None, silence_logs=logging.ERROR,
-                                       env={"NUMBA_NUM_THREADS": str(threads)})
+                                       env={"NUMBA_NUM_THREADS": str(threads)}, preload=[str(LOCAL_WORKER_SETUP)])
     try:
         client = distributed.Client(cluster, timeout=connect_timeout)
         try:
