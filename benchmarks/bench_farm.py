@@ -75,6 +75,15 @@ def kernel_load_seconds(report: dict) -> float:
     return (statistics.median(first) - statistics.median(later)) / 1e3 if first and later else float("nan")
 
 
+def boundary_seconds(report: dict) -> float:
+    """What the chunks' fresh first frames cost beyond a frame that reused the one before (the first
+    chunk's left out: the in-process run builds its first frame fresh too)."""
+    firsts = {c["frames"][0] for c in report["farm"]["chunks"]}
+    reused = statistics.median(r["total_ms"] for r in report["frames"] if r["frame"] not in firsts)
+    later_firsts = [r["total_ms"] for r in report["frames"] if r["frame"] in firsts and not r["first_run"]]
+    return sum(t - reused for t in later_firsts) / 1e3
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=24)
@@ -88,9 +97,10 @@ def main() -> None:
     t0 = time.perf_counter()
     render(scratch / "warm", args, farm=False)  # compiles the kernels if the cache is cold
     jit_seconds = time.perf_counter() - t0
+    frames = args.frames
     walls = {"in_process": [], "cluster": []}
     render_walls = {"in_process": [], "cluster": []}
-    chunks, fixed, loads = [], [], []
+    chunks, fixed, loads, boundaries = [], [], [], []
     for run in range(args.runs):
         for mode in ("in_process", "cluster") if run % 2 == 0 else ("cluster", "in_process"):
             wall, report = render(scratch / f"{mode}{run}", args, farm=mode == "cluster")
@@ -99,8 +109,8 @@ def main() -> None:
             if mode == "cluster":
                 chunks.append(chunk_seconds(report))
                 loads.append(kernel_load_seconds(report))
+                boundaries.append(boundary_seconds(report) / frames)
                 fixed.append(wall - sum(chunk_seconds(report)))  # process, cluster start, client, transfers
-    frames = args.frames
     overhead = [(c - i) / frames for c, i in zip(walls["cluster"], walls["in_process"])]
     render_overhead = [(c - i) / frames for c, i in zip(render_walls["cluster"], render_walls["in_process"])]
     median_chunks = [statistics.median(column) for column in zip(*chunks)]
@@ -118,6 +128,8 @@ def main() -> None:
           f"({statistics.median(render_walls['cluster']):.2f} s from the first chunk's submission)")
     print(f"  overhead a frame:      {statistics.median(overhead) * 1e3:7.1f} ms (whole processes), "
           f"{statistics.median(render_overhead) * 1e3:.1f} ms (rendering only)")
+    print(f"  of which chunk boundaries (fresh first frames beyond a reused frame): "
+          f"{statistics.median(boundaries) * 1e3:.1f} ms a frame")
     print(f"  chunk times (open + render): {', '.join(f'{s:.2f}' for s in median_chunks)} s; fixed cost "
           f"{fixed_s:.2f} s")
     print(f"  a new worker's kernel load from the cache (its first frame against later chunks' first frames): "
@@ -133,6 +145,7 @@ def main() -> None:
         "cluster_render": results.figure(render_walls["cluster"], render_walls["in_process"]),
         "overhead_per_frame": results.figure(overhead),
         "render_overhead_per_frame": results.figure(render_overhead),
+        "chunk_boundary_per_frame": results.figure(boundaries),
         "chunk_seconds": median_chunks, "fixed_seconds": fixed_s,
         "worker_kernel_load": results.figure(loads),
         "projected_seconds": {str(n): v for n, v in projected.items()}, "shot_frames": args.shot,

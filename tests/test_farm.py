@@ -155,6 +155,7 @@ class Cluster:
         self.folder = folder
         self.file = folder / "scheduler.json"
         self.procs: list[subprocess.Popen] = []
+        self.file.unlink(missing_ok=True)  # a folder used before: not the last scheduler's address
         self._spawn("scheduler", ["scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
                                   "--scheduler-file", str(self.file)])
         deadline = time.time() + 60
@@ -399,3 +400,23 @@ def test_a_worker_killed_mid_chunk_loses_no_frame(cluster, tmp_path):
     assert retries[0]["frames_sent_before"] >= 1
     assert report["farm"]["duplicate_frames_dropped"] == retries[0]["frames_sent_before"]
     assert "rerun on" in printed
+
+
+@pytest.mark.slow
+def test_a_lost_scheduler_ends_the_run_with_its_address_and_the_report(tmp_path):
+    lost = Cluster(tmp_path)
+    out = tmp_path / "lost"
+    try:
+        lost.add_workers(1)
+        proc = render_cli(["--demo", "--frames", "1-24", "--out", str(out), *SMALL, "--dask", lost.address,
+                           "--chunk-size", "24"])
+        for line in proc.stdout:
+            if re.match(r"^\s*\*?\d+\s+[\d,]+\s", line):
+                break
+        lost.procs[0].kill()  # the scheduler
+        code, _, err = finish(proc, timeout=120)
+    finally:
+        lost.close()
+    assert code == 1 and f"error: lost the Dask scheduler ({lost.address})" in err and "Traceback" not in err, err
+    report = json.loads((out / "report.json").read_text())
+    assert report["complete"] is False and len(report["frames"]) == len(list(out.glob("frame_*"))) >= 1

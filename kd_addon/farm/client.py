@@ -133,11 +133,15 @@ class FarmRun:
         made = prepare_folder(self.out_dir)
         self._print_header()
         try:
-            self._submit()
-            while self.futures:
-                if cancelled():
-                    raise Cancelled("cancelled")
-                self._step()
+            try:
+                self._submit()
+                while self.futures:
+                    if cancelled():
+                        raise Cancelled("cancelled")
+                    self._step()
+            except OSError as error:  # the scheduler went away (distributed's CommClosedError is one)
+                raise PreviewError(f"lost the Dask scheduler ({self.args.dask or 'the local cluster'}): "
+                                   f"{error or type(error).__name__}") from None
         except BaseException as error:  # noqa: B036  (a cancel too: the report says what finished)
             self._stop(error)
             if not self.written:
@@ -259,11 +263,12 @@ class FarmRun:
     def _stop(self, error: BaseException) -> None:
         """Cancel what still runs (a worker stops its chunk after the frame it is on) and write the report
         of what finished. Best effort: the error that stopped the run is the one to report."""
-        try:
-            self.cancel_event.set()
-            self.client.cancel(list(self.futures), force=True)
-        except Exception:  # noqa: BLE001  (the scheduler may be gone: that may be why the run stopped)
-            pass
+        if self.client.status == "running":  # else the scheduler is gone: each call would wait for it
+            try:
+                self.cancel_event.set()
+                self.client.cancel(list(self.futures), force=True)
+            except Exception:  # noqa: BLE001  (the error that stopped the run is the one to report)
+                pass
         if self.written:
             missing = next(f for f in self.frames if f not in self.written)
             try:

@@ -42,6 +42,11 @@ def local_worker_threads(workers: int) -> int:
 def dask_client(address: str | None, local_workers: int | None, connect_timeout: float):
     """A distributed.Client for the run, closed (and a local cluster shut down) afterwards."""
     distributed = import_distributed()
+    # The run reports what goes wrong itself (a lost scheduler, a failed chunk): the client's own log
+    # printed the same as tracebacks, again at every reconnection attempt.
+    for name in ["distributed", *logging.root.manager.loggerDict]:  # Dask's config gives some their own level
+        if name.split(".")[0] == "distributed":
+            logging.getLogger(name).setLevel(logging.CRITICAL)
     if address is not None:
         client = _connect(distributed, address, connect_timeout)
         try:
