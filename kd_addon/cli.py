@@ -7,7 +7,9 @@ The scene is the .blend given, else the file Blender has open, else (or with --d
 demo. Settings are the scene's own KD Preview settings, each overridden by the option of the same
 name. Writes DIR/frame_0001.png... and DIR/report.json. Exit codes: 0 done, 1 a problem with the
 scene, files or settings, 2 bad usage, 130 interrupted (Ctrl-C), 143 terminated (SIGTERM); the frames
-written are kept and report.json says an interrupted run is incomplete.
+written are kept and report.json says an interrupted run is incomplete. With --dask ADDRESS or
+--local-workers N the frames render on a Dask cluster instead (farm/, docs/farm.md); this module only
+parses those options and hands the run over.
 """
 
 from __future__ import annotations
@@ -284,10 +286,10 @@ def prepare(args) -> Prepared:
 def _run(args, cancelled) -> int:
     job = None
     try:
-        run = prepare(args)
-        scene, config, frames = run.scene, run.config, run.frames
+        prepared = prepare(args)
+        scene, config, frames = prepared.scene, prepared.config, prepared.frames
         job = SequenceJob(scene, config, frames, Path(args.out),
-                          depsgraph_source(scene, scene.view_layers[run.layer_name]),
+                          depsgraph_source(scene, scene.view_layers[prepared.layer_name]),
                           on_frame=partial(_print_row, args.prog))
         print(f"KD Preview: scene '{scene.name}', {len(frames)} frame(s), mode {config.settings.mode}, "
               f"{config.settings.samples} samples, {config.resolution_percentage}% resolution -> {args.out}")
