@@ -7,7 +7,9 @@ The scene is the .blend given, else the file Blender has open, else (or with --d
 demo. Settings are the scene's own KD Preview settings, each overridden by the option of the same
 name. Writes DIR/frame_0001.png... and DIR/report.json. Exit codes: 0 done, 1 a problem with the
 scene, files or settings, 2 bad usage, 130 interrupted (Ctrl-C), 143 terminated (SIGTERM); the frames
-written are kept and report.json says an interrupted run is incomplete.
+written are kept and report.json says an interrupted run is incomplete. With --dask ADDRESS or
+--local-workers N the frames render on a Dask cluster instead (farm/, docs/farm.md); this module only
+parses those options and hands the run over.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import signal
 import sys
 import threading
 from contextlib import contextmanager
+from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
 from types import SimpleNamespace
@@ -103,7 +106,29 @@ def build_parser(prog: str = COMMAND_ID) -> argparse.ArgumentParser:
     render.add_argument("--rebuild-all", dest="rebuild_all", action=on_off, default=s,
                         help="rebuild every kd-tree and re-trace every frame (no reuse of unchanged objects' "
                              "trees or of unchanged images)")
+    _add_farm_options(render)
     return parser
+
+
+def _add_farm_options(render) -> None:
+    """Rendering on a Dask cluster (kd_addon/farm/, docs/farm.md); without --dask or --local-workers the
+    frames render in this process."""
+    farm = render.add_argument_group("cluster (needs pip install -e \".[farm]\"; docs/farm.md)")
+    where = farm.add_mutually_exclusive_group()
+    where.add_argument("--dask", metavar="ADDRESS", help="render on the Dask cluster whose scheduler is at "
+                                                         "ADDRESS, e.g. tcp://HOST:8786")
+    where.add_argument("--local-workers", dest="local_workers", type=int, metavar="N",
+                       help="start a Dask cluster of N worker processes on this machine for the run")
+    farm.add_argument("--chunk-size", dest="chunk_size", type=int, default=0, metavar="FRAMES",
+                      help="frames a task renders in a row, reusing trees and pixels (default 0 = automatic: "
+                           "about three chunks a worker, 2 to 24 frames each)")
+    farm.add_argument("--ship-blend", dest="ship_blend", action="store_true",
+                      help="send the .blend's bytes to the workers (for workers without a shared filesystem)")
+    farm.add_argument("--connect-timeout", dest="connect_timeout", type=float, default=10.0, metavar="SECONDS",
+                      help="give up on an unreachable scheduler after this long (default 10)")
+    farm.add_argument("--retries", type=int, default=2,
+                      help="times a chunk whose task failed is rerun (default 2; a chunk whose worker died is "
+                           "rerun by the scheduler in any case)")
 
 
 def load_scene(args) -> bpy.types.Scene:
@@ -226,25 +251,50 @@ def interrupt_flag():
 
 
 def run(args) -> int:
-    """Render args.frames of the chosen scene into args.out; return the exit code."""
+    """Render args.frames of the chosen scene into args.out (in this process, or on a Dask cluster with
+    --dask / --local-workers); return the exit code."""
     with interrupt_flag() as interrupted:
-        code = _run(args, interrupted.is_set)
+        if getattr(args, "dask", None) is not None or getattr(args, "local_workers", None) is not None:
+            from .farm import client  # only here: dask is an optional extra, never imported otherwise
+
+            code = client.run(args, interrupted.is_set)
+        else:
+            code = _run(args, interrupted.is_set)
     return 128 + signal.SIGTERM if code == 130 and interrupted.signum == signal.SIGTERM else code
+
+
+@dataclass
+class Prepared:
+    """A run's scene, settings and frames, resolved from the command line."""
+    scene: object
+    layer_name: str
+    settings: SimpleNamespace  # the scene's saved settings with the options given
+    config: object  # config.RenderConfig
+    frames: list
+
+
+def prepare(args) -> Prepared:
+    """Check the options, open the scene and resolve its settings and frames (shared by the in-process
+    and the cluster paths)."""
+    _check_options(args)  # bad options fail before a file is opened
+    if not args.out.strip():
+        raise PreviewError("--out is empty: give the folder to write the frames to")
+    scene, layer_name = pick_scene(load_scene(args), args.scene)
+    settings = saved_settings_with_overrides(scene, args)
+    config = make_config(settings)
+    frames = parse_frames(args.frames if args.frames is not None  # --frames "" is an error, not the default
+                          else f"{scene.frame_start}-{scene.frame_end}:{max(1, scene.frame_step)}")
+    _note_frames_outside(args.prog, scene, frames)
+    return Prepared(scene, layer_name, settings, config, frames)
 
 
 def _run(args, cancelled) -> int:
     job = None
     try:
-        _check_options(args)  # bad options fail before a file is opened
-        if not args.out.strip():
-            raise PreviewError("--out is empty: give the folder to write the frames to")
-        scene, layer_name = pick_scene(load_scene(args), args.scene)
-        config = make_config(saved_settings_with_overrides(scene, args))
-        frames = parse_frames(args.frames if args.frames is not None  # --frames "" is an error, not the default
-                              else f"{scene.frame_start}-{scene.frame_end}:{max(1, scene.frame_step)}")
-        _note_frames_outside(args.prog, scene, frames)
+        prepared = prepare(args)
+        scene, config, frames = prepared.scene, prepared.config, prepared.frames
         job = SequenceJob(scene, config, frames, Path(args.out),
-                          depsgraph_source(scene, scene.view_layers[layer_name]),
+                          depsgraph_source(scene, scene.view_layers[prepared.layer_name]),
                           on_frame=partial(_print_row, args.prog))
         print(f"KD Preview: scene '{scene.name}', {len(frames)} frame(s), mode {config.settings.mode}, "
               f"{config.settings.samples} samples, {config.resolution_percentage}% resolution -> {args.out}")

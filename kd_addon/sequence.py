@@ -269,11 +269,12 @@ def summarize(results: list[FrameResult], wall_ms: float) -> dict:
 
 def write_report(out_dir: Path, scene_name: str, config: RenderConfig, results: list[FrameResult],
                  files: list[Path], totals: dict, frames_requested: int, stopped: dict | None = None, *,
-                 started_at: float | None = None) -> Path:
+                 started_at: float | None = None, extra: dict | None = None) -> Path:
     """Write `report.json` (the run: input file, versions, threads, CPU, start; the settings; one row
     per frame; totals) and return its path. `complete` is False when fewer frames than requested were
     written (a cancelled or failed sequence, or one still running); `stopped` ({"frame", "reason"}),
-    when given, says where and why it ended; `started_at`: the run's start, time.time() (default: now)."""
+    when given, says where and why it ended; `started_at`: the run's start, time.time() (default: now);
+    `extra`: more top-level sections (a cluster run's "farm": workers, chunks, retries)."""
     first = results[0]
     report = {
         "scene": scene_name,
@@ -286,6 +287,7 @@ def write_report(out_dir: Path, scene_name: str, config: RenderConfig, results: 
         "timings": TIMINGS_NOTE,
         "frames": [dict(r.summary(), file=p.name) for r, p in zip(results, files)],
         "totals": totals,
+        **(extra or {}),
     }
     path = Path(out_dir) / REPORT_NAME
     partial = output.partial_path(path)  # renamed over the report: never half a file

@@ -1,0 +1,84 @@
+"""Getting a Dask client: connected to a running scheduler (--dask) or to a LocalCluster started for the
+run (--local-workers), with errors that name the problem instead of a traceback or a hang."""
+
+from __future__ import annotations
+
+import logging
+import os
+import sys
+from contextlib import contextmanager
+from pathlib import Path
+
+from ..errors import PreviewError
+
+INSTALL_HINT = 'pip install -e ".[farm]"'
+LOCAL_WORKER_SETUP = Path(__file__).with_name("local_worker.py")
+
+
+def import_distributed():
+    """The distributed package, or PreviewError saying how to install it."""
+    try:
+        import distributed
+    except ImportError:
+        raise PreviewError(f"--dask and --local-workers need Dask's distributed scheduler, which this Python "
+                           f"({sys.executable}) does not have: {INSTALL_HINT} in the KD Preview clone "
+                           f"(or pip install \"dask[distributed]\")") from None
+    return distributed
+
+
+def cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+def local_worker_threads(workers: int) -> int:
+    """Kernel threads a local worker gets, so that workers x threads fits the cores."""
+    return max(1, cores() // workers)
+
+
+@contextmanager
+def dask_client(address: str | None, local_workers: int | None, connect_timeout: float):
+    """A distributed.Client for the run, closed (and a local cluster shut down) afterwards."""
+    distributed = import_distributed()
+    # The run reports what goes wrong itself (a lost scheduler, a failed chunk): the client's own log
+    # printed the same as tracebacks, again at every reconnection attempt.
+    for name in ["distributed", *logging.root.manager.loggerDict]:  # Dask's config gives some their own level
+        if name.split(".")[0] == "distributed":
+            logging.getLogger(name).setLevel(logging.CRITICAL)
+    if address is not None:
+        client = _connect(distributed, address, connect_timeout)
+        try:
+            yield client
+        finally:
+            client.close(timeout=connect_timeout)
+        return
+    if local_workers < 1:
+        raise PreviewError(f"--local-workers must be 1 or more, got {local_workers}")
+    threads = local_worker_threads(local_workers)
+    # One task at a time a process (bpy holds one open file); its kernels use `threads` threads (Numba's
+    # pool is sized by NUMBA_NUM_THREADS when the worker process starts).
+    cluster = distributed.LocalCluster(n_workers=local_workers, threads_per_worker=1, processes=True,
+                                       dashboard_address=None, silence_logs=logging.ERROR,
+                                       env={"NUMBA_NUM_THREADS": str(threads)}, preload=[str(LOCAL_WORKER_SETUP)])
+    try:
+        client = distributed.Client(cluster, timeout=connect_timeout)
+        try:
+            yield client
+        finally:
+            client.close(timeout=connect_timeout)
+    finally:
+        cluster.close(timeout=connect_timeout)
+
+
+def _connect(distributed, address: str, timeout: float):
+    if timeout <= 0:
+        raise PreviewError(f"--connect-timeout must be above 0 seconds, got {timeout:g}")
+    try:
+        return distributed.Client(address, timeout=timeout, set_as_default=False)
+    except (OSError, TimeoutError) as error:
+        raise PreviewError(f"cannot reach the Dask scheduler at {address} within {timeout:g} s ({error}); "
+                           "is it running (dask scheduler) and is the address right?") from None
+    except ValueError as error:  # an address Dask cannot parse
+        raise PreviewError(f"bad Dask scheduler address {address!r}: {error}") from None
