@@ -85,7 +85,8 @@ def test_rows_from_workers_go_through_the_one_report_writer(tmp_path):
     rows = [{"frame": f, "width": 4, "height": 3, "triangles": 10, "objects": 1, "lights": 0, "extract_ms": 1.0,
              "build_ms": 2.0, "trace_ms": 3.0, "total_ms": 6.0, "rays": 100, "rays_saved": 0, "mrays_per_s": 0.03,
              "samples": 2, "first_run": f == 1, "objects_rebuilt": 1, "objects_reused": 0, "image_reused": False,
-             "pixels_reused": 0, "rays_reused": 0, "compile_helper": None, "tree": {"nodes": 3}, "warnings": [],
+             "pixels_reused": 0, "rays_reused": 0, "compile_helper": None, "compile_ms": 0.0, "load_ms": 0.0,
+             "mode": "ao", "tree": {"nodes": 3}, "warnings": [],
              "worker": "tcp://w:1", "chunk": 0} for f in (1, 2)]
     results = [farm_client.RemoteFrame(r) for r in rows]
     totals = summarize(results, 20.0)
