@@ -34,6 +34,8 @@ from pathlib import Path
 
 import numpy as np
 
+import results as result_files
+
 ROOT = Path(__file__).resolve().parent.parent
 
 BLENDER_CHILD = r"""
@@ -129,6 +131,21 @@ def main():
                   f"{med['enable_to_image_s']:.1f} s (register {med['register_ms']:.0f} ms), frame {med['frame_ms']:.0f} ms, kernels "
                   f"{med['kernels_ms'] / 1e3:.1f} s apart from it, {med['mrays']:.2f} Mrays/s, "
                   f"{med['compiles_here']:.0f} compiles in Blender's process" + (" (idle first)" if args.idle else ""))
+    if len(sources) == 1 and "blender" in hows and not args.idle:
+        write_blender_figures(results, hows, states, switches, sources[0])
+
+
+def write_blender_figures(results, hows, states, switches, source):
+    """benchmarks/out/bench_first_render.json: the blender way's figures per cache state (the README's
+    first-use line, benchmarks/report.py), for the kernels loaded before the frame (KD_PREVIEW_WARMUP=1)."""
+    switch = switches[0]
+    out = {}
+    for state in states:
+        rows = results["blender", source, state, switch]
+        out[state] = {key: result_files.figure([r[key] for r in rows], unit=unit) for key, unit in (
+            ("enable_to_image_s", "s"), ("kernels_ms", "ms"), ("frame_ms", "ms"), ("mrays", "Mrays/s"))}
+    out["warmup"] = switch
+    result_files.write("bench_first_render", out, jit_seconds=0.0)
 
 
 def measure(args, results, run, how, source, switch, cache, states):

@@ -8,6 +8,7 @@ between them is replaced, the rest of the file is left alone. Blocks:
 
 - `figures` (README.md): one small table: build, camera and AO rays against Embree, seed 000's setting,
   our time against Cycles' at equal error.
+- `first-use` (README.md): the first render's wait in a fresh Blender, cold and warm (bench_first_render).
 - `bench_core`, `bench_seed000`, `bench_render` (docs/benchmarks.md): each benchmark's full table.
 
 Every block names the run it comes from (date, CPU, cores, Numba version, command, and whether it was a
@@ -23,7 +24,7 @@ ROOT = Path(__file__).resolve().parents[1]
 OUT_DIR = ROOT / "benchmarks" / "out"
 README = ROOT / "README.md"
 BENCH_DOC = ROOT / "docs" / "benchmarks.md"
-FILES = ("bench_core", "bench_seed000", "bench_render")
+FILES = ("bench_core", "bench_seed000", "bench_render", "bench_first_render")
 FIGURE_SCENE = "suzanne-251k"
 
 
@@ -189,7 +190,23 @@ def bench_render_block(data):
     return "\n".join(parts)
 
 
-BLOCKS = {README: {"figures": figures_block},
+def first_use_block(data):
+    """The README's first-use sentence: enable to image with the kernels cold and warm, the kernels' share."""
+    if "bench_first_render" not in data:
+        return missing("bench_first_render", "python benchmarks/bench_first_render.py --how blender --runs 3")
+    r = data["bench_first_render"]["results"]
+    parts = []
+    for state, words in (("cold", "with an empty kernel cache"), ("warm", "with the kernels cached")):
+        if state in r:
+            f = r[state]
+            parts.append(f"{words}, {f['enable_to_image_s']['median']:.1f} s from enabling to the image, of which "
+                         f"{f['kernels_ms']['median'] / 1e3:.1f} s the kernels' compile and load")
+    runs = len(next(iter(r[k] for k in ("cold", "warm") if k in r))["enable_to_image_s"]["runs"])
+    return ("Measured with the bpy module on the factory startup scene (medians of " + str(runs) + "): "
+            + "; ".join(parts) + ".\n" + provenance(data["bench_first_render"]))
+
+
+BLOCKS = {README: {"figures": figures_block, "first-use": first_use_block},
           BENCH_DOC: {"bench_core": bench_core_block, "bench_seed000": bench_seed000_block,
                       "bench_render": bench_render_block}}
 
