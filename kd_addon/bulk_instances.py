@@ -57,13 +57,15 @@ def read_in_bulk(depsgraph: bpy.types.Depsgraph, reader: EntryReader) -> Instanc
     """Every placement of the depsgraph in the walk's order, or None when the walk must read it."""
     segments: list = []
     own: list = []
+    alive: list = []  # every GeometrySet read, until the end: a freed one's mesh address may come back as
+    # another's, and the mesh reader keys meshes by address
     try:
         for ob in depsgraph.objects:
             own.append(reader.read(SelfEntry(ob)))
             if ob.type == "MESH" and has_node_modifier(ob.original):  # is_instancer is off for them here
                 segments.append([r for r in own if r is not None])
                 own = []
-                segments.append(_carrier_rows(ob, reader))
+                segments.append(_carrier_rows(ob, reader, alive))
     except NotInBulk:
         return None
     segments.append([r for r in own if r is not None])
@@ -71,13 +73,14 @@ def read_in_bulk(depsgraph: bpy.types.Depsgraph, reader: EntryReader) -> Instanc
                          for s in segments])
 
 
-def _carrier_rows(carrier, reader: EntryReader) -> InstanceTable:
+def _carrier_rows(carrier, reader: EntryReader, alive: list) -> InstanceTable:
     """The placements a geometry-nodes carrier's instances give, as the walk would record them."""
     if reader.paths.walks(carrier.original):
         raise NotInBulk  # a render-hidden path may block some: dupli_paths.py decides entry by entry
     geometry = carrier.evaluated_geometry()
+    alive.append(geometry)
     world = np.array(carrier.matrix_world, np.float32).T  # Blender's column-major layout
-    rows = _Rows(reader, carrier)
+    rows = _Rows(reader, carrier, alive)
     level = _Level(np.broadcast_to(world, (1, 4, 4)), [geometry], np.zeros(1, np.int64), [])
     while level is not None:
         level = rows.expand(level)
@@ -95,8 +98,8 @@ class _Level:
 class _Rows:
     """Rows gathered over the levels of one carrier: (geometry key, matrix, kind, path) per placement."""
 
-    def __init__(self, reader: EntryReader, carrier):
-        self.reader, self.carrier = reader, carrier
+    def __init__(self, reader: EntryReader, carrier, alive: list):
+        self.reader, self.carrier, self.alive = reader, carrier, alive
         self.keys, self.matrices, self.kinds, self.paths = [], [], [], []
         self.kind_list: dict[Kind, int] = {}
 
@@ -115,6 +118,7 @@ class _Rows:
             refs = np.tile(reference_of, len(rows))
             path = [p[rows].repeat(count) for p in level.path] + [np.tile(np.arange(count), len(rows))]
             references = geometry.instance_references()
+            self.alive.append(references)
             order = np.argsort(refs, kind="stable")
             bounds = np.searchsorted(refs[order], np.arange(len(references) + 1))
             for ref_index, reference in enumerate(references):
@@ -230,5 +234,6 @@ def _compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """a @ b of column-major float32 4x4 matrices (N, 4, 4) as Blender's mul_m4_m4m4 computes them:
     column i of the product is sum_k a[k] * b[i][k], summed in pairs ((0 + 1) + (2 + 3)), each step
     rounded to float32, so the result is the walk's matrix to the bit."""
-    terms = [a[:, k, None, :] * b[:, :, k, None] for k in range(4)]
-    return (terms[0] + terms[1]) + (terms[2] + terms[3])
+    with np.errstate(over="ignore", invalid="ignore"):  # an infinite scale: the row is dropped, and named
+        terms = [a[:, k, None, :] * b[:, :, k, None] for k in range(4)]
+        return (terms[0] + terms[1]) + (terms[2] + terms[3])
