@@ -133,3 +133,4 @@ def test_non_finite_instance_transforms_are_left_out_and_named(scene, extraction
     assert extracted.path == extraction_path
     assert extracted.object_count == 1
     assert sum("non-finite transform" in w for w in extracted.warnings) == 1
+
