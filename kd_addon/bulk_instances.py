@@ -23,13 +23,15 @@ import numpy as np
 
 from .dupli_paths import instances_things
 from .node_instances import has_node_modifier
-from .instance_table import InstanceTable, Kind, as_table, concatenated
+from .instance_rows import Gathered, InstanceSet, Reference, compose_rows
+from .instance_table import InstanceTable, as_table, concatenated
 from .render_visibility import instanced_by_its_parent
 from .scene_records import object_label
 from .scene_walk import EntryReader, SelfEntry
 
 AVAILABLE = hasattr(bpy.types.Object, "evaluated_geometry")  # Blender 4.3 and later
 ENABLED = True  # tests switch it off to run the walk on the same scenes (both paths must agree)
+_memos: dict = {}  # (session_uid, name) of a carrier -> its rows last frame (instance_rows.CarrierRows)
 
 # Object types whose own entry the walk reads or skips without instancing anything.
 _PLAIN_TYPES = frozenset(("MESH", "EMPTY", "LIGHT", "CAMERA", "LIGHT_PROBE", "LIGHTPROBE", "SPEAKER", "ARMATURE",
@@ -59,157 +61,88 @@ def read_in_bulk(depsgraph: bpy.types.Depsgraph, reader: EntryReader) -> Instanc
     own: list = []
     alive: list = []  # every GeometrySet read, until the end: a freed one's mesh address may come back as
     # another's, and the mesh reader keys meshes by address
+    memos: dict = {}
     try:
         for ob in depsgraph.objects:
             own.append(reader.read(SelfEntry(ob)))
             if ob.type == "MESH" and has_node_modifier(ob.original):  # is_instancer is off for them here
                 segments.append([r for r in own if r is not None])
                 own = []
-                segments.append(_carrier_rows(ob, reader, alive))
+                segments.append(_carrier_rows(ob, reader, alive, memos))
     except NotInBulk:
         return None
+    _memos.clear()  # only the carriers of this reading are kept
+    _memos.update(memos)
     segments.append([r for r in own if r is not None])
     return concatenated([as_table(reader.without_hidden_carriers(s)) if isinstance(s, list) else s
                          for s in segments])
 
 
-def _carrier_rows(carrier, reader: EntryReader, alive: list) -> InstanceTable:
-    """The placements a geometry-nodes carrier's instances give, as the walk would record them."""
+def _carrier_rows(carrier, reader: EntryReader, alive: list, memos: dict) -> InstanceTable:
+    """The placements a geometry-nodes carrier's instances give, as the walk would record them; last
+    frame's rows when everything they are made of is unchanged (module docstring)."""
     if reader.paths.walks(carrier.original):
         raise NotInBulk  # a render-hidden path may block some: dupli_paths.py decides entry by entry
     geometry = carrier.evaluated_geometry()
     alive.append(geometry)
     world = np.array(carrier.matrix_world, np.float32).T  # Blender's column-major layout
-    rows = _Rows(reader, carrier, alive)
-    level = _Level(np.broadcast_to(world, (1, 4, 4)), [geometry], np.zeros(1, np.int64), [])
-    while level is not None:
-        level = rows.expand(level)
-    return rows.table()
+    gathered = _gather(geometry, carrier, reader, alive)
+    memo_key = (carrier.original.session_uid, carrier.original.name)
+    memo = _memos.get(memo_key)
+    if memo is None or not memo.matches(world, gathered):
+        memo = compose_rows(world, gathered)
+    memos[memo_key] = memo
+    for (name, instancer), message in memo.non_finite.items():
+        reader.non_finite_placements.setdefault((name, instancer), message)
+    reader.meshed.update(memo.meshed)
+    return memo.table(gathered.keys)
 
 
-class _Level:
-    """Pending instancing: parents (N, 4, 4) column-major float32, the GeometrySet each row instances
-    from (an index into `sets`), and each row's path (one index array a level, for the walk's order)."""
+def _gather(geometry, carrier, reader: EntryReader, alive: list) -> Gathered:
+    """Every GeometrySet holding instances under the carrier's, read once each (transforms, reference
+    indices), and what each reference places: a mesh slot and kind, a nested GeometrySet."""
+    gathered = Gathered()
+    queue = [geometry]
+    while len(gathered.sets) < len(queue):
+        current = queue[len(gathered.sets)]
+        _check_components(current)
+        cloud = current.instances_pointcloud()
+        if cloud is None or len(cloud.points) == 0:
+            gathered.sets.append(InstanceSet(np.zeros((0, 4, 4), np.float32), np.zeros(0, np.int32), ()))
+            continue
+        transforms, reference_of = _instance_arrays(cloud)
+        references = current.instance_references()
+        alive.append(references)
+        used = np.bincount(reference_of, minlength=len(references)) > 0  # the walk meets only these
+        refs = tuple(_resolve(reference, carrier, reader, gathered, queue) if used[index] else Reference(-1, -1, -1)
+                     for index, reference in enumerate(references))
+        gathered.sets.append(InstanceSet(transforms, reference_of, refs))
+    return gathered
 
-    def __init__(self, parents, sets, set_of, path):
-        self.parents, self.sets, self.set_of, self.path = parents, sets, set_of, path
 
-
-class _Rows:
-    """Rows gathered over the levels of one carrier: (geometry key, matrix, kind, path) per placement."""
-
-    def __init__(self, reader: EntryReader, carrier, alive: list):
-        self.reader, self.carrier, self.alive = reader, carrier, alive
-        self.keys, self.matrices, self.kinds, self.paths = [], [], [], []
-        self.kind_list: dict[Kind, int] = {}
-
-    def expand(self, level: _Level) -> _Level | None:
-        """Rows of the instances the level's GeometrySets hold; the next level, or None at the end."""
-        nested = _Nested()
-        for index, geometry in enumerate(level.sets):
-            _check_components(geometry)
-            cloud = geometry.instances_pointcloud()
-            rows = np.flatnonzero(level.set_of == index)
-            if cloud is None or len(cloud.points) == 0 or len(rows) == 0:
-                continue
-            transforms, reference_of = _instance_arrays(cloud)
-            count = len(transforms)
-            composed = _compose(np.repeat(level.parents[rows], count, axis=0), np.tile(transforms, (len(rows), 1, 1)))
-            refs = np.tile(reference_of, len(rows))
-            path = [p[rows].repeat(count) for p in level.path] + [np.tile(np.arange(count), len(rows))]
-            references = geometry.instance_references()
-            self.alive.append(references)
-            order = np.argsort(refs, kind="stable")
-            bounds = np.searchsorted(refs[order], np.arange(len(references) + 1))
-            for ref_index, reference in enumerate(references):
-                chosen = np.sort(order[bounds[ref_index]:bounds[ref_index + 1]])
-                if len(chosen):
-                    self._place(reference, composed[chosen], [p[chosen] for p in path], nested)
-        return nested.level()
-
-    def _place(self, reference, matrices, path, nested: "_Nested") -> None:
-        """Record the rows of one reference; a GeometrySet holding instances goes to the next level."""
-        if reference is None:
-            return
-        if isinstance(reference, bpy.types.Object):
-            self._object_rows(reference, matrices, path)
-        elif isinstance(reference, bpy.types.GeometrySet):
-            _check_components(reference)
-            if reference.mesh is not None:
-                self._mesh_rows(reference.mesh, matrices, path)
-            cloud = reference.instances_pointcloud()
-            if cloud is not None and len(cloud.points):
-                nested.add(reference, matrices, path)
-        else:
-            raise NotInBulk  # a collection: its members follow the collection rules of a render
-
-    def _mesh_rows(self, mesh, matrices, path) -> None:
-        """Rows of a GeometrySet's mesh: entries of the carrier itself (named and seen as it)."""
-        verdict = self.reader.verdict(self.carrier, self.carrier)
-        if verdict is None:
-            return
-        key = self.reader.geometries.get_mesh(self.carrier, mesh, verdict[0])
-        if key is not None:
-            self.reader.meshed.add(verdict[0])
-            self._add(key, matrices, verdict, path)
-
-    def _object_rows(self, target, matrices, path) -> None:
-        """Rows of an instanced object (Object Info "As Instance", separated children; `target` is the
-        evaluated object): entries of it, instanced by the carrier."""
-        if target.type not in ("MESH", "EMPTY", "LIGHT", "CAMERA") or instances_things(target.original):
+def _resolve(reference, carrier, reader: EntryReader, gathered: Gathered, queue: list) -> Reference:
+    """What one instance reference places (its mesh's slot and kind, the nested GeometrySet's index)."""
+    if reference is None:
+        return Reference(-1, -1, -1)
+    if isinstance(reference, bpy.types.Object):
+        if reference.type not in ("MESH", "EMPTY", "LIGHT", "CAMERA") or instances_things(reference.original):
             raise NotInBulk  # curves, text, nested instancers: the walk reads their entries
-        verdict = self.reader.verdict(target, self.carrier)  # an instanced empty makes its carrier an instancer
-        if verdict is None or target.type != "MESH":
-            return
-        key = self.reader.geometries.get(target, verdict[0])
-        if key is not None:
-            self._add(key, matrices, verdict, path)
-
-    def _add(self, key, matrices, verdict, path) -> None:
-        finite = np.isfinite(matrices).all(axis=(1, 2))
-        if not finite.all():
-            name, instancer = verdict[0], verdict[1]
-            self.reader.non_finite_placements.setdefault(
-                (name, instancer), f"{object_label(name, instancer)} has a non-finite transform (NaN or infinite "
-                "location, rotation or scale); left out")
-            matrices, path = matrices[finite], [p[finite] for p in path]
-        kind = self.kind_list.setdefault(Kind(verdict[0], verdict[1], True, *verdict[2:]), len(self.kind_list))
-        self.keys.append(np.full(len(matrices), key, np.int64))
-        self.matrices.append(matrices)
-        self.kinds.append(np.full(len(matrices), kind, np.int32))
-        self.paths.append(path)
-
-    def table(self) -> InstanceTable:
-        """The rows in the walk's order: by path, an instance's mesh before its own instances (-1 pads)."""
-        if not self.keys:
-            return InstanceTable(np.zeros(0, np.int64), np.zeros((0, 4, 4)), np.zeros(0, np.int32), [])
-        keys, kinds, matrices = np.concatenate(self.keys), np.concatenate(self.kinds), np.concatenate(self.matrices)
-        if len(self.keys) > 1:
-            depth = max(len(p) for p in self.paths)
-            columns = [np.concatenate([p[d] if d < len(p) else np.full(len(k), -1) for p, k in zip(self.paths, self.keys)])
-                       for d in range(depth)]
-            order = np.lexsort(columns[::-1])
-            keys, kinds, matrices = keys[order], kinds[order], matrices[order]
-        return InstanceTable(keys, matrices.transpose(0, 2, 1).astype(np.float64), kinds, list(self.kind_list))
-
-
-class _Nested:
-    """The GeometrySets of one level that hold instances themselves, with the rows instancing them."""
-
-    def __init__(self):
-        self.parents, self.sets, self.set_of, self.paths = [], [], [], []
-
-    def add(self, geometry, matrices, path) -> None:
-        self.set_of.append(np.full(len(matrices), len(self.sets)))
-        self.sets.append(geometry)
-        self.parents.append(matrices)
-        self.paths.append(path)
-
-    def level(self) -> _Level | None:
-        if not self.sets:
-            return None
-        return _Level(np.concatenate(self.parents), self.sets, np.concatenate(self.set_of),
-                      [np.concatenate(column) for column in zip(*self.paths)])
+        verdict = reader.verdict(reference, carrier)  # an instanced empty makes its carrier an instancer too
+        key = reader.geometries.get(reference, verdict[0]) if verdict and reference.type == "MESH" else None
+        return Reference(*gathered.place(reader, key, verdict), -1)
+    if not isinstance(reference, bpy.types.GeometrySet):
+        raise NotInBulk  # a collection: its members follow the collection rules of a render
+    _check_components(reference)
+    slot = kind = nested = -1
+    if reference.mesh is not None:  # entries of the carrier itself, named and seen as it
+        verdict = reader.verdict(carrier, carrier)
+        key = reader.geometries.get_mesh(carrier, reference.mesh, verdict[0]) if verdict else None
+        slot, kind = gathered.place(reader, key, verdict)
+    cloud = reference.instances_pointcloud()
+    if cloud is not None and len(cloud.points):
+        nested = len(queue)
+        queue.append(reference)
+    return Reference(slot, kind, nested)
 
 
 def _check_components(geometry) -> None:
@@ -228,12 +161,3 @@ def _instance_arrays(cloud) -> tuple[np.ndarray, np.ndarray]:
     if index is not None:
         index.data.foreach_get("value", references)
     return transforms.reshape(count, 4, 4), references
-
-
-def _compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a @ b of column-major float32 4x4 matrices (N, 4, 4) as Blender's mul_m4_m4m4 computes them:
-    column i of the product is sum_k a[k] * b[i][k], summed in pairs ((0 + 1) + (2 + 3)), each step
-    rounded to float32, so the result is the walk's matrix to the bit."""
-    with np.errstate(over="ignore", invalid="ignore"):  # an infinite scale: the row is dropped, and named
-        terms = [a[:, k, None, :] * b[:, :, k, None] for k in range(4)]
-        return (terms[0] + terms[1]) + (terms[2] + terms[3])

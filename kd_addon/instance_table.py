@@ -10,6 +10,7 @@ world triangles) use the arrays. Nothing here imports bpy.
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Sequence
 from typing import NamedTuple
 
@@ -33,11 +34,15 @@ class InstanceTable(Sequence):
     """Rows of placements: geometry_keys (I,) int64, matrices (I, 4, 4) float64, kind_of (I,) int32
     indices into `kinds`."""
 
-    def __init__(self, geometry_keys: np.ndarray, matrices: np.ndarray, kind_of: np.ndarray, kinds: list[Kind]):
+    def __init__(self, geometry_keys: np.ndarray, matrices: np.ndarray, kind_of: np.ndarray, kinds: list[Kind],
+                 token: bytes | None = None):
         self.geometry_keys = np.ascontiguousarray(geometry_keys, np.int64)
         self.matrices = np.ascontiguousarray(matrices, np.float64).reshape(-1, 4, 4)
         self.kind_of = np.ascontiguousarray(kind_of, np.int32)
         self.kinds = list(kinds)
+        # Stands for the matrices, kinds and kind_of in tree_cache.image_key: equal tokens, equal rows (a
+        # carrier's rows kept from last frame keep theirs, new rows get a new one), whatever the keys.
+        self.token = token if token is not None else _content_token(self.matrices, self.kind_of, self.kinds)
 
     def __len__(self) -> int:
         return len(self.geometry_keys)
@@ -79,13 +84,34 @@ def as_table(instances) -> InstanceTable:
 
 
 def concatenated(tables: list[InstanceTable]) -> InstanceTable:
-    """The rows of `tables` one after the other, their kinds merged."""
-    kinds: dict[Kind, int] = {}
-    kind_of = []
-    for table in tables:
-        remap = np.array([kinds.setdefault(k, len(kinds)) for k in table.kinds] or [0], np.int32)
-        kind_of.append(remap[table.kind_of])
+    """The rows of `tables` one after the other, their kinds merged. The matrices and kinds of the last
+    call are taken again when the parts' tokens say they are unchanged (a static frame copies no matrix)."""
     if not tables:
         return InstanceTable(np.zeros(0, np.int64), np.zeros((0, 4, 4)), np.zeros(0, np.int32), [])
-    return InstanceTable(np.concatenate([t.geometry_keys for t in tables]),
-                         np.concatenate([t.matrices for t in tables]), np.concatenate(kind_of), list(kinds))
+    if len(tables) == 1:
+        return tables[0]
+    token = hashlib.blake2b(b"".join(t.token for t in tables), digest_size=16).digest()
+    keys = np.concatenate([t.geometry_keys for t in tables])
+    if _last_joined and _last_joined[0] == token:
+        _, matrices, kind_of, kinds = _last_joined
+        return InstanceTable(keys, matrices, kind_of, kinds, token)
+    merged: dict[Kind, int] = {}
+    kind_of = []
+    for table in tables:
+        remap = np.array([merged.setdefault(k, len(merged)) for k in table.kinds] or [0], np.int32)
+        kind_of.append(remap[table.kind_of])
+    joined = InstanceTable(keys, np.concatenate([t.matrices for t in tables]), np.concatenate(kind_of), list(merged),
+                           token)
+    _last_joined[:] = [token, joined.matrices, joined.kind_of, joined.kinds]
+    return joined
+
+
+_last_joined: list = []  # [token, matrices, kind_of, kinds] of the last concatenation
+
+
+def _content_token(matrices: np.ndarray, kind_of: np.ndarray, kinds: list[Kind]) -> bytes:
+    h = hashlib.blake2b(digest_size=16)
+    h.update(matrices.tobytes())
+    h.update(kind_of.tobytes())
+    h.update(repr(kinds).encode())
+    return h.digest()

@@ -221,7 +221,7 @@ class FrameJob:
         # an AO image does not depend on the lights: animated lights must not stop its reuse
         lights = inputs.lights if self.config.settings.mode != "ao" else []
         key = tree_cache.image_key(meshes, mesh_of, matrices, visibility, inputs.camera.keywords(), lights,
-                                   (inputs.width, inputs.height), self.config.as_dict())
+                                   (inputs.width, inputs.height), self.config.as_dict(), extracted.table().token)
         return _SceneRead(inputs, extracted, (meshes, mesh_of, matrices, visibility), unapplied, key)
 
     def _lazy_visibility(self, core, extracted: ExtractedScene, visibility: np.ndarray):

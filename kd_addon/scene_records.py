@@ -87,7 +87,10 @@ class ExtractedScene:
     def table(self):
         """``instances`` as an instance_table.InstanceTable (arrays: no Python object a row)."""
         from .instance_table import as_table  # it imports this module's Instance
-        return as_table(self.instances)
+        cached = getattr(self, "_table", None)
+        if cached is None or cached[0] is not self.instances or len(cached[1]) != len(self.instances):
+            cached = self._table = (self.instances, as_table(self.instances))
+        return cached[1]
 
     def _instance_triangle_counts(self) -> np.ndarray:
         keys = self.table().geometry_keys

@@ -81,13 +81,18 @@ def _first_rows(row_keys: np.ndarray, keys: np.ndarray) -> np.ndarray:
 
 
 def image_key(meshes, mesh_of, matrices, visibility, camera_keywords: dict, lights: list, size: tuple,
-              settings: dict) -> bytes:
-    """Digest of everything the image depends on (see the module docstring)."""
+              settings: dict, rows_token: bytes | None = None) -> bytes:
+    """Digest of everything the image depends on (see the module docstring). `rows_token`: the
+    instances' InstanceTable.token, which stands for the matrices and visibility (hashing a million
+    matrices would cost a static frame more than reading them)."""
     h = hashlib.blake2b(digest_size=20)
     h.update(repr([(m.key, m.fingerprint) for m in meshes]).encode())
     h.update(np.ascontiguousarray(mesh_of).tobytes())
-    h.update(np.ascontiguousarray(matrices, np.float64).tobytes())
-    h.update(np.ascontiguousarray(visibility, np.uint8).tobytes())
+    if rows_token is not None:
+        h.update(b"rows" + rows_token)
+    else:
+        h.update(np.ascontiguousarray(matrices, np.float64).tobytes())
+        h.update(np.ascontiguousarray(visibility, np.uint8).tobytes())
     _update(h, camera_keywords)
     for light in lights:  # what it is, does and is warned about: a portal toggled must render anew
         h.update(f"{light.name}:{light.kind}:{light.portal}:{light.emits_nothing!r}:{light.no_diffuse!r}:"

@@ -134,3 +134,23 @@ def test_non_finite_instance_transforms_are_left_out_and_named(scene, extraction
     assert extracted.object_count == 1
     assert sum("non-finite transform" in w for w in extracted.warnings) == 1
 
+
+
+def test_unchanged_instances_keep_their_rows_and_changed_ones_are_read_anew(scene, extraction_path):
+    """A second reading of the same state keeps the rows (same token: the image key stays); moving the
+    points, the carrier or changing the instanced mesh gives new rows, each checked against the walk."""
+    host = scenes.add_gn_instancer("Host", count=50, offset=(1.5, 0.2, 0))
+    tokens = [extract_scene().table().token, extract_scene().table().token]
+    line = next(n for n in host.modifiers["GN"].node_group.nodes if n.bl_idname == "GeometryNodeMeshLine")
+    line.inputs["Offset"].default_value = (1.5, 0.3, 0)
+    tokens.append(extract_scene().table().token)
+    host.location.z += 1
+    tokens.append(extract_scene().table().token)
+    cube = next(n for n in host.modifiers["GN"].node_group.nodes if n.bl_idname == "GeometryNodeMeshCube")
+    cube.inputs["Size"].default_value = (0.5, 0.5, 0.5)
+    extracted = extract_scene()
+    tokens.append(extracted.table().token)
+    assert tokens[0] == tokens[1]
+    assert len(set(tokens[1:4])) == 3
+    assert (tokens[4] != tokens[3]) == (extraction_path == "bulk")  # the walk's token is the rows' content
+    assert np.ptp(extracted.world_triangles()[:12].reshape(-1, 3), axis=0).max() == pytest.approx(0.5)
