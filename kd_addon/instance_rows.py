@@ -163,18 +163,25 @@ class _Parts:
         return join(self.slots), join(self.matrices), join(self.kinds), paths
 
 
-def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def compose(a: np.ndarray, b: np.ndarray, chunk: int = 1 << 14) -> np.ndarray:
     """a @ b of column-major float32 4x4 matrices (N or 1, 4, 4) as Blender's mul_m4_m4m4 computes them:
     column i of the product is sum_k a[k] * b[i][k], summed in pairs ((0 + 1) + (2 + 3)), each step
-    rounded to float32, so the result is the walk's matrix to the bit."""
-    out = np.empty((max(len(a), len(b)), 4, 4), np.float32)
-    pair = np.empty_like(out)
+    rounded to float32, so the result is the walk's matrix to the bit. In chunks of `chunk` rows, whose
+    temporaries stay in cache: only the result is allocated whole."""
+    count = max(len(a), len(b))
+    out = np.empty((count, 4, 4), np.float32)
+    pair, term = np.empty((2, min(count, chunk), 4, 4), np.float32)
     with np.errstate(over="ignore", invalid="ignore"):  # an infinite scale: the row is dropped, and named
-        np.multiply(a[:, 0, None, :], b[:, :, 0, None], out=out)
-        out += a[:, 1, None, :] * b[:, :, 1, None]
-        np.multiply(a[:, 2, None, :], b[:, :, 2, None], out=pair)
-        pair += a[:, 3, None, :] * b[:, :, 3, None]
-        out += pair
+        for start in range(0, count, chunk):
+            end = min(count, start + chunk)
+            left = a if len(a) == 1 else a[start:end]
+            right = b if len(b) == 1 else b[start:end]
+            o, p, t = out[start:end], pair[:end - start], term[:end - start]
+            np.multiply(left[:, 0, None, :], right[:, :, 0, None], out=o)
+            o += np.multiply(left[:, 1, None, :], right[:, :, 1, None], out=t)
+            np.multiply(left[:, 2, None, :], right[:, :, 2, None], out=p)
+            p += np.multiply(left[:, 3, None, :], right[:, :, 3, None], out=t)
+            o += p
     return out
 
 

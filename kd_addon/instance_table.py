@@ -86,6 +86,7 @@ def as_table(instances) -> InstanceTable:
 def concatenated(tables: list[InstanceTable]) -> InstanceTable:
     """The rows of `tables` one after the other, their kinds merged. The matrices and kinds of the last
     call are taken again when the parts' tokens say they are unchanged (a static frame copies no matrix)."""
+    tables = [t for t in tables if len(t)] or tables[:1]
     if not tables:
         return InstanceTable(np.zeros(0, np.int64), np.zeros((0, 4, 4)), np.zeros(0, np.int32), [])
     if len(tables) == 1:
