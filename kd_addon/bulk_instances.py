@@ -55,6 +55,29 @@ def _plain(ob: bpy.types.Object) -> bool:
             and ob.show_instancer_for_viewport and not instanced_by_its_parent(ob))
 
 
+def light_entries(depsgraph: bpy.types.Depsgraph):
+    """The entries scene_input.read_lights looks for lights in: the objects' own (SelfEntry) where the
+    bulk path reads the scene and no instance is anything but a mesh (so none is a light), else every
+    object_instances entry, which costs microseconds an instance."""
+    if usable(depsgraph) and not any(_instances_other_than_meshes(ob) for ob in depsgraph.objects
+                                     if ob.type == "MESH" and has_node_modifier(ob.original)):
+        return [SelfEntry(ob) for ob in depsgraph.objects]
+    return depsgraph.object_instances
+
+
+def _instances_other_than_meshes(carrier) -> bool:
+    """Whether any instance reference under the carrier, nested ones too, is an object other than a
+    mesh (a light, say) or a collection."""
+    todo = [carrier.evaluated_geometry()]
+    while todo:
+        for reference in todo.pop().instance_references():
+            if isinstance(reference, bpy.types.GeometrySet):
+                todo.append(reference)
+            elif reference is not None and not (isinstance(reference, bpy.types.Object) and reference.type == "MESH"):
+                return True
+    return False
+
+
 def read_in_bulk(depsgraph: bpy.types.Depsgraph, reader: EntryReader) -> InstanceTable | None:
     """Every placement of the depsgraph in the walk's order, or None when the walk must read it."""
     segments: list = []

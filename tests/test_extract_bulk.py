@@ -154,3 +154,18 @@ def test_unchanged_instances_keep_their_rows_and_changed_ones_are_read_anew(scen
     assert len(set(tokens[1:4])) == 3
     assert (tokens[4] != tokens[3]) == (extraction_path == "bulk")  # the walk's token is the rows' content
     assert np.ptp(extracted.world_triangles()[:12].reshape(-1, 3), axis=0).max() == pytest.approx(0.5)
+
+
+def test_lights_instanced_by_geometry_nodes_are_still_found(scene, extraction_path):
+    """read_lights skips the instance entries only where no instance is anything but a mesh: a light
+    placed by Object Info on points lights the scene on both paths."""
+    from kd_addon.scene_input import read_lights
+
+    lamp = scenes.add_light("Lamp")
+    scenes.add_gn_instancer("Meshes", count=5)
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    assert [light.name for light in read_lights(depsgraph)] == ["Lamp"]
+    host = scenes.add_info_node_host("Lights", lamp)
+    host.location = (3, 0, 0)
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    assert sorted(light.name for light in read_lights(depsgraph)) == ["Lamp", "Lamp (instanced by Lights)"]
