@@ -93,10 +93,12 @@ class ExtractedScene:
         return cached[1]
 
     def _instance_triangle_counts(self) -> np.ndarray:
+        """(I,) int64 triangles of each instance's mesh: a binary search of the few mesh keys a row."""
         keys = self.table().geometry_keys
-        unique, inverse = np.unique(keys, return_inverse=True)
-        counts = np.array([self.geometries[int(k)].triangle_count for k in unique], np.int64)
-        return counts[inverse.reshape(-1)] if len(keys) else np.zeros(0, np.int64)
+        mesh_keys = np.fromiter(self.geometries, np.int64, len(self.geometries))
+        counts = np.array([g.triangle_count for g in self.geometries.values()], np.int64)
+        order = np.argsort(mesh_keys)
+        return counts[order[np.searchsorted(mesh_keys, keys, sorter=order)]] if len(keys) else np.zeros(0, np.int64)
 
     def triangle_object_ids(self) -> np.ndarray:
         """int32 (N,): index into ``instances`` of each world triangle."""
