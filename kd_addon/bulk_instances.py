@@ -8,7 +8,8 @@ scene with a million scattered instances. Blender 4.3+ gives an evaluated object
 GeometrySets level by level (docs/choices.md#bulk-instance-extraction).
 
 The result is what the per-entry walk (scene_walk.py) gives, row for row: the same world matrices, to
-the bit (Blender composes them in float32 with mul_m4_m4m4's pairwise sums, which `_compose` repeats),
+the bit (Blender composes them in float32 with mul_m4_m4m4's pairwise sums, which instance_rows.compose
+repeats),
 the same order (an instance's mesh, then its own instances, depth first), the same records and
 visibility (the walk's EntryReader decides, once per carrier and object). Whatever the bulk reading
 cannot express as the walk does (collection references, particles, vertex or face instancing, curves
@@ -26,7 +27,6 @@ from .node_instances import has_node_modifier
 from .instance_rows import Gathered, InstanceSet, Reference, compose_rows
 from .instance_table import InstanceTable, as_table, concatenated
 from .render_visibility import instanced_by_its_parent
-from .scene_records import object_label
 from .scene_walk import EntryReader, SelfEntry
 
 AVAILABLE = hasattr(bpy.types.Object, "evaluated_geometry")  # Blender 4.3 and later
@@ -133,8 +133,8 @@ def _gather(geometry, carrier, reader: EntryReader, alive: list) -> Gathered:
         if cloud is None or len(cloud.points) == 0:
             gathered.sets.append(InstanceSet(np.zeros((0, 4, 4), np.float32), np.zeros(0, np.int32), ()))
             continue
-        transforms, reference_of = _instance_arrays(cloud)
         references = current.instance_references()
+        transforms, reference_of = _instance_arrays(cloud, len(references))
         alive.append(references)
         used = np.bincount(reference_of, minlength=len(references)) > 0  # the walk meets only these
         refs = tuple(_resolve(reference, carrier, reader, gathered, queue) if used[index] else Reference(-1, -1, -1)
@@ -174,13 +174,19 @@ def _check_components(geometry) -> None:
         raise NotInBulk
 
 
-def _instance_arrays(cloud) -> tuple[np.ndarray, np.ndarray]:
-    """(transforms (K, 4, 4) float32 as Blender stores them (column-major), reference indices (K,))."""
+def _instance_arrays(cloud, reference_count: int) -> tuple[np.ndarray, np.ndarray]:
+    """(transforms (K, 4, 4) float32 as Blender stores them (column-major), reference indices (K,)).
+    Attributes under other names (a later Blender) send the scene to the walk."""
     count = len(cloud.points)
     transforms = np.empty(count * 16, np.float32)
-    cloud.attributes["instance_transform"].data.foreach_get("value", transforms)
-    references = np.zeros(count, np.int32)
+    matrix = cloud.attributes.get("instance_transform")
     index = cloud.attributes.get(".reference_index")
+    if matrix is None or (index is None and reference_count > 1):
+        raise NotInBulk
+    matrix.data.foreach_get("value", transforms)
+    references = np.zeros(count, np.int32)
     if index is not None:
         index.data.foreach_get("value", references)
+    if len(references) and not 0 <= references.min() <= references.max() < max(reference_count, 1):
+        raise NotInBulk
     return transforms.reshape(count, 4, 4), references
