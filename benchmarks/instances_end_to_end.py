@@ -21,6 +21,9 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 SETTINGS = dict(mode="ao+shadow", samples=4, resolution_percentage=100)
 WIDTH, HEIGHT = 480, 270
+# The warm-up frame's instances: enough references for the parallel top of the builder (top_levels.py,
+# PARALLEL_MIN_REFS), whose kernels a smaller frame never loads: the measured frame would pay for them.
+WARM_UP = 20000
 
 
 def scatter_scene(count: int, subdivisions: int = 3):
@@ -86,7 +89,7 @@ def _frame_figures(result) -> dict:
 
 
 def child(count: int, path: str) -> dict:
-    """One process: a warm-up frame (kernels), then the scatter scene's first and static frames."""
+    """One process: a warm-up frame (kernels, WARM_UP), then the scatter scene's first and static frames."""
     import bpy
     from kd_addon import bulk_instances, tree_cache
     from kd_addon.config import make_config
@@ -94,7 +97,7 @@ def child(count: int, path: str) -> dict:
 
     bulk_instances.ENABLED = path == "bulk"
     config = make_config(SimpleNamespace(**SETTINGS))
-    scene = scatter_scene(16)
+    scene = scatter_scene(WARM_UP)
     render_frame(scene, bpy.context.evaluated_depsgraph_get(), config)  # kernels loaded or compiled here
     tree_cache.clear()
     scene = scatter_scene(count)

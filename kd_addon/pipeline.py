@@ -91,6 +91,8 @@ class FrameResult:
             "objects_reused", "image_reused", "pixels_reused", "rays_reused", "compile_helper")}
         # Not the tree stats' build_ms (the sum over trees, kept ones included): the row's is the frame's.
         row["tree"] = {k: _plain(v) for k, v in self.tree_stats.items() if k != "build_ms"}
+        if self.tree_stats.get("instances"):  # the top level's duplication (two_level.TOP_LEVEL_DUPLICATION)
+            row["tree"]["top_references_per_instance"] = self.tree_stats["top_references"] / self.tree_stats["instances"]
         row["warnings"] = list(self.warnings)
         return row
 
