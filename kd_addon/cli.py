@@ -36,9 +36,11 @@ from .sequence import SequenceJob, parse_frames
 
 COMMAND_ID = "kdpreview"
 FORMAT_ALIASES = {"PNG": "PNG", "EXR": "OPEN_EXR", "OPEN_EXR": "OPEN_EXR"}
-TABLE = "{:>6} {:>10} {:>8} {:>11} {:>10} {:>10} {:>10} {:>12} {:>8} {:>10} {:>12} {:>10} {:>10} {:>8} {:>7} {:>6}"
+TABLE = ("{:>6} {:>10} {:>8} {:>11} {:>10} {:>10} {:>10} {:>12} {:>8} {:>10} {:>12} {:>10} {:>10} {:>8} {:>7} {:>6}"
+         " {:>8} {:>9}")
 HEADER = TABLE.format("frame", "triangles", "objects", "extract ms", "build ms", "trace ms", "total ms", "rays",
-                      "Mrays/s", "rays saved", "rays reused", "px kept", "nodes", "rebuilt", "reused", "image")
+                      "Mrays/s", "rays saved", "rays reused", "px kept", "nodes", "rebuilt", "reused", "image",
+                      "top ms", "top refs")
 _handle = None  # register_cli_command's handle
 
 
@@ -197,6 +199,13 @@ def saved_settings_with_overrides(scene, args) -> SimpleNamespace:
             properties.unregister()
 
 
+def _top_level(stats: dict) -> tuple[str, str]:
+    """The top level's build time and references per instance, "-" without a top level over instances."""
+    if not stats.get("instances"):
+        return "-", "-"
+    return f"{stats.get('top_build_ms', 0.0):.1f}", f"{stats.get('top_references', 0) / stats['instances']:.2f}"
+
+
 def _print_row(prog, result, path) -> None:
     mark = "*" if result.first_run else ""
     print(TABLE.format(f"{mark}{result.frame}", f"{result.triangles:,}", result.objects, f"{result.extract_ms:.1f}",
@@ -204,7 +213,7 @@ def _print_row(prog, result, path) -> None:
                        f"{result.rays:,}", f"{result.mrays_per_s:.2f}", f"{result.rays_saved:,}",
                        f"{result.rays_reused:,}", f"{result.pixels_reused:,}",
                        f"{result.tree_stats.get('nodes', 0):,}", result.objects_rebuilt, result.objects_reused,
-                       "reused" if result.image_reused else "new"), flush=True)
+                       "reused" if result.image_reused else "new", *_top_level(result.tree_stats)), flush=True)
     if result.compile_ms or result.load_ms:
         compiled = f"compiled in {result.compile_ms / 1e3:.1f} s (first use), " if result.compile_ms else ""
         print(f"kernels: {compiled}loaded in {result.load_ms / 1e3:.1f} s; not in frame {result.frame}'s times or "

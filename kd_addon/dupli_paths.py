@@ -84,6 +84,13 @@ class DupliPaths:
             self.blocked.add(pointer)
         return not blocked
 
+    def walks(self, instancer: bpy.types.Object) -> bool:
+        """Whether `made_by_render` may block an entry under the top-level instancer `instancer` (an
+        original): a reader that skips it must then leave that instancer's entries to it."""
+        if self._active is None:
+            self._active = _anything_render_hidden()
+        return self._active and self._reach_of(instancer)[1]
+
     def _blocked(self, pid: tuple, pointer: int, plain_top) -> tuple[bool, bool]:
         """Whether the entry's parent, the nearest stacked entry it descends from (its levels continue
         the parent's and the parent could make it), makes nothing (itself hidden, or on a path a render

@@ -20,9 +20,11 @@ import time
 
 import bpy
 
+from . import bulk_instances
 from .cycles_culling import culling_warning
 from .extraction_warnings import (left_out_warnings, objects_shown, surfaces_off_warnings,
                                   unused_layer_warnings)
+from .instance_table import as_table, concatenated
 from .render_visibility import RenderVisibility
 from .scene_records import ExtractedScene
 from .scene_walk import EntryReader, SelfEntry, hidden_by_viewport_flag_only
@@ -41,16 +43,21 @@ def extract_scene(depsgraph: bpy.types.Depsgraph | None = None) -> ExtractedScen
     vis = RenderVisibility(depsgraph)
     render_mode = depsgraph.mode == "RENDER"
     walker = EntryReader(vis, render_mode)
-    instances = [r for r in map(walker.read, depsgraph.object_instances) if r is not None]
-    instances = walker.without_hidden_carriers(instances)
+    instances = bulk_instances.read_in_bulk(depsgraph, walker) if bulk_instances.usable(depsgraph) else None
+    path = "bulk" if instances is not None else "walk"
+    if instances is None:
+        walker = EntryReader(vis, render_mode)  # a bulk reading given up leaves its notes behind
+        instances = [r for r in map(walker.read, depsgraph.object_instances) if r is not None]
+        instances = walker.without_hidden_carriers(instances)
     surfaces_off = surfaces_off_warnings(depsgraph.view_layer)
     evaluated = {ob.original.as_pointer() for ob in depsgraph.objects}
     flag_hidden = [] if render_mode else hidden_by_viewport_flag_only(depsgraph, evaluated, walker.instanced_by)
     shown = [ob for ob in flag_hidden if ob.type == "MESH" and ob.show_instancer_for_render and vis.scene_object(ob)]
-    instances += [r for r in map(walker.read, (SelfEntry(ob.evaluated_get(depsgraph)) for ob in shown))
-                  if r is not None]
+    extra = [r for r in map(walker.read, (SelfEntry(ob.evaluated_get(depsgraph)) for ob in shown)) if r is not None]
+    if extra:
+        instances = concatenated([as_table(instances), as_table(extra)]) if path == "bulk" else instances + extra
     viewport_shown = evaluated | {ob.as_pointer() for ob in flag_hidden}
-    shown_objects = objects_shown(depsgraph, vis, instances)
+    shown_objects = objects_shown(depsgraph, vis, instances.distinct_kinds() if path == "bulk" else instances)
     if surfaces_off:
         instances = []
     return ExtractedScene(
@@ -64,4 +71,5 @@ def extract_scene(depsgraph: bpy.types.Depsgraph | None = None) -> ExtractedScen
                   + culling_warning(shown_objects, depsgraph.scene)),
         extract_ms=(time.perf_counter() - t0) * 1e3,
         frame=depsgraph.scene.frame_current,
+        path=path,
     )

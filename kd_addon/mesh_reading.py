@@ -64,7 +64,10 @@ class GeometryReader:
 
     def get(self, ob: bpy.types.Object, object_name: str) -> int | None:
         """Geometry key for the evaluated object `ob`'s mesh, or None when it has no usable triangles."""
-        mesh = ob.data
+        return self.get_mesh(ob, ob.data, object_name)
+
+    def get_mesh(self, ob: bpy.types.Object, mesh: bpy.types.Mesh, object_name: str) -> int | None:
+        """`get` of a mesh `ob` places other than its own data (a geometry-nodes instance's mesh)."""
         key = mesh.as_pointer()
         if key in self.geometries:
             return key

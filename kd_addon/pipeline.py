@@ -98,6 +98,8 @@ class FrameResult:
             "load_ms")}
         # Not the tree stats' build_ms (the sum over trees, kept ones included): the row's is the frame's.
         row["tree"] = {k: _plain(v) for k, v in self.tree_stats.items() if k != "build_ms"}
+        if self.tree_stats.get("instances"):  # the top level's duplication (two_level.TOP_LEVEL_DUPLICATION)
+            row["tree"]["top_references_per_instance"] = self.tree_stats["top_references"] / self.tree_stats["instances"]
         row["warnings"] = list(self.warnings)
         return row
 
@@ -286,7 +288,7 @@ class FrameJob:
         # an AO image does not depend on the lights: animated lights must not stop its reuse
         lights = inputs.lights if self.mode != "ao" else []
         key = tree_cache.image_key(meshes, mesh_of, matrices, visibility, inputs.camera.keywords(), lights,
-                                   (inputs.width, inputs.height), self.config.as_dict())
+                                   (inputs.width, inputs.height), self.config.as_dict(), extracted.table().token)
         return _SceneRead(inputs, extracted, (meshes, mesh_of, matrices, visibility), unapplied, key)
 
     def _lazy_visibility(self, core, extracted: ExtractedScene, visibility: np.ndarray):

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from . import bulk_instances
 from .errors import PreviewError
 from .extraction_warnings import hidden_light_warnings
 from .render_visibility import RenderVisibility, entry_visible  # the meshes' visibility rules
@@ -244,7 +245,7 @@ def read_lights(depsgraph, visibility: RenderVisibility | None = None, instanced
     gets the original pointers of the instanced lights the viewport made (hidden_light_warnings)."""
     visibility = RenderVisibility(depsgraph) if visibility is None else visibility
     lights = []
-    for inst in depsgraph.object_instances:
+    for inst in bulk_instances.light_entries(depsgraph):
         ob = inst.object
         if ob.type != "LIGHT":
             continue

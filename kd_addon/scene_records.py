@@ -57,18 +57,22 @@ def object_label(name: str, instancer: str | None) -> str:
 
 @dataclass
 class ExtractedScene:
-    """The render-visible triangles of one evaluated depsgraph."""
+    """The render-visible triangles of one evaluated depsgraph. `instances`: a list of Instance records
+    (the per-entry walk) or an instance_table.InstanceTable (the bulk path), read alike."""
 
     geometries: dict[int, MeshGeometry] = field(default_factory=dict)
     instances: list[Instance] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
     extract_ms: float = 0.0
     frame: int = 0
+    path: str = "walk"  # how the instances were read: "walk" (scene_walk.py) or "bulk" (bulk_instances.py)
 
     @property
     def object_names(self) -> list[str]:
         """Original object name for each entry of ``instances``."""
-        return [inst.name for inst in self.instances]
+        table = self.table()
+        names = [k.name for k in table.kinds]
+        return [names[k] for k in table.kind_of.tolist()]
 
     @property
     def object_count(self) -> int:
@@ -80,11 +84,21 @@ class ExtractedScene:
         """Total world-space triangles, instances counted separately."""
         return int(self._instance_triangle_counts().sum())
 
+    def table(self):
+        """``instances`` as an instance_table.InstanceTable (arrays: no Python object a row)."""
+        from .instance_table import as_table  # it imports this module's Instance
+        cached = getattr(self, "_table", None)
+        if cached is None or cached[0] is not self.instances or len(cached[1]) != len(self.instances):
+            cached = self._table = (self.instances, as_table(self.instances))
+        return cached[1]
+
     def _instance_triangle_counts(self) -> np.ndarray:
-        return np.array(
-            [self.geometries[i.geometry_key].triangle_count for i in self.instances],
-            dtype=np.int64,
-        )
+        """(I,) int64 triangles of each instance's mesh: a binary search of the few mesh keys a row."""
+        keys = self.table().geometry_keys
+        mesh_keys = np.fromiter(self.geometries, np.int64, len(self.geometries))
+        counts = np.array([g.triangle_count for g in self.geometries.values()], np.int64)
+        order = np.argsort(mesh_keys)
+        return counts[order[np.searchsorted(mesh_keys, keys, sorter=order)]] if len(keys) else np.zeros(0, np.int64)
 
     def triangle_object_ids(self) -> np.ndarray:
         """int32 (N,): index into ``instances`` of each world triangle."""
@@ -97,18 +111,19 @@ class ExtractedScene:
         counts = self._instance_triangle_counts()
         starts = np.concatenate(([0], np.cumsum(counts)[:-1])).astype(np.int64)
         out = np.empty((int(counts.sum()), 3, 3), dtype=np.float32)
-        for key, idx in self._instances_by_geometry().items():
+        table = self.table()
+        for key, idx in _rows_by_key(table.geometry_keys).items():
             geom = self.geometries[key]
-            mats = np.stack([self.instances[i].matrix_world for i in idx])
-            world = _transform_points(mats, geom.vertices)  # (K, V, 3)
+            world = _transform_points(table.matrices[idx], geom.vertices)  # (K, V, 3)
             _scatter_triangles(out, starts[idx], world, geom.triangles)
         return out
 
-    def _instances_by_geometry(self) -> dict[int, np.ndarray]:
-        groups: dict[int, list[int]] = {}
-        for i, inst in enumerate(self.instances):
-            groups.setdefault(inst.geometry_key, []).append(i)
-        return {k: np.array(v, dtype=np.int64) for k, v in groups.items()}
+
+def _rows_by_key(keys: np.ndarray) -> dict[int, np.ndarray]:
+    """Row indices of each geometry key, in row order."""
+    order = np.argsort(keys, kind="stable")
+    unique, first = np.unique(keys[order], return_index=True)
+    return {int(k): rows for k, rows in zip(unique, np.split(order, first[1:]))}
 
 
 def _transform_points(mats: np.ndarray, points: np.ndarray) -> np.ndarray:

@@ -97,6 +97,12 @@ class EntryReader:
         hidden = {id(r) for pointer, r in self._own_entries_hidden_if_instancing if pointer in self.instanced_by}
         return [r for r in records if id(r) not in hidden] if hidden else records
 
+    def verdict(self, ob, parent) -> tuple[str, str | None, bool, bool, bool] | None:
+        """(object name, instancer name, camera, shadow, holdout) of the entries of the evaluated `ob`
+        under the top-level instancer `parent` (None: its own entry), None when a render hides them:
+        what `read` applies, for readers of many entries at once (bulk_instances.py)."""
+        return self._verdict(ob, parent)
+
     def _note_not_triangles(self, ob, parent) -> None:
         """Warn once per object and instancer about render-visible geometry that is not triangles
         which an object makes (a geometry-nodes point cloud, curves, volume) or an instance brings;

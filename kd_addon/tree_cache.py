@@ -64,33 +64,44 @@ def clear() -> None:
 
 def mesh_inputs(core, extracted: ExtractedScene):
     """(MeshInputs, mesh_of (I,), matrices (I, 4, 4), visibility (I,) core ray-visibility and holdout bits)
-    for core.SceneBuilder.build."""
-    owners: dict[int, tuple] = {}
-    for inst in extracted.instances:
-        owners.setdefault(inst.geometry_key, (inst.name, inst.instancer))
+    for core.SceneBuilder.build, from the instances' arrays (instance_table.py): no Python step a row."""
+    table = extracted.table()
+    keys = np.fromiter(extracted.geometries, np.int64, len(extracted.geometries))
+    owner_rows = _first_rows(table.geometry_keys, keys)
     seen: dict[tuple, int] = {}
-    order = {}
     meshes = []
-    for geom_key, geom in extracted.geometries.items():
-        base = (geom.name, *owners.get(geom_key, ("", None)))
+    for (geom_key, geom), row in zip(extracted.geometries.items(), owner_rows):
+        kind = table.kinds[table.kind_of[row]] if row >= 0 else None
+        base = (geom.name, *((kind.name, kind.instancer) if kind else ("", None)))
         seen[base] = seen.get(base, -1) + 1
-        order[geom_key] = len(meshes)
         meshes.append(core.MeshInput((*base, seen[base]), geom.vertices, geom.triangles, geometry_fingerprint(geom)))
-    mesh_of = np.array([order[i.geometry_key] for i in extracted.instances], np.int64)
-    matrices = np.stack([i.matrix_world for i in extracted.instances]) if extracted.instances else np.zeros((0, 4, 4))
-    visibility = np.array([core.CAMERA_RAYS * i.camera | core.SHADOW_RAYS * i.shadow | core.HOLDOUT * i.holdout
-                           for i in extracted.instances], np.uint8)
-    return meshes, mesh_of, matrices, visibility
+    order = np.argsort(keys)
+    mesh_of = order[np.searchsorted(keys, table.geometry_keys, sorter=order)].astype(np.int64)
+    visibility = table.visibility(core.CAMERA_RAYS, core.SHADOW_RAYS, core.HOLDOUT)
+    return meshes, mesh_of, table.matrices, visibility
+
+
+def _first_rows(row_keys: np.ndarray, keys: np.ndarray) -> np.ndarray:
+    """(len(keys),) the first row placing each key, -1 where none does."""
+    unique, first = np.unique(row_keys, return_index=True)
+    at = np.clip(np.searchsorted(unique, keys), 0, max(len(unique) - 1, 0))
+    found = (unique[at] == keys) if len(unique) else np.zeros(len(keys), bool)
+    return np.where(found, first[at] if len(unique) else -1, -1)
 
 
 def image_key(meshes, mesh_of, matrices, visibility, camera_keywords: dict, lights: list, size: tuple,
-              settings: dict) -> bytes:
-    """Digest of everything the image depends on (see the module docstring)."""
+              settings: dict, rows_token: bytes | None = None) -> bytes:
+    """Digest of everything the image depends on (see the module docstring). `rows_token`: the
+    instances' InstanceTable.token, which stands for the matrices and visibility (hashing a million
+    matrices would cost a static frame more than reading them)."""
     h = hashlib.blake2b(digest_size=20)
     h.update(repr([(m.key, m.fingerprint) for m in meshes]).encode())
     h.update(np.ascontiguousarray(mesh_of).tobytes())
-    h.update(np.ascontiguousarray(matrices, np.float64).tobytes())
-    h.update(np.ascontiguousarray(visibility, np.uint8).tobytes())
+    if rows_token is not None:
+        h.update(b"rows" + rows_token)
+    else:
+        h.update(np.ascontiguousarray(matrices, np.float64).tobytes())
+        h.update(np.ascontiguousarray(visibility, np.uint8).tobytes())
     _update(h, camera_keywords)
     for light in lights:  # what it is, does and is warned about: a portal toggled must render anew
         h.update(f"{light.name}:{light.kind}:{light.portal}:{light.emits_nothing!r}:{light.no_diffuse!r}:"

@@ -52,3 +52,27 @@ def addon(monkeypatch):
             # wait for it. One that never ends would make every later test wait: stop the session.
             if not background.wait_for_work(120.0):
                 pytest.exit("a cancelled kernel call still runs 120 s after its test ended", returncode=1)
+
+
+BULK_READINGS: dict = {}  # how many extractions the bulk path took or gave up, over the session
+
+
+@pytest.fixture(params=["walk", "bulk"])
+def extraction_path(request, monkeypatch):
+    """Runs a test on both ways of reading instances (kd_addon/bulk_instances.py): "walk" switches the bulk
+    path off; "bulk" leaves it on and checks each bulk reading against the walk of the same depsgraph."""
+    from kd_addon import bulk_instances
+    from tests.extract_support import bulk_checked_against_walk
+
+    if request.param == "walk":
+        monkeypatch.setattr(bulk_instances, "ENABLED", False)
+    else:
+        monkeypatch.setattr(bulk_instances, "read_in_bulk",
+                            bulk_checked_against_walk(bulk_instances.read_in_bulk, BULK_READINGS))
+    return request.param
+
+
+def pytest_terminal_summary(terminalreporter):
+    if BULK_READINGS:
+        terminalreporter.write_line(f"bulk instance readings: {BULK_READINGS.get('bulk', 0)} taken, "
+                                    f"{BULK_READINGS.get('walk', 0)} left to the walk")

@@ -7,10 +7,13 @@ import math
 
 import bpy
 import numpy as np
+import pytest
 
 from kd_addon.extract import extract_scene
 from tests import bpy_scenes as scenes
 from tests.extract_support import bounds, triangles_of
+
+pytestmark = pytest.mark.usefixtures("extraction_path")  # each test on the walk and the bulk path
 
 CUBE = np.array(scenes.CUBE_VERTS)
 

@@ -18,6 +18,8 @@ from kd_addon.extract import extract_scene
 from tests import bpy_scenes as scenes
 from tests.render_depsgraph import differences, render_entries
 
+pytestmark = pytest.mark.usefixtures("extraction_path")  # each test on the walk and the bulk path
+
 
 class _RandomScene:
     def __init__(self, seed):

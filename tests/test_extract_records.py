@@ -6,11 +6,14 @@ import zlib
 
 import bpy
 import numpy as np
+import pytest
 
 from kd_addon.extract import extract_scene
 from kd_addon.mesh_reading import read_mesh
 from kd_addon.scene_records import MeshGeometry, geometry_fingerprint
 from tests import bpy_scenes as scenes
+
+pytestmark = pytest.mark.usefixtures("extraction_path")  # each test on the walk and the bulk path
 
 
 def test_empty_scene(scene):

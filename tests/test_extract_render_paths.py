@@ -15,6 +15,8 @@ from kd_addon.node_instances import node_references
 from tests import bpy_scenes as scenes
 from tests.render_depsgraph import differences, render_entries
 
+pytestmark = pytest.mark.usefixtures("extraction_path")  # each test on the walk and the bulk path
+
 
 def assert_extraction_matches_render():
     result = extract_scene()

@@ -12,6 +12,8 @@ from kd_addon.scene_records import ExtractedScene
 from tests import bpy_scenes as scenes
 from tests.extract_support import bounds, instances_by_host
 
+pytestmark = pytest.mark.usefixtures("extraction_path")  # each test on the walk and the bulk path
+
 
 def test_render_hidden_and_non_renderable_objects_left_out(scene):
     scenes.add_cube("Shown")

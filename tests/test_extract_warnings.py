@@ -11,6 +11,8 @@ from kd_addon.scene_records import ExtractedScene
 from tests import bpy_scenes as scenes
 from tests.extract_support import instances_by_host, triangles_of
 
+pytestmark = pytest.mark.usefixtures("extraction_path")  # each test on the walk and the bulk path
+
 
 def test_viewport_hidden_and_non_triangle_objects_are_named(scene):
     """The viewport depsgraph does not evaluate objects hidden in the viewport, so the preview cannot

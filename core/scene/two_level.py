@@ -23,6 +23,10 @@ from ..jit.threads import thread_count
 # tests: at the default intersection_cost (0.3, options.py) the top level keeps the 1.5 it was tuned with
 # before the triangle test's cost fell.
 INSTANCE_TEST_COST = 5.0
+# References an instance box may make in the top level (the builder's duplication budget, capped): boxes of
+# scattered instances nearly touch, and a larger budget splits them over and over for no faster trace
+# (docs/choices.md#a-top-level-budget-of-three-references-an-instance).
+TOP_LEVEL_DUPLICATION = 3.0
 SINGULAR = 1e-12  # |det| of the linear part below this times its column norms' product: not invertible
 
 
@@ -273,7 +277,8 @@ def build_top_level(boxes, opts):
         count[0] = len(keep)
         return axis, split, child, count, keep, bounds
     placeholder = np.zeros((len(keep), 3, 3), np.float32)  # never read: clipping is off
-    box_opts = make_options({**opts.as_dict(), "clip": False, "lazy": False,
+    budget = min(opts.duplication_budget or np.inf, TOP_LEVEL_DUPLICATION)
+    box_opts = make_options({**opts.as_dict(), "clip": False, "lazy": False, "duplication_budget": budget,
                              "intersection_cost": opts.intersection_cost * INSTANCE_TEST_COST})
     with thread_count(opts.threads) as threads:
         (axis, split, child, count, leaf), _ = _build_arrays(placeholder, np.arange(len(keep), dtype=np.int32),
