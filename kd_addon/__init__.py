@@ -16,7 +16,7 @@ if sys.argv[:1] == ["-m"]:  # `python -m kd_addon`, while Python locates __main_
 
 import bpy  # noqa: E402
 
-from . import (cli, engine, image_keeping, kernel_warmup, live_update, operators, panel,  # noqa: E402
+from . import (bulk_instances, cli, engine, image_keeping, kernel_warmup, live_update, operators, panel,  # noqa: E402
                properties, tree_cache, warmup_display)
 
 # Registration order: settings before the operators, panels and render engine that use them.
@@ -54,7 +54,8 @@ def unregister():
         return
     for module in reversed(MODULES):
         module.unregister()
-    tree_cache.clear()  # kept trees and images go with the add-on
+    tree_cache.clear()  # kept trees, images and instance rows go with the add-on
+    bulk_instances.forget()
     _registered = False
 
 

@@ -42,6 +42,11 @@ class NotInBulk(Exception):
     """The scene holds something only the per-entry walk reads as a render would."""
 
 
+def forget() -> None:
+    """Drop the rows kept from the last reading (hundreds of MB for a million instances)."""
+    _memos.clear()
+
+
 def usable(depsgraph: bpy.types.Depsgraph) -> bool:
     """Whether the bulk path may read this scene: bpy offers it, it is on, and every object of the file
     is of a kind whose own entry and instances it reads as the walk does."""
