@@ -55,13 +55,26 @@ def _bin(x, lo, scale, top):
 
 
 @njit(cache=True)
+def new_sweep_scratch(nbins):
+    """Per-thread buffers for best_binned_split_into: every boundary's cost, the running counts."""
+    return np.empty((3, nbins), np.float64), np.empty((2, nbins), np.float64)
+
+
+@njit(cache=True)
 def best_binned_split(min_bins, max_bins, weight, node_box, params):
+    """best_binned_split_into with buffers of its own (the top levels' few nodes)."""
+    return best_binned_split_into(min_bins, max_bins, weight, node_box, params,
+                                  new_sweep_scratch(min_bins.shape[1]))
+
+
+@njit(cache=True)
+def best_binned_split_into(min_bins, max_bins, weight, node_box, params, sweep_scratch):
     """Cheapest split among the bin boundaries: (cost, axis, position); axis -1 if none is valid. Every
     boundary's cost is computed first (_boundary_costs, a loop LLVM vectorizes), then the first cheapest
-    is taken axis by axis, boundary by boundary: the plane a scan comparing with `<` would take."""
+    is taken axis by axis, boundary by boundary: the plane a scan comparing with `<` would take.
+    sweep_scratch: new_sweep_scratch's buffers, so a subtree's nodes allocate nothing."""
     nbins = min_bins.shape[1]
-    costs = np.empty((3, nbins), np.float64)
-    counts = np.empty((2, nbins), np.float64)
+    costs, counts = sweep_scratch
     for axis in range(3):
         _boundary_costs(min_bins[axis], max_bins[axis], weight, node_box, axis, params, counts, costs[axis])
     best_cost, best_axis, best_k = np.inf, -1, 0
@@ -127,21 +140,22 @@ def skip_stride(n, params):
 
 
 @njit(cache=True)
-def binned_split(boxes, start, end, node_box, params, min_bins, max_bins):
+def binned_split(boxes, start, end, node_box, params, bins):
     """Bin the node's references and return the best binned split (cost, axis, position, planar_left),
     refined to the nearest box boundaries when every reference was binned (`snap_to_boundaries`).
     With params.longest_axis_only, the longest axis first, and all three only when it offers no plane
     better than a leaf (a cylinder along the cell's length gives the longest axis nothing to split)."""
+    min_bins, max_bins, sweep_scratch = bins
     stride = skip_stride(end - start, params)
     cost, axis, pos = np.inf, -1, np.float32(0.0)
     if params.longest_axis_only:
         _clear(min_bins, max_bins)
         bin_longest_axis(boxes, start, end, stride, node_box, min_bins, max_bins)
-        cost, axis, pos = best_binned_split(min_bins, max_bins, stride, node_box, params)
+        cost, axis, pos = best_binned_split_into(min_bins, max_bins, stride, node_box, params, sweep_scratch)
     if axis < 0 or not improves_on_leaf(cost, end - start, params):
         _clear(min_bins, max_bins)
         bin_references(boxes, start, end, stride, node_box, min_bins, max_bins)
-        cost, axis, pos = best_binned_split(min_bins, max_bins, stride, node_box, params)
+        cost, axis, pos = best_binned_split_into(min_bins, max_bins, stride, node_box, params, sweep_scratch)
     if axis < 0 or stride != 1 or not params.snap:
         return cost, axis, pos, False
     return snap_to_boundaries(boxes, start, end, node_box, params, cost, axis, pos)
