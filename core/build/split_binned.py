@@ -8,6 +8,7 @@ sampled zero is not trusted as an empty side (no empty bonus), or the builder cu
 import numpy as np
 from numba import njit
 
+from ..trace.simd import box_bin_indices
 from ..geometry import cut_half_area, extents, half_area, longest_axis
 from .sah import cost_of_areas, improves_on_leaf, split_cost, valid_position
 
@@ -21,12 +22,13 @@ def bin_references(boxes, start, end, stride, node_box, min_bins, max_bins):
     s1 = _bin_scale(node_box, 1, top + 1)
     s2 = _bin_scale(node_box, 2, top + 1)
     for i in range(start, end, stride):
-        min_bins[0, _bin(boxes[i, 0], lo0, s0, top)] += 1
-        min_bins[1, _bin(boxes[i, 1], lo1, s1, top)] += 1
-        min_bins[2, _bin(boxes[i, 2], lo2, s2, top)] += 1
-        max_bins[0, _bin(boxes[i, 3], lo0, s0, top)] += 1
-        max_bins[1, _bin(boxes[i, 4], lo1, s1, top)] += 1
-        max_bins[2, _bin(boxes[i, 5], lo2, s2, top)] += 1
+        b0, b1, b2, b3, b4, b5 = box_bin_indices(boxes, i, lo0, lo1, lo2, s0, s1, s2, top)  # _bin's, in lanes
+        min_bins[0, b0] += 1
+        min_bins[1, b1] += 1
+        min_bins[2, b2] += 1
+        max_bins[0, b3] += 1
+        max_bins[1, b4] += 1
+        max_bins[2, b5] += 1
 
 
 @njit(cache=True)
