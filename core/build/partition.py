@@ -42,7 +42,7 @@ def sides_of(lo, hi, pos, planar_left):
     return (hi <= pos) & (planar_left | (not planar)), (lo >= pos) & (not (planar_left & planar))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def split_reference(tri, box, axis, pos, clip, scratch, out_left, out_right):
     """Boxes of a straddling reference's parts on each side; returns the sides that are not empty."""
     out_left[:] = box
