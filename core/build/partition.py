@@ -35,14 +35,7 @@ def side_of(boxes, i, axis, pos, planar_left):
     return BOTH
 
 
-@njit(cache=True, inline="always")
-def sides_of(lo, hi, pos, planar_left):
-    """side_of as two flags (left, right) without branches; neither for a straddler."""
-    planar = (lo == hi) & (lo == pos)
-    return (hi <= pos) & (planar_left | (not planar)), (lo >= pos) & (not (planar_left & planar))
-
-
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def split_reference(tri, box, axis, pos, clip, scratch, out_left, out_right):
     """Boxes of a straddling reference's parts on each side; returns the sides that are not empty."""
     out_left[:] = box
