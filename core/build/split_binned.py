@@ -78,7 +78,7 @@ def best_binned_split_into(min_bins, max_bins, weight, node_box, params, sweep_s
     nbins = min_bins.shape[1]
     costs, counts = sweep_scratch
     for axis in range(3):
-        _boundary_costs(min_bins[axis], max_bins[axis], weight, node_box, axis, params, counts, costs[axis])
+        _boundary_costs(min_bins, max_bins, weight, node_box, axis, params, counts, costs)
     best_cost, best_axis, best_k = np.inf, -1, 0
     for axis in range(3):
         for k in range(1, nbins):
@@ -96,20 +96,23 @@ def _boundary(node_box, axis, k, nbins):
     return np.float32(lo + k * ((hi - lo) / nbins))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _boundary_costs(min_bins, max_bins, weight, node_box, axis, params, counts, costs):
-    """costs[k]: the SAH cost of bin boundary k (1 <= k < nbins) on `axis`; inf at k = 0, where the
-    plane is not strictly inside the node, and on an axis not binned (every binned reference ends in a
-    bin). The running counts go to `counts` first so the cost loop has no loop-carried value."""
-    nbins = min_bins.shape[0]
-    costs[:] = np.inf
-    n_right = max_bins.sum()
+    """costs[axis, k]: the SAH cost of bin boundary k (1 <= k < nbins) on `axis`; inf at k = 0, where
+    the plane is not strictly inside the node, and on an axis not binned (every binned reference ends in
+    a bin). The running counts go to `counts` first so the cost loop has no loop-carried value. Rows are
+    indexed, not sliced, and the function is inlined: a call or a row view costs reference counting."""
+    nbins = min_bins.shape[1]
+    n_right = 0
+    for k in range(nbins):
+        costs[axis, k] = np.inf
+        n_right += max_bins[axis, k]
     if n_right == 0:
         return
     n_left = 0
     for k in range(1, nbins):
-        n_left += min_bins[k - 1]
-        n_right -= max_bins[k - 1]
+        n_left += min_bins[axis, k - 1]
+        n_right -= max_bins[axis, k - 1]
         counts[0, k] = _estimate(n_left, weight)
         counts[1, k] = _estimate(n_right, weight)
     inv_area = 1.0 / half_area(node_box)
@@ -120,7 +123,7 @@ def _boundary_costs(min_bins, max_bins, weight, node_box, axis, params, counts, 
         cost = cost_of_areas(cut_half_area(e, axis, np.float64(pos) - lo),
                              cut_half_area(e, axis, hi - np.float64(pos)), inv_area,
                              counts[0, k], counts[1, k], params)
-        costs[k] = cost if valid_position(node_box, axis, pos) else np.inf
+        costs[axis, k] = cost if valid_position(node_box, axis, pos) else np.inf
 
 
 @njit(cache=True, inline="always")
