@@ -13,7 +13,7 @@ from ..geometry import cut_half_area, extents, half_area, longest_axis
 from .sah import cost_of_areas, improves_on_leaf, split_cost, valid_position
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def bin_references(boxes, start, end, stride, node_box, min_bins, max_bins):
     """Add the references boxes[start:end:stride] to the per-axis min and max bin counters."""
     top = min_bins.shape[1] - 1
@@ -69,7 +69,7 @@ def best_binned_split(min_bins, max_bins, weight, node_box, params):
                                   new_sweep_scratch(min_bins.shape[1]))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def best_binned_split_into(min_bins, max_bins, weight, node_box, params, sweep_scratch):
     """Cheapest split among the bin boundaries: (cost, axis, position); axis -1 if none is valid. Every
     boundary's cost is computed first (_boundary_costs, a loop LLVM vectorizes), then the first cheapest
@@ -144,7 +144,7 @@ def skip_stride(n, params):
     return int(np.log10(n))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def binned_split(boxes, start, end, node_box, params, bins):
     """Bin the node's references and return the best binned split (cost, axis, position, planar_left),
     refined to the nearest box boundaries when every reference was binned (`snap_to_boundaries`).
@@ -172,7 +172,7 @@ def _clear(min_bins, max_bins):
     max_bins[:] = 0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def snap_to_boundaries(boxes, start, end, node_box, params, cost, axis, pos):
     """Try the box boundaries nearest the binned plane on each side (within one bin) and keep the
     cheapest of the three, counted exactly. Bin boundaries fall between the vertex lines of grids and
@@ -195,7 +195,7 @@ def snap_to_boundaries(boxes, start, end, node_box, params, cost, axis, pos):
     return best
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _nearest_boundaries(boxes, start, end, axis, pos, step):
     """The box boundaries nearest to pos strictly below and above it within one bin, each with the
     references left of it, right of it and lying in it: ((below, left, right, planar), (above, ...)).

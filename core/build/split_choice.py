@@ -11,7 +11,7 @@ from .split_median import median_split
 NO_SPLIT = -1
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def choose_split(boxes, start, end, node_box, depth, params, bins, scratch):
     """(axis, position, planar_left) of the node's split; axis is NO_SPLIT when it becomes a leaf.
     "binned" switches to the exact sweep at `exact_below` references (seed 000 §3.4). bins: the
