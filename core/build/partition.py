@@ -63,7 +63,7 @@ def split_reference(tri, box, axis, pos, clip, scratch, out_left, out_right):
     return (LEFT if in_left else 0) | (RIGHT if in_right else 0)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def partition_in_place(tris, prims, boxes, start, end, axis, pos, planar_left, clip, scratch):
     """Split references [start, end) into right ones at [start, start+nr) and left ones right after.
     Right ones are compacted in place (each makes at most one, so writes never pass reads); left ones go
