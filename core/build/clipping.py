@@ -38,7 +38,7 @@ def clip_triangle(tri, box, scratch_a, scratch_b, out):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def split_triangle_inside(tri, axis, pos, poly_left, poly_right, out_left, out_right):
     """The clip_triangle results for both sides of the plane `pos` on `axis` when the triangle lies in
     `box` (triangle_in_box): then the split plane is the only one that cuts, and one pass over the

@@ -35,7 +35,7 @@ def side_of(boxes, i, axis, pos, planar_left):
     return BOTH
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def split_reference(tri, box, axis, pos, clip, scratch, out_left, out_right):
     """Boxes of a straddling reference's parts on each side; returns the sides that are not empty."""
     out_left[:] = box
