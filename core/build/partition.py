@@ -67,9 +67,8 @@ def split_reference(tri, box, axis, pos, clip, scratch, out_left, out_right):
 def partition_in_place(tris, prims, boxes, start, end, axis, pos, planar_left, clip, scratch):
     """Split references [start, end) into right ones at [start, start+nr) and left ones right after.
     Right ones are compacted in place (each makes at most one, so writes never pass reads); left ones go
-    to [end, end+nl), then move down; the caller leaves room for 2 * (end - start) from `start`. A
-    reference on one side is written to both next places and only that side's advances (no branch to
-    mispredict). Returns (n_right, n_left). The left child ends on top of the pool, so built first it grows freely (seed 000 §3.5)."""
+    to [end, end+nl), then move down; the caller leaves room for 2 * (end - start) from `start`. Returns
+    (n_right, n_left). The left child ends on top of the pool, so built first it grows freely (seed 000 §3.5)."""
     box_l, box_r = scratch[3], scratch[4]
     w_right = start
     w_left = end

@@ -9,6 +9,8 @@ and room, so building it later gives exactly the eager subtree. A node's room is
 params.duplication_budget: each split divides it by its duplication (n_left + n_right) / n, and room
 below 1 makes a leaf, so leaves hold at most twice the budget's references. A split that leaves every
 reference in both children separates nothing: the node becomes a leaf instead.
+The per-node functions it calls (split search, partition, pool checks) are inlined into it: a call of a
+compiled function counts every array argument's references atomically (docs/choices.md#inlined-per-node-calls).
 """
 from concurrent.futures import ThreadPoolExecutor
 
