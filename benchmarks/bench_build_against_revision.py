@@ -7,6 +7,8 @@ bench_against_revision.py times the build told the rays (seed 000's setting), wh
 snapping off; this one times the default build. The base's core is exported as `core_base` the same
 way (its kernels compiled afresh, excluded). Printed per thread count: medians of each version, the
 median of the per-pair ratios (this tree / base), each tree's SAH cost and whether the trees are equal.
+On 1 thread the build runs in the calling thread, so its CPU time (time.thread_time) is printed too:
+on a host other processes load, it moves far less than the wall time.
 """
 import argparse
 import sys
@@ -21,15 +23,15 @@ import core  # noqa: E402  (bench_against_revision put the worktree on sys.path)
 from scenes import load_scene  # noqa: E402
 
 
-def paired(versions, triangles, threads, pairs):
-    """Per-version build times (ms) over `pairs` alternating pairs."""
+def paired(versions, triangles, threads, pairs, clock=time.perf_counter):
+    """Per-version build times (ms, by `clock`) over `pairs` alternating pairs."""
     times = {name: [] for name in versions}
     for pair in range(pairs):
         order = list(versions.items()) if pair % 2 == 0 else list(versions.items())[::-1]
         for name, version in order:
-            t = time.perf_counter()
+            t = clock()
             version.build_kdtree(triangles, threads=threads)
-            times[name].append((time.perf_counter() - t) * 1e3)
+            times[name].append((clock() - t) * 1e3)
     return {name: np.array(t) for name, t in times.items()}
 
 
@@ -47,14 +49,19 @@ def main():
         trees = {name: v.build_kdtree(triangles, threads=2) for name, v in versions.items()}
         print(f"JIT compile / cache load: {time.perf_counter() - t:.1f} s (excluded); {args.scene}, {args.pairs} pairs")
         same = all(np.array_equal(a, b) for a, b in zip(*(tr.node_arrays for tr in trees.values())))
-        print("SAH cost:", {n: round(tr.stats()["sah_cost"], 4) for n, tr in trees.items()}, "same tree:", same)
-        for threads in (2, 1):
+        one = [v.build_kdtree(triangles, threads=1).node_arrays for v in versions.values()]
+        same_one = all(np.array_equal(a, b) for a, b in zip(*one))
+        print("SAH cost:", {n: round(tr.stats()["sah_cost"], 4) for n, tr in trees.items()},
+              "same tree (2 threads):", same, "(1 thread):", same_one)
+        for threads, clock in ((2, time.perf_counter), (1, time.perf_counter), (1, time.thread_time)):
             for v in versions.values():
                 v.build_kdtree(triangles, threads=threads)
-            times = paired(versions, triangles, threads, args.pairs)
+            times = paired(versions, triangles, threads, args.pairs, clock)
             mine, theirs = times.values()
             medians = "  ".join(f"{name} {np.median(t):6.1f} ms" for name, t in times.items())
-            print(f"threads {threads}: {medians}  ratio (paired) {np.median(mine / theirs):.3f}", flush=True)
+            what = "CPU time" if clock is time.thread_time else "wall"
+            print(f"threads {threads} ({what}): {medians}  ratio (paired) {np.median(mine / theirs):.3f}",
+                  flush=True)
 
 
 if __name__ == "__main__":

@@ -39,6 +39,55 @@ def clip_triangle(tri, box, scratch_a, scratch_b, out):
 
 
 @njit(cache=True, inline="always")
+def split_triangle_inside(tri, axis, pos, poly_left, poly_right, out_left, out_right):
+    """The clip_triangle results for both sides of the plane `pos` on `axis` when the triangle lies in
+    `box` (triangle_in_box): then the split plane is the only one that cuts, and one pass over the
+    edges builds both polygons as _clip_plane does, vertex for vertex in the same order (a crossing
+    edge's point is the same computed from either side, negation being exact), so the boxes are
+    bit-identical to clipping each side. out_left / out_right hold the two clip regions on entry.
+    Returns (left part not empty, right part not empty)."""
+    n_left = n_right = 0
+    for i in range(3):
+        j = i + 1 if i < 2 else 0
+        di = np.float64(tri[i, axis]) - pos
+        dj = np.float64(tri[j, axis]) - pos
+        if di <= 0.0:
+            n_left = _put_vertex(poly_left, n_left, tri, i)
+        if di >= 0.0:
+            n_right = _put_vertex(poly_right, n_right, tri, i)
+        if (di < 0.0 and dj > 0.0) or (di > 0.0 and dj < 0.0):
+            f = di / (di - dj)
+            for k in range(3):
+                vi = np.float64(tri[i, k])
+                poly_left[n_left, k] = poly_right[n_right, k] = vi + f * (np.float64(tri[j, k]) - vi)
+            poly_left[n_left, axis] = poly_right[n_right, axis] = pos
+            n_left += 1
+            n_right += 1
+    if n_left:
+        _polygon_box(poly_left, n_left, out_left, out_left)
+    if n_right:
+        _polygon_box(poly_right, n_right, out_right, out_right)
+    return n_left > 0, n_right > 0
+
+
+@njit(cache=True, inline="always")
+def _put_vertex(poly, n, tri, i):
+    for k in range(3):
+        poly[n, k] = tri[i, k]
+    return n + 1
+
+
+@njit(cache=True, inline="always")
+def triangle_in_box(tri, box):
+    """Does every vertex lie in the closed box (no plane of it would cut the triangle)?"""
+    for i in range(3):
+        for k in range(3):
+            if not box[k] <= tri[i, k] <= box[k + 3]:
+                return False
+    return True
+
+
+@njit(cache=True, inline="always")
 def _inside_plane(tri, axis, plane, sign):
     """Does the whole triangle lie on the kept side of the plane (as _clip_plane measures it)?
     A straddler is usually small against its node, so most of the six planes cut nothing. Skipping

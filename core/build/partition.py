@@ -8,7 +8,7 @@ Straddlers are clipped to each child (clipping.py); a side where the clipped tri
 import numpy as np
 from numba import njit
 
-from .clipping import clip_triangle, new_clip_scratch
+from .clipping import clip_triangle, new_clip_scratch, split_triangle_inside, triangle_in_box
 
 LEFT, RIGHT, BOTH = 1, 2, 3
 
@@ -35,7 +35,7 @@ def side_of(boxes, i, axis, pos, planar_left):
     return BOTH
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def split_reference(tri, box, axis, pos, clip, scratch, out_left, out_right):
     """Boxes of a straddling reference's parts on each side; returns the sides that are not empty."""
     out_left[:] = box
@@ -45,11 +45,14 @@ def split_reference(tri, box, axis, pos, clip, scratch, out_left, out_right):
     if not clip:
         return BOTH
     poly_a, poly_b, region, _, _ = scratch
-    region[:] = out_left
-    in_left = clip_triangle(tri, region, poly_a, poly_b, out_left)
-    region[:] = box
-    region[axis] = pos
-    in_right = clip_triangle(tri, region, poly_a, poly_b, out_right)
+    if triangle_in_box(tri, box):  # the usual straddler, never cut before: one pass for both sides
+        in_left, in_right = split_triangle_inside(tri, axis, pos, poly_a, poly_b, out_left, out_right)
+    else:
+        region[:] = out_left
+        in_left = clip_triangle(tri, region, poly_a, poly_b, out_left)
+        region[:] = box
+        region[axis] = pos
+        in_right = clip_triangle(tri, region, poly_a, poly_b, out_right)
     if not (in_left or in_right):
         # Only rounding can empty both sides of a straddler; keep it on both, unclipped.
         out_left[:] = box
@@ -60,7 +63,7 @@ def split_reference(tri, box, axis, pos, clip, scratch, out_left, out_right):
     return (LEFT if in_left else 0) | (RIGHT if in_right else 0)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def partition_in_place(tris, prims, boxes, start, end, axis, pos, planar_left, clip, scratch):
     """Split references [start, end) into right ones at [start, start+nr) and left ones right after.
     Right ones are compacted in place (each makes at most one, so writes never pass reads); left ones go
@@ -70,24 +73,25 @@ def partition_in_place(tris, prims, boxes, start, end, axis, pos, planar_left, c
     w_right = start
     w_left = end
     for i in range(start, end):
-        prim = prims[i]
         side = side_of(boxes, i, axis, pos, planar_left)
         if side == LEFT:
             _copy_ref(prims, boxes, i, w_left)
             w_left += 1
-        elif side == RIGHT:
+            continue
+        if side == RIGHT:
             _copy_ref(prims, boxes, i, w_right)
             w_right += 1
-        else:
-            side = split_reference(tris[prim], boxes[i], axis, pos, clip, scratch, box_l, box_r)
-            if side & LEFT:
-                prims[w_left] = prim
-                boxes[w_left] = box_l
-                w_left += 1
-            if side & RIGHT:
-                prims[w_right] = prim
-                boxes[w_right] = box_r
-                w_right += 1
+            continue
+        prim = prims[i]
+        side = split_reference(tris[prim], boxes[i], axis, pos, clip, scratch, box_l, box_r)
+        if side & LEFT:
+            prims[w_left] = prim
+            boxes[w_left] = box_l
+            w_left += 1
+        if side & RIGHT:
+            prims[w_right] = prim
+            boxes[w_right] = box_r
+            w_right += 1
     n_right = w_right - start
     n_left = w_left - end
     for k in range(n_left):
@@ -97,7 +101,6 @@ def partition_in_place(tris, prims, boxes, start, end, axis, pos, planar_left, c
 
 @njit(cache=True, inline="always")
 def _copy_ref(prims, boxes, src, dst):
-    if src != dst:
-        prims[dst] = prims[src]
-        for k in range(6):
-            boxes[dst, k] = boxes[src, k]
+    prims[dst] = prims[src]
+    for k in range(6):
+        boxes[dst, k] = boxes[src, k]

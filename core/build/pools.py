@@ -14,7 +14,7 @@ def new_capacity(current, need):
     return max(need, int(current * GROWTH) + 64)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def ensure_refs(prims, boxes, used, need):
     """Reference pool with room for `need` entries, keeping the first `used`."""
     if need <= prims.shape[0]:
@@ -27,7 +27,7 @@ def ensure_refs(prims, boxes, used, need):
     return new_prims, new_boxes
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def ensure_nodes(axis, split, child, count, used, need):
     """Node arrays with room for `need` nodes, keeping the first `used`."""
     if need <= axis.shape[0]:

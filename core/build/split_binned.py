@@ -8,11 +8,12 @@ sampled zero is not trusted as an empty side (no empty bonus), or the builder cu
 import numpy as np
 from numba import njit
 
+from ..trace.simd import box_bin_indices
 from ..geometry import cut_half_area, extents, half_area, longest_axis
 from .sah import cost_of_areas, improves_on_leaf, split_cost, valid_position
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def bin_references(boxes, start, end, stride, node_box, min_bins, max_bins):
     """Add the references boxes[start:end:stride] to the per-axis min and max bin counters."""
     top = min_bins.shape[1] - 1
@@ -21,12 +22,13 @@ def bin_references(boxes, start, end, stride, node_box, min_bins, max_bins):
     s1 = _bin_scale(node_box, 1, top + 1)
     s2 = _bin_scale(node_box, 2, top + 1)
     for i in range(start, end, stride):
-        min_bins[0, _bin(boxes[i, 0], lo0, s0, top)] += 1
-        min_bins[1, _bin(boxes[i, 1], lo1, s1, top)] += 1
-        min_bins[2, _bin(boxes[i, 2], lo2, s2, top)] += 1
-        max_bins[0, _bin(boxes[i, 3], lo0, s0, top)] += 1
-        max_bins[1, _bin(boxes[i, 4], lo1, s1, top)] += 1
-        max_bins[2, _bin(boxes[i, 5], lo2, s2, top)] += 1
+        b0, b1, b2, b3, b4, b5 = box_bin_indices(boxes, i, lo0, lo1, lo2, s0, s1, s2, top)  # _bin's, in lanes
+        min_bins[0, b0] += 1
+        min_bins[1, b1] += 1
+        min_bins[2, b2] += 1
+        max_bins[0, b3] += 1
+        max_bins[1, b4] += 1
+        max_bins[2, b5] += 1
 
 
 @njit(cache=True)
@@ -55,15 +57,28 @@ def _bin(x, lo, scale, top):
 
 
 @njit(cache=True)
+def new_sweep_scratch(nbins):
+    """Per-thread buffers for best_binned_split_into: every boundary's cost, the running counts."""
+    return np.empty((3, nbins), np.float64), np.empty((2, nbins), np.float64)
+
+
+@njit(cache=True)
 def best_binned_split(min_bins, max_bins, weight, node_box, params):
+    """best_binned_split_into with buffers of its own (the top levels' few nodes)."""
+    return best_binned_split_into(min_bins, max_bins, weight, node_box, params,
+                                  new_sweep_scratch(min_bins.shape[1]))
+
+
+@njit(cache=True, inline="always")
+def best_binned_split_into(min_bins, max_bins, weight, node_box, params, sweep_scratch):
     """Cheapest split among the bin boundaries: (cost, axis, position); axis -1 if none is valid. Every
     boundary's cost is computed first (_boundary_costs, a loop LLVM vectorizes), then the first cheapest
-    is taken axis by axis, boundary by boundary: the plane a scan comparing with `<` would take."""
+    is taken axis by axis, boundary by boundary: the plane a scan comparing with `<` would take.
+    sweep_scratch: new_sweep_scratch's buffers, so a subtree's nodes allocate nothing."""
     nbins = min_bins.shape[1]
-    costs = np.empty((3, nbins), np.float64)
-    counts = np.empty((2, nbins), np.float64)
+    costs, counts = sweep_scratch
     for axis in range(3):
-        _boundary_costs(min_bins[axis], max_bins[axis], weight, node_box, axis, params, counts, costs[axis])
+        _boundary_costs(min_bins, max_bins, weight, node_box, axis, params, counts, costs)
     best_cost, best_axis, best_k = np.inf, -1, 0
     for axis in range(3):
         for k in range(1, nbins):
@@ -81,20 +96,23 @@ def _boundary(node_box, axis, k, nbins):
     return np.float32(lo + k * ((hi - lo) / nbins))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _boundary_costs(min_bins, max_bins, weight, node_box, axis, params, counts, costs):
-    """costs[k]: the SAH cost of bin boundary k (1 <= k < nbins) on `axis`; inf at k = 0, where the
-    plane is not strictly inside the node, and on an axis not binned (every binned reference ends in a
-    bin). The running counts go to `counts` first so the cost loop has no loop-carried value."""
-    nbins = min_bins.shape[0]
-    costs[:] = np.inf
-    n_right = max_bins.sum()
+    """costs[axis, k]: the SAH cost of bin boundary k (1 <= k < nbins) on `axis`; inf at k = 0, where
+    the plane is not strictly inside the node, and on an axis not binned (every binned reference ends in
+    a bin). The running counts go to `counts` first so the cost loop has no loop-carried value. Rows are
+    indexed, not sliced, and the function is inlined: a call or a row view costs reference counting."""
+    nbins = min_bins.shape[1]
+    n_right = 0
+    for k in range(nbins):
+        costs[axis, k] = np.inf
+        n_right += max_bins[axis, k]
     if n_right == 0:
         return
     n_left = 0
     for k in range(1, nbins):
-        n_left += min_bins[k - 1]
-        n_right -= max_bins[k - 1]
+        n_left += min_bins[axis, k - 1]
+        n_right -= max_bins[axis, k - 1]
         counts[0, k] = _estimate(n_left, weight)
         counts[1, k] = _estimate(n_right, weight)
     inv_area = 1.0 / half_area(node_box)
@@ -105,7 +123,7 @@ def _boundary_costs(min_bins, max_bins, weight, node_box, axis, params, counts, 
         cost = cost_of_areas(cut_half_area(e, axis, np.float64(pos) - lo),
                              cut_half_area(e, axis, hi - np.float64(pos)), inv_area,
                              counts[0, k], counts[1, k], params)
-        costs[k] = cost if valid_position(node_box, axis, pos) else np.inf
+        costs[axis, k] = cost if valid_position(node_box, axis, pos) else np.inf
 
 
 @njit(cache=True, inline="always")
@@ -126,22 +144,23 @@ def skip_stride(n, params):
     return int(np.log10(n))
 
 
-@njit(cache=True)
-def binned_split(boxes, start, end, node_box, params, min_bins, max_bins):
+@njit(cache=True, inline="always")
+def binned_split(boxes, start, end, node_box, params, bins):
     """Bin the node's references and return the best binned split (cost, axis, position, planar_left),
     refined to the nearest box boundaries when every reference was binned (`snap_to_boundaries`).
     With params.longest_axis_only, the longest axis first, and all three only when it offers no plane
     better than a leaf (a cylinder along the cell's length gives the longest axis nothing to split)."""
+    min_bins, max_bins, sweep_scratch = bins
     stride = skip_stride(end - start, params)
     cost, axis, pos = np.inf, -1, np.float32(0.0)
     if params.longest_axis_only:
         _clear(min_bins, max_bins)
         bin_longest_axis(boxes, start, end, stride, node_box, min_bins, max_bins)
-        cost, axis, pos = best_binned_split(min_bins, max_bins, stride, node_box, params)
+        cost, axis, pos = best_binned_split_into(min_bins, max_bins, stride, node_box, params, sweep_scratch)
     if axis < 0 or not improves_on_leaf(cost, end - start, params):
         _clear(min_bins, max_bins)
         bin_references(boxes, start, end, stride, node_box, min_bins, max_bins)
-        cost, axis, pos = best_binned_split(min_bins, max_bins, stride, node_box, params)
+        cost, axis, pos = best_binned_split_into(min_bins, max_bins, stride, node_box, params, sweep_scratch)
     if axis < 0 or stride != 1 or not params.snap:
         return cost, axis, pos, False
     return snap_to_boundaries(boxes, start, end, node_box, params, cost, axis, pos)
@@ -153,7 +172,7 @@ def _clear(min_bins, max_bins):
     max_bins[:] = 0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def snap_to_boundaries(boxes, start, end, node_box, params, cost, axis, pos):
     """Try the box boundaries nearest the binned plane on each side (within one bin) and keep the
     cheapest of the three, counted exactly. Bin boundaries fall between the vertex lines of grids and
@@ -176,7 +195,7 @@ def snap_to_boundaries(boxes, start, end, node_box, params, cost, axis, pos):
     return best
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _nearest_boundaries(boxes, start, end, axis, pos, step):
     """The box boundaries nearest to pos strictly below and above it within one bin, each with the
     references left of it, right of it and lying in it: ((below, left, right, planar), (above, ...)).

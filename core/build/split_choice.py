@@ -11,10 +11,11 @@ from .split_median import median_split
 NO_SPLIT = -1
 
 
-@njit(cache=True)
-def choose_split(boxes, start, end, node_box, depth, params, min_bins, max_bins, scratch):
+@njit(cache=True, inline="always")
+def choose_split(boxes, start, end, node_box, depth, params, bins, scratch):
     """(axis, position, planar_left) of the node's split; axis is NO_SPLIT when it becomes a leaf.
-    "binned" switches to the exact sweep at `exact_below` references (seed 000 §3.4)."""
+    "binned" switches to the exact sweep at `exact_below` references (seed 000 §3.4). bins: the
+    thread's (min_bins, max_bins, sweep scratch) for binned_split."""
     n = end - start
     if n <= params.leaf_size or depth >= params.max_depth:
         return NO_SPLIT, np.float32(0.0), False
@@ -24,7 +25,7 @@ def choose_split(boxes, start, end, node_box, depth, params, min_bins, max_bins,
     elif params.builder == EXACT or n <= params.exact_below:
         cost, axis, pos, planar_left = exact_split(boxes, start, end, node_box, params, scratch)
     else:
-        cost, axis, pos, planar_left = binned_split(boxes, start, end, node_box, params, min_bins, max_bins)
+        cost, axis, pos, planar_left = binned_split(boxes, start, end, node_box, params, bins)
     if axis < 0 or not beats_leaf(cost, n, node_box, params):
         return NO_SPLIT, np.float32(0.0), False
     return axis, pos, planar_left

@@ -9,6 +9,8 @@ and room, so building it later gives exactly the eager subtree. A node's room is
 params.duplication_budget: each split divides it by its duplication (n_left + n_right) / n, and room
 below 1 makes a leaf, so leaves hold at most twice the budget's references. A split that leaves every
 reference in both children separates nothing: the node becomes a leaf instead.
+The per-node functions it calls (split search, partition, pool checks) are inlined into it: a call of a
+compiled function counts every array argument's references atomically (docs/choices.md#inlined-per-node-calls).
 """
 from concurrent.futures import ThreadPoolExecutor
 
@@ -21,6 +23,7 @@ from ..memory import MIN_SUBTREE_BUDGET, MemoryLimitError
 from .options import EXACT
 from .partition import new_split_scratch, partition_in_place
 from .pools import ensure_array, ensure_floats, ensure_nodes, ensure_refs
+from .split_binned import new_sweep_scratch
 from .split_choice import NO_SPLIT, choose_split
 
 
@@ -38,8 +41,8 @@ def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, root_room, p
     stack_room = np.empty(stack_size, np.float64)
     stack_box = np.empty((stack_size, 6), np.float32)
     box = np.empty(6, np.float32)
-    min_bins = np.zeros((3, params.bins), np.int64)
-    max_bins = np.zeros((3, params.bins), np.int64)
+    bins = (np.zeros((3, params.bins), np.int64), np.zeros((3, params.bins), np.int64),
+            new_sweep_scratch(params.bins))
     scratch = np.empty(3 * min(n_refs, max(params.exact_below, 16)) + 16, np.float32)
     split_scratch = new_split_scratch()
 
@@ -73,8 +76,7 @@ def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, root_room, p
             scratch = ensure_floats(scratch, 3 * n)
         split_axis, pos, planar_left = NO_SPLIT, np.float32(0.0), False
         if room >= 1.0:  # else no room left for more references (module docstring)
-            split_axis, pos, planar_left = choose_split(boxes, start, end, box, depth, params, min_bins,
-                                                        max_bins, scratch)
+            split_axis, pos, planar_left = choose_split(boxes, start, end, box, depth, params, bins, scratch)
         n_right = n_left = 0
         if split_axis != NO_SPLIT:
             n_right, n_left = partition_in_place(tris, prims, boxes, start, end, split_axis, pos,

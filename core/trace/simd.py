@@ -384,3 +384,53 @@ def with_lane(typingctx, v, k, x):
         return builder.insert_element(args[0], scalar, context.cast(builder, args[1], sig.args[1], types.int32))
 
     return v(v, k, x), codegen
+
+
+# -- min-max binning of reference boxes (core/build/split_binned.py; seed 000 §3.3's SIMD binning) -------
+# A separate block: 8 lanes here are one box's six bounds (two duplicates), not LANES rays.
+
+_BOX_LANE_AXES = (0, 1, 2, 0, 2, 0, 1, 2)  # the lanes' coordinates: floats 0-3 and 2-5 of a box row
+_BOX_LANE_BOUNDS = (0, 1, 2, 3, 6, 7)  # lanes holding lo x, y, z, hi x, y, z
+
+
+@intrinsic
+def box_bin_indices(typingctx, boxes, i, lo0, lo1, lo2, s0, s1, s2, top):
+    """The six min-max bin indices (lo x, y, z, hi x, y, z) of row i of a C-contiguous (N, 6) float32
+    box array: int((bound - lo[axis]) * s[axis]) clamped to [0, top], the scalar arithmetic lane for
+    lane (float32 difference, exactly widened, float64 product, truncation). Two 4-float loads (floats
+    0-3 and 2-5 of the row) never read past the row. lo*: float32, s*: float64, top: an integer."""
+    if not (isinstance(boxes, types.Array) and boxes.ndim == 2 and boxes.layout == "C"
+            and boxes.dtype == types.float32 and isinstance(i, types.Integer) and isinstance(top, types.Integer)):
+        return None
+    sig = types.UniTuple(types.intp, 6)(boxes, i, lo0, lo1, lo2, s0, s1, s2, top)
+
+    def codegen(context, builder, sig, args):
+        intp = context.get_value_type(types.intp)
+        f4, f8, d8 = ir.VectorType(ir.FloatType(), 4), ir.VectorType(ir.FloatType(), 8), ir.VectorType(
+            ir.DoubleType(), 8)
+        i8 = ir.VectorType(intp, 8)
+        ary = context.make_array(sig.args[0])(context, builder, args[0])
+        row = builder.mul(context.cast(builder, args[1], sig.args[1], types.intp), ir.Constant(intp, 6))
+        low = builder.load(builder.bitcast(builder.gep(ary.data, [row]), f4.as_pointer()), align=4)
+        high = builder.load(builder.bitcast(builder.gep(ary.data, [builder.add(row, ir.Constant(intp, 2))]),
+                                            f4.as_pointer()), align=4)
+        bounds = builder.shuffle_vector(low, high, ir.Constant(ir.VectorType(ir.IntType(32), 8), list(range(8))))
+        los = [context.cast(builder, args[2 + k], sig.args[2 + k], types.float32) for k in range(3)]
+        scales = [context.cast(builder, args[5 + k], sig.args[5 + k], types.float64) for k in range(3)]
+        lo, scale = ir.Constant(f8, ir.Undefined), ir.Constant(d8, ir.Undefined)
+        for lane_index, axis in enumerate(_BOX_LANE_AXES):
+            lo = builder.insert_element(lo, los[axis], ir.Constant(ir.IntType(32), lane_index))
+            scale = builder.insert_element(scale, scales[axis], ir.Constant(ir.IntType(32), lane_index))
+        product = builder.fmul(builder.fpext(builder.fsub(bounds, lo), d8), scale)
+        index = builder.fptosi(product, i8)
+        zero = ir.Constant(i8, [0] * 8)
+        top_scalar = context.cast(builder, args[8], sig.args[8], types.intp)
+        highest = builder.shuffle_vector(
+            builder.insert_element(ir.Constant(i8, ir.Undefined), top_scalar, ir.Constant(ir.IntType(32), 0)),
+            ir.Constant(i8, ir.Undefined), ir.Constant(ir.VectorType(ir.IntType(32), 8), [0] * 8))
+        index = builder.select(builder.icmp_signed("<", index, zero), zero, index)
+        index = builder.select(builder.icmp_signed(">", index, highest), highest, index)
+        lanes = [builder.extract_element(index, ir.Constant(ir.IntType(32), k)) for k in _BOX_LANE_BOUNDS]
+        return context.make_tuple(builder, sig.return_type, lanes)
+
+    return sig, codegen
