@@ -6,8 +6,9 @@ Prints one table per scene. Build times are medians of --runs builds after a war
 builder that absorbs the JIT compile (reported on its own line); throughputs are medians of --runs
 traces, camera rays also in packets (core.trace.packet_traversal, "packets"). Embree (embreex,
 single-threaded: see reference_tracers.py; --runs traces after an untimed first call, as ours) and
-Blender's BVHTree (Python loop over ray_cast, measured on a subset) trace the same rays in the same run; ratios are ours divided by theirs. Peak build memory is
-measured in a child process per builder (ru_maxrss growth over the loaded scene).
+Blender's BVHTree (Python loop over ray_cast, measured on a subset) trace the same rays in the same run;
+ratios are ours divided by theirs. Peak build memory is measured in a child process per builder
+(ru_maxrss growth over the loaded scene).
 
 Writes benchmarks/out/bench_core.json (benchmarks/results.py: every run of each figure, its median, Embree's
 runs of the same rays, the JIT time and the host); benchmarks/report.py renders the docs' tables from it.
