@@ -7,16 +7,6 @@ tie rule decides, take the single-ray test itself (triangle_test.intersect_leaf_
 lanes of a packet whose lanes shear along different axes. Triangles are taken in leaf order, as
 traversal.trace_ray does.
 
-Most lanes miss most triangles, so when every lane of the packet starts at one point (a perspective
-camera's packet) the triangle is first screened in float32 lanes: vertices relative to the shared
-origin (one float64 subtraction each, rounded to float32) sheared with fl32(sx), fl32(sy), and the
-three edge values. With Mx = max |x| + |sx'| max |z| and My likewise (sheared-vertex magnitudes), each
-float32 edge value lies within 2^-19 Mx My + 2^-126 (Mx + My + 1) of the exact one (about 21 float32
-roundings of Mx My each: the conversions, the shear, two products and a difference, Higham's model;
-the absolute term covers subnormal results) and the float64 test's within a 2^-29 fraction of that. A
-lane whose edge values lie beyond that bound on both sides of zero surely straddles in float64 too and
-is dropped; the others take the float64 lane test, so hits, t, u and v stay the float64 test's.
-
 The per-packet scratch `rays` holds one float64 row per quantity below, lane l of row r at r * L + l.
 """
 import numpy as np
@@ -34,26 +24,15 @@ O, TMIN, BEST, SX, SY, SZ = 0, 3, 4, 5, 6, 7
 ROWS = 8
 
 
-LANE_BY_LANE, VECTORS, SCREENED = 0, 1, 2  # leaf_test's modes
-EDGE_ERROR = 2.0 ** -19
-TINY32 = 2.0 ** -126
-
-
 @njit(cache=True, inline="always")
-def leaf_test(leaf_tris, leaf_prims, column, end, first, m, sc, mode, shear32):
+def leaf_test(leaf_tris, leaf_prims, column, end, first, m, sc, same_axes):
     """Test the leaf's triangles (columns column..end-1 of the leaf-ordered copy, prims from
     leaf_prims[first]) against the active lanes m, in leaf order; bits of lanes whose best hit changed.
-    mode: VECTORS for lanes sharing shear axes (_lanes_test), SCREENED when they also share their
-    origin (_screen first; shear32 = the float32 (sx', sy') vectors), else LANE_BY_LANE."""
+    Lanes sharing shear axes are tested in vectors (_lanes_test); otherwise lane by lane."""
     found = 0
     for k in range(end - column):
         j, prim = column + k, leaf_prims[at(first + k)]
-        if mode == SCREENED:
-            candidates = _screen(leaf_tris, j, sc, shear32, m)
-            if candidates != 0:
-                found |= _lanes_test(leaf_tris, j, prim, candidates, sc)
-            continue
-        if mode == VECTORS:
+        if same_axes:
             found |= _lanes_test(leaf_tris, j, prim, m, sc)
             continue
         candidates = m
@@ -63,42 +42,6 @@ def leaf_test(leaf_tris, leaf_prims, column, end, first, m, sc, mode, shear32):
             if _test_lane(leaf_tris, j, prim, l, sc):
                 found |= 1 << l
     return found
-
-
-@njit(cache=True, inline="always")
-def _screen(leaf_tris, j, sc, shear32, m):
-    """The lanes of m that the float32 screen (module docstring) cannot rule out for column j."""
-    rays, axes = sc.rays, sc.axes
-    l0 = S.count_trailing_zeros(m)
-    kx, ky, kz = axes[at(l0), 0], axes[at(l0), 1], axes[at(l0), 2]
-    ox, oy, oz = rays[at((O + kx) * L + l0)], rays[at((O + ky) * L + l0)], rays[at((O + kz) * L + l0)]
-    sx, sy = shear32
-    ax, ay, az = _relative(leaf_tris, 0, j, kx, ky, kz, ox, oy, oz)
-    bx, by, bz = _relative(leaf_tris, 3, j, kx, ky, kz, ox, oy, oz)
-    cx, cy, cz = _relative(leaf_tris, 6, j, kx, ky, kz, ox, oy, oz)
-    max_z = np.float32(max(abs(az), abs(bz), abs(cz)))
-    mx = S.add(S.splat_f32(max(abs(ax), abs(bx), abs(cx))), S.mul(S.vabs(sx), S.splat_f32(max_z)))
-    my = S.add(S.splat_f32(max(abs(ay), abs(by), abs(cy))), S.mul(S.vabs(sy), S.splat_f32(max_z)))
-    err = S.add(S.mul(S.splat_f32(EDGE_ERROR), S.mul(mx, my)),
-                S.mul(S.splat_f32(TINY32), S.add(S.add(mx, my), S.splat_f32(1.0))))
-    ax_, ay_ = S.sub(S.splat_f32(ax), S.mul(sx, S.splat_f32(az))), S.sub(S.splat_f32(ay), S.mul(sy, S.splat_f32(az)))
-    bx_, by_ = S.sub(S.splat_f32(bx), S.mul(sx, S.splat_f32(bz))), S.sub(S.splat_f32(by), S.mul(sy, S.splat_f32(bz)))
-    cx_, cy_ = S.sub(S.splat_f32(cx), S.mul(sx, S.splat_f32(cz))), S.sub(S.splat_f32(cy), S.mul(sy, S.splat_f32(cz)))
-    u = S.sub(S.mul(cx_, by_), S.mul(cy_, bx_))
-    v = S.sub(S.mul(ax_, cy_), S.mul(ay_, cx_))
-    w = S.sub(S.mul(bx_, ay_), S.mul(by_, ax_))
-    low = S.sub(S.splat_f32(0.0), err)
-    negative = S.mask_or(S.mask_or(S.lt(u, low), S.lt(v, low)), S.lt(w, low))
-    positive = S.mask_or(S.mask_or(S.gt(u, err), S.gt(v, err)), S.gt(w, err))
-    return m & ~S.mask_bits(S.mask_and(negative, positive))
-
-
-@njit(cache=True, inline="always")
-def _relative(leaf_tris, row, j, kx, ky, kz, ox, oy, oz):
-    """A vertex of column j minus the origin, in float64 then rounded to float32 (kx, ky, kz order)."""
-    return (np.float32(np.float64(leaf_tris[at(row + kx), at(j)]) - ox),
-            np.float32(np.float64(leaf_tris[at(row + ky), at(j)]) - oy),
-            np.float32(np.float64(leaf_tris[at(row + kz), at(j)]) - oz))
 
 
 @njit(cache=True, inline="always")

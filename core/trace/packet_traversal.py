@@ -35,7 +35,7 @@ from .kdtree import KdTree
 from .layout import LEAF, TreeArrays
 from .queries import Hits, intersect
 from ..jit.threads import thread_count
-from .packet_leaf import BEST, LANE_BY_LANE, O, ROWS, SCREENED, SX, SY, SZ, TMIN, VECTORS, leaf_test
+from .packet_leaf import BEST, O, ROWS, SX, SY, SZ, TMIN, leaf_test
 from .traversal import STACK_SIZE, block_range, clip_to_box, interleaved_blocks, trace_rays
 from .triangle_test import ray_shear
 
@@ -46,10 +46,9 @@ OUTSIDE_FLOAT32 = 2.0 ** 60  # |o|, |d|, |1 / d| or the root box beyond: the lan
 SCALE = 2.0 ** -21  # c = SCALE |i'| (module docstring)
 TINY = 2.0 ** -126
 
-# rows of the float32 scratch `lanes32`: o' (3 rows), i' (3), c (3), e (3), the root interval, and the
-# shear's fl32(sx), fl32(sy) for the leaf screen (packet_leaf.py)
-O32, INV32, C32, E32, T0, T1, SX32, SY32 = 0, 3, 6, 9, 12, 13, 14, 15
-ROWS32 = 16
+# rows of the float32 scratch `lanes32`: o' (3 rows), i' (3), c (3), e (3), and the root interval
+O32, INV32, C32, E32, T0, T1 = 0, 3, 6, 9, 12, 13
+ROWS32 = 14
 
 
 class PacketRays(NamedTuple):
@@ -172,10 +171,10 @@ def _trace_packet_block(tree, rays_in, out, start, stop):
     box_fits = _box_fits_float32(views.bounds)
     for p in range(start, stop):
         lanes = rows(rays_in.order, p * L, p * L + L)
-        bits, signs, mode = _setup(views.bounds, rays_in, lanes, sc, out, box_fits)
+        bits, signs, same_axes = _setup(views.bounds, rays_in, lanes, sc, out, box_fits)
         if bits == 0:
             continue
-        if _traverse(views, sc, mode, signs, bits, stack):
+        if _traverse(views, sc, same_axes, signs, bits, stack):
             _leave_to_single_rays(lanes, bits, out.single)
         else:
             _write(lanes, bits, sc, out)
@@ -216,8 +215,8 @@ def _joins(o, d, signs):
 
 @njit(cache=True, inline="always")
 def _setup(root_box, rays_in, lanes, sc, out, box_fits):
-    """Fill the scratch for one packet: (bits of the lanes traced, the packet's signs, the leaf test's
-    mode: packet_leaf.leaf_test). Lanes that cannot join go to single rays; lanes missing the root
+    """Fill the scratch for one packet: (bits of the lanes traced, the packet's signs, whether all of
+    them shear along the same axes). Lanes that cannot join go to single rays; lanes missing the root
     box are written as misses here, as trace_ray returns them."""
     origins, directions, tmin, tmax = rays_in.origins, rays_in.directions, rays_in.tmin, rays_in.tmax
     rays, lane_o, axes, prims, lanes32 = sc.rays, sc.lane_o, sc.axes, sc.prims, sc.lanes32
@@ -238,16 +237,16 @@ def _setup(root_box, rays_in, lanes, sc, out, box_fits):
         if t0 > t1:
             out.t[r], out.prim[r], out.u[r], out.v[r] = np.inf, -1, 0.0, 0.0
             continue
-        shear = _fill_lane(rays, lane_o, axes, l, o, d, tmin[r], tmax[r])
-        _fill_lane32(lanes32, l, o, inv, t0, t1, shear)
+        _fill_lane(rays, lane_o, axes, l, o, d, tmin[r], tmax[r])
+        _fill_lane32(lanes32, l, o, inv, t0, t1)
         prims[l] = -1
         bits |= 1 << l
-    return bits, signs, _leaf_mode(lane_o, axes, bits)
+    return bits, signs, _same_axes(axes, bits)
 
 
 @njit(cache=True, inline="always")
 def _fill_lane(rays, lane_o, axes, l, o, d, tmin, tmax):
-    """The leaf test's float64 rows of lane l (packet_leaf.py); returns the shear (sx, sy)."""
+    """The leaf test's float64 rows of lane l (packet_leaf.py)."""
     for k in range(3):
         rays[(O + k) * L + l] = o[k]
         lane_o[l, k] = o[k]
@@ -255,14 +254,12 @@ def _fill_lane(rays, lane_o, axes, l, o, d, tmin, tmax):
     axes[l, 0], axes[l, 1], axes[l, 2] = kx, ky, kz
     rays[TMIN * L + l], rays[BEST * L + l] = tmin, tmax
     rays[SX * L + l], rays[SY * L + l], rays[SZ * L + l] = sx, sy, sz
-    return sx, sy
 
 
 @njit(cache=True, inline="always")
-def _fill_lane32(lanes32, l, o, inv, t0, t1, shear):
+def _fill_lane32(lanes32, l, o, inv, t0, t1):
     """The node step's float32 rows of lane l (module docstring): o', i', c, e, and [t0, t1] rounded
-    outward (t0 >= 0: as_ray_limits); and the leaf screen's fl32 shear."""
-    lanes32[SX32 * L + l], lanes32[SY32 * L + l] = np.float32(shear[0]), np.float32(shear[1])
+    outward (t0 >= 0: as_ray_limits)."""
     for k in range(3):
         o32, inv32 = np.float32(o[k]), np.float32(inv[k])
         c = np.float32(SCALE) * abs(inv32)
@@ -274,28 +271,24 @@ def _fill_lane32(lanes32, l, o, inv, t0, t1, shear):
 
 
 @njit(cache=True, inline="always")
-def _leaf_mode(lane_o, axes, bits):
-    """SCREENED when the lanes share shear axes and origin, VECTORS when they share the axes only."""
+def _same_axes(axes, bits):
     if bits == 0:
-        return VECTORS
+        return True
     first = S.count_trailing_zeros(bits)
-    same_axes = same_origin = True
+    same = True
     for l in range(L):
         if (bits >> l) & 1:
-            same_axes &= axes[l, 0] == axes[first, 0] and axes[l, 2] == axes[first, 2]
-            for k in range(3):
-                same_origin &= lane_o[l, k] == lane_o[first, k]
-    return (SCREENED if same_origin else VECTORS) if same_axes else LANE_BY_LANE
+            same &= axes[l, 0] == axes[first, 0] and axes[l, 2] == axes[first, 2]
+    return same
 
 
 @njit(cache=True, inline="always")
-def _traverse(tree, sc, mode, signs, bits, stack):
+def _traverse(tree, sc, same_axes, signs, bits, stack):
     """Walk the tree with the packet (module docstring); True if it met an unbuilt node (lazy tree)."""
     axis, split, child, count, leaf_prims = tree.axis, tree.split, tree.child, tree.count, tree.leaf_prims
     leaf_tris, base = tree.leaf_triangles, tree.base
     lanes32, stack_node, stack_bits, stack_t = sc.lanes32, stack.node, stack.bits, stack.t
     t0, t1 = S.load(lanes32, T0 * L), S.load(lanes32, T1 * L)
-    shear32 = (S.load(lanes32, SX32 * L), S.load(lanes32, SY32 * L))
     node, m, sp = 0, bits, 0
     while True:
         a = axis[at(node)]
@@ -306,7 +299,7 @@ def _traverse(tree, sc, mode, signs, bits, stack):
         if a != LEAF:
             return True
         first = child[at(node)]
-        leaf_test(leaf_tris, leaf_prims, base + first, base + first + count[at(node)], first, m, sc, mode, shear32)
+        leaf_test(leaf_tris, leaf_prims, base + first, base + first + count[at(node)], first, m, sc, same_axes)
         node, m, t0, t1, sp = _pop(sc.rays, stack_node, stack_bits, stack_t, sp)
         if node < 0:
             return False
