@@ -184,9 +184,9 @@ def test_inputs_are_checked():
 @pytest.mark.parametrize("scale, offset", [(1e-18, 0.0), (2.0 ** -30, 0.0), (1.0, 0.0), (2.0 ** 30, 0.0), (1e20, 0.0),
                                            (1.0, 1e6), (2.0 ** 10, 1e6)])
 def test_rays_through_vertices_and_edges_at_extreme_scales(scale, offset):
-    """Rays from inside a closed subdivided cube aimed exactly at its grid vertices and edge midpoints (the
-    float32 leaf screen's closest calls), scaled and moved far from the origin: every ray hits, as
-    core.intersect. Beyond float32's safe range (OUTSIDE_FLOAT32) the lanes are single rays."""
+    """Rays from inside a closed subdivided cube aimed exactly at its grid vertices and edge midpoints,
+    scaled and moved far from the origin: every ray hits, as core.intersect (the float32 node bounds
+    must not lose a cell). Beyond float32's safe range (OUTSIDE_FLOAT32) the lanes are single rays."""
     half = 8 * scale
     tris = (subdivided_cube(8, half) + offset).astype(np.float32)
     tree = core.build_kdtree(tris)
