@@ -16,21 +16,20 @@ from pathlib import Path
 
 import numpy as np
 
-ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-ap.add_argument("root", nargs="?", default=str(Path(__file__).resolve().parent.parent))
-ap.add_argument("--runs", type=int, default=7)
-args = ap.parse_args()
-sys.path[:0] = [str(Path(__file__).resolve().parent), args.root]
-
-import core  # noqa: E402
-from core.jit.threads import thread_count  # noqa: E402
-from core.trace.packet_traversal import PacketOutputs, PacketRays, packet_order, trace_packets  # noqa: E402
-from reference_tracers import EmbreeTracer  # noqa: E402
-from scenes import load_scene  # noqa: E402
-from workload import camera_workload  # noqa: E402
-
 
 def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("root", nargs="?", default=str(Path(__file__).resolve().parent.parent))
+    ap.add_argument("--runs", type=int, default=7)
+    args = ap.parse_args()
+    sys.path[:0] = [str(Path(__file__).resolve().parent), args.root]  # the ROOT's core, imported below
+    import core
+    from core.jit.threads import thread_count
+    from core.trace.packet_traversal import PacketOutputs, PacketRays, packet_order, trace_packets
+    from reference_tracers import EmbreeTracer
+    from scenes import load_scene
+    from workload import camera_workload
+
     scene = load_scene("suzanne-251k")
     o, d = camera_workload(scene, 640, 480)
     n = len(o)
