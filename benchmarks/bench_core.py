@@ -4,10 +4,11 @@ Usage: python benchmarks/bench_core.py [--scenes suzanne-251k,...] [--runs 5] [-
 
 Prints one table per scene. Build times are medians of --runs builds after a warm-up build by each
 builder that absorbs the JIT compile (reported on its own line); throughputs are medians of --runs
-traces. Embree (embreex, single-threaded: see reference_tracers.py; --runs traces after an untimed first
-call, as ours) and Blender's BVHTree (Python loop over ray_cast, measured on a subset) trace the same
-rays in the same run; ratios are ours divided by theirs. Peak build memory is
-measured in a child process per builder (ru_maxrss growth over the loaded scene).
+traces, camera rays also in packets (core.trace.packet_traversal, "packets"). Embree (embreex,
+single-threaded: see reference_tracers.py; --runs traces after an untimed first call, as ours) and
+Blender's BVHTree (Python loop over ray_cast, measured on a subset) trace the same rays in the same run;
+ratios are ours divided by theirs. Peak build memory is measured in a child process per builder
+(ru_maxrss growth over the loaded scene).
 
 Writes benchmarks/out/bench_core.json (benchmarks/results.py: every run of each figure, its median, Embree's
 runs of the same rays, the JIT time and the host); benchmarks/report.py renders the docs' tables from it.
@@ -28,8 +29,9 @@ sys.path.insert(0, str(HERE.parent))
 
 import core  # noqa: E402
 import results  # noqa: E402
+from core.trace.packet_traversal import intersect_packets  # noqa: E402
 from scenes import load_scene  # noqa: E402
-from workload import ao_workload, camera_workload  # noqa: E402
+from workload import CAMERA_WIDTH, ao_workload, camera_workload  # noqa: E402
 
 BUILDERS = {
     "binned": {},
@@ -93,6 +95,7 @@ def bench_builder(scene, label, options, cam, ao, runs, memory):
     build_runs, tree = timed_runs(lambda: core.build_kdtree(scene.triangles, **options), runs)
     stats = tree.stats()
     cam_runs, _ = timed_runs(lambda: core.intersect(tree, *cam), runs)
+    packet_runs, _ = timed_runs(lambda: intersect_packets(tree, *cam, CAMERA_WIDTH), runs)
     ao_runs, _ = timed_runs(lambda: core.occluded(tree, *ao, tmax=1.0), runs)
     build_s, cam_s, ao_s = (float(np.median(r)) for r in (build_runs, cam_runs, ao_runs))
     row = {
@@ -105,12 +108,13 @@ def bench_builder(scene, label, options, cam, ao, runs, memory):
         "depth": stats["max_depth"],
         "refs/tri": stats["references_per_triangle"],
         "cam Mrays/s": len(cam[0]) / cam_s / 1e6,
+        "packets Mrays/s": len(cam[0]) / float(np.median(packet_runs)) / 1e6,
         "ao Mrays/s": len(ao[0]) / ao_s / 1e6,
         "image_s": build_s + cam_s + ao_s,
     }
     if memory:
         row["peak B/tri"] = peak_build_bytes_per_triangle(scene.name, options)
-    row["_runs"] = {"build_s": build_runs, "cam_s": cam_runs, "ao_s": ao_runs}
+    row["_runs"] = {"build_s": build_runs, "cam_s": cam_runs, "packets_s": packet_runs, "ao_s": ao_runs}
     return row
 
 
@@ -162,6 +166,7 @@ def print_table(rows, refs):
             continue
         for r in rows[:len(BUILDERS)]:
             print(f"   {r['builder']:>10} / {name}: camera {r['cam Mrays/s'] / ref['cam Mrays/s']:.2f}x, "
+                  f"camera packets {r['packets Mrays/s'] / ref['cam Mrays/s']:.2f}x, "
                   f"AO {r['ao Mrays/s'] / ref['ao Mrays/s']:.2f}x")
 
 
@@ -189,6 +194,7 @@ def main():
     tiny = core.build_kdtree(np.eye(3, dtype=np.float32)[None])
     core.intersect(tiny, np.zeros((1, 3)), np.ones((1, 3)))
     core.occluded(tiny, np.zeros((1, 3)), np.ones((1, 3)))
+    intersect_packets(tiny, np.zeros((8, 3)), np.ones((8, 3)), 4)
     jit_seconds = time.perf_counter() - t
     print(f"JIT compile / cache load and warm-up: {jit_seconds:.2f} s (not in any figure below)")
 
@@ -227,6 +233,8 @@ def scene_results(scene, cam, ao, rows, refs):
             "build_ms": results.figure([s * 1e3 for s in runs["build_s"]], unit="ms"),
             "camera_mrays": results.figure(rates(len(cam[0]), runs["cam_s"]),
                                            embree and rates(len(cam[0]), embree["_runs"]["cam_s"]), "Mrays/s"),
+            "camera_packets_mrays": results.figure(rates(len(cam[0]), runs["packets_s"]),
+                                                   embree and rates(len(cam[0]), embree["_runs"]["cam_s"]), "Mrays/s"),
             "ao_mrays": results.figure(rates(len(ao[0]), runs["ao_s"]),
                                        embree and rates(len(ao[0]), embree["_runs"]["ao_s"]), "Mrays/s"),
             **{key: r[col] for key, col in (("sah_cost", "sah"), ("nodes", "nodes"), ("leaves", "leaves"),

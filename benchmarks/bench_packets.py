@@ -1,5 +1,5 @@
-"""Packet traversal benchmark: camera rays in 4x2 packets (core.packet_traversal) against core.intersect
-and Embree, on suzanne-251k.
+"""Packet traversal benchmark: camera rays in packets (core.packet_traversal, tiles of simd.LANES pixels)
+against core.intersect and Embree, on suzanne-251k.
 
 Usage: python benchmarks/bench_packets.py [--scene suzanne-251k] [--width 640 --height 480] [--runs 7]
                                           [--no-compile] [--json benchmarks/out/bench_packets.json]
@@ -29,7 +29,7 @@ sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(HERE.parent))
 
 import core  # noqa: E402
-from core.trace.packet_traversal import (PacketOutputs, PacketRays, intersect_packets, packet_order,  # noqa: E402
+from core.trace.packet_traversal import (TILE_SHAPE, PacketOutputs, PacketRays, intersect_packets, packet_order,  # noqa: E402
                                         trace_packets)
 from core.jit.threads import thread_count  # noqa: E402
 from core.trace.traversal import trace_rays  # noqa: E402
@@ -117,7 +117,7 @@ def main():
     packets, single, (embree_t, embree_prim) = results["packets_1t"], results["intersect_2t"], results["embree_1t"]
     report = {
         "scene": args.scene, "triangles": int(len(scene.triangles)), "rays": n,
-        "image": [args.width, args.height], "runs": args.runs, "tile": [4, 2],
+        "image": [args.width, args.height], "runs": args.runs, "tile": list(TILE_SHAPE),
         "Mrays_per_s_median": mrays,
         "wall_s_runs": walls, "cpu_s_runs": cpus,
         "cpu_ms_per_Mray_median": {k: float(np.median(v)) / n * 1e9 for k, v in cpus.items()},
@@ -179,7 +179,7 @@ def kernel_single(tree, o, d, threads):
 
 def print_report(r):
     print(f"== {r['scene']}: {r['triangles']:,} triangles, {r['rays']:,} camera rays "
-          f"({r['image'][0]}x{r['image'][1]}), 4x2 packets, medians of {r['runs']} runs; "
+          f"({r['image'][0]}x{r['image'][1]}), {r['tile'][0]}x{r['tile'][1]} packets, medians of {r['runs']} runs; "
           f"load average {r['load_average'][0]:.1f}")
     for name, m in r["Mrays_per_s_median"].items():
         print(f"  {name:>14}: {m:7.2f} Mrays/s   (CPU {r['cpu_ms_per_Mray_median'][name]:6.1f} ms per Mray)")

@@ -8,7 +8,10 @@ import numpy as np
 from camera import camera_rays
 
 
-def camera_workload(scene, width=512, height=512):
+CAMERA_WIDTH = 512
+
+
+def camera_workload(scene, width=CAMERA_WIDTH, height=512):
     """Origins and directions of the scene's camera rays."""
     return camera_rays(scene.camera_matrix, scene.camera_fov, width, height)
 

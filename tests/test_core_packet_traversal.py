@@ -179,3 +179,22 @@ def test_inputs_are_checked():
         intersect_packets(tree, np.zeros((10, 3)), np.ones((10, 3)), 4)  # 10 rays are not rows of 4
     with pytest.raises(ValueError):
         intersect_packets(tree, np.zeros((8, 3)), np.zeros((8, 3)), 4)  # zero directions
+
+
+@pytest.mark.parametrize("scale, offset", [(1e-18, 0.0), (2.0 ** -30, 0.0), (1.0, 0.0), (2.0 ** 30, 0.0), (1e20, 0.0),
+                                           (1.0, 1e6), (2.0 ** 10, 1e6)])
+def test_rays_through_vertices_and_edges_at_extreme_scales(scale, offset):
+    """Rays from inside a closed subdivided cube aimed exactly at its grid vertices and edge midpoints,
+    scaled and moved far from the origin: every ray hits, as core.intersect (the float32 node bounds
+    must not lose a cell). Beyond float32's safe range (OUTSIDE_FLOAT32) the lanes are single rays."""
+    half = 8 * scale
+    tris = (subdivided_cube(8, half) + offset).astype(np.float32)
+    tree = core.build_kdtree(tris)
+    centre = np.float32(offset).astype(np.float64)
+    g = np.linspace(-half, half, 17)  # vertices and edge midpoints of the +x face's grid
+    yy, zz = np.meshgrid(g, g[::-1])
+    targets = np.stack([np.full(yy.size, half), yy.ravel(), zz.ravel()], axis=1) + offset
+    targets = targets.astype(np.float32).astype(np.float64)
+    o = np.full((len(targets), 3), centre)
+    hits, _ = assert_same_as_intersect(tree, o, targets - o, 17)
+    assert (hits.prim >= 0).all()

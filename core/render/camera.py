@@ -5,6 +5,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..inputs import as_number, check_image_size, without_negligible_components
+from ..trace.packet_traversal import L, packet_order
 
 TILE = 8  # tiled_pixels: 8 x 8 = 64 rays, one traversal task (traversal.RAYS_PER_TASK)
 
@@ -123,6 +124,21 @@ def tiled_pixels(width, height, tile=TILE):
     tiles_across = (width + tile - 1) // tile
     tile_of_pixel = (np.arange(height) // tile)[:, None] * tiles_across + (np.arange(width) // tile)[None, :]
     order = np.argsort(tile_of_pixel.ravel(), kind="stable")  # stable: row-major within a tile
+    order.setflags(write=False)
+    return order
+
+
+@functools.lru_cache(maxsize=8)
+def tiled_packets(width, height):
+    """The camera rays of tiled_pixels(width, height) (positions in that order) grouped into packets of
+    neighbouring pixels (packet_traversal.packet_order; -1 fills lanes off the image), the packets in
+    the order of their tiles, so a task's packets share a tile's nodes in cache. Read-only, kept per size."""
+    position = np.empty(width * height, np.int64)
+    position[tiled_pixels(width, height)] = np.arange(width * height)
+    packets = packet_order(width, height).reshape(-1, L)
+    grouped = np.where(packets >= 0, position[np.maximum(packets, 0)], -1)
+    first = np.where(grouped >= 0, grouped, width * height).min(axis=1)
+    order = grouped[np.argsort(first, kind="stable")].ravel()
     order.setflags(write=False)
     return order
 

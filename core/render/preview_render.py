@@ -14,7 +14,7 @@ from time import perf_counter
 
 import numpy as np
 
-from .camera import Camera, tiled_pixels
+from .camera import Camera, tiled_packets, tiled_pixels
 from .denoise import SOBOL_VARIANCE_DECAY, denoise_pixels
 from ..inputs import check_image_size
 from ..trace.kdtree import KdTree
@@ -28,6 +28,7 @@ from .render_kernels import (MEMO_BITS, MODES, PixelFrames, PixelSums, RayMemo, 
                              assemble_image, surface_frames)
 from .render_options import RenderOptions, check_mode_and_samples, packed_lights
 from .sampling import SAMPLERS, SOBOL_DIM1
+from ..scene.scene_packets import trace_camera_packets
 from ..scene.scene_queries import trace_valid_rays
 from ..jit.threads import thread_count
 from ..scene.two_level import TwoLevelScene, as_two_level
@@ -83,7 +84,8 @@ class PreviewRender:
     def _trace_camera(self):
         """Every pixel from scratch."""
         self.camera_rays = self.width * self.height
-        pixels, depths, points, normals, starts = self._camera_hits(tiled_pixels(self.width, self.height))
+        pixels, depths, points, normals, starts = self._camera_hits(tiled_pixels(self.width, self.height),
+                                                                    tiled_packets(self.width, self.height))
         zero = np.zeros(len(pixels), np.int64)
         self._start(pixels, depths, points, normals, starts, np.zeros((len(pixels), 3)), np.zeros(len(pixels)), zero,
                     zero.copy(), np.arange(len(pixels), dtype=np.int64), self._memo_rows(len(pixels)))
@@ -95,12 +97,17 @@ class PreviewRender:
         bits = self.target_samples * (1 + len(self.lights))
         return np.zeros((n, (bits + 7) // 8 if bits <= MEMO_BITS else 0), np.uint8)
 
-    def _camera_hits(self, traced):
+    def _camera_hits(self, traced, packets=None):
         """(pixels, depths, points, normals, ray starts) of the camera rays through pixels `traced` that hit,
-        in the order of `traced` (tiled_pixels' order keeps camera and later rays coherent)."""
+        in the order of `traced` (tiled_pixels' order keeps camera and later rays coherent); traced in
+        `packets` (tiled_packets) when given, which then covers every pixel."""
         origins, directions, tmin, tmax = self.camera.rays(self.width, self.height, traced)
-        t, inst, prim, _, _ = trace_valid_rays(self.scene, origins, directions, tmin, tmax, False, self.threads,
-                                               CAMERA_RAYS)
+        if packets is None:
+            t, inst, prim, _, _ = trace_valid_rays(self.scene, origins, directions, tmin, tmax, False, self.threads,
+                                                   CAMERA_RAYS)
+        else:
+            t, inst, prim, _, _ = trace_camera_packets(self.scene, origins, directions, tmin, tmax, packets,
+                                                       self.threads, CAMERA_RAYS)
         seen = prim >= 0
         seen[seen] = (self.scene.visibility[inst[seen]] & HOLDOUT) == 0  # a holdout leaves its pixels empty
         hit = np.flatnonzero(seen).astype(np.int64)

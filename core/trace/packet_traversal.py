@@ -2,25 +2,24 @@
 
 Wald et al. 2001 ("Interactive Rendering with Coherent Ray Tracing", §3) trace neighbouring primary rays
 together: the packet walks the kd-tree once, each lane keeping its own [t0, t1]; at an inner node it
-goes to the near child only, or the far child only, when every active lane agrees, and otherwise visits
-both, pushing the far child with the lanes that enter it and their intervals. A leaf's triangles are
-tested against all its active lanes. That needs one sign per axis for the whole packet (it fixes which
-child is near), so a lane whose direction has another sign on some axis, or a zero component, leaves
-the packet and is traced by the single-ray kernel (traversal.trace_rays) afterwards.
+goes to the first child only, or the second only, when every active lane agrees, and otherwise visits
+both, pushing the second with the lanes that enter it and their intervals. A leaf's triangles are
+tested against all its active lanes (packet_leaf.py). One sign per axis for the whole packet fixes
+which child comes first, so a lane whose direction has another sign on some axis, a zero component, or
+a magnitude float32 cannot bound (OUTSIDE_FLOAT32) leaves the packet and is traced by the single-ray
+kernel (traversal.trace_rays) afterwards.
 
-Results equal traversal.trace_ray's, hit for hit, because each lane makes the single-ray traversal's
-decisions with its arithmetic:
-- node steps are float64 lanes computing (split - o) / d and the 1e-9 relative widening exactly as
-  traversal._descend does (no contraction into FMAs), with the same near-only / far-only / both cases;
-  with strict direction signs no lane lies in a plane, so a lane's exit bound is its t1;
-- a lane finishes once its best hit lies within the leaf interval it just left, and stacked entries it
-  cannot improve on are dropped, as traversal._pop does;
-- leaves: each triangle is tested against the active lanes with the watertight test (Woop, Benthin and
-  Wald 2013, "Watertight Ray/Triangle Intersection") in float64 lanes, with triangle_test._hit's
-  operations in its order (edge values, det, t, the t rounding bound), so each lane gets the
-  single-ray t bit for bit; lanes with an exactly zero edge value, where the tie rule decides, take the
-  single-ray test itself (triangle_test.intersect_leaf_triangle), as do all lanes of a packet whose
-  lanes shear along different axes. Triangles are taken in leaf order, as trace_ray does.
+Node steps run in float32 lanes, conservatively (docs/choices.md#float32-node-arithmetic): per lane
+o' = fl32(o), i' = fl32(1 / d) and err = c |split| + e with c = 2^-21 |i'|, e = c (|o'| + 2^-126) +
+2^-126, so [ts' - err, ts' + err] holds the exact plane distance ts. The lane's part of the first child
+is [t0, min(t1, ts' + err)], of the second [max(t0, ts' - err), t1]: each contains the exact part, so a
+lane visits every cell the exact traversal visits, in the same front-to-back order (the packet's signs
+are the lane's). The interval and the stack stay in float32; the starting interval is rounded outward.
+A lane stops only when every stacked cell left to it starts (float32 bound, widened down) after its
+best hit: cells behind that start later still. The leaf test is float64, so t, u, v equal the
+single-ray test's, and hits equal traversal.trace_ray's except where two different triangles give a
+lane exactly the same t in different leaves (the first one visited wins in both, and the packet may
+visit a cell the single ray's tighter bounds skip).
 A lazy tree is handed to queries.intersect whole (an unbuilt node would stop the packet).
 """
 import functools
@@ -36,17 +35,20 @@ from .kdtree import KdTree
 from .layout import LEAF, TreeArrays
 from .queries import Hits, intersect
 from ..jit.threads import thread_count
-from .traversal import STACK_SIZE, WIDEN, block_range, clip_to_box, interleaved_blocks, trace_rays
-from .triangle_test import GAMMA, intersect_leaf_triangle, ray_shear
+from .packet_leaf import BEST, O, ROWS, SX, SY, SZ, TMIN, leaf_test
+from .traversal import STACK_SIZE, block_range, clip_to_box, interleaved_blocks, trace_rays
+from .triangle_test import ray_shear
 
 L = S.LANES
-G2, G3, G5 = (n * GAMMA / (1.0 - n * GAMMA) for n in (2, 3, 5))  # triangle_test._gamma(n), the same doubles
-TILE_SHAPE = (4, 2)  # a packet: 4 x 2 neighbouring pixels (width x height)
+TILE_SHAPE = (4, 2) if L == 8 else (4, 4)  # a packet: neighbouring pixels (width x height)
 PACKETS_PER_TASK = 8  # packets a parallel task traces with one stack
+OUTSIDE_FLOAT32 = 2.0 ** 60  # |o|, |d|, |1 / d| or the root box beyond: the lane goes to single rays
+SCALE = 2.0 ** -21  # c = SCALE |i'| (module docstring)
+TINY = 2.0 ** -126
 
-# rows of the per-packet scratch `rays` (row r holds lane l at r * L + l)
-O, INV, T0, T1, TMIN, BEST, SX, SY, SZ = 0, 3, 6, 7, 8, 9, 10, 11, 12
-ROWS = 13
+# rows of the float32 scratch `lanes32`: o' (3 rows), i' (3), c (3), e (3), and the root interval
+O32, INV32, C32, E32, T0, T1 = 0, 3, 6, 9, 12, 13
+ROWS32 = 14
 
 
 class PacketRays(NamedTuple):
@@ -71,8 +73,9 @@ class PacketOutputs(NamedTuple):
 
 
 class PacketScratch(NamedTuple):
-    """One packet's working set: `rays` (ROWS * L, the rows named above), lane origins `lane_o` (L, 3),
-    shear axes `axes` (L, 3), and the best hit's prim, u, v per lane."""
+    """One packet's working set: `rays` (ROWS * L float64, packet_leaf's rows), lane origins `lane_o`
+    (L, 3), shear axes `axes` (L, 3), the best hit's prim, u, v per lane, and `lanes32` (ROWS32 * L
+    float32, the node step's rows named above)."""
 
     rays: np.ndarray
     lane_o: np.ndarray
@@ -80,10 +83,11 @@ class PacketScratch(NamedTuple):
     prims: np.ndarray
     us: np.ndarray
     vs: np.ndarray
+    lanes32: np.ndarray
 
 
 class PacketStack(NamedTuple):
-    """The traversal stack: node, lane bits and per-lane [t0, t1] (2 L floats) of each entry."""
+    """The traversal stack: node, lane bits and per-lane [t0, t1] (2 L float32) of each entry."""
 
     node: np.ndarray
     bits: np.ndarray
@@ -155,23 +159,33 @@ def _trace_packet_block(tree, rays_in, out, start, stop):
                        unowned(tree.leaf_prims), unowned(tree.triangles), unowned(tree.bounds),
                        unowned(tree.leaf_triangles), tree.base)
     owned = (np.zeros(ROWS * L), np.zeros((L, 3)), np.zeros((L, 3), np.int64), np.empty(L, np.int32), np.empty(L),
-             np.empty(L), np.empty(STACK_SIZE, np.int32), np.empty(STACK_SIZE, np.int64), np.empty(STACK_SIZE * 2 * L))
+             np.empty(L), np.zeros(ROWS32 * L, np.float32), np.empty(STACK_SIZE, np.int32),
+             np.empty(STACK_SIZE, np.int64), np.empty(STACK_SIZE * 2 * L, np.float32))
     # unowned views of everything the per-packet code takes: their reference counts are no-ops (array_views)
     sc = PacketScratch(unowned(owned[0]), unowned(owned[1]), unowned(owned[2]), unowned(owned[3]),
-                       unowned(owned[4]), unowned(owned[5]))
-    stack = PacketStack(unowned(owned[6]), unowned(owned[7]), unowned(owned[8]))
+                       unowned(owned[4]), unowned(owned[5]), unowned(owned[6]))
+    stack = PacketStack(unowned(owned[7]), unowned(owned[8]), unowned(owned[9]))
     rays_in = PacketRays(unowned(rays_in.origins), unowned(rays_in.directions), unowned(rays_in.tmin),
                          unowned(rays_in.tmax), unowned(rays_in.order))
     out = PacketOutputs(unowned(out.t), unowned(out.prim), unowned(out.u), unowned(out.v), unowned(out.single))
+    box_fits = _box_fits_float32(views.bounds)
     for p in range(start, stop):
         lanes = rows(rays_in.order, p * L, p * L + L)
-        bits, signs, same_axes = _setup(views.bounds, rays_in, lanes, sc, out)
+        bits, signs, same_axes = _setup(views.bounds, rays_in, lanes, sc, out, box_fits)
         if bits == 0:
             continue
         if _traverse(views, sc, same_axes, signs, bits, stack):
             _leave_to_single_rays(lanes, bits, out.single)
         else:
             _write(lanes, bits, sc, out)
+
+
+@njit(cache=True, inline="always")
+def _box_fits_float32(box):
+    fits = True
+    for k in range(6):
+        fits &= abs(box[k]) < OUTSIDE_FLOAT32
+    return fits
 
 
 @njit(cache=True, inline="always")
@@ -189,30 +203,33 @@ def _packet_signs(directions, lanes):
 
 
 @njit(cache=True, inline="always")
-def _agrees(d, signs):
-    """Whether direction d is strictly positive on the packet's positive axes, negative on the others."""
+def _joins(o, d, signs):
+    """Whether a ray can be a lane: d strictly positive on the packet's positive axes, negative on the
+    others, and o, d, 1 / d within OUTSIDE_FLOAT32 (the float32 bound's range: no overflow)."""
     ok = True
     for k in range(3):
         ok &= d[k] > 0.0 if (signs >> k) & 1 else d[k] < 0.0
+        ok &= abs(o[k]) < OUTSIDE_FLOAT32 and 1.0 / OUTSIDE_FLOAT32 < abs(d[k]) < OUTSIDE_FLOAT32
     return ok
 
 
 @njit(cache=True, inline="always")
-def _setup(root_box, rays_in, lanes, sc, out):
+def _setup(root_box, rays_in, lanes, sc, out, box_fits):
     """Fill the scratch for one packet: (bits of the lanes traced, the packet's signs, whether all of
-    them shear along the same axes). Lanes that disagree go to single rays; lanes missing the root box
-    are written as misses here, as trace_ray returns them."""
+    them shear along the same axes). Lanes that cannot join go to single rays; lanes missing the root
+    box are written as misses here, as trace_ray returns them."""
     origins, directions, tmin, tmax = rays_in.origins, rays_in.directions, rays_in.tmin, rays_in.tmax
-    rays, lane_o, axes, prims = sc.rays, sc.lane_o, sc.axes, sc.prims
+    rays, lane_o, axes, prims, lanes32 = sc.rays, sc.lane_o, sc.axes, sc.prims, sc.lanes32
     signs = _packet_signs(directions, lanes)
     rays[:] = 0.0
+    lanes32[:] = 0.0
     bits = 0
     for l in range(L):
         r = lanes[l]
         if r < 0:
             continue
         o, d = rows(origins, r, r + 1)[0], rows(directions, r, r + 1)[0]
-        if not _agrees(d, signs):
+        if not (box_fits and _joins(o, d, signs)):
             out.single[r] = 1
             continue
         inv = (1.0 / d[0], 1.0 / d[1], 1.0 / d[2])  # non-zero: the packet's lanes have strict signs
@@ -220,22 +237,37 @@ def _setup(root_box, rays_in, lanes, sc, out):
         if t0 > t1:
             out.t[r], out.prim[r], out.u[r], out.v[r] = np.inf, -1, 0.0, 0.0
             continue
-        _fill_lane(rays, lane_o, axes, l, o, d, inv, t0, t1, tmin[r], tmax[r])
+        _fill_lane(rays, lane_o, axes, l, o, d, tmin[r], tmax[r])
+        _fill_lane32(lanes32, l, o, inv, t0, t1)
         prims[l] = -1
         bits |= 1 << l
     return bits, signs, _same_axes(axes, bits)
 
 
 @njit(cache=True, inline="always")
-def _fill_lane(rays, lane_o, axes, l, o, d, inv, t0, t1, tmin, tmax):
+def _fill_lane(rays, lane_o, axes, l, o, d, tmin, tmax):
+    """The leaf test's float64 rows of lane l (packet_leaf.py)."""
     for k in range(3):
         rays[(O + k) * L + l] = o[k]
-        rays[(INV + k) * L + l] = inv[k]
         lane_o[l, k] = o[k]
     kx, ky, kz, sx, sy, sz = ray_shear(d)
     axes[l, 0], axes[l, 1], axes[l, 2] = kx, ky, kz
-    rays[T0 * L + l], rays[T1 * L + l], rays[TMIN * L + l], rays[BEST * L + l] = t0, t1, tmin, tmax
+    rays[TMIN * L + l], rays[BEST * L + l] = tmin, tmax
     rays[SX * L + l], rays[SY * L + l], rays[SZ * L + l] = sx, sy, sz
+
+
+@njit(cache=True, inline="always")
+def _fill_lane32(lanes32, l, o, inv, t0, t1):
+    """The node step's float32 rows of lane l (module docstring): o', i', c, e, and [t0, t1] rounded
+    outward (t0 >= 0: as_ray_limits)."""
+    for k in range(3):
+        o32, inv32 = np.float32(o[k]), np.float32(inv[k])
+        c = np.float32(SCALE) * abs(inv32)
+        lanes32[(O32 + k) * L + l], lanes32[(INV32 + k) * L + l] = o32, inv32
+        lanes32[(C32 + k) * L + l] = c
+        lanes32[(E32 + k) * L + l] = c * (abs(o32) + np.float32(TINY)) + np.float32(TINY)
+    lanes32[T0 * L + l] = np.float32(t0 * (1.0 - 2.0 ** -22)) if t0 > 2.0 * TINY else np.float32(0.0)
+    lanes32[T1 * L + l] = np.float32(t1 * (1.0 + 2.0 ** -22) + 2.0 * TINY)
 
 
 @njit(cache=True, inline="always")
@@ -255,202 +287,58 @@ def _traverse(tree, sc, same_axes, signs, bits, stack):
     """Walk the tree with the packet (module docstring); True if it met an unbuilt node (lazy tree)."""
     axis, split, child, count, leaf_prims = tree.axis, tree.split, tree.child, tree.count, tree.leaf_prims
     leaf_tris, base = tree.leaf_triangles, tree.base
-    rays, stack_node, stack_bits, stack_t = sc.rays, stack.node, stack.bits, stack.t
-    t0, t1 = S.load(rays, T0 * L), S.load(rays, T1 * L)
-    node, m, sp, done, found = 0, bits, 0, 0, 0
+    lanes32, stack_node, stack_bits, stack_t = sc.lanes32, stack.node, stack.bits, stack.t
+    t0, t1 = S.load(lanes32, T0 * L), S.load(lanes32, T1 * L)
+    node, m, sp = 0, bits, 0
     while True:
         a = axis[at(node)]
         if a < LEAF:
-            node, m, t0, t1, sp = _node_step(rays, a, split[at(node)], child[at(node)], signs, m, t0, t1,
+            node, m, t0, t1, sp = _node_step(lanes32, a, split[at(node)], child[at(node)], signs, m, t0, t1,
                                              stack_node, stack_bits, stack_t, sp)
             continue
         if a != LEAF:
             return True
         first = child[at(node)]
-        found |= _leaf(leaf_tris, leaf_prims, base + first, base + first + count[at(node)], first, m, sc,
-                       same_axes)
-        done |= S.mask_bits(S.le(S.load(rays, BEST * L), t1)) & found & m  # as trace_ray: best_t <= t_exit
-        node, m, t0, t1, sp, done = _pop(rays, found, done, stack_node, stack_bits, stack_t, sp)
+        leaf_test(leaf_tris, leaf_prims, base + first, base + first + count[at(node)], first, m, sc, same_axes)
+        node, m, t0, t1, sp = _pop(sc.rays, stack_node, stack_bits, stack_t, sp)
         if node < 0:
             return False
 
 
 @njit(cache=True, inline="always")
-def _node_step(rays, a, pos, left, signs, m, t0, t1, stack_node, stack_bits, stack_t, sp):
-    """traversal._descend for every active lane: (next node, its lanes, their t0 and t1, stack size).
-    The packet's sign on the axis fixes the first child; lanes entering both push the second."""
-    oa, inv_a, p = S.load(rays, (O + a) * L), S.load(rays, (INV + a) * L), S.splat_f64(pos)
-    ts = S.mul(S.sub(p, oa), inv_a)
-    slack = S.mul(S.splat_f64(WIDEN), S.vabs(ts))
-    near_only = S.mask_or(S.le(ts, S.splat_f64(0.0)), S.gt(ts, S.add(t1, slack)))
-    far_only = S.mask_andnot(S.lt(ts, S.sub(t0, slack)), near_only)
-    both = S.mask_not(S.mask_or(near_only, far_only))
-    positive = (signs >> a) & 1
-    near_first = S.mask_bits(S.lt(oa, p) if positive else S.gt(oa, p))
-    near_or_both, far_or_both = S.mask_bits(S.mask_or(near_only, both)), S.mask_bits(S.mask_or(far_only, both))
-    in_first = m & ((near_first & near_or_both) | (~near_first & far_or_both))
-    in_second = m & ((near_first & far_or_both) | (~near_first & near_or_both))
-    first, second = (left, left + 1) if positive else (left + 1, left)
-    ts = S.vmin(S.vmax(ts, t0), t1)  # where both: the split, clamped into [t0, t1] as _descend does
+def _node_step(lanes32, a, pos, left, signs, m, t0, t1, stack_node, stack_bits, stack_t, sp):
+    """One inner node for the active lanes m: (next node, its lanes, their t0 and t1, stack size).
+    A lane's part of the first child is [t0, min(t1, hi)], of the second [max(t0, lo), t1], with
+    [lo, hi] the widened plane distance (module docstring); lanes entering both push the second."""
+    p = S.splat_f32(pos)
+    ts = S.mul(S.sub(p, S.load(lanes32, (O32 + a) * L)), S.load(lanes32, (INV32 + a) * L))
+    err = S.fma(S.load(lanes32, (C32 + a) * L), S.splat_f32(abs(pos)), S.load(lanes32, (E32 + a) * L))
+    lo, hi = S.sub(ts, err), S.add(ts, err)
+    in_first = m & S.mask_bits(S.le(t0, hi))
+    in_second = m & S.mask_bits(S.le(lo, t1))
+    first, second = (left, left + 1) if (signs >> a) & 1 else (left + 1, left)
     if in_first == 0:
-        return second, in_second, S.select(both, ts, t0), t1, sp
+        return second, in_second, S.vmax(t0, lo), t1, sp
     if in_second != 0:
         stack_node[at(sp)], stack_bits[at(sp)] = second, in_second
-        S.store(stack_t, sp * 2 * L, S.select(both, ts, t0))
+        S.store(stack_t, sp * 2 * L, S.vmax(t0, lo))
         S.store(stack_t, sp * 2 * L + L, t1)
         sp += 1
-    return first, in_first, t0, S.select(both, ts, t1), sp
+    return first, in_first, t0, S.vmin(t1, hi), sp
 
 
 @njit(cache=True, inline="always")
-def _pop(rays, found, done, stack_node, stack_bits, stack_t, sp):
-    """The next stacked node with lanes still searching: (node, lanes, t0, t1, sp, done), node -1 when
-    none. As traversal._pop, a lane whose hit lies before an entry's start (less the slack) skips it;
-    without in-plane lanes that means it is done."""
+def _pop(rays, stack_node, stack_bits, stack_t, sp):
+    """The next stacked node with lanes that may still find a closer hit there: (node, lanes, t0, t1,
+    sp), node -1 when none. A lane skips an entry whose start (a lower bound) lies after its best hit."""
     best = S.load(rays, BEST * L)
     while sp > 0:
         sp -= 1
-        m = stack_bits[at(sp)] & ~done
-        if m == 0:
-            continue
-        t0, t1 = S.load(stack_t, sp * 2 * L), S.load(stack_t, sp * 2 * L + L)
-        skip = found & m & S.mask_bits(S.lt(best, S.sub(t0, S.mul(S.splat_f64(WIDEN), S.vabs(t0)))))
-        done |= skip
-        m &= ~skip
+        t0 = S.load(stack_t, sp * 2 * L)
+        m = stack_bits[at(sp)] & ~S.mask_bits(S.lt(best, S.to_f64(t0)))
         if m != 0:
-            return stack_node[at(sp)], m, t0, t1, sp, done
-    return -1, 0, best, best, 0, done
-
-
-@njit(cache=True, inline="always")
-def _leaf(leaf_tris, leaf_prims, column, end, first, m, sc, same_axes):
-    """Test the leaf's triangles (columns column..end-1 of the leaf-ordered copy, prims from
-    leaf_prims[first]) against the active lanes m, in leaf order; bits of lanes whose best hit changed.
-    Lanes sharing shear axes are tested in vectors (_lanes_test); otherwise lane by lane."""
-    found = 0
-    for k in range(end - column):
-        j, prim = column + k, leaf_prims[at(first + k)]
-        if same_axes:
-            found |= _lanes_test(leaf_tris, j, prim, m, sc)
-            continue
-        candidates = m
-        while candidates != 0:
-            l = S.count_trailing_zeros(candidates)
-            candidates &= candidates - 1
-            if _test_lane(leaf_tris, j, prim, l, sc):
-                found |= 1 << l
-    return found
-
-
-@njit(cache=True, inline="always")
-def _lanes_test(leaf_tris, column, prim, m, sc):
-    """triangle_test._hit for the lanes m against one triangle, in float64 lanes with its operations in
-    its order (the sign flip by det's sign is exact and left out where it cannot change a bit), so each
-    lane gets the single-ray test's t. Lanes with an exactly zero edge value, where the tie rule
-    decides, take the single-ray test itself. Returns the bits of lanes whose best hit changed."""
-    rays, axes, prims, us, vs = sc.rays, sc.axes, sc.prims, sc.us, sc.vs
-    l0 = S.count_trailing_zeros(m)
-    kx, ky, kz = axes[at(l0), 0], axes[at(l0), 1], axes[at(l0), 2]
-    ax, ay, az, bx, by, bz, cx, cy, cz = _sheared_triangle(leaf_tris, column, rays, kx, ky, kz)
-    u = S.sub(S.mul(cx, by), S.mul(cy, bx))
-    v = S.sub(S.mul(ax, cy), S.mul(ay, cx))
-    w = S.sub(S.mul(bx, ay), S.mul(by, ax))
-    zero = S.splat_f64(0.0)
-    negative = S.mask_or(S.mask_or(S.lt(u, zero), S.lt(v, zero)), S.lt(w, zero))
-    positive = S.mask_or(S.mask_or(S.gt(u, zero), S.gt(v, zero)), S.gt(w, zero))
-    candidates = m & ~S.mask_bits(S.mask_and(negative, positive))
-    if candidates == 0:
-        return 0
-    ties = candidates & S.mask_bits(S.mask_or(S.mask_or(S.eq(u, zero), S.eq(v, zero)), S.eq(w, zero)))
-    found = 0
-    while ties != 0:
-        l = S.count_trailing_zeros(ties)
-        ties &= ties - 1
-        if _test_lane(leaf_tris, column, prim, l, sc):
-            found |= 1 << l
-    candidates &= ~S.mask_bits(S.mask_or(S.mask_or(S.eq(u, zero), S.eq(v, zero)), S.eq(w, zero)))
-    if candidates == 0:
-        return found
-    det = S.add(S.add(u, v), w)
-    flip = S.select(S.gt(det, zero), S.splat_f64(1.0), S.splat_f64(-1.0))
-    u, v, w, det = S.mul(flip, u), S.mul(flip, v), S.mul(flip, w), S.mul(flip, det)
-    sz = S.load(rays, SZ * L)
-    t = S.div(S.mul(S.add(S.add(S.mul(u, az), S.mul(v, bz)), S.mul(w, cz)), sz), det)
-    best = S.load(rays, BEST * L)
-    inside = S.mask_and(S.lt(S.load(rays, TMIN * L), t), S.lt(t, best))
-    hits = candidates & S.mask_bits(S.mask_and(inside, S.gt(det, zero)))
-    if hits == 0:
-        return found
-    bound = _t_rounding((ax, ay, az), (bx, by, bz), (cx, cy, cz), (S.load(rays, SX * L), S.load(rays, SY * L), sz),
-                        (u, v, w), det)
-    hits &= S.mask_bits(S.gt(t, bound))
-    if hits == 0:
-        return found
-    S.store(rays, BEST * L, S.select(S.mask_from_bits(hits), t, best))
-    hu, hv = S.div(v, det), S.div(w, det)
-    found |= hits
-    while hits != 0:
-        l = S.count_trailing_zeros(hits)
-        hits &= hits - 1
-        prims[at(l)], us[at(l)], vs[at(l)] = prim, S.lane(hu, l), S.lane(hv, l)
-    return found
-
-
-@njit(cache=True, inline="always")
-def _sheared_triangle(leaf_tris, j, rays, kx, ky, kz):
-    """The three vertices of column j sheared along each lane's ray (triangle_test._sheared in lanes)."""
-    ox, oy, oz = S.load(rays, (O + kx) * L), S.load(rays, (O + ky) * L), S.load(rays, (O + kz) * L)
-    sx, sy = S.load(rays, SX * L), S.load(rays, SY * L)
-    a = _sheared(leaf_tris[at(kx), at(j)], leaf_tris[at(ky), at(j)], leaf_tris[at(kz), at(j)], ox, oy, oz, sx, sy)
-    b = _sheared(leaf_tris[at(3 + kx), at(j)], leaf_tris[at(3 + ky), at(j)], leaf_tris[at(3 + kz), at(j)], ox, oy,
-                 oz, sx, sy)
-    c = _sheared(leaf_tris[at(6 + kx), at(j)], leaf_tris[at(6 + ky), at(j)], leaf_tris[at(6 + kz), at(j)], ox, oy,
-                 oz, sx, sy)
-    return a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]
-
-
-@njit(cache=True, inline="always")
-def _max3_abs(a, b, c):
-    return S.vmax(S.vmax(S.vabs(a), S.vabs(b)), S.vabs(c))
-
-
-@njit(cache=True, inline="always")
-def _t_rounding(a, b, c, shear, edges, det):
-    """triangle_test._t_rounding in lanes, the same operations in the same order."""
-    (ax, ay, az), (bx, by, bz), (cx, cy, cz) = a, b, c
-    sx, sy, sz = shear
-    u, v, w = edges
-    shear_z = _max3_abs(az, bz, cz)
-    max_z = S.mul(shear_z, S.vabs(sz))
-    max_x, max_y = _max3_abs(ax, bx, cx), _max3_abs(ay, by, cy)
-    delta_z = S.mul(S.splat_f64(G3), max_z)
-    delta_x = S.mul(S.splat_f64(G5), S.add(max_x, S.mul(S.vabs(sx), shear_z)))
-    delta_y = S.mul(S.splat_f64(G5), S.add(max_y, S.mul(S.vabs(sy), shear_z)))
-    delta_e = S.mul(S.splat_f64(2.0), S.add(S.add(S.mul(S.mul(S.splat_f64(G2), max_x), max_y),
-                                                  S.mul(delta_y, max_x)), S.mul(delta_x, max_y)))
-    max_e = S.vmax(S.vmax(u, v), w)
-    total = S.add(S.add(S.mul(S.mul(S.splat_f64(G3), max_e), max_z), S.mul(delta_e, max_z)), S.mul(delta_z, max_e))
-    return S.div(S.mul(S.splat_f64(3.0), total), det)
-
-
-@njit(cache=True, inline="always")
-def _test_lane(leaf_tris, column, prim, l, sc):
-    """The single-ray test of lane l against one leaf triangle; keeps the hit if closer (as trace_ray)."""
-    rays, lane_o, axes, prims, us, vs = sc.rays, sc.lane_o, sc.axes, sc.prims, sc.us, sc.vs
-    t, u, v = intersect_leaf_triangle(leaf_tris, column, rows(lane_o, l, l + 1)[0], axes[at(l), 0],
-                                      axes[at(l), 1], axes[at(l), 2], rays[at(SX * L + l)], rays[at(SY * L + l)],
-                                      rays[at(SZ * L + l)])
-    if rays[at(TMIN * L + l)] < t < rays[at(BEST * L + l)]:
-        rays[at(BEST * L + l)], prims[at(l)], us[at(l)], vs[at(l)] = t, prim, u, v
-        return True
-    return False
-
-
-@njit(cache=True, inline="always")
-def _sheared(x, y, z, ox, oy, oz, sx, sy):
-    """triangle_test._sheared in lanes: (x - ox) - sx (z - oz), (y - oy) - sy (z - oz), z - oz."""
-    z = S.sub(S.splat_f64(z), oz)
-    return S.sub(S.sub(S.splat_f64(x), ox), S.mul(sx, z)), S.sub(S.sub(S.splat_f64(y), oy), S.mul(sy, z)), z
+            return stack_node[at(sp)], m, t0, S.load(stack_t, sp * 2 * L + L), sp
+    return -1, 0, S.splat_f32(0.0), S.splat_f32(0.0), 0
 
 
 @njit(cache=True, inline="always")

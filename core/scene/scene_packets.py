@@ -1,0 +1,58 @@
+"""Camera rays through a TwoLevelScene in packets (packet_traversal.py) where the scene allows it.
+
+A scene of one instance in a one-leaf top level (a flat KdTree, or a scene whose objects all went to
+one soup) is traced as trace_scene traces it: every ray is carried into the instance's object space by
+its world-to-object matrix (instance_traversal._to_object, the same float64 arithmetic) and traced
+through the mesh tree in (tmin, tmax), here in packets. Rays the packets leave to single rays (mixed
+signs, zero components) are traced by trace_scene_rays itself, and so is every ray of any other scene
+or of a lazy tree, so results are trace_valid_rays' (see packet_traversal.py for exact ties in t).
+"""
+import numpy as np
+from numba import njit, prange
+
+from ..jit.threads import thread_count
+from ..trace.layout import LEAF, TreeArrays
+from ..trace.packet_traversal import PacketOutputs, PacketRays, trace_packets
+from .instance_traversal import _to_object, trace_scene_rays
+from .scene_queries import trace_valid_rays
+from .two_level import as_two_level
+
+
+def trace_camera_packets(scene, o, d, lo, hi, order, threads, ray_mask):
+    """trace_valid_rays(scene, o, d, lo, hi, False, threads, ray_mask) for coherent rays; `order` groups
+    the rays into packets (L ray indices a packet, -1 for none: packet_traversal.packet_order)."""
+    scene = as_two_level(scene)
+    s = scene.arrays
+    if (scene.lazy_tree is not None or len(s.top_items) != 1 or s.top_axis[0] != LEAF
+            or s.visibility[s.top_items[0]] & ray_mask == 0):
+        return trace_valid_rays(scene, o, d, lo, hi, False, threads, ray_mask)
+    n, inst = len(o), int(s.top_items[0])
+    t, u, v, prim = np.empty(n), np.empty(n), np.empty(n), np.empty(n, np.int32)
+    single = np.zeros(n, np.uint8)
+    o_obj, d_obj = np.empty_like(o), np.empty_like(d)
+    with thread_count(threads):
+        _rays_to_object(s.world_to_object[inst], o, d, o_obj, d_obj)
+        trace_packets(_mesh_tree(s, int(s.mesh_of[inst])), PacketRays(o_obj, d_obj, lo, hi, order),
+                      PacketOutputs(t, prim, u, v, single))
+        instance = np.where(prim >= 0, np.int32(inst), np.int32(-1))
+        rest = np.flatnonzero(single)
+        if len(rest):
+            out = [np.empty(len(rest)), np.empty(len(rest), np.int32), np.empty(len(rest), np.int32),
+                   np.empty(len(rest)), np.empty(len(rest))]
+            trace_scene_rays(s, o[rest], d[rest], lo[rest], hi[rest], False, ray_mask, *out)
+            t[rest], instance[rest], prim[rest], u[rest], v[rest] = out
+    return t, instance, prim, u, v
+
+
+def _mesh_tree(s, m):
+    """Mesh m's tree in the packed arrays (instance_traversal.mesh_tree, as slices)."""
+    n0, n1 = s.node_start[m], s.node_start[m + 1]
+    r0, r1 = s.ref_start[m], s.ref_start[m + 1]
+    return TreeArrays(s.axis[n0:n1], s.split[n0:n1], s.child[n0:n1], s.count[n0:n1], s.leaf_prims[r0:r1],
+                      s.triangles[s.tri_start[m]:s.tri_start[m + 1]], s.mesh_bounds[m], s.leaf_triangles, int(r0))
+
+
+@njit(cache=True, parallel=True)
+def _rays_to_object(w2o, o, d, o_obj, d_obj):
+    for r in prange(o.shape[0]):
+        _to_object(w2o, o[r], d[r], o_obj[r], d_obj[r])

@@ -1,0 +1,155 @@
+"""A packet's leaf test: one leaf triangle against every active lane (packet_traversal.py).
+
+The watertight test (Woop, Benthin and Wald 2013, "Watertight Ray/Triangle Intersection") in float64
+lanes, with triangle_test._hit's operations in its order (edge values, det, t, the t rounding bound),
+so each lane gets the single-ray t, u, v bit for bit; lanes with an exactly zero edge value, where the
+tie rule decides, take the single-ray test itself (triangle_test.intersect_leaf_triangle), as do all
+lanes of a packet whose lanes shear along different axes. Triangles are taken in leaf order, as
+traversal.trace_ray does.
+
+The per-packet scratch `rays` holds one float64 row per quantity below, lane l of row r at r * L + l.
+"""
+import numpy as np
+from numba import njit
+
+from . import simd as S
+from .array_views import at, rows
+from .triangle_test import GAMMA, intersect_leaf_triangle
+
+L = S.LANES
+G2, G3, G5 = (n * GAMMA / (1.0 - n * GAMMA) for n in (2, 3, 5))  # triangle_test._gamma(n), the same doubles
+
+# rows of the float64 scratch `rays`: origin (3 rows), tmin, the best hit's t, the shear (sx, sy, sz)
+O, TMIN, BEST, SX, SY, SZ = 0, 3, 4, 5, 6, 7
+ROWS = 8
+
+
+@njit(cache=True, inline="always")
+def leaf_test(leaf_tris, leaf_prims, column, end, first, m, sc, same_axes):
+    """Test the leaf's triangles (columns column..end-1 of the leaf-ordered copy, prims from
+    leaf_prims[first]) against the active lanes m, in leaf order; bits of lanes whose best hit changed.
+    Lanes sharing shear axes are tested in vectors (_lanes_test); otherwise lane by lane."""
+    found = 0
+    for k in range(end - column):
+        j, prim = column + k, leaf_prims[at(first + k)]
+        if same_axes:
+            found |= _lanes_test(leaf_tris, j, prim, m, sc)
+            continue
+        candidates = m
+        while candidates != 0:
+            l = S.count_trailing_zeros(candidates)
+            candidates &= candidates - 1
+            if _test_lane(leaf_tris, j, prim, l, sc):
+                found |= 1 << l
+    return found
+
+
+@njit(cache=True, inline="always")
+def _lanes_test(leaf_tris, column, prim, m, sc):
+    """triangle_test._hit for the lanes m against one triangle, in float64 lanes with its operations in
+    its order (the sign flip by det's sign is exact and left out where it cannot change a bit), so each
+    lane gets the single-ray test's t. Lanes with an exactly zero edge value, where the tie rule
+    decides, take the single-ray test itself. Returns the bits of lanes whose best hit changed."""
+    rays, axes, prims, us, vs = sc.rays, sc.axes, sc.prims, sc.us, sc.vs
+    l0 = S.count_trailing_zeros(m)
+    kx, ky, kz = axes[at(l0), 0], axes[at(l0), 1], axes[at(l0), 2]
+    ax, ay, az, bx, by, bz, cx, cy, cz = _sheared_triangle(leaf_tris, column, rays, kx, ky, kz)
+    u = S.sub(S.mul(cx, by), S.mul(cy, bx))
+    v = S.sub(S.mul(ax, cy), S.mul(ay, cx))
+    w = S.sub(S.mul(bx, ay), S.mul(by, ax))
+    zero = S.splat_f64(0.0)
+    negative = S.mask_or(S.mask_or(S.lt(u, zero), S.lt(v, zero)), S.lt(w, zero))
+    positive = S.mask_or(S.mask_or(S.gt(u, zero), S.gt(v, zero)), S.gt(w, zero))
+    candidates = m & ~S.mask_bits(S.mask_and(negative, positive))
+    if candidates == 0:
+        return 0
+    ties = candidates & S.mask_bits(S.mask_or(S.mask_or(S.eq(u, zero), S.eq(v, zero)), S.eq(w, zero)))
+    found = 0
+    while ties != 0:
+        l = S.count_trailing_zeros(ties)
+        ties &= ties - 1
+        if _test_lane(leaf_tris, column, prim, l, sc):
+            found |= 1 << l
+    candidates &= ~S.mask_bits(S.mask_or(S.mask_or(S.eq(u, zero), S.eq(v, zero)), S.eq(w, zero)))
+    if candidates == 0:
+        return found
+    det = S.add(S.add(u, v), w)
+    flip = S.select(S.gt(det, zero), S.splat_f64(1.0), S.splat_f64(-1.0))
+    u, v, w, det = S.mul(flip, u), S.mul(flip, v), S.mul(flip, w), S.mul(flip, det)
+    sz = S.load(rays, SZ * L)
+    t = S.div(S.mul(S.add(S.add(S.mul(u, az), S.mul(v, bz)), S.mul(w, cz)), sz), det)
+    best = S.load(rays, BEST * L)
+    inside = S.mask_and(S.lt(S.load(rays, TMIN * L), t), S.lt(t, best))
+    hits = candidates & S.mask_bits(S.mask_and(inside, S.gt(det, zero)))
+    if hits == 0:
+        return found
+    bound = _t_rounding((ax, ay, az), (bx, by, bz), (cx, cy, cz), (S.load(rays, SX * L), S.load(rays, SY * L), sz),
+                        (u, v, w), det)
+    hits &= S.mask_bits(S.gt(t, bound))
+    if hits == 0:
+        return found
+    S.store(rays, BEST * L, S.select(S.mask_from_bits(hits), t, best))
+    hu, hv = S.div(v, det), S.div(w, det)
+    found |= hits
+    while hits != 0:
+        l = S.count_trailing_zeros(hits)
+        hits &= hits - 1
+        prims[at(l)], us[at(l)], vs[at(l)] = prim, S.lane(hu, l), S.lane(hv, l)
+    return found
+
+
+@njit(cache=True, inline="always")
+def _sheared_triangle(leaf_tris, j, rays, kx, ky, kz):
+    """The three vertices of column j sheared along each lane's ray (triangle_test._sheared in lanes)."""
+    ox, oy, oz = S.load(rays, (O + kx) * L), S.load(rays, (O + ky) * L), S.load(rays, (O + kz) * L)
+    sx, sy = S.load(rays, SX * L), S.load(rays, SY * L)
+    a = _sheared(leaf_tris[at(kx), at(j)], leaf_tris[at(ky), at(j)], leaf_tris[at(kz), at(j)], ox, oy, oz, sx, sy)
+    b = _sheared(leaf_tris[at(3 + kx), at(j)], leaf_tris[at(3 + ky), at(j)], leaf_tris[at(3 + kz), at(j)], ox, oy,
+                 oz, sx, sy)
+    c = _sheared(leaf_tris[at(6 + kx), at(j)], leaf_tris[at(6 + ky), at(j)], leaf_tris[at(6 + kz), at(j)], ox, oy,
+                 oz, sx, sy)
+    return a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]
+
+
+@njit(cache=True, inline="always")
+def _max3_abs(a, b, c):
+    return S.vmax(S.vmax(S.vabs(a), S.vabs(b)), S.vabs(c))
+
+
+@njit(cache=True, inline="always")
+def _t_rounding(a, b, c, shear, edges, det):
+    """triangle_test._t_rounding in lanes, the same operations in the same order."""
+    (ax, ay, az), (bx, by, bz), (cx, cy, cz) = a, b, c
+    sx, sy, sz = shear
+    u, v, w = edges
+    shear_z = _max3_abs(az, bz, cz)
+    max_z = S.mul(shear_z, S.vabs(sz))
+    max_x, max_y = _max3_abs(ax, bx, cx), _max3_abs(ay, by, cy)
+    delta_z = S.mul(S.splat_f64(G3), max_z)
+    delta_x = S.mul(S.splat_f64(G5), S.add(max_x, S.mul(S.vabs(sx), shear_z)))
+    delta_y = S.mul(S.splat_f64(G5), S.add(max_y, S.mul(S.vabs(sy), shear_z)))
+    delta_e = S.mul(S.splat_f64(2.0), S.add(S.add(S.mul(S.mul(S.splat_f64(G2), max_x), max_y),
+                                                  S.mul(delta_y, max_x)), S.mul(delta_x, max_y)))
+    max_e = S.vmax(S.vmax(u, v), w)
+    total = S.add(S.add(S.mul(S.mul(S.splat_f64(G3), max_e), max_z), S.mul(delta_e, max_z)), S.mul(delta_z, max_e))
+    return S.div(S.mul(S.splat_f64(3.0), total), det)
+
+
+@njit(cache=True, inline="always")
+def _test_lane(leaf_tris, column, prim, l, sc):
+    """The single-ray test of lane l against one leaf triangle; keeps the hit if closer (as trace_ray)."""
+    rays, lane_o, axes, prims, us, vs = sc.rays, sc.lane_o, sc.axes, sc.prims, sc.us, sc.vs
+    t, u, v = intersect_leaf_triangle(leaf_tris, column, rows(lane_o, l, l + 1)[0], axes[at(l), 0],
+                                      axes[at(l), 1], axes[at(l), 2], rays[at(SX * L + l)], rays[at(SY * L + l)],
+                                      rays[at(SZ * L + l)])
+    if rays[at(TMIN * L + l)] < t < rays[at(BEST * L + l)]:
+        rays[at(BEST * L + l)], prims[at(l)], us[at(l)], vs[at(l)] = t, prim, u, v
+        return True
+    return False
+
+
+@njit(cache=True, inline="always")
+def _sheared(x, y, z, ox, oy, oz, sx, sy):
+    """triangle_test._sheared in lanes: (x - ox) - sx (z - oz), (y - oy) - sy (z - oz), z - oz."""
+    z = S.sub(S.splat_f64(z), oz)
+    return S.sub(S.sub(S.splat_f64(x), ox), S.mul(sx, z)), S.sub(S.sub(S.splat_f64(y), oy), S.mul(sy, z)), z

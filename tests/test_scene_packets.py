@@ -1,0 +1,110 @@
+"""Camera rays in packets through two-level scenes (core.scene.scene_packets) against the single-ray
+scene kernel (trace_valid_rays): the same t, instance, prim, u, v for every ray, on a flat tree, on one
+rotated and scaled instance, far from the origin, with rays lying in split planes and with zero
+components (left to single rays), and on scenes the packets do not take (several instances, lazy trees)."""
+import numpy as np
+import pytest
+
+import core
+from core.render.camera import tiled_packets, tiled_pixels
+from core.scene.ray_visibility import CAMERA_RAYS, SHADOW_RAYS
+from core.scene.scene_packets import trace_camera_packets
+from core.scene.scene_queries import trace_valid_rays
+from core.scene.two_level import build_two_level
+from core.trace.packet_traversal import L
+from tests.meshes import icosphere, mesh_triangles, random_soup
+
+
+def camera_rays(eye, target, width, height, fov=0.9):
+    """Pinhole rays in tiled_pixels order, as the renderer traces them."""
+    camera = core.Camera(_look_at(np.asarray(eye, float), np.asarray(target, float)), fov)
+    o, d, lo, hi = camera.rays(width, height, tiled_pixels(width, height))
+    return o, d, lo, hi
+
+
+def _look_at(eye, target):
+    forward = (target - eye) / np.linalg.norm(target - eye)
+    right = np.cross(forward, [0.0, 0.0, 1.0] if abs(forward[2]) < 0.9 else [0.0, 1.0, 0.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = right, up, -forward, eye
+    return m
+
+
+def assert_same_as_single_rays(scene, o, d, lo, hi, width, height, ray_mask=CAMERA_RAYS):
+    got = trace_camera_packets(scene, o, d, lo, hi, tiled_packets(width, height), 2, ray_mask)
+    want = trace_valid_rays(scene, o, d, lo, hi, False, 2, ray_mask)
+    for name, a, b in zip(("t", "instance", "prim", "u", "v"), got, want):
+        np.testing.assert_array_equal(a, b, err_msg=name)
+    return got
+
+
+def test_tiled_packets_cover_every_ray_once_in_pixel_tiles():
+    width, height = 37, 21
+    order = tiled_packets(width, height)
+    assert len(order) % L == 0
+    np.testing.assert_array_equal(np.sort(order[order >= 0]), np.arange(width * height))
+    pixels = tiled_pixels(width, height)
+    for packet in order.reshape(-1, L):
+        x, y = pixels[packet[packet >= 0]] % width, pixels[packet[packet >= 0]] // width
+        assert x.max() - x.min() < 4 and y.max() - y.min() < L // 4  # neighbouring pixels
+
+
+def test_flat_tree_equals_single_rays():
+    tris = random_soup(np.random.default_rng(21), 4000)
+    o, d, lo, hi = camera_rays([2.5, -3.0, 1.5], [0.0, 0.0, 0.0], 48, 40)
+    t, inst, prim, _, _ = assert_same_as_single_rays(core.build_kdtree(tris), o, d, lo, hi, 48, 40)
+    assert (prim >= 0).any() and (inst[prim >= 0] == 0).all()
+
+
+@pytest.mark.parametrize("offset", [0.0, 1e6])
+def test_one_transformed_instance_equals_single_rays(offset):
+    verts, faces = icosphere(3)
+    tree = core.build_kdtree(mesh_triangles(verts, faces))
+    angle = 0.7
+    m = np.eye(4)
+    m[:3, :3] = np.array([[np.cos(angle), -np.sin(angle), 0], [np.sin(angle), np.cos(angle), 0], [0, 0, 1]]) * 2.5
+    m[:3, 3] = offset + np.array([0.3, -0.2, 0.1])
+    scene = build_two_level([tree], [0], m[None])
+    o, d, lo, hi = camera_rays(np.array([6.0, -7.0, 3.0]) + offset, np.full(3, offset), 40, 32)
+    _, _, prim, _, _ = assert_same_as_single_rays(scene, o, d, lo, hi, 40, 32)
+    assert (prim >= 0).mean() > 0.2
+
+
+def test_rays_in_split_planes_and_zero_components():
+    """A camera on an axis looking along another: its middle row and column have zero components (single
+    rays); origins on the root's split plane."""
+    tris = random_soup(np.random.default_rng(22), 3000)
+    tree = core.build_kdtree(tris)
+    a, pos = int(tree.axis[0]), float(tree.split[0])
+    eye = np.zeros(3)
+    eye[a] = pos
+    eye[(a + 1) % 3] = -4.0
+    target = eye.copy()
+    target[(a + 1) % 3] = 0.0
+    o, d, lo, hi = camera_rays(eye, target, 33, 33, fov=1.2)
+    assert (d == 0.0).any()
+    assert_same_as_single_rays(tree, o, d, lo, hi, 33, 33)
+
+
+def test_scenes_packets_do_not_take_are_traced_as_before():
+    rng = np.random.default_rng(23)
+    trees = [core.build_kdtree(random_soup(rng, 500)) for _ in range(2)]
+    m = np.repeat(np.eye(4)[None], 3, axis=0)
+    m[1, :3, 3], m[2, :3, 3] = (2.5, 0, 0), (-2.5, 0, 0)
+    scene = build_two_level(trees, [0, 1, 0], m)
+    o, d, lo, hi = camera_rays([0.0, -9.0, 1.0], [0.0, 0.0, 0.0], 32, 24)
+    assert_same_as_single_rays(scene, o, d, lo, hi, 32, 24)
+    lazy = core.build_kdtree(random_soup(rng, 3000), lazy=True, lazy_subtree_size=256)
+    got = trace_camera_packets(lazy, o, d, lo, hi, tiled_packets(32, 24), 2, CAMERA_RAYS)
+    want = trace_valid_rays(lazy, o, d, lo, hi, False, 2, CAMERA_RAYS)
+    np.testing.assert_array_equal(got[2], want[2])
+
+
+def test_instance_invisible_to_the_ray_kind_is_missed():
+    tree = core.build_kdtree(random_soup(np.random.default_rng(24), 500))
+    scene = build_two_level([tree], [0], np.eye(4)[None], visibility=np.array([SHADOW_RAYS], np.uint8))
+    o, d, lo, hi = camera_rays([2.5, -3.0, 1.5], [0.0, 0.0, 0.0], 16, 16)
+    _, inst, prim, _, _ = assert_same_as_single_rays(scene, o, d, lo, hi, 16, 16)
+    assert (prim == -1).all() and (inst == -1).all()
