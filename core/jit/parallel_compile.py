@@ -76,7 +76,7 @@ class _SamplingOnly(PreviewRender):
     triangle indices, int64 pixel indices, float64 rays, depths and (M, 3) frames, C-contiguous and
     writable): Numba compiles one version per type signature, and the real render must find this one."""
 
-    def _camera_hits(self, traced):
+    def _camera_hits(self, traced, packets=None):  # packets: the camera pass's, not traced here
         origins, directions, _, _ = self.camera.rays(self.width, self.height, traced)
         t = -origins[:, 2] / directions[:, 2]
         first = np.zeros(len(traced), np.int32)
