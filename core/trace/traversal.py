@@ -32,6 +32,8 @@ WIDEN = 1e-9
 WIDEN32 = 2.0 ** -21
 TINY32 = 2.0 ** -126  # float32's smallest normal: absorbs the absolute error of subnormal results
 SAFE32 = 2.0 ** 60  # origins, boxes and |direction| components (and their inverses) within this: no overflow
+TINY32_STEP = 2.0 ** -149  # float32's smallest subnormal
+FLOAT32_MAX = float(np.finfo(np.float32).max)
 RAY32 = 12  # float32 per-ray constants: o, 1 / d, the widening's slope and offset, 3 each
 
 
@@ -126,16 +128,18 @@ def root_interval32(box, o, d, inv, tmin, tmax, ray32):
 
 @njit(cache=True, inline="always")
 def _down32(t):
-    """The largest float32 <= t."""
-    f = np.float32(t)
-    return np.nextafter(f, np.float32(-np.inf)) if np.float64(f) > t else f
+    """A float32 <= t, within 2 float32 ulps of it (no library call): t is first moved down by more than
+    the conversion's rounding (half an ulp, relative 2**-24, or 2**-150 for a subnormal), then capped at
+    float32's largest finite value so a huge t (or inf, giving NaN) does not round up to inf."""
+    r = t - abs(t) * 2.0 ** -23 - TINY32_STEP
+    return np.float32(r if r <= FLOAT32_MAX else FLOAT32_MAX)
 
 
 @njit(cache=True, inline="always")
 def _up32(t):
-    """The smallest float32 >= t."""
-    f = np.float32(t)
-    return np.nextafter(f, np.float32(np.inf)) if np.float64(f) < t else f
+    """A float32 >= t, within 2 float32 ulps of it (inf beyond float32's range); see _down32."""
+    r = t + abs(t) * 2.0 ** -23 + TINY32_STEP
+    return np.float32(r if r >= -FLOAT32_MAX else -FLOAT32_MAX)
 
 
 @njit(cache=True, inline="always")
