@@ -7,8 +7,8 @@ Usage: python benchmarks/bench_against_revision.py [--base HEAD] [--scene suzann
 The base revision's `core/` is exported (`git archive`) into a temporary folder as the package
 `core_base`, so both versions run side by side, each with its own Numba cache. Seed 000's setting
 (640 x 480, rays told to the build, one point light): per pair, in alternating order, each version
-builds its tree, traces the camera rays (closest hit), traces the hit points' shadow rays (any hit)
-and renders the image (`render_preview`, shadow mode, 1 sample). Printed: medians per version and the
+builds its tree, traces the camera rays (closest hit), traces the hit points' shadow rays (any hit),
+traces bench_core's AO rays (8 a hit, length 1, any hit: workload.ao_workload) and renders the image (`render_preview`, shadow mode, 1 sample). Printed: medians per version and the
 median of the per-pair ratios (this tree / base), plus whether both versions gave the same hits, tree
 and image. JIT compile is excluded and printed on its own line.
 """
@@ -28,6 +28,7 @@ sys.path[:0] = [str(HERE), str(ROOT)]
 import core  # noqa: E402
 from core.render.camera import tiled_pixels  # noqa: E402
 from scenes import load_scene  # noqa: E402
+from workload import ao_workload  # noqa: E402
 
 WIDTH, HEIGHT = 640, 480
 LIGHT = (2.0, -3.0, 4.0)
@@ -68,19 +69,23 @@ def one_pair(version, triangles, camera_rays, rays, frame_rays):
     t = time.perf_counter()
     blocked = version.occluded(tree, *rays[:2], 0.0, rays[2])
     times.append(time.perf_counter() - t)
+    t = time.perf_counter()
+    ao_blocked = version.occluded(tree, *rays[4], tmax=1.0)
+    times.append(time.perf_counter() - t)
     camera, light = rays[3]
     t = time.perf_counter()
     image = version.render_preview(tree, version.Camera(*camera), WIDTH, HEIGHT, mode="shadow", samples=1,
                                    lights=[version.Light.point(light)])
     times.append(time.perf_counter() - t)
-    return np.array(times) * 1e3, (tree.node_arrays, hits, blocked, image)
+    return np.array(times) * 1e3, (tree.node_arrays, hits, blocked, ao_blocked, image)
 
 
 def same(a, b):
-    (nodes_a, hits_a, blocked_a, image_a), (nodes_b, hits_b, blocked_b, image_b) = a, b
+    (nodes_a, hits_a, blocked_a, ao_a, image_a), (nodes_b, hits_b, blocked_b, ao_b, image_b) = a, b
     return {"tree": all(np.array_equal(x, y) for x, y in zip(nodes_a, nodes_b)),
             "hits": all(np.array_equal(x, y) for x, y in zip(hits_a, hits_b)),
-            "shadow rays": np.array_equal(blocked_a, blocked_b), "image": np.array_equal(image_a, image_b)}
+            "shadow rays": np.array_equal(blocked_a, blocked_b), "AO rays": np.array_equal(ao_a, ao_b),
+            "image": np.array_equal(image_a, image_b)}
 
 
 def main():
@@ -104,11 +109,12 @@ def main():
         versions = {"this tree": core, f"base {args.base}": base}
         hits = core.intersect(core.build_kdtree(scene.triangles, rays=frame_rays), *camera_rays)
         rays = (*shadow_rays(hits, camera_rays[0], camera_rays[1]),
-                ((scene.camera_matrix, scene.camera_fov), LIGHT))
+                ((scene.camera_matrix, scene.camera_fov), LIGHT),
+                ao_workload(scene.triangles, *camera_rays[:2], hits.t.astype(np.float64), hits.prim))
         t = time.perf_counter()
         results = {name: one_pair(v, scene.triangles, camera_rays, rays, frame_rays)[1] for name, v in versions.items()}
         print(f"JIT compile / cache load of both versions: {time.perf_counter() - t:.1f} s (excluded); {args.scene}, "
-              f"{WIDTH}x{HEIGHT}, {len(rays[2]):,} shadow rays, {args.pairs} pairs")
+              f"{WIDTH}x{HEIGHT}, {len(rays[2]):,} shadow rays, {len(rays[4][0]):,} AO rays, {args.pairs} pairs")
         print("identical results:", same(*results.values()))
         times = {name: [] for name in versions}
         for pair in range(args.pairs):
@@ -120,10 +126,11 @@ def main():
     for name, t in times.items():
         m = np.median(np.array(t), axis=0)
         print(f"{name:>16}: build {m[0]:6.1f} ms  camera rays {m[1]:6.1f} ms  shadow rays {m[2]:6.1f} ms  "
-              f"render {m[3]:6.1f} ms  build+render {np.median(np.array(t)[:, 0] + np.array(t)[:, 3]):6.1f} ms")
+              f"AO rays {m[3]:6.1f} ms  render {m[4]:6.1f} ms  "
+              f"build+render {np.median(np.array(t)[:, 0] + np.array(t)[:, 4]):6.1f} ms")
     print(f"{'ratio (paired)':>16}: build {ratios[0]:6.3f}     camera rays {ratios[1]:6.3f}     shadow rays "
-          f"{ratios[2]:6.3f}     render {ratios[3]:6.3f}     build+render "
-          f"{np.median((mine[:, 0] + mine[:, 3]) / (theirs[:, 0] + theirs[:, 3])):6.3f}")
+          f"{ratios[2]:6.3f}     AO rays {ratios[3]:6.3f}     render {ratios[4]:6.3f}     build+render "
+          f"{np.median((mine[:, 0] + mine[:, 4]) / (theirs[:, 0] + theirs[:, 4])):6.3f}")
 
 
 if __name__ == "__main__":
