@@ -152,17 +152,22 @@ def test_animation_writes_the_frame_range_by_step_and_reuses_trees(addon, tmp_pa
     assert np.array_equal(last, panel_image(scene))  # a kept pixel is the pixel a fresh render makes
 
 
-def test_passes_reach_the_render_result_and_a_multilayer_exr(addon, tmp_path):
-    scene = engine_scene(tmp_path)
-    layer = scene.view_layers[0]
-    layer.use_pass_ambient_occlusion = layer.use_pass_shadow = layer.use_pass_z = True
-    scene.kd_preview.mode = "ao+shadow"
+
+def render_multilayer_exr(scene, folder):
+    """F12 into an uncompressed multilayer EXR (the scene writes `frame.exr` in `folder`): its channels."""
     settings = scene.render.image_settings
     if hasattr(settings, "media_type"):  # Blender 5.0 on
         settings.media_type = "MULTI_LAYER_IMAGE"
     settings.file_format, settings.exr_codec = "OPEN_EXR_MULTILAYER", "NONE"
     assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
-    channels = exr_channels(str(tmp_path / "frame.exr"))
+    return exr_channels(str(folder / "frame.exr"))
+
+def test_passes_reach_the_render_result_and_a_multilayer_exr(addon, tmp_path):
+    scene = engine_scene(tmp_path)
+    layer = scene.view_layers[0]
+    layer.use_pass_ambient_occlusion = layer.use_pass_shadow = layer.use_pass_z = True
+    scene.kd_preview.mode = "ao+shadow"
+    channels = render_multilayer_exr(scene, tmp_path)
     prefix = f"{layer.name}."
 
     def rgb(name):
@@ -281,12 +286,7 @@ def test_every_view_layer_enabled_for_rendering_gets_its_own_image(addon, tmp_pa
     boxes.objects.link(box)
     second = scene.view_layers.new("NoBox")
     second.layer_collection.children["Boxes"].exclude = True
-    settings = scene.render.image_settings
-    if hasattr(settings, "media_type"):  # Blender 5.0 on
-        settings.media_type = "MULTI_LAYER_IMAGE"
-    settings.file_format, settings.exr_codec = "OPEN_EXR_MULTILAYER", "NONE"
-    assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
-    channels = exr_channels(str(tmp_path / "frame.exr"))
+    channels = render_multilayer_exr(scene, tmp_path)
     first = channels[f"{scene.view_layers[0].name}.Combined.R"]
     without = channels["NoBox.Combined.R"]
     box_top = (slice(14, 18), slice(14, 18))  # the box's top face, AO 1 there; open ground too without it
