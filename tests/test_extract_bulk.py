@@ -98,10 +98,17 @@ class _ScatterScene:
             links.new(value.outputs["Value"], on_points.inputs[socket])
         index = nodes.new("FunctionNodeRandomValue")
         index.data_type = "INT"
-        index.inputs[4].default_value, index.inputs[5].default_value = 0, 3  # Min, Max (integer)
-        links.new(index.outputs[2], on_points.inputs["Instance Index"])
+        integer_socket(index.inputs, "Min").default_value = 0
+        integer_socket(index.inputs, "Max").default_value = 3
+        links.new(integer_socket(index.outputs, "Value"), on_points.inputs["Instance Index"])
         return on_points.outputs["Instances"]
 
+
+
+def integer_socket(sockets, name):
+    """The integer socket `name` of a Random Value node: Blender 4.2 to 5.0 list one socket per data type
+    (the others disabled), 5.1 on only the chosen type's."""
+    return next(s for s in sockets if s.name == name and s.type == "INT" and s.enabled)
 
 @pytest.mark.parametrize("seed", range(24))
 def test_scatter_scene_matches_a_render_depsgraph(scene, seed, extraction_path):
