@@ -148,7 +148,7 @@ class FinalRender:
                 images[name] = np.where(np.isfinite(depth), depth, NO_HIT_DEPTH)[..., None]
                 continue
             term = TERM_OF_PASS[name]
-            if config.settings.mode == term:
+            if result.mode == term:  # the mode rendered ("auto" resolved): its term is the Combined image
                 images[name] = result.image[..., :channels]
                 continue
             term_config = make_config(replace(config.settings, mode=term))
