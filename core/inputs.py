@@ -6,6 +6,7 @@ true or raise a ValueError that names the first bad index.
 import numbers
 
 import numpy as np
+from numba import njit
 
 MIN_DIRECTION = 1e-20  # largest direction component allowed below this is rejected (see as_rays)
 NEGLIGIBLE_COMPONENT = 2.0 ** -600  # a direction component below this times the largest is made 0
@@ -70,17 +71,45 @@ def as_rays(origins, directions):
     d = _as_points("directions", directions)
     if o.shape != d.shape:
         raise ValueError(f"origins and directions must have the same shape (R, 3), got {o.shape} and {d.shape}")
-    zero = ~(d != 0.0).any(axis=1)
-    if zero.any():
-        raise ValueError(f"ray {int(np.flatnonzero(zero)[0])} has a zero direction vector")
+    faults = _ray_faults(o, d)  # one compiled pass: NumPy's row reductions cost more than tracing
+    if faults[:4].max() >= 0:
+        _raise_ray_fault(o, d, faults)
+    return o, without_negligible_components(d) if faults[4] else d
+
+
+def _raise_ray_fault(o, d, faults):
+    """The error for the first fault _ray_faults found, in the order the checks are made."""
+    bad_origin, bad_direction, zero, short = (int(f) for f in faults[:4])
+    if bad_origin >= 0:
+        raise ValueError(f"origin of ray {bad_origin} is not finite (NaN or inf): {o[bad_origin].tolist()}")
+    if bad_direction >= 0:
+        raise ValueError(f"direction of ray {bad_direction} is not finite (NaN or inf): {d[bad_direction].tolist()}")
+    if zero >= 0:
+        raise ValueError(f"ray {zero} has a zero direction vector")
     # t is in units of the direction and returned as float32: a direction this short would put
     # hits at t beyond float32's range (subnormal directions).
-    short = np.abs(d).max(axis=1) < MIN_DIRECTION
-    if short.any():
-        bad = int(np.flatnonzero(short)[0])
-        raise ValueError(f"ray {bad} has a direction too short to trace ({d[bad].tolist()}, every component "
-                         f"below {MIN_DIRECTION:g}): normalise it")
-    return o, without_negligible_components(d)
+    raise ValueError(f"ray {short} has a direction too short to trace ({d[short].tolist()}, every component "
+                     f"below {MIN_DIRECTION:g}): normalise it")
+
+
+@njit(cache=True)
+def _ray_faults(o, d):
+    """[first ray with a non-finite origin, with a non-finite direction, with a zero direction, with a
+    direction shorter than MIN_DIRECTION (-1: none), 1 if some direction has a negligible component]."""
+    faults = np.full(5, -1, np.int64)
+    faults[4] = 0
+    for r in range(o.shape[0]):
+        largest = max(abs(d[r, 0]), abs(d[r, 1]), abs(d[r, 2]))
+        finite_o = np.isfinite(o[r, 0]) and np.isfinite(o[r, 1]) and np.isfinite(o[r, 2])
+        finite_d = np.isfinite(d[r, 0]) and np.isfinite(d[r, 1]) and np.isfinite(d[r, 2])
+        for k, fault in enumerate((not finite_o, not finite_d, finite_d and largest == 0.0,
+                                   finite_d and 0.0 < largest < MIN_DIRECTION)):
+            if fault and faults[k] < 0:
+                faults[k] = r
+        for k in range(3):
+            if abs(d[r, k]) < NEGLIGIBLE_COMPONENT * largest:
+                faults[4] = 1
+    return faults
 
 
 def without_negligible_components(d):
@@ -120,12 +149,7 @@ def _as_points(name, values):
         raise ValueError(f"{name} must have shape (R, 3), got {arr.shape}")
     if not is_real_dtype(arr.dtype):
         raise ValueError(f"{name} must be a float array, got dtype {arr.dtype}")
-    arr = np.ascontiguousarray(arr, dtype=np.float64)
-    finite = np.isfinite(arr).all(axis=1)
-    if not finite.all():
-        bad = int(np.flatnonzero(~finite)[0])
-        raise ValueError(f"{name[:-1]} of ray {bad} is not finite (NaN or inf): {arr[bad].tolist()}")
-    return arr
+    return np.ascontiguousarray(arr, dtype=np.float64)
 
 
 def _as_limit(name, value, count):
