@@ -9,6 +9,7 @@ import hashlib
 from typing import NamedTuple
 
 import numpy as np
+from numba import njit, prange
 
 from .ray_visibility import stops_rays
 from .two_level import transformed_boxes
@@ -42,13 +43,26 @@ def instance_signature(digests, bounds, mesh_of, o2w, origin, rounding, visibili
     visibility = visibility[solid].reshape(-1, 1)
     table = np.frombuffer(b"".join(digests), np.uint8).reshape(len(digests), 8) if digests else \
         np.zeros((0, 8), np.uint8)
-    raw = np.concatenate([table[mesh_of], o2w.reshape(len(o2w), 16).view(np.uint8),
-                          rounding.view(np.uint8), visibility], axis=1)
-    rows = np.ascontiguousarray(raw).view(np.dtype((np.void, raw.shape[1]))).reshape(-1)
-    shifted = o2w.copy()
-    shifted[:, :3, 3] -= origin
-    boxes = transformed_boxes(bounds[mesh_of], shifted) if len(mesh_of) else np.zeros((0, 6))
+    raw = _row_bytes(table, mesh_of, o2w.reshape(len(o2w), 16).view(np.uint8), rounding.view(np.uint8),
+                     visibility)
+    rows = raw.view(np.dtype((np.void, raw.shape[1]))).reshape(-1)
+    boxes = transformed_boxes(bounds[mesh_of], o2w, origin)
     return InstanceSignature(origin, rows, _with_soup_rounding(boxes, rounding, origin))
+
+
+@njit(cache=True, parallel=True)
+def _row_bytes(table, mesh_of, matrices, rounding, visibility):
+    """(I, 8 + 128 + 32 + 1) uint8: each instance's mesh digest, matrix, rounding and visibility bytes
+    side by side, written in one parallel pass (np.concatenate of the gathered parts made each a
+    temporary of the instances' size)."""
+    parts = (8, 8 + matrices.shape[1], 8 + matrices.shape[1] + rounding.shape[1])
+    out = np.empty((len(mesh_of), parts[2] + 1), np.uint8)
+    for i in prange(len(mesh_of)):
+        out[i, :parts[0]] = table[mesh_of[i]]
+        out[i, parts[0]:parts[1]] = matrices[i]
+        out[i, parts[1]:parts[2]] = rounding[i]
+        out[i, parts[2]] = visibility[i, 0]
+    return out
 
 
 def _with_soup_rounding(boxes, rounding, origin):

@@ -16,6 +16,7 @@ from ..geometry import half_area
 from ..trace.kdtree import KdTree, empty_arrays
 from ..trace.layout import LEAF
 from ..build.options import make_options
+from .instance_transforms import affine_boxes, affine_inverses, relative_determinants
 from .ray_visibility import as_visibility
 from ..jit.threads import thread_count
 
@@ -210,16 +211,14 @@ def check_placement(n_meshes, mesh_of, matrices):
 
 def invertible(matrices):
     """(I,) bool: the 3x3 linear part can be inverted reliably (relative determinant test)."""
-    lin = matrices[:, :3, :3]
-    scale = np.prod(np.linalg.norm(lin, axis=1), axis=1)
-    return np.abs(np.linalg.det(lin)) > SINGULAR * scale
+    return relative_determinants(np.ascontiguousarray(matrices, np.float64)) > SINGULAR
 
 
 def world_to_object(o2w):
     """(I, 3, 4) float64 inverses of the object-to-world matrices."""
     if len(o2w) == 0:
         return np.zeros((0, 3, 4))
-    return np.ascontiguousarray(np.linalg.inv(o2w)[:, :3, :])
+    return affine_inverses(np.ascontiguousarray(o2w, np.float64))
 
 
 def mesh_bounds(meshes):
@@ -242,12 +241,11 @@ def world_boxes(bounds, mesh_of, o2w):
     return np.concatenate([_round_down(world[:, :3]), _round_up(world[:, 3:])], axis=1)
 
 
-def transformed_boxes(bounds, o2w):
-    """(K, 6) float64 boxes around the 8 transformed corners of each object-space box (K, 6)."""
-    b = bounds.astype(np.float64)
-    corners = np.stack([b[:, [3 if i & 1 else 0, 4 if i & 2 else 1, 5 if i & 4 else 2]] for i in range(8)], 1)
-    world = np.einsum("ijk,ick->icj", o2w[:, :3, :3], corners) + o2w[:, None, :3, 3]
-    return np.concatenate([world.min(axis=1), world.max(axis=1)], axis=1)
+def transformed_boxes(bounds, o2w, origin=(0.0, 0.0, 0.0)):
+    """(K, 6) float64 boxes around the 8 transformed corners of each object-space box (K, 6), minus
+    `origin` (the translation shifted before anything is summed)."""
+    return affine_boxes(np.ascontiguousarray(bounds, np.float64), np.ascontiguousarray(o2w, np.float64),
+                        np.asarray(origin, np.float64))
 
 
 def _round_down(x):
