@@ -3,6 +3,7 @@ end-to-end frame time of scattered instances.
 
 Usage: python benchmarks/bench_instances.py [--counts 1000,10000,100000] [--runs 3]
        python benchmarks/bench_instances.py --end-to-end [--counts 10000,100000,1000000] [--runs 3]
+       python benchmarks/bench_instances.py --big-mesh [--runs 3]
 
 Default mode: each instance is a 2-triangle quad placed by Instance on Points on a line of points, so
 the cost is all per instance: extract_scene reads the instances (the bulk path, kd_addon/bulk_instances.py,
@@ -16,6 +17,11 @@ with random rotations and scales, on a ground plane, rendered through kd_addon.p
 static frame (nothing changed), each split into extract / build / trace, with the top level's build
 time and references per instance, and the process's peak memory. Each (count, path) runs in a fresh
 process, paths alternating, --runs times; medians. Writes benchmarks/out/bench_instances.json.
+
+--big-mesh: one 10-million-triangle mesh, a random soup and a displaced grid (bench_memory.py's scenes,
+written once under benchmarks/data/), built with the default binned builder in a fresh process a run
+(kernels warmed on a slice first): build time, references and peak bytes a triangle (growth of the
+resident-set high-water mark over the loaded triangles). Writes benchmarks/out/bench_big_mesh.json.
 """
 import argparse
 import json
@@ -68,16 +74,35 @@ def extraction(counts, runs):
                   f"{w:>19.1f}")
 
 
+def big_mesh(runs):
+    """Build time and peak bytes a triangle of 10M-triangle meshes, each run in a fresh process."""
+    import bench_memory
+    import results
+
+    figures = {}
+    for name in ("soup-10m", "grid-10m"):
+        rows = [bench_memory.child("build", bench_memory.scene_file(name), "binned") for _ in range(runs)]
+        figures[name] = {key: float(np.median([r[key] for r in rows])) for key in rows[0]}
+        figures[name]["build_ms_runs"] = [r["build_ms"] for r in rows]
+        f = figures[name]
+        print(f"{name}: {f['triangles']:,.0f} triangles, build {f['build_ms']:.0f} ms (median of {runs}), "
+              f"{f['refs_per_triangle']:.2f} references and {f['bytes_per_triangle']:.0f} peak bytes a triangle")
+    results.write("bench_big_mesh", figures, jit_seconds=0.0, quick=runs < 3)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--counts", default=None)
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--end-to-end", action="store_true", help="frames through the pipeline (module docstring)")
     ap.add_argument("--paths", default="bulk,walk", help="instance reading paths to compare (end-to-end)")
+    ap.add_argument("--big-mesh", action="store_true", help="10M-triangle meshes: build time, bytes a triangle")
     ap.add_argument("--child", nargs=2, metavar=("COUNT", "PATH"), help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child:
         print(json.dumps(end_to_end.child(int(args.child[0]), args.child[1])))
+    elif args.big_mesh:
+        big_mesh(args.runs)
     elif args.end_to_end:
         end_to_end.main([int(c) for c in (args.counts or "10000,100000,1000000").split(",")], args.runs,
                         args.paths.split(","))

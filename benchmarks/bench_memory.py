@@ -75,7 +75,9 @@ def scene_file(name):
                   "flat-grid-1m": lambda: wavy_grid(1_000_000, amplitude=0.0),
                   "soup-1m": lambda: load_scene("soup-1m").triangles,
                   "suzanne-1m": lambda: load_scene("suzanne-1m").triangles,
-                  "dense-soup-100k": dense_soup, "flat-cards-200k": flat_cards}
+                  "dense-soup-100k": dense_soup, "flat-cards-200k": flat_cards,
+                  "soup-10m": lambda: __import__("scenes")._build_soup(10_000_000, seed=20_261_205)[0],
+                  "grid-10m": lambda: wavy_grid(10_000_000)}
         DATA.mkdir(exist_ok=True)
         np.save(path, np.ascontiguousarray(makers[name](), dtype=np.float32))
     return path
@@ -93,7 +95,14 @@ def child(*args):
 
 
 def peak_kib():
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    """The process's resident-set high-water mark in KiB. On Linux VmHWM, this address space's own: ru_maxrss
+    also carries the parent's peak across fork and exec, which hid the growth of a child started by a
+    process that had held more (a parent that had just generated a 10M-triangle scene)."""
+    try:
+        with open("/proc/self/status") as status:
+            return next(int(line.split()[1]) for line in status if line.startswith("VmHWM:"))
+    except (OSError, StopIteration):
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 
 
 def measure_build(path, builder):
