@@ -38,9 +38,11 @@ def instance_signature(digests, bounds, mesh_of, o2w, origin, rounding, visibili
     visibility = np.asarray(visibility, np.uint8)
     # rows for what rays can meet: an empty mesh or an instance no ray meets changes nothing
     solid = (bounds[mesh_of, 0] <= bounds[mesh_of, 3]) & stops_rays(visibility) if len(mesh_of) else np.zeros(0, bool)
-    mesh_of, o2w = mesh_of[solid], np.ascontiguousarray(o2w[solid], np.float64)
-    rounding = np.ascontiguousarray(np.asarray(rounding, np.float64).reshape(-1, 4)[solid])
-    visibility = visibility[solid].reshape(-1, 1)
+    rounding = np.asarray(rounding, np.float64).reshape(-1, 4)
+    if not solid.all():  # (a million-row copy of every matrix otherwise)
+        mesh_of, o2w, rounding, visibility = mesh_of[solid], o2w[solid], rounding[solid], visibility[solid]
+    o2w, rounding = np.ascontiguousarray(o2w, np.float64), np.ascontiguousarray(rounding)
+    visibility = visibility.reshape(-1, 1)
     table = np.frombuffer(b"".join(digests), np.uint8).reshape(len(digests), 8) if digests else \
         np.zeros((0, 8), np.uint8)
     raw = _row_bytes(table, mesh_of, o2w.reshape(len(o2w), 16).view(np.uint8), rounding.view(np.uint8),

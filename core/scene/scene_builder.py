@@ -134,7 +134,7 @@ class SceneBuilder:
                                  f"stop the same rays: got visibilities {sorted(set(visibility[soup].tolist()))}")
         own = ~soup & met
         trees, new_mesh_of, rebuilt, reused = self._mesh_trees(meshes, mesh_of, own, reuse, rays)
-        shifted = o2w[own].copy()
+        shifted = o2w[own]  # a boolean index copies
         shifted[:, :3, 3] -= origin
         scene_visibility = [visibility[own]]
         rounding = np.zeros((len(mesh_of), 4))
