@@ -12,24 +12,27 @@ from numba import njit, prange
 
 from ..trace.array_views import at, rows, unowned
 from ..trace.layout import LEAF, NO_HIT, TreeArrays
-from ..trace.traversal import (RAYS_PER_TASK, STACK_SIZE, _descend, _pop, block_range, clip_to_box,
-                        interleaved_blocks, trace_ray)
+from ..trace.traversal import (RAY32, RAYS_PER_TASK, STACK_SIZE, _descend, _down32, _pop, _up32, block_range,
+                               interleaved_blocks, root_interval32, trace_ray)
 from ..trace.triangle_test import LEAF_CHUNK
 from .two_level import SceneArrays
 
 
 @njit(cache=True)
 def new_scratch():
-    """Per-thread buffers: the top level's stack and inverse direction, the mesh traversal's stack and
-    inverse direction, the object-space ray, and the mesh traversal's leaf flags: four allocations cut
-    into unowned views, followed by the four owners that keep them alive."""
+    """Per-thread buffers: the top level's stack, inverse direction and float32 ray constants, the mesh
+    traversal's stack and inverse direction, the object-space ray, the mesh traversal's leaf flags and
+    float32 ray constants: five allocations cut into unowned views, followed by the five owners that
+    keep them alive."""
     nodes = np.empty(2 * STACK_SIZE, np.int32)
-    intervals = np.empty((2 * STACK_SIZE, 3))
+    intervals = np.empty((2 * STACK_SIZE, 3), np.float32)
     vectors = np.empty(12)
     flags = np.empty(LEAF_CHUNK, np.uint8)
+    ray32 = np.empty(2 * RAY32, np.float32)
     return (rows(nodes, 0, STACK_SIZE), rows(intervals, 0, STACK_SIZE), rows(vectors, 0, 3),
             rows(nodes, STACK_SIZE, 2 * STACK_SIZE), rows(intervals, STACK_SIZE, 2 * STACK_SIZE), rows(vectors, 3, 6),
-            rows(vectors, 6, 9), rows(vectors, 9, 12), rows(flags, 0, LEAF_CHUNK), nodes, intervals, vectors, flags)
+            rows(vectors, 6, 9), rows(vectors, 9, 12), rows(flags, 0, LEAF_CHUNK), rows(ray32, 0, RAY32),
+            rows(ray32, RAY32, 2 * RAY32), nodes, intervals, vectors, flags, ray32)
 
 
 @njit(cache=True, inline="always")
@@ -71,7 +74,7 @@ def trace_instance(scene, inst, o, d, tmin, tmax, any_hit, scratch):
     if d_obj[0] == 0.0 and d_obj[1] == 0.0 and d_obj[2] == 0.0:
         return np.inf, -1, 0.0, 0.0  # underflow of an extreme scale: nothing to trace
     return trace_ray(mesh_tree(scene, scene.mesh_of[inst]), o_obj, d_obj, tmin, tmax, any_hit, stack_node, stack_t,
-                     inv, flags)
+                     inv, flags, scratch[10])
 
 
 @njit(cache=True, inline="always")
@@ -86,12 +89,10 @@ def trace_scene(scene, o, d, tmin, tmax, any_hit, ray_mask, scratch):
     items, root_box, visibility = scene.top_items, scene.top_bounds, scene.visibility
     if items.shape[0] == 0:
         return np.inf, -1, -1, 0.0, 0.0
-    stack_node, stack_t, inv = scratch[0], scratch[1], scratch[2]
-    t0, t1 = tmin, tmax
+    stack_node, stack_t, inv, ray32 = scratch[0], scratch[1], scratch[2], scratch[9]
+    t0, t1, flips = _down32(tmin), _up32(tmax), 0
     if not (items.shape[0] == 1 and axis[0] == LEAF):
-        for k in range(3):
-            inv[k] = 1.0 / d[k] if d[k] != 0.0 else 0.0
-        t0, t1 = clip_to_box(root_box, o, d, inv, tmin, tmax)
+        t0, t1, flips = root_interval32(root_box, o, d, inv, tmin, tmax, ray32)
         if t0 > t1:
             return np.inf, -1, -1, 0.0, 0.0
     best_t, best_inst, best_prim, best_u, best_v = tmax, -1, -1, 0.0, 0.0
@@ -99,8 +100,8 @@ def trace_scene(scene, o, d, tmin, tmax, any_hit, ray_mask, scratch):
     while True:
         a = axis[at(node)]
         if a != LEAF:
-            node, t1, t_exit, sp = _descend(node, a, split[at(node)], child[at(node)], o[at(a)], d[at(a)], inv[at(a)],
-                                            t0, t1, t_exit, (stack_node, stack_t), sp)
+            node, t1, t_exit, sp = _descend(a, split[at(node)], child[at(node)], (ray32, flips), t0, t1, t_exit,
+                                            (stack_node, stack_t), sp)
             continue
         first = child[at(node)]
         for j in range(first, first + count[at(node)]):
