@@ -21,7 +21,7 @@ import numpy as np
 from numba import njit, prange
 
 from .array_views import at, rows, unowned
-from .layout import LEAF, TreeArrays, suspended_prim
+from .layout import KIND_SHIFT, LEAF, LOW_MASK, UNBUILT_COUNT, TreeArrays, suspended_prim
 from .triangle_test import LEAF_CHUNK, intersect_leaf_triangle, leaf_candidates, ray_shear
 
 STACK_SIZE = 64  # > DEPTH_LIMIT + 1: one pushed node per level
@@ -68,26 +68,25 @@ def trace_ray(tree, o, d, tmin, tmax, any_hit, stack_node, stack_t, inv, flags, 
     (lazy.py, seed 003 §3). `stack_node`, `stack_t` (float32), `inv` (3), `flags` (LEAF_CHUNK uint8)
     and `ray32` (RAY32 float32) are the caller's scratch. Leaves are screened LEAF_CHUNK triangles at a time (leaf_candidates) before the
     full test. Inlined into its callers (docs/choices.md#inline-the-traversal)."""
-    axis, split, child, count, leaf_prims = tree.axis, tree.split, tree.child, tree.count, tree.leaf_prims
+    nodes, node_split, leaf_prims = tree.nodes, tree.node_split, tree.leaf_prims
     root_box, leaf_tris, base = tree.bounds, tree.leaf_triangles, tree.base
-    for k in range(3):
-        inv[k] = 1.0 / d[k] if d[k] != 0.0 else 0.0
     t0, t1, flips = root_interval32(root_box, o, d, inv, tmin, tmax, ray32)
-    if t0 > t1 or axis.shape[0] == 0:
+    if t0 > t1 or nodes.shape[0] == 0:
         return np.inf, -1, 0.0, 0.0
     kx, ky, kz, sx, sy, sz = ray_shear(d)
     best_t, best_prim, best_u, best_v = tmax, -1, 0.0, 0.0
     node, sp, t_exit = 0, 0, t1
     while True:
-        a = axis[at(node)]
+        word = nodes[at(node), 1]  # one record a step (layout.py): kind and child in this word
+        a = word >> KIND_SHIFT
         if a < LEAF:
-            node, t1, t_exit, sp = _descend(a, split[at(node)], child[at(node)], (ray32, flips), t0, t1, t_exit,
-                                            (stack_node, stack_t), sp)
+            node, t1, t_exit, sp = _descend(a, node_split[at(node), 0], word & LOW_MASK, (ray32, flips), t0, t1,
+                                            t_exit, (stack_node, stack_t), sp)
             continue
-        first = child[at(node)]
-        if a != LEAF:  # UNBUILT: the one extra test, made only at leaves
+        first, n = np.int64(nodes[at(node), 0]), np.int64(word & LOW_MASK)
+        if n == UNBUILT_COUNT:  # an unbuilt subtree: the one extra test, made only at leaves
             return np.inf, suspended_prim(first), 0.0, 0.0
-        end = first + count[at(node)]
+        end = first + n
         for lo in range(first, end, LEAF_CHUNK):
             hi = min(end, lo + LEAF_CHUNK)
             if not leaf_candidates(leaf_tris, base + lo, base + hi, o, kx, ky, kz, sx, sy, flags):
@@ -269,15 +268,21 @@ def trace_rays(tree, origins, directions, tmin, tmax, any_hit, out_t, out_prim, 
         _trace_block(tree, origins, directions, tmin, tmax, any_hit, start, stop, out_t, out_prim, out_u, out_v)
 
 
+@njit(cache=True, inline="always")
+def unowned_tree(tree):
+    """The TreeArrays as unowned views, made once per block of rays (array_views.py)."""
+    return TreeArrays(unowned(tree.axis), unowned(tree.split), unowned(tree.child), unowned(tree.count),
+                      unowned(tree.nodes), unowned(tree.node_split), unowned(tree.leaf_prims),
+                      unowned(tree.triangles), unowned(tree.bounds), unowned(tree.leaf_triangles), tree.base)
+
+
 @njit(cache=True)
 def _trace_block(tree, origins, directions, tmin, tmax, any_hit, start, stop, out_t, out_prim, out_u, out_v):
     """Rays start..stop-1 with one stack, the tree's arrays and each ray's origin and direction as
     unowned views (array_views.py; docs/choices.md#unowned-array-views)."""
     stack_node, stack_t, inv = np.empty(STACK_SIZE, np.int32), np.empty((STACK_SIZE, 3), np.float32), np.empty(3)
     flags, ray32 = np.empty(LEAF_CHUNK, np.uint8), np.empty(RAY32, np.float32)
-    views = TreeArrays(unowned(tree.axis), unowned(tree.split), unowned(tree.child), unowned(tree.count),
-                       unowned(tree.leaf_prims), unowned(tree.triangles), unowned(tree.bounds),
-                       unowned(tree.leaf_triangles), tree.base)
+    views = unowned_tree(tree)
     scratch = (unowned(stack_node), unowned(stack_t), unowned(inv), unowned(flags), unowned(ray32))
     for r in range(start, stop):
         t, prim, u, v = trace_ray(views, rows(origins, r, r + 1)[0], rows(directions, r, r + 1)[0], tmin[r],
