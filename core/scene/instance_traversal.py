@@ -55,7 +55,7 @@ def mesh_tree(scene, m):
     node_start, ref_start, tri_start = scene.node_start, scene.ref_start, scene.tri_start
     n0, n1 = node_start[m], node_start[m + 1]
     return TreeArrays(rows(scene.axis, n0, n1), rows(scene.split, n0, n1), rows(scene.child, n0, n1),
-                      rows(scene.count, n0, n1), rows(scene.nodes, n0, n1), rows(scene.node_split, n0, n1),
+                      rows(scene.count, n0, n1), rows(scene.nodes, 2 * n0, 2 * n1), rows(scene.node_split, 2 * n0, 2 * n1),
                       rows(scene.leaf_prims, ref_start[m], ref_start[m + 1]),
                       rows(scene.triangles, tri_start[m], tri_start[m + 1]), rows(scene.mesh_bounds, m, m + 1)[0],
                       scene.leaf_triangles, ref_start[m])
@@ -93,20 +93,20 @@ def trace_scene(scene, o, d, tmin, tmax, any_hit, ray_mask, scratch):
         return np.inf, -1, -1, 0.0, 0.0
     stack_node, stack_t, inv, ray32 = scratch[0], scratch[1], scratch[2], scratch[9]
     t0, t1, flips = _down32(tmin), _up32(tmax), 0
-    if not (items.shape[0] == 1 and nodes[0, 1] >> KIND_SHIFT == LEAF):
+    if not (items.shape[0] == 1 and nodes[1] >> KIND_SHIFT == LEAF):
         t0, t1, flips = root_interval32(root_box, o, d, inv, tmin, tmax, ray32)
         if t0 > t1:
             return np.inf, -1, -1, 0.0, 0.0
     best_t, best_inst, best_prim, best_u, best_v = tmax, -1, -1, 0.0, 0.0
     node, sp, t_exit = 0, 0, t1
     while True:
-        word = nodes[at(node), 1]  # one record a step (layout.py)
+        word = nodes[at(2 * node + 1)]  # one record a step (layout.py)
         a = word >> KIND_SHIFT
         if a != LEAF:
-            node, t1, t_exit, sp = _descend(a, node_split[at(node), 0], word & LOW_MASK, (ray32, flips), t0, t1,
+            node, t1, t_exit, sp = _descend(a, node_split[at(2 * node)], word & LOW_MASK, (ray32, flips), t0, t1,
                                             t_exit, (stack_node, stack_t), sp)
             continue
-        first = np.int64(nodes[at(node), 0])
+        first = np.int64(nodes[at(2 * node)])
         for j in range(first, first + np.int64(word & LOW_MASK)):
             if visibility[items[j]] & ray_mask == 0:
                 continue

@@ -308,7 +308,7 @@ def pack_meshes(meshes):
                 m.triangles, m.bounds[None].copy(), m.leaf_triangles)
     if not meshes:
         axis, split, child, count, prims = empty_arrays()
-        zero, nodes = np.zeros(1, np.int64), np.zeros((0, 2), np.uint32)
+        zero, nodes = np.zeros(1, np.int64), np.zeros(0, np.uint32)
         return (zero, zero, zero, axis[:0], split[:0], child[:0], count[:0], nodes, split_view(nodes), prims,
                 np.zeros((0, 3, 3), np.float32), np.zeros((0, 6), np.float32), np.zeros((9, 0), np.float32))
     starts = [_offsets([len(getattr(m, name)) for m in meshes]) for name in ("axis", "leaf_prims", "triangles")]

@@ -11,7 +11,7 @@ class KdTree:
 
     Attributes: `triangles` (N, 3, 3) float32; `bounds` (6,) float32 box of the triangles in the tree;
     `axis`, `split`, `child`, `count` (per node, layout.py) and `leaf_prims` (triangle indices), given
-    as one NodeArrays; `nodes` (N, 2) uint32, the same nodes as the records the single-ray traversal
+    as one NodeArrays; `nodes` (2 N,) uint32, the same nodes as the records the single-ray traversal
     reads (layout.pack_nodes), repacked whenever the node arrays change;
     `leaf_triangles` (9, R) float32, the triangles copied into leaf order (leaf_triangles.py);
     `options` (the BuildOptions used); `build_ms`; `dropped` (indices of zero-area triangles, which can

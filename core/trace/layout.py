@@ -12,7 +12,8 @@ Node i is four parallel arrays (structure of arrays, seed 004 §4.7):
 Children are allocated in pairs, so one index names both (13 bytes a node in all).
 
 The single-ray traversal reads the same nodes packed into one 8-byte record a node (pack_nodes; pbrt-v3's
-KdAccelNode, Pharr, Jakob and Humphreys §4.4.1), `nodes` (N, 2) uint32:
+KdAccelNode, Pharr, Jakob and Humphreys §4.4.1), `nodes` (2 N,) uint32, node i's words at 2 i and 2 i + 1
+(flat, so the address is a shift of the index; a 2-D array multiplies by its row stride every step):
     word 0     inner: the split position's float32 bits (read through the float32 view `node_split`);
                leaf: its first leaf column (child above); unbuilt: its subtree index
     word 1     bits 31-30: 0-2 the split axis, 3 a leaf or unbuilt node; bits 29-0: inner: the left
@@ -52,7 +53,7 @@ class NodeArrays(NamedTuple):
 
 class TreeArrays(NamedTuple):
     """What the traversal kernels read of one tree (traversal.trace_ray), by name: the node arrays, the
-    same nodes as records `nodes` (N, 2) uint32 and their float32 view `node_split` (pack_nodes), the triangles (N, 3, 3) float32, the root box `bounds` (6,) float32, the leaf-ordered triangles
+    same nodes as records `nodes` (2 N,) uint32 and their float32 view `node_split` (pack_nodes), the triangles (N, 3, 3) float32, the root box `bounds` (6,) float32, the leaf-ordered triangles
     (9, R) float32 and `base`, where this tree's columns start in them (0 for a stand-alone tree; a
     mesh's first column in a two-level scene's packed arrays)."""
 
@@ -81,7 +82,7 @@ def subtree_of(prim):
 
 
 def pack_nodes(axis, split, child, count, n_prims):
-    """The (N, 2) uint32 node records (module docstring) of the node arrays; `n_prims`, the length of
+    """The (2 N,) uint32 node records (module docstring) of the node arrays; `n_prims`, the length of
     leaf_prims, bounds the leaf offsets. Raises ValueError when an index or count does not fit its field."""
     n = len(axis)
     if n > LOW_MASK + 1 or n_prims >= 1 << 32:
@@ -92,7 +93,7 @@ def pack_nodes(axis, split, child, count, n_prims):
     if leaves.any() and count[leaves].max() >= UNBUILT_COUNT:
         raise ValueError(f"a kd-tree leaf holds {int(count[leaves].max()):,} triangles, more than the node "
                          f"records hold ({UNBUILT_COUNT - 1:,})")
-    out = np.empty((n, 2), np.uint32)
+    out = np.empty(2 * n, np.uint32)
     if n:
         _pack(axis, split, child, count, out)
     return out
@@ -104,12 +105,12 @@ def _pack(axis, split, child, count, out):
     for i in prange(axis.shape[0]):
         a = axis[i]
         if a < LEAF:
-            out[i, 0] = bits[i]
-            out[i, 1] = (np.uint32(a) << KIND_SHIFT) | np.uint32(child[i])
+            out[2 * i] = bits[i]
+            out[2 * i + 1] = (np.uint32(a) << KIND_SHIFT) | np.uint32(child[i])
         else:
-            out[i, 0] = np.uint32(child[i])
+            out[2 * i] = np.uint32(child[i])
             low = count[i] if a == LEAF else UNBUILT_COUNT
-            out[i, 1] = (np.uint32(LEAF) << KIND_SHIFT) | np.uint32(low)
+            out[2 * i + 1] = (np.uint32(LEAF) << KIND_SHIFT) | np.uint32(low)
 
 
 def split_view(nodes):

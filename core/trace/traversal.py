@@ -77,13 +77,13 @@ def trace_ray(tree, o, d, tmin, tmax, any_hit, stack_node, stack_t, inv, flags, 
     best_t, best_prim, best_u, best_v = tmax, -1, 0.0, 0.0
     node, sp, t_exit = 0, 0, t1
     while True:
-        word = nodes[at(node), 1]  # one record a step (layout.py): kind and child in this word
+        word = nodes[at(2 * node + 1)]  # one record a step (layout.py): kind and child in this word
         a = word >> KIND_SHIFT
         if a < LEAF:
-            node, t1, t_exit, sp = _descend(a, node_split[at(node), 0], word & LOW_MASK, (ray32, flips), t0, t1,
+            node, t1, t_exit, sp = _descend(a, node_split[at(2 * node)], word & LOW_MASK, (ray32, flips), t0, t1,
                                             t_exit, (stack_node, stack_t), sp)
             continue
-        first, n = np.int64(nodes[at(node), 0]), np.int64(word & LOW_MASK)
+        first, n = np.int64(nodes[at(2 * node)]), np.int64(word & LOW_MASK)
         if n == UNBUILT_COUNT:  # an unbuilt subtree: the one extra test, made only at leaves
             return np.inf, suspended_prim(first), 0.0, 0.0
         end = first + n
