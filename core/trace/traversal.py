@@ -195,15 +195,14 @@ def _descend(a, pos, left, ray, t0, t1, t_exit, stack, sp):
     lo, hi = ts - err, ts + err
     flip = (flips >> a) & 1  # from a register: the next node's address waits for no float load
     near, far = left + flip, left + 1 - flip
-    far_only = hi < t0
-    both = not (lo > t1 or far_only)
+    if lo > t1:
+        return near, t1, t_exit, sp
+    if hi < t0:
+        return far, t1, t_exit, sp
     lo = lo if lo > t0 else t0
     hi = hi if hi < t1 else t1
-    # without branches: the far child is written to the stack every step but kept (sp + 1) only when
-    # both children are visited; which case a step takes is data, not a pattern a predictor learns
-    _push(stack_node, stack_t, sp, far, lo, t1, t_exit)
-    low = min(t_exit, lo)
-    return (far if far_only else near), (hi if both else t1), (low if both else t_exit), sp + np.int64(both)
+    sp = _push(stack_node, stack_t, sp, far, lo, t1, t_exit)
+    return near, hi, min(t_exit, lo), sp
 
 
 @njit(cache=True, inline="always")
