@@ -55,7 +55,8 @@ def mesh_tree(scene, m):
     node_start, ref_start, tri_start = scene.node_start, scene.ref_start, scene.tri_start
     n0, n1 = node_start[m], node_start[m + 1]
     return TreeArrays(rows(scene.axis, n0, n1), rows(scene.split, n0, n1), rows(scene.child, n0, n1),
-                      rows(scene.count, n0, n1), rows(scene.nodes, 2 * n0, 2 * n1), rows(scene.node_split, 2 * n0, 2 * n1),
+                      rows(scene.count, n0, n1), rows(scene.nodes, 2 * n0, 2 * n1),
+                      rows(scene.node_split, 2 * n0, 2 * n1),
                       rows(scene.leaf_prims, ref_start[m], ref_start[m + 1]),
                       rows(scene.triangles, tri_start[m], tri_start[m + 1]), rows(scene.mesh_bounds, m, m + 1)[0],
                       scene.leaf_triangles, ref_start[m])

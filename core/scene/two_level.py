@@ -39,7 +39,8 @@ class SceneArrays(NamedTuple):
     `world_to_object` (I, 3, 4) float64, `mesh_of` (I,) int32, `visibility` (I,) uint8 ray_visibility
     bits. The mesh trees packed (pack_meshes): `node_start`, `ref_start`, `tri_start` ((M + 1,) int64
     offsets of each mesh's nodes, leaf references and triangles), `axis`, `split`, `child`, `count`,
-    `nodes`, `node_split` (the records), `leaf_prims`, `triangles`, `mesh_bounds` (M, 6) float32 and `leaf_triangles` (9, R) float32.
+    `nodes`, `node_split` (the records), `leaf_prims`, `triangles`, `mesh_bounds` (M, 6) float32 and
+    `leaf_triangles` (9, R) float32.
     """
 
     top_axis: np.ndarray

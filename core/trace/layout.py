@@ -53,9 +53,10 @@ class NodeArrays(NamedTuple):
 
 class TreeArrays(NamedTuple):
     """What the traversal kernels read of one tree (traversal.trace_ray), by name: the node arrays, the
-    same nodes as records `nodes` (2 N,) uint32 and their float32 view `node_split` (pack_nodes), the triangles (N, 3, 3) float32, the root box `bounds` (6,) float32, the leaf-ordered triangles
-    (9, R) float32 and `base`, where this tree's columns start in them (0 for a stand-alone tree; a
-    mesh's first column in a two-level scene's packed arrays)."""
+    same nodes as records `nodes` (2 N,) uint32 and their float32 view `node_split` (pack_nodes), the
+    triangles (N, 3, 3) float32, the root box `bounds` (6,) float32, the leaf-ordered triangles (9, R)
+    float32 and `base`, where this tree's columns start in them (0 for a stand-alone tree; a mesh's first
+    column in a two-level scene's packed arrays)."""
 
     axis: np.ndarray
     split: np.ndarray

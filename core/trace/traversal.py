@@ -66,8 +66,8 @@ def trace_ray(tree, o, d, tmin, tmax, any_hit, stack_node, stack_t, inv, flags, 
     On a lazy tree a ray reaching an unbuilt subtree returns prim = suspended_prim(subtree) (<= -2):
     front to back, the eager traversal would enter that subtree, so the caller builds it and retraces
     (lazy.py, seed 003 §3). `stack_node`, `stack_t` (float32), `inv` (3), `flags` (LEAF_CHUNK uint8)
-    and `ray32` (RAY32 float32) are the caller's scratch. Leaves are screened LEAF_CHUNK triangles at a time (leaf_candidates) before the
-    full test. Inlined into its callers (docs/choices.md#inline-the-traversal)."""
+    and `ray32` (RAY32 float32) are the caller's scratch. Leaves are screened LEAF_CHUNK triangles at a
+    time (leaf_candidates) before the full test. Inlined into its callers (docs/choices.md#inline-the-traversal)."""
     nodes, node_split, leaf_prims = tree.nodes, tree.node_split, tree.leaf_prims
     root_box, leaf_tris, base = tree.bounds, tree.leaf_triangles, tree.base
     t0, t1, flips = root_interval32(root_box, o, d, inv, tmin, tmax, ray32)
