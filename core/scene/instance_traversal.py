@@ -11,28 +11,25 @@ import numpy as np
 from numba import njit, prange
 
 from ..trace.array_views import at, rows, unowned
-from ..trace.layout import KIND_SHIFT, LEAF, LOW_MASK, NO_HIT, TreeArrays
-from ..trace.traversal import (RAY32, RAYS_PER_TASK, STACK_SIZE, _descend, _down32, _pop, _up32, block_range,
-                               interleaved_blocks, root_interval32, trace_ray)
+from ..trace.layout import LEAF, NO_HIT, TreeArrays
+from ..trace.traversal import (RAYS_PER_TASK, STACK_SIZE, _descend, _pop, block_range, clip_to_box,
+                        interleaved_blocks, trace_ray)
 from ..trace.triangle_test import LEAF_CHUNK
 from .two_level import SceneArrays
 
 
 @njit(cache=True)
 def new_scratch():
-    """Per-thread buffers: the top level's stack, inverse direction and float32 ray constants, the mesh
-    traversal's stack and inverse direction, the object-space ray, the mesh traversal's leaf flags and
-    float32 ray constants: five allocations cut into unowned views, followed by the five owners that
-    keep them alive."""
+    """Per-thread buffers: the top level's stack and inverse direction, the mesh traversal's stack and
+    inverse direction, the object-space ray, and the mesh traversal's leaf flags: four allocations cut
+    into unowned views, followed by the four owners that keep them alive."""
     nodes = np.empty(2 * STACK_SIZE, np.int32)
-    intervals = np.empty((2 * STACK_SIZE, 3), np.float32)
+    intervals = np.empty((2 * STACK_SIZE, 3))
     vectors = np.empty(12)
     flags = np.empty(LEAF_CHUNK, np.uint8)
-    ray32 = np.empty(2 * RAY32, np.float32)
     return (rows(nodes, 0, STACK_SIZE), rows(intervals, 0, STACK_SIZE), rows(vectors, 0, 3),
             rows(nodes, STACK_SIZE, 2 * STACK_SIZE), rows(intervals, STACK_SIZE, 2 * STACK_SIZE), rows(vectors, 3, 6),
-            rows(vectors, 6, 9), rows(vectors, 9, 12), rows(flags, 0, LEAF_CHUNK), rows(ray32, 0, RAY32),
-            rows(ray32, RAY32, 2 * RAY32), nodes, intervals, vectors, flags, ray32)
+            rows(vectors, 6, 9), rows(vectors, 9, 12), rows(flags, 0, LEAF_CHUNK), nodes, intervals, vectors, flags)
 
 
 @njit(cache=True, inline="always")
@@ -40,10 +37,9 @@ def unowned_scene(s):
     """The SceneArrays (two_level.TwoLevelScene.arrays) as unowned views, made once per block of rays
     (array_views.py)."""
     return SceneArrays(unowned(s.top_axis), unowned(s.top_split), unowned(s.top_child), unowned(s.top_count),
-                       unowned(s.top_nodes), unowned(s.top_node_split), unowned(s.top_items), unowned(s.top_bounds),
-                       unowned(s.world_to_object), unowned(s.mesh_of), unowned(s.node_start), unowned(s.ref_start),
-                       unowned(s.tri_start), unowned(s.axis), unowned(s.split), unowned(s.child), unowned(s.count),
-                       unowned(s.nodes), unowned(s.node_split), unowned(s.leaf_prims),
+                       unowned(s.top_items), unowned(s.top_bounds), unowned(s.world_to_object), unowned(s.mesh_of),
+                       unowned(s.node_start), unowned(s.ref_start), unowned(s.tri_start), unowned(s.axis),
+                       unowned(s.split), unowned(s.child), unowned(s.count), unowned(s.leaf_prims),
                        unowned(s.triangles), unowned(s.mesh_bounds), unowned(s.leaf_triangles),
                        unowned(s.visibility))
 
@@ -55,9 +51,7 @@ def mesh_tree(scene, m):
     node_start, ref_start, tri_start = scene.node_start, scene.ref_start, scene.tri_start
     n0, n1 = node_start[m], node_start[m + 1]
     return TreeArrays(rows(scene.axis, n0, n1), rows(scene.split, n0, n1), rows(scene.child, n0, n1),
-                      rows(scene.count, n0, n1), rows(scene.nodes, 2 * n0, 2 * n1),
-                      rows(scene.node_split, 2 * n0, 2 * n1),
-                      rows(scene.leaf_prims, ref_start[m], ref_start[m + 1]),
+                      rows(scene.count, n0, n1), rows(scene.leaf_prims, ref_start[m], ref_start[m + 1]),
                       rows(scene.triangles, tri_start[m], tri_start[m + 1]), rows(scene.mesh_bounds, m, m + 1)[0],
                       scene.leaf_triangles, ref_start[m])
 
@@ -77,7 +71,7 @@ def trace_instance(scene, inst, o, d, tmin, tmax, any_hit, scratch):
     if d_obj[0] == 0.0 and d_obj[1] == 0.0 and d_obj[2] == 0.0:
         return np.inf, -1, 0.0, 0.0  # underflow of an extreme scale: nothing to trace
     return trace_ray(mesh_tree(scene, scene.mesh_of[inst]), o_obj, d_obj, tmin, tmax, any_hit, stack_node, stack_t,
-                     inv, flags, scratch[10])
+                     inv, flags)
 
 
 @njit(cache=True, inline="always")
@@ -88,27 +82,28 @@ def trace_scene(scene, o, d, tmin, tmax, any_hit, ray_mask, scratch):
     there: prim is then trace_ray's suspended value (< NO_HIT) and instance the one it stopped in.
     `scratch` comes from new_scratch() and is reused across rays. A flat tree (one instance in a
     one-leaf top) goes through the same leaf loop, without the top's clip."""
-    nodes, node_split = scene.top_nodes, scene.top_node_split
+    axis, split, child, count = scene.top_axis, scene.top_split, scene.top_child, scene.top_count
     items, root_box, visibility = scene.top_items, scene.top_bounds, scene.visibility
     if items.shape[0] == 0:
         return np.inf, -1, -1, 0.0, 0.0
-    stack_node, stack_t, inv, ray32 = scratch[0], scratch[1], scratch[2], scratch[9]
-    t0, t1, flips = _down32(tmin), _up32(tmax), 0
-    if not (items.shape[0] == 1 and nodes[1] >> KIND_SHIFT == LEAF):
-        t0, t1, flips = root_interval32(root_box, o, d, inv, tmin, tmax, ray32)
+    stack_node, stack_t, inv = scratch[0], scratch[1], scratch[2]
+    t0, t1 = tmin, tmax
+    if not (items.shape[0] == 1 and axis[0] == LEAF):
+        for k in range(3):
+            inv[k] = 1.0 / d[k] if d[k] != 0.0 else 0.0
+        t0, t1 = clip_to_box(root_box, o, d, inv, tmin, tmax)
         if t0 > t1:
             return np.inf, -1, -1, 0.0, 0.0
     best_t, best_inst, best_prim, best_u, best_v = tmax, -1, -1, 0.0, 0.0
     node, sp, t_exit = 0, 0, t1
     while True:
-        word = nodes[at(2 * node + 1)]  # one record a step (layout.py)
-        a = word >> KIND_SHIFT
+        a = axis[at(node)]
         if a != LEAF:
-            node, t1, t_exit, sp = _descend(a, node_split[at(2 * node)], word & LOW_MASK, (ray32, flips), t0, t1,
-                                            t_exit, (stack_node, stack_t), sp)
+            node, t1, t_exit, sp = _descend(node, a, split[at(node)], child[at(node)], o[at(a)], d[at(a)], inv[at(a)],
+                                            t0, t1, t_exit, (stack_node, stack_t), sp)
             continue
-        first = np.int64(nodes[at(2 * node)])
-        for j in range(first, first + np.int64(word & LOW_MASK)):
+        first = child[at(node)]
+        for j in range(first, first + count[at(node)]):
             if visibility[items[j]] & ray_mask == 0:
                 continue
             t, prim, u, v = trace_instance(scene, items[j], o, d, tmin, best_t, any_hit, scratch)

@@ -48,8 +48,7 @@ def _mesh_tree(s, m):
     """Mesh m's tree in the packed arrays (instance_traversal.mesh_tree, as slices)."""
     n0, n1 = s.node_start[m], s.node_start[m + 1]
     r0, r1 = s.ref_start[m], s.ref_start[m + 1]
-    return TreeArrays(s.axis[n0:n1], s.split[n0:n1], s.child[n0:n1], s.count[n0:n1], s.nodes[2 * n0:2 * n1],
-                      s.node_split[2 * n0:2 * n1], s.leaf_prims[r0:r1],
+    return TreeArrays(s.axis[n0:n1], s.split[n0:n1], s.child[n0:n1], s.count[n0:n1], s.leaf_prims[r0:r1],
                       s.triangles[s.tri_start[m]:s.tri_start[m + 1]], s.mesh_bounds[m], s.leaf_triangles, int(r0))
 
 

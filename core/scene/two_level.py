@@ -14,7 +14,7 @@ import numpy as np
 from ..build.builder import _build_arrays
 from ..geometry import half_area
 from ..trace.kdtree import KdTree, empty_arrays
-from ..trace.layout import LEAF, pack_nodes, split_view
+from ..trace.layout import LEAF
 from ..build.options import make_options
 from .ray_visibility import as_visibility
 from ..jit.threads import thread_count
@@ -34,21 +34,17 @@ class SceneArrays(NamedTuple):
     """What the scene kernels read of a two-level scene (instance_traversal.trace_scene), by name.
 
     The top-level tree over the instances (layout.py): `top_axis`, `top_split`, `top_child`,
-    `top_count`, the same nodes as records `top_nodes` and their float32 view `top_node_split`
-    (layout.pack_nodes), `top_items` (instance indices in leaf order), `top_bounds` (6,) float32. Per instance:
+    `top_count`, `top_items` (instance indices in leaf order), `top_bounds` (6,) float32. Per instance:
     `world_to_object` (I, 3, 4) float64, `mesh_of` (I,) int32, `visibility` (I,) uint8 ray_visibility
     bits. The mesh trees packed (pack_meshes): `node_start`, `ref_start`, `tri_start` ((M + 1,) int64
     offsets of each mesh's nodes, leaf references and triangles), `axis`, `split`, `child`, `count`,
-    `nodes`, `node_split` (the records), `leaf_prims`, `triangles`, `mesh_bounds` (M, 6) float32 and
-    `leaf_triangles` (9, R) float32.
+    `leaf_prims`, `triangles`, `mesh_bounds` (M, 6) float32 and `leaf_triangles` (9, R) float32.
     """
 
     top_axis: np.ndarray
     top_split: np.ndarray
     top_child: np.ndarray
     top_count: np.ndarray
-    top_nodes: np.ndarray
-    top_node_split: np.ndarray
     top_items: np.ndarray
     top_bounds: np.ndarray
     world_to_object: np.ndarray
@@ -60,8 +56,6 @@ class SceneArrays(NamedTuple):
     split: np.ndarray
     child: np.ndarray
     count: np.ndarray
-    nodes: np.ndarray
-    node_split: np.ndarray
     leaf_prims: np.ndarray
     triangles: np.ndarray
     mesh_bounds: np.ndarray
@@ -86,8 +80,6 @@ class TwoLevelScene:
         self.object_to_world, self.world_to_object = object_to_world, world_to_object
         self.world_boxes = world_boxes
         self.top = top
-        axis, split, child, count, items, _ = top
-        self._top_nodes = pack_nodes(axis, split, child, count, len(items))
         self.build_ms = build_ms
         self.signature = None  # an InstanceSignature when a SceneBuilder made it (pixel reuse across frames)
         # What a SceneBuilder / build_scene subtracted from every position: the scene's coordinates are
@@ -100,9 +92,7 @@ class TwoLevelScene:
     @property
     def arrays(self):
         """The SceneArrays the instance traversal takes (see instance_traversal.trace_scene)."""
-        nodes = (self._top_nodes, split_view(self._top_nodes))
-        return SceneArrays(*self.top[:4], *nodes, *self.top[4:], self.world_to_object, self.mesh_of, *self._packed,
-                           self.visibility)
+        return SceneArrays(*self.top, self.world_to_object, self.mesh_of, *self._packed, self.visibility)
 
     @property
     def lazy_tree(self):
@@ -298,25 +288,24 @@ def build_top_level(boxes, opts):
 
 def pack_meshes(meshes):
     """Every mesh tree's arrays concatenated, with offsets: (node_start, ref_start, tri_start, axis,
-    split, child, count, nodes, node_split, leaf_prims, triangles, mesh_bounds, leaf_triangles). Child indices and leaf
+    split, child, count, leaf_prims, triangles, mesh_bounds, leaf_triangles). Child indices and leaf
     offsets stay local to their mesh, so `mesh_tree` hands trace_ray views that look like a stand-alone
     tree; leaf_triangles, (9, R) with the meshes' columns side by side, is passed whole with the mesh's
     first column (ref_start)."""
     if len(meshes) == 1:  # the common flat case: no copy
         m = meshes[0]
         starts = [np.array([0, len(a)], np.int64) for a in (m.axis, m.leaf_prims, m.triangles)]
-        return (*starts, m.axis, m.split, m.child, m.count, m.nodes, split_view(m.nodes), m.leaf_prims,
-                m.triangles, m.bounds[None].copy(), m.leaf_triangles)
+        return (*starts, m.axis, m.split, m.child, m.count, m.leaf_prims, m.triangles, m.bounds[None].copy(),
+                m.leaf_triangles)
     if not meshes:
         axis, split, child, count, prims = empty_arrays()
-        zero, nodes = np.zeros(1, np.int64), np.zeros(0, np.uint32)
-        return (zero, zero, zero, axis[:0], split[:0], child[:0], count[:0], nodes, split_view(nodes), prims,
+        zero = np.zeros(1, np.int64)
+        return (zero, zero, zero, axis[:0], split[:0], child[:0], count[:0], prims,
                 np.zeros((0, 3, 3), np.float32), np.zeros((0, 6), np.float32), np.zeros((9, 0), np.float32))
     starts = [_offsets([len(getattr(m, name)) for m in meshes]) for name in ("axis", "leaf_prims", "triangles")]
     parts = [np.concatenate([getattr(m, name) for m in meshes])
-             for name in ("axis", "split", "child", "count", "nodes")]
-    rest = [np.concatenate([getattr(m, name) for m in meshes]) for name in ("leaf_prims", "triangles")]
-    return (*starts, *parts, split_view(parts[-1]), *rest, np.stack([m.bounds for m in meshes]).astype(np.float32),
+             for name in ("axis", "split", "child", "count", "leaf_prims", "triangles")]
+    return (*starts, *parts, np.stack([m.bounds for m in meshes]).astype(np.float32),
             np.concatenate([m.leaf_triangles for m in meshes], axis=1))
 
 

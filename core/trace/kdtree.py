@@ -1,7 +1,7 @@
 """The built tree: flat contiguous arrays (see layout.py), its triangles, and its statistics."""
 import numpy as np
 
-from .layout import LEAF, NodeArrays, TreeArrays, pack_nodes, split_view
+from .layout import LEAF, NodeArrays, TreeArrays
 from ..build.leaf_triangles import leaf_triangles
 from .tree_stats import leaf_size_histogram, walk_stats
 
@@ -11,8 +11,7 @@ class KdTree:
 
     Attributes: `triangles` (N, 3, 3) float32; `bounds` (6,) float32 box of the triangles in the tree;
     `axis`, `split`, `child`, `count` (per node, layout.py) and `leaf_prims` (triangle indices), given
-    as one NodeArrays; `nodes` (2 N,) uint32, the same nodes as the records the single-ray traversal
-    reads (layout.pack_nodes), repacked whenever the node arrays change;
+    as one NodeArrays;
     `leaf_triangles` (9, R) float32, the triangles copied into leaf order (leaf_triangles.py);
     `options` (the BuildOptions used); `build_ms`; `dropped` (indices of zero-area triangles, which can
     never be hit and are left out); `deferred` (lazy builds: the subtrees not built yet, lazy.py; None
@@ -24,7 +23,6 @@ class KdTree:
         self.bounds = bounds
         self.axis, self.split, self.child, self.count, self.leaf_prims = nodes
         self.leaf_triangles = leaf_triangles(triangles, self.leaf_prims) if leaf_tris is None else leaf_tris
-        self.nodes = pack_nodes(self.axis, self.split, self.child, self.count, len(self.leaf_prims))
         self.options = options
         self.build_ms = build_ms
         self.dropped = dropped
@@ -35,8 +33,8 @@ class KdTree:
     @property
     def arrays(self):
         """The TreeArrays the traversal kernels take (traversal.trace_ray)."""
-        return TreeArrays(self.axis, self.split, self.child, self.count, self.nodes, split_view(self.nodes),
-                          self.leaf_prims, self.triangles, self.bounds, self.leaf_triangles, 0)
+        return TreeArrays(self.axis, self.split, self.child, self.count, self.leaf_prims, self.triangles,
+                          self.bounds, self.leaf_triangles, 0)
 
     @property
     def node_arrays(self):
@@ -47,8 +45,6 @@ class KdTree:
         previous = (self.leaf_prims, self.leaf_triangles)
         self.axis, self.split, self.child, self.count, self.leaf_prims = node_arrays
         self.leaf_triangles = leaf_triangles(self.triangles, self.leaf_prims, previous)
-        # the whole array: splice_subtrees already copied every node array (one parallel pass)
-        self.nodes = pack_nodes(self.axis, self.split, self.child, self.count, len(self.leaf_prims))
         self._stats = None
 
     @property
@@ -72,8 +68,8 @@ class KdTree:
         sah, leaves, empty, depth, refs, _, _, unbuilt = walk_stats(
             self.axis, self.split, self.child, self.count, self.bounds, o.traversal_cost, o.intersection_cost)
         n = len(self.triangles)
-        nbytes = sum(a.nbytes for a in (self.axis, self.split, self.child, self.count, self.nodes,
-                                         self.leaf_prims, self.leaf_triangles))
+        nbytes = sum(a.nbytes for a in (self.axis, self.split, self.child, self.count, self.leaf_prims,
+                                         self.leaf_triangles))
         return {
             "triangles": n,
             "degenerate_dropped": len(self.dropped),

@@ -32,11 +32,11 @@ from . import simd as S
 from .array_views import at, rows, unowned
 from ..inputs import as_ray_limits, as_rays, hit_distances_as_float32
 from .kdtree import KdTree
-from .layout import LEAF
+from .layout import LEAF, TreeArrays
 from .queries import Hits, intersect
 from ..jit.threads import thread_count
 from .packet_leaf import BEST, O, ROWS, SX, SY, SZ, TMIN, leaf_test
-from .traversal import STACK_SIZE, block_range, clip_to_box, interleaved_blocks, trace_rays, unowned_tree
+from .traversal import STACK_SIZE, block_range, clip_to_box, interleaved_blocks, trace_rays
 from .triangle_test import ray_shear
 
 L = S.LANES
@@ -155,7 +155,9 @@ def trace_packets(tree, rays_in, out):
 def _trace_packet_block(tree, rays_in, out, start, stop):
     """Packets start..stop-1 with one set of scratch arrays and the tree as unowned views (see
     traversal._trace_block)."""
-    views = unowned_tree(tree)
+    views = TreeArrays(unowned(tree.axis), unowned(tree.split), unowned(tree.child), unowned(tree.count),
+                       unowned(tree.leaf_prims), unowned(tree.triangles), unowned(tree.bounds),
+                       unowned(tree.leaf_triangles), tree.base)
     owned = (np.zeros(ROWS * L), np.zeros((L, 3)), np.zeros((L, 3), np.int64), np.empty(L, np.int32), np.empty(L),
              np.empty(L), np.zeros(ROWS32 * L, np.float32), np.empty(STACK_SIZE, np.int32),
              np.empty(STACK_SIZE, np.int64), np.empty(STACK_SIZE * 2 * L, np.float32))
