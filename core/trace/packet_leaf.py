@@ -139,6 +139,8 @@ def _t_rounding(a, b, c, shear, edges, det):
 def _test_lane(leaf_tris, column, prim, l, sc):
     """The single-ray test of lane l against one leaf triangle; keeps the hit if closer (as trace_ray)."""
     rays, lane_o, axes, prims, us, vs = sc.rays, sc.lane_o, sc.axes, sc.prims, sc.us, sc.vs
+    for k in range(3):
+        lane_o[at(l), k] = rays[at((O + k) * L + l)]
     t, u, v = intersect_leaf_triangle(leaf_tris, column, rows(lane_o, l, l + 1)[0], axes[at(l), 0],
                                       axes[at(l), 1], axes[at(l), 2], rays[at(SX * L + l)], rays[at(SY * L + l)],
                                       rays[at(SZ * L + l)])
