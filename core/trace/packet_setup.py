@@ -13,7 +13,7 @@ from numba import njit
 
 from . import simd as S
 from .array_views import at, rows
-from .packet_leaf import BEST, O, SX, SY, SZ, TMIN
+from .packet_leaf import BEST, LANE_BY_LANE, O, ONE_ORIGIN, SAME_AXES, SX, SY, SZ, TMIN
 from .traversal import WIDEN
 from .triangle_test import ray_shear
 
@@ -29,14 +29,14 @@ ROWS32 = 14
 
 @njit(cache=True, inline="always")
 def setup_packet(root_box, rays_in, lanes, sc, out, box_fits):
-    """Fill the scratch for one packet: (bits of the lanes traced, the packet's signs, whether they all
-    shear along the same axes). Lanes that cannot join go to single rays (out.single); lanes missing
-    the root box are written as misses, as trace_ray returns them."""
+    """Fill the scratch for one packet: (bits of the lanes traced, the packet's signs, how they take the
+    leaf test: packet_leaf's LANE_BY_LANE, SAME_AXES or ONE_ORIGIN). Lanes that cannot join go to single
+    rays (out.single); lanes missing the root box are written as misses, as trace_ray returns them."""
     valid = 0
     for l in range(L):
         valid |= (1 if lanes[l] >= 0 else 0) << l
     if valid == 0:
-        return 0, 0, True
+        return 0, 0, LANE_BY_LANE
     fill = lanes[S.count_trailing_zeros(valid)]
     o = (_gather(rays_in.origins, lanes, fill, 0), _gather(rays_in.origins, lanes, fill, 1),
          _gather(rays_in.origins, lanes, fill, 2))
@@ -51,7 +51,7 @@ def setup_packet(root_box, rays_in, lanes, sc, out, box_fits):
     _write_misses(lanes, misses, out)
     bits = joins & ~misses
     if bits == 0:
-        return 0, signs, True
+        return 0, signs, LANE_BY_LANE
     rays = sc.rays
     for k in range(3):
         S.store(rays, (O + k) * L, o[k])
@@ -59,7 +59,20 @@ def setup_packet(root_box, rays_in, lanes, sc, out, box_fits):
     S.store(rays, BEST * L, tmax)
     _fill_rows32(sc.lanes32, o, inv, t0, t1)
     sc.prims[:] = -1
-    return bits, signs, _fill_shear(rays, sc.axes, d, inv, signs, bits, rays_in.directions, lanes)
+    if not _fill_shear(rays, sc.axes, d, inv, signs, bits, rays_in.directions, lanes):
+        return bits, signs, LANE_BY_LANE
+    return bits, signs, ONE_ORIGIN if _one_origin(o, bits) else SAME_AXES
+
+
+@njit(cache=True, inline="always")
+def _one_origin(o, bits):
+    """Whether the lanes `bits` share their origin (equal coordinates; +0 and -0 count as equal, which
+    changes no edge value's sign or t: packet_leaf.py)."""
+    l0 = S.count_trailing_zeros(bits)
+    same = bits
+    for k in range(3):
+        same &= S.mask_bits(S.eq(o[k], S.splat_f64(S.lane(o[k], l0))))
+    return same == bits
 
 
 @njit(cache=True, inline="always")

@@ -165,10 +165,10 @@ def _trace_packet_block(tree, rays_in, out, start, stop):
     box_fits = _box_fits_float32(views.bounds)
     for p in range(start, stop):
         lanes = rows(rays_in.order, p * L, p * L + L)
-        bits, signs, same_axes = setup_packet(views.bounds, rays_in, lanes, sc, out, box_fits)
+        bits, signs, mode = setup_packet(views.bounds, rays_in, lanes, sc, out, box_fits)
         if bits == 0:
             continue
-        if _traverse(views, sc, same_axes, signs, bits, stack):
+        if _traverse(views, sc, mode, signs, bits, stack):
             _leave_to_single_rays(lanes, bits, out.single)
         else:
             _write(lanes, bits, sc, out)
@@ -183,7 +183,7 @@ def _box_fits_float32(box):
 
 
 @njit(cache=True, inline="always")
-def _traverse(tree, sc, same_axes, signs, bits, stack):
+def _traverse(tree, sc, mode, signs, bits, stack):
     """Walk the tree with the packet (module docstring); True if it met an unbuilt node (lazy tree)."""
     axis, split, child, count, leaf_prims = tree.axis, tree.split, tree.child, tree.count, tree.leaf_prims
     leaf_tris, base = tree.leaf_triangles, tree.base
@@ -199,7 +199,7 @@ def _traverse(tree, sc, same_axes, signs, bits, stack):
         if a != LEAF:
             return True
         first = child[at(node)]
-        leaf_test(leaf_tris, leaf_prims, base + first, base + first + count[at(node)], first, m, sc, same_axes)
+        leaf_test(leaf_tris, leaf_prims, base + first, base + first + count[at(node)], first, m, sc, mode)
         node, m, t0, t1, sp = _pop(sc.rays, stack_node, stack_bits, stack_t, sp)
         if node < 0:
             return False
