@@ -6,6 +6,7 @@ true or raise a ValueError that names the first bad index.
 import numbers
 
 import numpy as np
+from numba import njit
 
 MIN_DIRECTION = 1e-20  # largest direction component allowed below this is rejected (see as_rays)
 NEGLIGIBLE_COMPONENT = 2.0 ** -600  # a direction component below this times the largest is made 0
@@ -65,11 +66,18 @@ def as_triangles(triangles):
 
 
 def as_rays(origins, directions):
-    """Origins and directions as C-contiguous (R, 3) float64 arrays; directions must be finite and non-zero."""
-    o = _as_points("origins", origins)
-    d = _as_points("directions", directions)
+    """Origins and directions as C-contiguous (R, 3) float64 arrays; directions must be finite and non-zero.
+    One compiled pass over the rays finds whether any check fails or any component is negligible; only
+    then do the NumPy passes below run, to name the ray (docs/choices.md#ray-checks-in-one-pass)."""
+    o = _as_points("origins", origins, check=False)
+    d = _as_points("directions", directions, check=False)
     if o.shape != d.shape:
         raise ValueError(f"origins and directions must have the same shape (R, 3), got {o.shape} and {d.shape}")
+    flawed, negligible = _ray_flaws(o, d, MIN_DIRECTION, NEGLIGIBLE_COMPONENT)
+    if not flawed:
+        return o, without_negligible_components(d) if negligible else d
+    _check_finite("origins", o)
+    _check_finite("directions", d)
     zero = ~(d != 0.0).any(axis=1)
     if zero.any():
         raise ValueError(f"ray {int(np.flatnonzero(zero)[0])} has a zero direction vector")
@@ -114,18 +122,40 @@ def is_real_dtype(dtype):
     return np.issubdtype(dtype, np.floating) or np.issubdtype(dtype, np.integer)
 
 
-def _as_points(name, values):
+def _as_points(name, values, check=True):
     arr = np.asarray(values)
     if arr.ndim != 2 or arr.shape[1] != 3:
         raise ValueError(f"{name} must have shape (R, 3), got {arr.shape}")
     if not is_real_dtype(arr.dtype):
         raise ValueError(f"{name} must be a float array, got dtype {arr.dtype}")
     arr = np.ascontiguousarray(arr, dtype=np.float64)
+    if check:
+        _check_finite(name, arr)
+    return arr
+
+
+def _check_finite(name, arr):
     finite = np.isfinite(arr).all(axis=1)
     if not finite.all():
         bad = int(np.flatnonzero(~finite)[0])
         raise ValueError(f"{name[:-1]} of ray {bad} is not finite (NaN or inf): {arr[bad].tolist()}")
-    return arr
+
+
+@njit(cache=True)
+def _ray_flaws(o, d, min_direction, negligible):
+    """(whether some ray fails as_rays' checks: a non-finite value, a direction whose largest component
+    is below min_direction (zero included); whether some direction has a component below negligible
+    times its largest, which without_negligible_components then sets to 0)."""
+    flawed, small = False, False
+    for r in range(o.shape[0]):
+        largest = 0.0
+        for k in range(3):
+            flawed |= not (np.isfinite(o[r, k]) and np.isfinite(d[r, k]))
+            largest = max(largest, abs(d[r, k]))
+        flawed |= not largest >= min_direction
+        for k in range(3):
+            small |= abs(d[r, k]) < negligible * largest
+    return flawed, small
 
 
 def _as_limit(name, value, count):
