@@ -100,13 +100,15 @@ def _lanes_test(leaf_tris, column, prim, m, sc, axes, one_origin):
     hits &= S.mask_bits(S.gt(t, bound))
     if hits == 0:
         return found
-    S.store(rays, BEST * L, S.select(S.mask_from_bits(hits), t, best))
-    hu, hv = S.div(v, det), S.div(w, det)
+    closer = S.mask_from_bits(hits)
+    S.store(rays, BEST * L, S.select(closer, t, best))
+    S.store(us, 0, S.select(closer, S.div(v, det), S.load(us, 0)))
+    S.store(vs, 0, S.select(closer, S.div(w, det), S.load(vs, 0)))
     found |= hits
     while hits != 0:
         l = S.count_trailing_zeros(hits)
         hits &= hits - 1
-        prims[at(l)], us[at(l)], vs[at(l)] = prim, S.lane(hu, l), S.lane(hv, l)
+        prims[at(l)] = prim
     return found
 
 
