@@ -83,6 +83,25 @@ def test_per_ray_tmin_tmax_and_partial_tiles():
     assert_same_as_intersect(tree, o, d, 37, tmin, tmax)
 
 
+def test_orthographic_rays_and_origins_differing_in_the_sign_of_zero():
+    """Parallel rays from a grid of origins (an orthographic camera: the lanes share shear axes but not
+    their origin) and pinhole rays whose origins differ only in the sign of zero (the one-origin leaf
+    test takes them as one origin): hits equal core.intersect's and the oracle's."""
+    rng = np.random.default_rng(17)
+    tris = random_soup(rng, 3000)
+    tree = core.build_kdtree(tris)
+    xx, zz = np.meshgrid(np.linspace(-0.9, 0.9, 40), np.linspace(0.9, -0.9, 32))
+    o = np.stack([xx.ravel(), np.full(xx.size, -3.0), zz.ravel()], axis=1)
+    d = np.broadcast_to([0.05, 1.0, -0.03], o.shape).copy()
+    hits, stats = assert_same_as_intersect(tree, o, d, 40)
+    assert stats["single_rays"] == 0 and (hits.prim >= 0).any()
+    o, d = grid_rays([0.0, -3.0, 0.0], [0.0, 0.0, 0.0], 32, 24)
+    o[::2, 0], o[::3, 2] = -0.0, -0.0
+    hits, _ = assert_same_as_intersect(tree, o, d, 32)
+    t, prim, _ = oracle_once(brute_watertight, tris, o, d)
+    np.testing.assert_array_equal(hits.prim, prim)
+
+
 @pytest.mark.parametrize("options", BUILDERS[:1] + BUILDERS[4:6])
 def test_lattice_axis_parallel_zero_components_and_lattice_starts(options):
     """Triangles in integer axis planes; rays along lattice lines with zero and negative-zero components

@@ -177,9 +177,10 @@ def _mask_kernel(a, b, bits_in, out):
     out[6] = S.mask_all(ma)
     out[7] = S.mask_bits(mb)
     out[8] = S.count_trailing_zeros(bits_in)
+    out[9] = S.count_set_bits(S.mask_bits(ma))
 
 
-def test_masks_bits_any_all_and_trailing_zeros():
+def test_masks_bits_any_all_trailing_zeros_and_set_bits():
     rng = np.random.default_rng(5)
     full = (1 << L) - 1
     for trial in range(200):
@@ -189,11 +190,11 @@ def test_masks_bits_any_all_and_trailing_zeros():
         if trial % 11 == 0:
             b = a + 1.0  # every lane set
         bits_in = int(rng.integers(0, 1 << L)) if trial % 5 else 0
-        out = np.empty(9, np.int64)
+        out = np.empty(10, np.int64)
         _mask_kernel(a, b, bits_in, out)
         m = int(sum(1 << k for k in range(L) if a[k] < b[k]))
         expected = [m, m & bits_in, m | bits_in, m & ~bits_in & full, ~m & full, m != 0, m == full, bits_in,
-                    (bits_in & -bits_in).bit_length() - 1 if bits_in else 64]
+                    (bits_in & -bits_in).bit_length() - 1 if bits_in else 64, bin(m).count("1")]
         assert out.tolist() == expected, (trial, out.tolist(), expected)
 
 

@@ -5,7 +5,9 @@ lanes, with triangle_test._hit's operations in its order (edge values, det, t, t
 so each lane gets the single-ray t, u, v bit for bit; lanes with an exactly zero edge value, where the
 tie rule decides, take the single-ray test itself (triangle_test.intersect_leaf_triangle), as do all
 lanes of a packet whose lanes shear along different axes. Triangles are taken in leaf order, as
-traversal.trace_ray does.
+traversal.trace_ray does. When the lanes also share one origin (a perspective camera), the vertices'
+differences from it are scalars, the same float64 differences every lane would compute
+(docs/choices.md#camera-ray-packets-one-origin-in-the-leaf-test).
 
 The per-packet scratch `rays` holds one float64 row per quantity below, lane l of row r at r * L + l.
 """
@@ -23,17 +25,24 @@ G2, G3, G5 = (n * GAMMA / (1.0 - n * GAMMA) for n in (2, 3, 5))  # triangle_test
 O, TMIN, BEST, SX, SY, SZ = 0, 3, 4, 5, 6, 7
 ROWS = 8
 
+# how a packet's lanes take the leaf test: lane by lane (shear axes differ), in vectors, in vectors with
+# one origin for all lanes (its differences from the vertices computed once, as scalars)
+LANE_BY_LANE, SAME_AXES, ONE_ORIGIN = 0, 1, 2
+
 
 @njit(cache=True, inline="always")
-def leaf_test(leaf_tris, leaf_prims, column, end, first, m, sc, same_axes):
+def leaf_test(leaf_tris, leaf_prims, column, end, first, m, sc, mode):
     """Test the leaf's triangles (columns column..end-1 of the leaf-ordered copy, prims from
     leaf_prims[first]) against the active lanes m, in leaf order; bits of lanes whose best hit changed.
-    Lanes sharing shear axes are tested in vectors (_lanes_test); otherwise lane by lane."""
+    `mode` (above): lanes sharing shear axes are tested in vectors (_lanes_test); otherwise lane by lane."""
     found = 0
+    axes = sc.axes
+    l0 = S.count_trailing_zeros(m)
+    kx, ky, kz = axes[at(l0), 0], axes[at(l0), 1], axes[at(l0), 2]
     for k in range(end - column):
         j, prim = column + k, leaf_prims[at(first + k)]
-        if same_axes:
-            found |= _lanes_test(leaf_tris, j, prim, m, sc)
+        if mode != LANE_BY_LANE:
+            found |= _lanes_test(leaf_tris, j, prim, m, sc, (kx, ky, kz), mode == ONE_ORIGIN)
             continue
         candidates = m
         while candidates != 0:
@@ -45,15 +54,18 @@ def leaf_test(leaf_tris, leaf_prims, column, end, first, m, sc, same_axes):
 
 
 @njit(cache=True, inline="always")
-def _lanes_test(leaf_tris, column, prim, m, sc):
+def _lanes_test(leaf_tris, column, prim, m, sc, axes, one_origin):
     """triangle_test._hit for the lanes m against one triangle, in float64 lanes with its operations in
     its order (the sign flip by det's sign is exact and left out where it cannot change a bit), so each
     lane gets the single-ray test's t. Lanes with an exactly zero edge value, where the tie rule
-    decides, take the single-ray test itself. Returns the bits of lanes whose best hit changed."""
-    rays, axes, prims, us, vs = sc.rays, sc.axes, sc.prims, sc.us, sc.vs
-    l0 = S.count_trailing_zeros(m)
-    kx, ky, kz = axes[at(l0), 0], axes[at(l0), 1], axes[at(l0), 2]
-    ax, ay, az, bx, by, bz, cx, cy, cz = _sheared_triangle(leaf_tris, column, rays, kx, ky, kz)
+    decides, take the single-ray test itself. Returns the bits of lanes whose best hit changed. `axes`:
+    the lanes' shear axes (kx, ky, kz); `one_origin`: whether the lanes share their origin."""
+    rays, prims, us, vs = sc.rays, sc.prims, sc.us, sc.vs
+    if one_origin:
+        ax, ay, az, bx, by, bz, cx, cy, cz = _sheared_from_one_origin(leaf_tris, column, rays, axes,
+                                                                       S.count_trailing_zeros(m))
+    else:
+        ax, ay, az, bx, by, bz, cx, cy, cz = _sheared_triangle(leaf_tris, column, rays, axes)
     u = S.sub(S.mul(cx, by), S.mul(cy, bx))
     v = S.sub(S.mul(ax, cy), S.mul(ay, cx))
     w = S.sub(S.mul(bx, ay), S.mul(by, ax))
@@ -88,19 +100,22 @@ def _lanes_test(leaf_tris, column, prim, m, sc):
     hits &= S.mask_bits(S.gt(t, bound))
     if hits == 0:
         return found
-    S.store(rays, BEST * L, S.select(S.mask_from_bits(hits), t, best))
-    hu, hv = S.div(v, det), S.div(w, det)
+    closer = S.mask_from_bits(hits)
+    S.store(rays, BEST * L, S.select(closer, t, best))
+    S.store(us, 0, S.select(closer, S.div(v, det), S.load(us, 0)))
+    S.store(vs, 0, S.select(closer, S.div(w, det), S.load(vs, 0)))
     found |= hits
     while hits != 0:
         l = S.count_trailing_zeros(hits)
         hits &= hits - 1
-        prims[at(l)], us[at(l)], vs[at(l)] = prim, S.lane(hu, l), S.lane(hv, l)
+        prims[at(l)] = prim
     return found
 
 
 @njit(cache=True, inline="always")
-def _sheared_triangle(leaf_tris, j, rays, kx, ky, kz):
+def _sheared_triangle(leaf_tris, j, rays, axes):
     """The three vertices of column j sheared along each lane's ray (triangle_test._sheared in lanes)."""
+    kx, ky, kz = axes
     ox, oy, oz = S.load(rays, (O + kx) * L), S.load(rays, (O + ky) * L), S.load(rays, (O + kz) * L)
     sx, sy = S.load(rays, SX * L), S.load(rays, SY * L)
     a = _sheared(leaf_tris[at(kx), at(j)], leaf_tris[at(ky), at(j)], leaf_tris[at(kz), at(j)], ox, oy, oz, sx, sy)
@@ -109,6 +124,29 @@ def _sheared_triangle(leaf_tris, j, rays, kx, ky, kz):
     c = _sheared(leaf_tris[at(6 + kx), at(j)], leaf_tris[at(6 + ky), at(j)], leaf_tris[at(6 + kz), at(j)], ox, oy,
                  oz, sx, sy)
     return a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]
+
+
+@njit(cache=True, inline="always")
+def _sheared_from_one_origin(leaf_tris, j, rays, axes, l0):
+    """_sheared_triangle for lanes whose origins are all lane l0's: the vertex's differences from the
+    origin are one float64 scalar each, the value every lane's subtraction gives."""
+    kx, ky, kz = axes
+    ox, oy, oz = rays[at((O + kx) * L + l0)], rays[at((O + ky) * L + l0)], rays[at((O + kz) * L + l0)]
+    sx, sy = S.load(rays, SX * L), S.load(rays, SY * L)
+    j = at(j)
+    a = _sheared_differences(leaf_tris[at(kx), j] - ox, leaf_tris[at(ky), j] - oy, leaf_tris[at(kz), j] - oz, sx, sy)
+    b = _sheared_differences(leaf_tris[at(3 + kx), j] - ox, leaf_tris[at(3 + ky), j] - oy,
+                             leaf_tris[at(3 + kz), j] - oz, sx, sy)
+    c = _sheared_differences(leaf_tris[at(6 + kx), j] - ox, leaf_tris[at(6 + ky), j] - oy,
+                             leaf_tris[at(6 + kz), j] - oz, sx, sy)
+    return a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]
+
+
+@njit(cache=True, inline="always")
+def _sheared_differences(dx, dy, dz, sx, sy):
+    """_sheared from the scalar differences (x - ox, y - oy, z - oz): dx - sx dz, dy - sy dz, dz."""
+    z = S.splat_f64(dz)
+    return S.sub(S.splat_f64(dx), S.mul(sx, z)), S.sub(S.splat_f64(dy), S.mul(sy, z)), z
 
 
 @njit(cache=True, inline="always")
@@ -139,6 +177,8 @@ def _t_rounding(a, b, c, shear, edges, det):
 def _test_lane(leaf_tris, column, prim, l, sc):
     """The single-ray test of lane l against one leaf triangle; keeps the hit if closer (as trace_ray)."""
     rays, lane_o, axes, prims, us, vs = sc.rays, sc.lane_o, sc.axes, sc.prims, sc.us, sc.vs
+    for k in range(3):
+        lane_o[at(l), k] = rays[at((O + k) * L + l)]
     t, u, v = intersect_leaf_triangle(leaf_tris, column, rows(lane_o, l, l + 1)[0], axes[at(l), 0],
                                       axes[at(l), 1], axes[at(l), 2], rays[at(SX * L + l)], rays[at(SY * L + l)],
                                       rays[at(SZ * L + l)])

@@ -14,7 +14,8 @@ o' = fl32(o), i' = fl32(1 / d) and err = c |split| + e with c = 2^-21 |i'|, e = 
 2^-126, so [ts' - err, ts' + err] holds the exact plane distance ts. The lane's part of the first child
 is [t0, min(t1, ts' + err)], of the second [max(t0, ts' - err), t1]: each contains the exact part, so a
 lane visits every cell the exact traversal visits, in the same front-to-back order (the packet's signs
-are the lane's). The interval and the stack stay in float32; the starting interval is rounded outward.
+are the lane's). The interval and the stack stay in float32; the starting interval is rounded outward. The
+set-up runs in lanes too (packet_setup.py).
 A lane stops only when every stacked cell left to it starts (float32 bound, widened down) after its
 best hit: cells behind that start later still. The leaf test is float64, so t, u, v equal the
 single-ray test's, and hits equal traversal.trace_ray's except where two different triangles give a
@@ -35,20 +36,13 @@ from .kdtree import KdTree
 from .layout import LEAF, TreeArrays
 from .queries import Hits, intersect
 from ..jit.threads import thread_count
-from .packet_leaf import BEST, O, ROWS, SX, SY, SZ, TMIN, leaf_test
-from .traversal import STACK_SIZE, block_range, clip_to_box, interleaved_blocks, trace_rays
-from .triangle_test import ray_shear
+from .packet_leaf import BEST, ROWS, leaf_test
+from .packet_setup import C32, E32, INV32, O32, OUTSIDE_FLOAT32, ROWS32, T0, T1, setup_packet
+from .traversal import STACK_SIZE, block_range, interleaved_blocks, trace_rays
 
 L = S.LANES
 TILE_SHAPE = (4, 2) if L == 8 else (4, 4)  # a packet: neighbouring pixels (width x height)
 PACKETS_PER_TASK = 8  # packets a parallel task traces with one stack
-OUTSIDE_FLOAT32 = 2.0 ** 60  # |o|, |d|, |1 / d| or the root box beyond: the lane goes to single rays
-SCALE = 2.0 ** -21  # c = SCALE |i'| (module docstring)
-TINY = 2.0 ** -126
-
-# rows of the float32 scratch `lanes32`: o' (3 rows), i' (3), c (3), e (3), and the root interval
-O32, INV32, C32, E32, T0, T1 = 0, 3, 6, 9, 12, 13
-ROWS32 = 14
 
 
 class PacketRays(NamedTuple):
@@ -74,8 +68,8 @@ class PacketOutputs(NamedTuple):
 
 class PacketScratch(NamedTuple):
     """One packet's working set: `rays` (ROWS * L float64, packet_leaf's rows), lane origins `lane_o`
-    (L, 3), shear axes `axes` (L, 3), the best hit's prim, u, v per lane, and `lanes32` (ROWS32 * L
-    float32, the node step's rows named above)."""
+    (L, 3, filled where a lane takes the single-ray test), shear axes `axes` (L, 3), the best hit's prim,
+    u, v per lane, and `lanes32` (ROWS32 * L float32, the node step's rows: packet_setup.py)."""
 
     rays: np.ndarray
     lane_o: np.ndarray
@@ -171,10 +165,10 @@ def _trace_packet_block(tree, rays_in, out, start, stop):
     box_fits = _box_fits_float32(views.bounds)
     for p in range(start, stop):
         lanes = rows(rays_in.order, p * L, p * L + L)
-        bits, signs, same_axes = _setup(views.bounds, rays_in, lanes, sc, out, box_fits)
+        bits, signs, mode = setup_packet(views.bounds, rays_in, lanes, sc, out, box_fits)
         if bits == 0:
             continue
-        if _traverse(views, sc, same_axes, signs, bits, stack):
+        if _traverse(views, sc, mode, signs, bits, stack):
             _leave_to_single_rays(lanes, bits, out.single)
         else:
             _write(lanes, bits, sc, out)
@@ -189,101 +183,7 @@ def _box_fits_float32(box):
 
 
 @njit(cache=True, inline="always")
-def _packet_signs(directions, lanes):
-    """Bit k set when most of the lanes' directions are positive on axis k (the packet's signs)."""
-    signs = 0
-    for k in range(3):
-        balance = 0
-        for l in range(L):
-            r = lanes[l]
-            if r >= 0:
-                balance += 1 if directions[r, k] > 0.0 else (-1 if directions[r, k] < 0.0 else 0)
-        signs |= (1 if balance >= 0 else 0) << k
-    return signs
-
-
-@njit(cache=True, inline="always")
-def _joins(o, d, signs):
-    """Whether a ray can be a lane: d strictly positive on the packet's positive axes, negative on the
-    others, and o, d, 1 / d within OUTSIDE_FLOAT32 (the float32 bound's range: no overflow)."""
-    ok = True
-    for k in range(3):
-        ok &= d[k] > 0.0 if (signs >> k) & 1 else d[k] < 0.0
-        ok &= abs(o[k]) < OUTSIDE_FLOAT32 and 1.0 / OUTSIDE_FLOAT32 < abs(d[k]) < OUTSIDE_FLOAT32
-    return ok
-
-
-@njit(cache=True, inline="always")
-def _setup(root_box, rays_in, lanes, sc, out, box_fits):
-    """Fill the scratch for one packet: (bits of the lanes traced, the packet's signs, whether all of
-    them shear along the same axes). Lanes that cannot join go to single rays; lanes missing the root
-    box are written as misses here, as trace_ray returns them."""
-    origins, directions, tmin, tmax = rays_in.origins, rays_in.directions, rays_in.tmin, rays_in.tmax
-    rays, lane_o, axes, prims, lanes32 = sc.rays, sc.lane_o, sc.axes, sc.prims, sc.lanes32
-    signs = _packet_signs(directions, lanes)
-    rays[:] = 0.0
-    lanes32[:] = 0.0
-    bits = 0
-    for l in range(L):
-        r = lanes[l]
-        if r < 0:
-            continue
-        o, d = rows(origins, r, r + 1)[0], rows(directions, r, r + 1)[0]
-        if not (box_fits and _joins(o, d, signs)):
-            out.single[r] = 1
-            continue
-        inv = (1.0 / d[0], 1.0 / d[1], 1.0 / d[2])  # non-zero: the packet's lanes have strict signs
-        t0, t1 = clip_to_box(root_box, o, d, inv, tmin[r], tmax[r])
-        if t0 > t1:
-            out.t[r], out.prim[r], out.u[r], out.v[r] = np.inf, -1, 0.0, 0.0
-            continue
-        _fill_lane(rays, lane_o, axes, l, o, d, tmin[r], tmax[r])
-        _fill_lane32(lanes32, l, o, inv, t0, t1)
-        prims[l] = -1
-        bits |= 1 << l
-    return bits, signs, _same_axes(axes, bits)
-
-
-@njit(cache=True, inline="always")
-def _fill_lane(rays, lane_o, axes, l, o, d, tmin, tmax):
-    """The leaf test's float64 rows of lane l (packet_leaf.py)."""
-    for k in range(3):
-        rays[(O + k) * L + l] = o[k]
-        lane_o[l, k] = o[k]
-    kx, ky, kz, sx, sy, sz = ray_shear(d)
-    axes[l, 0], axes[l, 1], axes[l, 2] = kx, ky, kz
-    rays[TMIN * L + l], rays[BEST * L + l] = tmin, tmax
-    rays[SX * L + l], rays[SY * L + l], rays[SZ * L + l] = sx, sy, sz
-
-
-@njit(cache=True, inline="always")
-def _fill_lane32(lanes32, l, o, inv, t0, t1):
-    """The node step's float32 rows of lane l (module docstring): o', i', c, e, and [t0, t1] rounded
-    outward (t0 >= 0: as_ray_limits)."""
-    for k in range(3):
-        o32, inv32 = np.float32(o[k]), np.float32(inv[k])
-        c = np.float32(SCALE) * abs(inv32)
-        lanes32[(O32 + k) * L + l], lanes32[(INV32 + k) * L + l] = o32, inv32
-        lanes32[(C32 + k) * L + l] = c
-        lanes32[(E32 + k) * L + l] = c * (abs(o32) + np.float32(TINY)) + np.float32(TINY)
-    lanes32[T0 * L + l] = np.float32(t0 * (1.0 - 2.0 ** -22)) if t0 > 2.0 * TINY else np.float32(0.0)
-    lanes32[T1 * L + l] = np.float32(t1 * (1.0 + 2.0 ** -22) + 2.0 * TINY)
-
-
-@njit(cache=True, inline="always")
-def _same_axes(axes, bits):
-    if bits == 0:
-        return True
-    first = S.count_trailing_zeros(bits)
-    same = True
-    for l in range(L):
-        if (bits >> l) & 1:
-            same &= axes[l, 0] == axes[first, 0] and axes[l, 2] == axes[first, 2]
-    return same
-
-
-@njit(cache=True, inline="always")
-def _traverse(tree, sc, same_axes, signs, bits, stack):
+def _traverse(tree, sc, mode, signs, bits, stack):
     """Walk the tree with the packet (module docstring); True if it met an unbuilt node (lazy tree)."""
     axis, split, child, count, leaf_prims = tree.axis, tree.split, tree.child, tree.count, tree.leaf_prims
     leaf_tris, base = tree.leaf_triangles, tree.base
@@ -299,7 +199,7 @@ def _traverse(tree, sc, same_axes, signs, bits, stack):
         if a != LEAF:
             return True
         first = child[at(node)]
-        leaf_test(leaf_tris, leaf_prims, base + first, base + first + count[at(node)], first, m, sc, same_axes)
+        leaf_test(leaf_tris, leaf_prims, base + first, base + first + count[at(node)], first, m, sc, mode)
         node, m, t0, t1, sp = _pop(sc.rays, stack_node, stack_bits, stack_t, sp)
         if node < 0:
             return False

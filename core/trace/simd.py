@@ -25,6 +25,7 @@ API (all callable from njit code only; vectors never reach Python):
     mask_bits(m)              int64 with bit k set for lane k; mask_from_bits(bits) the reverse
     mask_any(m), mask_all(m)  bool
     count_trailing_zeros(x)   of an int64 (llvm.cttz; 64 for 0): the lowest set lane of mask_bits
+    count_set_bits(x)         of an int64 (llvm.ctpop): the number of set lanes of mask_bits
     lane(v, k)                element k as a scalar; with_lane(v, k, x) v with element k replaced
 Vectors of other element types or widths are not provided; LANES is one constant for the module.
 """
@@ -355,6 +356,20 @@ def count_trailing_zeros(typingctx, x):
         i64 = ir.IntType(64)
         cttz = _function(builder, "llvm.cttz.i64", i64, [i64, ir.IntType(1)])
         return builder.call(cttz, [value, ir.Constant(ir.IntType(1), 0)])
+
+    return types.int64(x), codegen
+
+
+@intrinsic
+def count_set_bits(typingctx, x):
+    """The number of set bits of an integer (as int64; llvm.ctpop): with mask_bits, the lanes set."""
+    if not isinstance(x, types.Integer):
+        return None
+
+    def codegen(context, builder, sig, args):
+        value = context.cast(builder, args[0], sig.args[0], types.int64)
+        i64 = ir.IntType(64)
+        return builder.call(_function(builder, "llvm.ctpop.i64", i64, [i64]), [value])
 
     return types.int64(x), codegen
 
