@@ -64,7 +64,8 @@ def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, root_room, p
         sp -= 1
         node, start, end, depth = stack_node[sp], stack_range[sp, 0], stack_range[sp, 1], stack_depth[sp]
         room = stack_room[sp]
-        box[:] = stack_box[sp]
+        for k in range(6):  # element by element: a row view costs reference counting
+            box[k] = stack_box[sp, k]
         n = end - start
         if room >= 1.0 and params.leaf_size < n <= params.defer_size:
             deferred = _defer(deferred, n_deferred, node, prims, boxes, start, end, box, depth, room)
@@ -85,7 +86,8 @@ def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, root_room, p
                 split_axis = NO_SPLIT  # copy, at start..end like the node's own references, is the leaf
         if split_axis == NO_SPLIT:
             leaf_prims = ensure_array(leaf_prims, n_leaf_prims, n_leaf_prims + n)
-            leaf_prims[n_leaf_prims:n_leaf_prims + n] = prims[start:end]
+            for k in range(n):
+                leaf_prims[n_leaf_prims + k] = prims[start + k]
             axis[node], split[node], child[node], count[node] = LEAF, 0.0, n_leaf_prims, n
             n_leaf_prims += n
             continue
@@ -156,7 +158,8 @@ def _push(stack, sp, node, start, end, depth, box, axis, pos, is_left):
     stack_range[sp, 0] = start
     stack_range[sp, 1] = end
     stack_depth[sp] = depth
-    stack_box[sp] = box
+    for k in range(6):
+        stack_box[sp, k] = box[k]
     if is_left:
         stack_box[sp, axis + 3] = pos
     else:
