@@ -231,11 +231,17 @@ def _nearest_boundaries(boxes, start, end, axis, pos, step):
 @njit(cache=True, inline="always")
 def _nearest_values(boxes, start, end, axis, pos, step):
     """The largest box boundary in (pos - step, pos) and the smallest in (pos, pos + step); the
-    interval's far end where it holds none. The running extremes stay float32 and meet the float64
+    interval's far end where it holds none. The running extremes stay float32, one per bound and side
+    (four independent chains: one chain waits for each max before the next), and meet the float64
     interval ends once, after the loop: the same maxima and minima as taking them in float64."""
-    below, above = np.float32(-np.inf), np.float32(np.inf)
+    lo_below, hi_below = np.float32(-np.inf), np.float32(-np.inf)
+    lo_above, hi_above = np.float32(np.inf), np.float32(np.inf)
     for i in range(start, end):
-        for v in (boxes[i, axis], boxes[i, axis + 3]):
-            below = max(below, v) if v < pos else below
-            above = min(above, v) if v > pos else above
-    return max(pos - step, np.float64(below)), min(pos + step, np.float64(above))
+        lo, hi = boxes[i, axis], boxes[i, axis + 3]
+        lo_below = max(lo_below, lo) if lo < pos else lo_below
+        hi_below = max(hi_below, hi) if hi < pos else hi_below
+        lo_above = min(lo_above, lo) if lo > pos else lo_above
+        hi_above = min(hi_above, hi) if hi > pos else hi_above
+    below = max(pos - step, np.float64(max(lo_below, hi_below)))
+    above = min(pos + step, np.float64(min(lo_above, hi_above)))
+    return below, above
