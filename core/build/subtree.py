@@ -72,7 +72,9 @@ def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, root_room, p
             axis[node], split[node], child[node], count[node] = UNBUILT, 0.0, n_deferred, n
             n_deferred += 1
             continue
-        prims, boxes = ensure_refs(prims, boxes, end, start + 2 * n + 1)
+        # The pools are re-bound only when they grow: binding an array costs reference counting.
+        if start + 2 * n + 1 > prims.shape[0]:
+            prims, boxes = ensure_refs(prims, boxes, end, start + 2 * n + 1)
         if params.builder == EXACT or n <= params.exact_below:
             scratch = ensure_floats(scratch, 3 * n)
         split_axis, pos, planar_left = NO_SPLIT, np.float32(0.0), False
@@ -85,13 +87,15 @@ def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, root_room, p
             if n_left == n and n_right == n:  # separates nothing (module docstring): the right child's
                 split_axis = NO_SPLIT  # copy, at start..end like the node's own references, is the leaf
         if split_axis == NO_SPLIT:
-            leaf_prims = ensure_array(leaf_prims, n_leaf_prims, n_leaf_prims + n)
+            if n_leaf_prims + n > leaf_prims.shape[0]:
+                leaf_prims = ensure_array(leaf_prims, n_leaf_prims, n_leaf_prims + n)
             for k in range(n):
                 leaf_prims[n_leaf_prims + k] = prims[start + k]
             axis[node], split[node], child[node], count[node] = LEAF, 0.0, n_leaf_prims, n
             n_leaf_prims += n
             continue
-        axis, split, child, count = ensure_nodes(axis, split, child, count, n_nodes, n_nodes + 2)
+        if n_nodes + 2 > axis.shape[0]:
+            axis, split, child, count = ensure_nodes(axis, split, child, count, n_nodes, n_nodes + 2)
         if params.bytes_per_reference > 0.0:
             _check_budget(prims, leaf_prims, axis, deferred, params.bytes_per_reference * n_refs)
         left = n_nodes
