@@ -103,9 +103,11 @@ def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, root_room, p
         axis[node], split[node], child[node], count[node] = split_axis, pos, left, 0
         stack_room[sp] = stack_room[sp + 1] = child_room(room, n, n_left + n_right)
         # Right child first on the stack so the left one (on top of the pool) is built first.
-        stack = (stack_node, stack_range, stack_depth, stack_box)
-        sp = _push(stack, sp, left + 1, start, start + n_right, depth + 1, box, split_axis, pos, False)
-        sp = _push(stack, sp, left, start + n_right, start + n_right + n_left, depth + 1, box, split_axis, pos, True)
+        middle = start + n_right
+        _cut_box(stack_box, sp, box, split_axis, pos, False)
+        sp = _push(stack_node, stack_range, stack_depth, sp, left + 1, start, middle, depth + 1)
+        _cut_box(stack_box, sp, box, split_axis, pos, True)
+        sp = _push(stack_node, stack_range, stack_depth, sp, left, middle, middle + n_left, depth + 1)
     d_node, d_start, d_depth, d_box, d_prims, d_boxes, d_room = deferred
     n_deferred_refs = d_start[n_deferred]
     return (axis[:n_nodes].copy(), split[:n_nodes].copy(), child[:n_nodes].copy(),
@@ -154,21 +156,25 @@ def _defer(deferred, k, node, prims, boxes, start, end, box, depth, room):
 
 
 @njit(cache=True, inline="always")
-def _push(stack, sp, node, start, end, depth, box, axis, pos, is_left):
-    """Push a child whose box is the parent's cut at `pos` onto stack = (stack_node, stack_range,
-    stack_depth, stack_box); returns the new stack size."""
-    stack_node, stack_range, stack_depth, stack_box = stack
+def _push(stack_node, stack_range, stack_depth, sp, node, start, end, depth):
+    """Push a child (its box already in slot sp, _cut_box); returns the new stack size. The stack's
+    arrays are passed one by one: a tuple of them built per node costs reference counting."""
     stack_node[sp] = node
     stack_range[sp, 0] = start
     stack_range[sp, 1] = end
     stack_depth[sp] = depth
-    for k in range(6):
-        stack_box[sp, k] = box[k]
-    if is_left:
-        stack_box[sp, axis + 3] = pos
-    else:
-        stack_box[sp, axis] = pos
     return sp + 1
+
+
+@njit(cache=True, inline="always")
+def _cut_box(stack_box, slot, box, axis, pos, is_left):
+    """stack_box[slot] = `box` cut at `pos` on `axis`: its part left of the plane, or right of it."""
+    for k in range(6):
+        stack_box[slot, k] = box[k]
+    if is_left:
+        stack_box[slot, axis + 3] = pos
+    else:
+        stack_box[slot, axis] = pos
 
 
 def build_subtrees(tris, tasks, params, threads):
