@@ -53,9 +53,11 @@ def build_kdtree(triangles, **options):
 def _initial_references(tris):
     """One reference per triangle with area: its index and box; and the box around them all."""
     boxes, keep = triangle_boxes(tris)
-    prims = np.flatnonzero(keep).astype(np.int32)
-    dropped = np.flatnonzero(~keep).astype(np.int32)
-    if len(dropped):
+    if keep.all():  # the usual case: every index, without searching the mask
+        prims, dropped = np.arange(len(tris), dtype=np.int32), np.empty(0, np.int32)
+    else:
+        prims = np.flatnonzero(keep).astype(np.int32)
+        dropped = np.flatnonzero(~keep).astype(np.int32)
         boxes = np.ascontiguousarray(boxes[keep])
     if len(prims) == 0:
         return prims, boxes, np.zeros(6, np.float32), dropped

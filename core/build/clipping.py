@@ -39,27 +39,28 @@ def clip_triangle(tri, box, scratch_a, scratch_b, out):
 
 
 @njit(cache=True, inline="always")
-def split_triangle_inside(tri, axis, pos, poly_left, poly_right, out_left, out_right):
-    """The clip_triangle results for both sides of the plane `pos` on `axis` when the triangle lies in
+def split_triangle_inside(tris, prim, axis, pos, poly_left, poly_right, out_left, out_right):
+    """The clip_triangle results for both sides of the plane `pos` on `axis` when triangle tris[prim] lies in
     `box` (triangle_in_box): then the split plane is the only one that cuts, and one pass over the
     edges builds both polygons as _clip_plane does, vertex for vertex in the same order (a crossing
     edge's point is the same computed from either side, negation being exact), so the boxes are
     bit-identical to clipping each side. out_left / out_right hold the two clip regions on entry.
-    Returns (left part not empty, right part not empty)."""
+    Returns (left part not empty, right part not empty). The triangle is indexed, not taken as a view:
+    a view costs reference counting per straddler (docs/choices.md#no-views-per-straddler)."""
     n_left = n_right = 0
     for i in range(3):
         j = i + 1 if i < 2 else 0
-        di = np.float64(tri[i, axis]) - pos
-        dj = np.float64(tri[j, axis]) - pos
+        di = np.float64(tris[prim, i, axis]) - pos
+        dj = np.float64(tris[prim, j, axis]) - pos
         if di <= 0.0:
-            n_left = _put_vertex(poly_left, n_left, tri, i)
+            n_left = _put_vertex(poly_left, n_left, tris, prim, i)
         if di >= 0.0:
-            n_right = _put_vertex(poly_right, n_right, tri, i)
+            n_right = _put_vertex(poly_right, n_right, tris, prim, i)
         if (di < 0.0 and dj > 0.0) or (di > 0.0 and dj < 0.0):
             f = di / (di - dj)
             for k in range(3):
-                vi = np.float64(tri[i, k])
-                poly_left[n_left, k] = poly_right[n_right, k] = vi + f * (np.float64(tri[j, k]) - vi)
+                vi = np.float64(tris[prim, i, k])
+                poly_left[n_left, k] = poly_right[n_right, k] = vi + f * (np.float64(tris[prim, j, k]) - vi)
             poly_left[n_left, axis] = poly_right[n_right, axis] = pos
             n_left += 1
             n_right += 1
@@ -71,18 +72,19 @@ def split_triangle_inside(tri, axis, pos, poly_left, poly_right, out_left, out_r
 
 
 @njit(cache=True, inline="always")
-def _put_vertex(poly, n, tri, i):
+def _put_vertex(poly, n, tris, prim, i):
     for k in range(3):
-        poly[n, k] = tri[i, k]
+        poly[n, k] = tris[prim, i, k]
     return n + 1
 
 
 @njit(cache=True, inline="always")
-def triangle_in_box(tri, box):
-    """Does every vertex lie in the closed box (no plane of it would cut the triangle)?"""
+def triangle_in_box(tris, prim, boxes, row):
+    """Does every vertex of tris[prim] lie in the closed box boxes[row] (no plane of it would cut the
+    triangle)?"""
     for i in range(3):
         for k in range(3):
-            if not box[k] <= tri[i, k] <= box[k + 3]:
+            if not boxes[row, k] <= tris[prim, i, k] <= boxes[row, k + 3]:
                 return False
     return True
 
@@ -137,7 +139,7 @@ def round_down(x):
     """The largest float32 <= x."""
     f = np.float32(x)
     if np.float64(f) > x:
-        f = np.nextafter(f, np.float32(-np.inf))
+        f = next_float32(f, False)
     return f
 
 
@@ -146,5 +148,17 @@ def round_up(x):
     """The smallest float32 >= x."""
     f = np.float32(x)
     if np.float64(f) < x:
-        f = np.nextafter(f, np.float32(np.inf))
+        f = next_float32(f, True)
     return f
+
+
+@njit(cache=True, inline="always")
+def next_float32(f, up):
+    """np.nextafter(f, +inf if up else -inf) for a finite float32 f, by stepping its bit pattern:
+    Numba's nextafter is a library call that nothing can inline, and every clipped box rounds six
+    bounds (docs/choices.md#rounding-without-nextafter)."""
+    bits = f.view(np.int32)
+    if bits == 0 or bits == np.int32(-2147483648):  # +0 or -0: the smallest subnormal of that direction
+        return np.int32(1 if up else -2147483647).view(np.float32)
+    away_from_zero = (bits > 0) == up
+    return np.int32(bits + 1 if away_from_zero else bits - 1).view(np.float32)

@@ -36,31 +36,39 @@ def side_of(boxes, i, axis, pos, planar_left):
 
 
 @njit(cache=True, inline="always")
-def split_reference(tri, box, axis, pos, clip, scratch, out_left, out_right):
-    """Boxes of a straddling reference's parts on each side; returns the sides that are not empty."""
-    out_left[:] = box
-    out_left[axis + 3] = pos
-    out_right[:] = box
-    out_right[axis] = pos
+def split_reference(tris, prim, boxes, row, axis, pos, clip, scratch, out_left, out_right):
+    """Boxes of the parts on each side of the plane of straddling reference boxes[row] (triangle
+    tris[prim]); returns the sides that are not empty. Indexed, never viewed: a view or a row assignment
+    costs reference counting per straddler (docs/choices.md#no-views-per-straddler)."""
+    _cut_parts(boxes, row, axis, pos, out_left, out_right)
     if not clip:
         return BOTH
     poly_a, poly_b, region, _, _ = scratch
-    if triangle_in_box(tri, box):  # the usual straddler, never cut before: one pass for both sides
-        in_left, in_right = split_triangle_inside(tri, axis, pos, poly_a, poly_b, out_left, out_right)
+    if triangle_in_box(tris, prim, boxes, row):  # the usual straddler, never cut before: one pass for both sides
+        in_left, in_right = split_triangle_inside(tris, prim, axis, pos, poly_a, poly_b, out_left, out_right)
     else:
-        region[:] = out_left
+        tri = tris[prim]
+        for k in range(6):
+            region[k] = out_left[k]
         in_left = clip_triangle(tri, region, poly_a, poly_b, out_left)
-        region[:] = box
+        for k in range(6):
+            region[k] = boxes[row, k]
         region[axis] = pos
         in_right = clip_triangle(tri, region, poly_a, poly_b, out_right)
     if not (in_left or in_right):
         # Only rounding can empty both sides of a straddler; keep it on both, unclipped.
-        out_left[:] = box
-        out_left[axis + 3] = pos
-        out_right[:] = box
-        out_right[axis] = pos
+        _cut_parts(boxes, row, axis, pos, out_left, out_right)
         return BOTH
     return (LEFT if in_left else 0) | (RIGHT if in_right else 0)
+
+
+@njit(cache=True, inline="always")
+def _cut_parts(boxes, row, axis, pos, out_left, out_right):
+    """out_left / out_right = box boxes[row] cut at the plane: its parts left and right of it."""
+    for k in range(6):
+        out_left[k] = out_right[k] = boxes[row, k]
+    out_left[axis + 3] = pos
+    out_right[axis] = pos
 
 
 @njit(cache=True, inline="always")
@@ -83,20 +91,25 @@ def partition_in_place(tris, prims, boxes, start, end, axis, pos, planar_left, c
             w_right += 1
             continue
         prim = prims[i]
-        side = split_reference(tris[prim], boxes[i], axis, pos, clip, scratch, box_l, box_r)
+        side = split_reference(tris, prim, boxes, i, axis, pos, clip, scratch, box_l, box_r)
         if side & LEFT:
-            prims[w_left] = prim
-            boxes[w_left] = box_l
+            _put_ref(prims, boxes, w_left, prim, box_l)
             w_left += 1
         if side & RIGHT:
-            prims[w_right] = prim
-            boxes[w_right] = box_r
+            _put_ref(prims, boxes, w_right, prim, box_r)
             w_right += 1
     n_right = w_right - start
     n_left = w_left - end
     for k in range(n_left):
         _copy_ref(prims, boxes, end + k, w_right + k)
     return n_right, n_left
+
+
+@njit(cache=True, inline="always")
+def _put_ref(prims, boxes, dst, prim, box):
+    prims[dst] = prim
+    for k in range(6):
+        boxes[dst, k] = box[k]
 
 
 @njit(cache=True, inline="always")

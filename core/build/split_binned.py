@@ -23,12 +23,13 @@ def bin_references(boxes, start, end, stride, node_box, min_bins, max_bins):
     s2 = _bin_scale(node_box, 2, top + 1)
     for i in range(start, end, stride):
         b0, b1, b2, b3, b4, b5 = box_bin_indices(boxes, i, lo0, lo1, lo2, s0, s1, s2, top)  # _bin's, in lanes
-        min_bins[0, b0] += 1
-        min_bins[1, b1] += 1
-        min_bins[2, b2] += 1
-        max_bins[0, b3] += 1
-        max_bins[1, b4] += 1
-        max_bins[2, b5] += 1
+        # Unsigned indices (they are clamped to [0, top]): no negative-index wraparound code per increment.
+        min_bins[0, np.uint64(b0)] += 1
+        min_bins[1, np.uint64(b1)] += 1
+        min_bins[2, np.uint64(b2)] += 1
+        max_bins[0, np.uint64(b3)] += 1
+        max_bins[1, np.uint64(b4)] += 1
+        max_bins[2, np.uint64(b5)] += 1
 
 
 @njit(cache=True)
@@ -199,9 +200,12 @@ def snap_to_boundaries(boxes, start, end, node_box, params, cost, axis, pos):
 def _nearest_boundaries(boxes, start, end, axis, pos, step):
     """The box boundaries nearest to pos strictly below and above it within one bin, each with the
     references left of it, right of it and lying in it: ((below, left, right, planar), (above, ...)).
-    Two branch-free passes (LLVM vectorizes both): the nearest boundary each side, then the counts at
-    pos and at those two. Without a boundary in the bin, the bin's edge (rejected by the caller)."""
+    Two branch-free passes in float32 (the boxes' precision, so nothing is widened per reference): the
+    nearest boundary each side, then the counts at pos and at those two. Without a boundary in the bin,
+    the bin's edge (rejected by the caller); a float64 edge no float32 equals gets zero counts, as the
+    float64 comparisons gave (docs/choices.md#snapping-passes-in-float32)."""
     below, above = _nearest_values(boxes, start, end, axis, pos, step)
+    below32, above32 = np.float32(below), np.float32(above)
     left_of_pos = right_of_pos = begin_at_pos = end_at_pos = 0
     begin_below = end_below = planar_below = begin_above = end_above = planar_above = 0
     for i in range(start, end):
@@ -210,12 +214,16 @@ def _nearest_boundaries(boxes, start, end, axis, pos, step):
         right_of_pos += hi > pos
         begin_at_pos += lo == pos
         end_at_pos += hi == pos
-        begin_below += lo == below
-        end_below += hi == below
-        planar_below += (lo == below) & (hi == below)
-        begin_above += lo == above
-        end_above += hi == above
-        planar_above += (lo == above) & (hi == above)
+        begin_below += lo == below32
+        end_below += hi == below32
+        planar_below += (lo == below32) & (hi == below32)
+        begin_above += lo == above32
+        end_above += hi == above32
+        planar_above += (lo == above32) & (hi == above32)
+    at_below = np.float64(below32) == below  # else no float32 lies on it
+    at_above = np.float64(above32) == above
+    begin_below, end_below, planar_below = begin_below * at_below, end_below * at_below, planar_below * at_below
+    begin_above, end_above, planar_above = begin_above * at_above, end_above * at_above, planar_above * at_above
     return ((below, left_of_pos - begin_below, right_of_pos + end_at_pos, planar_below),
             (above, left_of_pos + begin_at_pos, right_of_pos - end_above, planar_above))
 
@@ -223,10 +231,17 @@ def _nearest_boundaries(boxes, start, end, axis, pos, step):
 @njit(cache=True, inline="always")
 def _nearest_values(boxes, start, end, axis, pos, step):
     """The largest box boundary in (pos - step, pos) and the smallest in (pos, pos + step); the
-    interval's far end where it holds none."""
-    below, above = pos - step, pos + step
+    interval's far end where it holds none. The running extremes stay float32, one per bound and side
+    (four independent chains: one chain waits for each max before the next), and meet the float64
+    interval ends once, after the loop: the same maxima and minima as taking them in float64."""
+    lo_below, hi_below = np.float32(-np.inf), np.float32(-np.inf)
+    lo_above, hi_above = np.float32(np.inf), np.float32(np.inf)
     for i in range(start, end):
-        for v in (boxes[i, axis], boxes[i, axis + 3]):
-            below = max(below, v) if v < pos else below
-            above = min(above, v) if v > pos else above
+        lo, hi = boxes[i, axis], boxes[i, axis + 3]
+        lo_below = max(lo_below, lo) if lo < pos else lo_below
+        hi_below = max(hi_below, hi) if hi < pos else hi_below
+        lo_above = min(lo_above, lo) if lo > pos else lo_above
+        hi_above = min(hi_above, hi) if hi > pos else hi_above
+    below = max(pos - step, np.float64(max(lo_below, hi_below)))
+    above = min(pos + step, np.float64(min(lo_above, hi_above)))
     return below, above

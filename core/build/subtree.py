@@ -64,14 +64,17 @@ def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, root_room, p
         sp -= 1
         node, start, end, depth = stack_node[sp], stack_range[sp, 0], stack_range[sp, 1], stack_depth[sp]
         room = stack_room[sp]
-        box[:] = stack_box[sp]
+        for k in range(6):  # element by element: a row view costs reference counting
+            box[k] = stack_box[sp, k]
         n = end - start
         if room >= 1.0 and params.leaf_size < n <= params.defer_size:
             deferred = _defer(deferred, n_deferred, node, prims, boxes, start, end, box, depth, room)
             axis[node], split[node], child[node], count[node] = UNBUILT, 0.0, n_deferred, n
             n_deferred += 1
             continue
-        prims, boxes = ensure_refs(prims, boxes, end, start + 2 * n + 1)
+        # The pools are re-bound only when they grow: binding an array costs reference counting.
+        if start + 2 * n + 1 > prims.shape[0]:
+            prims, boxes = ensure_refs(prims, boxes, end, start + 2 * n + 1)
         if params.builder == EXACT or n <= params.exact_below:
             scratch = ensure_floats(scratch, 3 * n)
         split_axis, pos, planar_left = NO_SPLIT, np.float32(0.0), False
@@ -84,12 +87,15 @@ def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, root_room, p
             if n_left == n and n_right == n:  # separates nothing (module docstring): the right child's
                 split_axis = NO_SPLIT  # copy, at start..end like the node's own references, is the leaf
         if split_axis == NO_SPLIT:
-            leaf_prims = ensure_array(leaf_prims, n_leaf_prims, n_leaf_prims + n)
-            leaf_prims[n_leaf_prims:n_leaf_prims + n] = prims[start:end]
+            if n_leaf_prims + n > leaf_prims.shape[0]:
+                leaf_prims = ensure_array(leaf_prims, n_leaf_prims, n_leaf_prims + n)
+            for k in range(n):
+                leaf_prims[n_leaf_prims + k] = prims[start + k]
             axis[node], split[node], child[node], count[node] = LEAF, 0.0, n_leaf_prims, n
             n_leaf_prims += n
             continue
-        axis, split, child, count = ensure_nodes(axis, split, child, count, n_nodes, n_nodes + 2)
+        if n_nodes + 2 > axis.shape[0]:
+            axis, split, child, count = ensure_nodes(axis, split, child, count, n_nodes, n_nodes + 2)
         if params.bytes_per_reference > 0.0:
             _check_budget(prims, leaf_prims, axis, deferred, params.bytes_per_reference * n_refs)
         left = n_nodes
@@ -97,9 +103,11 @@ def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, root_room, p
         axis[node], split[node], child[node], count[node] = split_axis, pos, left, 0
         stack_room[sp] = stack_room[sp + 1] = child_room(room, n, n_left + n_right)
         # Right child first on the stack so the left one (on top of the pool) is built first.
-        stack = (stack_node, stack_range, stack_depth, stack_box)
-        sp = _push(stack, sp, left + 1, start, start + n_right, depth + 1, box, split_axis, pos, False)
-        sp = _push(stack, sp, left, start + n_right, start + n_right + n_left, depth + 1, box, split_axis, pos, True)
+        middle = start + n_right
+        _cut_box(stack_box, sp, box, split_axis, pos, False)
+        sp = _push(stack_node, stack_range, stack_depth, sp, left + 1, start, middle, depth + 1)
+        _cut_box(stack_box, sp, box, split_axis, pos, True)
+        sp = _push(stack_node, stack_range, stack_depth, sp, left, middle, middle + n_left, depth + 1)
     d_node, d_start, d_depth, d_box, d_prims, d_boxes, d_room = deferred
     n_deferred_refs = d_start[n_deferred]
     return (axis[:n_nodes].copy(), split[:n_nodes].copy(), child[:n_nodes].copy(),
@@ -148,20 +156,25 @@ def _defer(deferred, k, node, prims, boxes, start, end, box, depth, room):
 
 
 @njit(cache=True, inline="always")
-def _push(stack, sp, node, start, end, depth, box, axis, pos, is_left):
-    """Push a child whose box is the parent's cut at `pos` onto stack = (stack_node, stack_range,
-    stack_depth, stack_box); returns the new stack size."""
-    stack_node, stack_range, stack_depth, stack_box = stack
+def _push(stack_node, stack_range, stack_depth, sp, node, start, end, depth):
+    """Push a child (its box already in slot sp, _cut_box); returns the new stack size. The stack's
+    arrays are passed one by one: a tuple of them built per node costs reference counting."""
     stack_node[sp] = node
     stack_range[sp, 0] = start
     stack_range[sp, 1] = end
     stack_depth[sp] = depth
-    stack_box[sp] = box
-    if is_left:
-        stack_box[sp, axis + 3] = pos
-    else:
-        stack_box[sp, axis] = pos
     return sp + 1
+
+
+@njit(cache=True, inline="always")
+def _cut_box(stack_box, slot, box, axis, pos, is_left):
+    """stack_box[slot] = `box` cut at `pos` on `axis`: its part left of the plane, or right of it."""
+    for k in range(6):
+        stack_box[slot, k] = box[k]
+    if is_left:
+        stack_box[slot, axis + 3] = pos
+    else:
+        stack_box[slot, axis] = pos
 
 
 def build_subtrees(tris, tasks, params, threads):

@@ -169,7 +169,7 @@ def _classify_chunk(tris, prims, boxes, axis, pos, planar_left, clip, start, end
     for i in range(start, end):
         side = side_of(boxes, i, axis, pos, planar_left)
         if side == BOTH:
-            side = split_reference(tris[prims[i]], boxes[i], axis, pos, clip, scratch, box_l, box_r)
+            side = split_reference(tris, prims[i], boxes, i, axis, pos, clip, scratch, box_l, box_r)
         sides[i] = side
         n_left += (side & LEFT) != 0
         n_right += (side & RIGHT) != 0
@@ -188,7 +188,7 @@ def _write_chunk(tris, prims, boxes, sides, axis, pos, clip, start, end, offsets
     for i in range(start, end):
         side = sides[i]
         if boxes[i, axis] < pos < boxes[i, axis + 3]:  # a straddler: clip it again, as in pass one
-            split_reference(tris[prims[i]], boxes[i], axis, pos, clip, scratch, box_l, box_r)
+            split_reference(tris, prims[i], boxes, i, axis, pos, clip, scratch, box_l, box_r)
         else:
             for k in range(6):
                 box_l[k] = box_r[k] = boxes[i, k]
