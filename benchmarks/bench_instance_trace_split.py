@@ -83,15 +83,24 @@ def _walk(scene, o, d, tmax, mode, scratch, counts):
 
 @njit(cache=True, parallel=True)
 def walk_rays(scene, origins, directions, tmax, mode, counts):
-    """_walk for every ray (counts: (rays, 7), each ray's row)."""
-    views = unowned_scene(scene)
+    """_walk for every ray (counts: (rays, 7), each ray's row), in blocks of 256 rays."""
     n = origins.shape[0]
-    out = np.zeros(n)
+    met = np.zeros((n + 255) // 256)
     for block in prange((n + 255) // 256):
-        scratch = new_scratch()
-        for r in range(block * 256, min(n, block * 256 + 256)):
-            out[r] = _walk(views, origins[r], directions[r], tmax[r], mode, scratch, counts[r])
-    return out.sum()
+        met[block] = _walk_block(scene, origins, directions, tmax, mode, counts, block * 256, min(n, block * 256 + 256))
+    return met.sum()
+
+
+@njit(cache=True)
+def _walk_block(scene, origins, directions, tmax, mode, counts, start, stop):
+    """Rays start..stop-1 with one scratch: a call of its own, as instance_traversal._trace_block, so each
+    thread allocates its own scratch."""
+    views = unowned_scene(scene)
+    scratch = new_scratch()
+    met = 0.0
+    for r in range(start, stop):
+        met += _walk(views, origins[r], directions[r], tmax[r], mode, scratch, counts[r])
+    return met
 
 
 @njit(cache=True)
