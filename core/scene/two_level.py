@@ -11,7 +11,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..build.builder import _build_arrays
+from ..build.box_tree import build_box_tree
 from ..geometry import half_area
 from ..trace.kdtree import KdTree, empty_arrays
 from ..trace.layout import LEAF
@@ -259,10 +259,9 @@ def _round_up(x):
 
 
 def build_top_level(boxes, opts):
-    """(axis, split, child, count, items, bounds) of a kd-tree over instance boxes.
-    The triangle builder already sees only boxes when it does not clip (seed 000's builder is "not
-    restricted to a certain primitive type"), so it is reused as is with clip off; boxes straddling a
-    plane are referenced from both sides. Instances with an empty box are left out."""
+    """(axis, split, child, count, items, bounds) of a kd-tree over instance boxes, built by the box
+    builder (build/box_tree.py: the binned SAH without triangles, in parallel); boxes straddling a plane
+    are referenced from both sides. Instances with an empty box are left out."""
     keep = np.flatnonzero(boxes[:, 0] <= boxes[:, 3]).astype(np.int32)
     if len(keep) == 0:
         return (*empty_arrays(), np.zeros(6, np.float32))
@@ -274,13 +273,11 @@ def build_top_level(boxes, opts):
         axis, split, child, count, _ = empty_arrays()
         count[0] = len(keep)
         return axis, split, child, count, keep, bounds
-    placeholder = np.zeros((len(keep), 3, 3), np.float32)  # never read: clipping is off
     budget = min(opts.duplication_budget or np.inf, TOP_LEVEL_DUPLICATION)
     box_opts = make_options({**opts.as_dict(), "clip": False, "lazy": False, "duplication_budget": budget,
                              "intersection_cost": opts.intersection_cost * INSTANCE_TEST_COST})
     with thread_count(opts.threads) as threads:
-        (axis, split, child, count, leaf), _ = _build_arrays(placeholder, np.arange(len(keep), dtype=np.int32),
-                                                             sub, bounds, box_opts, threads, {})
+        axis, split, child, count, leaf = build_box_tree(sub, bounds, box_opts.params(len(keep), bounds), threads)
     return axis, split, child, count, keep[leaf].astype(np.int32), bounds
 
 
