@@ -21,7 +21,7 @@ from ..trace.layout import NO_HIT
 from .lights import COLOR, DELTA, NO_SHADOW
 from .pixel_reuse import segment_meets_any
 from ..scene.ray_visibility import SHADOW_RAYS
-from .sampling import pixel_seed, sample_2d
+from .sampling import pixel_seed, sample_2d, seeded_sample_2d, use_seeds
 from .shading import cosine_direction, offset_origin, sample_light, short_of_light
 from ..trace.traversal import block_range, interleaved_blocks
 
@@ -124,6 +124,7 @@ def _sample_pixel(scene, frames, i, batch, lights, acc, scratch, direction, memo
     point, normal = rows(frames.points, i, i + 1)[0], rows(frames.normals, i, i + 1)[0]
     origin = rows(frames.starts, i, i + 1)[0]
     ps = pixel_seed(frames.pixels[i], seed)
+    ao_seeds = use_seeds(ps, USE_AO)
     before = (sums[i, 0], sums[i, 1], sums[i, 2], sq_sums[i], rays[i], memo.reused[i], memo.repeated[i])
     n_lights = lights.shape[0]
     uses = 1 + n_lights
@@ -133,7 +134,8 @@ def _sample_pixel(scene, frames, i, batch, lights, acc, scratch, direction, memo
         ao = 1.0
         lr = lg = lb = 0.0
         for use in range(first_use, last_use):
-            tmax, weight = _ray_of_use(use, lights, point, normal, ao_distance, sampler, ps, s, dim1, direction)
+            tmax, weight = _ray_of_use(use, lights, point, normal, ao_distance, sampler, ps, ao_seeds, s, dim1,
+                                        direction)
             if weight <= 0.0:
                 continue  # behind the surface or outside the light: no ray needed
             prim = -1  # a light that casts no shadow reaches every surface facing it: no ray either
@@ -168,13 +170,14 @@ def _sample_pixel(scene, frames, i, batch, lights, acc, scratch, direction, memo
 
 
 @njit(cache=True, inline="always")
-def _ray_of_use(use, lights, point, normal, ao_distance, sampler, ps, s, dim1, direction):
-    """The ray of one use of sample s: its direction (into `direction`), its tmax and its weight.
+def _ray_of_use(use, lights, point, normal, ao_distance, sampler, ps, ao_seeds, s, dim1, direction):
+    """The ray of one use of sample s: its direction (into `direction`), its tmax and its weight; the
+    AO use's seeds `ao_seeds` (sampling.use_seeds) come made once per pixel.
     USE_AO: cosine-weighted about the normal within ao_distance, weight 1. Light k (use 1 + k): toward a
     sampled light point, tmax a step short of it (shading.short_of_light), weight max(0, N.L) * mask;
     weight 0 needs no ray."""
     if use == USE_AO:
-        u1, u2 = sample_2d(sampler, ps, s, use, dim1)
+        u1, u2 = seeded_sample_2d(sampler, ao_seeds, s, dim1)
         cosine_direction(normal, u1, u2, direction)
         return ao_distance, 1.0
     light = rows(lights, use - 1, use)[0]

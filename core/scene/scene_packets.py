@@ -29,9 +29,8 @@ def trace_camera_packets(scene, o, d, lo, hi, order, threads, ray_mask):
     n, inst = len(o), int(s.top_items[0])
     t, u, v, prim = np.empty(n), np.empty(n), np.empty(n), np.empty(n, np.int32)
     single = np.zeros(n, np.uint8)
-    o_obj, d_obj = np.empty_like(o), np.empty_like(d)
     with thread_count(threads):
-        _rays_to_object(s.world_to_object[inst], o, d, o_obj, d_obj)
+        o_obj, d_obj = _in_object_space(s.world_to_object[inst], o, d)
         trace_packets(_mesh_tree(s, int(s.mesh_of[inst])), PacketRays(o_obj, d_obj, lo, hi, order),
                       PacketOutputs(t, prim, u, v, single))
         instance = np.where(prim >= 0, np.int32(inst), np.int32(-1))
@@ -50,6 +49,20 @@ def _mesh_tree(s, m):
     r0, r1 = s.ref_start[m], s.ref_start[m + 1]
     return TreeArrays(s.axis[n0:n1], s.split[n0:n1], s.child[n0:n1], s.count[n0:n1], s.leaf_prims[r0:r1],
                       s.triangles[s.tri_start[m]:s.tri_start[m + 1]], s.mesh_bounds[m], s.leaf_triangles, int(r0))
+
+
+IDENTITY = np.eye(3, 4)
+
+
+def _in_object_space(w2o, o, d):
+    """The rays in the instance's object space. A flat KdTree's instance has the identity matrix, whose
+    product leaves every finite coordinate as it is (but -0.0, which becomes +0.0: zero components go to
+    single rays, which take the world rays), so its rays are used as they are: no pass, no copies."""
+    if np.array_equal(w2o, IDENTITY):
+        return o, d
+    o_obj, d_obj = np.empty_like(o), np.empty_like(d)
+    _rays_to_object(w2o, o, d, o_obj, d_obj)
+    return o_obj, d_obj
 
 
 @njit(cache=True, parallel=True)
