@@ -205,7 +205,9 @@ class PreviewRender:
         samples = min(int(samples), self.target_samples - self.samples_done)
         added = 0
         while added < samples and len(self.active):
-            batch = min(samples - added, CHECK_EVERY - self.samples_done % CHECK_EVERY)
+            batch = samples - added  # one kernel call: a pixel's rays follow each other while its nodes are in cache
+            if self.error_target is not None:  # up to the next convergence check
+                batch = min(batch, CHECK_EVERY - self.samples_done % CHECK_EVERY)
             start = perf_counter()
             self._add_samples(batch)
             self.trace_ms += (perf_counter() - start) * 1e3
