@@ -259,11 +259,16 @@ class PreviewRender:
             with thread_count(self.threads):
                 hard_shadow_rays(frames, self.lights, int(k), SOBOL_DIM1, directions, tmax, lit)
             rays = np.flatnonzero(lit)
-            order = np.full(-(-len(rays) // L) * L, -1, np.int64)
-            order[:len(rays)] = np.arange(len(rays))
-            occluded = occluded_in_packets(self.scene, self.starts[rays], directions[rays], np.zeros(len(rays)),
-                                           tmax[rays], order, self.threads, SHADOW_RAYS)
-            self.pretraced[rays, k] = occluded
+            self.pretraced[rays, k] = self._occluded(self.starts[rays], directions[rays], tmax[rays])
+
+    def _occluded(self, origins, directions, tmax):
+        """Whether each shadow ray meets something in (0, tmax), traced in packets of consecutive rays.
+        The order is read-only, as the camera pass's (tiled_packets): the same compiled packet kernel."""
+        order = np.full(-(-len(origins) // L) * L, -1, np.int64)
+        order[:len(origins)] = np.arange(len(origins))
+        order.setflags(write=False)
+        return occluded_in_packets(self.scene, origins, directions, np.zeros(len(origins)), tmax, order,
+                                   self.threads, SHADOW_RAYS)
 
     def _retire_converged(self):
         """Stop sampling pixels whose standard error is below the target (after min_samples)."""
