@@ -8,7 +8,7 @@ import pytest
 import core
 from core.render.camera import tiled_packets, tiled_pixels
 from core.scene.ray_visibility import CAMERA_RAYS, SHADOW_RAYS
-from core.scene.scene_packets import trace_camera_packets
+from core.scene.scene_packets import occluded_in_packets, trace_camera_packets
 from core.scene.scene_queries import trace_valid_rays
 from core.scene.two_level import build_two_level
 from core.trace.packet_traversal import L
@@ -108,3 +108,27 @@ def test_instance_invisible_to_the_ray_kind_is_missed():
     o, d, lo, hi = camera_rays([2.5, -3.0, 1.5], [0.0, 0.0, 0.0], 16, 16)
     _, inst, prim, _, _ = assert_same_as_single_rays(scene, o, d, lo, hi, 16, 16)
     assert (prim == -1).all() and (inst == -1).all()
+
+
+@pytest.mark.parametrize("matrix", [np.eye(4), np.diag([2.0, 0.5, 1.5, 1.0])])
+def test_shadow_rays_to_one_point_occluded_as_any_hit_rays(matrix):
+    """occluded_in_packets (the renderer's shadow rays of a light without extent): from the camera hits
+    of a soup towards one point, ending short of it, every ray occluded exactly when the single-ray
+    any-hit query says so, on a flat tree and on one scaled instance; some rays occluded, some clear."""
+    tris = random_soup(np.random.default_rng(5), 3000)
+    o, d, lo, hi = camera_rays([2.5, -3.0, 1.5], [0.0, 0.0, 0.0], 48, 40)
+    scene = build_two_level([core.build_kdtree(tris)], [0], matrix[None])
+    t, _, prim, _, _ = trace_valid_rays(scene, o, d, lo, hi, False, 2, CAMERA_RAYS)
+    hit = prim >= 0
+    points = o[hit] + t[hit, None] * d[hit]
+    towards = np.array([0.3, -2.0, 2.5]) - points
+    length = np.linalg.norm(towards, axis=1)
+    towards /= length[:, None]
+    starts = np.ascontiguousarray(points + 1e-6 * towards)
+    tmax = length * (1.0 - 1e-6)
+    order = np.full(-(-len(starts) // L) * L, -1, np.int64)
+    order[:len(starts)] = np.arange(len(starts))
+    got = occluded_in_packets(scene, starts, towards, np.zeros(len(starts)), tmax, order, 2, SHADOW_RAYS)
+    want = trace_valid_rays(scene, starts, towards, np.zeros(len(starts)), tmax, True, 2, SHADOW_RAYS)[2] >= 0
+    np.testing.assert_array_equal(got, want)
+    assert 0 < want.sum() < len(want)

@@ -20,15 +20,16 @@ from ..inputs import check_image_size
 from ..trace.kdtree import KdTree
 from ..build.lazy import resolve_suspended
 from ..scene.instance_signature import changed_boxes
-from .lights import DELTA
+from .lights import DELTA, NO_SHADOW
 from ..memory import check_render_memory
 from .pixel_reuse import PixelState, prepared_boxes, segments_touch, settings_key, surface_rays_touch
-from ..scene.ray_visibility import CAMERA_RAYS, HOLDOUT
+from ..scene.ray_visibility import CAMERA_RAYS, HOLDOUT, SHADOW_RAYS
 from .render_kernels import (MEMO_BITS, MODES, PixelFrames, PixelSums, RayMemo, SampleBatch, add_samples,
-                             assemble_image, surface_frames)
+                             assemble_image, hard_shadow_rays, surface_frames)
 from .render_options import RenderOptions, check_mode_and_samples, packed_lights
 from .sampling import SAMPLERS, SOBOL_DIM1
-from ..scene.scene_packets import trace_camera_packets
+from ..scene.scene_packets import occluded_in_packets, packets_apply, trace_camera_packets
+from ..trace.packet_traversal import L
 from ..scene.scene_queries import trace_valid_rays
 from ..jit.threads import thread_count
 from ..scene.two_level import TwoLevelScene, as_two_level
@@ -90,6 +91,7 @@ class PreviewRender:
         self._start(pixels, depths, points, normals, starts, np.zeros((len(pixels), 3)), np.zeros(len(pixels)), zero,
                     zero.copy(), np.arange(len(pixels), dtype=np.int64), self._memo_rows(len(pixels)))
         self.known, self.boxes = np.zeros(len(pixels), np.int64), np.zeros((0, 6))
+        self._hard_shadows_due = True
 
     def _memo_rows(self, n):
         """(n, B) zero visibility bits: one per ray of every sample (render_kernels.py), none when
@@ -122,6 +124,8 @@ class PreviewRender:
         self.active, self.memo = active, memo
         self.memo_reused = np.zeros(len(pixels), np.int64)
         self.repeated = np.zeros(len(pixels), np.int64)  # rays of lights without extent (render_kernels.py)
+        self.pretraced = np.full((len(pixels), len(self.lights)), -1, np.int8)
+        self._hard_shadows_due = False  # only a frame traced from scratch (_trace_camera)
 
     def _changed_boxes(self, previous):
         """Where geometry changed since `previous` (a PixelState), or None when its pixels cannot be
@@ -201,7 +205,9 @@ class PreviewRender:
         samples = min(int(samples), self.target_samples - self.samples_done)
         added = 0
         while added < samples and len(self.active):
-            batch = min(samples - added, CHECK_EVERY - self.samples_done % CHECK_EVERY)
+            batch = samples - added  # one kernel call: a pixel's rays follow each other while its nodes are in cache
+            if self.error_target is not None:  # up to the next convergence check
+                batch = min(batch, CHECK_EVERY - self.samples_done % CHECK_EVERY)
             start = perf_counter()
             self._add_samples(batch)
             self.trace_ms += (perf_counter() - start) * 1e3
@@ -214,13 +220,18 @@ class PreviewRender:
     def _add_samples(self, batch):
         """Samples samples_done .. +batch of every active pixel; on a lazy tree, pixels stopped by an
         unbuilt subtree redo the batch once it is built (same samples, so the eager tree's sums)."""
+        if self._hard_shadows_due:
+            self._hard_shadows_due = False
+            self._trace_hard_shadows()
+
         def run(active):
             status = np.empty(len(active), np.int64)
             add_samples(self.scene.arrays, PixelFrames(self.points, self.normals, self.starts, self.pixels), active,
                         SampleBatch(self.samples_done, batch, MODES[self.mode], self.ao_distance, self.ambient,
                                     self.sampler, self.seed, SOBOL_DIM1), self.lights,
                         PixelSums(self.sums, self.sq_sums, self.counts, self.ray_counts), status,
-                        RayMemo(self.memo, self.known, self.boxes, self.memo_reused, self.repeated))
+                        RayMemo(self.memo, self.known, self.boxes, self.memo_reused, self.repeated,
+                                self.pretraced))
             return status
 
         with thread_count(self.threads):
@@ -232,6 +243,32 @@ class PreviewRender:
 
             if self.scene.lazy_tree is not None:
                 resolve_suspended(self.scene.lazy_tree, status, redo, self.threads)
+
+    def _trace_hard_shadows(self):
+        """Before a fresh frame's first sample: the shadow rays of every light without extent that casts
+        shadows, one a pixel (every sample's is the same), traced in packets (scene_packets.py) into
+        `pretraced`, where the sampling kernel takes them. The pixels are in tiled order, so a packet's
+        rays leave neighbouring points towards one point or direction: coherent rays, as camera rays are.
+        Scenes the packets do not take leave the rays to the sampling kernel."""
+        hard = np.flatnonzero((self.lights[:, DELTA] != 0.0) & (self.lights[:, NO_SHADOW] == 0.0))
+        if "shadow" not in self.mode or not len(hard) or not packets_apply(self.scene, SHADOW_RAYS):
+            return
+        frames = PixelFrames(self.points, self.normals, self.starts, self.pixels)
+        directions, tmax, lit = np.empty_like(self.points), np.empty(len(self.points)), np.empty(len(self.points), bool)
+        for k in hard:
+            with thread_count(self.threads):
+                hard_shadow_rays(frames, self.lights, int(k), SOBOL_DIM1, directions, tmax, lit)
+            rays = np.flatnonzero(lit)
+            self.pretraced[rays, k] = self._occluded(self.starts[rays], directions[rays], tmax[rays])
+
+    def _occluded(self, origins, directions, tmax):
+        """Whether each shadow ray meets something in (0, tmax), traced in packets of consecutive rays.
+        The order is read-only, as the camera pass's (tiled_packets): the same compiled packet kernel."""
+        order = np.full(-(-len(origins) // L) * L, -1, np.int64)
+        order[:len(origins)] = np.arange(len(origins))
+        order.setflags(write=False)
+        return occluded_in_packets(self.scene, origins, directions, np.zeros(len(origins)), tmax, order,
+                                   self.threads, SHADOW_RAYS)
 
     def _retire_converged(self):
         """Stop sampling pixels whose standard error is below the target (after min_samples)."""

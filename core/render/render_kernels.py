@@ -7,7 +7,9 @@ lazy tree's stopped pixel restores its sums and redoes the batch once the subtre
 Ray memo (pixel_reuse.py): ray (s, use) keeps its visibility in bit s * (1 + lights) + use of its
 pixel's row (when that fits in MEMO_BITS); a continued pixel takes last frame's bit for every ray that
 cannot meet a changed box (`known[i]`: bits last frame traced), and a light without extent
-(lights.DELTA) repeats sample 0's bit in later samples (counted in `repeated`, not `rays`).
+(lights.DELTA) repeats sample 0's bit in later samples (counted in `repeated`, not `rays`). Such a
+light's ray may also come traced beforehand (`pretraced`: hard_shadow_rays' rays, traced in packets by
+the caller), counted as if sample 0 had traced it and later samples repeated it.
 """
 from typing import NamedTuple
 
@@ -21,7 +23,7 @@ from ..trace.layout import NO_HIT
 from .lights import COLOR, DELTA, NO_SHADOW
 from .pixel_reuse import segment_meets_any
 from ..scene.ray_visibility import SHADOW_RAYS
-from .sampling import pixel_seed, sample_2d
+from .sampling import pixel_seed, sample_2d, seeded_sample_2d, use_seeds
 from .shading import cosine_direction, offset_origin, sample_light, short_of_light
 from ..trace.traversal import block_range, interleaved_blocks
 
@@ -71,13 +73,15 @@ class PixelSums(NamedTuple):
 class RayMemo(NamedTuple):
     """The ray memo (module docstring): `bits` (M, B) uint8, `known` (M,) int64, `boxes` (K, 6) the
     changed boxes, `reused` (M,) int64 rays whose bit was taken from last frame, `repeated` (M,) int64
-    rays of lights without extent that took sample 0's bit (not counted in PixelSums.rays)."""
+    rays of lights without extent that took sample 0's bit (not counted in PixelSums.rays), `pretraced`
+    (M, lights) int8 the visibility of light k's ray traced beforehand (1 occluded, 0 clear, -1 none)."""
 
     bits: np.ndarray
     known: np.ndarray
     boxes: np.ndarray
     reused: np.ndarray
     repeated: np.ndarray
+    pretraced: np.ndarray
 
 
 @njit(cache=True, parallel=True)
@@ -100,7 +104,7 @@ def _sample_pixels(scene, frames, active, start, stop, batch, lights, acc, statu
     the memo go to the per-ray code as unowned views (docs/choices.md#sampling-kernel-scratch-and-views)."""
     scene = unowned_scene(scene)
     memo = RayMemo(unowned(memo.bits), unowned(memo.known), unowned(memo.boxes), unowned(memo.reused),
-                   unowned(memo.repeated))
+                   unowned(memo.repeated), unowned(memo.pretraced))
     frames = PixelFrames(unowned(frames.points), unowned(frames.normals), unowned(frames.starts),
                          unowned(frames.pixels))
     lights = unowned(lights)
@@ -124,6 +128,7 @@ def _sample_pixel(scene, frames, i, batch, lights, acc, scratch, direction, memo
     point, normal = rows(frames.points, i, i + 1)[0], rows(frames.normals, i, i + 1)[0]
     origin = rows(frames.starts, i, i + 1)[0]
     ps = pixel_seed(frames.pixels[i], seed)
+    ao_seeds = use_seeds(ps, USE_AO)
     before = (sums[i, 0], sums[i, 1], sums[i, 2], sq_sums[i], rays[i], memo.reused[i], memo.repeated[i])
     n_lights = lights.shape[0]
     uses = 1 + n_lights
@@ -133,13 +138,16 @@ def _sample_pixel(scene, frames, i, batch, lights, acc, scratch, direction, memo
         ao = 1.0
         lr = lg = lb = 0.0
         for use in range(first_use, last_use):
-            tmax, weight = _ray_of_use(use, lights, point, normal, ao_distance, sampler, ps, s, dim1, direction)
+            tmax, weight = _ray_of_use(use, lights, point, normal, ao_distance, sampler, ps, ao_seeds, s, dim1,
+                                        direction)
             if weight <= 0.0:
                 continue  # behind the surface or outside the light: no ray needed
             prim = -1  # a light that casts no shadow reaches every surface facing it: no ray either
             if use == USE_AO or lights[use - 1, NO_SHADOW] == 0.0:
                 if _repeats(lights, use, s, memo):
                     prim = _repeated_visibility(memo, i, use, s * uses + use)
+                elif use != USE_AO and memo.pretraced[i, use - 1] >= 0:
+                    prim = _pretraced_visibility(memo, i, use, s, s * uses + use, rays)
                 else:
                     prim = _visibility(scene, origin, direction, tmax, scratch, memo, i, s * uses + use, rays)
             if prim < NO_HIT:
@@ -168,13 +176,14 @@ def _sample_pixel(scene, frames, i, batch, lights, acc, scratch, direction, memo
 
 
 @njit(cache=True, inline="always")
-def _ray_of_use(use, lights, point, normal, ao_distance, sampler, ps, s, dim1, direction):
-    """The ray of one use of sample s: its direction (into `direction`), its tmax and its weight.
+def _ray_of_use(use, lights, point, normal, ao_distance, sampler, ps, ao_seeds, s, dim1, direction):
+    """The ray of one use of sample s: its direction (into `direction`), its tmax and its weight; the
+    AO use's seeds `ao_seeds` (sampling.use_seeds) come made once per pixel.
     USE_AO: cosine-weighted about the normal within ao_distance, weight 1. Light k (use 1 + k): toward a
     sampled light point, tmax a step short of it (shading.short_of_light), weight max(0, N.L) * mask;
     weight 0 needs no ray."""
     if use == USE_AO:
-        u1, u2 = sample_2d(sampler, ps, s, use, dim1)
+        u1, u2 = seeded_sample_2d(sampler, ao_seeds, s, dim1)
         cosine_direction(normal, u1, u2, direction)
         return ao_distance, 1.0
     light = rows(lights, use - 1, use)[0]
@@ -214,6 +223,21 @@ def _repeated_visibility(memo, i, use, bit):
 
 
 @njit(cache=True, inline="always")
+def _pretraced_visibility(memo, i, use, s, bit, rays):
+    """The visibility of a light without extent traced beforehand (RayMemo.pretraced), kept in the memo
+    as a traced ray's bit; counted in rays[i] at sample 0 and as repeated later (_repeated_visibility).
+    Returns the any-hit prim's sign: 0 occluded, -1 clear."""
+    occluded = memo.pretraced[i, use - 1] == 1
+    if s == 0:
+        rays[i] += 1
+    else:
+        memo.repeated[i] += 1
+    if bit < 8 * memo.bits.shape[1]:
+        _keep_memo_bit(memo.bits, i, bit, occluded)
+    return 0 if occluded else -1
+
+
+@njit(cache=True, inline="always")
 def _visibility(scene, origin, direction, tmax, scratch, memo, i, bit, rays):
     """The any-hit prim of a ray (< 0: escapes; < NO_HIT: suspended at an unbuilt subtree), taken from
     last frame's bit when pixel i traced it last frame (bit < known[i]) and the ray cannot meet a
@@ -242,6 +266,24 @@ def _keep_memo_bit(bits, i, bit, occluded):
     """Set or clear pixel i's memo `bit`."""
     mask = np.uint8(1 << (bit & 7))
     bits[i, bit >> 3] = bits[i, bit >> 3] | mask if occluded else bits[i, bit >> 3] & ~mask
+
+
+@njit(cache=True, parallel=True)
+def hard_shadow_rays(frames, lights, k, dim1, directions, tmax, lit):
+    """The shadow ray of light k, one without extent (every sample's ray is the same), from each pixel
+    of the PixelFrames `frames`, made as the sampling kernel makes it (_ray_of_use): its direction into
+    directions (M, 3), tmax (M,), and lit (M,) bool, whether the pixel faces the light inside its mask
+    (else it takes no ray). The rays start at frames.starts."""
+    for i in prange(frames.points.shape[0]):
+        lit[i] = _hard_shadow_ray(frames, lights, k, dim1, directions, tmax, i)
+
+
+@njit(cache=True)
+def _hard_shadow_ray(frames, lights, k, dim1, directions, tmax, i):
+    """hard_shadow_rays' ray of pixel i (kept out of the parallel loop body, as _sample_pixels)."""
+    tmax[i], weight = _ray_of_use(USE_AO + 1 + k, lights, frames.points[i], frames.normals[i], 0.0, 0, 0,
+                                  (0, 0, 0, 0), 0, dim1, directions[i])
+    return weight > 0.0
 
 
 @njit(cache=True, parallel=True)

@@ -94,17 +94,27 @@ def sobol_2d(index, dim1):
 
 
 @njit(cache=True, inline="always")
+def use_seeds(pixel_seed, use):
+    """The three scramble seeds of one use (AO, light k, ...) of a pixel: the same for all its samples,
+    so a kernel makes them once per pixel and use rather than once per sample (four hashes a sample)."""
+    seed = hash_combine(pixel_seed, use)
+    return hash_combine(seed, 0x1B873593), hash_combine(seed, 0xCC9E2D51), hash_combine(seed, 0xE6546B64), seed
+
+
+@njit(cache=True, inline="always")
+def seeded_sample_2d(sampler, seeds, index, dim1):
+    """sample_2d with the use's seeds (use_seeds) made beforehand."""
+    if sampler == RANDOM:
+        a = hash_combine(seeds[3], index)
+        return a * INV_2_32, hash32(a ^ 0x5BD1E995) * INV_2_32
+    x, y = sobol_2d(nested_uniform_scramble(index, seeds[0]), dim1)
+    return nested_uniform_scramble(x, seeds[1]) * INV_2_32, nested_uniform_scramble(y, seeds[2]) * INV_2_32
+
+
+@njit(cache=True, inline="always")
 def sample_2d(sampler, pixel_seed, index, use, dim1):
     """Two uniform numbers in [0, 1) for sample `index` of a pixel, for one use (AO, light k, ...)."""
-    seed = hash_combine(pixel_seed, use)
-    if sampler == RANDOM:
-        a = hash_combine(seed, index)
-        return a * INV_2_32, hash32(a ^ 0x5BD1E995) * INV_2_32
-    shuffled = nested_uniform_scramble(index, hash_combine(seed, 0x1B873593))
-    x, y = sobol_2d(shuffled, dim1)
-    x = nested_uniform_scramble(x, hash_combine(seed, 0xCC9E2D51))
-    y = nested_uniform_scramble(y, hash_combine(seed, 0xE6546B64))
-    return x * INV_2_32, y * INV_2_32
+    return seeded_sample_2d(sampler, use_seeds(pixel_seed, use), index, dim1)
 
 
 @njit(cache=True, inline="always")

@@ -1,4 +1,5 @@
-"""Camera rays through a TwoLevelScene in packets (packet_traversal.py) where the scene allows it.
+"""Coherent rays through a TwoLevelScene in packets (packet_traversal.py) where the scene allows it:
+camera rays (closest hits) and the shadow rays of a light without extent (occlusion).
 
 A scene of one instance in a one-leaf top level (a flat KdTree, or a scene whose objects all went to
 one soup) is traced as trace_scene traces it: every ray is carried into the instance's object space by
@@ -6,6 +7,8 @@ its world-to-object matrix (instance_traversal._to_object, the same float64 arit
 through the mesh tree in (tmin, tmax), here in packets. Rays the packets leave to single rays (mixed
 signs, zero components) are traced by trace_scene_rays itself, and so is every ray of any other scene
 or of a lazy tree, so results are trace_valid_rays' (see packet_traversal.py for exact ties in t).
+Packets find closest hits; occlusion takes whether there is one in (tmin, tmax), which is whether an
+any-hit query finds one.
 """
 import numpy as np
 from numba import njit, prange
@@ -22,16 +25,37 @@ def trace_camera_packets(scene, o, d, lo, hi, order, threads, ray_mask):
     """trace_valid_rays(scene, o, d, lo, hi, False, threads, ray_mask) for coherent rays; `order` groups
     the rays into packets (L ray indices a packet, -1 for none: packet_traversal.packet_order)."""
     scene = as_two_level(scene)
-    s = scene.arrays
-    if (scene.lazy_tree is not None or len(s.top_items) != 1 or s.top_axis[0] != LEAF
-            or s.visibility[s.top_items[0]] & ray_mask == 0):
+    if not packets_apply(scene, ray_mask):
         return trace_valid_rays(scene, o, d, lo, hi, False, threads, ray_mask)
+    return _trace_in_packets(scene, o, d, lo, hi, order, threads, ray_mask, False)
+
+
+def occluded_in_packets(scene, o, d, lo, hi, order, threads, ray_mask):
+    """(R,) bool: whether each ray meets something in (lo, hi), as trace_valid_rays' any-hit query
+    tells it, for coherent rays grouped by `order` as in trace_camera_packets."""
+    scene = as_two_level(scene)
+    if not packets_apply(scene, ray_mask):
+        return trace_valid_rays(scene, o, d, lo, hi, True, threads, ray_mask)[2] >= 0
+    return _trace_in_packets(scene, o, d, lo, hi, order, threads, ray_mask, True)[2] >= 0
+
+
+def packets_apply(scene, ray_mask):
+    """Whether rays of kind `ray_mask` through the TwoLevelScene are traced in packets: one eager mesh
+    instance visible to them in a one-leaf top level."""
+    s = scene.arrays
+    return (scene.lazy_tree is None and len(s.top_items) == 1 and s.top_axis[0] == LEAF
+            and s.visibility[s.top_items[0]] & ray_mask != 0)
+
+
+def _trace_in_packets(scene, o, d, lo, hi, order, threads, ray_mask, any_hit):
+    """Packets through the one instance (packets_apply), the rays they leave traced singly, those as
+    any-hit queries when `any_hit`: (t, instance, prim, u, v) as trace_valid_rays gives them."""
+    s = scene.arrays
     n, inst = len(o), int(s.top_items[0])
     t, u, v, prim = np.empty(n), np.empty(n), np.empty(n), np.empty(n, np.int32)
     single = np.zeros(n, np.uint8)
-    o_obj, d_obj = np.empty_like(o), np.empty_like(d)
     with thread_count(threads):
-        _rays_to_object(s.world_to_object[inst], o, d, o_obj, d_obj)
+        o_obj, d_obj = _in_object_space(s.world_to_object[inst], o, d)
         trace_packets(_mesh_tree(s, int(s.mesh_of[inst])), PacketRays(o_obj, d_obj, lo, hi, order),
                       PacketOutputs(t, prim, u, v, single))
         instance = np.where(prim >= 0, np.int32(inst), np.int32(-1))
@@ -39,9 +63,23 @@ def trace_camera_packets(scene, o, d, lo, hi, order, threads, ray_mask):
         if len(rest):
             out = [np.empty(len(rest)), np.empty(len(rest), np.int32), np.empty(len(rest), np.int32),
                    np.empty(len(rest)), np.empty(len(rest))]
-            trace_scene_rays(s, o[rest], d[rest], lo[rest], hi[rest], False, ray_mask, *out)
+            trace_scene_rays(s, o[rest], d[rest], lo[rest], hi[rest], any_hit, ray_mask, *out)
             t[rest], instance[rest], prim[rest], u[rest], v[rest] = out
     return t, instance, prim, u, v
+
+
+IDENTITY = np.eye(3, 4)
+
+
+def _in_object_space(w2o, o, d):
+    """The rays in the instance's object space. A flat KdTree's instance has the identity matrix, whose
+    product leaves every finite coordinate as it is (but -0.0, which becomes +0.0: zero components go to
+    single rays, which take the world rays), so its rays are used as they are: no pass, no copies."""
+    if np.array_equal(w2o, IDENTITY):
+        return o, d
+    o_obj, d_obj = np.empty_like(o), np.empty_like(d)
+    _rays_to_object(w2o, o, d, o_obj, d_obj)
+    return o_obj, d_obj
 
 
 def _mesh_tree(s, m):
