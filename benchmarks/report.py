@@ -24,7 +24,7 @@ ROOT = Path(__file__).resolve().parents[1]
 OUT_DIR = ROOT / "benchmarks" / "out"
 README = ROOT / "README.md"
 BENCH_DOC = ROOT / "docs" / "benchmarks.md"
-FILES = ("bench_core", "bench_seed000", "bench_render", "bench_first_render")
+FILES = ("bench_core", "bench_seed000", "bench_render", "bench_first_render", "bench_instances", "bench_big_mesh")
 FIGURE_SCENE = "suzanne-251k"
 
 
@@ -206,9 +206,36 @@ def first_use_block(data):
             + "; ".join(parts) + ".\n" + provenance(data["bench_first_render"]))
 
 
+def instances_block(data):
+    """docs/benchmarks.md: scattered instances end to end (first and static frame, peak memory) and the
+    10M-triangle meshes' build."""
+    if "bench_instances" not in data:
+        return missing("bench_instances", "python benchmarks/bench_instances.py --end-to-end")
+    r = data["bench_instances"]["results"]
+    rows = []
+    for key in sorted(r, key=lambda k: (int(k.split("_")[0]), k)):
+        f = r[key]
+        count, path = key.split("_")
+        rows.append([f"{int(count):,} ({path})", f"{f['first_total_ms'] / 1e3:.2f} s", ms(f["first_extract_ms"]),
+                     f"{ms(f['first_build_ms'])} (top {ms(f['first_top_build_ms'])}, "
+                     f"{f['first_top_references_per_instance']:.2f} refs/instance)", ms(f["first_trace_ms"]),
+                     ms(f["static_total_ms"]), f"{f['peak_mb'] / 1024:.2f} GB", str(f["runs"]),
+                     f"{sorted(f['load'])[len(f['load']) // 2]:.1f}"])
+    out = table(["instances (reading path)", "first frame", "extract", "build", "trace", "static frame",
+                 "peak memory", "runs", "load average"], rows) + "\n\n" + provenance(data["bench_instances"])
+    if "bench_big_mesh" in data:
+        b = data["bench_big_mesh"]["results"]
+        lines = [f"- {name}: {f['triangles']:,.0f} triangles, build {f['build_ms'] / 1e3:.2f} s (median of "
+                 f"{len(f['build_ms_runs'])}), {f['refs_per_triangle']:.2f} references and "
+                 f"{f['bytes_per_triangle']:.0f} peak bytes a triangle" for name, f in b.items()]
+        out += "\n\nOne 10M-triangle mesh, default build:\n" + "\n".join(lines) + "\n\n" + provenance(
+            data["bench_big_mesh"])
+    return out
+
+
 BLOCKS = {README: {"figures": figures_block, "first-use": first_use_block},
           BENCH_DOC: {"bench_core": bench_core_block, "bench_seed000": bench_seed000_block,
-                      "bench_render": bench_render_block}}
+                      "bench_render": bench_render_block, "bench_instances": instances_block}}
 
 
 def replace_block(text, name, body):
