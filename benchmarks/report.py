@@ -81,7 +81,11 @@ def figures_block(data):
         rows.append([f"kd-tree build (binned SAH), {sc['triangles']:,} triangles",
                      f"{ms(b['build_ms']['median'])} (SAH cost {b['sah_cost']:.2f})",
                      f"Embree BVH build {ms(emb['build_ms'])}" if emb else "-"])
-        for key, label, rays in (("camera_mrays", "camera rays", sc["camera_rays"]), ("ao_mrays", "AO rays", sc["ao_rays"])):
+        for key, label, rays in (("camera_mrays", "camera rays", sc["camera_rays"]),
+                                 ("camera_packets_mrays", "camera rays in packets (the renderer's camera pass)",
+                                  sc["camera_rays"]), ("ao_mrays", "AO rays", sc["ao_rays"])):
+            if key not in b:
+                continue
             ours = b[key]["median"]
             ref = b[key].get("reference")
             rows.append([f"{label}, {sc['threads']} threads ({rays:,} rays)", f"{ours:.2f} Mrays/s",

@@ -335,18 +335,7 @@ def _partition(items, boxes, start, end, axis, pos):
     Straddlers are cut at the plane. The caller leaves room for end - start more from `end`.
     Returns (n_right, n_left)."""
     w_right, w_left = start, end
+    out = (items, boxes, items, boxes)  # reference i is read before either write: the left one lands past end
     for i in range(start, end):
-        lo, hi = boxes[i, axis], boxes[i, axis + 3]
-        if lo < pos:
-            items[w_left] = items[i]
-            for k in range(6):
-                boxes[w_left, k] = boxes[i, k]
-            boxes[w_left, axis + 3] = min(hi, pos)
-            w_left += 1
-        if hi > pos or (lo == pos and hi == pos):
-            items[w_right] = items[i]
-            for k in range(6):
-                boxes[w_right, k] = boxes[i, k]
-            boxes[w_right, axis] = max(lo, pos)
-            w_right += 1
+        w_left, w_right = _write_sides(items, boxes, i, axis, pos, out, w_left, w_right)
     return w_right - start, w_left - end

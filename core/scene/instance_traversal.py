@@ -2,7 +2,8 @@
 in a top leaf, the mesh's own tree in object space through the one kd-tree traversal (trace_ray).
 
 The top level is walked with the traversal's own steps and stop rules; only the leaf test differs: an
-instance test, skipped for an instance that does not stop the ray's kind (ray_visibility.py). The ray
+instance test, skipped for an instance that does not stop the ray's kind (ray_visibility.py) or whose
+world box the ray misses (issue 50's "instance boxes tested before entering"). The ray
 is carried into object space by the world-to-object matrix without normalising the direction, so t is
 the same in both spaces and the best hit so far is passed on as tmax (Wald 2004, seed 000 §5).
 trace_scene is inlined into its callers (docs/choices.md#inline-the-scene-traversal).
@@ -41,7 +42,7 @@ def unowned_scene(s):
                        unowned(s.node_start), unowned(s.ref_start), unowned(s.tri_start), unowned(s.axis),
                        unowned(s.split), unowned(s.child), unowned(s.count), unowned(s.leaf_prims),
                        unowned(s.triangles), unowned(s.mesh_bounds), unowned(s.leaf_triangles),
-                       unowned(s.visibility))
+                       unowned(s.visibility), unowned(s.world_boxes))
 
 
 @njit(cache=True, inline="always")
@@ -75,6 +76,15 @@ def trace_instance(scene, inst, o, d, tmin, tmax, any_hit, scratch):
 
 
 @njit(cache=True, inline="always")
+def _misses_box(world_boxes, inst, o, d, inv, tmin, tmax):
+    """Whether the ray misses the instance's world box within (tmin, tmax): most instances of a top leaf
+    do (their boxes only overlap the leaf's cell), and this float64 clip of a box rounded outward, widened
+    as every clip is (traversal.clip_to_box), spares them the transform into object space."""
+    t0, t1 = clip_to_box(rows(world_boxes, inst, inst + 1)[0], o, d, inv, tmin, tmax)
+    return t0 > t1
+
+
+@njit(cache=True, inline="always")
 def trace_scene(scene, o, d, tmin, tmax, any_hit, ray_mask, scratch):
     """(t, instance, prim, u, v) of the closest hit in (tmin, tmax), or of any hit if `any_hit`, among
     the instances whose visibility shares a bit with `ray_mask` (the ray's kind, ray_visibility.py);
@@ -88,7 +98,8 @@ def trace_scene(scene, o, d, tmin, tmax, any_hit, ray_mask, scratch):
         return np.inf, -1, -1, 0.0, 0.0
     stack_node, stack_t, inv = scratch[0], scratch[1], scratch[2]
     t0, t1 = tmin, tmax
-    if not (items.shape[0] == 1 and axis[0] == LEAF):
+    flat = items.shape[0] == 1 and axis[0] == LEAF
+    if not flat:
         for k in range(3):
             inv[k] = 1.0 / d[k] if d[k] != 0.0 else 0.0
         t0, t1 = clip_to_box(root_box, o, d, inv, tmin, tmax)
@@ -105,6 +116,8 @@ def trace_scene(scene, o, d, tmin, tmax, any_hit, ray_mask, scratch):
         first = child[at(node)]
         for j in range(first, first + count[at(node)]):
             if visibility[items[j]] & ray_mask == 0:
+                continue
+            if not flat and _misses_box(scene.world_boxes, items[j], o, d, inv, tmin, best_t):
                 continue
             t, prim, u, v = trace_instance(scene, items[j], o, d, tmin, best_t, any_hit, scratch)
             if prim < NO_HIT:  # a lazy mesh tree's unbuilt subtree: the caller builds it and retraces

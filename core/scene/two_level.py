@@ -40,6 +40,7 @@ class SceneArrays(NamedTuple):
     bits. The mesh trees packed (pack_meshes): `node_start`, `ref_start`, `tri_start` ((M + 1,) int64
     offsets of each mesh's nodes, leaf references and triangles), `axis`, `split`, `child`, `count`,
     `leaf_prims`, `triangles`, `mesh_bounds` (M, 6) float32 and `leaf_triangles` (9, R) float32.
+    Last, `world_boxes` (I, 6) float32: each instance's world box, rounded outward (world_boxes()).
     """
 
     top_axis: np.ndarray
@@ -62,6 +63,7 @@ class SceneArrays(NamedTuple):
     mesh_bounds: np.ndarray
     leaf_triangles: np.ndarray
     visibility: np.ndarray
+    world_boxes: np.ndarray
 
 
 class TwoLevelScene:
@@ -93,7 +95,8 @@ class TwoLevelScene:
     @property
     def arrays(self):
         """The SceneArrays the instance traversal takes (see instance_traversal.trace_scene)."""
-        return SceneArrays(*self.top, self.world_to_object, self.mesh_of, *self._packed, self.visibility)
+        return SceneArrays(*self.top, self.world_to_object, self.mesh_of, *self._packed, self.visibility,
+                           self.world_boxes)
 
     @property
     def lazy_tree(self):
