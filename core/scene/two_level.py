@@ -40,7 +40,8 @@ class SceneArrays(NamedTuple):
     bits. The mesh trees packed (pack_meshes): `node_start`, `ref_start`, `tri_start` ((M + 1,) int64
     offsets of each mesh's nodes, leaf references and triangles), `axis`, `split`, `child`, `count`,
     `leaf_prims`, `triangles`, `mesh_bounds` (M, 6) float32 and `leaf_triangles` (9, R) float32.
-    Last, `world_boxes` (I, 6) float32: each instance's world box, rounded outward (world_boxes()).
+    Last, `world_boxes` (I, 6) float32: each instance's world box, rounded outward (world_boxes()), which
+    the traversal clips before entering an instance (docs/choices.md#instance-boxes-tested-before-entering).
     """
 
     top_axis: np.ndarray
