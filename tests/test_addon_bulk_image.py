@@ -34,3 +34,31 @@ def test_both_paths_render_the_same_image(addon, monkeypatch, seed):
     assert paths == ["bulk", "walk"]
     assert images[0][..., 3].any()
     assert np.array_equal(images[0], images[1])
+
+
+def test_moved_instances_rebuild_only_the_top_level(addon):
+    """Issue 50: instances moved by their points keep every mesh tree (only the top level is built
+    anew) and give the image a render from nothing gives."""
+    from types import SimpleNamespace
+
+    from kd_addon import tree_cache
+    from kd_addon.config import make_config
+    from kd_addon.pipeline import render_frame
+    from tests import bpy_scenes as scenes
+    from tests.addon_support import floor_scene
+
+    scene = floor_scene(48, 32)
+    host = scenes.add_gn_instancer("Host", count=40, offset=(0.25, 0.1, 0), cube_size=0.2, location=(-4, -2, 0.3))
+    config = make_config(SimpleNamespace(mode="ao", samples=2, resolution_percentage=100))
+    tree_cache.clear()
+    first = render_frame(scene, bpy.context.evaluated_depsgraph_get(), config)
+    line = next(n for n in host.modifiers["GN"].node_group.nodes if n.bl_idname == "GeometryNodeMeshLine")
+    line.inputs["Offset"].default_value = (0.2, 0.15, 0)
+    moved = render_frame(scene, bpy.context.evaluated_depsgraph_get(), config)
+    tree_cache.clear()
+    fresh = render_frame(scene, bpy.context.evaluated_depsgraph_get(), config)
+    assert extract_scene().path == "bulk"
+    assert (moved.objects_rebuilt, moved.objects_reused) == (0, first.objects_rebuilt)
+    assert not moved.image_reused and fresh.objects_reused == 0
+    assert not np.array_equal(first.image, moved.image)
+    assert np.array_equal(moved.image, fresh.image)
