@@ -22,7 +22,7 @@ from numba import njit, prange
 from ..geometry import extents, half_area
 from ..trace.layout import LEAF, NodeArrays
 from .merge import merge_tree
-from .pools import ensure_array, ensure_nodes, ensure_refs
+from .pools import append_leaf, ensure_nodes, ensure_refs
 from .sah import beats_leaf, cost_of_areas, valid_position
 from .split_binned import best_binned_split, bin_references, skip_stride
 from .subtree import child_room
@@ -190,12 +190,8 @@ def build_box_subtree(items, boxes, n_refs, root_box, root_depth, root_room, par
             if n_left == n and n_right == n:  # separates nothing: the right copy at start..end is the leaf
                 split_axis = NO_SPLIT
         if split_axis == NO_SPLIT:
-            if n_leaf + n > leaf_items.shape[0]:
-                leaf_items = ensure_array(leaf_items, n_leaf, n_leaf + n)
-            for i in range(n):
-                leaf_items[n_leaf + i] = items[start + i]
             axis[node], split[node], child[node], count[node] = LEAF, 0.0, n_leaf, n
-            n_leaf += n
+            leaf_items, n_leaf = append_leaf(leaf_items, n_leaf, items, start, n)
             continue
         if n_nodes + 2 > axis.shape[0]:
             axis, split, child, count = ensure_nodes(axis, split, child, count, n_nodes, n_nodes + 2)

@@ -61,3 +61,14 @@ def ensure_floats(values, need):
     if need <= values.shape[0]:
         return values
     return np.empty(new_capacity(values.shape[0], need), np.float32)
+
+
+@njit(cache=True, inline="always")
+def append_leaf(leaf_refs, n_leaf, refs, start, n):
+    """refs[start:start + n] appended to a builder's leaf references at n_leaf, the array grown only
+    when full (binding an array costs reference counting); returns (leaf_refs, n_leaf + n)."""
+    if n_leaf + n > leaf_refs.shape[0]:
+        leaf_refs = ensure_array(leaf_refs, n_leaf, n_leaf + n)
+    for k in range(n):
+        leaf_refs[n_leaf + k] = refs[start + k]
+    return leaf_refs, n_leaf + n

@@ -22,7 +22,7 @@ from .leaf_triangles import BYTES_PER_REFERENCE as LEAF_COPY_BYTES
 from ..memory import MIN_SUBTREE_BUDGET, MemoryLimitError
 from .options import EXACT
 from .partition import new_split_scratch, partition_in_place
-from .pools import ensure_array, ensure_floats, ensure_nodes, ensure_refs
+from .pools import append_leaf, ensure_array, ensure_floats, ensure_nodes, ensure_refs
 from .split_binned import new_sweep_scratch
 from .split_choice import NO_SPLIT, choose_split
 
@@ -87,12 +87,8 @@ def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, root_room, p
             if n_left == n and n_right == n:  # separates nothing (module docstring): the right child's
                 split_axis = NO_SPLIT  # copy, at start..end like the node's own references, is the leaf
         if split_axis == NO_SPLIT:
-            if n_leaf_prims + n > leaf_prims.shape[0]:
-                leaf_prims = ensure_array(leaf_prims, n_leaf_prims, n_leaf_prims + n)
-            for k in range(n):
-                leaf_prims[n_leaf_prims + k] = prims[start + k]
             axis[node], split[node], child[node], count[node] = LEAF, 0.0, n_leaf_prims, n
-            n_leaf_prims += n
+            leaf_prims, n_leaf_prims = append_leaf(leaf_prims, n_leaf_prims, prims, start, n)
             continue
         if n_nodes + 2 > axis.shape[0]:
             axis, split, child, count = ensure_nodes(axis, split, child, count, n_nodes, n_nodes + 2)
