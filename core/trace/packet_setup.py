@@ -43,7 +43,7 @@ def setup_packet(root_box, rays_in, lanes, sc, out, box_fits):
     d = (_gather(rays_in.directions, lanes, fill, 0), _gather(rays_in.directions, lanes, fill, 1),
          _gather(rays_in.directions, lanes, fill, 2))
     signs, joins = _signs_and_joins(o, d, valid if box_fits else 0)
-    _mark_lanes(lanes, valid & ~joins, out.single)
+    leave_to_single_rays(lanes, valid & ~joins, out.single)
     inv = (S.reciprocal(d[0]), S.reciprocal(d[1]), S.reciprocal(d[2]))
     tmin, tmax = _gather_1d(rays_in.tmin, lanes, fill), _gather_1d(rays_in.tmax, lanes, fill)
     t0, t1 = _clip_to_box(root_box, o, inv, tmin, tmax)
@@ -181,7 +181,8 @@ def _pick(k, v):
 
 
 @njit(cache=True, inline="always")
-def _mark_lanes(lanes, bits, single):
+def leave_to_single_rays(lanes, bits, single):
+    """Mark the rays of lanes `bits` for the single-ray kernel (single[ray] = 1)."""
     while bits != 0:
         l = S.count_trailing_zeros(bits)
         bits &= bits - 1

@@ -37,7 +37,8 @@ from .layout import LEAF, TreeArrays
 from .queries import Hits, intersect
 from ..jit.threads import thread_count
 from .packet_leaf import BEST, ROWS, leaf_test
-from .packet_setup import C32, E32, INV32, O32, OUTSIDE_FLOAT32, ROWS32, T0, T1, setup_packet
+from .packet_setup import (C32, E32, INV32, O32, OUTSIDE_FLOAT32, ROWS32, T0, T1, leave_to_single_rays,
+                           setup_packet)
 from .traversal import STACK_SIZE, block_range, interleaved_blocks, trace_rays
 
 L = S.LANES
@@ -169,7 +170,7 @@ def _trace_packet_block(tree, rays_in, out, start, stop):
         if bits == 0:
             continue
         if _traverse(views, sc, mode, signs, bits, stack):
-            _leave_to_single_rays(lanes, bits, out.single)
+            leave_to_single_rays(lanes, bits, out.single)
         else:
             _write(lanes, bits, sc, out)
 
@@ -239,13 +240,6 @@ def _pop(rays, stack_node, stack_bits, stack_t, sp):
         if m != 0:
             return stack_node[at(sp)], m, t0, S.load(stack_t, sp * 2 * L + L), sp
     return -1, 0, S.splat_f32(0.0), S.splat_f32(0.0), 0
-
-
-@njit(cache=True, inline="always")
-def _leave_to_single_rays(lanes, bits, single):
-    for l in range(L):
-        if (bits >> l) & 1:
-            single[lanes[l]] = 1
 
 
 @njit(cache=True, inline="always")
