@@ -8,6 +8,7 @@ Straddlers are clipped to each child (clipping.py); a side where the clipped tri
 import numpy as np
 from numba import njit
 
+from ..trace.array_views import at
 from .clipping import clip_triangle, new_clip_scratch, split_triangle_inside, triangle_in_box
 
 LEFT, RIGHT, BOTH = 1, 2, 3
@@ -80,23 +81,24 @@ def partition_in_place(tris, prims, boxes, start, end, axis, pos, planar_left, c
     box_l, box_r = scratch[3], scratch[4]
     w_right = start
     w_left = end
-    for i in range(start, end):
+    for j in range(start, end):
+        i = at(j)  # unsigned: no negative-index fix-up at each access (array_views.at)
         side = side_of(boxes, i, axis, pos, planar_left)
         if side == LEFT:
-            _copy_ref(prims, boxes, i, w_left)
+            _copy_ref(prims, boxes, i, at(w_left))
             w_left += 1
             continue
         if side == RIGHT:
-            _copy_ref(prims, boxes, i, w_right)
+            _copy_ref(prims, boxes, i, at(w_right))
             w_right += 1
             continue
         prim = prims[i]
         side = split_reference(tris, prim, boxes, i, axis, pos, clip, scratch, box_l, box_r)
         if side & LEFT:
-            _put_ref(prims, boxes, w_left, prim, box_l)
+            _put_ref(prims, boxes, at(w_left), prim, box_l)
             w_left += 1
         if side & RIGHT:
-            _put_ref(prims, boxes, w_right, prim, box_r)
+            _put_ref(prims, boxes, at(w_right), prim, box_r)
             w_right += 1
     n_right = w_right - start
     n_left = w_left - end
@@ -114,6 +116,9 @@ def _put_ref(prims, boxes, dst, prim, box):
 
 @njit(cache=True, inline="always")
 def _copy_ref(prims, boxes, src, dst):
+    """Reference src to dst, the box read whole before it is written: rows of one array may overlap
+    for all the compiler knows, so interleaved element copies stay scalar, while this becomes vector
+    loads and stores."""
+    b0, b1, b2, b3, b4, b5 = boxes[src, 0], boxes[src, 1], boxes[src, 2], boxes[src, 3], boxes[src, 4], boxes[src, 5]
     prims[dst] = prims[src]
-    for k in range(6):
-        boxes[dst, k] = boxes[src, k]
+    boxes[dst, 0], boxes[dst, 1], boxes[dst, 2], boxes[dst, 3], boxes[dst, 4], boxes[dst, 5] = b0, b1, b2, b3, b4, b5
