@@ -66,8 +66,9 @@ def split_reference(tris, prim, boxes, row, axis, pos, clip, scratch, out_left, 
 @njit(cache=True, inline="always")
 def _cut_parts(boxes, row, axis, pos, out_left, out_right):
     """out_left / out_right = box boxes[row] cut at the plane: its parts left and right of it."""
-    for k in range(6):
-        out_left[k] = out_right[k] = boxes[row, k]
+    b0, b1, b2, b3, b4, b5 = boxes[row, 0], boxes[row, 1], boxes[row, 2], boxes[row, 3], boxes[row, 4], boxes[row, 5]
+    out_left[0], out_left[1], out_left[2], out_left[3], out_left[4], out_left[5] = b0, b1, b2, b3, b4, b5
+    out_right[0], out_right[1], out_right[2], out_right[3], out_right[4], out_right[5] = b0, b1, b2, b3, b4, b5
     out_left[axis + 3] = pos
     out_right[axis] = pos
 
@@ -109,9 +110,10 @@ def partition_in_place(tris, prims, boxes, start, end, axis, pos, planar_left, c
 
 @njit(cache=True, inline="always")
 def _put_ref(prims, boxes, dst, prim, box):
+    """Reference `prim` with `box` at dst, the box read whole first (see _copy_ref)."""
+    b0, b1, b2, b3, b4, b5 = box[0], box[1], box[2], box[3], box[4], box[5]
     prims[dst] = prim
-    for k in range(6):
-        boxes[dst, k] = box[k]
+    boxes[dst, 0], boxes[dst, 1], boxes[dst, 2], boxes[dst, 3], boxes[dst, 4], boxes[dst, 5] = b0, b1, b2, b3, b4, b5
 
 
 @njit(cache=True, inline="always")
