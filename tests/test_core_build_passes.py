@@ -1,11 +1,15 @@
 """The per-node passes of the subtree build against independent references: the snapping passes
-(float32) against float64 NumPy, and the clipped boxes' outward rounding against NumPy's nextafter."""
+(float32) against float64 NumPy, the clipped boxes' outward rounding against NumPy's nextafter, the
+partition of one-sided references against NumPy, and the subtree kernel's unowned views kept valid."""
 import numpy as np
 import pytest
 from numba import njit
 
 from core.build.clipping import round_down, round_up
+from core.build.partition import new_split_scratch, partition_in_place
 from core.build.split_binned import _nearest_boundaries
+from core.build.subtree import _hold
+from core.trace.array_views import unowned
 
 
 def _nearest_reference(boxes, axis, pos, step):
@@ -71,3 +75,59 @@ def test_outward_rounding_matches_nextafter_bit_for_bit():
     assert np.array_equal(got_down.view(np.int32), want_down.view(np.int32))
     assert np.array_equal(got_up.view(np.int32), want_up.view(np.int32))
     assert (got_down.astype(np.float64) <= x).all() and (got_up.astype(np.float64) >= x).all()
+
+
+@njit
+def _partition(tris, prims, boxes, start, end, axis, pos, planar_left):
+    return partition_in_place(tris, prims, boxes, start, end, axis, pos, planar_left, False, new_split_scratch())
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_partition_matches_a_numpy_reference(seed):
+    """Right references compacted in order at start, left ones after them, straddlers (unclipped) on both
+    sides and planar ones on the chosen side, each with its own index and box, the rows before start
+    untouched: the vector row copies and unsigned indices against NumPy."""
+    rng = np.random.default_rng(seed)
+    n, start, axis = 500, 37, seed % 3
+    lo = rng.integers(0, 20, (n, 3)).astype(np.float32)
+    boxes = np.concatenate([lo, lo + rng.integers(0, 3, (n, 3))], axis=1).astype(np.float32)
+    pos, planar_left = np.float32(10.0), seed % 2 == 0
+    pool_prims = np.full(start + 2 * n + 1, -1, np.int32)
+    pool_boxes = np.full((start + 2 * n + 1, 6), -1.0, np.float32)
+    prims = rng.permutation(n).astype(np.int32)
+    pool_prims[start:start + n], pool_boxes[start:start + n] = prims, boxes
+    before = pool_boxes[:start].copy()
+    n_right, n_left = _partition(np.zeros((n, 3, 3), np.float32), pool_prims, pool_boxes, start, start + n,
+                                 axis, pos, planar_left)
+    a, b = boxes[:, axis], boxes[:, axis + 3]
+    planar = (a == b) & (a == pos)
+    goes_left = np.where(planar, planar_left, a < pos)
+    goes_right = np.where(planar, not planar_left, b > pos)
+    right, left = np.flatnonzero(goes_right), np.flatnonzero(goes_left)
+    assert (n_right, n_left) == (len(right), len(left))
+    cut = boxes.copy()
+    sides = ((start, right, axis, np.maximum), (start + n_right, left, axis + 3, np.minimum))
+    for first, chosen, column, bound in sides:
+        expected = cut[chosen]
+        expected[:, column] = bound(expected[:, column], pos)  # a straddler's part of its box
+        np.testing.assert_array_equal(pool_prims[first:first + len(chosen)], prims[chosen])
+        np.testing.assert_array_equal(pool_boxes[first:first + len(chosen)], expected)
+    np.testing.assert_array_equal(pool_boxes[:start], before)
+
+
+@njit
+def _view_after_more_allocations(keep_owner):
+    owner = np.full(4096, 1.0)
+    second = np.empty(1, np.float64)
+    view = unowned(owner)
+    scratch = np.full(4096, 7.0)  # would reuse the owner's memory were the owner freed at its last use
+    value = view[100] + scratch[0] * 0.0
+    if keep_owner:
+        _hold(owner, second)
+    return value
+
+
+def test_hold_keeps_the_owner_of_an_unowned_view():
+    """The subtree kernel's unowned views stay valid while their owners are named after its loop
+    (subtree._hold): Numba frees an array after its last use otherwise."""
+    assert _view_after_more_allocations(True) == 1.0

@@ -8,6 +8,7 @@ Straddlers are clipped to each child (clipping.py); a side where the clipped tri
 import numpy as np
 from numba import njit
 
+from ..trace.array_views import at
 from .clipping import clip_triangle, new_clip_scratch, split_triangle_inside, triangle_in_box
 
 LEFT, RIGHT, BOTH = 1, 2, 3
@@ -65,8 +66,9 @@ def split_reference(tris, prim, boxes, row, axis, pos, clip, scratch, out_left, 
 @njit(cache=True, inline="always")
 def _cut_parts(boxes, row, axis, pos, out_left, out_right):
     """out_left / out_right = box boxes[row] cut at the plane: its parts left and right of it."""
-    for k in range(6):
-        out_left[k] = out_right[k] = boxes[row, k]
+    b0, b1, b2, b3, b4, b5 = boxes[row, 0], boxes[row, 1], boxes[row, 2], boxes[row, 3], boxes[row, 4], boxes[row, 5]
+    out_left[0], out_left[1], out_left[2], out_left[3], out_left[4], out_left[5] = b0, b1, b2, b3, b4, b5
+    out_right[0], out_right[1], out_right[2], out_right[3], out_right[4], out_right[5] = b0, b1, b2, b3, b4, b5
     out_left[axis + 3] = pos
     out_right[axis] = pos
 
@@ -80,23 +82,24 @@ def partition_in_place(tris, prims, boxes, start, end, axis, pos, planar_left, c
     box_l, box_r = scratch[3], scratch[4]
     w_right = start
     w_left = end
-    for i in range(start, end):
+    for j in range(start, end):
+        i = at(j)  # unsigned: no negative-index fix-up at each access (array_views.at)
         side = side_of(boxes, i, axis, pos, planar_left)
         if side == LEFT:
-            _copy_ref(prims, boxes, i, w_left)
+            _copy_ref(prims, boxes, i, at(w_left))
             w_left += 1
             continue
         if side == RIGHT:
-            _copy_ref(prims, boxes, i, w_right)
+            _copy_ref(prims, boxes, i, at(w_right))
             w_right += 1
             continue
         prim = prims[i]
         side = split_reference(tris, prim, boxes, i, axis, pos, clip, scratch, box_l, box_r)
         if side & LEFT:
-            _put_ref(prims, boxes, w_left, prim, box_l)
+            _put_ref(prims, boxes, at(w_left), prim, box_l)
             w_left += 1
         if side & RIGHT:
-            _put_ref(prims, boxes, w_right, prim, box_r)
+            _put_ref(prims, boxes, at(w_right), prim, box_r)
             w_right += 1
     n_right = w_right - start
     n_left = w_left - end
@@ -107,13 +110,17 @@ def partition_in_place(tris, prims, boxes, start, end, axis, pos, planar_left, c
 
 @njit(cache=True, inline="always")
 def _put_ref(prims, boxes, dst, prim, box):
+    """Reference `prim` with `box` at dst, the box read whole first (see _copy_ref)."""
+    b0, b1, b2, b3, b4, b5 = box[0], box[1], box[2], box[3], box[4], box[5]
     prims[dst] = prim
-    for k in range(6):
-        boxes[dst, k] = box[k]
+    boxes[dst, 0], boxes[dst, 1], boxes[dst, 2], boxes[dst, 3], boxes[dst, 4], boxes[dst, 5] = b0, b1, b2, b3, b4, b5
 
 
 @njit(cache=True, inline="always")
 def _copy_ref(prims, boxes, src, dst):
+    """Reference src to dst, the box read whole before it is written: rows of one array may overlap
+    for all the compiler knows, so interleaved element copies stay scalar, while this becomes vector
+    loads and stores."""
+    b0, b1, b2, b3, b4, b5 = boxes[src, 0], boxes[src, 1], boxes[src, 2], boxes[src, 3], boxes[src, 4], boxes[src, 5]
     prims[dst] = prims[src]
-    for k in range(6):
-        boxes[dst, k] = boxes[src, k]
+    boxes[dst, 0], boxes[dst, 1], boxes[dst, 2], boxes[dst, 3], boxes[dst, 4], boxes[dst, 5] = b0, b1, b2, b3, b4, b5

@@ -10,13 +10,16 @@ params.duplication_budget: each split divides it by its duplication (n_left + n_
 below 1 makes a leaf, so leaves hold at most twice the budget's references. A split that leaves every
 reference in both children separates nothing: the node becomes a leaf instead.
 The per-node functions it calls (split search, partition, pool checks) are inlined into it: a call of a
-compiled function counts every array argument's references atomically (docs/choices.md#inlined-per-node-calls).
+compiled function counts every array argument's references atomically (docs/choices.md#inlined-per-node-calls),
+and so does each binding of an inlined function's array argument, so they get unowned views, whose
+counts are no-ops (docs/choices.md#unowned-views-in-the-subtree-kernel).
 """
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 from numba import njit
 
+from ..trace.array_views import unowned
 from ..trace.layout import LEAF, UNBUILT
 from .leaf_triangles import BYTES_PER_REFERENCE as LEAF_COPY_BYTES
 from ..memory import MIN_SUBTREE_BUDGET, MemoryLimitError
@@ -47,6 +50,10 @@ def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, root_room, p
     split_scratch = new_split_scratch()
 
     prims, boxes = ensure_refs(prims, boxes, n_refs, 2 * n_refs + 64)
+    # What the inlined per-node code takes, as unowned views (module docstring); their owners stay
+    # bound to the end (_hold).
+    prims_v, boxes_v, tris_v, box_v = unowned(prims), unowned(boxes), unowned(tris), unowned(box)
+    bins_v, split_v = _unowned_scratch(bins, split_scratch)
     axis, split, child, count = ensure_nodes(np.empty(0, np.int8), np.empty(0, np.float32),
                                              np.empty(0, np.int32), np.empty(0, np.int32), 0,
                                              max(16, n_refs // 2))
@@ -75,20 +82,21 @@ def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, root_room, p
         # The pools are re-bound only when they grow: binding an array costs reference counting.
         if start + 2 * n + 1 > prims.shape[0]:
             prims, boxes = ensure_refs(prims, boxes, end, start + 2 * n + 1)
+            prims_v, boxes_v = unowned(prims), unowned(boxes)
         if params.builder == EXACT or n <= params.exact_below:
             scratch = ensure_floats(scratch, 3 * n)
         split_axis, pos, planar_left = NO_SPLIT, np.float32(0.0), False
         if room >= 1.0:  # else no room left for more references (module docstring)
-            split_axis, pos, planar_left = choose_split(boxes, start, end, box, depth, params, bins, scratch)
+            split_axis, pos, planar_left = choose_split(boxes_v, start, end, box_v, depth, params, bins_v, scratch)
         n_right = n_left = 0
         if split_axis != NO_SPLIT:
-            n_right, n_left = partition_in_place(tris, prims, boxes, start, end, split_axis, pos,
-                                                 planar_left, params.clip, split_scratch)
+            n_right, n_left = partition_in_place(tris_v, prims_v, boxes_v, start, end, split_axis, pos,
+                                                 planar_left, params.clip, split_v)
             if n_left == n and n_right == n:  # separates nothing (module docstring): the right child's
                 split_axis = NO_SPLIT  # copy, at start..end like the node's own references, is the leaf
         if split_axis == NO_SPLIT:
             axis[node], split[node], child[node], count[node] = LEAF, 0.0, n_leaf_prims, n
-            leaf_prims, n_leaf_prims = append_leaf(leaf_prims, n_leaf_prims, prims, start, n)
+            leaf_prims, n_leaf_prims = append_leaf(leaf_prims, n_leaf_prims, prims_v, start, n)
             continue
         if n_nodes + 2 > axis.shape[0]:
             axis, split, child, count = ensure_nodes(axis, split, child, count, n_nodes, n_nodes + 2)
@@ -104,6 +112,7 @@ def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, root_room, p
         sp = _push(stack_node, stack_range, stack_depth, sp, left + 1, start, middle, depth + 1)
         _cut_box(stack_box, sp, box, split_axis, pos, True)
         sp = _push(stack_node, stack_range, stack_depth, sp, left, middle, middle + n_left, depth + 1)
+    _hold(bins, split_scratch)
     d_node, d_start, d_depth, d_box, d_prims, d_boxes, d_room = deferred
     n_deferred_refs = d_start[n_deferred]
     return (axis[:n_nodes].copy(), split[:n_nodes].copy(), child[:n_nodes].copy(),
@@ -111,6 +120,21 @@ def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, root_room, p
             d_node[:n_deferred].copy(), d_start[:n_deferred + 1].copy(), d_depth[:n_deferred].copy(),
             d_box[:n_deferred].copy(), d_prims[:n_deferred_refs].copy(), d_boxes[:n_deferred_refs].copy(),
             d_room[:n_deferred].copy())
+
+
+@njit(cache=True, inline="always")
+def _unowned_scratch(bins, split_scratch):
+    """The thread's bin counters, sweep buffers and split scratch as unowned views (array_views.py)."""
+    costs, counts = bins[2]
+    poly_a, poly_b, region, box_l, box_r = split_scratch
+    return ((unowned(bins[0]), unowned(bins[1]), (unowned(costs), unowned(counts))),
+            (unowned(poly_a), unowned(poly_b), unowned(region), unowned(box_l), unowned(box_r)))
+
+
+@njit(cache=True, inline="always")
+def _hold(bins, split_scratch):
+    """Nothing, but a use: Numba frees an array after its last use in a function, and an unowned view
+    does not keep its owner alive, so the owners of the kernel's views are named after its loop."""
 
 
 @njit(cache=True, inline="always")
