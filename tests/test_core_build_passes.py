@@ -8,8 +8,7 @@ from numba import njit
 from core.build.clipping import round_down, round_up
 from core.build.partition import new_split_scratch, partition_in_place
 from core.build.split_binned import _nearest_boundaries
-from core.build.subtree import _hold
-from core.trace.array_views import unowned
+from core.trace.array_views import keep_alive, unowned
 
 
 def _nearest_reference(boxes, axis, pos, step):
@@ -123,11 +122,11 @@ def _view_after_more_allocations(keep_owner):
     scratch = np.full(4096, 7.0)  # would reuse the owner's memory were the owner freed at its last use
     value = view[100] + scratch[0] * 0.0
     if keep_owner:
-        _hold(owner, second)
+        keep_alive((owner, second))
     return value
 
 
-def test_hold_keeps_the_owner_of_an_unowned_view():
+def test_keep_alive_keeps_the_owner_of_an_unowned_view():
     """The subtree kernel's unowned views stay valid while their owners are named after its loop
-    (subtree._hold): Numba frees an array after its last use otherwise."""
+    (array_views.keep_alive): Numba frees an array after its last use otherwise."""
     assert _view_after_more_allocations(True) == 1.0

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import core
-from core.trace.packet_traversal import L, intersect_packets, packet_order
+from core.trace.packet_traversal import L, TILE_SHAPE, intersect_packets, packet_order
 from tests.core_helpers import BUILDERS, oracle_once, random_rays
 from tests.meshes import icosphere, lattice, mesh_triangles, random_soup, subdivided_cube
 from tests.oracles import brute_watertight
@@ -44,9 +44,10 @@ def assert_same_as_intersect(tree, o, d, width, tmin=0.0, tmax=np.inf):
 
 def test_packet_order_tiles_the_image():
     order = packet_order(10, 5)
-    assert len(order) == 3 * 3 * L
+    tw, th = TILE_SHAPE
+    assert len(order) == -(-10 // tw) * -(-5 // th) * L
     np.testing.assert_array_equal(np.sort(order[order >= 0]), np.arange(50))
-    np.testing.assert_array_equal(order[:L], [0, 1, 2, 3, 10, 11, 12, 13])
+    np.testing.assert_array_equal(order[:L], [y * 10 + x for y in range(th) for x in range(tw)])
     with pytest.raises(ValueError):
         packet_order(10, 5, (3, 3))
 

@@ -21,7 +21,7 @@ def operands(dtype, n=16 * L, seed=0):
     a = (rng.normal(size=n) * 10.0 ** rng.integers(-3, 4, n)).astype(dtype)
     b = (rng.normal(size=n) * 10.0 ** rng.integers(-3, 4, n)).astype(dtype)
     special = np.array([0.0, -0.0, np.inf, -np.inf, 1.0, -1.0, np.finfo(dtype).tiny / 4, 3.0], dtype)
-    a[:L], b[:L] = special, special[::-1]
+    a[:L], b[:L] = np.resize(special, L), np.resize(special[::-1], L)
     tie = rng.random(n) < 0.25
     b[tie] = a[tie]
     a[L:2 * L], b[L:2 * L] = np.array([0.0, -0.0] * (L // 2), dtype), np.array([-0.0, 0.0] * (L // 2), dtype)

@@ -19,7 +19,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 from numba import njit
 
-from ..trace.array_views import unowned
+from ..trace.array_views import keep_alive, unowned
 from ..trace.layout import LEAF, UNBUILT
 from .leaf_triangles import BYTES_PER_REFERENCE as LEAF_COPY_BYTES
 from ..memory import MIN_SUBTREE_BUDGET, MemoryLimitError
@@ -51,7 +51,7 @@ def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, root_room, p
 
     prims, boxes = ensure_refs(prims, boxes, n_refs, 2 * n_refs + 64)
     # What the inlined per-node code takes, as unowned views (module docstring); their owners stay
-    # bound to the end (_hold).
+    # bound to the end (keep_alive).
     prims_v, boxes_v, tris_v, box_v = unowned(prims), unowned(boxes), unowned(tris), unowned(box)
     bins_v, split_v = _unowned_scratch(bins, split_scratch)
     axis, split, child, count = ensure_nodes(np.empty(0, np.int8), np.empty(0, np.float32),
@@ -112,7 +112,7 @@ def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, root_room, p
         sp = _push(stack_node, stack_range, stack_depth, sp, left + 1, start, middle, depth + 1)
         _cut_box(stack_box, sp, box, split_axis, pos, True)
         sp = _push(stack_node, stack_range, stack_depth, sp, left, middle, middle + n_left, depth + 1)
-    _hold(bins, split_scratch)
+    keep_alive((bins, split_scratch))
     d_node, d_start, d_depth, d_box, d_prims, d_boxes, d_room = deferred
     n_deferred_refs = d_start[n_deferred]
     return (axis[:n_nodes].copy(), split[:n_nodes].copy(), child[:n_nodes].copy(),
@@ -129,12 +129,6 @@ def _unowned_scratch(bins, split_scratch):
     poly_a, poly_b, region, box_l, box_r = split_scratch
     return ((unowned(bins[0]), unowned(bins[1]), (unowned(costs), unowned(counts))),
             (unowned(poly_a), unowned(poly_b), unowned(region), unowned(box_l), unowned(box_r)))
-
-
-@njit(cache=True, inline="always")
-def _hold(bins, split_scratch):
-    """Nothing, but a use: Numba frees an array after its last use in a function, and an unowned view
-    does not keep its owner alive, so the owners of the kernel's views are named after its loop."""
 
 
 @njit(cache=True, inline="always")

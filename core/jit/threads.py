@@ -11,6 +11,9 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import numba  # noqa: E402
 import numpy as np  # noqa: E402
+from llvmlite import ir  # noqa: E402
+from numba.core import cgutils, types  # noqa: E402
+from numba.extending import intrinsic  # noqa: E402
 
 
 @contextmanager
@@ -26,3 +29,19 @@ def thread_count(threads):
         yield wanted
     finally:
         numba.set_num_threads(previous)
+
+
+@intrinsic
+def kernel_threads(typingctx):
+    """The Numba thread count a kernel runs with, read inside compiled code (the kernel's prange splits
+    by it). Calls the threading layer's `get_num_threads` symbol as Numba's own parallel loops do:
+    numba.get_num_threads() in a kernel reads it through a ctypes pointer, which Numba cannot cache."""
+    from numba.np.ufunc.parallel import _launch_threads
+    _launch_threads()  # registers the symbol with LLVM
+
+    def codegen(context, builder, signature, args):
+        i64 = ir.IntType(64)  # the type Numba's parfor lowering declares it with, in the same module
+        fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(i64, []), "get_num_threads")
+        return builder.sext(builder.trunc(builder.call(fn, []), ir.IntType(32)), i64)  # the C function's int
+
+    return types.int64(), codegen

@@ -166,9 +166,9 @@ def pooled_variance(valid, pos, nrm, foot, moments, height, width, sigma_normal,
     sum of their squares, sample count)."""
     s1, s2, cnt = moments
     min_cos = 1.0 - 1.0 / sigma_normal  # sigma_n (1 - c) <= -sigma_n log(c) <= 1
-    iterations, per_band = interleaved_blocks(height, ROWS_PER_TASK)  # balanced: see ROWS_PER_TASK
+    iterations, per_band, run = interleaved_blocks(height, ROWS_PER_TASK)  # balanced: see ROWS_PER_TASK
     for task in prange(iterations):
-        first, last = block_range(task, per_band, height, ROWS_PER_TASK)
+        first, last = block_range(task, per_band, run, height, ROWS_PER_TASK)
         for y in range(first, last):
             for x in range(width):
                 p = y * width + x
@@ -240,9 +240,9 @@ def atrous_pass(valid, rec, foot, col, height, width, step, sigma_luminance, sig
             if i != 2 or j != 2:
                 inv_r[j * 5 + i] = 1.0 / (step * np.sqrt(float((i - 2) * (i - 2) + (j - 2) * (j - 2))))
     min_cos = np.exp(-_CUTOFF / sigma_normal)  # below it, c ** sigma_normal < exp(-_CUTOFF)
-    iterations, per_band = interleaved_blocks(height, ROWS_PER_TASK)  # balanced: see ROWS_PER_TASK
+    iterations, per_band, run = interleaved_blocks(height, ROWS_PER_TASK)  # balanced: see ROWS_PER_TASK
     for task in prange(iterations):
-        first, last = block_range(task, per_band, height, ROWS_PER_TASK)
+        first, last = block_range(task, per_band, run, height, ROWS_PER_TASK)
         for y in range(first, last):
             for x in range(width):
                 p = y * width + x

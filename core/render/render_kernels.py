@@ -91,9 +91,9 @@ def add_samples(scene, frames, active, batch, lights, acc, status, memo):
     and the RayMemo `memo`. status[a] is NO_HIT when pixel active[a] got its samples, or the suspended
     prim of the unbuilt subtree that stopped it (lazy trees; its sums untouched)."""
     n = active.shape[0]
-    iterations, per_band = interleaved_blocks(n, PIXELS_PER_TASK)  # balances image regions (traversal.py)
+    iterations, per_band, run = interleaved_blocks(n, PIXELS_PER_TASK)  # balances image regions (traversal.py)
     for i in prange(iterations):
-        start, stop = block_range(i, per_band, n, PIXELS_PER_TASK)
+        start, stop = block_range(i, per_band, run, n, PIXELS_PER_TASK)
         _sample_pixels(scene, frames, active, start, stop, batch, lights, acc, status, memo)
 
 
@@ -270,38 +270,58 @@ def _keep_memo_bit(bits, i, bit, occluded):
 
 @njit(cache=True, parallel=True)
 def hard_shadow_rays(frames, lights, k, dim1, directions, tmax, lit):
-    """The shadow ray of light k, one without extent (every sample's ray is the same), from each pixel
+    """The shadow ray of light k, one without extent (every sample's is the same), from each pixel
     of the PixelFrames `frames`, made as the sampling kernel makes it (_ray_of_use): its direction into
     directions (M, 3), tmax (M,), and lit (M,) bool, whether the pixel faces the light inside its mask
     (else it takes no ray). The rays start at frames.starts."""
-    for i in prange(frames.points.shape[0]):
-        lit[i] = _hard_shadow_ray(frames, lights, k, dim1, directions, tmax, i)
+    n = frames.points.shape[0]
+    for b in prange((n + PIXELS_PER_TASK - 1) // PIXELS_PER_TASK):
+        _hard_shadow_block(frames, lights, k, dim1, directions, tmax, lit, b * PIXELS_PER_TASK,
+                           min(n, (b + 1) * PIXELS_PER_TASK))
 
 
 @njit(cache=True)
-def _hard_shadow_ray(frames, lights, k, dim1, directions, tmax, i):
-    """hard_shadow_rays' ray of pixel i (kept out of the parallel loop body, as _sample_pixels)."""
-    tmax[i], weight = _ray_of_use(USE_AO + 1 + k, lights, frames.points[i], frames.normals[i], 0.0, 0, 0,
-                                  (0, 0, 0, 0), 0, dim1, directions[i])
-    return weight > 0.0
+def _hard_shadow_block(frames, lights, k, dim1, directions, tmax, lit, start, stop):
+    """hard_shadow_rays' rays of pixels start..stop-1, with unowned views of the pixels' rows (a view per
+    pixel would count references on one shared counter from every thread: array_views.py)."""
+    points, normals, directions, lights = (unowned(frames.points), unowned(frames.normals), unowned(directions),
+                                           unowned(lights))
+    for i in range(start, stop):
+        tmax[i], weight = _ray_of_use(USE_AO + 1 + k, lights, rows(points, i, i + 1)[0], rows(normals, i, i + 1)[0],
+                                      0.0, 0, 0, (0, 0, 0, 0), 0, dim1, rows(directions, i, i + 1)[0])
+        lit[i] = weight > 0.0
 
 
 @njit(cache=True, parallel=True)
 def surface_frames(scene, origins, directions, t, inst, prim, hit_index, points, normals, starts):
     """Hit points, world-space geometric normals (turned to face the incoming ray) and the start of
     the AO and shadow rays (the point offset off its surface, shading.offset_origin) of the camera hits."""
-    for a in prange(hit_index.shape[0]):
+    n = hit_index.shape[0]
+    for b in prange((n + PIXELS_PER_TASK - 1) // PIXELS_PER_TASK):
+        _surface_block(scene, (origins, directions, t, inst, prim), hit_index, (points, normals, starts),
+                       b * PIXELS_PER_TASK, min(n, (b + 1) * PIXELS_PER_TASK))
+
+
+@njit(cache=True)
+def _surface_block(scene, hits, hit_index, frames, start, stop):
+    """surface_frames for hits start..stop-1, with unowned views (as _hard_shadow_block)."""
+    scene = unowned_scene(scene)
+    origins, directions, t, inst, prim = hits
+    origins, directions = unowned(origins), unowned(directions)
+    points, normals, starts = unowned(frames[0]), unowned(frames[1]), unowned(frames[2])
+    for a in range(start, stop):
         r = hit_index[a]
+        point, normal = rows(points, a, a + 1)[0], rows(normals, a, a + 1)[0]
         for k in range(3):
-            points[a, k] = origins[r, k] + t[r] * directions[r, k]
+            point[k] = origins[r, k] + t[r] * directions[r, k]
         surface = hit_surface(scene, inst[r], prim[r])
-        onto_triangle_plane(surface, points[a])
-        world_normal(surface, normals[a])
-        facing = normals[a, 0] * directions[r, 0] + normals[a, 1] * directions[r, 1] + normals[a, 2] * directions[r, 2]
+        onto_triangle_plane(surface, point)
+        world_normal(surface, normal)
+        facing = normal[0] * directions[r, 0] + normal[1] * directions[r, 1] + normal[2] * directions[r, 2]
         if facing > 0.0:
             for k in range(3):
-                normals[a, k] = -normals[a, k]
-        offset_origin(points[a], normals[a], surface_error_scale(surface, points[a], normals[a]), starts[a])
+                normal[k] = -normal[k]
+        offset_origin(point, normal, surface_error_scale(surface, point, normal), rows(starts, a, a + 1)[0])
 
 
 @njit(cache=True, parallel=True)

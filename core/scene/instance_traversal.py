@@ -141,9 +141,9 @@ def trace_scene_rays(scene, origins, directions, tmin, tmax, any_hit, ray_mask, 
                      out_v):
     """Trace all rays (of kind ray_mask) in parallel, in blocks of RAYS_PER_TASK that share one scratch."""
     n = origins.shape[0]
-    iterations, per_band = interleaved_blocks(n, RAYS_PER_TASK)  # balances image regions (traversal.py)
+    iterations, per_band, run = interleaved_blocks(n, RAYS_PER_TASK)  # balances image regions (traversal.py)
     for i in prange(iterations):
-        start, stop = block_range(i, per_band, n, RAYS_PER_TASK)
+        start, stop = block_range(i, per_band, run, n, RAYS_PER_TASK)
         _trace_block(scene, origins, directions, tmin, tmax, any_hit, ray_mask, start, stop,
                      (out_t, out_inst, out_prim, out_u, out_v))
 
@@ -179,7 +179,8 @@ def _object_normal(tri):
 def hit_surface(scene, inst, prim):
     """What the hit frame needs of instance inst's triangle prim, fetched and computed once per hit:
     (triangle (3, 3), world-to-object rows (3, 4), inverse_parts of them, object-space normal e1 x e2)."""
-    tri = scene.triangles[scene.tri_start[scene.mesh_of[inst]] + prim]
+    j = scene.tri_start[scene.mesh_of[inst]] + prim
+    tri = rows(scene.triangles, j, j + 1)[0]
     a = rows(scene.world_to_object, inst, inst + 1)[0]
     return tri, a, inverse_parts(a), _object_normal(tri)
 

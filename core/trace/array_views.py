@@ -46,3 +46,10 @@ def at(i):
     loads (node -> axis -> ray component -> split test -> next node)
     (docs/choices.md#unsigned-indices-in-the-traversal)."""
     return np.uint64(i)
+
+
+@njit(cache=True, inline="always")
+def keep_alive(owners):
+    """Nothing, but a use of `owners` (an array or a tuple of them): Numba frees an array after its last
+    use in a function, and an unowned view does not keep its owner alive, so a kernel that works through
+    views of arrays it allocated names their owners once more after its loop."""

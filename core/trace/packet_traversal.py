@@ -140,9 +140,9 @@ def trace_packets(tree, rays_in, out):
     """Trace the packets of rays_in.order (PacketRays) in parallel into `out` (PacketOutputs); rays that
     cannot join their packet are left for the single-ray kernel with out.single[ray] = 1."""
     n = rays_in.order.shape[0] // L
-    iterations, per_band = interleaved_blocks(n, PACKETS_PER_TASK)
+    iterations, per_band, run = interleaved_blocks(n, PACKETS_PER_TASK)
     for i in prange(iterations):
-        start, stop = block_range(i, per_band, n, PACKETS_PER_TASK)
+        start, stop = block_range(i, per_band, run, n, PACKETS_PER_TASK)
         _trace_packet_block(tree, rays_in, out, start, stop)
 
 

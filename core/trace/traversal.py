@@ -14,7 +14,8 @@ Robustness without NaN paths:
 import numpy as np
 from numba import njit, prange
 
-from .array_views import at, rows, unowned
+from .array_views import at, keep_alive, rows, unowned
+from ..jit.threads import kernel_threads
 from .layout import LEAF, TreeArrays, suspended_prim
 from .triangle_test import LEAF_CHUNK, intersect_leaf_triangle, leaf_candidates, ray_shear
 
@@ -147,28 +148,35 @@ def _push(stack_node, stack_t, sp, node, t0, t1, t_exit):
 
 
 BANDS = 16  # interleaved_blocks: the bands of the image every thread gets a share of
-RUN = 8  # ... in runs of this many consecutive blocks, which keep the tree's cache lines warm
 
 
 @njit(cache=True, inline="always")
 def interleaved_blocks(n, block_size):
-    """(iterations, per_band) of a prange over the blocks of block_size items among n, in which
-    iteration i runs items block_range(i, per_band, n, block_size): the iterations visit BANDS bands
-    of the blocks in turn, RUN consecutive blocks of a band at a time.
+    """(iterations, per_band, run) of a prange over the blocks of block_size items among n, in which
+    iteration i runs items block_range(i, per_band, run, n, block_size): BANDS bands of per_band
+    blocks, each cut into one run of consecutive blocks per thread, and the iterations visit the
+    bands' first runs in turn, then their second runs, and so on.
     Numba's prange gives each thread one contiguous range (a static schedule) and ray costs differ by
-    image region; dealt band by band, any contiguous range takes the same share of every band whatever
-    the thread count (docs/choices.md#interleaved-ray-blocks). Results do not depend on the order."""
-    n_blocks = (n + block_size - 1) // block_size
-    per_band = (n_blocks + BANDS - 1) // BANDS
-    per_band = (per_band + RUN - 1) // RUN * RUN
-    return per_band * BANDS, per_band
+    image region; dealt so, thread k's range is the k-th run of every band: an equal share of each
+    region, and as few jumps between regions as that allows, since a jump leaves the tree nodes in
+    cache behind (docs/choices.md#interleaved-ray-blocks, #one-run-a-band-per-thread). Results do
+    not depend on the order."""
+    return dealt_blocks((n + block_size - 1) // block_size, max(kernel_threads(), 1))
 
 
 @njit(cache=True, inline="always")
-def block_range(i, per_band, n, block_size):
+def dealt_blocks(n_blocks, threads):
+    """interleaved_blocks' (iterations, per_band, run) for n_blocks blocks and `threads` threads."""
+    run = max(((n_blocks + BANDS - 1) // BANDS + threads - 1) // threads, 1)
+    per_band = run * threads
+    return per_band * BANDS, per_band, run
+
+
+@njit(cache=True, inline="always")
+def block_range(i, per_band, run, n, block_size):
     """(start, stop) of the items iteration i runs (blocks are a permutation of the iterations;
     iterations past the last block get an empty range)."""
-    b = (i // RUN) % BANDS * per_band + i // (RUN * BANDS) * RUN + i % RUN
+    b = (i // run) % BANDS * per_band + i // (run * BANDS) * run + i % run
     start = min(n, b * block_size)
     return start, min(n, start + block_size)
 
@@ -177,9 +185,9 @@ def block_range(i, per_band, n, block_size):
 def trace_rays(tree, origins, directions, tmin, tmax, any_hit, out_t, out_prim, out_u, out_v):
     """Trace all rays in parallel, in blocks of RAYS_PER_TASK that share one traversal stack."""
     n = origins.shape[0]
-    iterations, per_band = interleaved_blocks(n, RAYS_PER_TASK)
+    iterations, per_band, run = interleaved_blocks(n, RAYS_PER_TASK)
     for i in prange(iterations):
-        start, stop = block_range(i, per_band, n, RAYS_PER_TASK)
+        start, stop = block_range(i, per_band, run, n, RAYS_PER_TASK)
         _trace_block(tree, origins, directions, tmin, tmax, any_hit, start, stop, out_t, out_prim, out_u, out_v)
 
 
@@ -200,3 +208,4 @@ def _trace_block(tree, origins, directions, tmin, tmax, any_hit, start, stop, ou
         out_prim[r] = prim
         out_u[r] = u
         out_v[r] = v
+    keep_alive((stack_node, stack_t, inv, flags))  # the owners of `scratch`
