@@ -7,7 +7,9 @@ both, pushing the second with the lanes that enter it and their intervals. A lea
 tested against all its active lanes (packet_leaf.py). One sign per axis for the whole packet fixes
 which child comes first, so a lane whose direction has another sign on some axis, a zero component, or
 a magnitude float32 cannot bound (OUTSIDE_FLOAT32) leaves the packet and is traced by the single-ray
-kernel (traversal.trace_rays) afterwards.
+kernel (traversal.trace_rays) afterwards. In an any-hit packet (occlusion_packets.py) the order does
+not matter, so lanes of both signs share it: on such an axis each lane takes its parts of the two
+children by its own sign (_mixed_node_step), and a lane that finds a hit leaves the packet.
 
 Node steps run in float32 lanes, conservatively (docs/choices.md#float32-node-arithmetic): per lane
 o' = fl32(o), i' = fl32(1 / d) and err = c |split| + e with c = 2^-21 |i'|, e = c (|o'| + 2^-126) +
