@@ -20,6 +20,7 @@ from numba import njit
 
 from . import simd as S
 from .array_views import at, rows
+from .traversal import leaf_hit
 from .triangle_test import GAMMA, intersect_leaf_triangle
 
 L = S.LANES
@@ -33,6 +34,7 @@ ROWS = 8
 # one origin for all lanes (its differences from the vertices computed once, as scalars), and so with
 # shear axes that differ by lane (each lane picks its coordinates of the differences)
 LANE_BY_LANE, SAME_AXES, ONE_ORIGIN, ONE_ORIGIN_BY_LANE = 0, 1, 2, 3
+SCREENED_LANES = 2  # an any-hit leaf with at most this many active lanes is tested lane by lane, screened
 
 
 @njit(cache=True, inline="always")
@@ -40,7 +42,11 @@ def leaf_test(leaf_tris, leaf_prims, column, end, first, m, sc, mode, any_hit):
     """Test the leaf's triangles (columns column..end-1 of the leaf-ordered copy, prims from
     leaf_prims[first]) against the active lanes m, in leaf order; bits of lanes whose best hit changed.
     `mode` (above): lanes sharing shear axes or an origin are tested in vectors (_lanes_test); otherwise
-    lane by lane. With `any_hit` a lane stops at its first hit."""
+    lane by lane. With `any_hit` a lane stops at its first hit, and a leaf with at most SCREENED_LANES
+    active lanes takes the single-ray leaf test lane by lane (its screen runs over eight triangles at
+    once, where the lanes' vector would run mostly empty)."""
+    if any_hit and S.count_set_bits(m) <= SCREENED_LANES:
+        return _screened_lanes(leaf_tris, leaf_prims, column - first, first, end - column + first, m, sc)
     found = 0
     axes = sc.axes
     l0 = S.count_trailing_zeros(m)
@@ -60,6 +66,27 @@ def leaf_test(leaf_tris, leaf_prims, column, end, first, m, sc, mode, any_hit):
             candidates &= candidates - 1
             if _test_lane(leaf_tris, j, prim, l, sc):
                 found |= 1 << l
+    return found
+
+
+@njit(cache=True, inline="always")
+def _screened_lanes(leaf_tris, leaf_prims, base, first, end, m, sc):
+    """traversal.leaf_hit (any hit) for each lane of m on the leaf's triangles first..end-1 (columns
+    base + first...); bits of lanes that found a hit."""
+    rays, lane_o, axes = sc.rays, sc.lane_o, sc.axes
+    found = 0
+    while m != 0:
+        l = S.count_trailing_zeros(m)
+        m &= m - 1
+        for k in range(3):
+            lane_o[at(l), k] = rays[at((O + k) * L + l)]
+        ray = (rows(lane_o, l, l + 1)[0], axes[at(l), 0], axes[at(l), 1], axes[at(l), 2], rays[at(SX * L + l)],
+               rays[at(SY * L + l)], rays[at(SZ * L + l)])
+        t, prim, u, v = leaf_hit(leaf_tris, leaf_prims, base, first, end, ray, rays[at(TMIN * L + l)],
+                                 rays[at(BEST * L + l)], True, sc.flags)
+        if prim >= 0:
+            rays[at(BEST * L + l)], sc.prims[at(l)], sc.us[at(l)], sc.vs[at(l)] = t, prim, u, v
+            found |= 1 << l
     return found
 
 

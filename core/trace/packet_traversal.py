@@ -42,6 +42,7 @@ from .packet_leaf import BEST, ROWS, leaf_test
 from .packet_setup import (C32, E32, INV32, LANE_BITS, MIXED, O32, OUTSIDE_FLOAT32, ROWS32, T0, T1,
                            leave_to_single_rays, setup_packet)
 from .traversal import STACK_SIZE, block_range, interleaved_blocks, trace_rays
+from .triangle_test import LEAF_CHUNK
 
 L = S.LANES
 TILE_SHAPE = (4, 2) if L == 8 else (4, 4)  # a packet: neighbouring pixels (width x height)
@@ -73,7 +74,7 @@ class PacketScratch(NamedTuple):
     """One packet's working set: `rays` (ROWS * L float64, packet_leaf's rows), lane origins `lane_o`
     (L, 3, filled where a lane takes the single-ray test), shear axes `axes` (L, 3), the best hit's prim,
     u, v per lane, `lanes32` (ROWS32 * L float32, the node step's rows: packet_setup.py) and `lane_bits`
-    (LANE_BITS int64 lane masks: packet_setup.py)."""
+    (LANE_BITS int64 lane masks: packet_setup.py), `flags` (LEAF_CHUNK uint8, the leaf screen's)."""
 
     rays: np.ndarray
     lane_o: np.ndarray
@@ -83,6 +84,7 @@ class PacketScratch(NamedTuple):
     vs: np.ndarray
     lanes32: np.ndarray
     lane_bits: np.ndarray
+    flags: np.ndarray
 
 
 class PacketStack(NamedTuple):
@@ -160,10 +162,11 @@ def _trace_packet_block(tree, rays_in, out, start, stop, any_hit):
                        unowned(tree.leaf_triangles), tree.base)
     owned = (np.zeros(ROWS * L), np.zeros((L, 3)), np.zeros((L, 3), np.int64), np.empty(L, np.int32), np.empty(L),
              np.empty(L), np.zeros(ROWS32 * L, np.float32), np.empty(STACK_SIZE, np.int32),
-             np.empty(STACK_SIZE, np.int64), np.empty(STACK_SIZE * 2 * L, np.float32), np.zeros(LANE_BITS, np.int64))
+             np.empty(STACK_SIZE, np.int64), np.empty(STACK_SIZE * 2 * L, np.float32), np.zeros(LANE_BITS, np.int64),
+             np.zeros(LEAF_CHUNK, np.uint8))
     # unowned views of everything the per-packet code takes: their reference counts are no-ops (array_views)
     sc = PacketScratch(unowned(owned[0]), unowned(owned[1]), unowned(owned[2]), unowned(owned[3]),
-                       unowned(owned[4]), unowned(owned[5]), unowned(owned[6]), unowned(owned[10]))
+                       unowned(owned[4]), unowned(owned[5]), unowned(owned[6]), unowned(owned[10]), unowned(owned[11]))
     stack = PacketStack(unowned(owned[7]), unowned(owned[8]), unowned(owned[9]))
     rays_in = PacketRays(unowned(rays_in.origins), unowned(rays_in.directions), unowned(rays_in.tmin),
                          unowned(rays_in.tmax), unowned(rays_in.order))
