@@ -196,7 +196,7 @@ def main():
         core.build_kdtree(load_scene("suzanne-251k").triangles, **options)
     tiny = core.build_kdtree(np.eye(3, dtype=np.float32)[None])
     core.intersect(tiny, np.zeros((1, 3)), np.ones((1, 3)))
-    core.occluded(tiny, np.zeros((1, 3)), np.ones((1, 3)))
+    core.occluded(tiny, np.zeros((2, 3)), np.ones((2, 3)))  # two rays from one origin: the packet kernel too
     intersect_packets(tiny, np.zeros((8, 3)), np.ones((8, 3)), 4)
     jit_seconds = time.perf_counter() - t
     print(f"JIT compile / cache load and warm-up: {jit_seconds:.2f} s (not in any figure below)")

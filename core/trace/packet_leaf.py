@@ -9,6 +9,10 @@ traversal.trace_ray does. When the lanes also share one origin (a perspective ca
 differences from it are scalars, the same float64 differences every lane would compute
 (docs/choices.md#camera-ray-packets-one-origin-in-the-leaf-test).
 
+Lanes sharing the origin but not the shear axes (an any-hit packet of rays in every direction from
+one point) pick each lane's coordinates of those differences with masks, so their t is the single-ray
+test's as well.
+
 The per-packet scratch `rays` holds one float64 row per quantity below, lane l of row r at r * L + l.
 """
 import numpy as np
@@ -16,6 +20,7 @@ from numba import njit
 
 from . import simd as S
 from .array_views import at, rows
+from .traversal import leaf_hit
 from .triangle_test import GAMMA, intersect_leaf_triangle
 
 L = S.LANES
@@ -26,23 +31,34 @@ O, TMIN, BEST, SX, SY, SZ = 0, 3, 4, 5, 6, 7
 ROWS = 8
 
 # how a packet's lanes take the leaf test: lane by lane (shear axes differ), in vectors, in vectors with
-# one origin for all lanes (its differences from the vertices computed once, as scalars)
-LANE_BY_LANE, SAME_AXES, ONE_ORIGIN = 0, 1, 2
+# one origin for all lanes (its differences from the vertices computed once, as scalars), and so with
+# shear axes that differ by lane (each lane picks its coordinates of the differences)
+LANE_BY_LANE, SAME_AXES, ONE_ORIGIN, ONE_ORIGIN_BY_LANE = 0, 1, 2, 3
+SCREENED_LANES = 2  # an any-hit leaf with at most this many active lanes is tested lane by lane, screened
 
 
 @njit(cache=True, inline="always")
-def leaf_test(leaf_tris, leaf_prims, column, end, first, m, sc, mode):
+def leaf_test(leaf_tris, leaf_prims, column, end, first, m, sc, mode, any_hit):
     """Test the leaf's triangles (columns column..end-1 of the leaf-ordered copy, prims from
     leaf_prims[first]) against the active lanes m, in leaf order; bits of lanes whose best hit changed.
-    `mode` (above): lanes sharing shear axes are tested in vectors (_lanes_test); otherwise lane by lane."""
+    `mode` (above): lanes sharing shear axes or an origin are tested in vectors (_lanes_test); otherwise
+    lane by lane. With `any_hit` a lane stops at its first hit, and a leaf with at most SCREENED_LANES
+    active lanes takes the single-ray leaf test lane by lane (its screen runs over eight triangles at
+    once, where the lanes' vector would run mostly empty)."""
+    if any_hit and S.count_set_bits(m) <= SCREENED_LANES:
+        return _screened_lanes(leaf_tris, leaf_prims, column - first, first, end - column + first, m, sc)
     found = 0
     axes = sc.axes
     l0 = S.count_trailing_zeros(m)
     kx, ky, kz = axes[at(l0), 0], axes[at(l0), 1], axes[at(l0), 2]
     for k in range(end - column):
         j, prim = column + k, leaf_prims[at(first + k)]
+        if any_hit:
+            m &= ~found
+            if m == 0:
+                break
         if mode != LANE_BY_LANE:
-            found |= _lanes_test(leaf_tris, j, prim, m, sc, (kx, ky, kz), mode == ONE_ORIGIN)
+            found |= _lanes_test(leaf_tris, j, prim, m, sc, (kx, ky, kz), mode)
             continue
         candidates = m
         while candidates != 0:
@@ -54,16 +70,40 @@ def leaf_test(leaf_tris, leaf_prims, column, end, first, m, sc, mode):
 
 
 @njit(cache=True, inline="always")
-def _lanes_test(leaf_tris, column, prim, m, sc, axes, one_origin):
+def _screened_lanes(leaf_tris, leaf_prims, base, first, end, m, sc):
+    """traversal.leaf_hit (any hit) for each lane of m on the leaf's triangles first..end-1 (columns
+    base + first...); bits of lanes that found a hit."""
+    rays, lane_o, axes = sc.rays, sc.lane_o, sc.axes
+    found = 0
+    while m != 0:
+        l = S.count_trailing_zeros(m)
+        m &= m - 1
+        for k in range(3):
+            lane_o[at(l), k] = rays[at((O + k) * L + l)]
+        ray = (rows(lane_o, l, l + 1)[0], axes[at(l), 0], axes[at(l), 1], axes[at(l), 2], rays[at(SX * L + l)],
+               rays[at(SY * L + l)], rays[at(SZ * L + l)])
+        t, prim, u, v = leaf_hit(leaf_tris, leaf_prims, base, first, end, ray, rays[at(TMIN * L + l)],
+                                 rays[at(BEST * L + l)], True, sc.flags)
+        if prim >= 0:
+            rays[at(BEST * L + l)], sc.prims[at(l)], sc.us[at(l)], sc.vs[at(l)] = t, prim, u, v
+            found |= 1 << l
+    return found
+
+
+@njit(cache=True, inline="always")
+def _lanes_test(leaf_tris, column, prim, m, sc, axes, mode):
     """triangle_test._hit for the lanes m against one triangle, in float64 lanes with its operations in
     its order (the sign flip by det's sign is exact and left out where it cannot change a bit), so each
     lane gets the single-ray test's t. Lanes with an exactly zero edge value, where the tie rule
     decides, take the single-ray test itself. Returns the bits of lanes whose best hit changed. `axes`:
-    the lanes' shear axes (kx, ky, kz); `one_origin`: whether the lanes share their origin."""
+    the lanes' shear axes (kx, ky, kz) unless `mode` is ONE_ORIGIN_BY_LANE."""
     rays, prims, us, vs = sc.rays, sc.prims, sc.us, sc.vs
-    if one_origin:
+    if mode == ONE_ORIGIN:
         ax, ay, az, bx, by, bz, cx, cy, cz = _sheared_from_one_origin(leaf_tris, column, rays, axes,
                                                                        S.count_trailing_zeros(m))
+    elif mode == ONE_ORIGIN_BY_LANE:
+        ax, ay, az, bx, by, bz, cx, cy, cz = _sheared_by_lane_axes(leaf_tris, column, rays, sc.lane_bits,
+                                                                    S.count_trailing_zeros(m))
     else:
         ax, ay, az, bx, by, bz, cx, cy, cz = _sheared_triangle(leaf_tris, column, rays, axes)
     u = S.sub(S.mul(cx, by), S.mul(cy, bx))
@@ -140,6 +180,32 @@ def _sheared_from_one_origin(leaf_tris, j, rays, axes, l0):
     c = _sheared_differences(leaf_tris[at(6 + kx), j] - ox, leaf_tris[at(6 + ky), j] - oy,
                              leaf_tris[at(6 + kz), j] - oz, sx, sy)
     return a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]
+
+
+@njit(cache=True, inline="always")
+def _sheared_by_lane_axes(leaf_tris, j, rays, lane_bits, l0):
+    """_sheared_from_one_origin for lanes whose shear axes differ: the nine differences of the vertices
+    from the one origin (lane l0's) as scalars, each lane taking its kx, ky, kz coordinates of them by
+    masks (lane_bits[3 + 2 i + c]: lanes whose axis i is c; packet_setup._fill_axis_bits)."""
+    ox, oy, oz = rays[at(O * L + l0)], rays[at((O + 1) * L + l0)], rays[at((O + 2) * L + l0)]
+    sx, sy = S.load(rays, SX * L), S.load(rays, SY * L)
+    picks = (S.mask_from_bits(lane_bits[3]), S.mask_from_bits(lane_bits[4]), S.mask_from_bits(lane_bits[5]),
+             S.mask_from_bits(lane_bits[6]), S.mask_from_bits(lane_bits[7]), S.mask_from_bits(lane_bits[8]))
+    j = at(j)
+    a = _picked_differences(leaf_tris[0, j] - ox, leaf_tris[1, j] - oy, leaf_tris[2, j] - oz, picks, sx, sy)
+    b = _picked_differences(leaf_tris[3, j] - ox, leaf_tris[4, j] - oy, leaf_tris[5, j] - oz, picks, sx, sy)
+    c = _picked_differences(leaf_tris[6, j] - ox, leaf_tris[7, j] - oy, leaf_tris[8, j] - oz, picks, sx, sy)
+    return a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]
+
+
+@njit(cache=True, inline="always")
+def _picked_differences(d0, d1, d2, picks, sx, sy):
+    """_sheared_differences with each lane's (kx, ky, kz) coordinates of the differences (d0, d1, d2)."""
+    v0, v1, v2 = S.splat_f64(d0), S.splat_f64(d1), S.splat_f64(d2)
+    dx = S.select(picks[0], v0, S.select(picks[1], v1, v2))
+    dy = S.select(picks[2], v0, S.select(picks[3], v1, v2))
+    dz = S.select(picks[4], v0, S.select(picks[5], v1, v2))
+    return S.sub(dx, S.mul(sx, dz)), S.sub(dy, S.mul(sy, dz)), dz
 
 
 @njit(cache=True, inline="always")

@@ -13,7 +13,7 @@ from numba import njit
 
 from . import simd as S
 from .array_views import at, rows
-from .packet_leaf import BEST, LANE_BY_LANE, O, ONE_ORIGIN, SAME_AXES, SX, SY, SZ, TMIN
+from .packet_leaf import BEST, LANE_BY_LANE, O, ONE_ORIGIN, ONE_ORIGIN_BY_LANE, SAME_AXES, SX, SY, SZ, TMIN
 from .traversal import WIDEN
 from .triangle_test import ray_shear
 
@@ -25,13 +25,16 @@ TINY = 2.0 ** -126
 # rows of the float32 scratch `lanes32`: o' (3 rows), i' (3), c (3), e (3), and the root interval
 O32, INV32, C32, E32, T0, T1 = 0, 3, 6, 9, 12, 13
 ROWS32 = 14
+MIXED = 8  # signs: bit k + 3 set when an any-hit packet's lanes have both signs on axis k
+LANE_BITS = 9  # rows of the scratch `lane_bits`: d > 0 per axis (3), shear axis masks (6: _fill_axis_bits)
 
 
 @njit(cache=True, inline="always")
-def setup_packet(root_box, rays_in, lanes, sc, out, box_fits):
+def setup_packet(root_box, rays_in, lanes, sc, out, box_fits, any_hit):
     """Fill the scratch for one packet: (bits of the lanes traced, the packet's signs, how they take the
-    leaf test: packet_leaf's LANE_BY_LANE, SAME_AXES or ONE_ORIGIN). Lanes that cannot join go to single
-    rays (out.single); lanes missing the root box are written as misses, as trace_ray returns them."""
+    leaf test: packet_leaf's LANE_BY_LANE, SAME_AXES, ONE_ORIGIN or ONE_ORIGIN_BY_LANE). Lanes that
+    cannot join go to single rays (out.single); lanes missing the root box are written as misses, as
+    trace_ray returns them. For `any_hit` packets lanes of every sign join (MIXED, below)."""
     valid = 0
     for l in range(L):
         valid |= (1 if lanes[l] >= 0 else 0) << l
@@ -42,7 +45,7 @@ def setup_packet(root_box, rays_in, lanes, sc, out, box_fits):
          _gather(rays_in.origins, lanes, fill, 2))
     d = (_gather(rays_in.directions, lanes, fill, 0), _gather(rays_in.directions, lanes, fill, 1),
          _gather(rays_in.directions, lanes, fill, 2))
-    signs, joins = _signs_and_joins(o, d, valid if box_fits else 0)
+    signs, joins = _signs_and_joins(o, d, valid if box_fits else 0, any_hit)
     leave_to_single_rays(lanes, valid & ~joins, out.single)
     inv = (S.reciprocal(d[0]), S.reciprocal(d[1]), S.reciprocal(d[2]))
     tmin, tmax = _gather_1d(rays_in.tmin, lanes, fill), _gather_1d(rays_in.tmax, lanes, fill)
@@ -52,6 +55,8 @@ def setup_packet(root_box, rays_in, lanes, sc, out, box_fits):
     bits = joins & ~misses
     if bits == 0:
         return 0, signs, LANE_BY_LANE
+    if any_hit:
+        signs = _lane_signs(d, bits, sc.lane_bits)
     rays = sc.rays
     for k in range(3):
         S.store(rays, (O + k) * L, o[k])
@@ -59,9 +64,43 @@ def setup_packet(root_box, rays_in, lanes, sc, out, box_fits):
     S.store(rays, BEST * L, tmax)
     _fill_rows32(sc.lanes32, o, inv, t0, t1)
     sc.prims[:] = -1
+    one_origin = _one_origin(o, bits)
     if not _fill_shear(rays, sc.axes, d, inv, signs, bits, rays_in.directions, lanes):
-        return bits, signs, LANE_BY_LANE
-    return bits, signs, ONE_ORIGIN if _one_origin(o, bits) else SAME_AXES
+        if not one_origin:
+            return bits, signs, LANE_BY_LANE
+        _fill_axis_bits(sc.axes, bits, sc.lane_bits)
+        return bits, signs, ONE_ORIGIN_BY_LANE
+    return bits, signs, ONE_ORIGIN if one_origin else SAME_AXES
+
+
+@njit(cache=True, inline="always")
+def _lane_signs(d, bits, lane_bits):
+    """An any-hit packet's signs: bit k as traversal wants it where the lanes `bits` agree on axis k,
+    and MIXED << k where they do not, with lane_bits[k] the lanes whose d[k] > 0 (the node step takes
+    each lane's children in its own order: packet_traversal.py)."""
+    signs = 0
+    for k in range(3):
+        up = S.mask_bits(S.gt(d[k], S.splat_f64(0.0))) & bits
+        lane_bits[k] = up
+        if up == bits:
+            signs |= 1 << k
+        elif up != 0:
+            signs |= (1 | MIXED) << k
+    return signs
+
+
+@njit(cache=True, inline="always")
+def _fill_axis_bits(axes, bits, lane_bits):
+    """lane_bits[3 + 2 i + c] = the lanes `bits` whose shear axis i (kx, ky, kz) is c (0 or 1; the
+    others have 2), for packet_leaf's ONE_ORIGIN_BY_LANE test."""
+    for i in range(6):
+        lane_bits[3 + i] = 0
+    for l in range(L):
+        if (bits >> l) & 1:
+            for i in range(3):
+                c = axes[l, i]
+                if c < 2:
+                    lane_bits[3 + 2 * i + c] |= 1 << l
 
 
 @njit(cache=True, inline="always")
@@ -95,10 +134,10 @@ def _gather_1d(values, lanes, fill):
 
 
 @njit(cache=True, inline="always")
-def _signs_and_joins(o, d, valid):
+def _signs_and_joins(o, d, valid, any_hit):
     """(the packet's signs: bit k set when at least as many of the valid lanes' directions are positive
-    as negative on axis k, the lanes that can join: d strictly of the packet's sign on every axis, and
-    o, d, 1 / d within OUTSIDE_FLOAT32, the float32 bound's range)."""
+    as negative on axis k, the lanes that can join: d strictly of the packet's sign on every axis (of
+    either sign for `any_hit`), and o, d, 1 / d within OUTSIDE_FLOAT32, the float32 bound's range)."""
     zero, big, small = S.splat_f64(0.0), S.splat_f64(OUTSIDE_FLOAT32), S.splat_f64(1.0 / OUTSIDE_FLOAT32)
     signs, joins = 0, valid
     for k in range(3):
@@ -106,7 +145,7 @@ def _signs_and_joins(o, d, valid):
         negative = S.mask_bits(S.lt(d[k], zero)) & valid
         up = S.count_set_bits(positive) >= S.count_set_bits(negative)
         signs |= (1 if up else 0) << k
-        joins &= positive if up else negative
+        joins &= (positive | negative) if any_hit else (positive if up else negative)
         size = S.vabs(d[k])
         joins &= S.mask_bits(S.mask_and(S.lt(S.vabs(o[k]), big), S.mask_and(S.lt(small, size), S.lt(size, big))))
     return signs, joins
@@ -154,7 +193,7 @@ def _fill_shear(rays, axes, d, inv, signs, bits, directions, lanes):
     y_major = S.mask_bits(S.ge(ay, az)) & ~x_major
     kz = 0 if x_major & bits == bits else (1 if y_major & bits == bits else (2 if (x_major | y_major) & bits == 0
                                                                              else -1))
-    if kz < 0:
+    if kz < 0 or (signs >> kz) & MIXED:  # the lanes' kz differ, or d[kz]'s sign (which orders kx, ky)
         for l in range(L):
             if (bits >> l) & 1:
                 r = lanes[l]

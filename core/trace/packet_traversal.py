@@ -7,7 +7,9 @@ both, pushing the second with the lanes that enter it and their intervals. A lea
 tested against all its active lanes (packet_leaf.py). One sign per axis for the whole packet fixes
 which child comes first, so a lane whose direction has another sign on some axis, a zero component, or
 a magnitude float32 cannot bound (OUTSIDE_FLOAT32) leaves the packet and is traced by the single-ray
-kernel (traversal.trace_rays) afterwards.
+kernel (traversal.trace_rays) afterwards. In an any-hit packet (occlusion_packets.py) the order does
+not matter, so lanes of both signs share it: on such an axis each lane takes its parts of the two
+children by its own sign (_mixed_node_step), and a lane that finds a hit leaves the packet.
 
 Node steps run in float32 lanes, conservatively (docs/choices.md#float32-node-arithmetic): per lane
 o' = fl32(o), i' = fl32(1 / d) and err = c |split| + e with c = 2^-21 |i'|, e = c (|o'| + 2^-126) +
@@ -30,16 +32,17 @@ import numpy as np
 from numba import njit, prange
 
 from . import simd as S
-from .array_views import at, rows, unowned
+from .array_views import at, keep_alive, rows, unowned
 from ..inputs import as_ray_limits, as_rays, hit_distances_as_float32
 from .kdtree import KdTree
 from .layout import LEAF, TreeArrays
 from .queries import Hits, intersect
 from ..jit.threads import thread_count
 from .packet_leaf import BEST, ROWS, leaf_test
-from .packet_setup import (C32, E32, INV32, O32, OUTSIDE_FLOAT32, ROWS32, T0, T1, leave_to_single_rays,
-                           setup_packet)
+from .packet_setup import (C32, E32, INV32, LANE_BITS, MIXED, O32, OUTSIDE_FLOAT32, ROWS32, T0, T1,
+                           leave_to_single_rays, setup_packet)
 from .traversal import STACK_SIZE, block_range, interleaved_blocks, trace_rays
+from .triangle_test import LEAF_CHUNK
 
 L = S.LANES
 TILE_SHAPE = (4, 2) if L == 8 else (4, 4)  # a packet: neighbouring pixels (width x height)
@@ -70,7 +73,8 @@ class PacketOutputs(NamedTuple):
 class PacketScratch(NamedTuple):
     """One packet's working set: `rays` (ROWS * L float64, packet_leaf's rows), lane origins `lane_o`
     (L, 3, filled where a lane takes the single-ray test), shear axes `axes` (L, 3), the best hit's prim,
-    u, v per lane, and `lanes32` (ROWS32 * L float32, the node step's rows: packet_setup.py)."""
+    u, v per lane, `lanes32` (ROWS32 * L float32, the node step's rows: packet_setup.py) and `lane_bits`
+    (LANE_BITS int64 lane masks: packet_setup.py), `flags` (LEAF_CHUNK uint8, the leaf screen's)."""
 
     rays: np.ndarray
     lane_o: np.ndarray
@@ -79,6 +83,8 @@ class PacketScratch(NamedTuple):
     us: np.ndarray
     vs: np.ndarray
     lanes32: np.ndarray
+    lane_bits: np.ndarray
+    flags: np.ndarray
 
 
 class PacketStack(NamedTuple):
@@ -136,18 +142,19 @@ def intersect_packets(tree, origins, directions, width, tmin=0.0, tmax=np.inf, t
 
 
 @njit(cache=True, parallel=True)
-def trace_packets(tree, rays_in, out):
+def trace_packets(tree, rays_in, out, any_hit=False):
     """Trace the packets of rays_in.order (PacketRays) in parallel into `out` (PacketOutputs); rays that
-    cannot join their packet are left for the single-ray kernel with out.single[ray] = 1."""
+    cannot join their packet are left for the single-ray kernel with out.single[ray] = 1. With `any_hit`
+    a lane stops at the first hit it finds (prim >= 0, t its distance), as trace_ray's any hit does."""
     n = rays_in.order.shape[0] // L
     iterations, per_band, run = interleaved_blocks(n, PACKETS_PER_TASK)
     for i in prange(iterations):
         start, stop = block_range(i, per_band, run, n, PACKETS_PER_TASK)
-        _trace_packet_block(tree, rays_in, out, start, stop)
+        _trace_packet_block(tree, rays_in, out, start, stop, any_hit)
 
 
 @njit(cache=True)
-def _trace_packet_block(tree, rays_in, out, start, stop):
+def _trace_packet_block(tree, rays_in, out, start, stop, any_hit):
     """Packets start..stop-1 with one set of scratch arrays and the tree as unowned views (see
     traversal._trace_block)."""
     views = TreeArrays(unowned(tree.axis), unowned(tree.split), unowned(tree.child), unowned(tree.count),
@@ -155,10 +162,11 @@ def _trace_packet_block(tree, rays_in, out, start, stop):
                        unowned(tree.leaf_triangles), tree.base)
     owned = (np.zeros(ROWS * L), np.zeros((L, 3)), np.zeros((L, 3), np.int64), np.empty(L, np.int32), np.empty(L),
              np.empty(L), np.zeros(ROWS32 * L, np.float32), np.empty(STACK_SIZE, np.int32),
-             np.empty(STACK_SIZE, np.int64), np.empty(STACK_SIZE * 2 * L, np.float32))
+             np.empty(STACK_SIZE, np.int64), np.empty(STACK_SIZE * 2 * L, np.float32), np.zeros(LANE_BITS, np.int64),
+             np.zeros(LEAF_CHUNK, np.uint8))
     # unowned views of everything the per-packet code takes: their reference counts are no-ops (array_views)
     sc = PacketScratch(unowned(owned[0]), unowned(owned[1]), unowned(owned[2]), unowned(owned[3]),
-                       unowned(owned[4]), unowned(owned[5]), unowned(owned[6]))
+                       unowned(owned[4]), unowned(owned[5]), unowned(owned[6]), unowned(owned[10]), unowned(owned[11]))
     stack = PacketStack(unowned(owned[7]), unowned(owned[8]), unowned(owned[9]))
     rays_in = PacketRays(unowned(rays_in.origins), unowned(rays_in.directions), unowned(rays_in.tmin),
                          unowned(rays_in.tmax), unowned(rays_in.order))
@@ -166,13 +174,14 @@ def _trace_packet_block(tree, rays_in, out, start, stop):
     box_fits = _box_fits_float32(views.bounds)
     for p in range(start, stop):
         lanes = rows(rays_in.order, p * L, p * L + L)
-        bits, signs, mode = setup_packet(views.bounds, rays_in, lanes, sc, out, box_fits)
+        bits, signs, mode = setup_packet(views.bounds, rays_in, lanes, sc, out, box_fits, any_hit)
         if bits == 0:
             continue
-        if _traverse(views, sc, mode, signs, bits, stack):
+        if _traverse(views, sc, mode, signs, bits, stack, any_hit):
             leave_to_single_rays(lanes, bits, out.single)
         else:
             _write(lanes, bits, sc, out)
+    keep_alive(owned)  # the owners of sc and stack
 
 
 @njit(cache=True, inline="always")
@@ -184,24 +193,32 @@ def _box_fits_float32(box):
 
 
 @njit(cache=True, inline="always")
-def _traverse(tree, sc, mode, signs, bits, stack):
-    """Walk the tree with the packet (module docstring); True if it met an unbuilt node (lazy tree)."""
+def _traverse(tree, sc, mode, signs, bits, stack, any_hit):
+    """Walk the tree with the packet (module docstring); True if it met an unbuilt node (lazy tree).
+    With `any_hit` a lane that found a hit leaves the active lanes and every stacked entry (`done`)."""
     axis, split, child, count, leaf_prims = tree.axis, tree.split, tree.child, tree.count, tree.leaf_prims
     leaf_tris, base = tree.leaf_triangles, tree.base
     lanes32, stack_node, stack_bits, stack_t = sc.lanes32, stack.node, stack.bits, stack.t
     t0, t1 = S.load(lanes32, T0 * L), S.load(lanes32, T1 * L)
-    node, m, sp = 0, bits, 0
+    node, m, sp, done = 0, bits, 0, 0
     while True:
         a = axis[at(node)]
         if a < LEAF:
+            if (signs >> a) & MIXED:
+                node, m, t0, t1, sp = _mixed_node_step(lanes32, a, split[at(node)], child[at(node)],
+                                                       sc.lane_bits[at(a)], m, t0, t1, stack, sp)
+                continue
             node, m, t0, t1, sp = _node_step(lanes32, a, split[at(node)], child[at(node)], signs, m, t0, t1,
                                              stack_node, stack_bits, stack_t, sp)
             continue
         if a != LEAF:
             return True
         first = child[at(node)]
-        leaf_test(leaf_tris, leaf_prims, base + first, base + first + count[at(node)], first, m, sc, mode)
-        node, m, t0, t1, sp = _pop(sc.rays, stack_node, stack_bits, stack_t, sp)
+        found = leaf_test(leaf_tris, leaf_prims, base + first, base + first + count[at(node)], first, m, sc, mode,
+                          any_hit)
+        if any_hit:
+            done |= found
+        node, m, t0, t1, sp = _pop(sc.rays, stack_node, stack_bits, stack_t, sp, done)
         if node < 0:
             return False
 
@@ -229,14 +246,52 @@ def _node_step(lanes32, a, pos, left, signs, m, t0, t1, stack_node, stack_bits, 
 
 
 @njit(cache=True, inline="always")
-def _pop(rays, stack_node, stack_bits, stack_t, sp):
+def _mixed_node_step(lanes32, a, pos, left, up, m, t0, t1, stack, sp):
+    """_node_step for an any-hit packet whose lanes have both signs on axis a (`up`: lanes with d[a] > 0):
+    each lane's parts of the two children follow its own sign (the near part [t0, min(t1, hi)] is the
+    left child's where d[a] > 0, the right child's otherwise). The children are taken in the order of
+    the lowest lane entering both (with one origin, all such lanes start on its side of the plane); the
+    order only decides which hit an any-hit lane meets first, never whether it meets one."""
+    p = S.splat_f32(pos)
+    ts = S.mul(S.sub(p, S.load(lanes32, (O32 + a) * L)), S.load(lanes32, (INV32 + a) * L))
+    err = S.fma(S.load(lanes32, (C32 + a) * L), S.splat_f32(abs(pos)), S.load(lanes32, (E32 + a) * L))
+    lo, hi = S.sub(ts, err), S.add(ts, err)
+    near = m & S.mask_bits(S.le(t0, hi))
+    far = m & S.mask_bits(S.le(lo, t1))
+    in_left, in_right = (near & up) | (far & ~up), (far & up) | (near & ~up)
+    up_mask = S.mask_from_bits(up)
+    near_t1, far_t0 = S.vmin(t1, hi), S.vmax(t0, lo)
+    left_t0, left_t1 = S.select(up_mask, t0, far_t0), S.select(up_mask, near_t1, t1)
+    right_t0, right_t1 = S.select(up_mask, far_t0, t0), S.select(up_mask, t1, near_t1)
+    if in_left == 0:
+        return left + 1, in_right, right_t0, right_t1, sp
+    if in_right == 0:
+        return left, in_left, left_t0, left_t1, sp
+    both = in_left & in_right
+    if (up >> S.count_trailing_zeros(both if both != 0 else in_left)) & 1:
+        _push(stack, sp, left + 1, in_right, right_t0, right_t1)
+        return left, in_left, left_t0, left_t1, sp + 1
+    _push(stack, sp, left, in_left, left_t0, left_t1)
+    return left + 1, in_right, right_t0, right_t1, sp + 1
+
+
+@njit(cache=True, inline="always")
+def _push(stack, sp, node, bits, t0, t1):
+    stack.node[at(sp)], stack.bits[at(sp)] = node, bits
+    S.store(stack.t, sp * 2 * L, t0)
+    S.store(stack.t, sp * 2 * L + L, t1)
+
+
+@njit(cache=True, inline="always")
+def _pop(rays, stack_node, stack_bits, stack_t, sp, done):
     """The next stacked node with lanes that may still find a closer hit there: (node, lanes, t0, t1,
-    sp), node -1 when none. A lane skips an entry whose start (a lower bound) lies after its best hit."""
+    sp), node -1 when none. A lane skips an entry whose start (a lower bound) lies after its best hit,
+    and every entry once it is `done`."""
     best = S.load(rays, BEST * L)
     while sp > 0:
         sp -= 1
         t0 = S.load(stack_t, sp * 2 * L)
-        m = stack_bits[at(sp)] & ~S.mask_bits(S.lt(best, S.to_f64(t0)))
+        m = stack_bits[at(sp)] & ~done & ~S.mask_bits(S.lt(best, S.to_f64(t0)))
         if m != 0:
             return stack_node[at(sp)], m, t0, S.load(stack_t, sp * 2 * L + L), sp
     return -1, 0, S.splat_f32(0.0), S.splat_f32(0.0), 0

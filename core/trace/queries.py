@@ -31,14 +31,26 @@ def intersect(tree, origins, directions, tmin=0.0, tmax=np.inf, threads=None):
 
 
 def occluded(tree, origins, directions, tmin=0.0, tmax=np.inf, threads=None):
-    """(R,) bool: does each ray hit anything in (tmin, tmax)? Stops at the first hit found."""
-    return _trace(tree, origins, directions, tmin, tmax, True, threads)[1] >= 0
+    """(R,) bool: does each ray hit anything in (tmin, tmax)? Stops at the first hit found. Runs of
+    consecutive rays with one origin go in packets (occlusion_packets.py) on an eager tree."""
+    _check_tree(tree)
+    if tree.lazy:
+        return _trace(tree, origins, directions, tmin, tmax, True, threads)[1] >= 0
+    from .occlusion_packets import occluded_prims  # imported here: packet_traversal imports this module
+    o, d = as_rays(origins, directions)
+    lo, hi = as_ray_limits(tmin, tmax, len(o))
+    with thread_count(threads):
+        return occluded_prims(tree.arrays, o, d, lo, hi) >= 0
 
 
-def _trace(tree, origins, directions, tmin, tmax, any_hit, threads):
+def _check_tree(tree):
     if not isinstance(tree, KdTree):
         hint = ": use core.intersect_scene / occluded_scene for a TwoLevelScene" if hasattr(tree, "meshes") else ""
         raise ValueError(f"tree must be a core.KdTree, got {type(tree).__name__}{hint}")
+
+
+def _trace(tree, origins, directions, tmin, tmax, any_hit, threads):
+    _check_tree(tree)
     o, d = as_rays(origins, directions)
     lo, hi = as_ray_limits(tmin, tmax, len(o))
     n = len(o)

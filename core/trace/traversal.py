@@ -74,19 +74,12 @@ def trace_ray(tree, o, d, tmin, tmax, any_hit, stack_node, stack_t, inv, flags):
         first = child[at(node)]
         if a != LEAF:  # UNBUILT: the one extra test, made only at leaves
             return np.inf, suspended_prim(first), 0.0, 0.0
-        end = first + count[at(node)]
-        for lo in range(first, end, LEAF_CHUNK):
-            hi = min(end, lo + LEAF_CHUNK)
-            if not leaf_candidates(leaf_tris, base + lo, base + hi, o, kx, ky, kz, sx, sy, flags):
-                continue
-            for j in range(lo, hi):
-                if flags[at(j - lo)] == 0:
-                    continue
-                t, u, v = intersect_leaf_triangle(leaf_tris, base + j, o, kx, ky, kz, sx, sy, sz)
-                if tmin < t < best_t:
-                    best_t, best_prim, best_u, best_v = t, leaf_prims[at(j)], u, v
-                    if any_hit:
-                        return best_t, best_prim, best_u, best_v
+        t, prim, u, v = leaf_hit(leaf_tris, leaf_prims, base, first, first + count[at(node)],
+                                 (o, kx, ky, kz, sx, sy, sz), tmin, best_t, any_hit, flags)
+        if prim >= 0:
+            best_t, best_prim, best_u, best_v = t, prim, u, v
+            if any_hit:
+                return best_t, best_prim, best_u, best_v
         if best_prim >= 0 and best_t <= t_exit:  # no slack: stopping late is safe, early is not
             break
         node, t0, t1, t_exit, sp = _pop(stack_node, stack_t, sp, best_t, best_prim >= 0)
@@ -95,6 +88,28 @@ def trace_ray(tree, o, d, tmin, tmax, any_hit, stack_node, stack_t, inv, flags):
     if best_prim < 0:
         return np.inf, -1, 0.0, 0.0
     return best_t, best_prim, best_u, best_v
+
+
+@njit(cache=True, inline="always")
+def leaf_hit(leaf_tris, leaf_prims, base, first, end, ray, tmin, best, any_hit, flags):
+    """(t, prim, u, v) of the closest hit in (tmin, best) among the leaf's triangles first..end-1 (the
+    first one found if `any_hit`), prim -1 when none; `ray` is (o, kx, ky, kz, sx, sy, sz) (ray_shear).
+    Screened LEAF_CHUNK triangles at a time (leaf_candidates) before the full test, in leaf order."""
+    o, kx, ky, kz, sx, sy, sz = ray
+    best_prim, best_u, best_v = -1, 0.0, 0.0
+    for lo in range(first, end, LEAF_CHUNK):
+        hi = min(end, lo + LEAF_CHUNK)
+        if not leaf_candidates(leaf_tris, base + lo, base + hi, o, kx, ky, kz, sx, sy, flags):
+            continue
+        for j in range(lo, hi):
+            if flags[at(j - lo)] == 0:
+                continue
+            t, u, v = intersect_leaf_triangle(leaf_tris, base + j, o, kx, ky, kz, sx, sy, sz)
+            if tmin < t < best:
+                best, best_prim, best_u, best_v = t, leaf_prims[at(j)], u, v
+                if any_hit:
+                    return best, best_prim, best_u, best_v
+    return best, best_prim, best_u, best_v
 
 
 @njit(cache=True, inline="always")
