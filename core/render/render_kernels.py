@@ -273,9 +273,10 @@ def hard_shadow_rays(frames, lights, k, dim1, directions, tmax, lit):
     """The shadow ray of light k, one without extent (every sample's ray is the same), from each pixel
     of the PixelFrames `frames`, made as the sampling kernel makes it (_ray_of_use): its direction into
     directions (M, 3), tmax (M,), and lit (M,) bool, whether the pixel faces the light inside its mask
-    (else it takes no ray). The rays start at frames.starts."""
+    (else it takes no ray). The rays start at frames.starts. The index is passed as int64: Numba types
+    the loop's index int64 and the parallel body's uint64, which would compile _hard_shadow_ray twice."""
     for i in prange(frames.points.shape[0]):
-        lit[i] = _hard_shadow_ray(frames, lights, k, dim1, directions, tmax, i)
+        lit[i] = _hard_shadow_ray(frames, lights, k, dim1, directions, tmax, np.int64(i))
 
 
 @njit(cache=True)
