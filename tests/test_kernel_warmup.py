@@ -190,3 +190,41 @@ def test_the_status_bar_and_panel_show_the_compile_until_ready(warmup, monkeypat
     drawn = Layout()
     warmup_display.draw_status(drawn)
     assert drawn.labels == []
+
+
+def compiled_versions() -> dict:
+    """Every Numba dispatcher alive in this process and the argument types it holds compiled (or loaded)."""
+    import gc
+
+    from numba.core.registry import CPUDispatcher
+
+    return {d: set(d.overloads) for d in gc.get_objects() if isinstance(d, CPUDispatcher)}
+
+
+@pytest.mark.slow
+def test_after_the_warm_up_the_factory_scenes_first_frame_compiles_nothing(monkeypatch):
+    """The warm-up's made-up frames (core/jit/first_frame.py) run every kernel, with every argument type,
+    that a first render of the factory scene (one cube, one point light, the default settings) runs:
+    after them, in this process, Render adds no compiled version to any kernel, so in Blender the frame
+    only loads kernels from the cache the warm-up filled."""
+    import bpy
+
+    import kd_addon
+    from core.jit import first_frame, parallel_compile
+    from tests import bpy_scenes
+
+    monkeypatch.setenv(parallel_compile.HELPER_SWITCH, "0")  # the helper's side runs here too
+    first_frame.compile_first_frames()
+    before = compiled_versions()
+    bpy.ops.wm.read_homefile(use_factory_startup=True)
+    kd_addon.register()
+    try:
+        bpy.context.scene.kd_preview.resolution_percentage = 5
+        assert bpy.ops.kdpreview.render() == {"FINISHED"}
+    finally:
+        kd_addon.unregister()
+        bpy_scenes.reset()
+    after = compiled_versions()
+    grown = sorted(f"{d.py_func.__module__}.{d.py_func.__qualname__}{sorted(map(str, after[d] - before.get(d, set())))}"
+                   for d in after if after[d] - before.get(d, set()))
+    assert grown == [], "compiled after the warm-up: " + "; ".join(grown)

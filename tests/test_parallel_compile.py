@@ -217,25 +217,32 @@ def test_a_failing_block_ends_the_helper_at_once(monkeypatch):
 def test_the_two_sides_compile_what_a_real_render_runs():
     """The helper's made-up camera hits and the camera pass run here must give the kernels the real
     render's argument types: otherwise a first frame would compile its kernels again after the wait.
-    After both sides ran in this process, renders of a built tree and of a two-level scene (raw and
-    denoised, every mode) add no compiled version to any rendering kernel."""
+    After both sides ran in this process (and the warm-up helper's placed packets), renders of a built
+    tree, of a two-level scene and of one placed instance (raw and denoised, every mode) add no
+    compiled version to any rendering kernel."""
     import numpy as np
 
     import core
     from core.render import camera as camera_module
     from core.render import denoise, render_kernels
-    from core.scene import instance_traversal
+    from core.scene import instance_traversal, scene_packets
+    from core.trace import packet_traversal
 
     parallel_compile.compile_rendering_kernels(denoise=True)
     parallel_compile.compile_camera_pass()
+    parallel_compile.compile_placed_packets()
     kernels = [render_kernels.add_samples, render_kernels.surface_frames, render_kernels.assemble_image,
-               camera_module._pixel_rays, instance_traversal.trace_scene_rays]
+               camera_module._pixel_rays, instance_traversal.trace_scene_rays, packet_traversal.trace_packets,
+               scene_packets._rays_to_object]
     kernels += [k for k in vars(denoise).values() if hasattr(k, "signatures")]
     before = {k: len(k.signatures) for k in kernels}
-    assert all(before[k] > 0 for k in kernels[:5]), "a side did not run a rendering kernel"
+    assert all(before[k] > 0 for k in kernels[:7]), "a side did not run a rendering kernel"
     tris = np.array([[[-1, -1, 0], [1, -1, 0], [0, 1, 0]], [[-1, -1, 0.5], [1, -1, 0.5], [0, 1, 0.5]]], np.float32)
     vertices, faces = tris.reshape(-1, 3), np.arange(6, dtype=np.int32).reshape(2, 3)
-    scenes = [core.build_kdtree(tris), core.build_scene([(vertices, faces)], [0, 0], np.stack([np.eye(4)] * 2))]
+    placed = np.eye(4)
+    placed[:3, 3] = (0.3, -0.2, -1.0)
+    scenes = [core.build_kdtree(tris), core.build_scene([(vertices, faces)], [0, 0], np.stack([np.eye(4)] * 2)),
+              core.build_scene([(vertices, faces)], [0], placed[None])]
     camera = core.Camera(np.array([[1.0, 0, 0, 0.2], [0, 1, 0, 0.1], [0, 0, 1, 3], [0, 0, 0, 1]]), 0.9)
     for scene in scenes:
         for mode in ("ao", "shadow", "ao+shadow"):

@@ -1,14 +1,18 @@
-"""A made-up first and second frame that runs every kernel a default render runs, so a process started
-ahead of the first render (the add-on's kernel warm-up, kd_addon/kernel_warmup.py) can fill Numba's
-on-disk cache with them, and the render itself only loads them.
+"""Made-up frames that run every kernel a default render runs, so a process started ahead of the
+first render (the add-on's kernel warm-up, kd_addon/kernel_warmup.py) can fill Numba's on-disk cache
+with them, and the render itself only loads them.
 
-It takes the add-on's path through core with the default settings: a SceneBuilder over several meshes
-(instanced, merged into a soup, and one large enough for its own tree), the rendering kernels compiled
-by the helper beside the build (parallel_compile.py), an ao+shadow render with one light of each kind,
-then a second frame with one object moved that continues from the first one's pixels (the pixel-reuse
-kernels), and the tree statistics the panel shows. Numba compiles one version per argument types, so the arrays have the add-on's dtypes
+They take the add-on's path through core with the default settings: a SceneBuilder over several meshes
+(instanced, merged into a soup, and one large enough for its own tree), the rendering kernels and the
+one-instance packet kernels compiled by the helper beside the build and camera pass (parallel_compile.py,
+warmup=True), an ao+shadow render with one light of each kind, then a second frame with one object
+moved that continues from the first one's pixels (the pixel-reuse kernels), the tree statistics the
+panel shows, and last the factory scene's first frame: one cube, a one-instance scene traced in packets.
+Numba compiles one version per argument types, so the arrays have the add-on's dtypes
 (tree_cache.mesh_inputs). Sizes, modes and sample counts are runtime values and need no second compile.
 """
+from contextlib import nullcontext
+
 import numpy as np
 
 from ..render.camera import Camera
@@ -74,28 +78,35 @@ def _camera(offset) -> Camera:
     return Camera(matrix, 0.8, clip_start=0.1, clip_end=100.0).translated(offset)
 
 
-def _frame(builder: SceneBuilder, shift: float, previous, first: bool):
-    """One frame as the add-on renders it (kd_addon/pipeline.py), relative to the camera's position."""
+def _frame(builder: SceneBuilder, scene_inputs, previous, first: bool):
+    """One frame as the add-on renders it (kd_addon/pipeline.py), relative to the camera's position;
+    `scene_inputs`: (meshes, mesh_of, matrices, visibility). The first frame's build and camera pass run
+    beside the helper's compile (parallel_compile.py: the warm-up's split)."""
     offset = np.array([0.0, 0.0, 4.0])
     lights = _lights(offset)
     options = RenderOptions(mode="ao+shadow", samples=SAMPLES, lights=lights)
     rays = frame_ray_count(WIDTH, HEIGHT, options.mode, options.samples, lights)
-    mesh_of, matrices, visibility = _placements(shift)
-    if first:
-        with rendering_kernels_alongside():
-            scene, _ = builder.build(_meshes(), mesh_of, matrices, origin=offset, visibility=visibility, rays=rays)
-    else:
-        scene, _ = builder.build(_meshes(), mesh_of, matrices, origin=offset, visibility=visibility, rays=rays)
-    scene.stats()  # the panel's tree figures (tree_stats.walk_stats)
-    render = PreviewRender(scene, _camera(offset), WIDTH, HEIGHT, options, previous=previous)
+    meshes, mesh_of, matrices, visibility = scene_inputs
+    with rendering_kernels_alongside(warmup=True) if first else nullcontext():
+        scene, _ = builder.build(meshes, mesh_of, matrices, origin=offset, visibility=visibility, rays=rays)
+        scene.stats()  # the panel's tree figures (tree_stats.walk_stats)
+        render = PreviewRender(scene, _camera(offset), WIDTH, HEIGHT, options, previous=previous)
     while not render.done:
         render.step(1)
     render.image()
     return render.pixel_state()
 
 
+def _one_cube():
+    """The factory scene's objects: one cube at the origin, seen by every ray."""
+    cube = MeshInput(("Cube", "Cube", None, 0), *cube_mesh(), b"cube")
+    return [cube], np.zeros(1, np.int64), np.eye(4)[None], np.full(1, CAMERA_RAYS | SHADOW_RAYS, np.uint8)
+
+
 def compile_first_frames() -> None:
-    """Run a first frame and a second one continued from it (see the module docstring)."""
+    """Run a first frame, a second one continued from it (see the module docstring), and a first frame
+    of one object (the factory scene: a one-instance scene, traced in packets)."""
     builder = SceneBuilder("auto")
-    pixels = _frame(builder, 0.0, None, first=True)
-    _frame(builder, 0.2, pixels, first=False)
+    pixels = _frame(builder, (_meshes(), *_placements(0.0)), None, first=True)
+    _frame(builder, (_meshes(), *_placements(0.2)), pixels, first=False)
+    _frame(SceneBuilder("auto"), _one_cube(), None, first=False)

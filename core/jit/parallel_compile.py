@@ -23,7 +23,10 @@ from ..render.lights import Light
 from ..build.options import BuildOptions
 from ..render.preview_render import PreviewRender
 from ..render.render_kernels import add_samples, surface_frames
-from ..scene.two_level import as_two_level
+from ..render.camera import tiled_packets
+from ..scene.ray_visibility import CAMERA_RAYS
+from ..scene.scene_packets import trace_camera_packets
+from ..scene.two_level import as_two_level, build_two_level
 
 CORE_PACKAGE = __package__.rpartition(".")[0]  # core's module name: "core", or bl_ext.<repo>.<id>.core
 
@@ -97,21 +100,49 @@ def compile_rendering_kernels(denoise=False) -> None:
     render.image(denoise=denoise)
 
 
+def compile_placed_packets() -> None:
+    """The packet kernels of a one-instance scene whose instance is placed by a matrix (as every object
+    of the add-on's scenes, extracted relative to the camera: the factory scene's cube): the rays carried
+    into object space (scene_packets._rays_to_object) and traced in packets (trace_packets), with the
+    camera pass's argument types (float64 rays, tiled_packets' read-only order). The directions share
+    one octant, so no lane is left to single rays (their kernel is the camera pass's, compiled apart)."""
+    placed = np.eye(4)
+    placed[:3, 3] = (0.25, -0.5, -3.0)
+    scene = build_two_level([hand_made_tree()], np.zeros(1, np.int32), placed[None], threads=1)
+    x, y = np.meshgrid(np.linspace(-0.5, 0.5, 4), np.linspace(-1.0, 0.0, 4))
+    origins = np.stack([x.ravel(), y.ravel(), np.zeros(16)], axis=1)
+    directions = np.tile([0.125, 0.25, -1.0], (16, 1))
+    trace_camera_packets(scene, origins, directions, np.zeros(16), np.full(16, np.inf), tiled_packets(4, 4), 1,
+                         CAMERA_RAYS)
+
+
+def compile_rendering_and_packet_kernels(denoise=False) -> None:
+    """The kernel warm-up's helper task (first_frame.py): the rendering kernels, then the placed
+    one-instance scene's packet kernels, which the warm-up's own process would otherwise compile
+    after its build, on the longer of the two processes' paths
+    (docs/choices.md#the-warm-up-covers-a-one-object-frame-and-splits-its-compile-evenly)."""
+    compile_rendering_kernels(denoise)
+    compile_placed_packets()
+
+
+WARMUP_TASK = "jit.parallel_compile:compile_rendering_and_packet_kernels"  # helper_program.py's TASK
 HELPER_SWITCH = "KD_PREVIEW_COMPILE_HELPER"  # "0": no helper process (e.g. where spawning one is not allowed)
 HELPER_TIMEOUT = 900.0  # seconds: a guard against a helper that never ends, far above its 1.5-4 minutes
 
 
 @contextmanager
-def rendering_kernels_alongside(denoise=False):
+def rendering_kernels_alongside(denoise=False, warmup=False):
     """Compile the rendering kernels in a helper process while the `with` block runs (a build), unless
     the cache holds the sampling kernel or HELPER_SWITCH is "0" (`denoise`: compile the denoiser too);
     yields the helper or None. On leaving, run the camera pass here, then wait for the helper (at most
-    HELPER_TIMEOUT); if the block raised, end it at once. No helper runs afterwards."""
+    HELPER_TIMEOUT); if the block raised, end it at once. No helper runs afterwards. `warmup`: the
+    kernel warm-up's made-up frame (first_frame.py), whose block makes its own camera pass: the helper
+    also compiles the placed one-instance scene's packet kernels, and no camera pass runs on leaving."""
     helper = None
     if os.environ.get(HELPER_SWITCH, "1") != "0" and not rendering_kernels_cached():
         compile_scene_wrapping()
         try:
-            helper = RenderingKernelsHelper(denoise)
+            helper = RenderingKernelsHelper(denoise, WARMUP_TASK if warmup else None)
         except (OSError, ValueError, subprocess.SubprocessError):
             helper = None  # no interpreter to start (an embedded Python): this process compiles it all
     try:
@@ -122,7 +153,8 @@ def rendering_kernels_alongside(denoise=False):
         raise
     if helper is not None:
         try:
-            compile_camera_pass()
+            if not warmup:
+                compile_camera_pass()
         finally:
             helper.wait(HELPER_TIMEOUT)
             helper.stop()
@@ -133,9 +165,10 @@ class RenderingKernelsHelper:
     this process's module name (in Blender `bl_ext.<repo>.<id>.core`: a kernel's pickled environment
     names its module), with parent packages stubbed so the add-on's bpy-importing `__init__` does not
     run; writes where this process reads (kernel_cache.CORE_CACHE_FOLDER_VARIABLE); runs one thread and
-    keeps its stderr for `outcome`. A failed helper costs only its time."""
+    keeps its stderr for `outcome`. A failed helper costs only its time. `task`: helper_program.py's
+    TASK (None: the rendering kernels)."""
 
-    def __init__(self, denoise=False):
+    def __init__(self, denoise=False, task=None):
         self._errors = tempfile.TemporaryFile()  # the helper's stderr: its last line names a failure
         self.stopped = False
         env = dict(os.environ, NUMBA_NUM_THREADS="1",
@@ -143,7 +176,8 @@ class RenderingKernelsHelper:
         env[CORE_CACHE_FOLDER_VARIABLE] = core_cache_folders()  # where this process reads
         env["KD_PREVIEW_HELPER_PARENT"] = str(os.getpid())  # the helper ends when this process is gone
         self.process = subprocess.Popen(
-            [sys.executable, "-c", _HELPER_CODE, CORE_PACKAGE, str(CORE_FOLDER), "1" if denoise else "0"], env=env,
+            [sys.executable, "-c", _HELPER_CODE, CORE_PACKAGE, str(CORE_FOLDER), "1" if denoise else "0",
+             *([task] if task else [])], env=env,
             stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=self._errors,
             creationflags=getattr(subprocess, "CREATE_NO_WINDOW", 0))  # Windows: no console window
 
@@ -178,5 +212,6 @@ class RenderingKernelsHelper:
         return f"failed (exit code {code}" + (f": {lines[-1]})" if lines else ")")
 
 
-# The helper's program (argv: core's module name, its folder, "1" for the denoiser): helper_program.py.
+# The helper's program (argv: core's module name, its folder, "1" for the denoiser, the task if not the
+# rendering kernels): helper_program.py.
 _HELPER_CODE = (Path(__file__).with_name("helper_program.py")).read_text(encoding="utf-8")

@@ -273,11 +273,13 @@ def hard_shadow_rays(frames, lights, k, dim1, directions, tmax, lit):
     """The shadow ray of light k, one without extent (every sample's is the same), from each pixel
     of the PixelFrames `frames`, made as the sampling kernel makes it (_ray_of_use): its direction into
     directions (M, 3), tmax (M,), and lit (M,) bool, whether the pixel faces the light inside its mask
-    (else it takes no ray). The rays start at frames.starts."""
+    (else it takes no ray). The rays start at frames.starts. The block index is passed as int64: Numba
+    types a prange's index int64 in one place and uint64 in the parallel body, which would compile the
+    block function twice."""
     n = frames.points.shape[0]
     for b in prange((n + PIXELS_PER_TASK - 1) // PIXELS_PER_TASK):
-        _hard_shadow_block(frames, lights, k, dim1, directions, tmax, lit, b * PIXELS_PER_TASK,
-                           min(n, (b + 1) * PIXELS_PER_TASK))
+        first = np.int64(b) * PIXELS_PER_TASK
+        _hard_shadow_block(frames, lights, k, dim1, directions, tmax, lit, first, min(n, first + PIXELS_PER_TASK))
 
 
 @njit(cache=True)
@@ -298,8 +300,9 @@ def surface_frames(scene, origins, directions, t, inst, prim, hit_index, points,
     the AO and shadow rays (the point offset off its surface, shading.offset_origin) of the camera hits."""
     n = hit_index.shape[0]
     for b in prange((n + PIXELS_PER_TASK - 1) // PIXELS_PER_TASK):
-        _surface_block(scene, (origins, directions, t, inst, prim), hit_index, (points, normals, starts),
-                       b * PIXELS_PER_TASK, min(n, (b + 1) * PIXELS_PER_TASK))
+        first = np.int64(b) * PIXELS_PER_TASK  # int64, as in hard_shadow_rays
+        _surface_block(scene, (origins, directions, t, inst, prim), hit_index, (points, normals, starts), first,
+                       min(n, first + PIXELS_PER_TASK))
 
 
 @njit(cache=True)
