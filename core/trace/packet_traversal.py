@@ -228,10 +228,7 @@ def _node_step(lanes32, a, pos, left, signs, m, t0, t1, stack_node, stack_bits, 
     """One inner node for the active lanes m: (next node, its lanes, their t0 and t1, stack size).
     A lane's part of the first child is [t0, min(t1, hi)], of the second [max(t0, lo), t1], with
     [lo, hi] the widened plane distance (module docstring); lanes entering both push the second."""
-    p = S.splat_f32(pos)
-    ts = S.mul(S.sub(p, S.load(lanes32, (O32 + a) * L)), S.load(lanes32, (INV32 + a) * L))
-    err = S.fma(S.load(lanes32, (C32 + a) * L), S.splat_f32(abs(pos)), S.load(lanes32, (E32 + a) * L))
-    lo, hi = S.sub(ts, err), S.add(ts, err)
+    lo, hi = _plane_bounds(lanes32, a, pos)
     in_first = m & S.mask_bits(S.le(t0, hi))
     in_second = m & S.mask_bits(S.le(lo, t1))
     first, second = (left, left + 1) if (signs >> a) & 1 else (left + 1, left)
@@ -246,16 +243,21 @@ def _node_step(lanes32, a, pos, left, signs, m, t0, t1, stack_node, stack_bits, 
 
 
 @njit(cache=True, inline="always")
+def _plane_bounds(lanes32, a, pos):
+    """Each lane's widened distance [lo, hi] to the plane at pos on axis a (module docstring)."""
+    ts = S.mul(S.sub(S.splat_f32(pos), S.load(lanes32, (O32 + a) * L)), S.load(lanes32, (INV32 + a) * L))
+    err = S.fma(S.load(lanes32, (C32 + a) * L), S.splat_f32(abs(pos)), S.load(lanes32, (E32 + a) * L))
+    return S.sub(ts, err), S.add(ts, err)
+
+
+@njit(cache=True, inline="always")
 def _mixed_node_step(lanes32, a, pos, left, up, m, t0, t1, stack, sp):
     """_node_step for an any-hit packet whose lanes have both signs on axis a (`up`: lanes with d[a] > 0):
     each lane's parts of the two children follow its own sign (the near part [t0, min(t1, hi)] is the
     left child's where d[a] > 0, the right child's otherwise). The children are taken in the order of
     the lowest lane entering both (with one origin, all such lanes start on its side of the plane); the
     order only decides which hit an any-hit lane meets first, never whether it meets one."""
-    p = S.splat_f32(pos)
-    ts = S.mul(S.sub(p, S.load(lanes32, (O32 + a) * L)), S.load(lanes32, (INV32 + a) * L))
-    err = S.fma(S.load(lanes32, (C32 + a) * L), S.splat_f32(abs(pos)), S.load(lanes32, (E32 + a) * L))
-    lo, hi = S.sub(ts, err), S.add(ts, err)
+    lo, hi = _plane_bounds(lanes32, a, pos)
     near = m & S.mask_bits(S.le(t0, hi))
     far = m & S.mask_bits(S.le(lo, t1))
     in_left, in_right = (near & up) | (far & ~up), (far & up) | (near & ~up)
