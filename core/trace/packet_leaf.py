@@ -73,16 +73,12 @@ def leaf_test(leaf_tris, leaf_prims, column, end, first, m, sc, mode, any_hit):
 def _screened_lanes(leaf_tris, leaf_prims, base, first, end, m, sc):
     """traversal.leaf_hit (any hit) for each lane of m on the leaf's triangles first..end-1 (columns
     base + first...); bits of lanes that found a hit."""
-    rays, lane_o, axes = sc.rays, sc.lane_o, sc.axes
+    rays = sc.rays
     found = 0
     while m != 0:
         l = S.count_trailing_zeros(m)
         m &= m - 1
-        for k in range(3):
-            lane_o[at(l), k] = rays[at((O + k) * L + l)]
-        ray = (rows(lane_o, l, l + 1)[0], axes[at(l), 0], axes[at(l), 1], axes[at(l), 2], rays[at(SX * L + l)],
-               rays[at(SY * L + l)], rays[at(SZ * L + l)])
-        t, prim, u, v = leaf_hit(leaf_tris, leaf_prims, base, first, end, ray, rays[at(TMIN * L + l)],
+        t, prim, u, v = leaf_hit(leaf_tris, leaf_prims, base, first, end, _lane_ray(sc, l), rays[at(TMIN * L + l)],
                                  rays[at(BEST * L + l)], True, sc.flags)
         if prim >= 0:
             rays[at(BEST * L + l)], sc.prims[at(l)], sc.us[at(l)], sc.vs[at(l)] = t, prim, u, v
@@ -240,14 +236,22 @@ def _t_rounding(a, b, c, shear, edges, det):
 
 
 @njit(cache=True, inline="always")
-def _test_lane(leaf_tris, column, prim, l, sc):
-    """The single-ray test of lane l against one leaf triangle; keeps the hit if closer (as trace_ray)."""
-    rays, lane_o, axes, prims, us, vs = sc.rays, sc.lane_o, sc.axes, sc.prims, sc.us, sc.vs
+def _lane_ray(sc, l):
+    """Lane l as the single-ray test takes a ray: (origin, kx, ky, kz, sx, sy, sz) (triangle_test.ray_shear),
+    its origin copied into the scratch row lane_o[l]."""
+    rays, lane_o, axes = sc.rays, sc.lane_o, sc.axes
     for k in range(3):
         lane_o[at(l), k] = rays[at((O + k) * L + l)]
-    t, u, v = intersect_leaf_triangle(leaf_tris, column, rows(lane_o, l, l + 1)[0], axes[at(l), 0],
-                                      axes[at(l), 1], axes[at(l), 2], rays[at(SX * L + l)], rays[at(SY * L + l)],
-                                      rays[at(SZ * L + l)])
+    return (rows(lane_o, l, l + 1)[0], axes[at(l), 0], axes[at(l), 1], axes[at(l), 2], rays[at(SX * L + l)],
+            rays[at(SY * L + l)], rays[at(SZ * L + l)])
+
+
+@njit(cache=True, inline="always")
+def _test_lane(leaf_tris, column, prim, l, sc):
+    """The single-ray test of lane l against one leaf triangle; keeps the hit if closer (as trace_ray)."""
+    rays, prims, us, vs = sc.rays, sc.prims, sc.us, sc.vs
+    o, kx, ky, kz, sx, sy, sz = _lane_ray(sc, l)
+    t, u, v = intersect_leaf_triangle(leaf_tris, column, o, kx, ky, kz, sx, sy, sz)
     if rays[at(TMIN * L + l)] < t < rays[at(BEST * L + l)]:
         rays[at(BEST * L + l)], prims[at(l)], us[at(l)], vs[at(l)] = t, prim, u, v
         return True

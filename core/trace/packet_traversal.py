@@ -209,7 +209,7 @@ def _traverse(tree, sc, mode, signs, bits, stack, any_hit):
                                                        sc.lane_bits[at(a)], m, t0, t1, stack, sp)
                 continue
             node, m, t0, t1, sp = _node_step(lanes32, a, split[at(node)], child[at(node)], signs, m, t0, t1,
-                                             stack_node, stack_bits, stack_t, sp)
+                                             stack, sp)
             continue
         if a != LEAF:
             return True
@@ -224,7 +224,7 @@ def _traverse(tree, sc, mode, signs, bits, stack, any_hit):
 
 
 @njit(cache=True, inline="always")
-def _node_step(lanes32, a, pos, left, signs, m, t0, t1, stack_node, stack_bits, stack_t, sp):
+def _node_step(lanes32, a, pos, left, signs, m, t0, t1, stack, sp):
     """One inner node for the active lanes m: (next node, its lanes, their t0 and t1, stack size).
     A lane's part of the first child is [t0, min(t1, hi)], of the second [max(t0, lo), t1], with
     [lo, hi] the widened plane distance (module docstring); lanes entering both push the second."""
@@ -235,9 +235,7 @@ def _node_step(lanes32, a, pos, left, signs, m, t0, t1, stack_node, stack_bits, 
     if in_first == 0:
         return second, in_second, S.vmax(t0, lo), t1, sp
     if in_second != 0:
-        stack_node[at(sp)], stack_bits[at(sp)] = second, in_second
-        S.store(stack_t, sp * 2 * L, S.vmax(t0, lo))
-        S.store(stack_t, sp * 2 * L + L, t1)
+        _push(stack, sp, second, in_second, S.vmax(t0, lo), t1)
         sp += 1
     return first, in_first, t0, S.vmin(t1, hi), sp
 
