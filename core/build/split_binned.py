@@ -93,7 +93,12 @@ def best_binned_split_into(min_bins, max_bins, weight, node_box, params, sweep_s
 @njit(cache=True, inline="always")
 def _boundary(node_box, axis, k, nbins):
     """Bin boundary k on `axis` as the float32 plane a split stores."""
-    lo, hi = np.float64(node_box[axis]), np.float64(node_box[axis + 3])
+    return _plane(np.float64(node_box[axis]), np.float64(node_box[axis + 3]), k, nbins)
+
+
+@njit(cache=True, inline="always")
+def _plane(lo, hi, k, nbins):
+    """_boundary from the node's bounds on the axis, lo and hi (float64)."""
     return np.float32(lo + k * ((hi - lo) / nbins))
 
 
@@ -120,9 +125,8 @@ def _boundary_costs(min_bins, max_bins, weight, node_box, axis, params, counts, 
     e = extents(node_box)
     lo32, hi32 = node_box[axis], node_box[axis + 3]  # read once: a load per boundary keeps the loop scalar
     lo, hi = np.float64(lo32), np.float64(hi32)
-    step = (hi - lo) / nbins
     for k in range(1, nbins):
-        pos = np.float32(lo + k * step)  # _boundary's plane
+        pos = _plane(lo, hi, k, nbins)
         cost = cost_of_areas(cut_half_area(e, axis, np.float64(pos) - lo),
                              cut_half_area(e, axis, hi - np.float64(pos)), inv_area,
                              counts[0, k], counts[1, k], params)
