@@ -127,7 +127,6 @@ def intersect_packets(tree, origins, directions, width, tmin=0.0, tmax=np.inf, t
         return intersect(tree, o, d, tmin, tmax, threads)
     lo, hi = as_ray_limits(tmin, tmax, n)
     order = packet_order(int(width), n // width, tuple(tile_shape))
-    order.setflags(write=False)  # read-only, as the renderer's: one compiled trace_packets serves all callers
     t, prim, u, v = np.empty(n), np.empty(n, np.int32), np.empty(n), np.empty(n)
     single = np.zeros(n, np.uint8)
     with thread_count(threads):
