@@ -12,7 +12,7 @@ from core.scene.scene_packets import occluded_in_packets, trace_camera_packets
 from core.scene.scene_queries import trace_valid_rays
 from core.scene.two_level import build_two_level
 from core.trace.packet_traversal import L
-from tests.meshes import icosphere, mesh_triangles, random_soup
+from tests.meshes import icosphere, lattice, mesh_triangles, random_soup
 
 
 def camera_rays(eye, target, width, height, fov=0.9):
@@ -132,3 +132,33 @@ def test_shadow_rays_to_one_point_occluded_as_any_hit_rays(matrix):
     want = trace_valid_rays(scene, starts, towards, np.zeros(len(starts)), tmax, True, 2, SHADOW_RAYS)[2] >= 0
     np.testing.assert_array_equal(got, want)
     assert 0 < want.sum() < len(want)
+
+
+@pytest.mark.parametrize("builder", ["binned", "median"])
+def test_shadow_rays_of_mixed_signs_from_lattice_points_occluded_as_any_hit_rays(builder):
+    """Shadow packets are any-hit packets (a lane stops at its first hit, lanes of both signs share a
+    packet): rays from many distinct points of a lattice (every triangle in a split plane, starts on
+    split planes, half-integer and integer coordinates) towards a point inside it, so a packet's lanes
+    point in both directions on some axis, many rays lie in split planes, some components are +-0.
+    Every ray is occluded exactly when the single-ray any-hit query says so."""
+    tris = lattice(3)
+    grid = np.stack(np.meshgrid(*[np.arange(0.0, 3.01, 0.5)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
+    light = np.array([1.5, 1.0, 2.0])
+    grid = grid[np.linalg.norm(grid - light, axis=1) > 0]
+    rng = np.random.default_rng(11)
+    starts = np.ascontiguousarray(np.concatenate([grid, grid + rng.normal(scale=1e-3, size=grid.shape)]))
+    towards = light - starts
+    length = np.linalg.norm(towards, axis=1)
+    towards /= length[:, None]
+    towards[::7] *= -1.0  # some rays away from the light: both signs inside most packets
+    scene = build_two_level([core.build_kdtree(tris, builder=builder)], [0], np.eye(4)[None])
+    order = np.full(-(-len(starts) // L) * L, -1, np.int64)
+    order[:len(starts)] = np.arange(len(starts))
+    for lo in (0.0, 1e-9):
+        lows = np.full(len(starts), lo)
+        got = occluded_in_packets(scene, starts, towards, lows, length, order, 2, SHADOW_RAYS)
+        want = trace_valid_rays(scene, starts, towards, lows, length, True, 2, SHADOW_RAYS)[2] >= 0
+        np.testing.assert_array_equal(got, want)
+        assert 0 < want.sum() < len(want)
+    signs = np.sign(towards[order[:len(starts) // L * L]].reshape(-1, L, 3))
+    assert ((signs > 0).any(axis=1) & (signs < 0).any(axis=1)).any(axis=1).mean() > 0.5

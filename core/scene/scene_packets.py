@@ -48,8 +48,9 @@ def packets_apply(scene, ray_mask):
 
 
 def _trace_in_packets(scene, o, d, lo, hi, order, threads, ray_mask, any_hit):
-    """Packets through the one instance (packets_apply), the rays they leave traced singly, those as
-    any-hit queries when `any_hit`: (t, instance, prim, u, v) as trace_valid_rays gives them."""
+    """Packets through the one instance (packets_apply), the rays they leave traced singly, all of them
+    as any-hit queries when `any_hit` (a lane stops at its first hit): (t, instance, prim, u, v) as
+    trace_valid_rays gives them."""
     s = scene.arrays
     n, inst = len(o), int(s.top_items[0])
     t, u, v, prim = np.empty(n), np.empty(n), np.empty(n), np.empty(n, np.int32)
@@ -57,7 +58,7 @@ def _trace_in_packets(scene, o, d, lo, hi, order, threads, ray_mask, any_hit):
     with thread_count(threads):
         o_obj, d_obj = _in_object_space(s.world_to_object[inst], o, d)
         trace_packets(_mesh_tree(s, int(s.mesh_of[inst])), PacketRays(o_obj, d_obj, lo, hi, order),
-                      PacketOutputs(t, prim, u, v, single))
+                      PacketOutputs(t, prim, u, v, single), any_hit)
         instance = np.where(prim >= 0, np.int32(inst), np.int32(-1))
         rest = np.flatnonzero(single)
         if len(rest):

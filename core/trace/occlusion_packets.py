@@ -25,6 +25,7 @@ def occluded_prims(tree_arrays, o, d, lo, hi):
     n = len(o)
     single = np.zeros(n, np.uint8)
     order = origin_runs(o, single)
+    order.setflags(write=False)  # as every caller's order: one compiled trace_packets (packet_traversal.py)
     t, prim, u, v = np.empty(n), np.empty(n, np.int32), np.empty(n), np.empty(n)
     if len(order) == 0:
         trace_rays(tree_arrays, o, d, lo, hi, True, t, prim, u, v)

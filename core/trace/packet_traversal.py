@@ -130,7 +130,8 @@ def intersect_packets(tree, origins, directions, width, tmin=0.0, tmax=np.inf, t
     t, prim, u, v = np.empty(n), np.empty(n, np.int32), np.empty(n), np.empty(n)
     single = np.zeros(n, np.uint8)
     with thread_count(threads):
-        trace_packets(tree.arrays, PacketRays(o, d, lo, hi, order), PacketOutputs(t, prim, u, v, single))
+        # any_hit passed, not left to its default: an omitted argument would be another specialisation
+        trace_packets(tree.arrays, PacketRays(o, d, lo, hi, order), PacketOutputs(t, prim, u, v, single), False)
         rest = np.flatnonzero(single)
         if len(rest):
             out = [np.empty(len(rest)), np.empty(len(rest), np.int32), np.empty(len(rest)), np.empty(len(rest))]
