@@ -134,16 +134,17 @@ def test_shadow_rays_to_one_point_occluded_as_any_hit_rays(matrix):
     assert 0 < want.sum() < len(want)
 
 
-@pytest.mark.parametrize("builder", ["binned", "median"])
-def test_shadow_rays_of_mixed_signs_from_lattice_points_occluded_as_any_hit_rays(builder):
+@pytest.mark.parametrize("builder, offset", [("binned", 0.0), ("median", 0.0), ("binned", 2.0 ** 20)])
+def test_shadow_rays_of_mixed_signs_from_lattice_points_occluded_as_any_hit_rays(builder, offset):
     """Shadow packets are any-hit packets (a lane stops at its first hit, lanes of both signs share a
     packet): rays from many distinct points of a lattice (every triangle in a split plane, starts on
     split planes, half-integer and integer coordinates) towards a point inside it, so a packet's lanes
     point in both directions on some axis, many rays lie in split planes, some components are +-0.
-    Every ray is occluded exactly when the single-ray any-hit query says so."""
-    tris = lattice(3)
-    grid = np.stack(np.meshgrid(*[np.arange(0.0, 3.01, 0.5)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
-    light = np.array([1.5, 1.0, 2.0])
+    Every ray is occluded exactly when the single-ray any-hit query says so, also far from the origin
+    (every coordinate offset by 2^20, where float32 keeps the lattice exact)."""
+    tris = lattice(3) + offset
+    grid = np.stack(np.meshgrid(*[np.arange(0.0, 3.01, 0.5)] * 3, indexing="ij"), axis=-1).reshape(-1, 3) + offset
+    light = np.array([1.5, 1.0, 2.0]) + offset
     grid = grid[np.linalg.norm(grid - light, axis=1) > 0]
     rng = np.random.default_rng(11)
     starts = np.ascontiguousarray(np.concatenate([grid, grid + rng.normal(scale=1e-3, size=grid.shape)]))
