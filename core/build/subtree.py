@@ -58,11 +58,12 @@ def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, root_room, p
                                              np.empty(0, np.int32), np.empty(0, np.int32), 0,
                                              max(16, n_refs // 2))
     leaf_prims = np.empty(max(16, n_refs + n_refs // 2), np.int32)
-    n_nodes, n_leaf_prims = 1, 0
+    # int64 from the start: a literal 0 makes Numba compile the callees once more for Literal[int](0).
+    n_nodes, n_leaf_prims = 1, np.int64(0)
     deferred = (np.empty(0, np.int32), np.zeros(1, np.int32), np.empty(0, np.int32),
                 np.empty((0, 6), np.float32), np.empty(0, np.int32), np.empty((0, 6), np.float32),
                 np.empty(0, np.float64))
-    n_deferred = 0
+    n_deferred = np.int64(0)
 
     stack_node[0], stack_range[0, 0], stack_range[0, 1], stack_depth[0] = 0, 0, n_refs, root_depth
     stack_box[0], stack_room[0] = root_box, root_room
