@@ -108,19 +108,17 @@ def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, root_room, p
         axis[node], split[node], child[node], count[node] = split_axis, pos, left, 0
         stack_room[sp] = stack_room[sp + 1] = child_room(room, n, n_left + n_right)
         # Right child first on the stack so the left one (on top of the pool) is built first.
-        middle = start + n_right
         _cut_box(stack_box, sp, box, split_axis, pos, False)
-        sp = _push(stack_node, stack_range, stack_depth, sp, left + 1, start, middle, depth + 1)
+        sp = _push(stack_node, stack_range, stack_depth, sp, left + 1, start, start + n_right, depth + 1)
         _cut_box(stack_box, sp, box, split_axis, pos, True)
-        sp = _push(stack_node, stack_range, stack_depth, sp, left, middle, middle + n_left, depth + 1)
+        sp = _push(stack_node, stack_range, stack_depth, sp, left, end, end + n_left, depth + 1)
     keep_alive((bins, split_scratch))
     d_node, d_start, d_depth, d_box, d_prims, d_boxes, d_room = deferred
     n_deferred_refs = d_start[n_deferred]
-    return (axis[:n_nodes].copy(), split[:n_nodes].copy(), child[:n_nodes].copy(),
-            count[:n_nodes].copy(), leaf_prims[:n_leaf_prims].copy(),
-            d_node[:n_deferred].copy(), d_start[:n_deferred + 1].copy(), d_depth[:n_deferred].copy(),
-            d_box[:n_deferred].copy(), d_prims[:n_deferred_refs].copy(), d_boxes[:n_deferred_refs].copy(),
-            d_room[:n_deferred].copy())
+    # Views, not copies: merge.py and lazy.py copy every part into the tree's own arrays.
+    return (axis[:n_nodes], split[:n_nodes], child[:n_nodes], count[:n_nodes], leaf_prims[:n_leaf_prims],
+            d_node[:n_deferred], d_start[:n_deferred + 1], d_depth[:n_deferred], d_box[:n_deferred],
+            d_prims[:n_deferred_refs], d_boxes[:n_deferred_refs], d_room[:n_deferred])
 
 
 @njit(cache=True, inline="always")
