@@ -49,7 +49,9 @@ def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, root_room, p
     scratch = np.empty(3 * min(n_refs, max(params.exact_below, 16)) + 16, np.float32)
     split_scratch = new_split_scratch()
 
-    prims, boxes = ensure_refs(prims, boxes, n_refs, 2 * n_refs + 64)
+    # Left children start at their parent's end (partition.py), so a chain of them reaches past 2 n:
+    # room for 3 n up front, or the pool is grown and copied once early in every subtree.
+    prims, boxes = ensure_refs(prims, boxes, n_refs, 3 * n_refs + 64)
     # What the inlined per-node code takes, as unowned views (module docstring); their owners stay
     # bound to the end (keep_alive).
     prims_v, boxes_v, tris_v, box_v = unowned(prims), unowned(boxes), unowned(tris), unowned(box)
