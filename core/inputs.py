@@ -67,6 +67,9 @@ def as_triangles(triangles):
     return arr
 
 
+_CHECK_BLOCK = 256  # rows _triangle_faults checks with no branch, before looking at each row
+
+
 @njit(cache=True)
 def _triangle_faults(rows):
     """(first row holding a NaN or inf, first row holding a finite value beyond float32's range; -1:
@@ -92,9 +95,6 @@ def _triangle_faults(rows):
                 if first_beyond < 0 and abs(np.float64(x)) > FLOAT32_MAX:
                     first_beyond = i
     return -1, first_beyond
-
-
-_CHECK_BLOCK = 256
 
 
 def as_rays(origins, directions):
