@@ -54,47 +54,15 @@ def as_triangles(triangles):
     if not is_real_dtype(arr.dtype):
         raise ValueError(f"triangles must be real numbers (float32 or float64; integers are taken too), got dtype "
                          f"{arr.dtype}")
-    rows = arr.reshape(len(arr), 9)
-    if rows.dtype not in (np.float32, np.float64):  # integers, float16: exact in float64
-        rows = rows.astype(np.float64)
-    bad, bad_range = _triangle_faults(rows)
-    if bad >= 0:
+    if len(arr) and not np.isfinite(arr).all():
+        bad = int(np.flatnonzero(~np.isfinite(arr).reshape(len(arr), 9).all(axis=1))[0])
         raise ValueError(f"triangle {bad} has a non-finite vertex coordinate (NaN or inf): {arr[bad].tolist()}")
-    if bad_range >= 0:
-        raise ValueError(f"triangle {bad_range} has a vertex coordinate beyond float32's range "
-                         f"(+-{FLOAT32_MAX:.4g}), in which triangles are stored: {arr[bad_range].tolist()}")
+    bad = first_row_beyond_float32(arr.reshape(len(arr), 9))
+    if bad >= 0:
+        raise ValueError(f"triangle {bad} has a vertex coordinate beyond float32's range (+-{FLOAT32_MAX:.4g}), "
+                         f"in which triangles are stored: {arr[bad].tolist()}")
     arr = np.ascontiguousarray(arr, dtype=np.float32)
     return arr
-
-
-_CHECK_BLOCK = 256  # rows _triangle_faults checks with no branch, before looking at each row
-
-
-@njit(cache=True)
-def _triangle_faults(rows):
-    """(first row holding a NaN or inf, first row holding a finite value beyond float32's range; -1:
-    none) of an (N, 9) float32 or float64 array, the second only when no row has the first. One compiled
-    pass, a block of rows at a time with no branch per value, then the first bad block row by row: NumPy's
-    isfinite pass and its bool array ran serially in every build (docs/choices.md#serial-steps-of-the-build-compiled)."""
-    first_beyond = -1
-    for start in range(0, rows.shape[0], _CHECK_BLOCK):
-        end = min(start + _CHECK_BLOCK, rows.shape[0])
-        not_finite = beyond = False
-        for i in range(start, end):
-            for k in range(9):
-                x = rows[i, k]
-                not_finite |= not (x - x == 0.0)  # x - x is NaN for NaN and +-inf
-                beyond |= abs(np.float64(x)) > FLOAT32_MAX
-        if not (not_finite or (beyond and first_beyond < 0)):
-            continue
-        for i in range(start, end):
-            for k in range(9):
-                x = rows[i, k]
-                if not (x - x == 0.0):
-                    return i, first_beyond
-                if first_beyond < 0 and abs(np.float64(x)) > FLOAT32_MAX:
-                    first_beyond = i
-    return -1, first_beyond
 
 
 def as_rays(origins, directions):
