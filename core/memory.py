@@ -105,6 +105,20 @@ def _malloc_trim():
 _MALLOC_TRIM = _malloc_trim()
 
 
+# A build whose leaf copy is smaller keeps its freed memory for the next build instead of handing it back
+# to the OS before the copy: released, every build faults its pools in afresh, zeroed page by page
+# (docs/choices.md#freed-build-memory-kept-below-64-mb-of-leaf-copy).
+RELEASE_MIN_BYTES = 64 * MB
+
+
+def release_before_copy(copy_bytes, memory_limit):
+    """Hand the build's freed memory back to the OS before the tree's leaf copy of `copy_bytes` is made,
+    where the peak matters: under a memory limit, or for a copy of at least RELEASE_MIN_BYTES. Otherwise
+    the copy adds at most RELEASE_MIN_BYTES to the peak, and the next build reuses the kept memory."""
+    if memory_limit is not None or copy_bytes >= RELEASE_MIN_BYTES:
+        release_freed_memory()
+
+
 def release_freed_memory():
     """Give the memory a build has freed back to the OS, where the C library can (glibc's
     malloc_trim). The subtree builds' pools are freed into their worker threads' malloc arenas, which

@@ -83,9 +83,10 @@ def _partition(tris, prims, boxes, start, end, axis, pos, planar_left):
 
 @pytest.mark.parametrize("seed", range(4))
 def test_partition_matches_a_numpy_reference(seed):
-    """Right references compacted in order at start, left ones after them, straddlers (unclipped) on both
-    sides and planar ones on the chosen side, each with its own index and box, the rows before start
-    untouched: the vector row copies and unsigned indices against NumPy."""
+    """Right references compacted in order at start, left ones in order from the node's end (where the
+    partition writes them, not moved down), straddlers (unclipped) on both sides and planar ones on the
+    chosen side, each with its own index and box, the rows before start untouched: the vector row copies
+    and unsigned indices against NumPy."""
     rng = np.random.default_rng(seed)
     n, start, axis = 500, 37, seed % 3
     lo = rng.integers(0, 20, (n, 3)).astype(np.float32)
@@ -105,7 +106,7 @@ def test_partition_matches_a_numpy_reference(seed):
     right, left = np.flatnonzero(goes_right), np.flatnonzero(goes_left)
     assert (n_right, n_left) == (len(right), len(left))
     cut = boxes.copy()
-    sides = ((start, right, axis, np.maximum), (start + n_right, left, axis + 3, np.minimum))
+    sides = ((start, right, axis, np.maximum), (start + n, left, axis + 3, np.minimum))
     for first, chosen, column, bound in sides:
         expected = cut[chosen]
         expected[:, column] = bound(expected[:, column], pos)  # a straddler's part of its box

@@ -177,17 +177,25 @@ def test_ray_in_a_split_plane_finds_the_closer_hit_in_the_in_plane_sibling():
         assert (hits.t[0], hits.prim[0]) == (np.float32(0.375), 5), options
 
 
-def test_build_releases_freed_memory_before_the_leaf_copy(monkeypatch):
+@pytest.mark.parametrize("options, release_min, released", [
+    ({"memory_limit": 1 << 30}, memory.RELEASE_MIN_BYTES, True),  # a limit: the peak matters
+    ({}, 0, True),  # a leaf copy of at least RELEASE_MIN_BYTES
+    ({}, memory.RELEASE_MIN_BYTES, False),  # a small copy: the freed memory is kept for the next build
+])
+def test_build_releases_freed_memory_before_a_large_leaf_copy(monkeypatch, options, release_min, released):
     """The subtree pools are freed before the tree's leaf copy is made, and handed back to the OS in
-    between (memory.release_freed_memory): otherwise the copy adds its whole size to the process's
-    peak (bench_core.py: 188 against 127 B a triangle on suzanne-251k)."""
+    between (memory.release_freed_memory) under a memory limit or when the copy is large: otherwise the
+    copy adds its whole size to the process's peak (bench_core.py: 188 against 127 B a triangle on
+    suzanne-251k). Below RELEASE_MIN_BYTES without a limit the memory is kept: released, the next build
+    faults it in again page by page."""
     import core.build.builder as build
     calls = []
     real_copy = build.leaf_triangles
-    monkeypatch.setattr(build, "release_freed_memory", lambda: calls.append("release"))
+    monkeypatch.setattr(memory, "release_freed_memory", lambda: calls.append("release"))
+    monkeypatch.setattr(memory, "RELEASE_MIN_BYTES", release_min)
     monkeypatch.setattr(build, "leaf_triangles", lambda *a: calls.append("copy") or real_copy(*a))
-    tree = core.build_kdtree(mesh_triangles(*icosphere(2)))
-    assert calls == ["release", "copy"]
+    tree = core.build_kdtree(mesh_triangles(*icosphere(2)), **options)
+    assert calls == (["release", "copy"] if released else ["copy"])
     assert tree.leaf_triangles.shape == (9, len(tree.leaf_prims))
     if sys.platform.startswith("linux") and "glibc" in platform.libc_ver()[0]:
         assert memory._MALLOC_TRIM is not None  # the release is real where glibc provides it

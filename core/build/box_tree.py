@@ -168,7 +168,7 @@ def build_box_subtree(items, boxes, n_refs, root_box, root_depth, root_room, par
     axis, split, child, count = ensure_nodes(np.empty(0, np.int8), np.empty(0, np.float32), np.empty(0, np.int32),
                                              np.empty(0, np.int32), 0, max(16, n_refs))
     leaf_items = np.empty(max(16, 2 * n_refs), np.int32)
-    n_nodes, n_leaf = 1, 0
+    n_nodes, n_leaf = 1, np.int64(0)  # int64 from the start: a literal 0 costs a second compile of the callees
     stack_range[0, 0], stack_range[0, 1], stack_range[0, 2] = 0, 0, n_refs
     stack_depth[0], stack_room[0], stack_box[0] = root_depth, root_room, root_box
     sp = 1

@@ -8,8 +8,8 @@ from ..inputs import as_triangles
 from ..trace.kdtree import KdTree, empty_arrays
 from ..trace.layout import NodeArrays
 from .lazy import DeferredSubtrees
-from .leaf_triangles import leaf_triangles
-from ..memory import MB, MemoryLimitError, check_build_memory, release_freed_memory
+from .leaf_triangles import BYTES_PER_REFERENCE as LEAF_COPY_BYTES, leaf_triangles
+from ..memory import MB, MemoryLimitError, check_build_memory, release_before_copy
 from .merge import merge_tree
 from .options import make_options
 from .subtree import build_subtrees
@@ -44,7 +44,7 @@ def build_kdtree(triangles, **options):
                     f"(here cost_ratio {opts.cost_ratio:g}, leaf_size {opts.leaf_size}, max_depth "
                     f"{opts.depth_for(len(tris))}) do; raise memory_limit, or lower max_depth or cost_ratio") from None
         del prims, boxes  # the initial references; the leaf copy below may take their memory
-        release_freed_memory()
+        release_before_copy(LEAF_COPY_BYTES * len(arrays.leaf_prims), opts.memory_limit)
         leaf_tris = leaf_triangles(tris, arrays.leaf_prims)  # part of the build: the traversal reads it
     return KdTree(tris, bounds, arrays, options=opts, build_ms=_ms_since(start), dropped=dropped,
                   timings=timings, deferred=deferred, leaf_tris=leaf_tris)

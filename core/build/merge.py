@@ -4,6 +4,7 @@ Each task's subtree root replaces its task slot and the rest is appended, child 
 offsets shifted; a lazy tree splices its on-demand subtrees into their UNBUILT slots the same way.
 """
 import numpy as np
+from numba import njit
 
 from ..trace.layout import LEAF, UNBUILT
 
@@ -37,18 +38,31 @@ def splice_subtrees(arrays, slots, subtrees, first_deferred=0):
     base, prim_base, deferred_base = n_old, p_old, first_deferred
     for slot, (s_axis, s_split, s_child, s_count, s_prims, s_deferred_node) in zip(
             slots, (s[:6] for s in subtrees)):
-        shifted = np.where(s_axis == LEAF, s_child + prim_base,
-                           np.where(s_axis == UNBUILT, s_child + deferred_base, s_child + (base - 1)))
-        shifted = shifted.astype(np.int32)
-        axis[slot], split[slot], child[slot], count[slot] = s_axis[0], s_split[0], shifted[0], s_count[0]
-        m = len(s_axis) - 1
-        axis[base:base + m], split[base:base + m] = s_axis[1:], s_split[1:]
-        child[base:base + m], count[base:base + m] = shifted[1:], s_count[1:]
+        _place_subtree((axis, split, child, count), int(slot), base, (s_axis, s_split, s_child, s_count),
+                       (int(prim_base), int(deferred_base)))
         leaf_prims[prim_base:prim_base + len(s_prims)] = s_prims
-        base += m
+        base += len(s_axis) - 1
         prim_base += len(s_prims)
         deferred_base += len(s_deferred_node)
     return axis, split, child, count, leaf_prims
+
+
+@njit(cache=True)
+def _place_subtree(nodes, slot, base, subtree, offsets):
+    """Subtree node 0 into node `slot`, its nodes 1.. into base.. of `nodes` (axis, split, child, count),
+    child indices shifted: a leaf's by the first leaf reference and an unbuilt node's by the first
+    deferred index (offsets), an inner node's to the new place of its children. One compiled pass instead
+    of NumPy's where / astype / slice copies, which run serially in every build
+    (docs/choices.md#serial-steps-of-the-build-compiled)."""
+    axis, split, child, count = nodes
+    s_axis, s_split, s_child, s_count = subtree
+    prim_base, deferred_base = offsets
+    for j in range(s_axis.shape[0]):
+        a = s_axis[j]
+        shift = prim_base if a == LEAF else (deferred_base if a == UNBUILT else base - 1)
+        dst = slot if j == 0 else base + j - 1
+        axis[dst], split[dst], count[dst] = a, s_split[j], s_count[j]
+        child[dst] = s_child[j] + shift
 
 
 def _grown(a, n):

@@ -75,10 +75,12 @@ def _cut_parts(boxes, row, axis, pos, out_left, out_right):
 
 @njit(cache=True, inline="always")
 def partition_in_place(tris, prims, boxes, start, end, axis, pos, planar_left, clip, scratch):
-    """Split references [start, end) into right ones at [start, start+nr) and left ones right after.
-    Right ones are compacted in place (each makes at most one, so writes never pass reads); left ones go
-    to [end, end+nl), then move down; the caller leaves room for 2 * (end - start) from `start`. Returns
-    (n_right, n_left). The left child ends on top of the pool, so built first it grows freely (seed 000 §3.5)."""
+    """Split references [start, end) into right ones at [start, start+nr) and left ones at [end, end+nl).
+    Right ones are compacted in place (each makes at most one, so writes never pass reads); left ones
+    stay where they are written, past the node's own range: moving them down next to the right ones
+    would copy them a second time (docs/choices.md#left-children-left-in-place). The caller leaves room
+    for 2 * (end - start) from `start`. Returns (n_right, n_left). The left child is on top of the pool,
+    so built first it grows freely (seed 000 §3.5)."""
     box_l, box_r = scratch[3], scratch[4]
     w_right = start
     w_left = end
@@ -101,11 +103,7 @@ def partition_in_place(tris, prims, boxes, start, end, axis, pos, planar_left, c
         if side & RIGHT:
             _put_ref(prims, boxes, at(w_right), prim, box_r)
             w_right += 1
-    n_right = w_right - start
-    n_left = w_left - end
-    for k in range(n_left):
-        _copy_ref(prims, boxes, end + k, w_right + k)
-    return n_right, n_left
+    return w_right - start, w_left - end
 
 
 @njit(cache=True, inline="always")

@@ -49,7 +49,9 @@ def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, root_room, p
     scratch = np.empty(3 * min(n_refs, max(params.exact_below, 16)) + 16, np.float32)
     split_scratch = new_split_scratch()
 
-    prims, boxes = ensure_refs(prims, boxes, n_refs, 2 * n_refs + 64)
+    # Left children start at their parent's end (partition.py), so a chain of them reaches past 2 n:
+    # room for 3 n up front, or the pool is grown and copied once early in every subtree.
+    prims, boxes = ensure_refs(prims, boxes, n_refs, 3 * n_refs + 64)
     # What the inlined per-node code takes, as unowned views (module docstring); their owners stay
     # bound to the end (keep_alive).
     prims_v, boxes_v, tris_v, box_v = unowned(prims), unowned(boxes), unowned(tris), unowned(box)
@@ -58,11 +60,12 @@ def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, root_room, p
                                              np.empty(0, np.int32), np.empty(0, np.int32), 0,
                                              max(16, n_refs // 2))
     leaf_prims = np.empty(max(16, n_refs + n_refs // 2), np.int32)
-    n_nodes, n_leaf_prims = 1, 0
+    # int64 from the start: a literal 0 makes Numba compile the callees once more for Literal[int](0).
+    n_nodes, n_leaf_prims = 1, np.int64(0)
     deferred = (np.empty(0, np.int32), np.zeros(1, np.int32), np.empty(0, np.int32),
                 np.empty((0, 6), np.float32), np.empty(0, np.int32), np.empty((0, 6), np.float32),
                 np.empty(0, np.float64))
-    n_deferred = 0
+    n_deferred = np.int64(0)
 
     stack_node[0], stack_range[0, 0], stack_range[0, 1], stack_depth[0] = 0, 0, n_refs, root_depth
     stack_box[0], stack_room[0] = root_box, root_room
@@ -107,19 +110,17 @@ def build_subtree(tris, prims, boxes, n_refs, root_box, root_depth, root_room, p
         axis[node], split[node], child[node], count[node] = split_axis, pos, left, 0
         stack_room[sp] = stack_room[sp + 1] = child_room(room, n, n_left + n_right)
         # Right child first on the stack so the left one (on top of the pool) is built first.
-        middle = start + n_right
         _cut_box(stack_box, sp, box, split_axis, pos, False)
-        sp = _push(stack_node, stack_range, stack_depth, sp, left + 1, start, middle, depth + 1)
+        sp = _push(stack_node, stack_range, stack_depth, sp, left + 1, start, start + n_right, depth + 1)
         _cut_box(stack_box, sp, box, split_axis, pos, True)
-        sp = _push(stack_node, stack_range, stack_depth, sp, left, middle, middle + n_left, depth + 1)
+        sp = _push(stack_node, stack_range, stack_depth, sp, left, end, end + n_left, depth + 1)
     keep_alive((bins, split_scratch))
     d_node, d_start, d_depth, d_box, d_prims, d_boxes, d_room = deferred
     n_deferred_refs = d_start[n_deferred]
-    return (axis[:n_nodes].copy(), split[:n_nodes].copy(), child[:n_nodes].copy(),
-            count[:n_nodes].copy(), leaf_prims[:n_leaf_prims].copy(),
-            d_node[:n_deferred].copy(), d_start[:n_deferred + 1].copy(), d_depth[:n_deferred].copy(),
-            d_box[:n_deferred].copy(), d_prims[:n_deferred_refs].copy(), d_boxes[:n_deferred_refs].copy(),
-            d_room[:n_deferred].copy())
+    # Views, not copies: merge.py and lazy.py copy every part into the tree's own arrays.
+    return (axis[:n_nodes], split[:n_nodes], child[:n_nodes], count[:n_nodes], leaf_prims[:n_leaf_prims],
+            d_node[:n_deferred], d_start[:n_deferred + 1], d_depth[:n_deferred], d_box[:n_deferred],
+            d_prims[:n_deferred_refs], d_boxes[:n_deferred_refs], d_room[:n_deferred])
 
 
 @njit(cache=True, inline="always")
