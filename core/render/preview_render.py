@@ -6,15 +6,16 @@ Value of a hit pixel (geometric normal N facing the camera), background 0 with a
   the light's extent, mask_l its cone or spread (shading._light_mask); no falloff or power, so S shows
   where each light reaches whatever its units.
 - "ao+shadow": AO * (ambient + (1 - ambient) * S).
-Deterministic for a seed. With an error target a pixel stops after `min_samples` once its standard
-error (sample variance floored by Laplace's rule of succession) is below it, checked every CHECK_EVERY
-samples so batching does not change the image.
+Deterministic for a seed. With an error target a pixel stops after `min_samples` once the estimated
+standard error of its mean is below it (convergence.py: Sobol's variance decay, pooled over the 5x5
+neighbourhood, Laplace's floor), checked at power-of-two sample counts so batching does not change the image.
 """
 from time import perf_counter
 
 import numpy as np
 
 from .camera import Camera, tiled_packets, tiled_pixels
+from .convergence import is_check, next_check, standard_errors
 from .denoise import SOBOL_VARIANCE_DECAY, denoise_pixels
 from ..inputs import check_image_size
 from ..trace.kdtree import KdTree
@@ -33,8 +34,6 @@ from ..trace.packet_traversal import L
 from ..scene.scene_queries import trace_valid_rays
 from ..jit.threads import thread_count
 from ..scene.two_level import TwoLevelScene, as_two_level
-
-CHECK_EVERY = 4
 
 
 class PreviewRender:
@@ -207,13 +206,13 @@ class PreviewRender:
         while added < samples and len(self.active):
             batch = samples - added  # one kernel call: a pixel's rays follow each other while its nodes are in cache
             if self.error_target is not None:  # up to the next convergence check
-                batch = min(batch, CHECK_EVERY - self.samples_done % CHECK_EVERY)
+                batch = min(batch, next_check(self.samples_done, self.min_samples) - self.samples_done)
             start = perf_counter()
             self._add_samples(batch)
             self.trace_ms += (perf_counter() - start) * 1e3
             self.samples_done += batch
             added += batch
-            if self.samples_done % CHECK_EVERY == 0:
+            if self.error_target is not None and is_check(self.samples_done, self.min_samples):
                 self._retire_converged()
         return added
 
@@ -271,18 +270,11 @@ class PreviewRender:
                                    self.threads, SHADOW_RAYS)
 
     def _retire_converged(self):
-        """Stop sampling pixels whose standard error is below the target (after min_samples)."""
-        if self.error_target is None or self.samples_done < self.min_samples:
-            return
+        """Stop sampling pixels whose estimated standard error is below the target (convergence.py)."""
+        decay = SOBOL_VARIANCE_DECAY if SAMPLERS[self.sampler] == "sobol" else 0.0
+        errors = standard_errors(self.width, self.height, self.pixels, self.sums, self.sq_sums, self.counts, decay)
+        converged = errors[self.active] < self.error_target
         n = self.counts[self.active].astype(np.float64)
-        mean = self.sums[self.active].mean(axis=1) / n
-        var = np.maximum(self.sq_sums[self.active] / n - mean * mean, 0.0) * n / np.maximum(n - 1, 1)
-        # Laplace's rule of succession: after n samples, an outcome not yet seen still has probability
-        # 1 / (n + 2), so a sample's variance is at least q (1 - q) for that q. Without this floor a
-        # pixel whose first samples all agreed had variance 0 and stopped at min_samples.
-        q = 1.0 / (n + 2.0)
-        var = np.maximum(var, q * (1.0 - q))
-        converged = np.sqrt(var / n) < self.error_target
         if converged.any():
             stopped, n_stopped = self.active[converged], n[converged]
             # lights without extent traced their ray at sample 0 only and would repeat it (render_kernels.py);
