@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import core
-from core.render.convergence import is_check, next_check, standard_errors
+from core.render.convergence import checks, is_check, next_check, sample_variances, standard_errors
 from tests.render_scenes import floor, hit_mask, look_at, look_down
 from tests.test_render_reference import boxes_on_floor
 
@@ -46,7 +46,7 @@ def test_standard_errors_match_their_definition():
     grey = (values & taken).sum(1).astype(np.float64)
     sums = np.repeat(grey[:, None], 3, axis=1)
     for decay in (0.0, 0.5):
-        got = standard_errors(width, height, pixels, sums, grey.copy(), counts, decay)
+        got = standard_errors(width, height, pixels, sample_variances(sums, grey.copy(), counts), counts, decay)
         np.testing.assert_allclose(got, brute_force_errors(width, height, pixels, sums, grey, counts, decay),
                                    rtol=1e-12)
 
@@ -56,6 +56,7 @@ def test_checks_at_powers_of_two_from_min_samples():
     assert [n for n in range(1, 40) if is_check(n, 12)] == [16, 32]
     assert [next_check(n, 8) for n in (0, 7, 8, 9, 16, 40)] == [8, 8, 16, 16, 32, 64]
     assert next_check(0, 2) == 2 and next_check(2, 2) == 4
+    assert checks(8, 100) == [8, 16, 32, 64] and checks(12, 16) == [16] and checks(8, 4) == []
 
 
 def test_stopped_pixels_hold_the_fixed_estimate_at_their_count():

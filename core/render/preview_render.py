@@ -15,7 +15,7 @@ from time import perf_counter
 import numpy as np
 
 from .camera import Camera, tiled_packets, tiled_pixels
-from .convergence import is_check, next_check, standard_errors
+from .convergence import checks, dependence_radius, is_check, near, next_check, sample_variances, standard_errors
 from .denoise import SOBOL_VARIANCE_DECAY, denoise_pixels
 from ..inputs import check_image_size
 from ..trace.kdtree import KdTree
@@ -65,6 +65,7 @@ class PreviewRender:
         self.lights = packed_lights(o.mode, o.lights)
         self.seed, self.sampler = int(o.seed) & 0xFFFFFFFF, SAMPLERS.index(o.sampler)
         self.error_target, self.min_samples, self.ambient = o.error_target, int(o.min_samples), float(o.ambient)
+        self.checks = checks(self.min_samples, self.target_samples) if o.error_target is not None else []
         self.threads = o.threads
         self.samples_done = 0
         self.trace_ms = 0.0
@@ -90,7 +91,12 @@ class PreviewRender:
         self._start(pixels, depths, points, normals, starts, np.zeros((len(pixels), 3)), np.zeros(len(pixels)), zero,
                     zero.copy(), np.arange(len(pixels), dtype=np.int64), self._memo_rows(len(pixels)))
         self.known, self.boxes = np.zeros(len(pixels), np.int64), np.zeros((0, 6))
+        self.checked = self._unchecked(len(pixels))
         self._hard_shadows_due = True
+
+    def _unchecked(self, n):
+        """(n, checks) NaN: each pixel's sample variance at every check it passes (_retire_converged)."""
+        return np.full((n, len(self.checks)), np.nan)
 
     def _memo_rows(self, n):
         """(n, B) zero visibility bits: one per ray of every sample (render_kernels.py), none when
@@ -146,7 +152,7 @@ class PreviewRender:
             kept = np.flatnonzero(~retrace[prev.pixels])
             ao_radius = self.ao_distance if self.mode != "shadow" else 0.0
             touched = surface_rays_touch(prev.starts[kept], ao_radius, self.lights, boxes)
-        clean, dirty = kept[~touched], kept[touched]
+        clean, dirty = self._around_changes(prev, retrace, kept[~touched], kept[touched])
         tiled = tiled_pixels(self.width, self.height)
         traced = tiled[retrace[tiled]]
         self.camera_rays = len(traced)
@@ -166,18 +172,30 @@ class PreviewRender:
         self.known = np.concatenate([np.zeros(len(clean), np.int64), prev.counts[dirty] * (1 + len(self.lights)),
                                      np.zeros(len(new[0]), np.int64)])
         self.boxes = boxes
+        self.checked = np.concatenate([prev.checked[clean], self._unchecked(fresh)])
         self._rays_before = int(prev.ray_counts[clean].sum())
         self.pixels_reused = len(clean)
         self._pixels_rays_reused = self._rays_before + self.width * self.height - self.camera_rays
         if fresh == 0:
             self.samples_done = self.target_samples
 
+    def _around_changes(self, prev, retrace, clean, dirty):
+        """(clean, dirty) with an error target: clean pixels near a retraced or dirty one move to dirty, since
+        a stop count depends on the pixels around (convergence.dependence_radius)."""
+        if not self.checks:
+            return clean, dirty
+        changed = retrace.copy()
+        changed[prev.pixels[dirty]] = True
+        radius = dependence_radius(self.min_samples, self.target_samples)
+        moved = near(changed.reshape(self.height, self.width), radius).reshape(-1)[prev.pixels[clean]]
+        return clean[~moved], np.concatenate([dirty, clean[moved]])
+
     def pixel_state(self):
         """This frame's pixels for the next frame's `previous` (None until the render is done)."""
         if not self.done:
             return None
         return PixelState(self.settings, self.scene.signature, self.pixels, self.depths, self.points, self.normals,
-                          self.starts, self.sums, self.sq_sums, self.counts, self.ray_counts, self.memo)
+                          self.starts, self.sums, self.sq_sums, self.counts, self.ray_counts, self.memo, self.checked)
 
     @property
     def rays_reused(self):
@@ -270,11 +288,18 @@ class PreviewRender:
                                    self.threads, SHADOW_RAYS)
 
     def _retire_converged(self):
-        """Stop sampling pixels whose estimated standard error is below the target (convergence.py)."""
+        """Stop sampling pixels whose estimated standard error is below the target (convergence.py). Every
+        pixel enters as it was after min(its samples, samples_done): a kept pixel of a continued frame
+        with more samples by its variance at this check, kept from the frame that sampled it."""
+        done, k = self.samples_done, self.checks.index(self.samples_done)
+        active = self.active
+        self.checked[active, k] = sample_variances(self.sums[active], self.sq_sums[active], self.counts[active])
+        past = self.counts >= done
+        variances = np.where(past, self.checked[:, k], sample_variances(self.sums, self.sq_sums, self.counts))
         decay = SOBOL_VARIANCE_DECAY if SAMPLERS[self.sampler] == "sobol" else 0.0
-        errors = standard_errors(self.width, self.height, self.pixels, self.sums, self.sq_sums, self.counts, decay)
-        converged = errors[self.active] < self.error_target
-        n = self.counts[self.active].astype(np.float64)
+        errors = standard_errors(self.width, self.height, self.pixels, variances, np.minimum(self.counts, done), decay)
+        converged = errors[active] < self.error_target
+        n = self.counts[active].astype(np.float64)
         if converged.any():
             stopped, n_stopped = self.active[converged], n[converged]
             # lights without extent traced their ray at sample 0 only and would repeat it (render_kernels.py);
