@@ -13,11 +13,16 @@ Before any timing, every method runs once untimed (JIT compile and cache load, r
    Written to OUT/render_sweep.csv (the run's settings in OUT/render_sweep.json) and plotted to
    OUT/render_rmse_vs_time.png with two Pareto fronts marked: raw estimates only, and with denoised rows.
    Also the denoiser's bias at convergence: RMSE between the reference and the denoised reference.
+   Adaptive rows (ours with each --error-targets, at most each --adaptive-max samples) are timed in the same
+   round-robin as the fixed rows of that sample count, with their mean samples a hit pixel; --methods
+   keeps only some of our fixed methods (a shorter run).
 3. Cycles' AO pass of the same .blend (the subdivided mesh, no modifier left to evaluate) and camera
    at matching sample counts (raw: Cycles has no denoiser for that pass), on as many threads as ours,
    timed in the same run, round-robin with our rows of the same sample count (sweep() says why), RMSE
    against the same reference; our time / Cycles' time at equal RMSE (interpolated in log-log) on the
-   raw front, the front with the denoiser and our default setup alone.
+   raw front, the front with the denoiser and our default setup alone. Also Cycles with its own adaptive
+   sampling (--cycles-thresholds, at most each --adaptive-max samples; cycles_ao.render_cycles' adaptive),
+   whose rows get the same ratios: against Cycles fixed and Cycles adaptive.
 4. Seed 000 Table 3's setting: 640x480, camera rays and one shadow ray to a point light, the tree
    rebuilt from scratch each time; median time to image, with the default build, with the build told
    the frame's ray count (BuildOptions.rays), the latter on one thread, and Embree's build and queries
@@ -83,23 +88,46 @@ def rmse(img, ref):
 
 
 def one_render(scene, camera, size, options, samples, sampler, ao_distance, error_target=None, denoise=False):
-    """(seconds of build + render (+ denoise), image)."""
+    """(seconds of build + render (+ denoise), image, mean samples a hit pixel took)."""
     t = time.perf_counter()
     tree = core.build_kdtree(scene.triangles, **options)
-    img = core.render_preview(tree, camera, size, size, samples=samples, sampler=sampler,
-                              ao_distance=ao_distance, error_target=error_target, denoise=denoise)
-    return time.perf_counter() - t, img
+    render = core.PreviewRender(tree, camera, size, size, samples=samples, sampler=sampler, ao_distance=ao_distance,
+                                error_target=error_target)
+    render.step(render.target_samples)
+    img = render.image(denoise)
+    return time.perf_counter() - t, img, float(render.counts.mean())
 
 
-def our_methods():
-    """(method name, build options, sampler, denoise) of every swept configuration of ours."""
+def our_methods(only=None):
+    """(method name, build options, sampler, denoise) of every swept configuration of ours (those named in
+    `only` when given)."""
     methods = []
     for label, options in BUILD_CONFIGS.items():
         for sampler in ("sobol", "random") if label == "binned" else ("sobol",):
             for denoise in (False, True) if label == "binned" else (False,):
                 methods.append((f"kd {label} {sampler}" + (" denoised" if denoise else ""), options, sampler,
                                 denoise))
-    return methods
+    return [m for m in methods if only is None or m[0] in only]
+
+
+def renders_of(spp, args):
+    """{(method, error target): a function of no argument returning (seconds, image, mean samples)}: every
+    render timed at `spp` samples, ours, our adaptive ones (their most samples `spp`, when spp is one of
+    --adaptive-max) and, unless --no-cycles, Cycles' fixed and adaptive ones likewise."""
+    scene, camera, ref = args.scene, args.camera, args.ref
+    jobs = {}
+    for method, options, sampler, denoise in our_methods(args.methods):
+        jobs[(method, None)] = lambda o=options, sa=sampler, d=denoise: one_render(
+            scene, camera, args.size, o, spp, sa, args.ao_distance, denoise=d)
+    adaptive = spp in args.adaptive_max
+    for target in args.error_targets if adaptive else ():
+        jobs[(ADAPTIVE, target)] = lambda t=target: one_render(scene, camera, args.size, {}, spp, "sobol",
+                                                               args.ao_distance, error_target=t)
+    if not args.no_cycles:
+        jobs[(CYCLES, None)] = lambda: cycles_image(scene, ref, args, spp)
+        for threshold in args.cycles_thresholds if adaptive else ():
+            jobs[(CYCLES_ADAPTIVE, threshold)] = lambda t=threshold: cycles_image(scene, ref, args, spp, t)
+    return jobs
 
 
 def sweep(scene, camera, ref, args):
@@ -110,47 +138,52 @@ def sweep(scene, camera, ref, args):
     median of --runs is kept. A method and the Cycles render it is compared with are timed minutes,
     not half an hour, apart. Every run's seconds go to sweep.runs, by (method, samples, error target)."""
     sweep.runs = {}
+    args.scene, args.camera, args.ref = scene, camera, ref
     rows = []
     for spp in args.samples:
-        times, images = {}, {}
+        jobs = renders_of(spp, args)
+        times, images, mean_samples = {}, {}, {}
         for _ in range(args.runs):
-            for method, options, sampler, denoise in our_methods():
-                seconds, images[method] = one_render(scene, camera, args.size, options, spp, sampler,
-                                                     args.ao_distance, denoise=denoise)
-                times.setdefault(method, []).append(seconds)
-            if not args.no_cycles:
-                images[CYCLES], seconds = cycles_image(scene, ref, args, spp)
-                times.setdefault(CYCLES, []).append(seconds)
-        for method in times:
-            sweep.runs[(method, spp, None)] = times[method]
-            rows.append({"method": method, "samples": spp, "seconds": float(np.median(times[method])),
-                         "rmse": rmse(images[method], ref)})
-            print(f"  {method:>32} spp {spp:>4}: {rows[-1]['seconds']:8.3f} s  RMSE {rows[-1]['rmse']:.5f}",
-                  flush=True)
-    for target in args.error_targets:  # adaptive: pixels stop once their standard error is below target
-        runs = [one_render(scene, camera, args.size, {}, max(args.samples), "sobol", args.ao_distance,
-                           error_target=target) for _ in range(args.runs)]
-        sweep.runs[("kd binned sobol adaptive", max(args.samples), target)] = [r[0] for r in runs]
-        rows.append({"method": "kd binned sobol adaptive", "samples": max(args.samples),
-                     "seconds": float(np.median([r[0] for r in runs])), "rmse": rmse(runs[-1][1], ref),
-                     "error_target": target})
-        print(f"  {rows[-1]['method']:>32} target {target:g}: {rows[-1]['seconds']:8.3f} s  RMSE {rows[-1]['rmse']:.5f}",
-              flush=True)
+            for key, job in jobs.items():
+                seconds, images[key], mean_samples[key] = job()
+                times.setdefault(key, []).append(seconds)
+        for (method, target), seconds in times.items():
+            sweep.runs[(method, spp, target)] = seconds
+            rows.append({"method": method, "samples": spp, "seconds": float(np.median(seconds)),
+                         "rmse": rmse(images[(method, target)], ref), "error_target": target,
+                         "mean_samples": mean_samples[(method, target)]})
+            label = method if target is None else f"{method} {target:g}"
+            mean = rows[-1]["mean_samples"]
+            print(f"  {label:>38} spp {spp:>4}: {rows[-1]['seconds']:8.3f} s  RMSE {rows[-1]['rmse']:.5f}"
+                  + (f"  mean spp {mean:.1f}" if target is not None and mean is not None else ""), flush=True)
     return rows
 
 
 CYCLES = "cycles ao pass"
+CYCLES_ADAPTIVE = "cycles ao pass adaptive"  # Cycles' adaptive sampling, error_target its adaptive_threshold
+ADAPTIVE = "kd binned sobol adaptive"  # ours with an error target
 DEFAULT_METHOD = "kd binned sobol"  # what the add-on renders with
 
 
-def cycles_image(scene, ref, args, spp):
-    """Cycles' AO pass as an (H, W, 4) image like ours (AO in R), and its render seconds."""
-    from cycles_ao import render_cycles_ao
-    img, seconds = render_cycles_ao(blend_path(scene.name), args.size, args.size, spp,
-                                    ao_distance=args.ao_distance, threads=args.threads)
+def is_cycles(row):
+    return row["method"] in (CYCLES, CYCLES_ADAPTIVE)
+
+
+def cycles_image(scene, ref, args, spp, threshold=None):
+    """As one_render: Cycles' render seconds, its AO pass as an (H, W, 4) image like ours (AO in R) and the
+    mean samples a hit pixel took (None without adaptive sampling); with `threshold`, Cycles' adaptive sampling at that
+    adaptive_threshold and automatic minimum samples, at most `spp`."""
+    from cycles_ao import render_cycles_ao, render_cycles_ao_adaptive
+    if threshold is None:
+        img, seconds = render_cycles_ao(blend_path(scene.name), args.size, args.size, spp,
+                                        ao_distance=args.ao_distance, threads=args.threads)
+        mean = None
+    else:
+        img, seconds, mean = render_cycles_ao_adaptive(blend_path(scene.name), args.size, args.size, spp, threshold,
+                                                       ao_distance=args.ao_distance, threads=args.threads)
     full = np.zeros_like(ref)
     full[..., 0] = img
-    return full, seconds
+    return seconds, full, mean
 
 
 def pareto(rows):
@@ -164,7 +197,7 @@ def pareto(rows):
 
 def our_fronts(rows):
     """Our two Pareto fronts, raw rows only and with the denoised ones (Cycles' rows left out)."""
-    ours = [r for r in rows if r["method"] != CYCLES]
+    ours = [r for r in rows if not is_cycles(r)]
     return {"Pareto front, raw (KD Preview)": pareto([r for r in ours if "denoised" not in r["method"]]),
             "Pareto front, with denoiser (KD Preview)": pareto(ours)}
 
@@ -216,6 +249,8 @@ def plot(rows, fronts, path, title):
                          key=lambda r: (r["samples"], -float(r.get("error_target") or 0)))
         pts = [(r["seconds"], r["rmse"]) for r in ordered]
         style = dict(color="red", marker="s", ms=4, lw=2) if method == CYCLES else dict(marker="o", ms=3, lw=1)
+        if method == CYCLES_ADAPTIVE:
+            style = dict(color="darkred", marker="^", ms=4, lw=1, ls=":")
         ax.plot(*zip(*pts), label=method, **style)
     for (label, front), style in zip(fronts.items(), ("k--", "k:")):
         ax.plot([r["seconds"] for r in front], [r["rmse"] for r in front], style, lw=2, label=label)
@@ -240,7 +275,7 @@ def warm_up(scene, camera, args):
     core.render_preview(tree, camera, 8, 8, samples=1, mode="shadow", lights=[core.Light.point((0, 0, 3))])
     if args.only_seed000:
         return
-    for _, options, sampler, denoise in our_methods():
+    for _, options, sampler, denoise in our_methods(args.methods):
         one_render(scene, camera, 8, options, 1, sampler, args.ao_distance, denoise=denoise)
     for target in args.error_targets[:1]:
         one_render(scene, camera, 8, {}, 2, "sobol", args.ao_distance, error_target=target)
@@ -324,8 +359,15 @@ def main():
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--reference-samples", type=int, default=1024)
     ap.add_argument("--samples", default="1,2,4,8,16,32,64,128,256")
-    ap.add_argument("--error-targets", default="0.1,0.05,0.02",
-                    help="adaptive rows: at most max(--samples) samples, a pixel stops below this standard error")
+    ap.add_argument("--error-targets", default="0.03,0.02,0.015,0.012,0.01",
+                    help="adaptive rows: a pixel stops below this estimated standard error")
+    ap.add_argument("--adaptive-max", default=None,
+                    help="the most samples of the adaptive rows, ours and Cycles' (comma list of --samples "
+                         "values; default the largest two)")
+    ap.add_argument("--cycles-thresholds", default="0.1,0.05,0.02,0.01",
+                    help="Cycles' adaptive rows: its adaptive_threshold (empty: none)")
+    ap.add_argument("--methods", default=None,
+                    help="only these of our fixed methods (comma list of names, e.g. 'kd binned sobol')")
     ap.add_argument("--ao-distance", type=float, default=1.0)
     ap.add_argument("--threads", type=int, default=numba.get_num_threads(),
                     help="Cycles' thread count (default: Numba's, which ours uses)")
@@ -342,6 +384,12 @@ def main():
         args.size, args.runs, args.samples, args.error_targets = 128, 1, "1,4,16", "0.05"
     args.samples = [int(s) for s in args.samples.split(",")]
     args.error_targets = [float(s) for s in args.error_targets.split(",") if s]
+    args.cycles_thresholds = [float(s) for s in args.cycles_thresholds.split(",") if s]
+    args.adaptive_max = (sorted(args.samples)[-2:] if args.adaptive_max is None
+                         else [int(s) for s in args.adaptive_max.split(",")])
+    args.methods = None if args.methods is None else [m.strip() for m in args.methods.split(",")]
+    if args.methods is not None and DEFAULT_METHOD not in args.methods:
+        ap.error(f"--methods must include {DEFAULT_METHOD!r} (the default setup's ratio)")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
 
@@ -381,22 +429,25 @@ def main():
             print(f"  {spp:>4} spp: {b['rmse'] / a['rmse']:.2f}x")
     ratios_out = []
     if not args.no_cycles:
-        crow = [r for r in rows if r["method"] == CYCLES]
+        crow = [r for r in rows if is_cycles(r)]
         default = pareto([r for r in rows if r["method"] == DEFAULT_METHOD])
         print("\nOur time / Cycles' time at equal RMSE (target <= 0.2; Cycles' AO pass raw: it has no denoiser):\n"
               f"  on our raw front, on the front with our denoiser, and on our default setup alone "
               f"({DEFAULT_METHOD!r}: the front picks, per sample count, the fastest of several setups that give\n"
               "  the same image, so noise helps it)")
-        print(f"  {'':>44} {'ours raw':>12} {'ours denoised':>14} {'ours default':>14}")
+        print(f"  {'':>59} {'ours raw':>12} {'ours denoised':>14} {'ours default':>14}")
         for r in crow:
             ratios = [ratio_text(front, r) for front in (*fronts.values(), default)]
             ratios_out.append({"cycles_samples": r["samples"], "cycles_rmse": r["rmse"],
                                "cycles_seconds": r["seconds"], "ours_raw": ratios[0],
-                               "ours_denoised": ratios[1], "ours_default": ratios[2]})
-            print(f"  Cycles {r['samples']:>4} spp (RMSE {r['rmse']:.4f}, {r['seconds']:6.2f} s): "
+                               "ours_denoised": ratios[1], "ours_default": ratios[2],
+                               "cycles_adaptive_threshold": r["error_target"],
+                               "cycles_mean_samples": r["mean_samples"]})
+            kind = "fixed" if r["error_target"] is None else f"adaptive {r['error_target']:g}"
+            print(f"  Cycles {kind:>14} {r['samples']:>4} spp (RMSE {r['rmse']:.4f}, {r['seconds']:6.2f} s): "
                   f"{ratios[0]:>12} {ratios[1]:>14} {ratios[2]:>14}")
     with open(out / "render_sweep.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=["method", "samples", "seconds", "rmse", "error_target"])
+        w = csv.DictWriter(f, fieldnames=["method", "samples", "seconds", "rmse", "error_target", "mean_samples"])
         w.writeheader()
         w.writerows(rows)
     meta = run_description(args)

@@ -171,12 +171,27 @@ def render_cycles_ao(blend_path, width, height, samples, ao_distance=1.0, thread
     return r.ao, r.seconds
 
 
+def render_cycles_ao_adaptive(blend_path, width, height, samples, threshold, min_samples=0, ao_distance=1.0,
+                              threads=2):
+    """Cycles' AO pass with its adaptive sampling (render_cycles' ``adaptive``): ((H, W) float32 image,
+    render seconds, mean samples a pixel took or None when Cycles does not report them)."""
+    r = render_cycles(blend_path, width, height, samples, ao_distance=ao_distance, threads=threads,
+                      adaptive=(threshold, min_samples))
+    return r.ao, r.seconds, r.settings.get("mean_samples")
+
+
 def render_cycles(blend_path, width, height, samples, ao_distance=1.0, threads=2, *, lean=True,
                   filter_width=MIN_FILTER_WIDTH, filter_type="BLACKMAN_HARRIS", seed=0, python=None,
-                  timeout=None) -> CyclesAO:
+                  timeout=None, adaptive=None) -> CyclesAO:
     """Render the AO pass in a child process and return a ``CyclesAO`` (see module docstring).
 
     python: interpreter with bpy (default: this one, sys.executable).
+    adaptive: None (every pixel takes ``samples``) or (threshold, min_samples): Cycles' own adaptive
+    sampling (``cycles.adaptive_threshold``, ``cycles.adaptive_min_samples``, 0 = Cycles' automatic
+    choice), ``samples`` the most a pixel takes. Cycles measures a pixel's noise on the Combined pass,
+    which a lean render leaves black (every pixel would stop at the minimum), so the world is lit white
+    (strength 1, still no light sampling and no bounces): Combined is then the surface's cosine-weighted
+    view of the sky, whose noise follows the AO pass's. See ``render_cycles_ao_adaptive``.
     """
     blend_path = Path(blend_path).resolve()
     if not blend_path.is_file():
@@ -195,6 +210,7 @@ def render_cycles(blend_path, width, height, samples, ao_distance=1.0, threads=2
             "samples": int(samples), "ao_distance": float(ao_distance), "threads": int(threads),
             "lean": bool(lean), "filter_width": float(filter_width), "filter_type": str(filter_type),
             "seed": int(seed), "exr": str(tmp / "render.exr"), "out": str(tmp / "result.npz"),
+            "adaptive": None if adaptive is None else [float(adaptive[0]), int(adaptive[1])],
         }
         spec_path = tmp / "spec.json"
         spec_path.write_text(json.dumps(spec))
@@ -244,7 +260,10 @@ def _child(spec_path: str) -> int:
     scene.camera.data.dof.use_dof = False
 
     cyc.samples = spec["samples"]
-    cyc.use_adaptive_sampling = False
+    cyc.use_adaptive_sampling = spec["adaptive"] is not None
+    if spec["adaptive"] is not None:
+        cyc.adaptive_threshold, cyc.adaptive_min_samples = spec["adaptive"]
+        view_layer.cycles.pass_debug_sample_count = True  # what the mean samples a pixel are read from
     cyc.use_denoising = False
     cyc.seed = spec["seed"]
     cyc.use_animated_seed = False
@@ -257,21 +276,26 @@ def _child(spec_path: str) -> int:
     world = scene.world
     world.light_settings.distance = spec["ao_distance"]
     if spec["lean"]:
+        sky = 1.0 if spec["adaptive"] is not None else 0.0  # adaptive sampling reads Combined's noise
         cyc.max_bounces = 0
-        world.color = (0.0, 0.0, 0.0)
+        world.color = (sky, sky, sky)
         world.cycles.sampling_method = "NONE"
         if world.node_tree is not None:
             for node in world.node_tree.nodes:
                 if node.type == "BACKGROUND":
-                    node.inputs["Strength"].default_value = 0.0
+                    node.inputs["Strength"].default_value = sky
+                    node.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
 
     view_layer.use_pass_ambient_occlusion = True
 
     # Time stamps of Cycles' status messages: the first "Sample 0/N" ends sync + BVH build.
-    first_sample = []
+    first_sample, last_sample = [], [0]
 
     def on_stats(stats, *_):
-        if not first_sample and re.search(r"\bSample \d+/\d+", str(stats)):
+        found = re.search(r"\bSample (\d+)/\d+", str(stats))
+        if found:
+            last_sample[0] = max(last_sample[0], int(found.group(1)))
+        if found and not first_sample:
             first_sample.append(time.perf_counter())
 
     bpy.app.handlers.render_stats.append(on_stats)
@@ -302,6 +326,11 @@ def _child(spec_path: str) -> int:
 
     ao = find([f"{n}.R" for n in AO_PASS_NAMES])
     alpha = find(["Combined.A"])
+    mean_samples = None
+    if spec["adaptive"] is not None:
+        # the pass holds a pixel's samples over the most any pixel took, which the last status names
+        counts = find(["Debug Sample Count.X", "Debug Sample Count.R", "Debug Sample Count.V"])
+        mean_samples = float(counts[alpha > 0.5].mean()) * max(last_sample[0], 1)
     if ao.shape != (spec["height"], spec["width"]):
         raise RuntimeError(f"AO pass has shape {ao.shape}, expected {(spec['height'], spec['width'])}")
     info = {
@@ -314,6 +343,8 @@ def _child(spec_path: str) -> int:
         "engine": render.engine, "device": cyc.device, "threads_mode": render.threads_mode,
         "threads": render.threads, "samples": cyc.samples,
         "use_adaptive_sampling": cyc.use_adaptive_sampling, "use_denoising": cyc.use_denoising,
+        "adaptive_threshold": cyc.adaptive_threshold, "adaptive_min_samples": cyc.adaptive_min_samples,
+        "mean_samples": mean_samples,
         "pixel_filter_type": cyc.pixel_filter_type, "filter_width": cyc.filter_width,
         "world_ao_distance": world.light_settings.distance, "max_bounces": cyc.max_bounces,
         "world_sampling_method": world.cycles.sampling_method, "lean": spec["lean"],

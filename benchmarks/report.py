@@ -104,7 +104,7 @@ def figures_block(data):
     if "bench_render" in data:
         r = data["bench_render"]["results"]
         for entry in r["time_ratio_at_equal_rmse"]:
-            if entry["cycles_samples"] in (4, 16, 64):
+            if entry["cycles_samples"] in (4, 16, 64) and entry.get("cycles_adaptive_threshold") is None:
                 rows.append([f"our time / Cycles' at equal AO error, Cycles at {entry['cycles_samples']} spp "
                              f"({r['size']}x{r['size']})",
                              f"raw {entry['ours_raw']}, denoised {entry['ours_denoised']}",
@@ -177,21 +177,33 @@ def bench_render_block(data):
                    [[m, *[cells.get((m, s), "-") for s in samples]] for m in methods])]
     adaptive = [row for row in r["rows"] if row.get("error_target") is not None]
     if adaptive:
-        parts += ["", table(["adaptive (error target)", "max spp", "RMSE", "seconds"],
-                            [[row["error_target"], row["samples"], f"{row['rmse']:.4f}", f"{row['seconds']:.2f}"]
-                             for row in adaptive])]
+        parts += ["", "Adaptive rows (ours: error target; Cycles: its adaptive threshold):\n",
+                  table(["method", "target", "max spp", "mean spp", "RMSE", "seconds"],
+                        [[row["method"], row["error_target"], row["samples"], _mean_samples(row),
+                          f"{row['rmse']:.4f}", f"{row['seconds']:.2f}"] for row in adaptive])]
     if r["time_ratio_at_equal_rmse"]:
         parts += ["", "Our time / Cycles' time at Cycles' RMSE (`<= x`: Cycles is less accurate than our fastest "
                   "row, whose ratio is given):\n",
-                  table(["Cycles spp", "Cycles RMSE", "Cycles s", "ours raw", "ours denoised", "ours default"],
-                        [[e["cycles_samples"], f"{e['cycles_rmse']:.4f}", f"{e['cycles_seconds']:.2f}",
-                          e["ours_raw"], e["ours_denoised"], e["ours_default"]]
+                  table(["Cycles", "Cycles spp", "Cycles RMSE", "Cycles s", "ours raw", "ours denoised",
+                         "ours default"],
+                        [[_cycles_kind(e), e["cycles_samples"], f"{e['cycles_rmse']:.4f}",
+                          f"{e['cycles_seconds']:.2f}", e["ours_raw"], e["ours_denoised"], e["ours_default"]]
                          for e in r["time_ratio_at_equal_rmse"]])]
     if r.get("denoiser_bias_rmse") is not None:
         parts += ["", f"Denoiser bias at convergence (RMSE between the reference and the denoised reference): "
                   f"{r['denoiser_bias_rmse']:.5f}."]
     parts += ["", provenance(data["bench_render"])]
     return "\n".join(parts)
+
+
+def _mean_samples(row):
+    return "-" if row.get("mean_samples") is None else f"{row['mean_samples']:.1f}"
+
+
+def _cycles_kind(entry):
+    """'fixed', or 'adaptive <threshold>' for a ratio against Cycles' adaptive sampling."""
+    t = entry.get("cycles_adaptive_threshold")
+    return "fixed" if t is None else f"adaptive {t:g}"
 
 
 def first_use_block(data):

@@ -17,11 +17,14 @@ MARGIN = 1.25  # peaks vary by scene (references per triangle); the limit is a p
 BUILD_BYTES_PER_TRIANGLE = {"binned": 620.0, "exact": 600.0, "median": 620.0}
 TRIANGLE_BYTES = 36  # (3, 3) float32: the array the tree keeps
 # Peak RSS growth of PreviewRender plus image(), per pixel, every pixel hit (the worst case, 200 B), plus
-# each pixel's 24 B ray start, up to 64 B of ray-memo bits (render_kernels.MEMO_BITS) and three int64 counts.
-RENDER_BYTES_PER_PIXEL = 200.0 + 24.0 + 64.0 + 3 * 8.0
+# each pixel's 24 B ray start, up to 64 B of ray-memo bits (render_kernels.MEMO_BITS), three int64 counts
+# and with an error target a float64 variance per check (convergence.py; 64 B: eight checks, up to 1,024
+# samples from min_samples 8).
+RENDER_BYTES_PER_PIXEL = 200.0 + 24.0 + 64.0 + 3 * 8.0 + 64.0
 # The last frame's pixel state kept for pixel reuse (PreviewRender.pixel_state): index, depth, point,
-# normal, ray start, sums, counts (float64 / int64) and up to 64 bytes of visibility bits per hit pixel.
-PIXEL_STATE_BYTES_PER_PIXEL = 136 + 64
+# normal, ray start, sums, counts (float64 / int64), up to 64 bytes of visibility bits and the checks'
+# variances (64 B, as above) per hit pixel.
+PIXEL_STATE_BYTES_PER_PIXEL = 136 + 64 + 64
 
 
 class MemoryLimitError(ValueError):

@@ -42,7 +42,7 @@ def test_the_benchmark_tables_list_every_builder_configuration_and_run(report):
     render = report.bench_render_block(data)
     assert rows_of(render)[0] == "| method | 1 spp | 4 spp | 16 spp |"
     assert any(r.startswith("| cycles ao pass |") for r in rows_of(render))
-    assert "| 4 | 0.1000 | 0.50 | 0.700 | 0.450 | 0.800 |" in rows_of(render)
+    assert "| fixed | 4 | 0.1000 | 0.50 | 0.700 | 0.450 | 0.800 |" in rows_of(render)
 
 
 def test_blocks_are_replaced_between_their_markers_only(report, tmp_path):

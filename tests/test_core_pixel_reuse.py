@@ -165,8 +165,7 @@ def test_pixels_that_stopped_early_and_now_need_more_samples_continue_exactly(la
     """With an error target, a pixel whose AO rays were all blocked stopped after ~20 samples last frame;
     once one of its two roofs is gone it needs all 48 this frame. Last frame's visibility bits exist only
     for the samples it took: the rays towards the roof that stayed must be traced from sample ~20 on,
-    not read from the memo (which would count them as escaping). (The random animations above never
-    stop early: at 8 samples the standard-error floor keeps every pixel above 0.05.)"""
+    not read from the memo (which would count them as escaping)."""
     def slab(x0, x1, z0, z1):
         v = np.array([[x, y, z] for x in (x0, x1) for y in (-6, 6) for z in (z0, z1)], float)
         return v, cube()[1]

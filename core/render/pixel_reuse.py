@@ -23,7 +23,8 @@ class PixelState(NamedTuple):
     """A finished render's per-pixel state, enough to continue the next frame (PreviewRender.pixel_state).
 
     settings: everything besides geometry that the pixels depend on (bytes); signature: the scene's
-    InstanceSignature (None: no reuse); the rest are the renderer's per-hit-pixel arrays."""
+    InstanceSignature (None: no reuse); the rest are the renderer's per-hit-pixel arrays (`checked`: the
+    sample variance at each error-target check passed, convergence.py)."""
 
     settings: bytes
     signature: object
@@ -37,6 +38,7 @@ class PixelState(NamedTuple):
     counts: np.ndarray
     ray_counts: np.ndarray
     memo: np.ndarray
+    checked: np.ndarray
 
 
 def settings_key(camera, width, height, mode, samples, ao_distance, lights, seed, sampler, error_target,

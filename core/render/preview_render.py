@@ -6,15 +6,16 @@ Value of a hit pixel (geometric normal N facing the camera), background 0 with a
   the light's extent, mask_l its cone or spread (shading._light_mask); no falloff or power, so S shows
   where each light reaches whatever its units.
 - "ao+shadow": AO * (ambient + (1 - ambient) * S).
-Deterministic for a seed. With an error target a pixel stops after `min_samples` once its standard
-error (sample variance floored by Laplace's rule of succession) is below it, checked every CHECK_EVERY
-samples so batching does not change the image.
+Deterministic for a seed. With an error target a pixel stops after `min_samples` once the estimated
+standard error of its mean is below it (convergence.py: Sobol's variance decay, pooled over the 5x5
+neighbourhood, Laplace's floor), checked at power-of-two sample counts so batching does not change the image.
 """
 from time import perf_counter
 
 import numpy as np
 
 from .camera import Camera, tiled_packets, tiled_pixels
+from .convergence import checks, dependence_radius, is_check, near, next_check, sample_variances, standard_errors
 from .denoise import SOBOL_VARIANCE_DECAY, denoise_pixels
 from ..inputs import check_image_size
 from ..trace.kdtree import KdTree
@@ -33,8 +34,6 @@ from ..trace.packet_traversal import L
 from ..scene.scene_queries import trace_valid_rays
 from ..jit.threads import thread_count
 from ..scene.two_level import TwoLevelScene, as_two_level
-
-CHECK_EVERY = 4
 
 
 class PreviewRender:
@@ -66,6 +65,7 @@ class PreviewRender:
         self.lights = packed_lights(o.mode, o.lights)
         self.seed, self.sampler = int(o.seed) & 0xFFFFFFFF, SAMPLERS.index(o.sampler)
         self.error_target, self.min_samples, self.ambient = o.error_target, int(o.min_samples), float(o.ambient)
+        self.checks = checks(self.min_samples, self.target_samples) if o.error_target is not None else []
         self.threads = o.threads
         self.samples_done = 0
         self.trace_ms = 0.0
@@ -91,7 +91,12 @@ class PreviewRender:
         self._start(pixels, depths, points, normals, starts, np.zeros((len(pixels), 3)), np.zeros(len(pixels)), zero,
                     zero.copy(), np.arange(len(pixels), dtype=np.int64), self._memo_rows(len(pixels)))
         self.known, self.boxes = np.zeros(len(pixels), np.int64), np.zeros((0, 6))
+        self.checked = self._unchecked(len(pixels))
         self._hard_shadows_due = True
+
+    def _unchecked(self, n):
+        """(n, checks) NaN: each pixel's sample variance at every check it passes (_retire_converged)."""
+        return np.full((n, len(self.checks)), np.nan)
 
     def _memo_rows(self, n):
         """(n, B) zero visibility bits: one per ray of every sample (render_kernels.py), none when
@@ -147,7 +152,7 @@ class PreviewRender:
             kept = np.flatnonzero(~retrace[prev.pixels])
             ao_radius = self.ao_distance if self.mode != "shadow" else 0.0
             touched = surface_rays_touch(prev.starts[kept], ao_radius, self.lights, boxes)
-        clean, dirty = kept[~touched], kept[touched]
+        clean, dirty = self._around_changes(prev, retrace, kept[~touched], kept[touched])
         tiled = tiled_pixels(self.width, self.height)
         traced = tiled[retrace[tiled]]
         self.camera_rays = len(traced)
@@ -167,18 +172,30 @@ class PreviewRender:
         self.known = np.concatenate([np.zeros(len(clean), np.int64), prev.counts[dirty] * (1 + len(self.lights)),
                                      np.zeros(len(new[0]), np.int64)])
         self.boxes = boxes
+        self.checked = np.concatenate([prev.checked[clean], self._unchecked(fresh)])
         self._rays_before = int(prev.ray_counts[clean].sum())
         self.pixels_reused = len(clean)
         self._pixels_rays_reused = self._rays_before + self.width * self.height - self.camera_rays
         if fresh == 0:
             self.samples_done = self.target_samples
 
+    def _around_changes(self, prev, retrace, clean, dirty):
+        """(clean, dirty) with an error target: clean pixels near a retraced or dirty one move to dirty, since
+        a stop count depends on the pixels around (convergence.dependence_radius)."""
+        if not self.checks:
+            return clean, dirty
+        changed = retrace.copy()
+        changed[prev.pixels[dirty]] = True
+        radius = dependence_radius(self.min_samples, self.target_samples)
+        moved = near(changed.reshape(self.height, self.width), radius).reshape(-1)[prev.pixels[clean]]
+        return clean[~moved], np.concatenate([dirty, clean[moved]])
+
     def pixel_state(self):
         """This frame's pixels for the next frame's `previous` (None until the render is done)."""
         if not self.done:
             return None
         return PixelState(self.settings, self.scene.signature, self.pixels, self.depths, self.points, self.normals,
-                          self.starts, self.sums, self.sq_sums, self.counts, self.ray_counts, self.memo)
+                          self.starts, self.sums, self.sq_sums, self.counts, self.ray_counts, self.memo, self.checked)
 
     @property
     def rays_reused(self):
@@ -207,13 +224,13 @@ class PreviewRender:
         while added < samples and len(self.active):
             batch = samples - added  # one kernel call: a pixel's rays follow each other while its nodes are in cache
             if self.error_target is not None:  # up to the next convergence check
-                batch = min(batch, CHECK_EVERY - self.samples_done % CHECK_EVERY)
+                batch = min(batch, next_check(self.samples_done, self.min_samples) - self.samples_done)
             start = perf_counter()
             self._add_samples(batch)
             self.trace_ms += (perf_counter() - start) * 1e3
             self.samples_done += batch
             added += batch
-            if self.samples_done % CHECK_EVERY == 0:
+            if self.error_target is not None and is_check(self.samples_done, self.min_samples):
                 self._retire_converged()
         return added
 
@@ -271,18 +288,18 @@ class PreviewRender:
                                    self.threads, SHADOW_RAYS)
 
     def _retire_converged(self):
-        """Stop sampling pixels whose standard error is below the target (after min_samples)."""
-        if self.error_target is None or self.samples_done < self.min_samples:
-            return
-        n = self.counts[self.active].astype(np.float64)
-        mean = self.sums[self.active].mean(axis=1) / n
-        var = np.maximum(self.sq_sums[self.active] / n - mean * mean, 0.0) * n / np.maximum(n - 1, 1)
-        # Laplace's rule of succession: after n samples, an outcome not yet seen still has probability
-        # 1 / (n + 2), so a sample's variance is at least q (1 - q) for that q. Without this floor a
-        # pixel whose first samples all agreed had variance 0 and stopped at min_samples.
-        q = 1.0 / (n + 2.0)
-        var = np.maximum(var, q * (1.0 - q))
-        converged = np.sqrt(var / n) < self.error_target
+        """Stop sampling pixels whose estimated standard error is below the target (convergence.py). Every
+        pixel enters as it was after min(its samples, samples_done): a kept pixel of a continued frame
+        with more samples by its variance at this check, kept from the frame that sampled it."""
+        done, k = self.samples_done, self.checks.index(self.samples_done)
+        active = self.active
+        self.checked[active, k] = sample_variances(self.sums[active], self.sq_sums[active], self.counts[active])
+        past = self.counts >= done
+        variances = np.where(past, self.checked[:, k], sample_variances(self.sums, self.sq_sums, self.counts))
+        decay = SOBOL_VARIANCE_DECAY if SAMPLERS[self.sampler] == "sobol" else 0.0
+        errors = standard_errors(self.width, self.height, self.pixels, variances, np.minimum(self.counts, done), decay)
+        converged = errors[active] < self.error_target
+        n = self.counts[active].astype(np.float64)
         if converged.any():
             stopped, n_stopped = self.active[converged], n[converged]
             # lights without extent traced their ray at sample 0 only and would repeat it (render_kernels.py);

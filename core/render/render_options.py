@@ -23,8 +23,11 @@ class RenderOptions:
     lights: (); core.Light objects, at least one for the modes with shadows (kept as a tuple).
     seed: 0; any integer, taken modulo 2^32: sampling is deterministic for a seed.
     sampler: "sobol" (Owen-scrambled Sobol) or "random" (independent numbers; sampling.py).
-    error_target: None (off); a standard error of a pixel's mean, > 0, below which it stops sampling.
-    min_samples: 8; samples a pixel takes before the error target may stop it, an integer >= 2.
+    error_target: None (off); > 0, a pixel stops sampling once the estimated standard error of its mean is
+        below it (convergence.py: Sobol's variance decay, pooled over its 5x5 neighbourhood, Laplace's floor),
+        checked when the sample count reaches a power of two.
+    min_samples: 8; samples a pixel takes before the error target may stop it, an integer >= 2 (the first
+        check is the power of two at or above it).
     ambient: 0.25; in [0, 1], the light an occluded-from-the-lights point still gets in "ao+shadow".
     threads: None (all Numba threads) or an integer >= 1.
     """
