@@ -61,6 +61,7 @@ BUILD_CONFIGS = {
     "binned leaf_size=8": {"leaf_size": 8},
     "binned max_depth=28": {"max_depth": 28},
     "binned clip=False": {"clip": False},
+    "binned rays=frame": {"rays": "frame"},  # told the render's ray count (core.frame_ray_count): seed 003 §3.5
 }
 
 
@@ -90,6 +91,8 @@ def rmse(img, ref):
 def one_render(scene, camera, size, options, samples, sampler, ao_distance, error_target=None, denoise=False):
     """(seconds of build + render (+ denoise), image, mean samples a hit pixel took)."""
     t = time.perf_counter()
+    if options.get("rays") == "frame":  # the most rays this render traces, as a frame's build is told them
+        options = {**options, "rays": core.frame_ray_count(size, size, "ao", samples)}
     tree = core.build_kdtree(scene.triangles, **options)
     render = core.PreviewRender(tree, camera, size, size, samples=samples, sampler=sampler, ao_distance=ao_distance,
                                 error_target=error_target)
