@@ -1,15 +1,16 @@
 """The packet kernel of several copies of core in ONE process, by turns, against Embree: paired
 comparisons of revisions or of variants (a part done twice, a part left out) for profiling.
 
-Usage: python benchmarks/bench_packet_copies.py DIR/NAME [DIR/NAME ...] [--runs 41]
+Usage: python benchmarks/bench_packet_copies.py DIR/NAME [DIR/NAME ...] [--runs 41] [--threads 1]
 
 Each DIR/NAME is a copy of `core/` under another package name, e.g.
 `mkdir -p /tmp/pv/base && git archive REV core | tar -x -C /tmp/pv/base --strip-components=1`
 (core imports itself only relatively, so the copies load side by side, each with its own Numba
-cache). Traces suzanne-251k's 640 x 480 camera rays with each copy's `trace_packets` on one thread and
-with embreex (one thread), after an untimed call each (which compiles), checks each copy's hits against
-core.intersect, then takes --runs rounds of all of them in turn and prints medians of CPU time per
-million rays, the speed against Embree and the time against the first copy.
+cache). Traces suzanne-251k's 640 x 480 camera rays with each copy's `trace_packets` on --threads
+threads and with embreex (one thread), after an untimed call each (which compiles), checks each copy's
+hits against core.intersect, then takes --runs rounds of all of them in turn and prints medians of the
+time per million rays (CPU time on one thread, wall time on more), the speed against Embree and the
+time against the first copy.
 """
 import argparse
 import importlib
@@ -26,6 +27,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("copies", nargs="+")
     ap.add_argument("--runs", type=int, default=41)
+    ap.add_argument("--threads", type=int, default=1)
     args = ap.parse_args()
     sys.path[:0] = [str(HERE), str(HERE.parent)] + [str(Path(c).resolve().parent) for c in args.copies]
     import core
@@ -50,7 +52,7 @@ def main():
         def run(packets=packets, arrays=arrays, rays=rays):
             out = packets.PacketOutputs(np.empty(n), np.empty(n, np.int32), np.empty(n), np.empty(n),
                                         np.zeros(n, np.uint8))
-            with thread_count(1):
+            with thread_count(args.threads):
                 packets.trace_packets(arrays, rays, out)
             return out
 
@@ -65,15 +67,16 @@ def main():
     tracers["embree"] = lambda: embree.closest(o, d)
     tracers["embree"]()
     cpu = {name: [] for name in tracers}
+    clock, kind = (time.process_time, "CPU") if args.threads == 1 else (time.perf_counter, "wall")
     for _ in range(args.runs):
         for name, fn in tracers.items():
-            start = time.process_time()
+            start = clock()
             fn()
-            cpu[name].append(time.process_time() - start)
+            cpu[name].append(clock() - start)
     median = {name: float(np.median(times)) for name, times in cpu.items()}
     first = Path(args.copies[0]).name
     for name in tracers:
-        print(f"{name:>16}: {median[name] / n * 1e9:7.1f} ms CPU per Mray, ours / Embree speed "
+        print(f"{name:>16}: {median[name] / n * 1e9:7.1f} ms {kind} per Mray, ours / Embree speed "
               f"{median['embree'] / median[name]:.3f}, time / {first} {median[name] / median[first]:.3f}")
 
 

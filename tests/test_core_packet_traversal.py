@@ -84,6 +84,22 @@ def test_per_ray_tmin_tmax_and_partial_tiles():
     assert_same_as_intersect(tree, o, d, 37, tmin, tmax)
 
 
+def test_every_packet_traced_once_on_each_thread_count():
+    """The kernel runs one prange iteration a thread, each taking its share of the blocks
+    (docs/choices.md#packet-scratch-once-a-thread): on 1 and 2 threads, and on an image with fewer
+    packets than bands, every ray is traced, with the same hits as core.intersect."""
+    rng = np.random.default_rng(19)
+    tree = core.build_kdtree(random_soup(rng, 2000))
+    for width, height in ((61, 47), (9, 5)):
+        o, d = grid_rays([0.3, -3.0, 0.2], [0.0, 0.0, 0.0], width, height)
+        want = core.intersect(tree, o, d)
+        for threads in (1, 2):
+            got = intersect_packets(tree, o, d, width, threads=threads)
+            for name in ("prim", "t", "u", "v"):
+                np.testing.assert_array_equal(getattr(got, name), getattr(want, name), err_msg=name)
+        assert (want.prim >= 0).any() and (want.prim < 0).any()
+
+
 def test_orthographic_rays_and_origins_differing_in_the_sign_of_zero():
     """Parallel rays from a grid of origins (an orthographic camera: the lanes share shear axes but not
     their origin) and pinhole rays whose origins differ only in the sign of zero (the one-origin leaf

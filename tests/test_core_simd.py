@@ -241,3 +241,26 @@ def test_helpers_compile_to_packed_vector_instructions():
     assert {"vsubps", "vminps", "vmaxps"} <= ops, sorted(ops)
     assert re.search(r"%[yz]mm\d+", asm), "no 256- or 512-bit registers"
     assert any(op.startswith("vcmp") for op in ops), sorted(ops)
+
+
+@njit
+def _sum_with_prefetch(values, shaped, ahead):
+    total = 0.0
+    for i in range(values.size):
+        S.prefetch(shaped, i + ahead)  # past the end for the last `ahead` elements: a hint, never a read
+        total += values[i]
+    return total
+
+
+def test_prefetch_changes_no_result_even_past_the_data():
+    values = np.arange(1000, dtype=np.float32)
+    shaped = values.reshape(10, 10, 10)  # the flat index of a multi-dimensional array, as packet_leaf takes it
+    assert _sum_with_prefetch(values, shaped, 64) == _sum_with_prefetch(values, shaped, 0) == float(values.sum())
+    assert _sum_with_prefetch(values, shaped, 1 << 20) == float(values.sum())
+
+
+@pytest.mark.skipif(platform.machine().lower() not in ("x86_64", "amd64"), reason="x86 machine code only")
+def test_prefetch_compiles_to_a_prefetch_instruction():
+    values = np.ones(4, np.float64)
+    _sum_with_prefetch(values, values, 1)
+    assert re.search(r"\bprefetch", _sum_with_prefetch.inspect_asm(_sum_with_prefetch.signatures[0]))

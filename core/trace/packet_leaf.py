@@ -13,6 +13,11 @@ Lanes sharing the origin but not the shear axes (an any-hit packet of rays in ev
 one point) pick each lane's coordinates of those differences with masks, so their t is the single-ray
 test's as well.
 
+The vector test reads a triangle's vertices from the triangles by index (triangles[prim]: 36
+consecutive bytes, the values the leaf-ordered copy holds), one or two cache lines a triangle where the
+copy's nine coordinate rows take nine a leaf, and asks for every triangle of a leaf at its start
+(docs/choices.md#packet-leaf-triangles-by-index). The single-ray test of tie lanes keeps the copy.
+
 The per-packet scratch `rays` holds one float64 row per quantity below, lane l of row r at r * L + l.
 """
 import numpy as np
@@ -38,9 +43,10 @@ SCREENED_LANES = 2  # an any-hit leaf with at most this many active lanes is tes
 
 
 @njit(cache=True, inline="always")
-def leaf_test(leaf_tris, leaf_prims, column, end, first, m, sc, mode, any_hit):
+def leaf_test(leaf_tris, triangles, leaf_prims, column, end, first, m, sc, mode, any_hit):
     """Test the leaf's triangles (columns column..end-1 of the leaf-ordered copy, prims from
-    leaf_prims[first]) against the active lanes m, in leaf order; bits of lanes whose best hit changed.
+    leaf_prims[first], vertices triangles[prim]) against the active lanes m, in leaf order; bits of lanes
+    whose best hit changed.
     `mode` (above): lanes sharing shear axes or an origin are tested in vectors (_lanes_test); otherwise
     lane by lane. With `any_hit` a lane stops at its first hit, and a leaf with at most SCREENED_LANES
     active lanes takes the single-ray leaf test lane by lane (its screen runs over eight triangles at
@@ -48,6 +54,10 @@ def leaf_test(leaf_tris, leaf_prims, column, end, first, m, sc, mode, any_hit):
     if any_hit and S.count_set_bits(m) <= SCREENED_LANES:
         return _screened_lanes(leaf_tris, leaf_prims, column - first, first, end - column + first, m, sc)
     found = 0
+    for k in range(end - column):  # the lines of every triangle asked for at once, not one after another
+        row = leaf_prims[at(first + k)] * 9  # triangles[prim]'s first and last float
+        S.prefetch(triangles, row)
+        S.prefetch(triangles, row + 8)
     axes = sc.axes
     l0 = S.count_trailing_zeros(m)
     kx, ky, kz = axes[at(l0), 0], axes[at(l0), 1], axes[at(l0), 2]
@@ -58,7 +68,7 @@ def leaf_test(leaf_tris, leaf_prims, column, end, first, m, sc, mode, any_hit):
             if m == 0:
                 break
         if mode != LANE_BY_LANE:
-            found |= _lanes_test(leaf_tris, j, prim, m, sc, (kx, ky, kz), mode)
+            found |= _lanes_test((leaf_tris, triangles), j, prim, m, sc, (kx, ky, kz), mode)
             continue
         candidates = m
         while candidates != 0:
@@ -87,21 +97,23 @@ def _screened_lanes(leaf_tris, leaf_prims, base, first, end, m, sc):
 
 
 @njit(cache=True, inline="always")
-def _lanes_test(leaf_tris, column, prim, m, sc, axes, mode):
+def _lanes_test(tris, column, prim, m, sc, axes, mode):
     """triangle_test._hit for the lanes m against one triangle, in float64 lanes with its operations in
     its order (the sign flip by det's sign is exact and left out where it cannot change a bit), so each
     lane gets the single-ray test's t. Lanes with an exactly zero edge value, where the tie rule
-    decides, take the single-ray test itself. Returns the bits of lanes whose best hit changed. `axes`:
-    the lanes' shear axes (kx, ky, kz) unless `mode` is ONE_ORIGIN_BY_LANE."""
+    decides, take the single-ray test itself. Returns the bits of lanes whose best hit changed. `tris`:
+    (the leaf-ordered copy, whose column the tie lanes read, the triangles by prim); `axes`: the lanes'
+    shear axes (kx, ky, kz) unless `mode` is ONE_ORIGIN_BY_LANE."""
     rays, prims, us, vs = sc.rays, sc.prims, sc.us, sc.vs
+    leaf_tris, triangles = tris
     if mode == ONE_ORIGIN:
-        ax, ay, az, bx, by, bz, cx, cy, cz = _sheared_from_one_origin(leaf_tris, column, rays, axes,
+        ax, ay, az, bx, by, bz, cx, cy, cz = _sheared_from_one_origin(triangles, prim, rays, axes,
                                                                        S.count_trailing_zeros(m))
     elif mode == ONE_ORIGIN_BY_LANE:
-        ax, ay, az, bx, by, bz, cx, cy, cz = _sheared_by_lane_axes(leaf_tris, column, rays, sc.lane_bits,
+        ax, ay, az, bx, by, bz, cx, cy, cz = _sheared_by_lane_axes(triangles, prim, rays, sc.lane_bits,
                                                                     S.count_trailing_zeros(m))
     else:
-        ax, ay, az, bx, by, bz, cx, cy, cz = _sheared_triangle(leaf_tris, column, rays, axes)
+        ax, ay, az, bx, by, bz, cx, cy, cz = _sheared_triangle(triangles, prim, rays, axes)
     u = S.sub(S.mul(cx, by), S.mul(cy, bx))
     v = S.sub(S.mul(ax, cy), S.mul(ay, cx))
     w = S.sub(S.mul(bx, ay), S.mul(by, ax))
@@ -149,37 +161,35 @@ def _lanes_test(leaf_tris, column, prim, m, sc, axes, mode):
 
 
 @njit(cache=True, inline="always")
-def _sheared_triangle(leaf_tris, j, rays, axes):
-    """The three vertices of column j sheared along each lane's ray (triangle_test._sheared in lanes)."""
+def _sheared_triangle(triangles, prim, rays, axes):
+    """The vertices of triangles[prim] sheared along each lane's ray (triangle_test._sheared in lanes)."""
     kx, ky, kz = axes
     ox, oy, oz = S.load(rays, (O + kx) * L), S.load(rays, (O + ky) * L), S.load(rays, (O + kz) * L)
     sx, sy = S.load(rays, SX * L), S.load(rays, SY * L)
-    a = _sheared(leaf_tris[at(kx), at(j)], leaf_tris[at(ky), at(j)], leaf_tris[at(kz), at(j)], ox, oy, oz, sx, sy)
-    b = _sheared(leaf_tris[at(3 + kx), at(j)], leaf_tris[at(3 + ky), at(j)], leaf_tris[at(3 + kz), at(j)], ox, oy,
-                 oz, sx, sy)
-    c = _sheared(leaf_tris[at(6 + kx), at(j)], leaf_tris[at(6 + ky), at(j)], leaf_tris[at(6 + kz), at(j)], ox, oy,
-                 oz, sx, sy)
+    t = triangles[at(prim)]
+    a = _sheared(t[0, at(kx)], t[0, at(ky)], t[0, at(kz)], ox, oy, oz, sx, sy)
+    b = _sheared(t[1, at(kx)], t[1, at(ky)], t[1, at(kz)], ox, oy, oz, sx, sy)
+    c = _sheared(t[2, at(kx)], t[2, at(ky)], t[2, at(kz)], ox, oy, oz, sx, sy)
     return a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]
 
 
 @njit(cache=True, inline="always")
-def _sheared_from_one_origin(leaf_tris, j, rays, axes, l0):
+def _sheared_from_one_origin(triangles, prim, rays, axes, l0):
     """_sheared_triangle for lanes whose origins are all lane l0's: the vertex's differences from the
     origin are one float64 scalar each, the value every lane's subtraction gives."""
     kx, ky, kz = axes
     ox, oy, oz = rays[at((O + kx) * L + l0)], rays[at((O + ky) * L + l0)], rays[at((O + kz) * L + l0)]
     sx, sy = S.load(rays, SX * L), S.load(rays, SY * L)
-    j = at(j)
-    a = _sheared_differences(leaf_tris[at(kx), j] - ox, leaf_tris[at(ky), j] - oy, leaf_tris[at(kz), j] - oz, sx, sy)
-    b = _sheared_differences(leaf_tris[at(3 + kx), j] - ox, leaf_tris[at(3 + ky), j] - oy,
-                             leaf_tris[at(3 + kz), j] - oz, sx, sy)
-    c = _sheared_differences(leaf_tris[at(6 + kx), j] - ox, leaf_tris[at(6 + ky), j] - oy,
-                             leaf_tris[at(6 + kz), j] - oz, sx, sy)
+    t = triangles[at(prim)]
+    kx, ky, kz = at(kx), at(ky), at(kz)
+    a = _sheared_differences(t[0, kx] - ox, t[0, ky] - oy, t[0, kz] - oz, sx, sy)
+    b = _sheared_differences(t[1, kx] - ox, t[1, ky] - oy, t[1, kz] - oz, sx, sy)
+    c = _sheared_differences(t[2, kx] - ox, t[2, ky] - oy, t[2, kz] - oz, sx, sy)
     return a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]
 
 
 @njit(cache=True, inline="always")
-def _sheared_by_lane_axes(leaf_tris, j, rays, lane_bits, l0):
+def _sheared_by_lane_axes(triangles, prim, rays, lane_bits, l0):
     """_sheared_from_one_origin for lanes whose shear axes differ: the nine differences of the vertices
     from the one origin (lane l0's) as scalars, each lane taking its kx, ky, kz coordinates of them by
     masks (lane_bits[3 + 2 i + c]: lanes whose axis i is c; packet_setup._fill_axis_bits)."""
@@ -187,10 +197,10 @@ def _sheared_by_lane_axes(leaf_tris, j, rays, lane_bits, l0):
     sx, sy = S.load(rays, SX * L), S.load(rays, SY * L)
     picks = (S.mask_from_bits(lane_bits[3]), S.mask_from_bits(lane_bits[4]), S.mask_from_bits(lane_bits[5]),
              S.mask_from_bits(lane_bits[6]), S.mask_from_bits(lane_bits[7]), S.mask_from_bits(lane_bits[8]))
-    j = at(j)
-    a = _picked_differences(leaf_tris[0, j] - ox, leaf_tris[1, j] - oy, leaf_tris[2, j] - oz, picks, sx, sy)
-    b = _picked_differences(leaf_tris[3, j] - ox, leaf_tris[4, j] - oy, leaf_tris[5, j] - oz, picks, sx, sy)
-    c = _picked_differences(leaf_tris[6, j] - ox, leaf_tris[7, j] - oy, leaf_tris[8, j] - oz, picks, sx, sy)
+    t = triangles[at(prim)]
+    a = _picked_differences(t[0, 0] - ox, t[0, 1] - oy, t[0, 2] - oz, picks, sx, sy)
+    b = _picked_differences(t[1, 0] - ox, t[1, 1] - oy, t[1, 2] - oz, picks, sx, sy)
+    c = _picked_differences(t[2, 0] - ox, t[2, 1] - oy, t[2, 2] - oz, picks, sx, sy)
     return a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]
 
 

@@ -41,12 +41,12 @@ from ..jit.threads import thread_count
 from .packet_leaf import BEST, ROWS, leaf_test
 from .packet_setup import (C32, E32, INV32, LANE_BITS, MIXED, O32, OUTSIDE_FLOAT32, ROWS32, T0, T1,
                            leave_to_single_rays, setup_packet)
-from .traversal import STACK_SIZE, block_range, interleaved_blocks, trace_rays
+from .traversal import BANDS, STACK_SIZE, block_range, interleaved_blocks, trace_rays
 from .triangle_test import LEAF_CHUNK
 
 L = S.LANES
 TILE_SHAPE = (4, 2) if L == 8 else (4, 4)  # a packet: neighbouring pixels (width x height)
-PACKETS_PER_TASK = 8  # packets a parallel task traces with one stack
+PACKETS_PER_TASK = 8  # packets of one block of interleaved_blocks
 
 
 class PacketRays(NamedTuple):
@@ -146,18 +146,23 @@ def intersect_packets(tree, origins, directions, width, tmin=0.0, tmax=np.inf, t
 def trace_packets(tree, rays_in, out, any_hit=False):
     """Trace the packets of rays_in.order (PacketRays) in parallel into `out` (PacketOutputs); rays that
     cannot join their packet are left for the single-ray kernel with out.single[ray] = 1. With `any_hit`
-    a lane stops at the first hit it finds (prim >= 0, t its distance), as trace_ray's any hit does."""
+    a lane stops at the first hit it finds (prim >= 0, t its distance), as trace_ray's any hit does.
+    One prange iteration a thread, taking the iterations a static schedule of interleaved_blocks' prange
+    would give that thread, so the scratch arrays are made once a thread
+    (docs/choices.md#packet-scratch-once-a-thread)."""
     n = rays_in.order.shape[0] // L
     iterations, per_band, run = interleaved_blocks(n, PACKETS_PER_TASK)
-    for i in prange(iterations):
-        start, stop = block_range(i, per_band, run, n, PACKETS_PER_TASK)
-        _trace_packet_block(tree, rays_in, out, start, stop, any_hit)
+    share = run * BANDS  # iterations a thread: its run of every band
+    for k in prange(iterations // share):
+        _trace_packet_blocks(tree, rays_in, out, (k * share, k * share + share, per_band, run, n), any_hit)
 
 
 @njit(cache=True)
-def _trace_packet_block(tree, rays_in, out, start, stop, any_hit):
-    """Packets start..stop-1 with one set of scratch arrays and the tree as unowned views (see
+def _trace_packet_blocks(tree, rays_in, out, blocks, any_hit):
+    """The packets of iterations blocks[0]..blocks[1]-1 (blocks: first, end, per_band, run, packets;
+    traversal.block_range) with one set of scratch arrays and the tree as unowned views (see
     traversal._trace_block)."""
+    first, end, per_band, run, n = blocks
     views = TreeArrays(unowned(tree.axis), unowned(tree.split), unowned(tree.child), unowned(tree.count),
                        unowned(tree.leaf_prims), unowned(tree.triangles), unowned(tree.bounds),
                        unowned(tree.leaf_triangles), tree.base)
@@ -173,15 +178,17 @@ def _trace_packet_block(tree, rays_in, out, start, stop, any_hit):
                          unowned(rays_in.tmax), unowned(rays_in.order))
     out = PacketOutputs(unowned(out.t), unowned(out.prim), unowned(out.u), unowned(out.v), unowned(out.single))
     box_fits = _box_fits_float32(views.bounds)
-    for p in range(start, stop):
-        lanes = rows(rays_in.order, p * L, p * L + L)
-        bits, signs, mode = setup_packet(views.bounds, rays_in, lanes, sc, out, box_fits, any_hit)
-        if bits == 0:
-            continue
-        if _traverse(views, sc, mode, signs, bits, stack, any_hit):
-            leave_to_single_rays(lanes, bits, out.single)
-        else:
-            _write(lanes, bits, sc, out)
+    for i in range(first, end):
+        start, stop = block_range(i, per_band, run, n, PACKETS_PER_TASK)
+        for p in range(start, stop):
+            lanes = rows(rays_in.order, p * L, p * L + L)
+            bits, signs, mode = setup_packet(views.bounds, rays_in, lanes, sc, out, box_fits, any_hit)
+            if bits == 0:
+                continue
+            if _traverse(views, sc, mode, signs, bits, stack, any_hit):
+                leave_to_single_rays(lanes, bits, out.single)
+            else:
+                _write(lanes, bits, sc, out)
     keep_alive(owned)  # the owners of sc and stack
 
 
@@ -215,8 +222,8 @@ def _traverse(tree, sc, mode, signs, bits, stack, any_hit):
         if a != LEAF:
             return True
         first = child[at(node)]
-        found = leaf_test(leaf_tris, leaf_prims, base + first, base + first + count[at(node)], first, m, sc, mode,
-                          any_hit)
+        found = leaf_test(leaf_tris, tree.triangles, leaf_prims, base + first, base + first + count[at(node)], first, m,
+                          sc, mode, any_hit)
         if any_hit:
             done |= found
         node, m, t0, t1, sp = _pop(sc.rays, stack_node, stack_bits, stack_t, sp, done)

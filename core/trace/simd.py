@@ -11,6 +11,8 @@ intrinsic call) it names, so it inlines into any kernel and LLVM legalises the w
 API (all callable from njit code only; vectors never reach Python):
     load(array, i)            LANES consecutive elements of a float32/float64 array's flat data from i
     store(array, i, v)        the reverse (no bounds checks: the caller keeps i + LANES <= size)
+    prefetch(array, i)        ask for the cache line of element i of an array's flat data (llvm.prefetch;
+                              a hint: no fault, no effect on results)
     splat_f32(x), splat_f64(x)  x in every lane
     to_f32(v), to_f64(v)      lane-wise conversion (round to nearest / exact widening)
     add, sub, mul, div(a, b)  IEEE lane-wise arithmetic, never contracted into FMAs
@@ -129,6 +131,26 @@ def store(typingctx, array, index, value):
         return context.get_dummy_value()
 
     return types.none(array, index, value), codegen
+
+
+@intrinsic
+def prefetch(typingctx, array, index):
+    """A read prefetch of the cache line holding element `index` of the array's flat (C-ordered) data
+    (llvm.prefetch, kept in every cache level). A hint only: an address past the data does not fault."""
+    if not (isinstance(array, types.Array) and array.layout == "C") or not isinstance(index, types.Integer):
+        return None
+
+    def codegen(context, builder, sig, args):
+        ary = context.make_array(sig.args[0])(context, builder, args[0])
+        i = context.cast(builder, args[1], sig.args[1], types.intp)
+        byte = ir.IntType(8).as_pointer()
+        i32 = ir.IntType(32)
+        fn = _function(builder, "llvm.prefetch.p0i8", ir.VoidType(), [byte, i32, i32, i32])
+        builder.call(fn, [builder.bitcast(builder.gep(ary.data, [i]), byte), ir.Constant(i32, 0), ir.Constant(i32, 3),
+                          ir.Constant(i32, 1)])
+        return context.get_dummy_value()
+
+    return types.none(array, index), codegen
 
 
 # -- construction and conversion ---------------------------------------------------------------------
