@@ -6,10 +6,13 @@ true or raise a ValueError that names the first bad index.
 import numbers
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
+
+from .jit.threads import thread_count
 
 MIN_DIRECTION = 1e-20  # largest direction component allowed below this is rejected (see as_rays)
 NEGLIGIBLE_COMPONENT = 2.0 ** -600  # a direction component below this times the largest is made 0
+BLOCK = 4096  # rays a parallel task of the ray checks and of the float32 outputs takes
 
 
 def as_number(name, value):
@@ -65,16 +68,20 @@ def as_triangles(triangles):
     return arr
 
 
-def as_rays(origins, directions):
-    """Origins and directions as C-contiguous (R, 3) float64 arrays; directions must be finite and non-zero."""
+def as_rays(origins, directions, threads=None):
+    """Origins and directions as C-contiguous (R, 3) float64 arrays; directions must be finite and non-zero.
+    The checks are one compiled pass, parallel on `threads` (None: all)."""
     o = _as_points("origins", origins)
     d = _as_points("directions", directions)
     if o.shape != d.shape:
         raise ValueError(f"origins and directions must have the same shape (R, 3), got {o.shape} and {d.shape}")
-    faults = _ray_faults(o, d)  # one compiled pass: NumPy's row reductions cost more than tracing
-    if faults[:4].max() >= 0:
-        _raise_ray_fault(o, d, faults)
-    return o, without_negligible_components(d) if faults[4] else d
+    faults = np.full((-(-len(o) // BLOCK), 5), -1, np.int64)
+    with thread_count(threads):
+        _ray_faults(o, d, faults)  # NumPy's row reductions cost more than tracing
+    firsts = [faults[faults[:, k] >= 0, k] for k in range(4)]  # blocks in ray order: the first is the first
+    if any(len(f) for f in firsts):
+        _raise_ray_fault(o, d, [int(f[0]) if len(f) else -1 for f in firsts])
+    return o, without_negligible_components(d) if (faults[:, 4] > 0).any() else d
 
 
 def _raise_ray_fault(o, d, faults):
@@ -92,14 +99,25 @@ def _raise_ray_fault(o, d, faults):
                      f"below {MIN_DIRECTION:g}): normalise it")
 
 
+@njit(cache=True, parallel=True)
+def _ray_faults(o, d, faults):
+    """Per block b of BLOCK rays, faults[b] = [its first ray with a non-finite origin, with a non-finite
+    direction, with a zero direction, with a direction shorter than MIN_DIRECTION (-1: none), 1 if some
+    direction has a negligible component (else -1)]."""
+    for b in prange(faults.shape[0]):
+        _block_faults(o, d, faults[b], b * BLOCK, min(o.shape[0], (b + 1) * BLOCK))
+
+
 @njit(cache=True)
-def _ray_faults(o, d):
-    """[first ray with a non-finite origin, with a non-finite direction, with a zero direction, with a
-    direction shorter than MIN_DIRECTION (-1: none), 1 if some direction has a negligible component]."""
-    faults = np.full(5, -1, np.int64)
-    faults[4] = 0
-    for r in range(o.shape[0]):
-        largest = max(abs(d[r, 0]), abs(d[r, 1]), abs(d[r, 2]))
+def _block_faults(o, d, faults, start, stop):
+    """_ray_faults for rays start..stop-1: a ray passes one cheap test (x * 0 is 0 only for a finite x),
+    and only a ray that fails it is told apart fault by fault."""
+    for r in range(start, stop):
+        ax, ay, az = abs(d[r, 0]), abs(d[r, 1]), abs(d[r, 2])
+        largest = max(ax, ay, az)
+        finite = (o[r, 0] * 0.0 + o[r, 1] * 0.0 + o[r, 2] * 0.0 + ax * 0.0 + ay * 0.0 + az * 0.0) == 0.0
+        if finite and largest >= MIN_DIRECTION and min(ax, ay, az) >= NEGLIGIBLE_COMPONENT * largest:
+            continue
         finite_o = np.isfinite(o[r, 0]) and np.isfinite(o[r, 1]) and np.isfinite(o[r, 2])
         finite_d = np.isfinite(d[r, 0]) and np.isfinite(d[r, 1]) and np.isfinite(d[r, 2])
         for k, fault in enumerate((not finite_o, not finite_d, finite_d and largest == 0.0,
@@ -109,7 +127,6 @@ def _ray_faults(o, d):
         for k in range(3):
             if abs(d[r, k]) < NEGLIGIBLE_COMPONENT * largest:
                 faults[4] = 1
-    return faults
 
 
 def without_negligible_components(d):
@@ -125,17 +142,23 @@ def without_negligible_components(d):
 def as_ray_limits(tmin, tmax, count):
     """tmin and tmax (scalars or (R,) arrays) as (R,) float64 arrays: tmin finite and >= 0, neither NaN.
     A ray whose interval is empty (tmax <= tmin, tmax = -inf included) misses: callers compute tmax
-    per ray (a light's distance, say) and an empty interval is a valid answer there, not an error."""
+    per ray (a light's distance, say) and an empty interval is a valid answer there, not an error.
+    A scalar is checked once, before it fills its array (ray 0 is named for a bad one)."""
     lo = _as_limit("tmin", tmin, count)
     hi = _as_limit("tmax", tmax, count)
     if np.isnan(lo).any() or np.isnan(hi).any():
         which, arr = ("tmin", lo) if np.isnan(lo).any() else ("tmax", hi)
-        raise ValueError(f"{which} of ray {int(np.flatnonzero(np.isnan(arr))[0])} is NaN")
+        raise ValueError(f"{which} of ray {_first(np.isnan(arr))} is NaN")
     if (lo < 0).any():
-        raise ValueError(f"tmin must be >= 0; ray {int(np.flatnonzero(lo < 0)[0])} has tmin < 0")
+        raise ValueError(f"tmin must be >= 0; ray {_first(lo < 0)} has tmin < 0")
     if np.isinf(lo).any():
-        raise ValueError(f"tmin must be finite; ray {int(np.flatnonzero(np.isinf(lo))[0])} has tmin = inf")
-    return lo, hi
+        raise ValueError(f"tmin must be finite; ray {_first(np.isinf(lo))} has tmin = inf")
+    return tuple(np.full(count, float(x)) if x.ndim == 0 else x for x in (lo, hi))
+
+
+def _first(bad):
+    """The first True of a check's result (0 for a scalar's)."""
+    return int(np.flatnonzero(bad)[0]) if bad.ndim else 0
 
 
 def is_real_dtype(dtype):
@@ -161,29 +184,71 @@ def _as_limit(name, value, count):
     except (TypeError, ValueError):  # None or a string would become NaN or a silently parsed number
         raise ValueError(f"{name} must be a number or an array of numbers, got {value!r}") from None
     if arr.ndim == 0:
-        return np.full(count, float(arr))
+        return arr
     if arr.shape != (count,):
         raise ValueError(f"{name} must be a scalar or have shape ({count},), got {arr.shape}")
     return np.ascontiguousarray(arr)
 
 
-def hit_distances_as_float32(t, prim, tmin=0.0, tmax=np.inf):
-    """The float64 hit distances as the float32 `t` queries return. A hit beyond float32's range raises
-    ValueError naming the first such ray (inf would read as a miss). A positive t below float32's smallest
-    subnormal becomes that subnormal, not 0, and a t that rounds onto or past the ray's tmin or tmax
-    (scalars or (R,) arrays) moves one float32 step back inside the open interval."""
-    with np.errstate(over="ignore"):
-        out = t.astype(np.float32)
-    hit = prim >= 0
-    bad = hit & (out == np.inf)
-    if bad.any():
-        r = int(np.flatnonzero(bad)[0])
+def hits_as_float32(t, prim, u, v, lo, hi):
+    """The float64 hit distances and barycentrics (R,) as the float32 `t`, `u`, `v` queries return, in
+    one compiled parallel pass; lo, hi the rays' (R,) limits (as_ray_limits). A hit beyond float32's
+    range raises ValueError naming the first such ray (inf would read as a miss). A positive t below
+    float32's smallest subnormal becomes that subnormal, not 0, and a t that rounds onto or past the
+    ray's tmin or tmax moves one float32 step back inside the open interval."""
+    out = (np.empty(len(t), np.float32), np.empty(len(t), np.float32), np.empty(len(t), np.float32))
+    first_beyond = np.full(-(-len(t) // BLOCK), -1, np.int64)
+    _hits_to_float32(t, prim, u, v, lo, hi, out, first_beyond)
+    beyond = first_beyond[first_beyond >= 0]
+    if len(beyond):
+        r = int(beyond[0])
         raise ValueError(f"ray {r} hits at t = {t[r]:.6g}, beyond float32's range for t: scale its direction "
                          "(t is in units of the direction's length)")
-    out[hit & (out == 0.0)] = np.nextafter(np.float32(0), np.float32(1))
-    lo, hi = (np.broadcast_to(np.asarray(x, np.float64), out.shape) for x in (tmin, tmax))
-    past = hit & (out >= hi)
-    out[past] = np.nextafter(out[past], np.float32(-np.inf))
-    before = hit & (out <= lo)
-    out[before] = np.nextafter(out[before], np.float32(np.inf))
     return out
+
+
+@njit(cache=True, parallel=True)
+def _hits_to_float32(t, prim, u, v, lo, hi, out, first_beyond):
+    """hits_as_float32's pass by blocks of BLOCK rays; first_beyond[b] gets block b's first hit beyond
+    float32's range (or stays -1)."""
+    for b in prange(first_beyond.shape[0]):
+        first_beyond[b] = _convert_block(t, prim, u, v, lo, hi, out, b * BLOCK, min(t.shape[0], (b + 1) * BLOCK))
+
+
+@njit(cache=True)
+def _convert_block(t, prim, u, v, lo, hi, out, start, stop):
+    """Rays start..stop-1 of _hits_to_float32 (its own function: the parfor pass rejects a variable
+    assigned twice in a prange body); returns the first hit beyond float32's range, or -1."""
+    t32, u32, v32 = out
+    first = -1
+    for r in range(start, stop):
+        u32[r], v32[r] = u[r], v[r]
+        f = np.float32(t[r])
+        if prim[r] >= 0 and (f == 0.0 or f == np.inf or np.float64(f) >= hi[r] or np.float64(f) <= lo[r]):
+            if f == np.inf:
+                first = r if first < 0 else first
+            f = _inside_limits(f, lo[r], hi[r])
+        t32[r] = f
+    return first
+
+
+@njit(cache=True)
+def _inside_limits(f, lo, hi):
+    """A hit's float32 t moved as hits_as_float32 says (inf is left as it is: the caller raises)."""
+    if f == np.inf:
+        return f
+    if f == 0.0:
+        f = _next_float32(f, True)
+    if np.float64(f) >= hi:
+        f = _next_float32(f, False)
+    if np.float64(f) <= lo:
+        f = _next_float32(f, True)
+    return f
+
+
+@njit(cache=True)
+def _next_float32(f, up):
+    """np.nextafter(f, +inf if up else -inf) for a float32 f >= 0 (f > 0 when down): a hit's t, by its
+    bit pattern (as clipping.next_float32)."""
+    bits = np.float32(f).view(np.int32)
+    return np.int32(bits + 1 if up else bits - 1).view(np.float32)

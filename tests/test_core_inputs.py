@@ -387,3 +387,65 @@ def test_an_instance_placed_beyond_float32s_range_is_named(layout):
         core.SceneBuilder(layout=layout).build([core.MeshInput("m", v, f, 0)], np.array([0, 0, 0, 0]),
                                                np.stack([np.eye(4), far, np.eye(4), farther]))
     assert raised.value.instances.tolist() == [1, 3]  # every one, so a caller can leave them out
+
+
+def _numpy_hits_as_float32(t, prim, lo, hi):
+    """The float32 rules of hits_as_float32 in NumPy, one array operation each (an independent oracle)."""
+    with np.errstate(over="ignore"):
+        out = t.astype(np.float32)
+    hit = prim >= 0
+    out[hit & (out == 0.0)] = np.nextafter(np.float32(0), np.float32(1))
+    past = hit & (out >= hi)
+    out[past] = np.nextafter(out[past], np.float32(-np.inf))
+    before = hit & (out <= lo)
+    out[before] = np.nextafter(out[before], np.float32(np.inf))
+    return out
+
+
+def test_the_compiled_float32_outputs_equal_numpys_rules_across_blocks():
+    """hits_as_float32 (one parallel pass by blocks) against the NumPy oracle, on 3 blocks' worth of rays:
+    ordinary t, t that round onto or past tmin and tmax, t below the smallest subnormal, misses (inf),
+    u and v. A hit beyond float32's range is named by its index, the first of all blocks', though a
+    later block holds another."""
+    from core.inputs import BLOCK, hits_as_float32
+    rng = np.random.default_rng(3)
+    n = 3 * BLOCK + 17
+    lo, hi = rng.random(n) * 2.0, np.full(n, np.inf)
+    t = lo + rng.random(n) * 10.0 + 1e-12
+    prim = np.where(rng.random(n) < 0.8, 7, -1).astype(np.int32)
+    at_hi, at_lo, tiny = np.split(rng.permutation(n)[:1050], [500, 1000])  # three disjoint sets of rays
+    hi[at_hi] = np.float64(np.float32(t[at_hi])) + rng.choice([0.0, 1e-12, -1e-12], 500) * t[at_hi]
+    t[at_hi] = np.minimum(t[at_hi], np.nextafter(hi[at_hi], 0.0))
+    lo[at_lo] = np.minimum(np.nextafter(np.float64(np.float32(t[at_lo])), 0.0), np.nextafter(t[at_lo], 0.0))
+    lo[tiny], t[tiny] = 0.0, rng.random(50) * 1e-300
+    t[prim < 0] = np.inf
+    u, v = rng.random(n), rng.random(n)
+    t32, u32, v32 = hits_as_float32(t, prim, u, v, lo, hi)
+    np.testing.assert_array_equal(t32, _numpy_hits_as_float32(t, prim, lo, hi))
+    np.testing.assert_array_equal(u32, u.astype(np.float32))
+    np.testing.assert_array_equal(v32, v.astype(np.float32))
+    hit = prim >= 0
+    assert (t32[hit] > lo[hit]).all() and (t32[hit] < hi[hit]).all()
+    beyond = np.flatnonzero(hit)[[-1, 3 * len(np.flatnonzero(hit)) // 4]]  # in the last and an earlier block
+    t[beyond] = 1e45
+    with pytest.raises(ValueError, match=f"ray {beyond.min()} hits at t = 1e\\+45"):
+        hits_as_float32(t, prim, u, v, lo, hi)
+
+
+def test_the_parallel_ray_check_names_the_first_bad_ray_of_all_blocks():
+    """as_rays' compiled check runs by blocks in parallel: the ray it names is still the first bad one
+    (a NaN origin in an early block beats one in a later block), and each fault is named in its order."""
+    from core.inputs import BLOCK, as_rays
+    n = 3 * BLOCK
+    o, d = np.zeros((n, 3)), np.tile([0.0, 0.0, 1.0], (n, 1))
+    o[2 * BLOCK + 5, 1] = np.nan
+    o[BLOCK + 9, 0] = np.inf
+    d[5, 2] = 0.0
+    with pytest.raises(ValueError, match=f"origin of ray {BLOCK + 9} is not finite"):
+        as_rays(o, d)
+    o[:] = 0.0
+    with pytest.raises(ValueError, match="ray 5 has a zero direction vector"):
+        as_rays(o, d)
+    d[5, 2], d[BLOCK + 3, 0] = 1.0, 2.0 ** -700
+    _, fixed = as_rays(o, d)
+    assert fixed[BLOCK + 3, 0] == 0.0 and fixed[BLOCK + 3, 2] == 1.0

@@ -60,7 +60,7 @@ def _trace_in_packets(scene, o, d, lo, hi, order, threads, ray_mask, any_hit):
         trace_packets(_mesh_tree(s, int(s.mesh_of[inst])), PacketRays(o_obj, d_obj, lo, hi, order),
                       PacketOutputs(t, prim, u, v, single), any_hit)
         instance = np.where(prim >= 0, np.int32(inst), np.int32(-1))
-        rest = np.flatnonzero(single)
+        rest = np.flatnonzero(single.view(np.bool_))
         if len(rest):
             out = [np.empty(len(rest)), np.empty(len(rest), np.int32), np.empty(len(rest), np.int32),
                    np.empty(len(rest)), np.empty(len(rest))]

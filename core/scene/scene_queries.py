@@ -3,7 +3,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..inputs import as_ray_limits, as_rays, hit_distances_as_float32
+from ..inputs import as_ray_limits, as_rays, hits_as_float32
 from .instance_traversal import trace_scene_rays
 from ..build.lazy import resolve_suspended
 from .ray_visibility import ALL_RAYS, as_ray_mask
@@ -32,8 +32,10 @@ def intersect_scene(scene, origins, directions, tmin=0.0, tmax=np.inf, threads=N
     ids = getattr(scene, "caller_ids", None)
     if ids is not None:
         inst, prim = ids.map(inst, prim)
-    return SceneHits(hit_distances_as_float32(t, prim, tmin, tmax), inst, prim, u.astype(np.float32),
-                     v.astype(np.float32))
+    lo, hi = as_ray_limits(tmin, tmax, len(t))  # checked already by trace_scene_all
+    with thread_count(threads):
+        t32, u32, v32 = hits_as_float32(t, prim, u, v, lo, hi)
+    return SceneHits(t32, inst, prim, u32, v32)
 
 
 def occluded_scene(scene, origins, directions, tmin=0.0, tmax=np.inf, threads=None, ray_mask=ALL_RAYS):
@@ -45,7 +47,7 @@ def occluded_scene(scene, origins, directions, tmin=0.0, tmax=np.inf, threads=No
 def trace_scene_all(scene, origins, directions, tmin, tmax, any_hit, threads, ray_mask=ALL_RAYS):
     """Checked rays through the scene: float64 (t, u, v) and int32 (instance, prim) arrays. A lazy
     KdTree builds the subtrees its rays reach (lazy.py) and the rays that stopped there are retraced."""
-    o, d = as_rays(origins, directions)
+    o, d = as_rays(origins, directions, threads)
     lo, hi = as_ray_limits(tmin, tmax, len(o))
     return trace_valid_rays(scene, o, d, lo, hi, any_hit, threads, as_ray_mask(ray_mask))
 

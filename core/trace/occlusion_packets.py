@@ -31,7 +31,7 @@ def occluded_prims(tree_arrays, o, d, lo, hi):
         trace_rays(tree_arrays, o, d, lo, hi, True, t, prim, u, v)
         return prim
     trace_packets(tree_arrays, PacketRays(o, d, lo, hi, order), PacketOutputs(t, prim, u, v, single), True)
-    rest = np.flatnonzero(single)
+    rest = np.flatnonzero(single.view(np.bool_))
     if len(rest):
         m = len(rest)
         out = [np.empty(m), np.empty(m, np.int32), np.empty(m), np.empty(m)]

@@ -33,7 +33,7 @@ from numba import njit, prange
 
 from . import simd as S
 from .array_views import at, keep_alive, rows, unowned
-from ..inputs import as_ray_limits, as_rays, hit_distances_as_float32
+from ..inputs import as_ray_limits, as_rays, hits_as_float32
 from .kdtree import KdTree
 from .layout import LEAF, TreeArrays
 from .queries import Hits, intersect
@@ -119,7 +119,7 @@ def intersect_packets(tree, origins, directions, width, tmin=0.0, tmax=np.inf, t
     the number of packets and of rays traced singly."""
     if not isinstance(tree, KdTree):
         raise ValueError(f"tree must be a core.KdTree, got {type(tree).__name__}")
-    o, d = as_rays(origins, directions)
+    o, d = as_rays(origins, directions, threads)
     n = len(o)
     if n % width:
         raise ValueError(f"{n} rays do not fill rows of width {width}")
@@ -132,14 +132,16 @@ def intersect_packets(tree, origins, directions, width, tmin=0.0, tmax=np.inf, t
     with thread_count(threads):
         # any_hit passed, not left to its default: an omitted argument would be another specialisation
         trace_packets(tree.arrays, PacketRays(o, d, lo, hi, order), PacketOutputs(t, prim, u, v, single), False)
-        rest = np.flatnonzero(single)
+        rest = np.flatnonzero(single.view(np.bool_))
         if len(rest):
             out = [np.empty(len(rest)), np.empty(len(rest), np.int32), np.empty(len(rest)), np.empty(len(rest))]
             trace_rays(tree.arrays, o[rest], d[rest], lo[rest], hi[rest], False, *out)
             t[rest], prim[rest], u[rest], v[rest] = out
     if stats is not None:
         stats.update(packets=len(order) // L, single_rays=len(rest))
-    return Hits(hit_distances_as_float32(t, prim, lo, hi), prim, u.astype(np.float32), v.astype(np.float32))
+    with thread_count(threads):
+        t32, u32, v32 = hits_as_float32(t, prim, u, v, lo, hi)
+    return Hits(t32, prim, u32, v32)
 
 
 @njit(cache=True, parallel=True)

@@ -7,7 +7,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..inputs import as_ray_limits, as_rays, hit_distances_as_float32
+from ..inputs import as_ray_limits, as_rays, hits_as_float32
 from .kdtree import KdTree
 from ..build.lazy import resolve_suspended
 from ..jit.threads import thread_count
@@ -26,8 +26,10 @@ class Hits(NamedTuple):
 
 def intersect(tree, origins, directions, tmin=0.0, tmax=np.inf, threads=None):
     """Closest hit of each ray in the open interval (tmin, tmax); tmin, tmax scalars or (R,) arrays."""
-    t, prim, u, v = _trace(tree, origins, directions, tmin, tmax, False, threads)
-    return Hits(hit_distances_as_float32(t, prim, tmin, tmax), prim, u.astype(np.float32), v.astype(np.float32))
+    t, prim, u, v, lo, hi = _trace(tree, origins, directions, tmin, tmax, False, threads)
+    with thread_count(threads):
+        t32, u32, v32 = hits_as_float32(t, prim, u, v, lo, hi)
+    return Hits(t32, prim, u32, v32)
 
 
 def occluded(tree, origins, directions, tmin=0.0, tmax=np.inf, threads=None):
@@ -37,7 +39,7 @@ def occluded(tree, origins, directions, tmin=0.0, tmax=np.inf, threads=None):
     if tree.lazy:
         return _trace(tree, origins, directions, tmin, tmax, True, threads)[1] >= 0
     from .occlusion_packets import occluded_prims  # imported here: packet_traversal imports this module
-    o, d = as_rays(origins, directions)
+    o, d = as_rays(origins, directions, threads)
     lo, hi = as_ray_limits(tmin, tmax, len(o))
     with thread_count(threads):
         return occluded_prims(tree.arrays, o, d, lo, hi) >= 0
@@ -51,7 +53,7 @@ def _check_tree(tree):
 
 def _trace(tree, origins, directions, tmin, tmax, any_hit, threads):
     _check_tree(tree)
-    o, d = as_rays(origins, directions)
+    o, d = as_rays(origins, directions, threads)
     lo, hi = as_ray_limits(tmin, tmax, len(o))
     n = len(o)
     t = np.empty(n)
@@ -68,4 +70,4 @@ def _trace(tree, origins, directions, tmin, tmax, any_hit, threads):
             t[rays], prim[rays], u[rays], v[rays] = out
 
         resolve_suspended(tree, prim, retrace, threads)
-    return t, prim, u, v
+    return t, prim, u, v, lo, hi
