@@ -7,6 +7,7 @@ versions, and the JIT compile (or cache load) time, which no figure includes.
 import json
 import os
 import platform
+import shlex
 import sys
 import time
 from pathlib import Path
@@ -57,7 +58,7 @@ def write(name: str, results: dict, jit_seconds: float, quick: bool = False, out
     (fewer runs or a smaller workload) whose figures only check that the benchmark works."""
     payload = {
         "benchmark": name,
-        "command": " ".join([Path(sys.executable).name, *sys.argv]),
+        "command": shlex.join([Path(sys.executable).name, *sys.argv]),  # quoted: an empty argument stays one
         "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
         "quick": bool(quick),
         "jit_seconds": round(float(jit_seconds), 2),
