@@ -190,15 +190,16 @@ def _as_limit(name, value, count):
     return np.ascontiguousarray(arr)
 
 
-def hits_as_float32(t, prim, u, v, lo, hi):
+def hits_as_float32(t, prim, u, v, lo, hi, threads=None):
     """The float64 hit distances and barycentrics (R,) as the float32 `t`, `u`, `v` queries return, in
-    one compiled parallel pass; lo, hi the rays' (R,) limits (as_ray_limits). A hit beyond float32's
-    range raises ValueError naming the first such ray (inf would read as a miss). A positive t below
-    float32's smallest subnormal becomes that subnormal, not 0, and a t that rounds onto or past the
-    ray's tmin or tmax moves one float32 step back inside the open interval."""
+    one compiled pass, parallel on `threads`; lo, hi the rays' (R,) limits (as_ray_limits). A hit beyond
+    float32's range raises ValueError naming the first such ray (inf would read as a miss). A positive t
+    below float32's smallest subnormal becomes that subnormal, not 0, and a t that rounds onto or past
+    the ray's tmin or tmax moves one float32 step back inside the open interval."""
     out = (np.empty(len(t), np.float32), np.empty(len(t), np.float32), np.empty(len(t), np.float32))
     first_beyond = np.full(-(-len(t) // BLOCK), -1, np.int64)
-    _hits_to_float32(t, prim, u, v, lo, hi, out, first_beyond)
+    with thread_count(threads):
+        _hits_to_float32(t, prim, u, v, lo, hi, out, first_beyond)
     beyond = first_beyond[first_beyond >= 0]
     if len(beyond):
         r = int(beyond[0])
@@ -224,19 +225,18 @@ def _convert_block(t, prim, u, v, lo, hi, out, start, stop):
     for r in range(start, stop):
         u32[r], v32[r] = u[r], v[r]
         f = np.float32(t[r])
-        if prim[r] >= 0 and (f == 0.0 or f == np.inf or np.float64(f) >= hi[r] or np.float64(f) <= lo[r]):
+        if prim[r] >= 0:
             if f == np.inf:
                 first = r if first < 0 else first
-            f = _inside_limits(f, lo[r], hi[r])
+            elif f == 0.0 or np.float64(f) >= hi[r] or np.float64(f) <= lo[r]:
+                f = _inside_limits(f, lo[r], hi[r])
         t32[r] = f
     return first
 
 
 @njit(cache=True)
 def _inside_limits(f, lo, hi):
-    """A hit's float32 t moved as hits_as_float32 says (inf is left as it is: the caller raises)."""
-    if f == np.inf:
-        return f
+    """A hit's finite float32 t moved as hits_as_float32 says."""
     if f == 0.0:
         f = _next_float32(f, True)
     if np.float64(f) >= hi:
@@ -248,7 +248,7 @@ def _inside_limits(f, lo, hi):
 
 @njit(cache=True)
 def _next_float32(f, up):
-    """np.nextafter(f, +inf if up else -inf) for a float32 f >= 0 (f > 0 when down): a hit's t, by its
-    bit pattern (as clipping.next_float32)."""
+    """np.nextafter(f, +inf if up else -inf) for a float32 f >= 0 (f > 0 when down), by its bit pattern.
+    Not clipping.next_float32: its inlined `view` of an argument assigned twice fails Numba's checks."""
     bits = np.float32(f).view(np.int32)
     return np.int32(bits + 1 if up else bits - 1).view(np.float32)

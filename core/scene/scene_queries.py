@@ -28,13 +28,11 @@ def intersect_scene(scene, origins, directions, tmin=0.0, tmax=np.inf, threads=N
     """Closest hit of each ray in (tmin, tmax); `scene` a TwoLevelScene (or a KdTree, as one instance).
     ray_mask: the rays' kind (ray_visibility.py): CAMERA_RAYS or SHADOW_RAYS meet only the instances
     visible to that kind; ALL_RAYS every instance visible to any."""
-    t, inst, prim, u, v = trace_scene_all(scene, origins, directions, tmin, tmax, False, threads, ray_mask)
+    t, inst, prim, u, v, lo, hi = trace_scene_all(scene, origins, directions, tmin, tmax, False, threads, ray_mask)
     ids = getattr(scene, "caller_ids", None)
     if ids is not None:
         inst, prim = ids.map(inst, prim)
-    lo, hi = as_ray_limits(tmin, tmax, len(t))  # checked already by trace_scene_all
-    with thread_count(threads):
-        t32, u32, v32 = hits_as_float32(t, prim, u, v, lo, hi)
+    t32, u32, v32 = hits_as_float32(t, prim, u, v, lo, hi, threads)
     return SceneHits(t32, inst, prim, u32, v32)
 
 
@@ -45,11 +43,12 @@ def occluded_scene(scene, origins, directions, tmin=0.0, tmax=np.inf, threads=No
 
 
 def trace_scene_all(scene, origins, directions, tmin, tmax, any_hit, threads, ray_mask=ALL_RAYS):
-    """Checked rays through the scene: float64 (t, u, v) and int32 (instance, prim) arrays. A lazy
-    KdTree builds the subtrees its rays reach (lazy.py) and the rays that stopped there are retraced."""
+    """Checked rays through the scene: float64 (t, u, v) and int32 (instance, prim) arrays, then the
+    rays' (R,) limits (lo, hi). A lazy KdTree builds the subtrees its rays reach (lazy.py) and the rays
+    that stopped there are retraced."""
     o, d = as_rays(origins, directions, threads)
     lo, hi = as_ray_limits(tmin, tmax, len(o))
-    return trace_valid_rays(scene, o, d, lo, hi, any_hit, threads, as_ray_mask(ray_mask))
+    return (*trace_valid_rays(scene, o, d, lo, hi, any_hit, threads, as_ray_mask(ray_mask)), lo, hi)
 
 
 def trace_valid_rays(scene, o, d, lo, hi, any_hit, threads, ray_mask=ALL_RAYS):

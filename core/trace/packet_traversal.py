@@ -139,8 +139,7 @@ def intersect_packets(tree, origins, directions, width, tmin=0.0, tmax=np.inf, t
             t[rest], prim[rest], u[rest], v[rest] = out
     if stats is not None:
         stats.update(packets=len(order) // L, single_rays=len(rest))
-    with thread_count(threads):
-        t32, u32, v32 = hits_as_float32(t, prim, u, v, lo, hi)
+    t32, u32, v32 = hits_as_float32(t, prim, u, v, lo, hi, threads)
     return Hits(t32, prim, u32, v32)
 
 

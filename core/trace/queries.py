@@ -27,8 +27,7 @@ class Hits(NamedTuple):
 def intersect(tree, origins, directions, tmin=0.0, tmax=np.inf, threads=None):
     """Closest hit of each ray in the open interval (tmin, tmax); tmin, tmax scalars or (R,) arrays."""
     t, prim, u, v, lo, hi = _trace(tree, origins, directions, tmin, tmax, False, threads)
-    with thread_count(threads):
-        t32, u32, v32 = hits_as_float32(t, prim, u, v, lo, hi)
+    t32, u32, v32 = hits_as_float32(t, prim, u, v, lo, hi, threads)
     return Hits(t32, prim, u32, v32)
 
 
