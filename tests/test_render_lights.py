@@ -4,7 +4,8 @@ import pytest
 
 import core
 from core.render.lights import DELTA
-from tests.render_scenes import floor, hit_mask, look_down, quad, render
+from core.scene.two_level import build_two_level
+from tests.render_scenes import box, floor, hit_mask, look_at, look_down, quad, render
 
 
 def test_point_light_cosine_falloff():
@@ -288,3 +289,43 @@ def test_area_light_with_a_zero_scale_axis_is_named():
         m[axis, axis] = 0.0
         with pytest.raises(ValueError, match=f"zero {'XYZ'[axis]} axis"):
             core.Light.area(m, size=1.0)
+
+
+def _hard_shadow_scene():
+    """A floor, and a box and a slanted roof over it casting shadows, whose sides the camera sees facing
+    away from some lights: lit, shadowed and unlit pixels (two parts, for the two-instance scene)."""
+    roof = np.array([[[-0.9, -0.2, 0.0], [-0.3, -0.2, 0.6], [-0.3, 0.5, 0.6]],
+                     [[-0.3, -0.2, 0.6], [0.2, -0.2, 0.0], [0.2, 0.5, 0.0]]])
+    return floor(0.0, half=2.0), np.concatenate([box((0.4, 0.3, 0.3), (0.2, 0.25, 0.3)), roof])
+
+
+@pytest.mark.parametrize("mode", ["ao", "shadow", "ao+shadow"])
+@pytest.mark.parametrize("lights", [
+    [core.Light.point((-0.6, 1.5, 1.5))],
+    [core.Light.sun((0.3, -0.6, -1.0))],
+    [core.Light.spot((0.3, 1.2, 2.0), (-0.1, -0.3, -1.0), spot_size=0.9)],
+    [core.Light.area(moved_up(2.0), size=0.5), core.Light.point((-0.6, 1.5, 1.5), color=(0.5, 1.0, 0.25))]],
+    ids=["point", "sun", "spot", "area+point"])
+def test_the_hard_shadow_pass_gives_the_images_of_single_shadow_rays(mode, lights):
+    """A flat tree's lights without extent have their shadow rays traced in packets before the first
+    sample (PreviewRender._trace_hard_shadows: only the rays of pixels facing the light, read in place).
+    Neither a two-instance scene (the packets do not take it: the sampling kernel traces every ray) nor
+    the flat tree with the lights' flag cleared (every sample traces its own ray) takes that pass: all
+    three images are bit-identical, in every mode, with lit, shadowed and unlit pixels."""
+    ground, objects = _hard_shadow_scene()
+    camera = look_at((0.3, -2.2, 2.4), (0.0, 0.1, 0.2), fov=1.0)
+    settings = dict(samples=4, mode=mode, lights=lights, ao_distance=0.5)
+    flat = core.PreviewRender(core.build_kdtree(np.concatenate([ground, objects])), camera, 32, 24, **settings)
+    drawn = core.PreviewRender(core.build_kdtree(np.concatenate([ground, objects])), camera, 32, 24, **settings)
+    drawn.lights[:, DELTA] = 0.0
+    two = build_two_level([core.build_kdtree(ground), core.build_kdtree(objects)], np.arange(2, dtype=np.int32),
+                          np.stack([np.eye(4)] * 2))
+    separate = core.PreviewRender(two, camera, 32, 24, **settings)
+    for render in (flat, drawn, separate):
+        render.step(4)
+    np.testing.assert_array_equal(flat.image(), separate.image())
+    np.testing.assert_array_equal(flat.image(), drawn.image())
+    if "shadow" in mode:  # the last light is the one without extent
+        pretraced = flat.pretraced[:, -1]
+        assert (pretraced == 1).any() and (pretraced == 0).any() and (pretraced == -1).any()  # -1: no ray
+        assert (separate.pretraced == -1).all()

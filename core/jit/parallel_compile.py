@@ -88,8 +88,8 @@ class _SamplingOnly(PreviewRender):
         surface_frames(self.scene.arrays, origins, directions, t, first, first.copy(), hit, points, normals, starts)
         return traced[hit], t[hit], points, normals, starts
 
-    def _occluded(self, origins, directions, tmax):  # made up too: the packet kernel compiles in the camera pass
-        return np.zeros(len(origins), bool)
+    def _occluded(self, directions, tmax, rays):  # made up too: the packet kernel compiles in the camera pass
+        return np.zeros(len(rays), bool)
 
 
 def compile_rendering_kernels(denoise=False) -> None:

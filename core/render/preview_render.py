@@ -116,7 +116,8 @@ class PreviewRender:
             t, inst, prim, _, _ = trace_camera_packets(self.scene, origins, directions, tmin, tmax, packets,
                                                        self.threads, CAMERA_RAYS)
         seen = prim >= 0
-        seen[seen] = (self.scene.visibility[inst[seen]] & HOLDOUT) == 0  # a holdout leaves its pixels empty
+        if (self.scene.visibility & HOLDOUT).any():  # a holdout leaves its pixels empty
+            seen[seen] = (self.scene.visibility[inst[seen]] & HOLDOUT) == 0
         hit = np.flatnonzero(seen).astype(np.int64)
         points, normals, starts = np.empty((len(hit), 3)), np.empty((len(hit), 3)), np.empty((len(hit), 3))
         with thread_count(self.threads):
@@ -276,16 +277,19 @@ class PreviewRender:
             with thread_count(self.threads):
                 hard_shadow_rays(frames, self.lights, int(k), SOBOL_DIM1, directions, tmax, lit)
             rays = np.flatnonzero(lit)
-            self.pretraced[rays, k] = self._occluded(self.starts[rays], directions[rays], tmax[rays])
+            self.pretraced[rays, k] = self._occluded(directions, tmax, rays)
 
-    def _occluded(self, origins, directions, tmax):
-        """Whether each shadow ray meets something in (0, tmax), traced in packets of consecutive rays.
-        The order is read-only, as the camera pass's (tiled_packets): the same compiled packet kernel."""
-        order = np.full(-(-len(origins) // L) * L, -1, np.int64)
-        order[:len(origins)] = np.arange(len(origins))
+    def _occluded(self, directions, tmax, rays):
+        """Whether each shadow ray listed in `rays` (from `starts` along `directions`) meets something in
+        (0, tmax), traced in packets of consecutive listed rays. The packets read the rays where they are
+        (no copies of the listed rows). The order is read-only, as the camera pass's (tiled_packets): the
+        same compiled packet kernel."""
+        order = np.full(-(-len(rays) // L) * L, -1, np.int64)
+        order[:len(rays)] = rays
         order.setflags(write=False)
-        return occluded_in_packets(self.scene, origins, directions, np.zeros(len(origins)), tmax, order,
-                                   self.threads, SHADOW_RAYS)
+        blocked = occluded_in_packets(self.scene, self.starts, directions, np.zeros(len(tmax)), tmax, order,
+                                      self.threads, SHADOW_RAYS)
+        return blocked[rays]
 
     def _retire_converged(self):
         """Stop sampling pixels whose estimated standard error is below the target (convergence.py). Every
