@@ -25,7 +25,7 @@ from .ray_memo import RayMemo, keep_memo_bit, keep_traced, memo_bit, reused_visi
 from ..scene.ray_visibility import SHADOW_RAYS
 from .sampling import pixel_seed, sample_2d, use_seeds
 from .shading import offset_origin, sample_light, short_of_light
-from ..trace.traversal import block_range, interleaved_blocks
+from ..trace.traversal import BANDS, block_range, interleaved_blocks
 
 AO, SHADOW, AO_SHADOW = 1, 2, 3
 MODES = {"ao": AO, "shadow": SHADOW, "ao+shadow": AO_SHADOW}
@@ -78,17 +78,20 @@ def add_samples(scene, frames, active, batch, lights, acc, status, memo):
     prim of the unbuilt subtree that stopped it (lazy trees; its sums untouched)."""
     n = active.shape[0]
     iterations, per_band, run = interleaved_blocks(n, PIXELS_PER_TASK)  # balances image regions (traversal.py)
-    for i in prange(iterations):
-        start, stop = block_range(i, per_band, run, n, PIXELS_PER_TASK)
-        _sample_pixels(scene, frames, active, start, stop, batch, lights, acc, status, memo)
+    share = run * BANDS  # iterations a thread: its run of every band, as packet_traversal.trace_packets takes them
+    for k in prange(iterations // share):
+        _sample_pixels(scene, frames, active, (k * share, k * share + share, per_band, run, n), batch, lights, acc,
+                       status, memo)
 
 
 @njit(cache=True)
-def _sample_pixels(scene, frames, active, start, stop, batch, lights, acc, status, memo):
-    """Pixels active[start:stop], sharing one set of scratch buffers (kept out of the parallel loop
-    body: Numba's parfor analysis does not cope with the samplers' inlined tuple code). The scene and
-    the memo go to the per-ray code as unowned views (docs/choices.md#sampling-kernel-scratch-and-views), with
-the AO packets' buffers (ao_packets.new_ao_work) when the scene takes them."""
+def _sample_pixels(scene, frames, active, blocks, batch, lights, acc, status, memo):
+    """The pixels of iterations blocks[0]..blocks[1]-1 (blocks: first, end, per_band, run, pixels;
+    traversal.block_range) with one set of scratch buffers, made once a thread (kept out of the parallel
+    loop body: Numba's parfor analysis does not cope with the samplers' inlined tuple code). The scene
+    and the memo go to the per-ray code as unowned views
+    (docs/choices.md#sampling-kernel-scratch-and-views), with the AO packets' buffers
+    (ao_packets.new_ao_work) when the scene takes them."""
     scene = unowned_scene(scene)
     memo = RayMemo(unowned(memo.bits), unowned(memo.known), unowned(memo.boxes), unowned(memo.reused),
                    unowned(memo.repeated), unowned(memo.pretraced))
@@ -99,8 +102,12 @@ the AO packets' buffers (ao_packets.new_ao_work) when the scene takes them."""
     scratch = new_scratch()
     direction = np.empty(3)
     packets, owners = new_ao_work(scene, batch.ao_distance, batch.mode != SHADOW)
-    for a in range(start, stop):
-        status[a] = _sample_pixel(scene, frames, active[a], batch, lights, acc, (scratch, direction, packets), memo)
+    first, end, per_band, run, n = blocks
+    for it in range(first, end):
+        start, stop = block_range(it, per_band, run, n, PIXELS_PER_TASK)
+        for a in range(start, stop):
+            status[a] = _sample_pixel(scene, frames, active[a], batch, lights, acc, (scratch, direction, packets),
+                                      memo)
     keep_alive(owners)
 
 
