@@ -4,28 +4,28 @@ One sample is one cosine-weighted AO ray (mode ao), one shadow ray per light fac
 shadow), or both multiplied (ao+shadow), each an any-hit query of kind SHADOW_RAYS (as Cycles traces
 AO rays). Sample k of pixel p depends only on (p, k, seed), so any batching gives the same sums; a
 lazy tree's stopped pixel restores its sums and redoes the batch once the subtree is built.
-Ray memo (pixel_reuse.py): ray (s, use) keeps its visibility in bit s * (1 + lights) + use of its
-pixel's row (when that fits in MEMO_BITS); a continued pixel takes last frame's bit for every ray that
-cannot meet a changed box (`known[i]`: bits last frame traced), and a light without extent
+The ray memo (ray_memo.py) keeps each ray's visibility for the next frame, and a light without extent
 (lights.DELTA) repeats sample 0's bit in later samples (counted in `repeated`, not `rays`). Such a
 light's ray may also come traced beforehand (`pretraced`: hard_shadow_rays' rays, traced in packets by
-the caller), counted as if sample 0 had traced it and later samples repeated it.
+the caller), counted as if sample 0 had traced it and later samples repeated it. On a flat scene the AO
+rays of a pixel are traced in packets (ao_packets.py), with the same answers.
 """
 from typing import NamedTuple
 
 import numpy as np
 from numba import njit, prange
 
-from ..trace.array_views import rows, unowned
+from ..trace.array_views import keep_alive, rows, unowned
 from ..scene.instance_traversal import (hit_surface, new_scratch, onto_triangle_plane, surface_error_scale, trace_scene,
                                  unowned_scene, world_normal)
 from ..trace.layout import NO_HIT
 from .lights import COLOR, DELTA, NO_SHADOW
-from .pixel_reuse import segment_meets_any
+from .ao_packets import CHUNK, ao_direction, new_ao_work, trace_ao_chunk
+from .ray_memo import RayMemo, keep_memo_bit, keep_traced, memo_bit, reused_visibility
 from ..scene.ray_visibility import SHADOW_RAYS
-from .sampling import pixel_seed, sample_2d, seeded_sample_2d, use_seeds
-from .shading import cosine_direction, offset_origin, sample_light, short_of_light
-from ..trace.traversal import block_range, interleaved_blocks
+from .sampling import pixel_seed, sample_2d, use_seeds
+from .shading import offset_origin, sample_light, short_of_light
+from ..trace.traversal import BANDS, block_range, interleaved_blocks
 
 AO, SHADOW, AO_SHADOW = 1, 2, 3
 MODES = {"ao": AO, "shadow": SHADOW, "ao+shadow": AO_SHADOW}
@@ -70,20 +70,6 @@ class PixelSums(NamedTuple):
     rays: np.ndarray
 
 
-class RayMemo(NamedTuple):
-    """The ray memo (module docstring): `bits` (M, B) uint8, `known` (M,) int64, `boxes` (K, 6) the
-    changed boxes, `reused` (M,) int64 rays whose bit was taken from last frame, `repeated` (M,) int64
-    rays of lights without extent that took sample 0's bit (not counted in PixelSums.rays), `pretraced`
-    (M, lights) int8 the visibility of light k's ray traced beforehand (1 occluded, 0 clear, -1 none)."""
-
-    bits: np.ndarray
-    known: np.ndarray
-    boxes: np.ndarray
-    reused: np.ndarray
-    repeated: np.ndarray
-    pretraced: np.ndarray
-
-
 @njit(cache=True, parallel=True)
 def add_samples(scene, frames, active, batch, lights, acc, status, memo):
     """Add the SampleBatch `batch` to every pixel listed in `active` (indices into the PixelFrames
@@ -92,16 +78,20 @@ def add_samples(scene, frames, active, batch, lights, acc, status, memo):
     prim of the unbuilt subtree that stopped it (lazy trees; its sums untouched)."""
     n = active.shape[0]
     iterations, per_band, run = interleaved_blocks(n, PIXELS_PER_TASK)  # balances image regions (traversal.py)
-    for i in prange(iterations):
-        start, stop = block_range(i, per_band, run, n, PIXELS_PER_TASK)
-        _sample_pixels(scene, frames, active, start, stop, batch, lights, acc, status, memo)
+    share = run * BANDS  # iterations a thread: its run of every band, as packet_traversal.trace_packets takes them
+    for k in prange(iterations // share):
+        _sample_pixels(scene, frames, active, (k * share, k * share + share, per_band, run, n), batch, lights, acc,
+                       status, memo)
 
 
 @njit(cache=True)
-def _sample_pixels(scene, frames, active, start, stop, batch, lights, acc, status, memo):
-    """Pixels active[start:stop], sharing one set of scratch buffers (kept out of the parallel loop
-    body: Numba's parfor analysis does not cope with the samplers' inlined tuple code). The scene and
-    the memo go to the per-ray code as unowned views (docs/choices.md#sampling-kernel-scratch-and-views)."""
+def _sample_pixels(scene, frames, active, blocks, batch, lights, acc, status, memo):
+    """The pixels of iterations blocks[0]..blocks[1]-1 (blocks: first, end, per_band, run, pixels;
+    traversal.block_range) with one set of scratch buffers, made once a thread (kept out of the parallel
+    loop body: Numba's parfor analysis does not cope with the samplers' inlined tuple code). The scene
+    and the memo go to the per-ray code as unowned views
+    (docs/choices.md#sampling-kernel-scratch-and-views), with the AO packets' buffers
+    (ao_packets.new_ao_work) when the scene takes them."""
     scene = unowned_scene(scene)
     memo = RayMemo(unowned(memo.bits), unowned(memo.known), unowned(memo.boxes), unowned(memo.reused),
                    unowned(memo.repeated), unowned(memo.pretraced))
@@ -111,20 +101,29 @@ def _sample_pixels(scene, frames, active, start, stop, batch, lights, acc, statu
     acc = PixelSums(unowned(acc.sums), unowned(acc.sq_sums), unowned(acc.counts), unowned(acc.rays))
     scratch = new_scratch()
     direction = np.empty(3)
-    for a in range(start, stop):
-        status[a] = _sample_pixel(scene, frames, active[a], batch, lights, acc, scratch, direction, memo)
+    packets, owners = new_ao_work(scene, batch.ao_distance, batch.mode != SHADOW)
+    first, end, per_band, run, n = blocks
+    for it in range(first, end):
+        start, stop = block_range(it, per_band, run, n, PIXELS_PER_TASK)
+        for a in range(start, stop):
+            status[a] = _sample_pixel(scene, frames, active[a], batch, lights, acc, (scratch, direction, packets),
+                                      memo)
+    keep_alive(owners)
 
 
 @njit(cache=True, inline="always")
-def _sample_pixel(scene, frames, i, batch, lights, acc, scratch, direction, memo):
+def _sample_pixel(scene, frames, i, batch, lights, acc, buffers, memo):
     """All of one pixel's new samples. Returns NO_HIT, or the suspended prim of a ray that reached an
-    unbuilt subtree, after restoring the pixel's sums.
+    unbuilt subtree, after restoring the pixel's sums. buffers: (single-ray scratch, a direction, the
+    AO packets' work: ao_packets.new_ao_work).
 
     A sample's rays (its AO ray, then one per light) go through one loop with one inlined traversal,
-    and the pixel's point, normal, ray start and light rows are unowned views (array_views.py)."""
+    and the pixel's point, normal, ray start and light rows are unowned views (array_views.py). Where
+    AO packets apply, the AO rays of each CHUNK of samples are traced first (ao_packets.py) and the
+    loop takes their answers."""
     first, count, mode, seed = batch.first, batch.count, batch.mode, batch.seed
-    ao_distance, ambient, sampler, dim1 = batch.ao_distance, batch.ambient, batch.sampler, batch.dim1
     sums, sq_sums, counts, rays = acc.sums, acc.sq_sums, acc.counts, acc.rays
+    scratch, direction, packets = buffers
     point, normal = rows(frames.points, i, i + 1)[0], rows(frames.normals, i, i + 1)[0]
     origin = rows(frames.starts, i, i + 1)[0]
     ps = pixel_seed(frames.pixels[i], seed)
@@ -134,45 +133,73 @@ def _sample_pixel(scene, frames, i, batch, lights, acc, scratch, direction, memo
     uses = 1 + n_lights
     first_use = USE_AO if mode != SHADOW else USE_AO + 1
     last_use = USE_AO + 1 if mode == AO else uses
-    for s in range(first, first + count):
-        ao = 1.0
-        lr = lg = lb = 0.0
-        for use in range(first_use, last_use):
-            tmax, weight = _ray_of_use(use, lights, point, normal, ao_distance, sampler, ps, ao_seeds, s, dim1,
-                                        direction)
-            if weight <= 0.0:
-                continue  # behind the surface or outside the light: no ray needed
-            prim = -1  # a light that casts no shadow reaches every surface facing it: no ray either
-            if use == USE_AO or lights[use - 1, NO_SHADOW] == 0.0:
-                if _repeats(lights, use, s, memo):
-                    prim = _repeated_visibility(memo, i, use, s * uses + use)
-                elif use != USE_AO and memo.pretraced[i, use - 1] >= 0:
-                    prim = _pretraced_visibility(memo, i, use, s, s * uses + use, rays)
-                else:
-                    prim = _visibility(scene, origin, direction, tmax, scratch, memo, i, s * uses + use, rays)
+    in_packets = packets[4] >= 0
+    for chunk in range(first, first + count, CHUNK):
+        chunk_end = min(first + count, chunk + CHUNK)
+        if in_packets:
+            prim = trace_ao_chunk(scene, packets, (i, origin, normal, ao_seeds, uses), (chunk, chunk_end), batch,
+                                  memo, rays, scratch)
             if prim < NO_HIT:
                 return _restore(sums, sq_sums, rays, memo, i, before, prim)
-            if use == USE_AO:
-                ao = 1.0 if prim < 0 else 0.0
-            elif prim < 0:
-                w = weight / n_lights
-                lr += w * lights[use - 1, COLOR]
-                lg += w * lights[use - 1, COLOR + 1]
-                lb += w * lights[use - 1, COLOR + 2]
-        r = g = b = ao
-        if mode == SHADOW:
-            r, g, b = lr, lg, lb
-        elif mode == AO_SHADOW:
-            r = ao * (ambient + (1.0 - ambient) * lr)
-            g = ao * (ambient + (1.0 - ambient) * lg)
-            b = ao * (ambient + (1.0 - ambient) * lb)
-        sums[i, 0] += r
-        sums[i, 1] += g
-        sums[i, 2] += b
-        grey = (r + g + b) / 3.0
-        sq_sums[i] += grey * grey
+        for s in range(chunk, chunk_end):
+            ao = 1.0
+            lr = lg = lb = 0.0
+            for use in range(first_use, last_use):
+                if use == USE_AO and in_packets:
+                    prim, weight = packets[0].prims[s - chunk], 1.0
+                else:
+                    tmax, weight = _ray_of_use(use, lights, point, normal, batch.ao_distance, batch.sampler, ps,
+                                                ao_seeds, s, batch.dim1, direction)
+                    if weight <= 0.0:
+                        continue  # behind the surface or outside the light: no ray needed
+                    prim = _traced_visibility(scene, lights, use, (i, s, uses), origin, direction, tmax, scratch,
+                                              memo, rays)
+                if prim < NO_HIT:
+                    return _restore(sums, sq_sums, rays, memo, i, before, prim)
+                if use == USE_AO:
+                    ao = 1.0 if prim < 0 else 0.0
+                elif prim < 0:
+                    w = weight / n_lights
+                    lr += w * lights[use - 1, COLOR]
+                    lg += w * lights[use - 1, COLOR + 1]
+                    lb += w * lights[use - 1, COLOR + 2]
+            _add_sample(acc, i, mode, batch.ambient, ao, (lr, lg, lb))
     counts[i] += count
     return NO_HIT
+
+
+@njit(cache=True, inline="always")
+def _traced_visibility(scene, lights, use, ray_of, origin, direction, tmax, scratch, memo, rays):
+    """The any-hit prim of ray `use` of sample s of pixel i (ray_of = (i, s, uses)) towards `direction`:
+    repeated from sample 0 or pretraced for a light without extent, else from the memo or traced
+    (_visibility). A light that casts no shadow reaches every surface facing it: -1, no ray."""
+    i, s, uses = ray_of
+    if use != USE_AO and lights[use - 1, NO_SHADOW] != 0.0:
+        return -1
+    if _repeats(lights, use, s, memo):
+        return _repeated_visibility(memo, i, use, s * uses + use)
+    if use != USE_AO and memo.pretraced[i, use - 1] >= 0:
+        return _pretraced_visibility(memo, i, use, s, s * uses + use, rays)
+    return _visibility(scene, origin, direction, tmax, scratch, memo, i, s * uses + use, rays)
+
+
+@njit(cache=True, inline="always")
+def _add_sample(acc, i, mode, ambient, ao, light):
+    """Add one sample's value to pixel i's sums: AO, the lights' sum `light` (r, g, b), or both
+    (module docstring of preview_render)."""
+    lr, lg, lb = light
+    r = g = b = ao
+    if mode == SHADOW:
+        r, g, b = lr, lg, lb
+    elif mode == AO_SHADOW:
+        r = ao * (ambient + (1.0 - ambient) * lr)
+        g = ao * (ambient + (1.0 - ambient) * lg)
+        b = ao * (ambient + (1.0 - ambient) * lb)
+    acc.sums[i, 0] += r
+    acc.sums[i, 1] += g
+    acc.sums[i, 2] += b
+    grey = (r + g + b) / 3.0
+    acc.sq_sums[i] += grey * grey
 
 
 @njit(cache=True, inline="always")
@@ -183,8 +210,7 @@ def _ray_of_use(use, lights, point, normal, ao_distance, sampler, ps, ao_seeds, 
     sampled light point, tmax a step short of it (shading.short_of_light), weight max(0, N.L) * mask;
     weight 0 needs no ray."""
     if use == USE_AO:
-        u1, u2 = seeded_sample_2d(sampler, ao_seeds, s, dim1)
-        cosine_direction(normal, u1, u2, direction)
+        ao_direction(sampler, ao_seeds, s, dim1, normal, direction)
         return ao_distance, 1.0
     light = rows(lights, use - 1, use)[0]
     # A light without extent ignores its sample numbers (lights.DELTA), so none are drawn: Owen-scrambled
@@ -217,8 +243,8 @@ def _repeated_visibility(memo, i, use, bit):
     """Sample 0's visibility bit for this use, copied into `bit` (every ray keeps its bit, memo rule);
     returns the any-hit prim's sign: 0 occluded, -1 clear."""
     memo.repeated[i] += 1
-    occluded = _memo_bit(memo.bits, i, use)
-    _keep_memo_bit(memo.bits, i, bit, occluded)
+    occluded = memo_bit(memo.bits, i, use)
+    keep_memo_bit(memo.bits, i, bit, occluded)
     return 0 if occluded else -1
 
 
@@ -233,39 +259,22 @@ def _pretraced_visibility(memo, i, use, s, bit, rays):
     else:
         memo.repeated[i] += 1
     if bit < 8 * memo.bits.shape[1]:
-        _keep_memo_bit(memo.bits, i, bit, occluded)
+        keep_memo_bit(memo.bits, i, bit, occluded)
     return 0 if occluded else -1
 
 
 @njit(cache=True, inline="always")
 def _visibility(scene, origin, direction, tmax, scratch, memo, i, bit, rays):
     """The any-hit prim of a ray (< 0: escapes; < NO_HIT: suspended at an unbuilt subtree), taken from
-    last frame's bit when pixel i traced it last frame (bit < known[i]) and the ray cannot meet a
-    changed box (counted in reused[i]), else traced; rays[i] counts both. The bit is kept for the next
-    frame either way."""
-    bits, known, boxes, reused = memo.bits, memo.known, memo.boxes, memo.reused
-    kept = bit < 8 * bits.shape[1]
+    last frame's bit when the memo answers it (ray_memo.reused_visibility), else traced; rays[i] counts
+    both. The bit is kept for the next frame either way."""
     rays[i] += 1
-    if kept and bit < known[i] and not segment_meets_any(origin, direction, 0.0, tmax, boxes):
-        reused[i] += 1
-        return 0 if _memo_bit(bits, i, bit) else -1
+    prim = reused_visibility(memo, i, bit, origin, direction, tmax)
+    if prim != NO_HIT:
+        return prim
     _, _, prim, _, _ = trace_scene(scene, origin, direction, 0.0, tmax, True, SHADOW_RAYS, scratch)
-    if kept and prim >= NO_HIT:
-        _keep_memo_bit(bits, i, bit, prim >= 0)
+    keep_traced(memo, i, bit, prim)
     return prim
-
-
-@njit(cache=True, inline="always")
-def _memo_bit(bits, i, bit):
-    """Whether pixel i's memo holds `bit` set (the ray was occluded)."""
-    return bits[i, bit >> 3] & (1 << (bit & 7)) != 0
-
-
-@njit(cache=True, inline="always")
-def _keep_memo_bit(bits, i, bit, occluded):
-    """Set or clear pixel i's memo `bit`."""
-    mask = np.uint8(1 << (bit & 7))
-    bits[i, bit >> 3] = bits[i, bit >> 3] | mask if occluded else bits[i, bit >> 3] & ~mask
 
 
 @njit(cache=True, parallel=True)

@@ -1,0 +1,63 @@
+"""The ray memo: one visibility bit per ray of every pixel, kept from frame to frame.
+
+Ray (s, use) of a pixel keeps its visibility in bit s * (1 + lights) + use of the pixel's row (when that
+fits in render_kernels.MEMO_BITS). A continued pixel takes last frame's bit for every ray that cannot
+meet a changed box (`known[i]`: bits last frame traced; pixel_reuse.py says which pixels continue), and a
+light without extent (lights.DELTA) repeats sample 0's bit in later samples. The sampling kernel
+(render_kernels.py) and its AO packets (ao_packets.py) read and write the bits through these helpers.
+"""
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from ..trace.layout import NO_HIT
+from .pixel_reuse import segment_meets_any
+
+
+class RayMemo(NamedTuple):
+    """The ray memo (module docstring): `bits` (M, B) uint8, `known` (M,) int64, `boxes` (K, 6) the
+    changed boxes, `reused` (M,) int64 rays whose bit was taken from last frame, `repeated` (M,) int64
+    rays of lights without extent that took sample 0's bit (not counted in PixelSums.rays), `pretraced`
+    (M, lights) int8 the visibility of light k's ray traced beforehand (1 occluded, 0 clear, -1 none)."""
+
+    bits: np.ndarray
+    known: np.ndarray
+    boxes: np.ndarray
+    reused: np.ndarray
+    repeated: np.ndarray
+    pretraced: np.ndarray
+
+
+@njit(cache=True, inline="always")
+def reused_visibility(memo, i, bit, origin, direction, tmax):
+    """Last frame's answer for pixel i's ray `bit` (origin, direction, tmax): the any-hit prim's sign (0
+    occluded, -1 clear) when pixel i traced that ray last frame (bit < known[i]) and the ray cannot meet
+    a changed box, counted in reused[i]; else NO_HIT: the ray must be traced."""
+    if bit >= 8 * memo.bits.shape[1] or bit >= memo.known[i]:
+        return NO_HIT
+    if segment_meets_any(origin, direction, 0.0, tmax, memo.boxes):
+        return NO_HIT
+    memo.reused[i] += 1
+    return 0 if memo_bit(memo.bits, i, bit) else -1
+
+
+@njit(cache=True, inline="always")
+def keep_traced(memo, i, bit, prim):
+    """Keep a traced ray's answer (any-hit prim: >= 0 occluded, -1 clear; a suspended prim keeps
+    nothing) in pixel i's `bit` for the next frame, when the bit fits."""
+    if bit < 8 * memo.bits.shape[1] and prim >= NO_HIT:
+        keep_memo_bit(memo.bits, i, bit, prim >= 0)
+
+
+@njit(cache=True, inline="always")
+def memo_bit(bits, i, bit):
+    """Whether pixel i's memo holds `bit` set (the ray was occluded)."""
+    return bits[i, bit >> 3] & (1 << (bit & 7)) != 0
+
+
+@njit(cache=True, inline="always")
+def keep_memo_bit(bits, i, bit, occluded):
+    """Set or clear pixel i's memo `bit`."""
+    mask = np.uint8(1 << (bit & 7))
+    bits[i, bit >> 3] = bits[i, bit >> 3] | mask if occluded else bits[i, bit >> 3] & ~mask
