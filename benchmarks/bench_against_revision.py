@@ -8,7 +8,9 @@ The base revision's `core/` is exported (`git archive`) into a temporary folder 
 `core_base`, so both versions run side by side, each with its own Numba cache. Seed 000's setting
 (640 x 480, rays told to the build, one point light): per pair, in alternating order, each version
 builds its tree, traces the camera rays (closest hit), traces the hit points' shadow rays (any hit),
-traces bench_core's AO rays (8 a hit, length 1, any hit: workload.ao_workload) and renders the image (`render_preview`, shadow mode, 1 sample). Printed: medians per version and the
+traces bench_core's AO rays (8 a hit, length 1, any hit: workload.ao_workload), renders the image (`render_preview`,
+shadow mode, 1 sample) and an AO image as the Cycles comparison renders it (256 x 256, `--ao-samples`
+samples, AO distance 1: the sampling kernel's AO rays). Printed: medians per version and the
 median of the per-pair ratios (this tree / base), plus whether both versions gave the same hits, tree
 and image. JIT compile is excluded and printed on its own line.
 """
@@ -56,8 +58,12 @@ def shadow_rays(hits, origins, directions):
     return points + 1e-4 * towards, towards, distance
 
 
-def one_pair(version, triangles, camera_rays, rays, frame_rays):
-    """Times (ms) of build, camera rays, shadow rays and render for one version, and its results."""
+AO_SIZE = 256  # the AO image: bench_render's Cycles comparison setting
+
+
+def one_pair(version, triangles, camera_rays, rays, frame_rays, ao_samples):
+    """Times (ms) of build, camera rays, shadow rays, AO rays, render and AO render for one version, and
+    its results."""
     origins, directions, tmin, tmax = camera_rays
     times = []
     t = time.perf_counter()
@@ -77,15 +83,20 @@ def one_pair(version, triangles, camera_rays, rays, frame_rays):
     image = version.render_preview(tree, version.Camera(*camera), WIDTH, HEIGHT, mode="shadow", samples=1,
                                    lights=[version.Light.point(light)])
     times.append(time.perf_counter() - t)
-    return np.array(times) * 1e3, (tree.node_arrays, hits, blocked, ao_blocked, image)
+    t = time.perf_counter()
+    ao_image = version.render_preview(tree, version.Camera(*camera), AO_SIZE, AO_SIZE, samples=ao_samples,
+                                      ao_distance=1.0)
+    times.append(time.perf_counter() - t)
+    return np.array(times) * 1e3, (tree.node_arrays, hits, blocked, ao_blocked, image, ao_image)
 
 
 def same(a, b):
-    (nodes_a, hits_a, blocked_a, ao_a, image_a), (nodes_b, hits_b, blocked_b, ao_b, image_b) = a, b
+    (nodes_a, hits_a, blocked_a, ao_a, image_a, ao_image_a) = a
+    (nodes_b, hits_b, blocked_b, ao_b, image_b, ao_image_b) = b
     return {"tree": all(np.array_equal(x, y) for x, y in zip(nodes_a, nodes_b)),
             "hits": all(np.array_equal(x, y) for x, y in zip(hits_a, hits_b)),
             "shadow rays": np.array_equal(blocked_a, blocked_b), "AO rays": np.array_equal(ao_a, ao_b),
-            "image": np.array_equal(image_a, image_b)}
+            "image": np.array_equal(image_a, image_b), "AO image": np.array_equal(ao_image_a, ao_image_b)}
 
 
 def main():
@@ -94,6 +105,7 @@ def main():
     ap.add_argument("--scene", default="suzanne-251k")
     ap.add_argument("--pairs", type=int, default=21)
     ap.add_argument("--threads", type=int, default=None, help="Numba threads (default: all)")
+    ap.add_argument("--ao-samples", type=int, default=16, help="samples of the AO image (default 16)")
     args = ap.parse_args()
     if args.threads:
         import numba  # noqa: PLC0415
@@ -112,7 +124,8 @@ def main():
                 ((scene.camera_matrix, scene.camera_fov), LIGHT),
                 ao_workload(scene.triangles, *camera_rays[:2], hits.t.astype(np.float64), hits.prim))
         t = time.perf_counter()
-        results = {name: one_pair(v, scene.triangles, camera_rays, rays, frame_rays)[1] for name, v in versions.items()}
+        results = {name: one_pair(v, scene.triangles, camera_rays, rays, frame_rays, args.ao_samples)[1]
+                   for name, v in versions.items()}
         print(f"JIT compile / cache load of both versions: {time.perf_counter() - t:.1f} s (excluded); {args.scene}, "
               f"{WIDTH}x{HEIGHT}, {len(rays[2]):,} shadow rays, {len(rays[4][0]):,} AO rays, {args.pairs} pairs")
         print("identical results:", same(*results.values()))
@@ -120,17 +133,19 @@ def main():
         for pair in range(args.pairs):
             order = list(versions.items()) if pair % 2 == 0 else list(versions.items())[::-1]
             for name, version in order:
-                times[name].append(one_pair(version, scene.triangles, camera_rays, rays, frame_rays)[0])
+                pair_times = one_pair(version, scene.triangles, camera_rays, rays, frame_rays, args.ao_samples)[0]
+                times[name].append(pair_times)
     mine, theirs = (np.array(t) for t in times.values())
     ratios = np.median(mine / theirs, axis=0)
     for name, t in times.items():
         m = np.median(np.array(t), axis=0)
         print(f"{name:>16}: build {m[0]:6.1f} ms  camera rays {m[1]:6.1f} ms  shadow rays {m[2]:6.1f} ms  "
-              f"AO rays {m[3]:6.1f} ms  render {m[4]:6.1f} ms  "
+              f"AO rays {m[3]:6.1f} ms  render {m[4]:6.1f} ms  AO render {m[5]:6.1f} ms  "
               f"build+render {np.median(np.array(t)[:, 0] + np.array(t)[:, 4]):6.1f} ms")
+    both = np.median((mine[:, 0] + mine[:, 4]) / (theirs[:, 0] + theirs[:, 4]))
     print(f"{'ratio (paired)':>16}: build {ratios[0]:6.3f}     camera rays {ratios[1]:6.3f}     shadow rays "
-          f"{ratios[2]:6.3f}     AO rays {ratios[3]:6.3f}     render {ratios[4]:6.3f}     build+render "
-          f"{np.median((mine[:, 0] + mine[:, 4]) / (theirs[:, 0] + theirs[:, 4])):6.3f}")
+          f"{ratios[2]:6.3f}     AO rays {ratios[3]:6.3f}     render {ratios[4]:6.3f}     AO render "
+          f"{ratios[5]:6.3f}     build+render {both:6.3f}")
 
 
 if __name__ == "__main__":

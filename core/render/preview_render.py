@@ -131,6 +131,7 @@ class PreviewRender:
         self.memo_reused = np.zeros(len(pixels), np.int64)
         self.repeated = np.zeros(len(pixels), np.int64)  # rays of lights without extent (render_kernels.py)
         self.pretraced = np.full((len(pixels), len(self.lights)), -1, np.int8)
+        self.pretraced_weights = np.full((len(pixels), len(self.lights)), np.nan)
         self._hard_shadows_due = False  # only a frame traced from scratch (_trace_camera)
 
     def _changed_boxes(self, previous):
@@ -249,7 +250,7 @@ class PreviewRender:
                                     self.sampler, self.seed, SOBOL_DIM1), self.lights,
                         PixelSums(self.sums, self.sq_sums, self.counts, self.ray_counts), status,
                         RayMemo(self.memo, self.known, self.boxes, self.memo_reused, self.repeated,
-                                self.pretraced))
+                                self.pretraced, self.pretraced_weights))
             return status
 
         with thread_count(self.threads):
@@ -265,8 +266,9 @@ class PreviewRender:
     def _trace_hard_shadows(self):
         """Before a fresh frame's first sample: the shadow rays of every light without extent that casts
         shadows, one a pixel (every sample's is the same), traced in packets (scene_packets.py) into
-        `pretraced`, where the sampling kernel takes them. The pixels are in tiled order, so a packet's
-        rays leave neighbouring points towards one point or direction: coherent rays, as camera rays are.
+        `pretraced`, their weights into `pretraced_weights`, where the sampling kernel takes both. The
+        pixels are in tiled order, so a packet's rays leave neighbouring points towards one point or
+        direction: coherent rays, as camera rays are.
         Scenes the packets do not take leave the rays to the sampling kernel."""
         hard = np.flatnonzero((self.lights[:, DELTA] != 0.0) & (self.lights[:, NO_SHADOW] == 0.0))
         if "shadow" not in self.mode or not len(hard) or not packets_apply(self.scene, SHADOW_RAYS):
@@ -275,7 +277,8 @@ class PreviewRender:
         directions, tmax, lit = np.empty_like(self.points), np.empty(len(self.points)), np.empty(len(self.points), bool)
         for k in hard:
             with thread_count(self.threads):
-                hard_shadow_rays(frames, self.lights, int(k), SOBOL_DIM1, directions, tmax, lit)
+                hard_shadow_rays(frames, self.lights, int(k), SOBOL_DIM1, directions, tmax, lit,
+                                 self.pretraced_weights)
             rays = np.flatnonzero(lit)
             self.pretraced[rays, k] = self._occluded(directions, tmax, rays)
 

@@ -19,7 +19,9 @@ class RayMemo(NamedTuple):
     """The ray memo (module docstring): `bits` (M, B) uint8, `known` (M,) int64, `boxes` (K, 6) the
     changed boxes, `reused` (M,) int64 rays whose bit was taken from last frame, `repeated` (M,) int64
     rays of lights without extent that took sample 0's bit (not counted in PixelSums.rays), `pretraced`
-    (M, lights) int8 the visibility of light k's ray traced beforehand (1 occluded, 0 clear, -1 none)."""
+    (M, lights) int8 the visibility of light k's ray traced beforehand (1 occluded, 0 clear, -1 none), and
+    `weights` (M, lights) float64 that ray's weight (0 where the pixel takes no ray; NaN where no ray of
+    light k was made beforehand)."""
 
     bits: np.ndarray
     known: np.ndarray
@@ -27,6 +29,7 @@ class RayMemo(NamedTuple):
     reused: np.ndarray
     repeated: np.ndarray
     pretraced: np.ndarray
+    weights: np.ndarray
 
 
 @njit(cache=True, inline="always")

@@ -94,7 +94,7 @@ def _sample_pixels(scene, frames, active, blocks, batch, lights, acc, status, me
     (ao_packets.new_ao_work) when the scene takes them."""
     scene = unowned_scene(scene)
     memo = RayMemo(unowned(memo.bits), unowned(memo.known), unowned(memo.boxes), unowned(memo.reused),
-                   unowned(memo.repeated), unowned(memo.pretraced))
+                   unowned(memo.repeated), unowned(memo.pretraced), unowned(memo.weights))
     frames = PixelFrames(unowned(frames.points), unowned(frames.normals), unowned(frames.starts),
                          unowned(frames.pixels))
     lights = unowned(lights)
@@ -147,6 +147,12 @@ def _sample_pixel(scene, frames, i, batch, lights, acc, buffers, memo):
             for use in range(first_use, last_use):
                 if use == USE_AO and in_packets:
                     prim, weight = packets[0].prims[s - chunk], 1.0
+                elif use != USE_AO and not np.isnan(memo.weights[i, use - 1]):  # the ray was made beforehand
+                    weight = memo.weights[i, use - 1]
+                    if weight <= 0.0:
+                        continue
+                    prim = _traced_visibility(scene, lights, use, (i, s, uses), origin, direction, 0.0, scratch, memo,
+                                              rays)
                 else:
                     tmax, weight = _ray_of_use(use, lights, point, normal, batch.ao_distance, batch.sampler, ps,
                                                 ao_seeds, s, batch.dim1, direction)
@@ -278,29 +284,33 @@ def _visibility(scene, origin, direction, tmax, scratch, memo, i, bit, rays):
 
 
 @njit(cache=True, parallel=True)
-def hard_shadow_rays(frames, lights, k, dim1, directions, tmax, lit):
+def hard_shadow_rays(frames, lights, k, dim1, directions, tmax, lit, weights):
     """The shadow ray of light k, one without extent (every sample's is the same), from each pixel
     of the PixelFrames `frames`, made as the sampling kernel makes it (_ray_of_use): its direction into
-    directions (M, 3), tmax (M,), and lit (M,) bool, whether the pixel faces the light inside its mask
-    (else it takes no ray). The rays start at frames.starts. The block index is passed as int64: Numba
-    types a prange's index int64 in one place and uint64 in the parallel body, which would compile the
-    block function twice."""
+    directions (M, 3), tmax (M,), lit (M,) bool, whether the pixel faces the light inside its mask
+    (else it takes no ray), and its weight into weights[:, k] (RayMemo.weights: the sampling kernel then
+    takes it and the pretraced answer without making the ray again). The rays start at frames.starts.
+    The block index is passed as int64: Numba types a prange's index int64 in one place and uint64 in
+    the parallel body, which would compile the block function twice."""
     n = frames.points.shape[0]
     for b in prange((n + PIXELS_PER_TASK - 1) // PIXELS_PER_TASK):
         first = np.int64(b) * PIXELS_PER_TASK
-        _hard_shadow_block(frames, lights, k, dim1, directions, tmax, lit, first, min(n, first + PIXELS_PER_TASK))
+        _hard_shadow_block(frames, lights, k, dim1, (directions, tmax, lit, weights), first,
+                           min(n, first + PIXELS_PER_TASK))
 
 
 @njit(cache=True)
-def _hard_shadow_block(frames, lights, k, dim1, directions, tmax, lit, start, stop):
+def _hard_shadow_block(frames, lights, k, dim1, out, start, stop):
     """hard_shadow_rays' rays of pixels start..stop-1, with unowned views of the pixels' rows (a view per
     pixel would count references on one shared counter from every thread: array_views.py)."""
+    directions, tmax, lit, weights = out
     points, normals, directions, lights = (unowned(frames.points), unowned(frames.normals), unowned(directions),
                                            unowned(lights))
     for i in range(start, stop):
         tmax[i], weight = _ray_of_use(USE_AO + 1 + k, lights, rows(points, i, i + 1)[0], rows(normals, i, i + 1)[0],
                                       0.0, 0, 0, (0, 0, 0, 0), 0, dim1, rows(directions, i, i + 1)[0])
         lit[i] = weight > 0.0
+        weights[i, k] = weight
 
 
 @njit(cache=True, parallel=True)
