@@ -9,6 +9,7 @@ import pytest
 
 import core
 from core.render.pixel_reuse import MAX_BOXES, prepared_boxes, segments_touch, surface_rays_touch
+from core.render.ray_memo import TRACE, RayMemo, keep_memo_bit, reused_visibility
 from core.render.render_kernels import MEMO_BITS
 from core.scene.scene_builder import MeshInput, SceneBuilder
 from core.render.shading import cosine_direction, offset_origin, sample_light
@@ -369,3 +370,23 @@ def test_many_boxes_merge_into_a_cover():
     assert len(merged) == MAX_BOXES
     covered = [((merged[:, :3] <= b[:3]) & (merged[:, 3:] >= b[3:])).all(axis=1).any() for b in boxes]
     assert all(covered)
+
+
+def test_memo_answers_clear_and_occluded_rays_without_a_trace():
+    """ray_memo.reused_visibility: a ray pixel 0 traced last frame (bit < known) that meets no changed
+    box takes its kept bit, clear (-1) as well as occluded (0), counted as reused; a ray beyond `known`
+    or meeting a changed box is left to be traced (TRACE), uncounted. A clear answer must not be taken
+    for "trace it" (-1 is also the traversal's miss)."""
+    bits = np.zeros((1, 2), np.uint8)
+    keep_memo_bit(bits, 0, 3, True)
+    memo = RayMemo(bits, np.array([9]), np.zeros((0, 6)), np.zeros(1, np.int64), np.zeros(1, np.int64),
+                   np.full((1, 0), -1, np.int8), np.empty((0, 0)))
+    o, d = np.zeros(3), np.array([0.0, 0.0, 1.0])
+    assert reused_visibility(memo, 0, 2, o, d, 1.0) == -1
+    assert reused_visibility(memo, 0, 3, o, d, 1.0) == 0
+    assert memo.reused[0] == 2
+    assert reused_visibility(memo, 0, 9, o, d, 1.0) == TRACE  # not traced last frame
+    changed = memo._replace(boxes=prepared_boxes([[-1.0, -1.0, 0.5, 1.0, 1.0, 0.6]]))
+    assert reused_visibility(changed, 0, 2, o, d, 1.0) == TRACE  # the ray meets a changed box
+    assert reused_visibility(changed, 0, 2, o, -d, 1.0) == -1  # this one does not
+    assert memo.reused[0] == 3

@@ -2,12 +2,14 @@
 take, renders the image, sample counts and ray counts of the same scene with a second instance far
 away that no ray reaches, which the packets do not take (every AO ray traced alone through the
 two-level traversal). Cases: a soup, a lattice (triangles in split planes, points on them), a rotated
-and scaled instance far from the origin, AO and AO + shadows, chunks of samples cut at every size,
-adaptive sampling, a lazy tree."""
+and scaled instance far from the origin, AO and AO + shadows, a chunk of samples and a short one reached
+in one step or several, adaptive sampling, a lazy tree."""
 import numpy as np
 import pytest
 
 import core
+from core.scene.ray_visibility import SHADOW_RAYS
+from core.scene.scene_packets import flat_instance
 from core.scene.two_level import build_two_level
 from tests.meshes import lattice, random_soup
 from tests.render_scenes import look_at
@@ -20,7 +22,11 @@ def with_far_instance(tree, matrix):
     far = core.build_kdtree(random_soup(np.random.default_rng(1), 20))
     away = np.eye(4)
     away[:3, 3] = matrix[:3, 3] + FAR
-    return build_two_level([tree], [0], matrix[None]), build_two_level([tree, far], [0, 1], np.stack([matrix, away]))
+    packed = build_two_level([tree], [0], matrix[None])
+    single = build_two_level([tree, far], [0, 1], np.stack([matrix, away]))
+    assert flat_instance.py_func(packed.arrays, SHADOW_RAYS) == 0  # the packets' rule takes the first only
+    assert flat_instance.py_func(single.arrays, SHADOW_RAYS) == -1
+    return packed, single
 
 
 def rendered(scene, camera, steps, **settings):
@@ -34,6 +40,7 @@ def assert_same_render(packed, single, camera, steps, **settings):
     a, b = rendered(packed, camera, steps, **settings), rendered(single, camera, steps, **settings)
     np.testing.assert_array_equal(a.image(), b.image())
     np.testing.assert_array_equal(a.sample_counts(), b.sample_counts())
+    np.testing.assert_array_equal(a.memo, b.memo)  # every ray's visibility bit, for the next frame
     assert a.rays_traced == b.rays_traced
     return a.image()
 
@@ -85,8 +92,12 @@ def test_transformed_instance_renders_as_single_rays():
 def test_adaptive_sampling_renders_as_single_rays():
     tree = core.build_kdtree(random_soup(np.random.default_rng(4), 2000, size=0.2))
     packed, single = with_far_instance(tree, np.eye(4))
-    assert_same_render(packed, single, look_at((2.5, -3.0, 1.5), (0.0, 0.0, 0.0)), (128,), samples=128,
-                       ao_distance=0.8, error_target=0.05, min_samples=8)
+    camera = look_at((2.5, -3.0, 1.5), (0.0, 0.0, 0.0))
+    assert_same_render(packed, single, camera, (128,), samples=128, ao_distance=0.8, error_target=0.05,
+                       min_samples=8)
+    counts = rendered(packed, camera, (128,), samples=128, ao_distance=0.8, error_target=0.05,
+                      min_samples=8).sample_counts()
+    assert (counts[counts > 0] < 128).any()  # some pixels stopped early
 
 
 def test_lazy_tree_renders_as_the_eager_tree():
@@ -95,9 +106,15 @@ def test_lazy_tree_renders_as_the_eager_tree():
     tris = random_soup(np.random.default_rng(5), 4000, size=0.2)
     camera = look_at((2.5, -3.0, 1.5), (0.0, 0.0, 0.0))
     settings = dict(samples=20, ao_distance=0.8)
-    eager = rendered(core.build_kdtree(tris), camera, (20,), **settings).image()
+    eager = rendered(core.build_kdtree(tris), camera, (20,), **settings)
     lazy = core.build_kdtree(tris, lazy=True, lazy_subtree_size=256)
-    np.testing.assert_array_equal(rendered(lazy, camera, (20,), **settings).image(), eager)
+    got = core.PreviewRender(lazy, camera, 40, 32, **settings)
+    built_by_camera = lazy.stats()["subtrees_built"]
+    got.step(20)
+    assert lazy.stats()["subtrees_built"] > built_by_camera  # the AO rays met unbuilt subtrees
+    np.testing.assert_array_equal(got.image(), eager.image())
+    np.testing.assert_array_equal(got.sample_counts(), eager.sample_counts())
+    assert got.rays_traced == eager.rays_traced
 
 
 def _placed(position):

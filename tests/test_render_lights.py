@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 import core
-from core.render.lights import DELTA
+from core.render.lights import DELTA, POINT
 from core.scene.two_level import build_two_level
 from tests.render_scenes import box, floor, hit_mask, look_at, look_down, quad, render
 
@@ -329,3 +329,10 @@ def test_the_hard_shadow_pass_gives_the_images_of_single_shadow_rays(mode, light
         pretraced = flat.pretraced[:, -1]
         assert (pretraced == 1).any() and (pretraced == 0).any() and (pretraced == -1).any()  # -1: no ray
         assert (separate.pretraced == -1).all()
+        weights = flat.pretraced_weights[:, -1]  # what the sampling kernel takes instead of making the ray
+        assert (weights[pretraced >= 0] > 0.0).all() and (weights[pretraced == -1] == 0.0).all()
+        assert separate.pretraced_weights.shape[0] == 0
+        if lights[-1].kind == POINT:  # cos(N, L) towards the light's position: an independent weight
+            towards = lights[-1].params["position"] - flat.points
+            cosine = (flat.normals * towards).sum(axis=1) / np.linalg.norm(towards, axis=1)
+            np.testing.assert_allclose(weights, np.maximum(cosine, 0.0), rtol=1e-9, atol=1e-12)

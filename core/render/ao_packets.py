@@ -6,22 +6,24 @@ Sobol's consecutive samples are spread over the hemisphere on purpose, so the sa
 first put in order of where they fall: quarter of azimuth, then the inner or outer half of Malley's disk
 (u1 < 1/2), by a counting sort that keeps sample order inside a cell. A packet's lanes then point
 roughly one way and walk the same nodes (docs/choices.md#ao-rays-in-packets-inside-the-sampling-kernel).
-Packets apply to a scene of one instance in a one-leaf top level that shadow rays see (the rule of
-scene_packets.packets_apply); a lazy tree's unbuilt node sends a packet's lanes to single rays, which
-stop there as before. Rays the memo answers (ray_memo.py) are not traced.
+Packets apply to a scene of one instance in a one-leaf top level that shadow rays see
+(scene_packets.flat_instance), lazy trees included: a packet that meets an unbuilt node leaves its lanes
+to single rays, which stop there as before. Rays the memo answers (ray_memo.py) are not traced, and
+rays a packet leaves are traced one by one by the sampling kernel.
 """
 from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
-from ..scene.instance_traversal import _to_object, mesh_tree, trace_scene
+from ..scene.instance_traversal import _to_object, mesh_tree
 from ..scene.ray_visibility import SHADOW_RAYS
+from ..scene.scene_packets import flat_instance
 from ..trace import simd as S
 from ..trace.array_views import rows, unowned
-from ..trace.layout import LEAF, NO_HIT, TreeArrays
+from ..trace.layout import TreeArrays
 from ..trace.packet_traversal import PacketOutputs, PacketRays, box_fits_float32, new_packet_work, trace_packet
-from .ray_memo import keep_traced, reused_visibility
+from .ray_memo import TRACE, keep_traced, reused_visibility
 from .sampling import seeded_sample_2d
 from .shading import cosine_direction
 
@@ -60,40 +62,30 @@ def new_ao_work(scene, ao_distance, wanted):
                         unowned(owned[9]))
     work = AoWork(rays, out, unowned(owned[10]), unowned(owned[11]), unowned(owned[12]), unowned(owned[13]))
     sc, stack, packet_owned = new_packet_work()
-    inst = _flat_instance(scene) if wanted else -1
+    inst = flat_instance(scene, SHADOW_RAYS) if wanted else -1
     tree = mesh_tree(scene, scene.mesh_of[inst]) if inst >= 0 else _no_tree(scene)
     return (work, (sc, stack), tree, box_fits_float32(tree.bounds), inst), (owned, packet_owned)
 
 
 @njit(cache=True, inline="always")
-def _flat_instance(scene):
-    """The one instance of a one-leaf top level when shadow rays see it (packets apply), else -1."""
-    items = scene.top_items
-    if items.shape[0] != 1 or scene.top_axis[0] != LEAF or scene.visibility[items[0]] & SHADOW_RAYS == 0:
-        return -1
-    return items[0]
-
-
-@njit(cache=True, inline="always")
 def _no_tree(scene):
-    """A tree of no nodes, of mesh_tree's type: the packet tree of a scene packets do not apply to."""
+    """A tree of no nodes, of mesh_tree's type: the packet tree of a scene packets do not apply to (which
+    may have no mesh, so mesh_tree(scene, 0) could read past its offsets)."""
     return TreeArrays(rows(scene.axis, 0, 0), rows(scene.split, 0, 0), rows(scene.child, 0, 0),
                       rows(scene.count, 0, 0), rows(scene.leaf_prims, 0, 0), rows(scene.triangles, 0, 0),
                       unowned(scene.top_bounds), scene.leaf_triangles, scene.ref_start[0])
 
 
 @njit(cache=True, inline="always")
-def trace_ao_chunk(scene, packets, pixel, samples, batch, memo, rays, scratch):
-    """The AO rays of samples[0]..samples[1]-1 of pixel = (i, origin, normal, ao seeds, uses), their
-    any-hit prims into packets[0].prims[s - samples[0]] (>= 0 occluded, -1 clear), each counted in
-    rays[i] and kept in the memo as render_kernels._visibility does. Returns NO_HIT, or the suspended
-    prim of a ray that reached an unbuilt subtree. `packets` comes from new_ao_work (its instance >= 0),
-    `scratch` is the single-ray scratch (instance_traversal.new_scratch)."""
+def trace_ao_chunk(scene, packets, pixel, samples, batch, memo, rays):
+    """The AO rays of samples[0]..samples[1]-1 of pixel = (i, origin, normal, ao seeds, uses): each one's
+    any-hit prim (>= 0 occluded, -1 clear) into packets[0].prims[s - samples[0]], from the memo or its
+    packet, kept in the memo; ray_memo.TRACE for a ray its packet left, which the caller traces alone.
+    Every ray is counted in rays[i], as render_kernels' single rays are. `packets` comes from
+    new_ao_work (its instance >= 0)."""
     work, packet_work, tree, box_fits, inst = packets
-    i, origin, normal, ao_seeds, uses = pixel
-    first, end = samples
-    w2o = scene.world_to_object[inst]
-    pending = _directions(work, w2o, pixel, samples, batch, memo, rays)
+    i, first, end, uses = pixel[0], samples[0], samples[1], pixel[4]
+    pending = _directions(work, scene.world_to_object[inst], pixel, samples, batch, memo, rays)
     if pending > 1:
         _sort_into_packets(work, end - first, pending)
         for p in range((pending + L - 1) // L):
@@ -101,16 +93,12 @@ def trace_ao_chunk(scene, packets, pixel, samples, batch, memo, rays, scratch):
                          True)
     for k in range(end - first):
         if work.cells[k] < 0:
-            continue
-        prim = work.out.prim[k]
+            continue  # answered by the memo
         if pending <= 1 or work.out.single[k] != 0:
-            _, _, prim, _, _ = trace_scene(scene, origin, work.world[k], 0.0, batch.ao_distance, True, SHADOW_RAYS,
-                                           scratch)
-            if prim < NO_HIT:
-                return prim
-        keep_traced(memo, i, (first + k) * uses, prim)
-        work.prims[k] = prim
-    return NO_HIT
+            work.prims[k] = TRACE
+            continue
+        work.prims[k] = work.out.prim[k]
+        keep_traced(memo, i, (first + k) * uses, work.prims[k])
 
 
 @njit(cache=True, inline="always")
@@ -127,7 +115,7 @@ def _directions(work, w2o, pixel, samples, batch, memo, rays):
         u1, u2 = ao_direction(batch.sampler, ao_seeds, s, batch.dim1, normal, d)
         rays[i] += 1
         work.prims[k] = reused_visibility(memo, i, s * uses, origin, d, batch.ao_distance)
-        if work.prims[k] != NO_HIT:
+        if work.prims[k] != TRACE:
             work.cells[k] = -1
             continue
         work.cells[k] = 2 * min(int(4.0 * u2), 3) + (1 if u1 >= 0.5 else 0)

@@ -131,7 +131,7 @@ class PreviewRender:
         self.memo_reused = np.zeros(len(pixels), np.int64)
         self.repeated = np.zeros(len(pixels), np.int64)  # rays of lights without extent (render_kernels.py)
         self.pretraced = np.full((len(pixels), len(self.lights)), -1, np.int8)
-        self.pretraced_weights = np.full((len(pixels), len(self.lights)), np.nan)
+        self.pretraced_weights = np.empty((0, len(self.lights)))  # none made (RayMemo.weights)
         self._hard_shadows_due = False  # only a frame traced from scratch (_trace_camera)
 
     def _changed_boxes(self, previous):
@@ -274,6 +274,7 @@ class PreviewRender:
         if "shadow" not in self.mode or not len(hard) or not packets_apply(self.scene, SHADOW_RAYS):
             return
         frames = PixelFrames(self.points, self.normals, self.starts, self.pixels)
+        self.pretraced_weights = np.full((len(self.points), len(self.lights)), np.nan)
         directions, tmax, lit = np.empty_like(self.points), np.empty(len(self.points)), np.empty(len(self.points), bool)
         for k in hard:
             with thread_count(self.threads):

@@ -11,8 +11,9 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ..trace.layout import NO_HIT
 from .pixel_reuse import segment_meets_any
+
+TRACE = 1 << 62  # an answer no ray has (prims are >= -1 or suspended, < -1): the ray must be traced
 
 
 class RayMemo(NamedTuple):
@@ -21,7 +22,7 @@ class RayMemo(NamedTuple):
     rays of lights without extent that took sample 0's bit (not counted in PixelSums.rays), `pretraced`
     (M, lights) int8 the visibility of light k's ray traced beforehand (1 occluded, 0 clear, -1 none), and
     `weights` (M, lights) float64 that ray's weight (0 where the pixel takes no ray; NaN where no ray of
-    light k was made beforehand)."""
+    light k was made beforehand; (0, lights) when none was)."""
 
     bits: np.ndarray
     known: np.ndarray
@@ -36,11 +37,11 @@ class RayMemo(NamedTuple):
 def reused_visibility(memo, i, bit, origin, direction, tmax):
     """Last frame's answer for pixel i's ray `bit` (origin, direction, tmax): the any-hit prim's sign (0
     occluded, -1 clear) when pixel i traced that ray last frame (bit < known[i]) and the ray cannot meet
-    a changed box, counted in reused[i]; else NO_HIT: the ray must be traced."""
+    a changed box, counted in reused[i]; else TRACE."""
     if bit >= 8 * memo.bits.shape[1] or bit >= memo.known[i]:
-        return NO_HIT
+        return TRACE
     if segment_meets_any(origin, direction, 0.0, tmax, memo.boxes):
-        return NO_HIT
+        return TRACE
     memo.reused[i] += 1
     return 0 if memo_bit(memo.bits, i, bit) else -1
 
@@ -49,7 +50,7 @@ def reused_visibility(memo, i, bit, origin, direction, tmax):
 def keep_traced(memo, i, bit, prim):
     """Keep a traced ray's answer (any-hit prim: >= 0 occluded, -1 clear; a suspended prim keeps
     nothing) in pixel i's `bit` for the next frame, when the bit fits."""
-    if bit < 8 * memo.bits.shape[1] and prim >= NO_HIT:
+    if bit < 8 * memo.bits.shape[1] and prim >= -1:
         keep_memo_bit(memo.bits, i, bit, prim >= 0)
 
 

@@ -7,8 +7,9 @@ lazy tree's stopped pixel restores its sums and redoes the batch once the subtre
 The ray memo (ray_memo.py) keeps each ray's visibility for the next frame, and a light without extent
 (lights.DELTA) repeats sample 0's bit in later samples (counted in `repeated`, not `rays`). Such a
 light's ray may also come traced beforehand (`pretraced`: hard_shadow_rays' rays, traced in packets by
-the caller), counted as if sample 0 had traced it and later samples repeated it. On a flat scene the AO
-rays of a pixel are traced in packets (ao_packets.py), with the same answers.
+the caller, with its weight: `weights`), counted as if sample 0 had traced it and later samples repeated
+it. On a scene of one instance the AO rays of a pixel are traced in packets (ao_packets.py), with the
+same answers.
 """
 from typing import NamedTuple
 
@@ -21,11 +22,11 @@ from ..scene.instance_traversal import (hit_surface, new_scratch, onto_triangle_
 from ..trace.layout import NO_HIT
 from .lights import COLOR, DELTA, NO_SHADOW
 from .ao_packets import CHUNK, ao_direction, new_ao_work, trace_ao_chunk
-from .ray_memo import RayMemo, keep_memo_bit, keep_traced, memo_bit, reused_visibility
+from .ray_memo import TRACE, RayMemo, keep_memo_bit, keep_traced, memo_bit, reused_visibility
 from ..scene.ray_visibility import SHADOW_RAYS
 from .sampling import pixel_seed, sample_2d, use_seeds
 from .shading import offset_origin, sample_light, short_of_light
-from ..trace.traversal import BANDS, block_range, interleaved_blocks
+from ..trace.traversal import block_range, thread_shares
 
 AO, SHADOW, AO_SHADOW = 1, 2, 3
 MODES = {"ao": AO, "shadow": SHADOW, "ao+shadow": AO_SHADOW}
@@ -77,9 +78,8 @@ def add_samples(scene, frames, active, batch, lights, acc, status, memo):
     and the RayMemo `memo`. status[a] is NO_HIT when pixel active[a] got its samples, or the suspended
     prim of the unbuilt subtree that stopped it (lazy trees; its sums untouched)."""
     n = active.shape[0]
-    iterations, per_band, run = interleaved_blocks(n, PIXELS_PER_TASK)  # balances image regions (traversal.py)
-    share = run * BANDS  # iterations a thread: its run of every band, as packet_traversal.trace_packets takes them
-    for k in prange(iterations // share):
+    threads, share, per_band, run = thread_shares(n, PIXELS_PER_TASK)  # balances image regions (traversal.py)
+    for k in prange(threads):
         _sample_pixels(scene, frames, active, (k * share, k * share + share, per_band, run, n), batch, lights, acc,
                        status, memo)
 
@@ -117,10 +117,10 @@ def _sample_pixel(scene, frames, i, batch, lights, acc, buffers, memo):
     unbuilt subtree, after restoring the pixel's sums. buffers: (single-ray scratch, a direction, the
     AO packets' work: ao_packets.new_ao_work).
 
-    A sample's rays (its AO ray, then one per light) go through one loop with one inlined traversal,
-    and the pixel's point, normal, ray start and light rows are unowned views (array_views.py). Where
-    AO packets apply, the AO rays of each CHUNK of samples are traced first (ao_packets.py) and the
-    loop takes their answers."""
+    Every ray a sample needs (its AO ray, then one per light) that nothing answers beforehand is traced
+    at one place in the loop, the one inlined traversal; the pixel's point, normal, ray start and light
+    rows are unowned views (array_views.py). Where AO packets apply, the AO rays of each CHUNK of
+    samples are answered first (ao_packets.py), and the loop traces only those their packets left."""
     first, count, mode, seed = batch.first, batch.count, batch.mode, batch.seed
     sums, sq_sums, counts, rays = acc.sums, acc.sq_sums, acc.counts, acc.rays
     scratch, direction, packets = buffers
@@ -137,29 +137,24 @@ def _sample_pixel(scene, frames, i, batch, lights, acc, buffers, memo):
     for chunk in range(first, first + count, CHUNK):
         chunk_end = min(first + count, chunk + CHUNK)
         if in_packets:
-            prim = trace_ao_chunk(scene, packets, (i, origin, normal, ao_seeds, uses), (chunk, chunk_end), batch,
-                                  memo, rays, scratch)
-            if prim < NO_HIT:
-                return _restore(sums, sq_sums, rays, memo, i, before, prim)
+            trace_ao_chunk(scene, packets, (i, origin, normal, ao_seeds, uses), (chunk, chunk_end), batch, memo, rays)
         for s in range(chunk, chunk_end):
             ao = 1.0
             lr = lg = lb = 0.0
             for use in range(first_use, last_use):
-                if use == USE_AO and in_packets:
-                    prim, weight = packets[0].prims[s - chunk], 1.0
-                elif use != USE_AO and not np.isnan(memo.weights[i, use - 1]):  # the ray was made beforehand
-                    weight = memo.weights[i, use - 1]
-                    if weight <= 0.0:
-                        continue
-                    prim = _traced_visibility(scene, lights, use, (i, s, uses), origin, direction, 0.0, scratch, memo,
-                                              rays)
-                else:
-                    tmax, weight = _ray_of_use(use, lights, point, normal, batch.ao_distance, batch.sampler, ps,
-                                                ao_seeds, s, batch.dim1, direction)
+                packed = use == USE_AO and in_packets  # answered by trace_ao_chunk (counted, kept), or TRACE
+                prim = packets[0].prims[s - chunk] if packed else TRACE
+                tmax, weight = batch.ao_distance, 1.0
+                if not packed or prim == TRACE:
+                    tmax, weight = _ray_of_sample(use, lights, (point, normal, ps, ao_seeds, s, i), batch, memo,
+                                                  direction)
                     if weight <= 0.0:
                         continue  # behind the surface or outside the light: no ray needed
-                    prim = _traced_visibility(scene, lights, use, (i, s, uses), origin, direction, tmax, scratch,
-                                              memo, rays)
+                    if not packed:
+                        prim = _answered_visibility(lights, use, (i, s, uses), origin, direction, tmax, memo, rays)
+                if prim == TRACE:
+                    _, _, prim, _, _ = trace_scene(scene, origin, direction, 0.0, tmax, True, SHADOW_RAYS, scratch)
+                    keep_traced(memo, i, s * uses + use, prim)
                 if prim < NO_HIT:
                     return _restore(sums, sq_sums, rays, memo, i, before, prim)
                 if use == USE_AO:
@@ -175,10 +170,24 @@ def _sample_pixel(scene, frames, i, batch, lights, acc, buffers, memo):
 
 
 @njit(cache=True, inline="always")
-def _traced_visibility(scene, lights, use, ray_of, origin, direction, tmax, scratch, memo, rays):
-    """The any-hit prim of ray `use` of sample s of pixel i (ray_of = (i, s, uses)) towards `direction`:
-    repeated from sample 0 or pretraced for a light without extent, else from the memo or traced
-    (_visibility). A light that casts no shadow reaches every surface facing it: -1, no ray."""
+def _ray_of_sample(use, lights, at_pixel, batch, memo, direction):
+    """(tmax, weight) of ray `use` of a sample, at_pixel = (point, normal, pixel seed, AO seeds, s, i), and
+    its direction into `direction`: _ray_of_use's, except that the weight of a light's ray made
+    beforehand (RayMemo.weights) is taken as it is, with no direction: a weight above 0 means the hard-
+    shadow pass traced that ray, so _answered_visibility takes its answer and nothing traces it here."""
+    point, normal, ps, ao_seeds, s, i = at_pixel
+    if use != USE_AO and memo.weights.shape[0] > 0 and not np.isnan(memo.weights[i, use - 1]):
+        return 0.0, memo.weights[i, use - 1]
+    return _ray_of_use(use, lights, point, normal, batch.ao_distance, batch.sampler, ps, ao_seeds, s, batch.dim1,
+                       direction)
+
+
+@njit(cache=True, inline="always")
+def _answered_visibility(lights, use, ray_of, origin, direction, tmax, memo, rays):
+    """The any-hit prim of ray `use` of sample s of pixel i (ray_of = (i, s, uses)) when something answers
+    it without tracing: a light that casts no shadow (-1: it reaches every surface facing it), sample 0's
+    answer repeated or the pretraced one for a light without extent, or last frame's (ray_memo.py);
+    otherwise ray_memo.TRACE. Counts the ray in rays[i] as a traced or reused one, as before."""
     i, s, uses = ray_of
     if use != USE_AO and lights[use - 1, NO_SHADOW] != 0.0:
         return -1
@@ -186,7 +195,8 @@ def _traced_visibility(scene, lights, use, ray_of, origin, direction, tmax, scra
         return _repeated_visibility(memo, i, use, s * uses + use)
     if use != USE_AO and memo.pretraced[i, use - 1] >= 0:
         return _pretraced_visibility(memo, i, use, s, s * uses + use, rays)
-    return _visibility(scene, origin, direction, tmax, scratch, memo, i, s * uses + use, rays)
+    rays[i] += 1
+    return reused_visibility(memo, i, s * uses + use, origin, direction, tmax)
 
 
 @njit(cache=True, inline="always")
@@ -267,20 +277,6 @@ def _pretraced_visibility(memo, i, use, s, bit, rays):
     if bit < 8 * memo.bits.shape[1]:
         keep_memo_bit(memo.bits, i, bit, occluded)
     return 0 if occluded else -1
-
-
-@njit(cache=True, inline="always")
-def _visibility(scene, origin, direction, tmax, scratch, memo, i, bit, rays):
-    """The any-hit prim of a ray (< 0: escapes; < NO_HIT: suspended at an unbuilt subtree), taken from
-    last frame's bit when the memo answers it (ray_memo.reused_visibility), else traced; rays[i] counts
-    both. The bit is kept for the next frame either way."""
-    rays[i] += 1
-    prim = reused_visibility(memo, i, bit, origin, direction, tmax)
-    if prim != NO_HIT:
-        return prim
-    _, _, prim, _, _ = trace_scene(scene, origin, direction, 0.0, tmax, True, SHADOW_RAYS, scratch)
-    keep_traced(memo, i, bit, prim)
-    return prim
 
 
 @njit(cache=True, parallel=True)

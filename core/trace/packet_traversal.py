@@ -41,7 +41,7 @@ from ..jit.threads import thread_count
 from .packet_leaf import BEST, ROWS, leaf_test
 from .packet_setup import (C32, E32, INV32, LANE_BITS, MIXED, O32, OUTSIDE_FLOAT32, ROWS32, T0, T1,
                            leave_to_single_rays, setup_packet)
-from .traversal import BANDS, STACK_SIZE, block_range, interleaved_blocks, trace_rays
+from .traversal import STACK_SIZE, block_range, thread_shares, trace_rays
 from .triangle_test import LEAF_CHUNK
 
 L = S.LANES
@@ -152,9 +152,8 @@ def trace_packets(tree, rays_in, out, any_hit=False):
     would give that thread, so the scratch arrays are made once a thread
     (docs/choices.md#packet-scratch-once-a-thread)."""
     n = rays_in.order.shape[0] // L
-    iterations, per_band, run = interleaved_blocks(n, PACKETS_PER_TASK)
-    share = run * BANDS  # iterations a thread: its run of every band
-    for k in prange(iterations // share):
+    threads, share, per_band, run = thread_shares(n, PACKETS_PER_TASK)
+    for k in prange(threads):
         _trace_packet_blocks(tree, rays_in, out, (k * share, k * share + share, per_band, run, n), any_hit)
 
 

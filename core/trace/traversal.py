@@ -180,6 +180,17 @@ def interleaved_blocks(n, block_size):
 
 
 @njit(cache=True, inline="always")
+def thread_shares(n, block_size):
+    """interleaved_blocks with one prange iteration a thread, so a kernel makes its scratch once a thread:
+    (threads, share, per_band, run), thread k running iterations k * share .. k * share + share - 1, the
+    ones a static schedule of interleaved_blocks' prange gives it (its run of every band)
+    (docs/choices.md#packet-scratch-once-a-thread)."""
+    iterations, per_band, run = interleaved_blocks(n, block_size)
+    share = run * BANDS
+    return iterations // share, share, per_band, run
+
+
+@njit(cache=True, inline="always")
 def dealt_blocks(n_blocks, threads):
     """interleaved_blocks' (iterations, per_band, run) for n_blocks blocks and `threads` threads."""
     run = max(((n_blocks + BANDS - 1) // BANDS + threads - 1) // threads, 1)
