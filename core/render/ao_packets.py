@@ -76,21 +76,24 @@ def _no_tree(scene):
                       unowned(scene.top_bounds), scene.leaf_triangles, scene.ref_start[0])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def trace_ao_chunk(scene, packets, pixel, samples, batch, memo, rays):
     """The AO rays of samples[0]..samples[1]-1 of pixel = (i, origin, normal, ao seeds, uses): each one's
     any-hit prim (>= 0 occluded, -1 clear) into packets[0].prims[s - samples[0]], from the memo or its
     packet, kept in the memo; ray_memo.TRACE for a ray its packet left, which the caller traces alone.
     Every ray is counted in rays[i], as render_kernels' single rays are. `packets` comes from
-    new_ao_work (its instance >= 0)."""
+    new_ao_work (its instance >= 0). Not inlined into the sampling kernel: one call a chunk costs little
+    beside its rays, and the kernel's compile stays near what it was without packets
+    (docs/choices.md#ao-rays-in-packets-inside-the-sampling-kernel)."""
     work, packet_work, tree, box_fits, inst = packets
     i, first, end, uses = pixel[0], samples[0], samples[1], pixel[4]
     pending = _directions(work, scene.world_to_object[inst], pixel, samples, batch, memo, rays)
     if pending > 1:
         _sort_into_packets(work, end - first, pending)
+        any_hit = pending > 1  # True, as a bool value: a literal True would compile trace_packet again
         for p in range((pending + L - 1) // L):
             trace_packet(tree, work.rays, rows(work.rays.order, p * L, p * L + L), packet_work, work.out, box_fits,
-                         True)
+                         any_hit)
     for k in range(end - first):
         if work.cells[k] < 0:
             continue  # answered by the memo
