@@ -6,8 +6,9 @@ Sobol's consecutive samples are spread over the hemisphere on purpose, so the sa
 first put in order of where they fall: quarter of azimuth, then the inner or outer half of Malley's disk
 (u1 < 1/2), by a counting sort that keeps sample order inside a cell. A packet's lanes then point
 roughly one way and walk the same nodes (docs/choices.md#ao-rays-in-packets-inside-the-sampling-kernel).
-Packets apply to a scene of one instance in a one-leaf top level that shadow rays see
-(scene_packets.flat_instance), lazy trees included: a packet that meets an unbuilt node leaves its lanes
+Packets apply to batches of at least render_kernels.PACKED_BATCH samples (a progressive step of one
+sample gives each packet one lane) on a scene of one instance in a one-leaf top level that shadow rays
+see (scene_packets.flat_instance), lazy trees included: a packet that meets an unbuilt node leaves its lanes
 to single rays, which stop there as before. Rays the memo answers (ray_memo.py) are not traced, and
 rays a packet leaves are traced one by one by the sampling kernel.
 """

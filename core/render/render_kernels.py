@@ -32,6 +32,7 @@ AO, SHADOW, AO_SHADOW = 1, 2, 3
 MODES = {"ao": AO, "shadow": SHADOW, "ao+shadow": AO_SHADOW}
 USE_AO = 0  # the sampler's "use" ids: 0 for AO, 1 + k for light k
 PIXELS_PER_TASK = 64  # pixels a parallel task samples with one set of scratch buffers
+PACKED_BATCH = 8  # fewest samples a batch traces its AO rays in packets with (a progressive step(1) does not)
 MEMO_BITS = 512  # most visibility bits kept per pixel (64 bytes): 16 samples x 32 uses, 512 AO samples
 
 
@@ -101,7 +102,7 @@ def _sample_pixels(scene, frames, active, blocks, batch, lights, acc, status, me
     acc = PixelSums(unowned(acc.sums), unowned(acc.sq_sums), unowned(acc.counts), unowned(acc.rays))
     scratch = new_scratch()
     direction = np.empty(3)
-    packets, owners = new_ao_work(scene, batch.ao_distance, batch.mode != SHADOW)
+    packets, owners = new_ao_work(scene, batch.ao_distance, batch.mode != SHADOW and batch.count >= PACKED_BATCH)
     first, end, per_band, run, n = blocks
     for it in range(first, end):
         start, stop = block_range(it, per_band, run, n, PIXELS_PER_TASK)
