@@ -4,7 +4,7 @@ Ray (s, use) of a pixel keeps its visibility in bit s * (1 + lights) + use of th
 fits in render_kernels.MEMO_BITS). A continued pixel takes last frame's bit for every ray that cannot
 meet a changed box (`known[i]`: bits last frame traced; pixel_reuse.py says which pixels continue), and a
 light without extent (lights.DELTA) repeats sample 0's bit in later samples. The sampling kernel
-(render_kernels.py) and its AO packets (ao_packets.py) read and write the bits through these helpers.
+(render_kernels.py) reads and writes the bits through these helpers.
 """
 from typing import NamedTuple
 

@@ -193,15 +193,12 @@ def new_packet_work():
     return sc, stack, owned
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def trace_packet(tree, rays_in, lanes, work, out, box_fits, any_hit):
     """One packet: the rays `lanes` (L indices into rays_in, -1 for none) through the tree with `work`
     = (PacketScratch, PacketStack) of new_packet_work, their hits written to `out`; rays that cannot
     join, and every ray of a packet that meets an unbuilt node, get out.single[ray] = 1. box_fits:
-    box_fits_float32 of the tree's root box. Not inlined: the packet kernel and the sampling kernel's AO
-    packets call this one compiled function (with the same argument types: unowned views, any_hit a
-    bool value, never a literal), so the sampling kernel's compile does not carry a second copy of the
-    packet traversal (docs/choices.md#ao-rays-in-packets-inside-the-sampling-kernel)."""
+    box_fits_float32 of the tree's root box."""
     sc, stack = work
     bits, signs, mode = setup_packet(tree.bounds, rays_in, lanes, sc, out, box_fits, any_hit)
     if bits == 0:
