@@ -275,12 +275,11 @@ class PreviewRender:
             return
         frames = PixelFrames(self.points, self.normals, self.starts, self.pixels)
         self.pretraced_weights = np.full((len(self.points), len(self.lights)), np.nan)
-        directions, tmax, lit = np.empty_like(self.points), np.empty(len(self.points)), np.empty(len(self.points), bool)
+        directions, tmax = np.empty_like(self.points), np.empty(len(self.points))
         for k in hard:
             with thread_count(self.threads):
-                hard_shadow_rays(frames, self.lights, int(k), SOBOL_DIM1, directions, tmax, lit,
-                                 self.pretraced_weights)
-            rays = np.flatnonzero(lit)
+                hard_shadow_rays(frames, self.lights, int(k), SOBOL_DIM1, directions, tmax, self.pretraced_weights)
+            rays = np.flatnonzero(self.pretraced_weights[:, k] > 0.0)  # pixels facing the light: a ray each
             self.pretraced[rays, k] = self._occluded(directions, tmax, rays)
 
     def _occluded(self, directions, tmax, rays):

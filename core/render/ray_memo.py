@@ -11,6 +11,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from ..trace.layout import NO_HIT
 from .pixel_reuse import segment_meets_any
 
 TRACE = 1 << 62  # an answer no ray has (prims are >= -1 or suspended, < -1): the ray must be traced
@@ -50,7 +51,7 @@ def reused_visibility(memo, i, bit, origin, direction, tmax):
 def keep_traced(memo, i, bit, prim):
     """Keep a traced ray's answer (any-hit prim: >= 0 occluded, -1 clear; a suspended prim keeps
     nothing) in pixel i's `bit` for the next frame, when the bit fits."""
-    if bit < 8 * memo.bits.shape[1] and prim >= -1:
+    if bit < 8 * memo.bits.shape[1] and prim >= NO_HIT:
         keep_memo_bit(memo.bits, i, bit, prim >= 0)
 
 

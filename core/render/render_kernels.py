@@ -262,18 +262,18 @@ def _pretraced_visibility(memo, i, use, s, bit, rays):
 
 
 @njit(cache=True, parallel=True)
-def hard_shadow_rays(frames, lights, k, dim1, directions, tmax, lit, weights):
+def hard_shadow_rays(frames, lights, k, dim1, directions, tmax, weights):
     """The shadow ray of light k, one without extent (every sample's is the same), from each pixel
     of the PixelFrames `frames`, made as the sampling kernel makes it (_ray_of_use): its direction into
-    directions (M, 3), tmax (M,), lit (M,) bool, whether the pixel faces the light inside its mask
-    (else it takes no ray), and its weight into weights[:, k] (RayMemo.weights: the sampling kernel then
-    takes it and the pretraced answer without making the ray again). The rays start at frames.starts.
+    directions (M, 3), tmax (M,), and its weight into weights[:, k], above 0 where the pixel faces the
+    light inside its mask, 0 where it takes no ray (RayMemo.weights: the sampling kernel then takes it
+    and the pretraced answer without making the ray again). The rays start at frames.starts.
     The block index is passed as int64: Numba types a prange's index int64 in one place and uint64 in
     the parallel body, which would compile the block function twice."""
     n = frames.points.shape[0]
     for b in prange((n + PIXELS_PER_TASK - 1) // PIXELS_PER_TASK):
         first = np.int64(b) * PIXELS_PER_TASK
-        _hard_shadow_block(frames, lights, k, dim1, (directions, tmax, lit, weights), first,
+        _hard_shadow_block(frames, lights, k, dim1, (directions, tmax, weights), first,
                            min(n, first + PIXELS_PER_TASK))
 
 
@@ -281,14 +281,13 @@ def hard_shadow_rays(frames, lights, k, dim1, directions, tmax, lit, weights):
 def _hard_shadow_block(frames, lights, k, dim1, out, start, stop):
     """hard_shadow_rays' rays of pixels start..stop-1, with unowned views of the pixels' rows (a view per
     pixel would count references on one shared counter from every thread: array_views.py)."""
-    directions, tmax, lit, weights = out
+    directions, tmax, weights = out
     points, normals, directions, lights = (unowned(frames.points), unowned(frames.normals), unowned(directions),
                                            unowned(lights))
     for i in range(start, stop):
-        tmax[i], weight = _ray_of_use(USE_AO + 1 + k, lights, rows(points, i, i + 1)[0], rows(normals, i, i + 1)[0],
-                                      0.0, 0, 0, (0, 0, 0, 0), 0, dim1, rows(directions, i, i + 1)[0])
-        lit[i] = weight > 0.0
-        weights[i, k] = weight
+        tmax[i], weights[i, k] = _ray_of_use(USE_AO + 1 + k, lights, rows(points, i, i + 1)[0],
+                                             rows(normals, i, i + 1)[0], 0.0, 0, 0, (0, 0, 0, 0), 0, dim1,
+                                             rows(directions, i, i + 1)[0])
 
 
 @njit(cache=True, parallel=True)

@@ -166,20 +166,20 @@ def _trace_packet_blocks(tree, rays_in, out, blocks, any_hit):
     views = TreeArrays(unowned(tree.axis), unowned(tree.split), unowned(tree.child), unowned(tree.count),
                        unowned(tree.leaf_prims), unowned(tree.triangles), unowned(tree.bounds),
                        unowned(tree.leaf_triangles), tree.base)
-    sc, stack, owned = new_packet_work()
+    sc, stack, owned = _new_packet_work()
     rays_in = PacketRays(unowned(rays_in.origins), unowned(rays_in.directions), unowned(rays_in.tmin),
                          unowned(rays_in.tmax), unowned(rays_in.order))
     out = PacketOutputs(unowned(out.t), unowned(out.prim), unowned(out.u), unowned(out.v), unowned(out.single))
-    box_fits = box_fits_float32(views.bounds)
+    box_fits = _box_fits_float32(views.bounds)
     for i in range(first, end):
         start, stop = block_range(i, per_band, run, n, PACKETS_PER_TASK)
         for p in range(start, stop):
-            trace_packet(views, rays_in, rows(rays_in.order, p * L, p * L + L), (sc, stack), out, box_fits, any_hit)
+            _trace_packet(views, rays_in, rows(rays_in.order, p * L, p * L + L), (sc, stack), out, box_fits, any_hit)
     keep_alive(owned)  # the owners of sc and stack
 
 
 @njit(cache=True, inline="always")
-def new_packet_work():
+def _new_packet_work():
     """(PacketScratch, PacketStack, owners): one packet's working set as unowned views, whose reference
     counts are no-ops (array_views.py), and the arrays that own them, which the caller keeps alive
     (array_views.keep_alive) while it traces."""
@@ -194,11 +194,11 @@ def new_packet_work():
 
 
 @njit(cache=True, inline="always")
-def trace_packet(tree, rays_in, lanes, work, out, box_fits, any_hit):
+def _trace_packet(tree, rays_in, lanes, work, out, box_fits, any_hit):
     """One packet: the rays `lanes` (L indices into rays_in, -1 for none) through the tree with `work`
-    = (PacketScratch, PacketStack) of new_packet_work, their hits written to `out`; rays that cannot
+    = (PacketScratch, PacketStack) of _new_packet_work, their hits written to `out`; rays that cannot
     join, and every ray of a packet that meets an unbuilt node, get out.single[ray] = 1. box_fits:
-    box_fits_float32 of the tree's root box."""
+    _box_fits_float32 of the tree's root box."""
     sc, stack = work
     bits, signs, mode = setup_packet(tree.bounds, rays_in, lanes, sc, out, box_fits, any_hit)
     if bits == 0:
@@ -210,7 +210,7 @@ def trace_packet(tree, rays_in, lanes, work, out, box_fits, any_hit):
 
 
 @njit(cache=True, inline="always")
-def box_fits_float32(box):
+def _box_fits_float32(box):
     """Whether the root box lies inside the range float32 lanes bound (packet_setup.OUTSIDE_FLOAT32)."""
     fits = True
     for k in range(6):
