@@ -14,10 +14,11 @@ each process and writes what it counted to a JSON file at exit. Each process is 
 helper_program.py task). A kernel's time is exclusive: the compiles of the functions it calls (each
 compiled once, then reused) count for those, while code inlined into it (inline="always") counts for it,
 which is what makes a large inlined callee at several call sites expensive. Cache loads are not compiles
-and are not counted.
+and are not counted. Each time is counted twice: wall seconds, and CPU seconds of the compiling thread,
+which stay comparable when the processes share the cores with each other or with other work.
 
 Prints the first frame's figures from the render's report.json (its wait for the kernels' compile, their
-load, the frame itself), each process's compile total, wall and CPU seconds (the longest process is the
+load, the frame itself), each process's compile total, span and CPU seconds (the longest process is the
 critical path), the total, and the top kernels labelled by process. `--helper off` runs with
 KD_PREVIEW_COMPILE_HELPER=0 (the warm-up compiles alone); `--helper both` alternates the two `--runs`
 times. Writes benchmarks/out/bench_compile.json (benchmarks/results.py).
@@ -49,10 +50,11 @@ module.record_compiles({dumps!r})
 # -- in every process of a run (loaded by the sitecustomize) ------------------------------------------------
 
 def compile_listener():
-    """A Numba event listener summing each function's exclusive compile time into a dict."""
+    """A Numba event listener summing each function's exclusive compile time into two dicts: wall seconds,
+    and CPU seconds of the compiling thread (what the compile costs whatever else runs on the cores)."""
     from numba.core import event
 
-    seconds = defaultdict(float)
+    seconds, cpu_seconds = defaultdict(float), defaultdict(float)
 
     class Listener(event.Listener):
         def __init__(self):
@@ -61,17 +63,19 @@ def compile_listener():
         def on_start(self, ev):
             func = getattr(ev.data["dispatcher"], "py_func", None)
             name = f"{func.__module__}.{func.__qualname__}" if func is not None else repr(ev.data["dispatcher"])
-            self.open.append((name, time.perf_counter()))
+            self.open.append((name, time.perf_counter(), time.thread_time()))
 
         def on_end(self, ev):
-            name, start = self.open.pop()
-            spent = time.perf_counter() - start
+            name, start, cpu_start = self.open.pop()
+            spent, cpu_spent = time.perf_counter() - start, time.thread_time() - cpu_start
             seconds[name] += spent
+            cpu_seconds[name] += cpu_spent
             if self.open:  # a compile nested in another's: not the outer kernel's own time
                 seconds[self.open[-1][0]] -= spent
+                cpu_seconds[self.open[-1][0]] -= cpu_spent
 
     event.register("numba:compile", Listener())
-    return seconds
+    return seconds, cpu_seconds
 
 
 def process_role(argv) -> tuple[str, str]:
@@ -88,12 +92,13 @@ def record_compiles(dumps: str) -> None:
     marks a process that started, so one that ended without atexit (killed) is reported, not missed."""
     started, cpu_started = time.time(), time.process_time()
     Path(dumps, f"{os.getpid()}.started").write_text(json.dumps({"argv": sys.argv}))
-    seconds = compile_listener()
+    seconds, cpu_seconds = compile_listener()
 
     def dump():
         role, task = process_role(sys.argv)
         record = {"pid": os.getpid(), "parent": os.getppid(), "role": role, "task": task, "started": started,
-                  "ended": time.time(), "cpu_s": time.process_time() - cpu_started, "seconds": dict(seconds)}
+                  "ended": time.time(), "cpu_s": time.process_time() - cpu_started, "seconds": dict(seconds),
+                  "cpu_seconds": dict(cpu_seconds)}
         Path(dumps, f"{os.getpid()}.json").write_text(json.dumps(record))
 
     atexit.register(dump)
@@ -123,14 +128,15 @@ def read_processes(dumps: Path, launched: float) -> list[dict]:
     for r in records:
         seen[r["role"]] += 1
         r["label"] = r["role"] + (f"#{seen[r['role']]}" if seen[r["role"]] > 1 else "")
-        r["compile_s"] = sum(r["seconds"].values())
+        r["compile_s"], r["compile_cpu_s"] = sum(r["seconds"].values()), sum(r["cpu_seconds"].values())
         r["start_s"], r["end_s"] = r["started"] - launched, r["ended"] - launched
     return records
 
 
 def top_kernels(processes: list[dict], top: int) -> list[dict]:
     """The `top` longest exclusive compiles over every process, each with its process's label."""
-    rows = [{"process": p["label"], "name": name, "seconds": s} for p in processes for name, s in p["seconds"].items()]
+    rows = [{"process": p["label"], "name": name, "seconds": s, "cpu_seconds": p["cpu_seconds"][name]}
+            for p in processes for name, s in p["seconds"].items()]
     return sorted(rows, key=lambda row: -row["seconds"])[:top]
 
 
@@ -203,16 +209,25 @@ def one_run(args, mode: str) -> dict:
 def print_run(run: dict, top: int) -> None:
     print("\n".join(run["rows"]))
     f = run["first_frame"]
+    helper = f" (its compile helper: {f['compile_helper']})" if f["compile_helper"] else ""
     print(f"first frame ({f['frame']}): waited {f['wait_s']:.1f} s = kernels' compile {f['compile_s']:.1f} s "
-          f"+ load {f['load_s']:.1f} s + the frame {f['total_s']:.2f} s (compile helper: {f['compile_helper']})")
+          f"+ load {f['load_s']:.1f} s + the frame {f['total_s']:.2f} s{helper}")
+    print("compile seconds by process (wall, and CPU of the compiling thread); the process's run and CPU:")
     for p in run["processes"]:
-        print(f"  {p['label']:<9} compiled {p['compile_s']:6.1f} s in {len(p['seconds']):3d} functions; "
-              f"ran {p['start_s']:5.1f}-{p['end_s']:5.1f} s, {p['cpu_s']:.1f} s CPU  {p['task']}")
+        print(f"  {p['label']:<9} {p['compile_s']:6.1f} s, CPU {p['compile_cpu_s']:6.1f} s, {len(p['seconds']):3d} "
+              f"functions; ran {p['start_s']:5.1f}-{p['end_s']:5.1f} s, {p['cpu_s']:.1f} s CPU  {p['task']}")
     longest = max(run["processes"], key=lambda p: p["compile_s"])
-    print(f"compile total {run['compile_s']:.1f} s; the longest process: {longest['label']} "
-          f"({longest['compile_s']:.1f} s); the render's process wall {run['wall_s']:.1f} s (empty cache)")
+    print(f"compile total {run['compile_s']:.1f} s (CPU {sum(p['compile_cpu_s'] for p in run['processes']):.1f} s); "
+          f"the longest process: {longest['label']} ({longest['compile_s']:.1f} s); the render's process wall "
+          f"{run['wall_s']:.1f} s (empty cache)")
+    print("top kernels, exclusive compile seconds (wall, CPU):")
     for row in top_kernels(run["processes"], top):
-        print(f"  {row['seconds']:7.1f} s  {row['process']:<9} {row['name']}")
+        print(f"  {row['seconds']:7.1f} s {row['cpu_seconds']:7.1f} s  {row['process']:<9} {row['name']}")
+
+
+def by_label(run: dict, label: str, key: str = "compile_s") -> float:
+    """A run's compile seconds in the process of this label (0 when the run had none)."""
+    return sum(p[key] for p in run["processes"] if p["label"] == label)
 
 
 def summary(runs: list[dict], top: int) -> dict:
@@ -220,8 +235,8 @@ def summary(runs: list[dict], top: int) -> dict:
     import results as result_files  # benchmarks/ is on sys.path when run as a script
 
     labels = sorted({p["label"] for run in runs for p in run["processes"]})
-    per_process = {label: result_files.figure([sum(p["compile_s"] for p in run["processes"] if p["label"] == label)
-                                                for run in runs]) for label in labels}
+    per_process = {label: result_files.figure([by_label(r, label) for r in runs]) for label in labels}
+    per_process_cpu = {label: result_files.figure([by_label(r, label, "compile_cpu_s") for r in runs]) for label in labels}
     return {
         "first_frame_wait": result_files.figure([r["first_frame"]["wait_s"] for r in runs]),
         "kernels_compile_wait": result_files.figure([r["first_frame"]["compile_s"] for r in runs]),
@@ -230,7 +245,8 @@ def summary(runs: list[dict], top: int) -> dict:
         "process_wall": result_files.figure([r["wall_s"] for r in runs]),
         "compile_total": result_files.figure([r["compile_s"] for r in runs]),
         "compile_by_process": per_process,
-        "processes": [[{k: p[k] for k in ("label", "task", "compile_s", "cpu_s", "start_s", "end_s")}
+        "compile_cpu_by_process": per_process_cpu,
+        "processes": [[{k: p[k] for k in ("label", "task", "compile_s", "compile_cpu_s", "cpu_s", "start_s", "end_s")}
                        for p in r["processes"]] for r in runs],
         "top_kernels": [top_kernels(r["processes"], top) for r in runs],
     }
@@ -258,7 +274,9 @@ def main():
         rs = runs[mode]
         print(f"helper {mode}: first frame waited {statistics.median(r['first_frame']['wait_s'] for r in rs):.1f} s, "
               f"compile {statistics.median(r['compile_s'] for r in rs):.1f} s in all, process "
-              f"{statistics.median(r['wall_s'] for r in rs):.1f} s (medians of {len(rs)})")
+              f"{statistics.median(r['wall_s'] for r in rs):.1f} s (medians of {len(rs)}); compile by process: "
+              + ", ".join(f"{label} {statistics.median(by_label(r, label) for r in rs):.1f} s"
+                          for label in sorted({p["label"] for r in rs for p in r["processes"]})))
     import results as result_files
 
     jit = statistics.median(r["compile_s"] for rs in runs.values() for r in rs)

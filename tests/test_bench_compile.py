@@ -64,6 +64,9 @@ def test_every_process_counts_its_own_exclusive_compiles_under_its_role(bench, t
     first_call = json.loads(timing.read_text())["first_call_s"]
     # exclusive: the callee's compile, nested in the caller's, is not counted twice
     assert 0 < caller and 0 < callee and caller + callee <= first_call
+    cpu = processes[0]["cpu_seconds"]  # the compiling thread's CPU seconds, exclusive the same way
+    assert 0 < cpu["__main__.caller"] and 0 < cpu["__main__.callee"]
+    assert cpu["__main__.caller"] + cpu["__main__.callee"] <= first_call
     assert all(len(p["seconds"]) == 1 and p["compile_s"] > 0 for p in processes[1:])
     top = bench.top_kernels(processes, 2)
     assert [row["seconds"] for row in top] == sorted((s for p in processes for s in p["seconds"].values()),
