@@ -107,13 +107,14 @@ def record_compiles(dumps: str) -> None:
 # -- the benchmark -------------------------------------------------------------------------------------------
 
 def write_sitecustomize(folder: Path, dumps: Path) -> None:
+    """FOLDER/sitecustomize.py: loads this file by path in each process and counts its compiles into DUMPS."""
     (folder / "sitecustomize.py").write_text(SITECUSTOMIZE.format(path=str(Path(__file__).resolve()),
                                                                   dumps=str(dumps)))
 
 
 def read_processes(dumps: Path, launched: float) -> list[dict]:
     """Every process's record, labelled (a second process of one role gets `#2`), its times from the
-    run's launch; a process that started but wrote no record fails the run with its argv."""
+    run's launch; a process that started but wrote no record fails the run, named by role and task."""
     records = [json.loads(p.read_text()) for p in sorted(dumps.glob("*.json"))]
     unwritten = [p for p in dumps.glob("*.started") if not p.with_suffix(".json").exists()]
     if unwritten:
