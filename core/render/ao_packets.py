@@ -22,14 +22,15 @@ import numpy as np
 from numba import njit, types
 from numba.extending import overload
 
-from ..scene.instance_traversal import _to_object, mesh_tree
+from ..scene.instance_traversal import _to_object, mesh_tree, unowned_scene
 from ..scene.ray_visibility import SHADOW_RAYS
 from ..scene.scene_packets import flat_instance
 from ..trace import simd as S
 from ..trace.array_views import rows, unowned
 from ..trace.layout import TreeArrays
-from ..trace.packet_traversal import PacketOutputs, PacketRays, box_fits_float32, new_packet_work, trace_packet
-from .ray_memo import TRACE, keep_traced, reused_visibility
+from ..trace.packet_traversal import (PacketOutputs, PacketRays, box_fits_float32, new_packet_work, trace_packet,
+                                     unowned_outputs, unowned_packet_work, unowned_rays, unowned_tree)
+from .ray_memo import TRACE, keep_traced, reused_visibility, unowned_memo
 from .sampling import seeded_sample_2d
 from .shading import cosine_direction
 
@@ -92,8 +93,23 @@ def answer_ao_chunk(scene, packets, pixel, samples, batch, memo, rays):
 def _answer_ao_chunk(scene, packets, pixel, samples, batch, memo, rays):
     if isinstance(packets, types.NoneType):
         return lambda scene, packets, pixel, samples, batch, memo, rays: None
-    return lambda scene, packets, pixel, samples, batch, memo, rays: trace_ao_chunk(scene, packets, pixel, samples,
-                                                                                    batch, memo, rays)
+
+    def answer(scene, packets, pixel, samples, batch, memo, rays):
+        # A function of its own: its arrays become unowned views again, as packet_traversal.trace_packet's.
+        i, origin, normal, ao_seeds, uses = pixel
+        trace_ao_chunk(unowned_scene(scene), _unowned_packets(packets),
+                       (i, unowned(origin), unowned(normal), ao_seeds, uses), samples, batch, unowned_memo(memo),
+                       unowned(rays))
+    return answer
+
+
+@njit(cache=True, inline="always")
+def _unowned_packets(packets):
+    """new_ao_work's packets as unowned views (array_views.py)."""
+    work, packet_work, tree, box_fits, inst = packets
+    work = AoWork(unowned_rays(work.rays), unowned_outputs(work.out), unowned(work.world), unowned(work.cells),
+                  unowned(work.starts), unowned(work.prims))
+    return work, unowned_packet_work(packet_work), unowned_tree(tree), box_fits, inst
 
 
 @njit(cache=True, inline="always")

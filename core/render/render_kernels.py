@@ -22,7 +22,7 @@ from ..scene.instance_traversal import (hit_surface, new_scratch, onto_triangle_
 from ..trace.layout import NO_HIT
 from .lights import COLOR, DELTA, NO_SHADOW
 from .ao_packets import CHUNK, ao_direction, ao_work_for, answer_ao_chunk, in_packets
-from .ray_memo import TRACE, RayMemo, keep_memo_bit, keep_traced, memo_bit, reused_visibility
+from .ray_memo import TRACE, RayMemo, keep_memo_bit, keep_traced, memo_bit, reused_visibility, unowned_memo
 from ..scene.ray_visibility import SHADOW_RAYS
 from .sampling import pixel_seed, sample_2d, use_seeds
 from .shading import offset_origin, sample_light, short_of_light
@@ -95,8 +95,7 @@ def _sample_pixels(scene, frames, active, blocks, batch, lights, acc, status, me
     (docs/choices.md#sampling-kernel-scratch-and-views), with the AO packets' buffers
     (ao_packets.ao_work_for) when the kernel is the packed one."""
     scene = unowned_scene(scene)
-    memo = RayMemo(unowned(memo.bits), unowned(memo.known), unowned(memo.boxes), unowned(memo.reused),
-                   unowned(memo.repeated), unowned(memo.pretraced), unowned(memo.weights))
+    memo = unowned_memo(memo)
     frames = PixelFrames(unowned(frames.points), unowned(frames.normals), unowned(frames.starts),
                          unowned(frames.pixels))
     lights = unowned(lights)

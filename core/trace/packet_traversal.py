@@ -176,13 +176,28 @@ def _trace_packet_blocks(tree, rays_in, out, blocks, any_hit):
 @njit(cache=True, inline="always")
 def _unowned_arguments(tree, rays_in, out):
     """The tree, rays and outputs as unowned views (array_views.py)."""
-    views = TreeArrays(unowned(tree.axis), unowned(tree.split), unowned(tree.child), unowned(tree.count),
-                       unowned(tree.leaf_prims), unowned(tree.triangles), unowned(tree.bounds),
-                       unowned(tree.leaf_triangles), tree.base)
-    rays_in = PacketRays(unowned(rays_in.origins), unowned(rays_in.directions), unowned(rays_in.tmin),
-                         unowned(rays_in.tmax), unowned(rays_in.order))
-    out = PacketOutputs(unowned(out.t), unowned(out.prim), unowned(out.u), unowned(out.v), unowned(out.single))
-    return views, rays_in, out
+    return unowned_tree(tree), unowned_rays(rays_in), unowned_outputs(out)
+
+
+@njit(cache=True, inline="always")
+def unowned_tree(tree):
+    """TreeArrays as unowned views (array_views.py)."""
+    return TreeArrays(unowned(tree.axis), unowned(tree.split), unowned(tree.child), unowned(tree.count),
+                      unowned(tree.leaf_prims), unowned(tree.triangles), unowned(tree.bounds),
+                      unowned(tree.leaf_triangles), tree.base)
+
+
+@njit(cache=True, inline="always")
+def unowned_rays(rays_in):
+    """PacketRays as unowned views (array_views.py)."""
+    return PacketRays(unowned(rays_in.origins), unowned(rays_in.directions), unowned(rays_in.tmin),
+                      unowned(rays_in.tmax), unowned(rays_in.order))
+
+
+@njit(cache=True, inline="always")
+def unowned_outputs(out):
+    """PacketOutputs as unowned views (array_views.py)."""
+    return PacketOutputs(unowned(out.t), unowned(out.prim), unowned(out.u), unowned(out.v), unowned(out.single))
 
 
 @njit(cache=True, inline="always")
@@ -209,11 +224,16 @@ def trace_packet(tree, rays_in, lanes, work, out, box_fits, any_hit):
     (docs/choices.md#ao-packets-compiled-only-for-batches). any_hit must be a bool value, never a literal,
     or this compiles twice."""
     tree, rays_in, out = _unowned_arguments(tree, rays_in, out)
+    _trace_packet(tree, rays_in, unowned(lanes), unowned_packet_work(work), out, box_fits, any_hit)
+
+
+@njit(cache=True, inline="always")
+def unowned_packet_work(work):
+    """new_packet_work's (PacketScratch, PacketStack) as unowned views (array_views.py)."""
     sc, stack = work
     sc = PacketScratch(unowned(sc.rays), unowned(sc.lane_o), unowned(sc.axes), unowned(sc.prims), unowned(sc.us),
                        unowned(sc.vs), unowned(sc.lanes32), unowned(sc.lane_bits), unowned(sc.flags))
-    stack = PacketStack(unowned(stack.node), unowned(stack.bits), unowned(stack.t))
-    _trace_packet(tree, rays_in, unowned(lanes), (sc, stack), out, box_fits, any_hit)
+    return sc, PacketStack(unowned(stack.node), unowned(stack.bits), unowned(stack.t))
 
 
 @njit(cache=True, inline="always")
