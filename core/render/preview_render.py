@@ -25,11 +25,11 @@ from .lights import DELTA, NO_SHADOW
 from ..memory import check_render_memory
 from .pixel_reuse import PixelState, prepared_boxes, segments_touch, settings_key, surface_rays_touch
 from ..scene.ray_visibility import CAMERA_RAYS, HOLDOUT, SHADOW_RAYS
-from .render_kernels import (MEMO_BITS, MODES, PixelFrames, PixelSums, RayMemo, SampleBatch, add_samples,
+from .render_kernels import (MEMO_BITS, MODES, PACKED_BATCH, PixelFrames, PixelSums, RayMemo, SampleBatch, add_samples,
                              assemble_image, hard_shadow_rays, surface_frames)
 from .render_options import RenderOptions, check_mode_and_samples, packed_lights
 from .sampling import SAMPLERS, SOBOL_DIM1
-from ..scene.scene_packets import occluded_in_packets, packets_apply, trace_camera_packets
+from ..scene.scene_packets import flat_instance, occluded_in_packets, packets_apply, trace_camera_packets
 from ..trace.packet_traversal import L
 from ..scene.scene_queries import trace_valid_rays
 from ..jit.threads import thread_count
@@ -236,12 +236,21 @@ class PreviewRender:
                 self._retire_converged()
         return added
 
+    def _ao_packets(self, batch):
+        """True when this batch's AO rays go in packets (ao_packets.py: AO wanted, a batch of at least
+        PACKED_BATCH samples, a scene of one instance the rays see), else None: the sampling kernel's
+        version without packets, the only one a renderer stepping one sample at a time compiles."""
+        flat = flat_instance.py_func(self.scene.arrays, SHADOW_RAYS) >= 0
+        return True if self.mode != "shadow" and batch >= PACKED_BATCH and flat else None
+
     def _add_samples(self, batch):
         """Samples samples_done .. +batch of every active pixel; on a lazy tree, pixels stopped by an
         unbuilt subtree redo the batch once it is built (same samples, so the eager tree's sums)."""
         if self._hard_shadows_due:
             self._hard_shadows_due = False
             self._trace_hard_shadows()
+
+        packed = self._ao_packets(batch)
 
         def run(active):
             status = np.empty(len(active), np.int64)
@@ -250,7 +259,7 @@ class PreviewRender:
                                     self.sampler, self.seed, SOBOL_DIM1), self.lights,
                         PixelSums(self.sums, self.sq_sums, self.counts, self.ray_counts), status,
                         RayMemo(self.memo, self.known, self.boxes, self.memo_reused, self.repeated,
-                                self.pretraced, self.pretraced_weights))
+                                self.pretraced, self.pretraced_weights), packed)
             return status
 
         with thread_count(self.threads):

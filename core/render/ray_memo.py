@@ -12,6 +12,7 @@ import numpy as np
 from numba import njit
 
 from ..trace.layout import NO_HIT
+from ..trace.array_views import unowned
 from .pixel_reuse import segment_meets_any
 
 TRACE = 1 << 62  # an answer no ray has (prims are >= -1 or suspended, < -1): the ray must be traced
@@ -66,3 +67,10 @@ def keep_memo_bit(bits, i, bit, occluded):
     """Set or clear pixel i's memo `bit`."""
     mask = np.uint8(1 << (bit & 7))
     bits[i, bit >> 3] = bits[i, bit >> 3] | mask if occluded else bits[i, bit >> 3] & ~mask
+
+
+@njit(cache=True, inline="always")
+def unowned_memo(memo):
+    """The RayMemo as unowned views (array_views.py)."""
+    return RayMemo(unowned(memo.bits), unowned(memo.known), unowned(memo.boxes), unowned(memo.reused),
+                   unowned(memo.repeated), unowned(memo.pretraced), unowned(memo.weights))

@@ -8,28 +8,31 @@ The ray memo (ray_memo.py) keeps each ray's visibility for the next frame, and a
 (lights.DELTA) repeats sample 0's bit in later samples (counted in `repeated`, not `rays`). Such a
 light's ray may also come traced beforehand (`pretraced`: hard_shadow_rays' rays, traced in packets by
 the caller, with its weight: `weights`), counted as if sample 0 had traced it and later samples repeated
-it.
+it. On a scene of one instance the AO rays of a pixel are traced in packets (ao_packets.py), with the
+same answers.
 """
 from typing import NamedTuple
 
 import numpy as np
 from numba import njit, prange
 
-from ..trace.array_views import rows, unowned
+from ..trace.array_views import keep_alive, rows, unowned
 from ..scene.instance_traversal import (hit_surface, new_scratch, onto_triangle_plane, surface_error_scale, trace_scene,
                                  unowned_scene, world_normal)
 from ..trace.layout import NO_HIT
 from .lights import COLOR, DELTA, NO_SHADOW
-from .ray_memo import TRACE, RayMemo, keep_memo_bit, keep_traced, memo_bit, reused_visibility
+from .ao_packets import CHUNK, ao_direction, ao_work_for, answer_ao_chunk, in_packets
+from .ray_memo import TRACE, RayMemo, keep_memo_bit, keep_traced, memo_bit, reused_visibility, unowned_memo
 from ..scene.ray_visibility import SHADOW_RAYS
-from .sampling import pixel_seed, sample_2d, seeded_sample_2d, use_seeds
-from .shading import cosine_direction, offset_origin, sample_light, short_of_light
+from .sampling import pixel_seed, sample_2d, use_seeds
+from .shading import offset_origin, sample_light, short_of_light
 from ..trace.traversal import block_range, thread_shares
 
 AO, SHADOW, AO_SHADOW = 1, 2, 3
 MODES = {"ao": AO, "shadow": SHADOW, "ao+shadow": AO_SHADOW}
 USE_AO = 0  # the sampler's "use" ids: 0 for AO, 1 + k for light k
 PIXELS_PER_TASK = 64  # pixels a parallel task samples with one set of scratch buffers
+PACKED_BATCH = 8  # fewest samples a batch traces its AO rays in packets with (a progressive step(1) does not)
 MEMO_BITS = 512  # most visibility bits kept per pixel (64 bytes): 16 samples x 32 uses, 512 AO samples
 
 
@@ -70,52 +73,60 @@ class PixelSums(NamedTuple):
 
 
 @njit(cache=True, parallel=True)
-def add_samples(scene, frames, active, batch, lights, acc, status, memo):
+def add_samples(scene, frames, active, batch, lights, acc, status, memo, packed):
     """Add the SampleBatch `batch` to every pixel listed in `active` (indices into the PixelFrames
     `frames`), with `lights` (lights.pack_lights rows), into the PixelSums `acc` (counts[i] += count)
     and the RayMemo `memo`. status[a] is NO_HIT when pixel active[a] got its samples, or the suspended
-    prim of the unbuilt subtree that stopped it (lazy trees; its sums untouched)."""
+    prim of the unbuilt subtree that stopped it (lazy trees; its sums untouched). `packed`: None, or
+    True to trace the AO rays in packets (ao_packets.py), a version of the kernel compiled apart."""
     n = active.shape[0]
     threads, share, per_band, run = thread_shares(n, PIXELS_PER_TASK)  # balances image regions (traversal.py)
     for k in prange(threads):
         _sample_pixels(scene, frames, active, (k * share, k * share + share, per_band, run, n), batch, lights, acc,
-                       status, memo)
+                       status, memo, packed)
 
 
 @njit(cache=True)
-def _sample_pixels(scene, frames, active, blocks, batch, lights, acc, status, memo):
+def _sample_pixels(scene, frames, active, blocks, batch, lights, acc, status, memo, packed):
     """The pixels of iterations blocks[0]..blocks[1]-1 (blocks: first, end, per_band, run, pixels;
     traversal.block_range) with one set of scratch buffers, made once a thread (kept out of the parallel
     loop body: Numba's parfor analysis does not cope with the samplers' inlined tuple code). The scene
     and the memo go to the per-ray code as unowned views
-    (docs/choices.md#sampling-kernel-scratch-and-views)."""
+    (docs/choices.md#sampling-kernel-scratch-and-views), with the AO packets' buffers
+    (ao_packets.ao_work_for) when the kernel is the packed one."""
     scene = unowned_scene(scene)
-    memo = RayMemo(unowned(memo.bits), unowned(memo.known), unowned(memo.boxes), unowned(memo.reused),
-                   unowned(memo.repeated), unowned(memo.pretraced), unowned(memo.weights))
+    memo = unowned_memo(memo)
     frames = PixelFrames(unowned(frames.points), unowned(frames.normals), unowned(frames.starts),
                          unowned(frames.pixels))
     lights = unowned(lights)
     acc = PixelSums(unowned(acc.sums), unowned(acc.sq_sums), unowned(acc.counts), unowned(acc.rays))
     scratch = new_scratch()
     direction = np.empty(3)
+    packets, prims, owners = ao_work_for(scene, batch.ao_distance, packed)
+    prims = unowned(prims)
     first, end, per_band, run, n = blocks
     for it in range(first, end):
         start, stop = block_range(it, per_band, run, n, PIXELS_PER_TASK)
         for a in range(start, stop):
-            status[a] = _sample_pixel(scene, frames, active[a], batch, lights, acc, (scratch, direction), memo)
+            status[a] = _sample_pixel(scene, frames, active[a], batch, lights, acc, (scratch, direction), memo,
+                                      (packets, prims))
+    keep_alive(owners)
 
 
 @njit(cache=True, inline="always")
-def _sample_pixel(scene, frames, i, batch, lights, acc, buffers, memo):
+def _sample_pixel(scene, frames, i, batch, lights, acc, buffers, memo, ao_packets):
     """All of one pixel's new samples. Returns NO_HIT, or the suspended prim of a ray that reached an
-    unbuilt subtree, after restoring the pixel's sums. buffers: (single-ray scratch, a direction).
+    unbuilt subtree, after restoring the pixel's sums. buffers: (single-ray scratch, a direction);
+    ao_packets: (packets, prims) of ao_packets.ao_work_for (packets None in the kernel without them).
 
-    A sample's rays (its AO ray, then one per light) go through one loop; a ray nothing answers
-    beforehand is traced at one place, the one inlined traversal; the pixel's point, normal, ray start
-    and light rows are unowned views (array_views.py)."""
+    Every ray a sample needs (its AO ray, then one per light) that nothing answers beforehand is traced
+    at one place in the loop, the one inlined traversal; the pixel's point, normal, ray start and light
+    rows are unowned views (array_views.py). Where AO packets apply, the AO rays of each CHUNK of
+    samples are answered first (ao_packets.py), and the loop traces only those their packets left."""
     first, count, mode, seed = batch.first, batch.count, batch.mode, batch.seed
     sums, sq_sums, counts, rays = acc.sums, acc.sq_sums, acc.counts, acc.rays
     scratch, direction = buffers
+    packets, prims = ao_packets
     point, normal = rows(frames.points, i, i + 1)[0], rows(frames.normals, i, i + 1)[0]
     origin = rows(frames.starts, i, i + 1)[0]
     ps = pixel_seed(frames.pixels[i], seed)
@@ -125,27 +136,39 @@ def _sample_pixel(scene, frames, i, batch, lights, acc, buffers, memo):
     uses = 1 + n_lights
     first_use = USE_AO if mode != SHADOW else USE_AO + 1
     last_use = USE_AO + 1 if mode == AO else uses
-    for s in range(first, first + count):
-        ao = 1.0
-        lr = lg = lb = 0.0
-        for use in range(first_use, last_use):
-            tmax, weight = _ray_of_sample(use, lights, (point, normal, ps, ao_seeds, s, i), batch, memo, direction)
-            if weight <= 0.0:
-                continue  # behind the surface or outside the light: no ray needed
-            prim = _answered_visibility(lights, use, (i, s, uses), origin, direction, tmax, memo, rays)
-            if prim == TRACE:
-                _, _, prim, _, _ = trace_scene(scene, origin, direction, 0.0, tmax, True, SHADOW_RAYS, scratch)
-                keep_traced(memo, i, s * uses + use, prim)
-            if prim < NO_HIT:
-                return _restore(sums, sq_sums, rays, memo, i, before, prim)
-            if use == USE_AO:
-                ao = 1.0 if prim < 0 else 0.0
-            elif prim < 0:
-                w = weight / n_lights
-                lr += w * lights[use - 1, COLOR]
-                lg += w * lights[use - 1, COLOR + 1]
-                lb += w * lights[use - 1, COLOR + 2]
-        _add_sample(acc, i, mode, batch.ambient, ao, (lr, lg, lb))
+    packets_apply = in_packets(packets)
+    for chunk in range(first, first + count, CHUNK):
+        chunk_end = min(first + count, chunk + CHUNK)
+        if packets_apply:
+            answer_ao_chunk(scene, packets, (i, origin, normal, ao_seeds, uses), (chunk, chunk_end), batch, memo,
+                            rays)
+        for s in range(chunk, chunk_end):
+            ao = 1.0
+            lr = lg = lb = 0.0
+            for use in range(first_use, last_use):
+                from_chunk = use == USE_AO and packets_apply  # answered by the chunk (counted, kept), or TRACE
+                prim = prims[s - chunk] if from_chunk else TRACE
+                tmax, weight = batch.ao_distance, 1.0
+                if not from_chunk or prim == TRACE:
+                    tmax, weight = _ray_of_sample(use, lights, (point, normal, ps, ao_seeds, s, i), batch, memo,
+                                                  direction)
+                    if weight <= 0.0:
+                        continue  # behind the surface or outside the light: no ray needed
+                    if not from_chunk:
+                        prim = _answered_visibility(lights, use, (i, s, uses), origin, direction, tmax, memo, rays)
+                if prim == TRACE:
+                    _, _, prim, _, _ = trace_scene(scene, origin, direction, 0.0, tmax, True, SHADOW_RAYS, scratch)
+                    keep_traced(memo, i, s * uses + use, prim)
+                if prim < NO_HIT:
+                    return _restore(sums, sq_sums, rays, memo, i, before, prim)
+                if use == USE_AO:
+                    ao = 1.0 if prim < 0 else 0.0
+                elif prim < 0:
+                    w = weight / n_lights
+                    lr += w * lights[use - 1, COLOR]
+                    lg += w * lights[use - 1, COLOR + 1]
+                    lb += w * lights[use - 1, COLOR + 2]
+            _add_sample(acc, i, mode, batch.ambient, ao, (lr, lg, lb))
     counts[i] += count
     return NO_HIT
 
@@ -207,8 +230,7 @@ def _ray_of_use(use, lights, point, normal, ao_distance, sampler, ps, ao_seeds, 
     sampled light point, tmax a step short of it (shading.short_of_light), weight max(0, N.L) * mask;
     weight 0 needs no ray."""
     if use == USE_AO:
-        u1, u2 = seeded_sample_2d(sampler, ao_seeds, s, dim1)
-        cosine_direction(normal, u1, u2, direction)
+        ao_direction(sampler, ao_seeds, s, dim1, normal, direction)
         return ao_distance, 1.0
     light = rows(lights, use - 1, use)[0]
     # A light without extent ignores its sample numbers (lights.DELTA), so none are drawn: Owen-scrambled

@@ -41,10 +41,19 @@ def occluded_in_packets(scene, o, d, lo, hi, order, threads, ray_mask):
 
 def packets_apply(scene, ray_mask):
     """Whether rays of kind `ray_mask` through the TwoLevelScene are traced in packets: one eager mesh
-    instance visible to them in a one-leaf top level."""
-    s = scene.arrays
-    return (scene.lazy_tree is None and len(s.top_items) == 1 and s.top_axis[0] == LEAF
-            and s.visibility[s.top_items[0]] & ray_mask != 0)
+    instance visible to them in a one-leaf top level (flat_instance, run as Python here)."""
+    return scene.lazy_tree is None and flat_instance.py_func(scene.arrays, ray_mask) >= 0
+
+
+@njit(cache=True, inline="always")
+def flat_instance(arrays, ray_mask):
+    """The instance of a scene (SceneArrays) of one instance in a one-leaf top level, when rays of kind
+    `ray_mask` see it; else -1. The packet kernels' rule for taking a scene (the sampling kernel's AO
+    packets too, lazy trees included there)."""
+    items = arrays.top_items
+    if items.shape[0] != 1 or arrays.top_axis[0] != LEAF or arrays.visibility[items[0]] & ray_mask == 0:
+        return -1
+    return items[0]
 
 
 def _trace_in_packets(scene, o, d, lo, hi, order, threads, ray_mask, any_hit):

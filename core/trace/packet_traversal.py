@@ -163,14 +163,9 @@ def _trace_packet_blocks(tree, rays_in, out, blocks, any_hit):
     traversal.block_range) with one set of scratch arrays and the tree as unowned views (see
     traversal._trace_block)."""
     first, end, per_band, run, n = blocks
-    views = TreeArrays(unowned(tree.axis), unowned(tree.split), unowned(tree.child), unowned(tree.count),
-                       unowned(tree.leaf_prims), unowned(tree.triangles), unowned(tree.bounds),
-                       unowned(tree.leaf_triangles), tree.base)
-    sc, stack, owned = _new_packet_work()
-    rays_in = PacketRays(unowned(rays_in.origins), unowned(rays_in.directions), unowned(rays_in.tmin),
-                         unowned(rays_in.tmax), unowned(rays_in.order))
-    out = PacketOutputs(unowned(out.t), unowned(out.prim), unowned(out.u), unowned(out.v), unowned(out.single))
-    box_fits = _box_fits_float32(views.bounds)
+    views, rays_in, out = _unowned_arguments(tree, rays_in, out)
+    sc, stack, owned = new_packet_work()
+    box_fits = box_fits_float32(views.bounds)
     for i in range(first, end):
         start, stop = block_range(i, per_band, run, n, PACKETS_PER_TASK)
         for p in range(start, stop):
@@ -179,7 +174,34 @@ def _trace_packet_blocks(tree, rays_in, out, blocks, any_hit):
 
 
 @njit(cache=True, inline="always")
-def _new_packet_work():
+def _unowned_arguments(tree, rays_in, out):
+    """The tree, rays and outputs as unowned views (array_views.py)."""
+    return unowned_tree(tree), unowned_rays(rays_in), unowned_outputs(out)
+
+
+@njit(cache=True, inline="always")
+def unowned_tree(tree):
+    """TreeArrays as unowned views (array_views.py)."""
+    return TreeArrays(unowned(tree.axis), unowned(tree.split), unowned(tree.child), unowned(tree.count),
+                      unowned(tree.leaf_prims), unowned(tree.triangles), unowned(tree.bounds),
+                      unowned(tree.leaf_triangles), tree.base)
+
+
+@njit(cache=True, inline="always")
+def unowned_rays(rays_in):
+    """PacketRays as unowned views (array_views.py)."""
+    return PacketRays(unowned(rays_in.origins), unowned(rays_in.directions), unowned(rays_in.tmin),
+                      unowned(rays_in.tmax), unowned(rays_in.order))
+
+
+@njit(cache=True, inline="always")
+def unowned_outputs(out):
+    """PacketOutputs as unowned views (array_views.py)."""
+    return PacketOutputs(unowned(out.t), unowned(out.prim), unowned(out.u), unowned(out.v), unowned(out.single))
+
+
+@njit(cache=True, inline="always")
+def new_packet_work():
     """(PacketScratch, PacketStack, owners): one packet's working set as unowned views, whose reference
     counts are no-ops (array_views.py), and the arrays that own them, which the caller keeps alive
     (array_views.keep_alive) while it traces."""
@@ -193,12 +215,33 @@ def _new_packet_work():
     return sc, stack, owned
 
 
+@njit(cache=True)
+def trace_packet(tree, rays_in, lanes, work, out, box_fits, any_hit):
+    """_trace_packet compiled as a function of its own, for the sampling kernel's AO packets
+    (ao_packets.py), so that kernel does not carry a second inlined copy of the packet traversal. The
+    arrays are taken as unowned views again at entry: the caller's views are not known to be unowned
+    in here, and every view made inside would count references, at twice the packet's time
+    (docs/choices.md#ao-packets-compiled-only-for-batches). any_hit must be a bool value, never a literal,
+    or this compiles twice."""
+    tree, rays_in, out = _unowned_arguments(tree, rays_in, out)
+    _trace_packet(tree, rays_in, unowned(lanes), unowned_packet_work(work), out, box_fits, any_hit)
+
+
+@njit(cache=True, inline="always")
+def unowned_packet_work(work):
+    """new_packet_work's (PacketScratch, PacketStack) as unowned views (array_views.py)."""
+    sc, stack = work
+    sc = PacketScratch(unowned(sc.rays), unowned(sc.lane_o), unowned(sc.axes), unowned(sc.prims), unowned(sc.us),
+                       unowned(sc.vs), unowned(sc.lanes32), unowned(sc.lane_bits), unowned(sc.flags))
+    return sc, PacketStack(unowned(stack.node), unowned(stack.bits), unowned(stack.t))
+
+
 @njit(cache=True, inline="always")
 def _trace_packet(tree, rays_in, lanes, work, out, box_fits, any_hit):
     """One packet: the rays `lanes` (L indices into rays_in, -1 for none) through the tree with `work`
-    = (PacketScratch, PacketStack) of _new_packet_work, their hits written to `out`; rays that cannot
+    = (PacketScratch, PacketStack) of new_packet_work, their hits written to `out`; rays that cannot
     join, and every ray of a packet that meets an unbuilt node, get out.single[ray] = 1. box_fits:
-    _box_fits_float32 of the tree's root box."""
+    box_fits_float32 of the tree's root box."""
     sc, stack = work
     bits, signs, mode = setup_packet(tree.bounds, rays_in, lanes, sc, out, box_fits, any_hit)
     if bits == 0:
@@ -210,10 +253,12 @@ def _trace_packet(tree, rays_in, lanes, work, out, box_fits, any_hit):
 
 
 @njit(cache=True, inline="always")
-def _box_fits_float32(box):
-    """Whether the root box lies inside the range float32 lanes bound (packet_setup.OUTSIDE_FLOAT32)."""
-    fits = True
-    for k in range(6):
+def box_fits_float32(box):
+    """Whether the root box lies inside the range float32 lanes bound (packet_setup.OUTSIDE_FLOAT32). It
+    starts from a comparison: a literal True could type the result Literal[bool] and compile trace_packet
+    twice."""
+    fits = abs(box[0]) < OUTSIDE_FLOAT32
+    for k in range(1, 6):
         fits &= abs(box[k]) < OUTSIDE_FLOAT32
     return fits
 

@@ -1,0 +1,151 @@
+"""The renderer's AO rays in packets (core.render.ao_packets): a scene of one instance, which the packets
+take, renders the image, sample counts and ray counts of the same scene with a second instance far
+away that no ray reaches, which the packets do not take (every AO ray traced alone through the
+two-level traversal). Cases: a soup, a lattice (triangles in split planes, points on them), a rotated
+and scaled instance far from the origin, AO and AO + shadows, a chunk of samples and a short one reached
+in one step or several, adaptive sampling, a lazy tree."""
+import numpy as np
+import pytest
+
+import core
+from core.scene.ray_visibility import SHADOW_RAYS
+from core.scene.scene_packets import flat_instance
+from core.scene.two_level import build_two_level
+from tests.meshes import lattice, random_soup
+from tests.render_scenes import look_at
+
+FAR = 1e4  # the second instance's distance: beyond every AO ray
+
+
+def with_far_instance(tree, matrix):
+    """The scene [tree at matrix] and the same with a small soup FAR away (not one flat instance)."""
+    far = core.build_kdtree(random_soup(np.random.default_rng(1), 20))
+    away = np.eye(4)
+    away[:3, 3] = matrix[:3, 3] + FAR
+    packed = build_two_level([tree], [0], matrix[None])
+    single = build_two_level([tree, far], [0, 1], np.stack([matrix, away]))
+    assert flat_instance.py_func(packed.arrays, SHADOW_RAYS) == 0  # the packets' rule takes the first only
+    assert flat_instance.py_func(single.arrays, SHADOW_RAYS) == -1
+    return packed, single
+
+
+def rendered(scene, camera, steps, **settings):
+    render = core.PreviewRender(scene, camera, 40, 32, **settings)
+    for n in steps:
+        render.step(n)
+    return render
+
+
+def assert_same_render(packed, single, camera, steps, **settings):
+    a, b = rendered(packed, camera, steps, **settings), rendered(single, camera, steps, **settings)
+    np.testing.assert_array_equal(a.image(), b.image())
+    np.testing.assert_array_equal(a.sample_counts(), b.sample_counts())
+    np.testing.assert_array_equal(a.memo, b.memo)  # every ray's visibility bit, for the next frame
+    assert a.rays_traced == b.rays_traced
+    return a.image()
+
+
+def occluded_share(image):
+    """The share of hit pixels darkened by AO (some rays met something): a case that exercises hits."""
+    hit = image[..., 3] > 0
+    return float((image[..., 0][hit] < 1.0).mean())
+
+
+@pytest.mark.parametrize("steps", [(70,), (1, 2, 67), (64, 6)])
+@pytest.mark.parametrize("mode", ["ao", "ao+shadow"])
+def test_soup_renders_as_single_rays(mode, steps):
+    """70 samples: a chunk of CHUNK (64) samples and a short one, in one call or cut into steps."""
+    tree = core.build_kdtree(random_soup(np.random.default_rng(2), 3000, size=0.2))
+    packed, single = with_far_instance(tree, np.eye(4))
+    lights = [core.Light.point((2.0, -3.0, 4.0)), core.Light.area(_placed((0.0, 0.0, 3.0)), size=1.0)]
+    image = assert_same_render(packed, single, look_at((2.5, -3.0, 1.5), (0.0, 0.0, 0.0)), steps, mode=mode,
+                               samples=70, ao_distance=0.8, lights=lights if mode != "ao" else ())
+    assert occluded_share(image) > 0.3
+
+
+@pytest.mark.parametrize("builder, offset", [("binned", 0.0), ("median", 0.0), ("binned", 2.0 ** 20)])
+def test_lattice_renders_as_single_rays(builder, offset):
+    """Every triangle in a split plane and every ray start on one (the camera inside a cell looks at its
+    walls); also far from the origin."""
+    tree = core.build_kdtree(lattice(4), builder=builder)
+    packed, single = with_far_instance(tree, _placed((offset, offset, offset)))
+    camera = look_at(np.array([2.5, 2.45, 2.4]) + offset, np.array([2.0, 3.0, 2.0]) + offset, fov=1.6)
+    image = assert_same_render(packed, single, camera, (16,), samples=16, ao_distance=1.0)
+    assert occluded_share(image) > 0.3
+
+
+def test_transformed_instance_renders_as_single_rays():
+    """A rotated, scaled instance far from the origin: the rays go into object space as the
+    single-ray traversal takes them."""
+    verts_tris = random_soup(np.random.default_rng(3), 2000, size=0.3)
+    angle, offset = 0.6, 3.0e5
+    m = np.eye(4)
+    m[:3, :3] = np.array([[np.cos(angle), -np.sin(angle), 0], [np.sin(angle), np.cos(angle), 0], [0, 0, 1]])
+    m[:3, :3] = m[:3, :3] @ np.diag([2.0, 0.7, 1.3])
+    m[:3, 3] = offset
+    packed, single = with_far_instance(core.build_kdtree(verts_tris), m)
+    camera = look_at(np.array([5.0, -6.0, 3.0]) + offset, np.full(3, offset))
+    image = assert_same_render(packed, single, camera, (9, 24), samples=33, ao_distance=1.2)
+    assert occluded_share(image) > 0.3
+
+
+def test_adaptive_sampling_renders_as_single_rays():
+    tree = core.build_kdtree(random_soup(np.random.default_rng(4), 2000, size=0.2))
+    packed, single = with_far_instance(tree, np.eye(4))
+    camera = look_at((2.5, -3.0, 1.5), (0.0, 0.0, 0.0))
+    assert_same_render(packed, single, camera, (128,), samples=128, ao_distance=0.8, error_target=0.05,
+                       min_samples=8)
+    counts = rendered(packed, camera, (128,), samples=128, ao_distance=0.8, error_target=0.05,
+                      min_samples=8).sample_counts()
+    assert (counts[counts > 0] < 128).any()  # some pixels stopped early
+
+
+def test_lazy_tree_renders_as_the_eager_tree():
+    """A lazy tree's packet meets unbuilt nodes: its lanes stop at them as single rays and the batch is
+    redone once they are built, so the image is the eager tree's."""
+    tris = random_soup(np.random.default_rng(5), 4000, size=0.2)
+    camera = look_at((2.5, -3.0, 1.5), (0.0, 0.0, 0.0))
+    settings = dict(samples=20, ao_distance=0.8)
+    eager = rendered(core.build_kdtree(tris), camera, (20,), **settings)
+    lazy = core.build_kdtree(tris, lazy=True, lazy_subtree_size=256)
+    got = core.PreviewRender(lazy, camera, 40, 32, **settings)
+    built_by_camera = lazy.stats()["subtrees_built"]
+    got.step(20)
+    assert lazy.stats()["subtrees_built"] > built_by_camera  # the AO rays met unbuilt subtrees
+    np.testing.assert_array_equal(got.image(), eager.image())
+    np.testing.assert_array_equal(got.sample_counts(), eager.sample_counts())
+    assert got.rays_traced == eager.rays_traced
+
+
+def _placed(position):
+    m = np.eye(4)
+    m[:3, 3] = position
+    return m
+
+
+def test_only_batches_of_eight_or_more_on_one_instance_take_the_packed_kernel(monkeypatch):
+    """The sampling kernel's `packed` argument: None (the version without packets, the only one a
+    progressive renderer compiles) for steps under PACKED_BATCH samples, shadow-only renders and scenes
+    the packets do not take; True for a batch of 8 or more AO samples on one instance."""
+    import core.render.preview_render as preview_render
+
+    calls = []
+    kernel = preview_render.add_samples
+
+    def recording(*args):
+        calls.append(args[-1])
+        return kernel(*args)
+
+    monkeypatch.setattr(preview_render, "add_samples", recording)
+    tree = core.build_kdtree(random_soup(np.random.default_rng(6), 500, size=0.2))
+    packed, single = with_far_instance(tree, np.eye(4))
+    camera = look_at((2.5, -3.0, 1.5), (0.0, 0.0, 0.0))
+    cases = [(packed, "ao", (1, 2, 4, 8), [None, None, None, True]),
+             (packed, "ao+shadow", (7, 9), [None, True]),
+             (packed, "shadow", (16,), [None]),
+             (single, "ao", (16,), [None])]
+    for scene, mode, steps, expected in cases:
+        calls.clear()
+        rendered(scene, camera, steps, mode=mode, samples=sum(steps), ao_distance=0.8,
+                 lights=[core.Light.point((2.0, -3.0, 4.0))] if mode != "ao" else ())
+        assert calls == expected, (mode, steps)
