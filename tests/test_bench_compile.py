@@ -1,7 +1,6 @@
 """benchmarks/bench_compile.py's counting and reading, on tiny kernels (never the add-on's: compiling them
 takes minutes): every process started with its sitecustomize counts its own exclusive compile seconds and
 is labelled by its role; the first frame's figures come from report.json, and what is missing is named."""
-import importlib.util
 import json
 import os
 import subprocess
@@ -11,7 +10,8 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+from tests.benchmark_modules import load_benchmark
+
 
 MAIN_SCRIPT = """
 import json, sys, time
@@ -38,10 +38,7 @@ njit(lambda x: x + 1)(1)
 
 @pytest.fixture(scope="module")
 def bench():
-    spec = importlib.util.spec_from_file_location("bench_compile", ROOT / "benchmarks" / "bench_compile.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_benchmark("bench_compile")
 
 
 def test_every_process_counts_its_own_exclusive_compiles_under_its_role(bench, tmp_path):

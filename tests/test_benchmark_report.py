@@ -1,9 +1,10 @@
 """benchmarks/report.py renders the docs' figure tables from benchmark JSON: checked on a small fixture
 (tests/fixtures/benchmarks/), for the tables' content, not for any timing."""
-import importlib.util
 from pathlib import Path
 
 import pytest
+
+from tests.benchmark_modules import load_benchmark
 
 ROOT = Path(__file__).resolve().parents[1]
 FIXTURE = ROOT / "tests" / "fixtures" / "benchmarks"
@@ -11,10 +12,7 @@ FIXTURE = ROOT / "tests" / "fixtures" / "benchmarks"
 
 @pytest.fixture(scope="module")
 def report():
-    spec = importlib.util.spec_from_file_location("report", ROOT / "benchmarks" / "report.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_benchmark("report")
 
 
 def rows_of(block):
