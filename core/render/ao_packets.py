@@ -8,13 +8,12 @@ first put in order of where they fall: quarter of azimuth, then the inner or out
 roughly one way and walk the same nodes (docs/choices.md#ao-rays-in-packets-inside-the-sampling-kernel).
 Packets apply to batches of at least render_kernels.PACKED_BATCH samples (a progressive step of one
 sample gives each packet one lane) on a scene of one instance in a one-leaf top level that shadow rays
-see (scene_packets.flat_instance), lazy trees included. The sampling kernel takes `packed`: None compiles
-it without any of this code (the helpers below are overloads that vanish for None), so a renderer that
-steps one sample at a time, as the add-on does, compiles what it did before packets
-(docs/choices.md#ao-packets-compiled-only-for-batches). In a packed kernel
- a packet that meets an unbuilt node leaves its lanes
-to single rays, which stop there as before. Rays the memo answers (ray_memo.py) are not traced, and
-rays a packet leaves are traced one by one by the sampling kernel.
+see (scene_packets.flat_instance), lazy trees included: a packet that meets an unbuilt node leaves its
+lanes to single rays, which stop there as before. Rays the memo answers (ray_memo.py) are not traced,
+and rays a packet leaves are traced one by one by the sampling kernel. The sampling kernel takes
+`packed`: for None it is compiled without any of this code (the helpers below are overloads that are
+nothing for None), so a renderer that steps one sample at a time, as the add-on does, compiles what it
+did before packets (docs/choices.md#ao-packets-compiled-only-for-batches).
 """
 from typing import NamedTuple
 
@@ -67,7 +66,7 @@ def _ao_work_for(scene, ao_distance, packed):
         return lambda scene, ao_distance, packed: (None, np.empty(0, np.int64), None)
 
     def work(scene, ao_distance, packed):
-        packets, owners = new_ao_work(scene, ao_distance, True)
+        packets, owners = new_ao_work(scene, ao_distance)
         return packets, packets[0].prims, owners
     return work
 
@@ -113,11 +112,10 @@ def _unowned_packets(packets):
 
 
 @njit(cache=True, inline="always")
-def new_ao_work(scene, ao_distance, wanted):
+def new_ao_work(scene, ao_distance):
     """((AoWork, packet work, flat tree, box fits, instance or -1), owners): a thread's AO packet buffers
-    as unowned views, the flat scene's mesh tree (instance -1 when packets are not `wanted` or do not
-    apply, the tree then an empty one never traced) and the arrays owning the views, which the caller
-    keeps alive."""
+    as unowned views, the flat scene's mesh tree (instance -1 when packets do not apply, the tree then an
+    empty one never traced) and the arrays owning the views, which the caller keeps alive."""
     owned = (np.zeros((CHUNK, 3)), np.zeros((CHUNK, 3)), np.zeros(CHUNK), np.full(CHUNK, ao_distance),
              np.full(CHUNK, -1, np.int64), np.empty(CHUNK), np.empty(CHUNK, np.int32), np.empty(CHUNK),
              np.empty(CHUNK), np.zeros(CHUNK, np.uint8), np.empty((CHUNK, 3)), np.empty(CHUNK, np.int64),
@@ -128,7 +126,7 @@ def new_ao_work(scene, ao_distance, wanted):
                         unowned(owned[9]))
     work = AoWork(rays, out, unowned(owned[10]), unowned(owned[11]), unowned(owned[12]), unowned(owned[13]))
     sc, stack, packet_owned = new_packet_work()
-    inst = flat_instance(scene, SHADOW_RAYS) if wanted else -1
+    inst = flat_instance(scene, SHADOW_RAYS)
     tree = mesh_tree(scene, scene.mesh_of[inst]) if inst >= 0 else _no_tree(scene)
     return (work, (sc, stack), tree, box_fits_float32(tree.bounds), inst), (owned, packet_owned)
 
