@@ -157,3 +157,45 @@ def test_a_registered_kernel_that_cannot_be_cached_still_runs(tmp_path):
     assert out.returncode == 0, out.stderr
     assert out.stdout.split()[-1] == "1"
     assert "Cannot cache compiled function" in out.stderr and "caller.py" in out.stderr
+
+
+TWO_TYPES = """
+from numba import njit
+
+@njit(cache=True)
+def twice(x):
+    return 2 * x
+"""
+SIGNATURES = """
+import sys
+sys.path.insert(0, {root!r})
+from core.jit import kernel_cache
+kernel_cache.register({package!r}, sources={package!r})
+from pkg.twice import twice
+if {call}:
+    twice(1), twice(1.5)
+print(sorted(str(sig) for sig in kernel_cache.cached_signatures(twice)), sorted(map(str, twice.signatures)))
+"""
+
+
+def _signatures(root: Path, call: bool, cache: Path) -> str:
+    script = SIGNATURES.format(root=str(root), package=str(root / "pkg"), call=call)
+    env = {"NUMBA_CACHE_DIR": str(cache), "PATH": "/usr/bin:/bin", "PYTHONDONTWRITEBYTECODE": "1"}
+    out = subprocess.run([sys.executable, "-c", script], cwd=Path(core.__file__).parent.parent, env=env,
+                         capture_output=True, text=True, check=True, timeout=300)
+    return out.stdout.strip().splitlines()[-1]
+
+
+def test_cached_signatures_lists_what_the_cache_holds_before_anything_loads(tmp_path):
+    """What PreviewRender.batch_without_compile asks (through render_kernels.packed_version_ready): the
+    versions another process compiled are listed without being loaded; none for an empty cache or once
+    the sources changed (the index's stamp no longer matches)."""
+    (tmp_path / "pkg").mkdir()
+    (tmp_path / "pkg" / "__init__.py").write_text("")
+    (tmp_path / "pkg" / "twice.py").write_text(TWO_TYPES)
+    cache = tmp_path / "cache"
+    assert _signatures(tmp_path, False, cache) == "[] []"
+    assert _signatures(tmp_path, True, cache) == "['(float64,)', '(int64,)'] ['(float64,)', '(int64,)']"
+    assert _signatures(tmp_path, False, cache) == "['(float64,)', '(int64,)'] []"
+    (tmp_path / "pkg" / "__init__.py").write_text("# edited\n")
+    assert _signatures(tmp_path, False, cache) == "[] []"

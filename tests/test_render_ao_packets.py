@@ -149,3 +149,45 @@ def test_only_batches_of_eight_or_more_on_one_instance_take_the_packed_kernel(mo
         rendered(scene, camera, steps, mode=mode, samples=sum(steps), ao_distance=0.8,
                  lights=[core.Light.point((2.0, -3.0, 4.0))] if mode != "ao" else ())
         assert calls == expected, (mode, steps)
+
+
+def test_a_batch_that_would_compile_the_packed_version_is_cut_below_it(monkeypatch):
+    """PreviewRender.batch_without_compile: a batch that would take the packed kernel (8+ AO samples, one
+    instance) is cut to PACKED_BATCH - 1 while that version is neither loaded nor cached; other batches
+    and scenes keep their size. A batch so cut gives the image of the batch asked for."""
+    import core.render.preview_render as preview_render
+    from core.render.render_kernels import PACKED_BATCH
+
+    tree = core.build_kdtree(random_soup(np.random.default_rng(7), 500, size=0.2))
+    packed, single = with_far_instance(tree, np.eye(4))
+    camera = look_at((2.5, -3.0, 1.5), (0.0, 0.0, 0.0))
+    light = [core.Light.point((2.0, -3.0, 4.0))]
+    for ready, expected in ((False, PACKED_BATCH - 1), (True, 16)):
+        monkeypatch.setattr(preview_render, "packed_version_ready", lambda: ready)
+        render = core.PreviewRender(packed, camera, 8, 8, samples=16, mode="ao+shadow", lights=light)
+        assert [render.batch_without_compile(n) for n in (1, 7, 16)] == [1, 7, expected]
+        for scene, mode in ((packed, "shadow"), (single, "ao")):
+            other = core.PreviewRender(scene, camera, 8, 8, samples=16, mode=mode, lights=light)
+            assert other.batch_without_compile(16) == 16
+    cut = rendered(packed, camera, (PACKED_BATCH - 1, 16 - PACKED_BATCH + 1), samples=16, ao_distance=0.8)
+    np.testing.assert_array_equal(cut.image(), rendered(packed, camera, (16,), samples=16, ao_distance=0.8).image())
+
+
+def test_the_packed_version_is_ready_once_loaded_or_cached(tmp_path):
+    """render_kernels.packed_version_ready: False in a process whose cache holds no packed version, True
+    once a batch ran it here (it then sits in the cache, which a later process reads)."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from core.render.render_kernels import PACKED_BATCH, packed_version_ready
+
+    script = "import core.render.render_kernels as k; print(k.packed_version_ready())"
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path))
+    out = subprocess.run([sys.executable, "-c", script], cwd=Path(core.__file__).parent.parent, env=env,
+                         capture_output=True, text=True, check=True, timeout=300)
+    assert out.stdout.split()[-1] == "False"
+    tree = core.build_kdtree(random_soup(np.random.default_rng(8), 200, size=0.2))
+    rendered(tree, look_at((2.5, -3.0, 1.5), (0.0, 0.0, 0.0)), (PACKED_BATCH,), samples=PACKED_BATCH)
+    assert packed_version_ready()

@@ -18,6 +18,7 @@ import numpy as np
 from ..render.camera import Camera
 from ..render.lights import Light
 from ..render.preview_render import PreviewRender, frame_ray_count
+from ..render.render_kernels import PACKED_BATCH
 from ..render.render_options import RenderOptions
 from ..scene.ray_visibility import CAMERA_RAYS, SHADOW_RAYS
 from ..scene.scene_builder import MeshInput, SceneBuilder
@@ -78,13 +79,13 @@ def _camera(offset) -> Camera:
     return Camera(matrix, 0.8, clip_start=0.1, clip_end=100.0).translated(offset)
 
 
-def _frame(builder: SceneBuilder, scene_inputs, previous, first: bool):
-    """One frame as the add-on renders it (kd_addon/pipeline.py), relative to the camera's position;
-    `scene_inputs`: (meshes, mesh_of, matrices, visibility). The first frame's build and camera pass run
-    beside the helper's compile (parallel_compile.py: the warm-up's split)."""
+def _frame(builder: SceneBuilder, scene_inputs, previous, first: bool, batch: int = 1):
+    """One frame as the add-on renders it (kd_addon/pipeline.py), relative to the camera's position, in
+    steps of `batch` samples; `scene_inputs`: (meshes, mesh_of, matrices, visibility). The first frame's
+    build and camera pass run beside the helper's compile (parallel_compile.py: the warm-up's split)."""
     offset = np.array([0.0, 0.0, 4.0])
     lights = _lights(offset)
-    options = RenderOptions(mode="ao+shadow", samples=SAMPLES, lights=lights)
+    options = RenderOptions(mode="ao+shadow", samples=max(SAMPLES, batch), lights=lights)
     rays = frame_ray_count(WIDTH, HEIGHT, options.mode, options.samples, lights)
     meshes, mesh_of, matrices, visibility = scene_inputs
     with rendering_kernels_alongside(warmup=True) if first else nullcontext():
@@ -92,7 +93,7 @@ def _frame(builder: SceneBuilder, scene_inputs, previous, first: bool):
         scene.stats()  # the panel's tree figures (tree_stats.walk_stats)
         render = PreviewRender(scene, _camera(offset), WIDTH, HEIGHT, options, previous=previous)
     while not render.done:
-        render.step(1)
+        render.step(batch)
     render.image()
     return render.pixel_state()
 
@@ -110,3 +111,11 @@ def compile_first_frames() -> None:
     pixels = _frame(builder, (_meshes(), *_placements(0.0)), None, first=True)
     _frame(builder, (_meshes(), *_placements(0.2)), pixels, first=False)
     _frame(SceneBuilder("auto"), _one_cube(), None, first=False)
+
+
+def compile_packed_samples() -> None:
+    """The sampling kernel's packed version (AO packets in batches of PACKED_BATCH or more samples on a
+    one-instance scene: render/ao_packets.py), which the add-on's first steps of one sample never run:
+    the factory scene's frame in one batch. The add-on compiles it after the first frames, in a process
+    of lower priority (kd_addon/kernel_warmup.py), and steps in batches that large once it is cached."""
+    _frame(SceneBuilder("auto"), _one_cube(), None, first=False, batch=PACKED_BATCH)

@@ -145,6 +145,18 @@ def core_cache_folders() -> str:
     return json.dumps(_core_cache_folders, sort_keys=True)
 
 
+def cached_signatures(dispatcher) -> list:
+    """The argument types of the versions of `dispatcher` (an njit(cache=True) function) that Numba's
+    on-disk cache holds for this machine (its codegen's magic tuple) and for the current sources (the
+    index's stamp, SourcesDigestLocator's); [] when none. Reads Numba's index as Numba does
+    (IndexDataCacheFile._load_index, internal; numba is pinned) without loading any code."""
+    cache_file = getattr(dispatcher._cache, "_cache_file", None)  # a NullCache has none
+    if cache_file is None:
+        return []
+    magic = dispatcher.targetctx.codegen().magic_tuple()
+    return [key[0] for key in cache_file._load_index() if key[1] == magic]
+
+
 def register(folder=CORE_FOLDER, sources=CORE_FOLDER) -> None:
     """Key the cached kernels of `folder` and its subfolders (core's, or e.g. a test's that inline
     core's functions) by the `*.py` files of `sources` (and its subfolders) too. Must run before the

@@ -26,7 +26,7 @@ from ..memory import check_render_memory
 from .pixel_reuse import PixelState, prepared_boxes, segments_touch, settings_key, surface_rays_touch
 from ..scene.ray_visibility import CAMERA_RAYS, HOLDOUT, SHADOW_RAYS
 from .render_kernels import (MEMO_BITS, MODES, PACKED_BATCH, PixelFrames, PixelSums, RayMemo, SampleBatch, add_samples,
-                             assemble_image, hard_shadow_rays, surface_frames)
+                             assemble_image, hard_shadow_rays, packed_version_ready, surface_frames)
 from .render_options import RenderOptions, check_mode_and_samples, packed_lights
 from .sampling import SAMPLERS, SOBOL_DIM1
 from ..scene.scene_packets import flat_instance, occluded_in_packets, packets_apply, trace_camera_packets
@@ -242,6 +242,15 @@ class PreviewRender:
         version without packets, the only one a renderer stepping one sample at a time compiles."""
         flat = flat_instance.py_func(self.scene.arrays, SHADOW_RAYS) >= 0
         return True if self.mode != "shadow" and batch >= PACKED_BATCH and flat else None
+
+    def batch_without_compile(self, samples):
+        """`samples`, or PACKED_BATCH - 1 when a step of that many would run the sampling kernel's packed
+        version (_ao_packets) and that version is neither loaded nor cached, so its first call would
+        compile for about a minute: the largest batch a caller stepping in growing batches (the add-on)
+        takes without waiting for a compile. Batching never changes the image (render_kernels.py)."""
+        if samples >= PACKED_BATCH and self._ao_packets(samples) and not packed_version_ready():
+            return PACKED_BATCH - 1
+        return samples
 
     def _add_samples(self, batch):
         """Samples samples_done .. +batch of every active pixel; on a lazy tree, pixels stopped by an

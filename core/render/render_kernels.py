@@ -14,8 +14,9 @@ traced in packets (ao_packets.py), with the same answers, by a version of the ke
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit, prange
+from numba import njit, prange, types
 
+from ..jit.kernel_cache import cached_signatures
 from ..trace.array_views import keep_alive, rows, unowned
 from ..scene.instance_traversal import (hit_surface, new_scratch, onto_triangle_plane, surface_error_scale, trace_scene,
                                  unowned_scene, world_normal)
@@ -84,6 +85,18 @@ def add_samples(scene, frames, active, batch, lights, acc, status, memo, packed)
     for k in prange(threads):
         _sample_pixels(scene, frames, active, (k * share, k * share + share, per_band, run, n), batch, lights, acc,
                        status, memo, packed)
+
+
+def packed_version_ready():
+    """Whether add_samples' packed version (`packed` True) runs without a compile: loaded in this process,
+    or in Numba's on-disk cache for this machine and these sources. Its first compile takes about a
+    minute, so a caller stepping in growing batches stays under PACKED_BATCH until then
+    (PreviewRender.batch_without_compile). An unreadable cache index reads as not ready."""
+    try:
+        signatures = [*add_samples.signatures, *cached_signatures(add_samples)]
+    except Exception:  # noqa: BLE001 (a broken or foreign index: Numba would recompile too)
+        return False
+    return any(isinstance(signature[-1], types.Boolean) for signature in signatures)
 
 
 @njit(cache=True)
