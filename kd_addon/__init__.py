@@ -31,7 +31,7 @@ def register():
     unregister()  # nothing when not registered
     _registered = True  # before the modules: unregister() then undoes a registration that failed halfway
     if compiles_at_enable():
-        kernel_warmup.start()  # before the modules: the display's timer runs only while a compile does
+        kernel_warmup.start(packed=True)  # before the modules: the display's timer runs only while a compile does
     for module in MODULES:
         module.register()
     if not bpy.app.binary_path:  # the bpy module (Blender itself unregisters at quit)

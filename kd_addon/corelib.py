@@ -142,6 +142,16 @@ def cache_is_warm(kernel: str = WARM_KERNEL) -> bool:
     return holds_kernel(numba_cache_dir(), kernel)
 
 
+def packed_version_cached() -> bool:
+    """Whether the cache folder holds a second version of the sampling kernel for this Python: the add-on
+    compiles it in two, steps of one sample and the packed batches (kernel_warmup's packed stage). A file
+    count, so that the check needs no numba; renders ask core itself (PreviewRender.batch_without_compile),
+    so a wrong count only starts or skips that stage."""
+    python = f"py{sys.version_info[0]}{sys.version_info[1]}"
+    folder = numba_cache_dir()
+    return folder.is_dir() and len(list(folder.rglob(f"{WARM_KERNEL}-*.{python}.*.nbc"))) >= 2
+
+
 def holds_kernel(folder: Path, kernel: str = WARM_KERNEL) -> bool:
     """Whether the Numba cache files in `folder` (or below) include `kernel` compiled for this Python."""
     python = f"py{sys.version_info[0]}{sys.version_info[1]}"

@@ -21,6 +21,7 @@ from .scene_input import CameraInput, normalized_matrix
 
 VIEWPORT_GROUP = "viewport"  # the viewport's own trees and image (tree_cache.state_for)
 VIEWPORT_POLL_SECONDS = 0.005  # longest a draw waits for the worker
+VIEWPORT_STEP_SECONDS = 0.25  # a sampling step's length: a navigation's new job waits for the cancelled one's
 # Data-block types whose changes cannot change the preview's image: it shades no material or texture.
 IGNORED_UPDATES = frozenset(("MATERIAL", "TEXTURE", "IMAGE", "WORKSPACE", "SCREEN", "WINDOWMANAGER", "BRUSH",
                              "PALETTE", "TEXT"))
@@ -126,7 +127,7 @@ class ViewportSession:
         """A new job for this view and these settings; the one before is left to its worker call."""
         self._key, self._dirty, self.error, self.samples_shown = key, False, "", 0  # the old image stays meanwhile
         self.job = FrameJob(self.scene, lambda: self._depsgraph, config, view=view, group=VIEWPORT_GROUP,
-                            poll_seconds=VIEWPORT_POLL_SECONDS)
+                            poll_seconds=VIEWPORT_POLL_SECONDS, step_seconds=VIEWPORT_STEP_SECONDS)
 
     def _show_progress(self) -> None:
         """Take the job's image once it has more samples than the one shown."""

@@ -14,6 +14,10 @@ cache file under a temporary name and renames it, so an interrupted compile leav
 Disabling the add-on lets a running compile finish: it only fills the cache. KD_PREVIEW_WARMUP=0
 turns the warm-up off (then a first render compiles as before: pipeline.FrameJob).
 
+Once those kernels are cached, a second process of lower priority compiles the sampling kernel's
+packed version (AO packets in batches of 8+ samples, core/jit/first_frame.compile_packed_samples), which
+no render waits for: renders step in batches that large only once it is cached (pipeline.FrameJob).
+
 API for the UI and a render engine: start(), status() -> WarmupStatus (state, elapsed seconds,
 message; `.text` is the line to show), wait(cancel=None, timeout=None).
 """
@@ -33,6 +37,8 @@ from . import corelib
 NOT_STARTED, COMPILING, READY, FAILED = "not started", "compiling", "ready", "failed"
 SWITCH = "KD_PREVIEW_WARMUP"  # "0": no background compile
 TASK = "jit.first_frame:compile_first_frames"
+PACKED_TASK = "jit.first_frame:compile_packed_samples"
+PACKED_NICE = 10  # the packed stage's niceness (POSIX): a render running meanwhile keeps the cores
 POLL_SECONDS = 0.05
 
 
@@ -64,6 +70,8 @@ class _Warmup:
         self.started_at = 0.0
         self.ended_at: float | None = None
         self.state, self.message = NOT_STARTED, ""
+        self.packed: subprocess.Popen | None = None  # the packed stage (_start_packed_stage)
+        self.packed_wanted = False  # start(packed=True) asked for it (Blender's UI)
 
     def observe(self) -> WarmupStatus:
         if self.state == COMPILING:
@@ -71,6 +79,8 @@ class _Warmup:
             if code is not None:
                 self.ended_at = time.perf_counter()
                 self.state, self.message = (READY, "") if code == 0 else (FAILED, _failure(code, self.errors))
+                if code == 0 and self.packed_wanted:
+                    _start_packed_stage()
         end = time.perf_counter() if self.ended_at is None else self.ended_at
         return WarmupStatus(self.state, end - self.started_at if self.started_at else 0.0, self.message)
 
@@ -83,15 +93,24 @@ def status() -> WarmupStatus:
     return _warmup.observe()
 
 
-def start() -> WarmupStatus:
+def start(packed: bool = False) -> WarmupStatus:
     """Begin compiling the kernels in the background unless they are cached, a compile already runs or
     ran, or KD_PREVIEW_WARMUP is "0"; returns status(). Never raises: a warm-up that cannot start is
-    FAILED, and a render then compiles in its own process as it would without one."""
-    if _warmup.state in (COMPILING, READY) or os.environ.get(SWITCH, "1") == "0":
+    FAILED, and a render then compiles in its own process as it would without one. `packed`: then
+    the packed stage too, once they are ready (with Blender's UI only: a batch job or a test session
+    would end it unfinished, and a render never waits for it)."""
+    if os.environ.get(SWITCH, "1") == "0":
+        return status()
+    _warmup.packed_wanted = _warmup.packed_wanted or packed
+    if _warmup.state == READY and _warmup.packed_wanted:
+        _start_packed_stage()
+    if _warmup.state in (COMPILING, READY):
         return status()
     try:
         if corelib.cache_is_warm():
             _warmup.state, _warmup.message = READY, ""
+            if _warmup.packed_wanted:
+                _start_packed_stage()
             return status()
         _warmup.errors = tempfile.TemporaryFile()
         _warmup.process = _spawn(_warmup.errors)
@@ -102,18 +121,49 @@ def start() -> WarmupStatus:
     return status()
 
 
-def _spawn(errors) -> subprocess.Popen:
-    """The compile process: core/jit/helper_program.py running TASK, writing where this process's
+def _spawn(errors, task=TASK, low_priority=False) -> subprocess.Popen:
+    """The compile process: core/jit/helper_program.py running `task`, writing where this process's
     kernels will be read (corelib.numba_cache_dir), with this process's module path (Blender's
-    extension site-packages hold the bundled numba)."""
+    extension site-packages hold the bundled numba). `low_priority`: below normal priority (Windows) or
+    PACKED_NICE (POSIX, set before the process starts its threads and helper, which inherit it)."""
     cache = corelib.numba_cache_dir()
     cache.mkdir(parents=True, exist_ok=True)
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), KD_PREVIEW_HELPER_PARENT=str(os.getpid()),
                PYTHONPATH=os.pathsep.join(p for p in sys.path if p and os.path.isdir(p)))
     program = (corelib.CORE_FOLDER / "jit" / "helper_program.py").read_text(encoding="utf-8")
-    return subprocess.Popen([sys.executable, "-c", program, corelib.core_module_name(), str(corelib.CORE_FOLDER),
-                             "0", TASK], env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                            stderr=errors, creationflags=getattr(subprocess, "CREATE_NO_WINDOW", 0))
+    flags = getattr(subprocess, "CREATE_NO_WINDOW", 0)
+    if low_priority:
+        flags |= getattr(subprocess, "BELOW_NORMAL_PRIORITY_CLASS", 0)
+    process = subprocess.Popen([sys.executable, "-c", program, corelib.core_module_name(), str(corelib.CORE_FOLDER),
+                                "0", task], env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                               stderr=errors, creationflags=flags)
+    if low_priority and hasattr(os, "setpriority"):
+        try:
+            os.setpriority(os.PRIO_PROCESS, process.pid, PACKED_NICE)
+        except OSError:
+            pass  # it ran or ended already: it only compiles at normal priority
+    return process
+
+
+def _start_packed_stage() -> None:
+    """Start the packed stage once the first frames' kernels are cached, unless it ran in this process
+    or the cache already holds the packed version (corelib.packed_version_cached). Never raises: without
+    it, renders keep their batches under 8 samples (core PreviewRender.batch_without_compile)."""
+    if _warmup.packed is not None or corelib.packed_version_cached():
+        return
+    try:
+        _warmup.packed = _spawn_packed_stage()
+    except (OSError, ValueError, subprocess.SubprocessError):
+        pass
+
+
+def _spawn_packed_stage() -> subprocess.Popen:
+    return _spawn(subprocess.DEVNULL, PACKED_TASK, low_priority=True)
+
+
+def packed_stage_running() -> bool:
+    """Whether the packed stage's process runs now."""
+    return _warmup.packed is not None and _warmup.packed.poll() is None
 
 
 def _failure(code: int, errors) -> str:
@@ -147,12 +197,15 @@ def wait(cancel=None, timeout: float | None = None) -> WarmupStatus:
 
 
 def stop() -> None:
-    """End a running compile (this process is exiting); what it saved stays valid."""
+    """End a running compile, either stage (this process is exiting); what it saved stays valid."""
     process = _warmup.process
     if process is not None and process.poll() is None:
         process.kill()
         process.wait()
         _warmup.state, _warmup.message, _warmup.ended_at = FAILED, "stopped", time.perf_counter()
+    if packed_stage_running():
+        _warmup.packed.kill()
+        _warmup.packed.wait()
 
 
 atexit.register(stop)

@@ -32,6 +32,9 @@ from .scene_records import ExtractedScene
 
 KERNEL_LOCK = threading.Lock()
 POLL_SECONDS = 0.05  # longest a tick waits for the worker: the bound on cancel latency
+STEP_SECONDS = 1.0  # what a sampling step's batch grows toward: a cancelled run's step runs on (holding
+# the kernel lock the next run waits for), so the viewport asks for shorter ones (engine_viewport.py)
+STEP_GROWTH = 16  # a batch at most this many times the last one's samples (a rate measured on few samples)
 COMPILING_STATUS = "Compiling kernels (first run)…"
 LOADING_STATUS = "Loading compiled kernels (first run)…"
 WARMUP_WAIT_NOTE = ": the render starts when they are ready"  # after kernel_warmup's "compiling kernels …"
@@ -131,20 +134,23 @@ class FrameJob:
     """One frame of one scene, driven by `tick()` until `done`.
 
     The first ticks read the scene (once no cancelled run's kernel call still runs:
-    background.SCENE_READ_WAIT) and build the tree on the worker; later ticks add one sample per
-    unconverged pixel. `depsgraph`: the evaluated depsgraph, or a function returning it when read.
+    background.SCENE_READ_WAIT) and build the tree on the worker; later ticks add samples to the
+    unconverged pixels, in batches growing toward `step_seconds` a step (_next_batch). `depsgraph`: the
+    evaluated depsgraph, or a function returning it when read.
 
     A render engine sets the rest: `view` the frame's size and camera where they are not the scene
     camera's at the panel's resolution (a final render's region, the viewport's view), `group` and
     `lane` the trees and last image it continues from (tree_cache.state_for), `poll_seconds` the
-    longest a tick waits for the worker.
+    longest a tick waits for the worker, `step_seconds` what a sampling step's batch grows toward.
     """
 
     def __init__(self, scene, depsgraph, config: RenderConfig, *, view: FrameView | None = None,
-                 group: str = "", lane: str = "", poll_seconds: float | None = None):
+                 group: str = "", lane: str = "", poll_seconds: float | None = None,
+                 step_seconds: float | None = None):
         self.scene, self.depsgraph, self.config = scene, depsgraph, config
         self.view, self.group, self.lane = view, group, lane
         self.poll_seconds = POLL_SECONDS if poll_seconds is None else poll_seconds
+        self.step_seconds = STEP_SECONDS if step_seconds is None else step_seconds
         self.renderer = None
         self._timings = {"extract_ms": 0.0, "build_ms": 0.0, "trace_ms": 0.0, "other_ms": 0.0}
         self._info: dict = {}
@@ -159,6 +165,7 @@ class FrameJob:
         self._waiting_since = None  # when the first tick found the kernels' compile running
         self.mode = None  # the mode this frame renders in: the setting, "auto" resolved (_resolved_mode)
         self._depth = None  # the finished image's depth_image
+        self._last_step = None  # (samples, ms) of the last sampling step, for the next one's batch
 
     # -- state the operators show ------------------------------------------
 
@@ -433,14 +440,29 @@ class FrameJob:
             KERNEL_LOCK.release()
 
     def step(self) -> None:
-        """One more sample per unconverged pixel, on the worker."""
-        self._pending = BackgroundCall(KERNEL_LOCK, self._step_once)
+        """More samples per unconverged pixel (_next_batch), on the worker."""
+        self._pending = BackgroundCall(KERNEL_LOCK, self._step_once, self._next_batch())
 
-    def _step_once(self) -> None:
+    def _next_batch(self) -> int:
+        """The next step's samples: one at first, then as many as the last step's rate fits in
+        step_seconds, at most STEP_GROWTH times its samples and never so many that the sampling kernel's
+        packed version would compile (core PreviewRender.batch_without_compile: it waits until the
+        warm-up's packed stage cached it, kernel_warmup.py). Batches do not change the image, and fewer
+        kernel calls with AO packets are faster (docs/choices.md#the-add-on-steps-in-growing-batches)."""
+        if self._last_step is None:
+            return 1
+        samples, ms = self._last_step
+        left = self.renderer.target_samples - self.renderer.samples_done
+        fit = int(self.step_seconds * 1e3 * samples / max(ms, 1e-3))
+        return self.renderer.batch_without_compile(max(1, min(left, STEP_GROWTH * samples, fit)))
+
+    def _step_once(self, samples: int) -> None:
         global _kernels_ready
         t0 = time.perf_counter()
-        self.renderer.step(1)
-        self._timings["trace_ms"] += _ms_since(t0)
+        added = self.renderer.step(samples)
+        ms = _ms_since(t0)
+        self._timings["trace_ms"] += ms
+        self._last_step = (max(1, added), ms)
         _kernels_ready = True
 
     def finish(self) -> None:

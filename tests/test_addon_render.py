@@ -389,3 +389,50 @@ def test_preview_image_is_resized_in_place_and_shown_in_an_image_editor(addon):
     assert bpy.data.images[IMAGE_NAME] == image and tuple(image.size) == (32, 16)
     img = preview_pixels()
     assert (img[:, :16, 3] == 1.0).all() and (img[:, 16:, 3] == 0.0).all()
+
+
+def test_sampling_steps_grow_toward_the_step_time_and_stop_short_of_a_compile():
+    """FrameJob._next_batch: one sample first, then what the last step's rate fits in its step_seconds,
+    at most STEP_GROWTH times its samples, never past the target, and as core's batch_without_compile
+    cuts it (here: as while the packed version is not cached, under 8)."""
+    from types import SimpleNamespace
+
+    asked = []
+    job = pipeline.FrameJob(None, None, None, step_seconds=0.25)
+    job.renderer = SimpleNamespace(target_samples=100, samples_done=0,
+                                   batch_without_compile=lambda n: asked.append(n) or min(n, 7))
+    assert job._next_batch() == 1
+    job._last_step = (1, 5.0)  # 5 ms a sample: 50 would fit in 0.25 s, STEP_GROWTH allows 16
+    assert job._next_batch() == 7 and asked == [pipeline.STEP_GROWTH]
+    job._last_step = (7, 70.0)  # 10 ms a sample: 25 fit
+    assert job._next_batch() == 7 and asked[-1] == 25
+    job._last_step, job.renderer.samples_done = (7, 700.0), 90  # 100 ms a sample: 2 fit
+    assert job._next_batch() == 2 and asked[-1] == 2
+    job._last_step = (7, 1e-9)  # a step too quick to time: the target's remaining 10
+    assert job._next_batch() == 7 and asked[-1] == 10
+    job._last_step = (1, 5000.0)  # slower than step_seconds: still one sample
+    assert job._next_batch() == 1
+    assert pipeline.FrameJob(None, None, None).step_seconds == pipeline.STEP_SECONDS
+
+
+def test_a_frame_steps_in_growing_batches_with_the_one_sample_images(addon, monkeypatch):
+    """The batches a FrameJob asks the renderer for (one, then more) give the image of one-sample steps
+    (core: any batching gives the same sums)."""
+    from kd_addon import corelib, tree_cache
+
+    scene = half_plane_scene()
+    scene.kd_preview.samples = 12
+    steps = {}  # renderer -> its steps (a process's first frame also runs the made-up frames that load kernels)
+    preview_render = corelib.load_core().PreviewRender
+    original = preview_render.step
+    monkeypatch.setattr(preview_render, "step", lambda self, n=1: steps.setdefault(self, []).append(n) or
+                        original(self, n))
+    batched = pipeline.render_frame(scene, bpy.context.evaluated_depsgraph_get(), make_config(scene.kd_preview))
+    frame_steps = list(steps.values())[-1]
+    assert frame_steps[0] == 1 and len(frame_steps) < 12 and sum(frame_steps) == 12
+    monkeypatch.setattr(pipeline, "STEP_GROWTH", 0)  # then max(1, ...): every step one sample
+    steps.clear()
+    tree_cache.clear()  # no kept image
+    single = pipeline.render_frame(scene, bpy.context.evaluated_depsgraph_get(), make_config(scene.kd_preview))
+    assert list(steps.values()) == [[1] * 12]
+    np.testing.assert_array_equal(batched.image, single.image)

@@ -3,6 +3,7 @@ failure's message, the compile process as the add-on starts it, and a render wai
 
 from __future__ import annotations
 
+import os
 import shutil
 import subprocess
 import sys
@@ -37,6 +38,91 @@ def test_a_warm_cache_is_ready_without_a_process(warmup, monkeypatch):
     monkeypatch.setattr(kernel_warmup, "_spawn", lambda errors: pytest.fail("a process was started"))
     now = warmup.start()
     assert (now.state, now.elapsed, now.text) == (warmup.READY, 0.0, "")
+
+
+def record_packed_stage(monkeypatch) -> list:
+    """The packed stage's starts, recorded instead of run (each a process that sleeps 60 s)."""
+    started = []
+
+    def spawn():
+        started.append(subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"]))
+        return started[-1]
+    monkeypatch.setattr(kernel_warmup, "_spawn_packed_stage", spawn)
+    return started
+
+
+def test_with_the_ui_a_warm_cache_starts_the_packed_stage_once(warmup, monkeypatch):
+    """Blender's UI (start(packed=True)): the first frames' kernels cached, the sampling kernel's packed
+    version not yet: only the packed stage starts, once, and the state is READY (no render waits for it)."""
+    monkeypatch.setattr(corelib, "cache_is_warm", lambda kernel=corelib.WARM_KERNEL: True)
+    monkeypatch.setattr(corelib, "packed_version_cached", lambda: False)
+    monkeypatch.setattr(kernel_warmup, "_spawn", lambda errors: pytest.fail("the first stage was started"))
+    started = record_packed_stage(monkeypatch)
+    assert warmup.start(packed=True).state == warmup.READY
+    assert warmup.start(packed=True).state == warmup.READY and len(started) == 1
+    assert warmup.packed_stage_running() and warmup.status().text == ""
+    warmup.stop()
+    assert not warmup.packed_stage_running() and started[0].poll() is not None
+
+
+def test_the_packed_stage_follows_a_successful_first_stage_only(warmup, monkeypatch):
+    monkeypatch.setattr(corelib, "packed_version_cached", lambda: False)
+    started = record_packed_stage(monkeypatch)
+    fake_compile(monkeypatch, "import time; time.sleep(1)")
+    warmup.start(packed=True)
+    assert started == []  # not beside the first stage: the first render waits for that one
+    assert warmup.wait().state == warmup.READY and len(started) == 1
+    monkeypatch.setattr(kernel_warmup, "_warmup", kernel_warmup._Warmup())
+    fake_compile(monkeypatch, "raise SystemExit('the compile broke')")
+    warmup.start(packed=True)
+    assert warmup.wait().state == warmup.FAILED and len(started) == 1
+
+
+def test_without_the_ui_or_with_the_packed_version_cached_no_packed_stage(warmup, monkeypatch):
+    """A render's own start() (a batch job, a test session: it would end the stage unfinished) and a cache
+    that holds the packed version start no packed stage."""
+    monkeypatch.setattr(corelib, "cache_is_warm", lambda kernel=corelib.WARM_KERNEL: True)
+    monkeypatch.setattr(corelib, "packed_version_cached", lambda: False)
+    started = record_packed_stage(monkeypatch)
+    assert warmup.start().state == warmup.READY and started == []
+    monkeypatch.setattr(corelib, "packed_version_cached", lambda: True)
+    assert warmup.start(packed=True).state == warmup.READY and started == []
+
+
+def test_the_packed_version_counts_as_cached_from_a_second_sampling_kernel_file(tmp_path, monkeypatch):
+    monkeypatch.setattr(corelib, "numba_cache_dir", lambda package=None: tmp_path)
+    python = f"py{sys.version_info[0]}{sys.version_info[1]}"
+    kernel = tmp_path / "render"
+    kernel.mkdir()
+    (kernel / f"{corelib.WARM_KERNEL}-76.{python}.nbi").write_bytes(b"")
+    (kernel / f"{corelib.WARM_KERNEL}-76.{python}.1.nbc").write_bytes(b"")
+    (kernel / f"{corelib.WARM_KERNEL}-76.py10.2.nbc").write_bytes(b"")  # another Python's
+    assert not corelib.packed_version_cached()
+    (kernel / f"{corelib.WARM_KERNEL}-76.{python}.2.nbc").write_bytes(b"")
+    assert corelib.packed_version_cached()
+
+
+@pytest.mark.skipif(not hasattr(os, "setpriority"), reason="POSIX niceness")
+def test_the_packed_stage_runs_at_lower_priority(warmup, monkeypatch, tmp_path):
+    """The real process: core/jit/helper_program.py running PACKED_TASK (here a stand-in that records its
+    niceness), PACKED_NICE or the parent's if that is lower already."""
+    core = tmp_path / "kd_stand_in" / "core"
+    (core / "jit").mkdir(parents=True)
+    for folder in (core, core / "jit"):
+        (folder / "__init__.py").write_text("")
+    (core / "jit" / "first_frame.py").write_text(
+        "import os, sys\nfrom pathlib import Path\n\ndef compile_packed_samples():\n"
+        "    Path(sys.argv[2], 'nice.txt').write_text(str(os.nice(0)))\n")
+    shutil.copy(REAL_PROGRAM, core / "jit" / "helper_program.py")
+    monkeypatch.setattr(corelib, "CORE_FOLDER", core)
+    monkeypatch.setattr(corelib, "core_module_name", lambda package=None: "kd_stand_in.core")
+    monkeypatch.setattr(corelib, "numba_cache_dir", lambda package=None: tmp_path / "cache")
+    process = kernel_warmup._spawn_packed_stage()
+    try:
+        assert process.wait(60) == 0
+    finally:
+        process.kill()
+    assert int((core / "nice.txt").read_text()) == max(os.nice(0), warmup.PACKED_NICE)
 
 
 def test_switched_off_it_starts_nothing(warmup, monkeypatch):
@@ -203,10 +289,10 @@ def compiled_versions() -> dict:
 
 @pytest.mark.slow
 def test_after_the_warm_up_the_factory_scenes_first_frame_compiles_nothing(monkeypatch):
-    """The warm-up's made-up frames (core/jit/first_frame.py) run every kernel, with every argument type,
-    that a first render of the factory scene (one cube, one point light, the default settings) runs:
-    after them, in this process, Render adds no compiled version to any kernel, so in Blender the frame
-    only loads kernels from the cache the warm-up filled."""
+    """The warm-up's made-up frames (core/jit/first_frame.py, both stages) run every kernel, with every
+    argument type, that a first render of the factory scene (one cube, one point light, the default
+    settings) runs: after them, in this process, Render adds no compiled version to any kernel, so in
+    Blender the frame only loads kernels from the cache the warm-up filled."""
     import bpy
 
     import kd_addon
@@ -215,6 +301,7 @@ def test_after_the_warm_up_the_factory_scenes_first_frame_compiles_nothing(monke
 
     monkeypatch.setenv(parallel_compile.HELPER_SWITCH, "0")  # the helper's side runs here too
     first_frame.compile_first_frames()
+    first_frame.compile_packed_samples()  # the packed stage: the batches a render steps in once it is cached
     before = compiled_versions()
     bpy.ops.wm.read_homefile(use_factory_startup=True)
     kd_addon.register()
