@@ -1,15 +1,17 @@
 """The add-on's sampling steps: growing batches (pipeline.FrameJob._next_batch) against one sample a step.
 
 A frame of one object (suzanne-251k's .blend: one mesh, so the sampling kernel's AO packets apply to
-batches of 8+ samples) rendered through the add-on's pipeline (pipeline.render_frame, as the panel, F12
-and the command line render), mode ao, 16 samples by default. Per round, alternating: (a) growing
+batches of 8+ samples), or with --demo frame 1 of the built-in demo scene (17 objects: no packets, only
+fewer kernel calls), rendered through the add-on's pipeline (pipeline.render_frame, as the panel, F12
+and the command line render), mode ao and 16 samples by default. Per round, alternating: (a) growing
 batches, (b) every step one sample (STEP_GROWTH 0), the add-on's stepping before batches. Each run
 changes the AO distance by a hair so that the frame is traced anew on the kept tree. Before the rounds,
 the warm-up's packed stage (core/jit/first_frame.compile_packed_samples) makes sure the packed version
 is loaded, as the add-on's background compile leaves it. Prints medians of the frames' trace and total
 times, their ratio (b) / (a), and the steps each took; writes benchmarks/out/bench_addon_steps.json.
 
-    PYTHONPATH=$PWD .venv/bin/python benchmarks/bench_addon_steps.py [--size 480x360] [--samples 16] [--rounds 7]
+    PYTHONPATH=$PWD .venv/bin/python benchmarks/bench_addon_steps.py [--demo] [--size 480x360] [--samples 16]
+                                                                     [--mode ao] [--rounds 7]
 """
 
 from __future__ import annotations
@@ -29,24 +31,30 @@ import bpy  # noqa: E402
 import kd_addon  # noqa: E402
 from kd_addon import corelib, pipeline  # noqa: E402
 from kd_addon.config import make_config  # noqa: E402
+from kd_addon.demo_scene import build_demo_scene  # noqa: E402
 import results  # noqa: E402
 from scenes import load_scene  # noqa: E402
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--scene", default="suzanne-251k")
+    parser.add_argument("--scene", default="suzanne-251k", help="a benchmark scene's .blend (scenes.py)")
+    parser.add_argument("--demo", action="store_true", help="the built-in demo scene instead")
     parser.add_argument("--size", default="480x360")
     parser.add_argument("--samples", type=int, default=16)
+    parser.add_argument("--mode", default="ao", choices=["ao", "shadow", "ao+shadow"])
     parser.add_argument("--rounds", type=int, default=7)
     args = parser.parse_args()
     width, height = (int(v) for v in args.size.split("x"))
-    bpy.ops.wm.open_mainfile(filepath=str(load_scene(args.scene).blend_path))
+    if args.demo:
+        scene = build_demo_scene(bpy.context.scene)
+    else:
+        bpy.ops.wm.open_mainfile(filepath=str(load_scene(args.scene).blend_path))
+        scene = bpy.context.scene
     kd_addon.register()
-    scene = bpy.context.scene
     scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = width, height, 100
     settings = scene.kd_preview
-    settings.resolution_percentage, settings.mode, settings.samples, settings.ao_distance = 100, "ao", args.samples, 1.0
+    settings.resolution_percentage, settings.mode, settings.samples, settings.ao_distance = 100, args.mode, args.samples, 1.0
     t0 = time.perf_counter()
     core = corelib.load_core()
     importlib.import_module(core.__name__ + ".jit.first_frame").compile_packed_samples()
@@ -79,8 +87,9 @@ def main() -> None:
               f"steps {taken[name]}")
     a, b = medians["growing batches"], medians["one sample a step"]
     print(f"one sample a step / growing batches: trace {b['trace'] / a['trace']:.3f}, total {b['total'] / a['total']:.3f}")
-    results.write("bench_addon_steps", {
-        "scene": args.scene, "size": [width, height], "samples": args.samples, "mode": "ao",
+    name = "bench_addon_steps" + ("_demo" if args.demo else "") + ("" if args.mode == "ao" else "_" + args.mode.replace("+", "_"))
+    results.write(name, {
+        "scene": "demo" if args.demo else args.scene, "size": [width, height], "samples": args.samples, "mode": args.mode,
         "rounds": args.rounds, "steps": taken,
         "trace_ms": {name: results.figure(t["trace"], unit="ms") for name, t in times.items()},
         "total_ms": {name: results.figure(t["total"], unit="ms") for name, t in times.items()},
