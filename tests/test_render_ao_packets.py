@@ -1,15 +1,17 @@
-"""The renderer's AO rays in packets (core.render.ao_packets): a scene of one instance, which the packets
-take, renders the image, sample counts and ray counts of the same scene with a second instance far
-away that no ray reaches, which the packets do not take (every AO ray traced alone through the
-two-level traversal). Cases: a soup, a lattice (triangles in split planes, points on them), a rotated
-and scaled instance far from the origin, AO and AO + shadows, a chunk of samples and a short one reached
-in one step or several, adaptive sampling, a lazy tree."""
+"""The renderer's AO rays in packets (core.render.ao_packets): a render in batches of PACKED_BATCH or
+more samples, which trace AO rays in packets, gives the image, sample counts, ray counts and memo bits of
+the same render in steps of one sample, whose kernel traces every AO ray alone through the two-level
+traversal. Scenes: one instance, the same with a second one far away, and several instances that occlude
+one another (mirrored, rotated, one that shadow rays do not see, one out of reach). Cases: a soup, a
+lattice (triangles in split planes, points on them), a rotated and scaled instance far from the origin,
+AO and AO + shadows, a chunk of samples and a short one reached in one step or several, adaptive
+sampling, a lazy tree."""
 import numpy as np
 import pytest
 
 import core
-from core.scene.ray_visibility import SHADOW_RAYS
-from core.scene.scene_packets import flat_instance
+from core.render.ao_packets import MAX_PACKET_INSTANCES, packets_take
+from core.scene.ray_visibility import CAMERA_RAYS, SHADOW_RAYS
 from core.scene.two_level import build_two_level
 from tests.meshes import lattice, random_soup
 from tests.render_scenes import look_at
@@ -18,15 +20,15 @@ FAR = 1e4  # the second instance's distance: beyond every AO ray
 
 
 def with_far_instance(tree, matrix):
-    """The scene [tree at matrix] and the same with a small soup FAR away (not one flat instance)."""
+    """The scene [tree at matrix] and the same with a small soup FAR away (two instances, one beyond every
+    AO ray's reach); the packets take both."""
     far = core.build_kdtree(random_soup(np.random.default_rng(1), 20))
     away = np.eye(4)
     away[:3, 3] = matrix[:3, 3] + FAR
-    packed = build_two_level([tree], [0], matrix[None])
-    single = build_two_level([tree, far], [0, 1], np.stack([matrix, away]))
-    assert flat_instance.py_func(packed.arrays, SHADOW_RAYS) == 0  # the packets' rule takes the first only
-    assert flat_instance.py_func(single.arrays, SHADOW_RAYS) == -1
-    return packed, single
+    one = build_two_level([tree], [0], matrix[None])
+    two = build_two_level([tree, far], [0, 1], np.stack([matrix, away]))
+    assert packets_take.py_func(one.arrays) and packets_take.py_func(two.arrays)
+    return one, two
 
 
 def rendered(scene, camera, steps, **settings):
@@ -36,8 +38,9 @@ def rendered(scene, camera, steps, **settings):
     return render
 
 
-def assert_same_render(packed, single, camera, steps, **settings):
-    a, b = rendered(packed, camera, steps, **settings), rendered(single, camera, steps, **settings)
+def assert_same_render(scene, camera, steps, **settings):
+    """The render in `steps` equals the one in steps of one sample (no packets); returns its image."""
+    a, b = rendered(scene, camera, steps, **settings), rendered(scene, camera, (1,) * sum(steps), **settings)
     np.testing.assert_array_equal(a.image(), b.image())
     np.testing.assert_array_equal(a.sample_counts(), b.sample_counts())
     np.testing.assert_array_equal(a.memo, b.memo)  # every ray's visibility bit, for the next frame
@@ -58,9 +61,10 @@ def test_soup_renders_as_single_rays(mode, steps):
     tree = core.build_kdtree(random_soup(np.random.default_rng(2), 3000, size=0.2))
     packed, single = with_far_instance(tree, np.eye(4))
     lights = [core.Light.point((2.0, -3.0, 4.0)), core.Light.area(_placed((0.0, 0.0, 3.0)), size=1.0)]
-    image = assert_same_render(packed, single, look_at((2.5, -3.0, 1.5), (0.0, 0.0, 0.0)), steps, mode=mode,
-                               samples=70, ao_distance=0.8, lights=lights if mode != "ao" else ())
-    assert occluded_share(image) > 0.3
+    for scene in (packed, single):
+        image = assert_same_render(scene, look_at((2.5, -3.0, 1.5), (0.0, 0.0, 0.0)), steps, mode=mode,
+                                   samples=70, ao_distance=0.8, lights=lights if mode != "ao" else ())
+        assert occluded_share(image) > 0.3
 
 
 @pytest.mark.parametrize("builder, offset", [("binned", 0.0), ("median", 0.0), ("binned", 2.0 ** 20)])
@@ -70,8 +74,9 @@ def test_lattice_renders_as_single_rays(builder, offset):
     tree = core.build_kdtree(lattice(4), builder=builder)
     packed, single = with_far_instance(tree, _placed((offset, offset, offset)))
     camera = look_at(np.array([2.5, 2.45, 2.4]) + offset, np.array([2.0, 3.0, 2.0]) + offset, fov=1.6)
-    image = assert_same_render(packed, single, camera, (16,), samples=16, ao_distance=1.0)
-    assert occluded_share(image) > 0.3
+    for scene in (packed, single):
+        image = assert_same_render(scene, camera, (16,), samples=16, ao_distance=1.0)
+        assert occluded_share(image) > 0.3
 
 
 def test_transformed_instance_renders_as_single_rays():
@@ -85,19 +90,42 @@ def test_transformed_instance_renders_as_single_rays():
     m[:3, 3] = offset
     packed, single = with_far_instance(core.build_kdtree(verts_tris), m)
     camera = look_at(np.array([5.0, -6.0, 3.0]) + offset, np.full(3, offset))
-    image = assert_same_render(packed, single, camera, (9, 24), samples=33, ao_distance=1.2)
-    assert occluded_share(image) > 0.3
+    for scene in (packed, single):
+        image = assert_same_render(scene, camera, (9, 24), samples=33, ao_distance=1.2)
+        assert occluded_share(image) > 0.3
 
 
 def test_adaptive_sampling_renders_as_single_rays():
     tree = core.build_kdtree(random_soup(np.random.default_rng(4), 2000, size=0.2))
     packed, single = with_far_instance(tree, np.eye(4))
     camera = look_at((2.5, -3.0, 1.5), (0.0, 0.0, 0.0))
-    assert_same_render(packed, single, camera, (128,), samples=128, ao_distance=0.8, error_target=0.05,
-                       min_samples=8)
+    assert_same_render(packed, camera, (128,), samples=128, ao_distance=0.8, error_target=0.05, min_samples=8)
     counts = rendered(packed, camera, (128,), samples=128, ao_distance=0.8, error_target=0.05,
                       min_samples=8).sample_counts()
     assert (counts[counts > 0] < 128).any()  # some pixels stopped early
+
+
+def test_several_instances_render_as_single_rays():
+    """Instances whose AO rays meet one another: a soup, a plate under it, a mirrored and rotated copy of
+    the soup beside it, a copy that shadow rays do not see (its occlusion must not count), one copy out of
+    every ray's reach; and the same scene far from the origin."""
+    soup = core.build_kdtree(random_soup(np.random.default_rng(9), 1500, size=0.2))
+    plate = core.build_kdtree(np.array([[[-3, -3, -0.7], [3, -3, -0.7], [3, 3, -0.7]],
+                                        [[-3, -3, -0.7], [3, 3, -0.7], [-3, 3, -0.7]]], np.float32))
+    mirrored = _placed((1.1, 0.3, 0.0))
+    c, s_ = np.cos(0.7), np.sin(0.7)
+    mirrored[:3, :3] = np.array([[c, -s_, 0], [s_, c, 0], [0, 0, 1]]) @ np.diag([-1.0, 1.0, 1.3])
+    for offset in (0.0, 2.0 ** 18):
+        matrices = np.stack([_placed((offset, offset, offset)), _placed((offset, offset, offset)),
+                             mirrored + np.pad(np.full((3, 1), offset), ((0, 1), (3, 0))),
+                             _placed((offset - 1.1, offset, offset)), _placed((offset + FAR, offset, offset))])
+        visibility = np.array([SHADOW_RAYS | CAMERA_RAYS] * 3 + [CAMERA_RAYS, SHADOW_RAYS | CAMERA_RAYS], np.uint8)
+        scene = build_two_level([soup, plate], [0, 1, 0, 0, 0], matrices, visibility=visibility)
+        camera = look_at(np.array([0.5, -4.0, 2.0]) + offset, np.full(3, offset), fov=1.2)
+        image = assert_same_render(scene, camera, (24,), samples=24, ao_distance=0.9)
+        assert occluded_share(image) > 0.3
+        unseen = build_two_level([soup, plate], [0, 1, 0, 0, 0], matrices)  # the copy at x - 1.1 occludes now
+        assert not np.array_equal(image, rendered(unseen, camera, (24,), samples=24, ao_distance=0.9).image())
 
 
 def test_lazy_tree_renders_as_the_eager_tree():
@@ -123,10 +151,11 @@ def _placed(position):
     return m
 
 
-def test_only_batches_of_eight_or_more_on_one_instance_take_the_packed_kernel(monkeypatch):
+def test_only_batches_of_eight_or_more_on_few_instances_take_the_packed_kernel(monkeypatch):
     """The sampling kernel's `packed` argument: None (the version without packets, the only one a
     progressive renderer compiles) for steps under PACKED_BATCH samples, shadow-only renders and scenes
-    the packets do not take; True for a batch of 8 or more AO samples on one instance."""
+    the packets do not take (more than MAX_PACKET_INSTANCES instances); True for a batch of 8 or more
+    AO samples on a scene of a few instances."""
     import core.render.preview_render as preview_render
 
     calls = []
@@ -140,10 +169,13 @@ def test_only_batches_of_eight_or_more_on_one_instance_take_the_packed_kernel(mo
     tree = core.build_kdtree(random_soup(np.random.default_rng(6), 500, size=0.2))
     packed, single = with_far_instance(tree, np.eye(4))
     camera = look_at((2.5, -3.0, 1.5), (0.0, 0.0, 0.0))
+    many = build_two_level([tree], [0] * (MAX_PACKET_INSTANCES + 1),
+                           np.stack([_placed((3.0 * k, 0.0, 0.0)) for k in range(MAX_PACKET_INSTANCES + 1)]))
     cases = [(packed, "ao", (1, 2, 4, 8), [None, None, None, True]),
              (packed, "ao+shadow", (7, 9), [None, True]),
              (packed, "shadow", (16,), [None]),
-             (single, "ao", (16,), [None])]
+             (single, "ao", (16,), [True]),
+             (many, "ao", (16,), [None])]
     for scene, mode, steps, expected in cases:
         calls.clear()
         rendered(scene, camera, steps, mode=mode, samples=sum(steps), ao_distance=0.8,
@@ -152,14 +184,16 @@ def test_only_batches_of_eight_or_more_on_one_instance_take_the_packed_kernel(mo
 
 
 def test_a_batch_that_would_compile_the_packed_version_is_cut_below_it(monkeypatch):
-    """PreviewRender.batch_without_compile: a batch that would take the packed kernel (8+ AO samples, one
-    instance) is cut to PACKED_BATCH - 1 while that version is neither loaded nor cached; other batches
+    """PreviewRender.batch_without_compile: a batch that would take the packed kernel (8+ AO samples, few
+    instances) is cut to PACKED_BATCH - 1 while that version is neither loaded nor cached; other batches
     and scenes keep their size. A batch so cut gives the image of the batch asked for."""
     import core.render.preview_render as preview_render
     from core.render.render_kernels import PACKED_BATCH
 
     tree = core.build_kdtree(random_soup(np.random.default_rng(7), 500, size=0.2))
-    packed, single = with_far_instance(tree, np.eye(4))
+    packed, _ = with_far_instance(tree, np.eye(4))
+    single = build_two_level([tree], [0] * (MAX_PACKET_INSTANCES + 1),
+                             np.stack([_placed((3.0 * k, 0.0, 0.0)) for k in range(MAX_PACKET_INSTANCES + 1)]))
     camera = look_at((2.5, -3.0, 1.5), (0.0, 0.0, 0.0))
     light = [core.Light.point((2.0, -3.0, 4.0))]
     for ready, expected in ((False, PACKED_BATCH - 1), (True, 16)):

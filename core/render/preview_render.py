@@ -25,11 +25,12 @@ from .lights import DELTA, NO_SHADOW
 from ..memory import check_render_memory
 from .pixel_reuse import PixelState, prepared_boxes, segments_touch, settings_key, surface_rays_touch
 from ..scene.ray_visibility import CAMERA_RAYS, HOLDOUT, SHADOW_RAYS
+from .ao_packets import packets_take
 from .render_kernels import (MEMO_BITS, MODES, PACKED_BATCH, PixelFrames, PixelSums, RayMemo, SampleBatch, add_samples,
                              assemble_image, hard_shadow_rays, packed_version_ready, surface_frames)
 from .render_options import RenderOptions, check_mode_and_samples, packed_lights
 from .sampling import SAMPLERS, SOBOL_DIM1
-from ..scene.scene_packets import flat_instance, occluded_in_packets, packets_apply, trace_camera_packets
+from ..scene.scene_packets import occluded_in_packets, packets_apply, trace_camera_packets
 from ..trace.packet_traversal import L
 from ..scene.scene_queries import trace_valid_rays
 from ..jit.threads import thread_count
@@ -238,10 +239,10 @@ class PreviewRender:
 
     def _ao_packets(self, batch):
         """True when this batch's AO rays go in packets (ao_packets.py: AO wanted, a batch of at least
-        PACKED_BATCH samples, a scene of one instance the rays see), else None: the sampling kernel's
-        version without packets, the only one a renderer stepping one sample at a time compiles."""
-        flat = flat_instance.py_func(self.scene.arrays, SHADOW_RAYS) >= 0
-        return True if self.mode != "shadow" and batch >= PACKED_BATCH and flat else None
+        PACKED_BATCH samples, a scene of at most MAX_PACKET_INSTANCES instances), else None: the sampling
+        kernel's version without packets, the only one a renderer stepping one sample at a time compiles."""
+        taken = packets_take.py_func(self.scene.arrays)
+        return True if self.mode != "shadow" and batch >= PACKED_BATCH and taken else None
 
     def batch_without_compile(self, samples):
         """`samples`, or PACKED_BATCH - 1 when a step of that many would run the sampling kernel's packed
