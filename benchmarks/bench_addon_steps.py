@@ -1,14 +1,15 @@
 """The add-on's sampling steps: growing batches (pipeline.FrameJob._next_batch) against one sample a step.
 
-A frame of one object (suzanne-251k's .blend: one mesh, so the sampling kernel's AO packets apply to
-batches of 8+ samples), or with --demo frame 1 of the built-in demo scene (17 objects: no packets, only
-fewer kernel calls), rendered through the add-on's pipeline (pipeline.render_frame, as the panel, F12
-and the command line render), mode ao and 16 samples by default. Per round, alternating: (a) growing
-batches, (b) every step one sample (STEP_GROWTH 0), the add-on's stepping before batches. Each run
+A frame of one object (suzanne-251k's .blend: one mesh), or with --demo frame 1 of the built-in demo
+scene (17 objects in 16 instances), rendered through the add-on's pipeline (pipeline.render_frame, as
+the panel, F12 and the command line render), mode ao and 16 samples by default; the sampling kernel's AO
+packets apply to batches of 8+ samples on both. Per round, alternating: (a) growing batches, (b) every
+step one sample (STEP_GROWTH 0), the add-on's stepping before batches, (c) growing batches without AO
+packets (the sampling kernel's other version), which tells the packets' share. Each run
 changes the AO distance by a hair so that the frame is traced anew on the kept tree. Before the rounds,
 the warm-up's packed stage (core/jit/first_frame.compile_packed_samples) makes sure the packed version
 is loaded, as the add-on's background compile leaves it. Prints medians of the frames' trace and total
-times, their ratio (b) / (a), and the steps each took; writes benchmarks/out/bench_addon_steps.json.
+times, the ratios (b) / (a) and (c) / (a), and the steps each took; writes benchmarks/out/bench_addon_steps.json.
 
     PYTHONPATH=$PWD .venv/bin/python benchmarks/bench_addon_steps.py [--demo] [--size 480x360] [--samples 16]
                                                                      [--mode ao] [--rounds 7]
@@ -63,14 +64,15 @@ def main() -> None:
     preview_render = core.PreviewRender
     step = preview_render.step
     preview_render.step = lambda self, n=1: steps.setdefault(self, []).append(n) or step(self, n)
-    growth = pipeline.STEP_GROWTH
-    ways = {"growing batches": growth, "one sample a step": 0}
+    growth, packets = pipeline.STEP_GROWTH, preview_render._ao_packets
+    ways = {"growing batches": growth, "one sample a step": 0, "growing batches, no AO packets": growth}
     times = {name: {"trace": [], "total": []} for name in ways}
     taken = {}
     count = 0
     for round_ in range(args.rounds + 1):
         for name in (ways if round_ % 2 == 0 else list(ways)[::-1]):
             pipeline.STEP_GROWTH = ways[name]
+            preview_render._ao_packets = packets if "no AO packets" not in name else (lambda self, batch: None)
             count += 1
             settings.ao_distance = 1.0 + 1e-6 * count  # a new frame on the kept tree
             steps.clear()
@@ -79,14 +81,15 @@ def main() -> None:
             if round_ > 0:  # the first round builds the tree and loads kernels
                 times[name]["trace"].append(result.trace_ms)
                 times[name]["total"].append(result.total_ms)
-    pipeline.STEP_GROWTH = growth
+    pipeline.STEP_GROWTH, preview_render._ao_packets = growth, packets
     kd_addon.unregister()
     medians = {name: {k: statistics.median(v) for k, v in t.items()} for name, t in times.items()}
     for name in ways:
-        print(f"{name:>18}: trace {medians[name]['trace']:7.1f} ms  total {medians[name]['total']:7.1f} ms  "
+        print(f"{name:>31}: trace {medians[name]['trace']:7.1f} ms  total {medians[name]['total']:7.1f} ms  "
               f"steps {taken[name]}")
-    a, b = medians["growing batches"], medians["one sample a step"]
+    a, b, c = medians["growing batches"], medians["one sample a step"], medians["growing batches, no AO packets"]
     print(f"one sample a step / growing batches: trace {b['trace'] / a['trace']:.3f}, total {b['total'] / a['total']:.3f}")
+    print(f"no AO packets / growing batches: trace {c['trace'] / a['trace']:.3f}, total {c['total'] / a['total']:.3f}")
     name = "bench_addon_steps" + ("_demo" if args.demo else "") + ("" if args.mode == "ao" else "_" + args.mode.replace("+", "_"))
     results.write(name, {
         "scene": "demo" if args.demo else args.scene, "size": [width, height], "samples": args.samples, "mode": args.mode,
@@ -95,6 +98,7 @@ def main() -> None:
         "total_ms": {name: results.figure(t["total"], unit="ms") for name, t in times.items()},
         "ratio_total_single_to_batched": b["total"] / a["total"],
         "ratio_trace_single_to_batched": b["trace"] / a["trace"],
+        "ratio_total_no_packets_to_batched": c["total"] / a["total"],
     }, jit_seconds)
 
 

@@ -10,6 +10,7 @@ core is the sibling subpackage `bl_ext.<repo>.kd_preview.core`; in the repositor
 
 from __future__ import annotations
 
+import collections
 import functools
 import importlib
 import importlib.util
@@ -149,7 +150,11 @@ def packed_version_cached() -> bool:
     so a wrong count only starts or skips that stage."""
     python = f"py{sys.version_info[0]}{sys.version_info[1]}"
     folder = numba_cache_dir()
-    return folder.is_dir() and len(list(folder.rglob(f"{WARM_KERNEL}-*.{python}.*.nbc"))) >= 2
+    if not folder.is_dir():
+        return False
+    # per kernel folder: Numba keeps one a source path, and installations at several paths share `folder`
+    counts = collections.Counter(path.parent for path in folder.rglob(f"{WARM_KERNEL}-*.{python}.*.nbc"))
+    return any(count >= 2 for count in counts.values())
 
 
 def holds_kernel(folder: Path, kernel: str = WARM_KERNEL) -> bool:

@@ -29,6 +29,7 @@ import os
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from dataclasses import dataclass
 
@@ -86,6 +87,7 @@ class _Warmup:
 
 
 _warmup = _Warmup()
+_packed_lock = threading.Lock()
 
 
 def status() -> WarmupStatus:
@@ -138,8 +140,8 @@ def _spawn(errors, task=TASK, low_priority=False) -> subprocess.Popen:
                                 "0", task], env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                                stderr=errors, creationflags=flags)
     if low_priority and hasattr(os, "setpriority"):
-        try:
-            os.setpriority(os.PRIO_PROCESS, process.pid, PACKED_NICE)
+        try:  # never above this process's own niceness (lowering it would raise the compile's priority)
+            os.setpriority(os.PRIO_PROCESS, process.pid, max(PACKED_NICE, os.getpriority(os.PRIO_PROCESS, 0)))
         except OSError:
             pass  # it ran or ended already: it only compiles at normal priority
     return process
@@ -149,12 +151,13 @@ def _start_packed_stage() -> None:
     """Start the packed stage once the first frames' kernels are cached, unless it ran in this process
     or the cache already holds the packed version (corelib.packed_version_cached). Never raises: without
     it, renders keep their batches under 8 samples (core PreviewRender.batch_without_compile)."""
-    if _warmup.packed is not None or corelib.packed_version_cached():
-        return
-    try:
-        _warmup.packed = _spawn_packed_stage()
-    except (OSError, ValueError, subprocess.SubprocessError):
-        pass
+    with _packed_lock:  # status() on the UI's timer and start() on a render's thread may both get here
+        if _warmup.packed is not None or corelib.packed_version_cached():
+            return
+        try:
+            _warmup.packed = _spawn_packed_stage()
+        except (OSError, ValueError, subprocess.SubprocessError):
+            pass
 
 
 def _spawn_packed_stage() -> subprocess.Popen:

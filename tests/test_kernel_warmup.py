@@ -40,24 +40,29 @@ def test_a_warm_cache_is_ready_without_a_process(warmup, monkeypatch):
     assert (now.state, now.elapsed, now.text) == (warmup.READY, 0.0, "")
 
 
-def record_packed_stage(monkeypatch) -> list:
-    """The packed stage's starts, recorded instead of run (each a process that sleeps 60 s)."""
+@pytest.fixture
+def packed_starts(monkeypatch):
+    """The packed stage's starts, recorded instead of run (each a process that sleeps 60 s, ended after
+    the test: a test that replaces the warm-up's state would leave one behind)."""
     started = []
 
     def spawn():
         started.append(subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"]))
         return started[-1]
     monkeypatch.setattr(kernel_warmup, "_spawn_packed_stage", spawn)
-    return started
+    yield started
+    for process in started:
+        process.kill()
+        process.wait()
 
 
-def test_with_the_ui_a_warm_cache_starts_the_packed_stage_once(warmup, monkeypatch):
+def test_with_the_ui_a_warm_cache_starts_the_packed_stage_once(warmup, monkeypatch, packed_starts):
     """Blender's UI (start(packed=True)): the first frames' kernels cached, the sampling kernel's packed
     version not yet: only the packed stage starts, once, and the state is READY (no render waits for it)."""
     monkeypatch.setattr(corelib, "cache_is_warm", lambda kernel=corelib.WARM_KERNEL: True)
     monkeypatch.setattr(corelib, "packed_version_cached", lambda: False)
     monkeypatch.setattr(kernel_warmup, "_spawn", lambda errors: pytest.fail("the first stage was started"))
-    started = record_packed_stage(monkeypatch)
+    started = packed_starts
     assert warmup.start(packed=True).state == warmup.READY
     assert warmup.start(packed=True).state == warmup.READY and len(started) == 1
     assert warmup.packed_stage_running() and warmup.status().text == ""
@@ -65,9 +70,9 @@ def test_with_the_ui_a_warm_cache_starts_the_packed_stage_once(warmup, monkeypat
     assert not warmup.packed_stage_running() and started[0].poll() is not None
 
 
-def test_the_packed_stage_follows_a_successful_first_stage_only(warmup, monkeypatch):
+def test_the_packed_stage_follows_a_successful_first_stage_only(warmup, monkeypatch, packed_starts):
     monkeypatch.setattr(corelib, "packed_version_cached", lambda: False)
-    started = record_packed_stage(monkeypatch)
+    started = packed_starts
     fake_compile(monkeypatch, "import time; time.sleep(1)")
     warmup.start(packed=True)
     assert started == []  # not beside the first stage: the first render waits for that one
@@ -78,12 +83,12 @@ def test_the_packed_stage_follows_a_successful_first_stage_only(warmup, monkeypa
     assert warmup.wait().state == warmup.FAILED and len(started) == 1
 
 
-def test_without_the_ui_or_with_the_packed_version_cached_no_packed_stage(warmup, monkeypatch):
+def test_without_the_ui_or_with_the_packed_version_cached_no_packed_stage(warmup, monkeypatch, packed_starts):
     """A render's own start() (a batch job, a test session: it would end the stage unfinished) and a cache
     that holds the packed version start no packed stage."""
     monkeypatch.setattr(corelib, "cache_is_warm", lambda kernel=corelib.WARM_KERNEL: True)
     monkeypatch.setattr(corelib, "packed_version_cached", lambda: False)
-    started = record_packed_stage(monkeypatch)
+    started = packed_starts
     assert warmup.start().state == warmup.READY and started == []
     monkeypatch.setattr(corelib, "packed_version_cached", lambda: True)
     assert warmup.start(packed=True).state == warmup.READY and started == []
@@ -97,6 +102,10 @@ def test_the_packed_version_counts_as_cached_from_a_second_sampling_kernel_file(
     (kernel / f"{corelib.WARM_KERNEL}-76.{python}.nbi").write_bytes(b"")
     (kernel / f"{corelib.WARM_KERNEL}-76.{python}.1.nbc").write_bytes(b"")
     (kernel / f"{corelib.WARM_KERNEL}-76.py10.2.nbc").write_bytes(b"")  # another Python's
+    assert not corelib.packed_version_cached()
+    other = tmp_path / "render_elsewhere"  # the same sources installed at another path: a folder of its own
+    other.mkdir()
+    (other / f"{corelib.WARM_KERNEL}-76.{python}.1.nbc").write_bytes(b"")
     assert not corelib.packed_version_cached()
     (kernel / f"{corelib.WARM_KERNEL}-76.{python}.2.nbc").write_bytes(b"")
     assert corelib.packed_version_cached()
@@ -123,6 +132,23 @@ def test_the_packed_stage_runs_at_lower_priority(warmup, monkeypatch, tmp_path):
     finally:
         process.kill()
     assert int((core / "nice.txt").read_text()) == max(os.nice(0), warmup.PACKED_NICE)
+
+
+def test_two_threads_start_one_packed_stage(warmup, monkeypatch, packed_starts):
+    """A render's thread (start) and the UI's timer (status) may both find the first stage ready."""
+    import threading
+
+    monkeypatch.setattr(corelib, "packed_version_cached", lambda: False)
+    spawn = kernel_warmup._spawn_packed_stage
+    monkeypatch.setattr(kernel_warmup, "_spawn_packed_stage", lambda: time.sleep(0.2) or spawn())
+    monkeypatch.setattr(kernel_warmup._warmup, "state", warmup.READY)
+    monkeypatch.setattr(kernel_warmup._warmup, "packed_wanted", True)
+    threads = [threading.Thread(target=warmup.start, kwargs={"packed": True}) for _ in range(2)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    assert len(packed_starts) == 1
 
 
 def test_switched_off_it_starts_nothing(warmup, monkeypatch):

@@ -11,6 +11,7 @@ import pytest
 
 import core
 from core.render.ao_packets import MAX_PACKET_INSTANCES, packets_take
+from core.render.render_kernels import PACKED_BATCH
 from core.scene.ray_visibility import CAMERA_RAYS, SHADOW_RAYS
 from core.scene.two_level import build_two_level
 from tests.meshes import lattice, random_soup
@@ -56,8 +57,10 @@ def occluded_share(image):
 
 @pytest.mark.parametrize("steps", [(70,), (1, 2, 67), (64, 6)])
 @pytest.mark.parametrize("mode", ["ao", "ao+shadow"])
-def test_soup_renders_as_single_rays(mode, steps):
-    """70 samples: a chunk of CHUNK (64) samples and a short one, in one call or cut into steps."""
+def test_soup_renders_as_single_rays(mode, steps, monkeypatch):
+    """70 samples: a chunk of CHUNK (64) samples and a short one, in one call or cut into steps. The
+    packed kernel takes light samples too, though PreviewRender gives it only AO renders: forced here."""
+    monkeypatch.setattr(core.PreviewRender, "_ao_packets", lambda self, batch: True if batch >= PACKED_BATCH else None)
     tree = core.build_kdtree(random_soup(np.random.default_rng(2), 3000, size=0.2))
     packed, single = with_far_instance(tree, np.eye(4))
     lights = [core.Light.point((2.0, -3.0, 4.0)), core.Light.area(_placed((0.0, 0.0, 3.0)), size=1.0)]
@@ -153,9 +156,9 @@ def _placed(position):
 
 def test_only_batches_of_eight_or_more_on_few_instances_take_the_packed_kernel(monkeypatch):
     """The sampling kernel's `packed` argument: None (the version without packets, the only one a
-    progressive renderer compiles) for steps under PACKED_BATCH samples, shadow-only renders and scenes
-    the packets do not take (more than MAX_PACKET_INSTANCES instances); True for a batch of 8 or more
-    AO samples on a scene of a few instances."""
+    progressive renderer compiles) for steps under PACKED_BATCH samples, renders with shadow rays and
+    scenes the packets do not take (more than MAX_PACKET_INSTANCES instances); True for a batch of 8 or
+    more samples of an AO render on a scene of a few instances."""
     import core.render.preview_render as preview_render
 
     calls = []
@@ -172,7 +175,8 @@ def test_only_batches_of_eight_or_more_on_few_instances_take_the_packed_kernel(m
     many = build_two_level([tree], [0] * (MAX_PACKET_INSTANCES + 1),
                            np.stack([_placed((3.0 * k, 0.0, 0.0)) for k in range(MAX_PACKET_INSTANCES + 1)]))
     cases = [(packed, "ao", (1, 2, 4, 8), [None, None, None, True]),
-             (packed, "ao+shadow", (7, 9), [None, True]),
+             (packed, "ao+shadow", (7, 9), [None, None]),
+             (packed, "ao", (7, 9), [None, True]),
              (packed, "shadow", (16,), [None]),
              (single, "ao", (16,), [True]),
              (many, "ao", (16,), [None])]
@@ -198,9 +202,9 @@ def test_a_batch_that_would_compile_the_packed_version_is_cut_below_it(monkeypat
     light = [core.Light.point((2.0, -3.0, 4.0))]
     for ready, expected in ((False, PACKED_BATCH - 1), (True, 16)):
         monkeypatch.setattr(preview_render, "packed_version_ready", lambda: ready)
-        render = core.PreviewRender(packed, camera, 8, 8, samples=16, mode="ao+shadow", lights=light)
+        render = core.PreviewRender(packed, camera, 8, 8, samples=16, mode="ao")
         assert [render.batch_without_compile(n) for n in (1, 7, 16)] == [1, 7, expected]
-        for scene, mode in ((packed, "shadow"), (single, "ao")):
+        for scene, mode in ((packed, "shadow"), (packed, "ao+shadow"), (single, "ao")):
             other = core.PreviewRender(scene, camera, 8, 8, samples=16, mode=mode, lights=light)
             assert other.batch_without_compile(16) == 16
     cut = rendered(packed, camera, (PACKED_BATCH - 1, 16 - PACKED_BATCH + 1), samples=16, ao_distance=0.8)
@@ -225,3 +229,6 @@ def test_the_packed_version_is_ready_once_loaded_or_cached(tmp_path):
     tree = core.build_kdtree(random_soup(np.random.default_rng(8), 200, size=0.2))
     rendered(tree, look_at((2.5, -3.0, 1.5), (0.0, 0.0, 0.0)), (PACKED_BATCH,), samples=PACKED_BATCH)
     assert packed_version_ready()
+    out = subprocess.run([sys.executable, "-c", script], cwd=Path(core.__file__).parent.parent, env=dict(os.environ),
+                         capture_output=True, text=True, check=True, timeout=300)
+    assert out.stdout.split()[-1] == "True"  # this session's cache now holds it, read without loading it

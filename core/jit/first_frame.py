@@ -8,6 +8,8 @@ one-instance packet kernels compiled by the helper beside the build and camera p
 warmup=True), an ao+shadow render with one light of each kind, then a second frame with one object
 moved that continues from the first one's pixels (the pixel-reuse kernels), the tree statistics the
 panel shows, and last the factory scene's first frame: one cube, a one-instance scene traced in packets.
+compile_packed_samples is the warm-up's second stage: the sampling kernel's packed version (AO packets in
+batches of 8 or more samples), which the add-on steps into once it is cached (kd_addon/kernel_warmup.py).
 Numba compiles one version per argument types, so the arrays have the add-on's dtypes
 (tree_cache.mesh_inputs). Sizes, modes and sample counts are runtime values and need no second compile.
 """
@@ -79,13 +81,13 @@ def _camera(offset) -> Camera:
     return Camera(matrix, 0.8, clip_start=0.1, clip_end=100.0).translated(offset)
 
 
-def _frame(builder: SceneBuilder, scene_inputs, previous, first: bool, batch: int = 1):
+def _frame(builder: SceneBuilder, scene_inputs, previous, first: bool, batch: int = 1, mode: str = "ao+shadow"):
     """One frame as the add-on renders it (kd_addon/pipeline.py), relative to the camera's position, in
-    steps of `batch` samples; `scene_inputs`: (meshes, mesh_of, matrices, visibility). The first frame's
+    steps of `batch` samples, in `mode`; `scene_inputs`: (meshes, mesh_of, matrices, visibility). The first frame's
     build and camera pass run beside the helper's compile (parallel_compile.py: the warm-up's split)."""
     offset = np.array([0.0, 0.0, 4.0])
     lights = _lights(offset)
-    options = RenderOptions(mode="ao+shadow", samples=max(SAMPLES, batch), lights=lights)
+    options = RenderOptions(mode=mode, samples=max(SAMPLES, batch), lights=lights)
     rays = frame_ray_count(WIDTH, HEIGHT, options.mode, options.samples, lights)
     meshes, mesh_of, matrices, visibility = scene_inputs
     with rendering_kernels_alongside(warmup=True) if first else nullcontext():
@@ -116,6 +118,6 @@ def compile_first_frames() -> None:
 def compile_packed_samples() -> None:
     """The sampling kernel's packed version (AO packets in batches of PACKED_BATCH or more samples on a
     scene of a few instances: render/ao_packets.py), which the add-on's first steps of one sample never run:
-    the factory scene's frame in one batch. The add-on compiles it after the first frames, in a process
+    the factory scene's frame in one batch, mode ao (the packets' only mode). The add-on compiles it after the first frames, in a process
     of lower priority (kd_addon/kernel_warmup.py), and steps in batches that large once it is cached."""
-    _frame(SceneBuilder("auto"), _one_cube(), None, first=False, batch=PACKED_BATCH)
+    _frame(SceneBuilder("auto"), _one_cube(), None, first=False, batch=PACKED_BATCH, mode="ao")

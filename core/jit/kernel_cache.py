@@ -148,13 +148,15 @@ def core_cache_folders() -> str:
 def cached_signatures(dispatcher) -> list:
     """The argument types of the versions of `dispatcher` (an njit(cache=True) function) that Numba's
     on-disk cache holds for this machine (its codegen's magic tuple) and for the current sources (the
-    index's stamp, SourcesDigestLocator's); [] when none. Reads Numba's index as Numba does
-    (IndexDataCacheFile._load_index, internal; numba is pinned) without loading any code."""
+    index's stamp, SourcesDigestLocator's) whose data file is written (Numba saves the index first); []
+    when none. Reads Numba's index as Numba does (IndexDataCacheFile._load_index, internal; numba is
+    pinned) without loading any code."""
     cache_file = getattr(dispatcher._cache, "_cache_file", None)  # a NullCache has none
     if cache_file is None:
         return []
     magic = dispatcher.targetctx.codegen().magic_tuple()
-    return [key[0] for key in cache_file._load_index() if key[1] == magic]
+    return [key[0] for key, name in cache_file._load_index().items()
+            if key[1] == magic and os.path.exists(cache_file._data_path(name))]
 
 
 def register(folder=CORE_FOLDER, sources=CORE_FOLDER) -> None:

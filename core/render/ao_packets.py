@@ -16,8 +16,8 @@ clear, as an any-hit query through the top level finds (docs/choices.md#ao-packe
 Rays the memo answers (ray_memo.py) are not traced, and rays a packet leaves are traced one by one by
 the sampling kernel, through the whole scene. The sampling kernel takes
 `packed`: for None it is compiled without any of this code (the helpers below are overloads that are
-nothing for None), so a renderer that steps one sample at a time, as the add-on does, compiles what it
-did before packets (docs/choices.md#ao-packets-compiled-only-for-batches).
+nothing for None), so a renderer that steps one sample at a time (the add-on's first step, and its steps
+until the packed version is cached) compiles what it did before packets (docs/choices.md#ao-packets-compiled-only-for-batches).
 """
 from typing import NamedTuple
 
@@ -29,6 +29,7 @@ from ..scene.instance_traversal import _to_object, mesh_tree, unowned_scene
 from ..scene.ray_visibility import SHADOW_RAYS
 from ..trace import simd as S
 from ..trace.array_views import rows, unowned
+from ..trace.layout import LEAF
 from ..trace.packet_traversal import (PacketOutputs, PacketRays, box_fits_float32, new_packet_work, trace_packet,
                                      unowned_outputs, unowned_packet_work, unowned_rays)
 from .ray_memo import TRACE, keep_traced, reused_visibility, unowned_memo
@@ -170,15 +171,19 @@ def trace_ao_chunk(scene, packets, pixel, samples, batch, memo, rays):
 
 @njit(cache=True, inline="always")
 def _reached(scene, inst, origin, reach):
-    """Whether AO rays from origin, at most `reach` long, may meet instance inst: shadow rays see it, its
-    mesh has nodes, and its world box (rounded outward) comes within `reach` of the origin on every axis,
-    widened by 2^-20 of the reach (a unit direction's length rounds to 1 within far less) and by 2^-50 of
-    the coordinate (the sum's rounding); a box with a NaN bound counts as reached."""
+    """Whether AO rays from origin, at most `reach` long, may meet instance inst, as trace_scene decides:
+    shadow rays see it, its mesh has nodes, the top level holds it (two_level.build_top_level leaves out
+    a box with box[0] <= box[3] false), and, unless the top level is flat (trace_scene then tests no box),
+    its world box (rounded outward) comes within `reach` of the origin on every axis, widened by 2^-20 of
+    the reach (a unit direction's length rounds to 1 within far less) and 2^-50 of the coordinate (the
+    sum's rounding)."""
     if scene.visibility[inst] & SHADOW_RAYS == 0:
         return False
     m = scene.mesh_of[inst]
-    if scene.node_start[m + 1] == scene.node_start[m]:
+    if scene.node_start[m + 1] == scene.node_start[m] or not scene.world_boxes[inst, 0] <= scene.world_boxes[inst, 3]:
         return False
+    if scene.top_items.shape[0] == 1 and scene.top_axis[0] == LEAF:
+        return True
     for k in range(3):
         slack = reach * (1.0 + 2.0 ** -20) + (abs(origin[k]) + reach) * 2.0 ** -50
         if scene.world_boxes[inst, k] > origin[k] + slack or scene.world_boxes[inst, k + 3] < origin[k] - slack:

@@ -238,11 +238,14 @@ class PreviewRender:
         return added
 
     def _ao_packets(self, batch):
-        """True when this batch's AO rays go in packets (ao_packets.py: AO wanted, a batch of at least
+        """True when this batch's AO rays go in packets (ao_packets.py: mode "ao", a batch of at least
         PACKED_BATCH samples, a scene of at most MAX_PACKET_INSTANCES instances), else None: the sampling
-        kernel's version without packets, the only one a renderer stepping one sample at a time compiles."""
+        kernel's version without packets, the only one a renderer stepping one sample at a time compiles
+        (batch_without_compile keeps a stepping caller there until the packed version is cached)."""
         taken = packets_take.py_func(self.scene.arrays)
-        return True if self.mode != "shadow" and batch >= PACKED_BATCH and taken else None
+        # not beside shadow rays: their single rays ran slower in the packed version's code
+        # (docs/choices.md#ao-packets-through-several-instances), more than the AO packets saved
+        return True if self.mode == "ao" and batch >= PACKED_BATCH and taken else None
 
     def batch_without_compile(self, samples):
         """`samples`, or PACKED_BATCH - 1 when a step of that many would run the sampling kernel's packed
