@@ -1,4 +1,4 @@
-"""The add-on's sampling steps: growing batches (pipeline.FrameJob._next_batch) against one sample a step.
+"""The add-on's sampling steps: growing batches (kd_addon/sampling_steps.py) against one sample a step.
 
 A frame of one object (suzanne-251k's .blend: one mesh), or with --demo frame 1 of the built-in demo
 scene (17 objects in 16 instances), rendered through the add-on's pipeline (pipeline.render_frame, as
@@ -30,7 +30,7 @@ sys.path[:0] = [str(HERE), str(HERE.parent)]
 import bpy  # noqa: E402
 
 import kd_addon  # noqa: E402
-from kd_addon import corelib, pipeline  # noqa: E402
+from kd_addon import corelib, pipeline, sampling_steps  # noqa: E402
 from kd_addon.config import make_config  # noqa: E402
 from kd_addon.demo_scene import build_demo_scene  # noqa: E402
 import results  # noqa: E402
@@ -64,14 +64,14 @@ def main() -> None:
     preview_render = core.PreviewRender
     step = preview_render.step
     preview_render.step = lambda self, n=1: steps.setdefault(self, []).append(n) or step(self, n)
-    growth, packets = pipeline.STEP_GROWTH, preview_render._ao_packets
+    growth, packets = sampling_steps.STEP_GROWTH, preview_render._ao_packets
     ways = {"growing batches": growth, "one sample a step": 0, "growing batches, no AO packets": growth}
     times = {name: {"trace": [], "total": []} for name in ways}
     taken = {}
     count = 0
     for round_ in range(args.rounds + 1):
         for name in (ways if round_ % 2 == 0 else list(ways)[::-1]):
-            pipeline.STEP_GROWTH = ways[name]
+            sampling_steps.STEP_GROWTH = ways[name]
             preview_render._ao_packets = packets if "no AO packets" not in name else (lambda self, batch: None)
             count += 1
             settings.ao_distance = 1.0 + 1e-6 * count  # a new frame on the kept tree
@@ -81,7 +81,7 @@ def main() -> None:
             if round_ > 0:  # the first round builds the tree and loads kernels
                 times[name]["trace"].append(result.trace_ms)
                 times[name]["total"].append(result.total_ms)
-    pipeline.STEP_GROWTH, preview_render._ao_packets = growth, packets
+    sampling_steps.STEP_GROWTH, preview_render._ao_packets = growth, packets
     kd_addon.unregister()
     medians = {name: {k: statistics.median(v) for k, v in t.items()} for name, t in times.items()}
     for name in ways:

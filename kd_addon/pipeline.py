@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import background, corelib, kernel_warmup, memory_limit, scene_input, tree_cache
+from . import background, corelib, kernel_warmup, memory_limit, scene_input, sampling_steps, tree_cache
 from .background import BackgroundCall
 from .config import RenderConfig, frame_size
 from .errors import Cancelled, PreviewError
@@ -32,9 +32,6 @@ from .scene_records import ExtractedScene
 
 KERNEL_LOCK = threading.Lock()
 POLL_SECONDS = 0.05  # longest a tick waits for the worker: the bound on cancel latency
-STEP_SECONDS = 1.0  # what a sampling step's batch grows toward: a cancelled run's step runs on (holding
-# the kernel lock the next run waits for), so the viewport asks for shorter ones (engine_viewport.py)
-STEP_GROWTH = 16  # a batch at most this many times the last one's samples (a rate measured on few samples)
 COMPILING_STATUS = "Compiling kernels (first run)…"
 LOADING_STATUS = "Loading compiled kernels (first run)…"
 WARMUP_WAIT_NOTE = ": the render starts when they are ready"  # after kernel_warmup's "compiling kernels …"
@@ -135,7 +132,7 @@ class FrameJob:
 
     The first ticks read the scene (once no cancelled run's kernel call still runs:
     background.SCENE_READ_WAIT) and build the tree on the worker; later ticks add samples to the
-    unconverged pixels, in batches growing toward `step_seconds` a step (_next_batch). `depsgraph`: the
+    unconverged pixels, in batches growing toward `step_seconds` a step (sampling_steps.py). `depsgraph`: the
     evaluated depsgraph, or a function returning it when read.
 
     A render engine sets the rest: `view` the frame's size and camera where they are not the scene
@@ -150,7 +147,7 @@ class FrameJob:
         self.scene, self.depsgraph, self.config = scene, depsgraph, config
         self.view, self.group, self.lane = view, group, lane
         self.poll_seconds = POLL_SECONDS if poll_seconds is None else poll_seconds
-        self.step_seconds = STEP_SECONDS if step_seconds is None else step_seconds
+        self.step_seconds = sampling_steps.STEP_SECONDS if step_seconds is None else step_seconds
         self.renderer = None
         self._timings = {"extract_ms": 0.0, "build_ms": 0.0, "trace_ms": 0.0, "other_ms": 0.0}
         self._info: dict = {}
@@ -440,21 +437,9 @@ class FrameJob:
             KERNEL_LOCK.release()
 
     def step(self) -> None:
-        """More samples per unconverged pixel (_next_batch), on the worker."""
-        self._pending = BackgroundCall(KERNEL_LOCK, self._step_once, self._next_batch())
-
-    def _next_batch(self) -> int:
-        """The next step's samples: one at first, then as many as the last step's rate fits in
-        step_seconds, at most STEP_GROWTH times its samples and never so many that the sampling kernel's
-        packed version would compile (core PreviewRender.batch_without_compile: it waits until the
-        warm-up's packed stage cached it, kernel_warmup.py). Batches do not change the image, and fewer
-        kernel calls with AO packets are faster (docs/choices.md#the-add-on-steps-in-growing-batches)."""
-        if self._last_step is None:
-            return 1
-        samples, ms = self._last_step
-        left = self.renderer.target_samples - self.renderer.samples_done
-        fit = int(self.step_seconds * 1e3 * samples / max(ms, 1e-3))
-        return self.renderer.batch_without_compile(max(1, min(left, STEP_GROWTH * samples, fit)))
+        """More samples per unconverged pixel (sampling_steps.next_batch), on the worker."""
+        batch = sampling_steps.next_batch(self.renderer, self._last_step, self.step_seconds)
+        self._pending = BackgroundCall(KERNEL_LOCK, self._step_once, batch)
 
     def _step_once(self, samples: int) -> None:
         global _kernels_ready

@@ -15,7 +15,7 @@ import bpy
 import numpy as np
 import pytest
 
-from kd_addon import output, pipeline
+from kd_addon import output, pipeline, sampling_steps
 from kd_addon.config import make_config
 from kd_addon.errors import Cancelled, PreviewError
 from kd_addon.output import IMAGE_NAME
@@ -392,27 +392,24 @@ def test_preview_image_is_resized_in_place_and_shown_in_an_image_editor(addon):
 
 
 def test_sampling_steps_grow_toward_the_step_time_and_stop_short_of_a_compile():
-    """FrameJob._next_batch: one sample first, then what the last step's rate fits in its step_seconds,
+    """sampling_steps.next_batch: one sample first, then what the last step's rate fits in the step time,
     at most STEP_GROWTH times its samples, never past the target, and as core's batch_without_compile
     cuts it (here: as while the packed version is not cached, under 8)."""
     from types import SimpleNamespace
 
     asked = []
-    job = pipeline.FrameJob(None, None, None, step_seconds=0.25)
-    job.renderer = SimpleNamespace(target_samples=100, samples_done=0,
-                                   batch_without_compile=lambda n: asked.append(n) or min(n, 7))
-    assert job._next_batch() == 1
-    job._last_step = (1, 5.0)  # 5 ms a sample: 50 would fit in 0.25 s, STEP_GROWTH allows 16
-    assert job._next_batch() == 7 and asked == [pipeline.STEP_GROWTH]
-    job._last_step = (7, 70.0)  # 10 ms a sample: 25 fit
-    assert job._next_batch() == 7 and asked[-1] == 25
-    job._last_step, job.renderer.samples_done = (7, 700.0), 90  # 100 ms a sample: 2 fit
-    assert job._next_batch() == 2 and asked[-1] == 2
-    job._last_step = (7, 1e-9)  # a step too quick to time: the target's remaining 10
-    assert job._next_batch() == 7 and asked[-1] == 10
-    job._last_step = (1, 5000.0)  # slower than step_seconds: still one sample
-    assert job._next_batch() == 1
-    assert pipeline.FrameJob(None, None, None).step_seconds == pipeline.STEP_SECONDS
+    renderer = SimpleNamespace(target_samples=100, samples_done=0,
+                               batch_without_compile=lambda n: asked.append(n) or min(n, 7))
+    assert sampling_steps.next_batch(renderer, None, 0.25) == 1
+    # 5 ms a sample: 50 would fit in 0.25 s, STEP_GROWTH allows 16
+    assert sampling_steps.next_batch(renderer, (1, 5.0), 0.25) == 7 and asked == [sampling_steps.STEP_GROWTH]
+    assert sampling_steps.next_batch(renderer, (7, 70.0), 0.25) == 7 and asked[-1] == 25  # 10 ms a sample
+    renderer.samples_done = 90
+    assert sampling_steps.next_batch(renderer, (7, 700.0), 0.25) == 2 and asked[-1] == 2  # 100 ms a sample
+    assert sampling_steps.next_batch(renderer, (7, 1e-9), 0.25) == 7 and asked[-1] == 10  # too quick to time
+    assert sampling_steps.next_batch(renderer, (1, 5000.0), 0.25) == 1  # slower than the step time
+    assert sampling_steps.next_batch(renderer, (1, 10.0), 1.0) == 7 and asked[-1] == 10  # FrameJob's default
+    assert pipeline.FrameJob(None, None, None).step_seconds == sampling_steps.STEP_SECONDS
 
 
 def test_a_frame_steps_in_growing_batches_with_the_one_sample_images(addon, monkeypatch):
@@ -430,7 +427,7 @@ def test_a_frame_steps_in_growing_batches_with_the_one_sample_images(addon, monk
     batched = pipeline.render_frame(scene, bpy.context.evaluated_depsgraph_get(), make_config(scene.kd_preview))
     frame_steps = list(steps.values())[-1]
     assert frame_steps[0] == 1 and len(frame_steps) < 12 and sum(frame_steps) == 12
-    monkeypatch.setattr(pipeline, "STEP_GROWTH", 0)  # then max(1, ...): every step one sample
+    monkeypatch.setattr(sampling_steps, "STEP_GROWTH", 0)  # then max(1, ...): every step one sample
     steps.clear()
     tree_cache.clear()  # no kept image
     single = pipeline.render_frame(scene, bpy.context.evaluated_depsgraph_get(), make_config(scene.kd_preview))
