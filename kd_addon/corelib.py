@@ -148,16 +148,19 @@ def packed_version_cached() -> bool:
     compiles it in two, steps of one sample and the packed batches (kernel_warmup's packed stage). A file
     count, so that the check needs no numba; renders ask core itself (PreviewRender.batch_without_compile),
     so a wrong count only starts or skips that stage."""
-    python = f"py{sys.version_info[0]}{sys.version_info[1]}"
     folder = numba_cache_dir()
     if not folder.is_dir():
         return False
     # per kernel folder: Numba keeps one a source path, and installations at several paths share `folder`
-    counts = collections.Counter(path.parent for path in folder.rglob(f"{WARM_KERNEL}-*.{python}.*.nbc"))
+    counts = collections.Counter(path.parent for path in folder.rglob(f"{WARM_KERNEL}-*.{_python_tag()}.*.nbc"))
     return any(count >= 2 for count in counts.values())
 
 
 def holds_kernel(folder: Path, kernel: str = WARM_KERNEL) -> bool:
     """Whether the Numba cache files in `folder` (or below) include `kernel` compiled for this Python."""
-    python = f"py{sys.version_info[0]}{sys.version_info[1]}"
-    return folder.is_dir() and any(folder.rglob(f"{kernel}-*.{python}.nbi"))
+    return folder.is_dir() and any(folder.rglob(f"{kernel}-*.{_python_tag()}.nbi"))
+
+
+def _python_tag() -> str:
+    """This Python's tag in Numba's cache file names ("py311")."""
+    return f"py{sys.version_info[0]}{sys.version_info[1]}"

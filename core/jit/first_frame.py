@@ -81,10 +81,12 @@ def _camera(offset) -> Camera:
     return Camera(matrix, 0.8, clip_start=0.1, clip_end=100.0).translated(offset)
 
 
-def _frame(builder: SceneBuilder, scene_inputs, previous, first: bool, batch: int = 1, mode: str = "ao+shadow"):
+def _frame(builder: SceneBuilder, scene_inputs, previous, first: bool, batch: int = 1,
+           mode: str = "ao+shadow"):
     """One frame as the add-on renders it (kd_addon/pipeline.py), relative to the camera's position, in
-    steps of `batch` samples, in `mode`; `scene_inputs`: (meshes, mesh_of, matrices, visibility). The first frame's
-    build and camera pass run beside the helper's compile (parallel_compile.py: the warm-up's split)."""
+    steps of `batch` samples, in `mode`; `scene_inputs`: (meshes, mesh_of, matrices, visibility). The
+    first frame's build and camera pass run beside the helper's compile (parallel_compile.py: the
+    warm-up's split)."""
     offset = np.array([0.0, 0.0, 4.0])
     lights = _lights(offset)
     options = RenderOptions(mode=mode, samples=max(SAMPLES, batch), lights=lights)
@@ -117,7 +119,8 @@ def compile_first_frames() -> None:
 
 def compile_packed_samples() -> None:
     """The sampling kernel's packed version (AO packets in batches of PACKED_BATCH or more samples on a
-    scene of a few instances: render/ao_packets.py), which the add-on's first steps of one sample never run:
-    the factory scene's frame in one batch, mode ao (the packets' only mode). The add-on compiles it after the first frames, in a process
-    of lower priority (kd_addon/kernel_warmup.py), and steps in batches that large once it is cached."""
+    scene of a few instances: render/ao_packets.py), which the add-on's first steps of one sample never
+    run: the factory scene's frame in one batch, mode ao (the packets' only mode). The add-on compiles it
+    after the first frames, in a process of lower priority (kd_addon/kernel_warmup.py), and steps in
+    batches that large once it is cached."""
     _frame(SceneBuilder("auto"), _one_cube(), None, first=False, batch=PACKED_BATCH, mode="ao")

@@ -252,7 +252,7 @@ class PreviewRender:
         version (_ao_packets) and that version is neither loaded nor cached, so its first call would
         compile for about a minute: the largest batch a caller stepping in growing batches (the add-on)
         takes without waiting for a compile. Batching never changes the image (render_kernels.py)."""
-        if samples >= PACKED_BATCH and self._ao_packets(samples) and not packed_version_ready():
+        if self._ao_packets(samples) and not packed_version_ready():
             return PACKED_BATCH - 1
         return samples
 

@@ -93,10 +93,16 @@ def packed_version_ready():
     or in Numba's on-disk cache for this machine and these sources. Its first compile takes about a
     minute, so a caller stepping in growing batches stays under PACKED_BATCH until then
     (PreviewRender.batch_without_compile). An unreadable cache index reads as not ready."""
+    if _holds_packed(add_samples.signatures):  # loaded here: no need to read the cache's index every step
+        return True
     try:
-        signatures = [*add_samples.signatures, *cached_signatures(add_samples)]
+        return _holds_packed(cached_signatures(add_samples))
     except Exception:  # noqa: BLE001 (a broken or foreign index: Numba would recompile too)
         return False
+
+
+def _holds_packed(signatures):
+    """Whether add_samples' argument types `signatures` include the packed version's (`packed` a bool)."""
     return any(isinstance(signature[-1], types.Boolean) for signature in signatures)
 
 
