@@ -64,15 +64,15 @@ def main() -> None:
     preview_render = core.PreviewRender
     step = preview_render.step
     preview_render.step = lambda self, n=1: steps.setdefault(self, []).append(n) or step(self, n)
-    growth, packets = sampling_steps.STEP_GROWTH, preview_render._ao_packets
-    ways = {"growing batches": growth, "one sample a step": 0, "growing batches, no AO packets": growth}
+    growth, packets = sampling_steps.STEP_GROWTH, preview_render._sample_packets
+    ways = {"growing batches": growth, "one sample a step": 0, "growing batches, no packets": growth}
     times = {name: {"trace": [], "total": []} for name in ways}
     taken = {}
     count = 0
     for round_ in range(args.rounds + 1):
         for name in (ways if round_ % 2 == 0 else list(ways)[::-1]):
             sampling_steps.STEP_GROWTH = ways[name]
-            preview_render._ao_packets = packets if "no AO packets" not in name else (lambda self, batch: None)
+            preview_render._sample_packets = packets if "no packets" not in name else (lambda self, batch: None)
             count += 1
             settings.ao_distance = 1.0 + 1e-6 * count  # a new frame on the kept tree
             steps.clear()
@@ -81,15 +81,15 @@ def main() -> None:
             if round_ > 0:  # the first round builds the tree and loads kernels
                 times[name]["trace"].append(result.trace_ms)
                 times[name]["total"].append(result.total_ms)
-    sampling_steps.STEP_GROWTH, preview_render._ao_packets = growth, packets
+    sampling_steps.STEP_GROWTH, preview_render._sample_packets = growth, packets
     kd_addon.unregister()
     medians = {name: {k: statistics.median(v) for k, v in t.items()} for name, t in times.items()}
     for name in ways:
         print(f"{name:>31}: trace {medians[name]['trace']:7.1f} ms  total {medians[name]['total']:7.1f} ms  "
               f"steps {taken[name]}")
-    a, b, c = medians["growing batches"], medians["one sample a step"], medians["growing batches, no AO packets"]
+    a, b, c = medians["growing batches"], medians["one sample a step"], medians["growing batches, no packets"]
     print(f"one sample a step / growing batches: trace {b['trace'] / a['trace']:.3f}, total {b['total'] / a['total']:.3f}")
-    print(f"no AO packets / growing batches: trace {c['trace'] / a['trace']:.3f}, total {c['total'] / a['total']:.3f}")
+    print(f"no packets / growing batches: trace {c['trace'] / a['trace']:.3f}, total {c['total'] / a['total']:.3f}")
     name = "bench_addon_steps" + ("_demo" if args.demo else "") + ("" if args.mode == "ao" else "_" + args.mode.replace("+", "_"))
     results.write(name, {
         "scene": "demo" if args.demo else args.scene, "size": [width, height], "samples": args.samples, "mode": args.mode,

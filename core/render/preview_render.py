@@ -25,8 +25,9 @@ from .lights import DELTA, NO_SHADOW
 from ..memory import check_render_memory
 from .pixel_reuse import PixelState, prepared_boxes, segments_touch, settings_key, surface_rays_touch
 from ..scene.ray_visibility import CAMERA_RAYS, HOLDOUT, SHADOW_RAYS
-from .ao_packets import packets_take
-from .render_kernels import (MEMO_BITS, MODES, PACKED_BATCH, PixelFrames, PixelSums, RayMemo, SampleBatch, add_samples,
+from .sample_packets import packets_take
+from .sample_rays import MODES
+from .render_kernels import (MEMO_BITS, PACKED_BATCH, PixelFrames, PixelSums, RayMemo, SampleBatch, add_samples,
                              assemble_image, hard_shadow_rays, packed_version_ready, surface_frames)
 from .render_options import RenderOptions, check_mode_and_samples, packed_lights
 from .sampling import SAMPLERS, SOBOL_DIM1
@@ -237,22 +238,23 @@ class PreviewRender:
                 self._retire_converged()
         return added
 
-    def _ao_packets(self, batch):
-        """True when this batch's AO rays go in packets (ao_packets.py: mode "ao", a batch of at least
-        PACKED_BATCH samples, a scene of at most MAX_PACKET_INSTANCES instances), else None: the sampling
-        kernel's version without packets, the only one a renderer stepping one sample at a time compiles
+    def _sample_packets(self, batch):
+        """True when this batch's rays go in packets (sample_packets.py: a batch of at least PACKED_BATCH
+        samples, a scene of at most MAX_PACKET_INSTANCES instances, and rays the packets take: AO rays,
+        or those of a light with extent that casts shadows), else None: the sampling kernel's version
+        without packets, the only one a renderer stepping one sample at a time compiles
         (batch_without_compile keeps a stepping caller there until the packed version is cached)."""
+        soft = (self.lights[:, DELTA] == 0.0) & (self.lights[:, NO_SHADOW] == 0.0)
+        rays = "ao" in self.mode or ("shadow" in self.mode and soft.any())
         taken = packets_take.py_func(self.scene.arrays)
-        # not beside shadow rays: their single rays ran slower in the packed version's code
-        # (docs/choices.md#ao-packets-through-several-instances), more than the AO packets saved
-        return True if self.mode == "ao" and batch >= PACKED_BATCH and taken else None
+        return True if rays and batch >= PACKED_BATCH and taken else None
 
     def batch_without_compile(self, samples):
         """`samples`, or PACKED_BATCH - 1 when a step of that many would run the sampling kernel's packed
-        version (_ao_packets) and that version is neither loaded nor cached, so its first call would
+        version (_sample_packets) and that version is neither loaded nor cached, so its first call would
         compile for about a minute: the largest batch a caller stepping in growing batches (the add-on)
         takes without waiting for a compile. Batching never changes the image (render_kernels.py)."""
-        if self._ao_packets(samples) and not packed_version_ready():
+        if self._sample_packets(samples) and not packed_version_ready():
             return PACKED_BATCH - 1
         return samples
 
@@ -263,7 +265,7 @@ class PreviewRender:
             self._hard_shadows_due = False
             self._trace_hard_shadows()
 
-        packed = self._ao_packets(batch)
+        packed = self._sample_packets(batch)
 
         def run(active):
             status = np.empty(len(active), np.int64)

@@ -8,9 +8,9 @@ The ray memo (ray_memo.py) keeps each ray's visibility for the next frame, and a
 (lights.DELTA) repeats sample 0's bit in later samples (counted in `repeated`, not `rays`). Such a
 light's ray may also come traced beforehand (`pretraced`: hard_shadow_rays' rays, traced in packets by
 the caller, with its weight: `weights`), counted as if sample 0 had traced it and later samples repeated
-it. In a batch of PACKED_BATCH samples or more on a scene of a few instances (ao_packets.packets_take),
-the AO rays of a pixel are traced in packets (ao_packets.py), with the same answers, by a version of the
-kernel compiled apart.
+it. In a batch of PACKED_BATCH samples or more on a scene of a few instances (sample_packets.packets_take),
+a pixel's AO rays and its rays towards lights with extent are traced in packets (sample_packets.py), with
+the same answers, by a version of the kernel compiled apart.
 """
 from typing import NamedTuple
 
@@ -23,18 +23,16 @@ from ..scene.instance_traversal import (hit_surface, new_scratch, onto_triangle_
                                  unowned_scene, world_normal)
 from ..trace.layout import NO_HIT
 from .lights import COLOR, DELTA, NO_SHADOW
-from .ao_packets import CHUNK, ao_direction, ao_work_for, answer_ao_chunk, in_packets
+from .sample_packets import CHUNK, answer_chunk, chunk_work_for, in_chunk, in_packets
+from .sample_rays import AO_SHADOW, SHADOW, USE_AO, ray_of_use, uses_of_mode
 from .ray_memo import TRACE, RayMemo, keep_memo_bit, keep_traced, memo_bit, reused_visibility, unowned_memo
 from ..scene.ray_visibility import SHADOW_RAYS
-from .sampling import pixel_seed, sample_2d, use_seeds
-from .shading import offset_origin, sample_light, short_of_light
+from .sampling import pixel_seed, use_seeds
+from .shading import offset_origin
 from ..trace.traversal import block_range, thread_shares
 
-AO, SHADOW, AO_SHADOW = 1, 2, 3
-MODES = {"ao": AO, "shadow": SHADOW, "ao+shadow": AO_SHADOW}
-USE_AO = 0  # the sampler's "use" ids: 0 for AO, 1 + k for light k
 PIXELS_PER_TASK = 64  # pixels a parallel task samples with one set of scratch buffers
-PACKED_BATCH = 8  # fewest samples a batch traces its AO rays in packets with (a progressive step(1) does not)
+PACKED_BATCH = 8  # fewest samples a batch traces its rays in packets with (a progressive step(1) does not)
 MEMO_BITS = 512  # most visibility bits kept per pixel (64 bytes): 16 samples x 32 uses, 512 AO samples
 
 
@@ -80,7 +78,7 @@ def add_samples(scene, frames, active, batch, lights, acc, status, memo, packed)
     `frames`), with `lights` (lights.pack_lights rows), into the PixelSums `acc` (counts[i] += count)
     and the RayMemo `memo`. status[a] is NO_HIT when pixel active[a] got its samples, or the suspended
     prim of the unbuilt subtree that stopped it (lazy trees; its sums untouched). `packed`: None, or
-    True to trace the AO rays in packets (ao_packets.py), a version of the kernel compiled apart."""
+    True to trace the rays in packets (sample_packets.py), a version of the kernel compiled apart."""
     n = active.shape[0]
     threads, share, per_band, run = thread_shares(n, PIXELS_PER_TASK)  # balances image regions (traversal.py)
     for k in prange(threads):
@@ -112,8 +110,8 @@ def _sample_pixels(scene, frames, active, blocks, batch, lights, acc, status, me
     traversal.block_range) with one set of scratch buffers, made once a thread (kept out of the parallel
     loop body: Numba's parfor analysis does not cope with the samplers' inlined tuple code). The scene
     and the memo go to the per-ray code as unowned views
-    (docs/choices.md#sampling-kernel-scratch-and-views), with the AO packets' buffers
-    (ao_packets.ao_work_for) when the kernel is the packed one."""
+    (docs/choices.md#sampling-kernel-scratch-and-views), with the sample packets' buffers
+    (sample_packets.chunk_work_for) when the kernel is the packed one."""
     scene = unowned_scene(scene)
     memo = unowned_memo(memo)
     frames = PixelFrames(unowned(frames.points), unowned(frames.normals), unowned(frames.starts),
@@ -122,31 +120,33 @@ def _sample_pixels(scene, frames, active, blocks, batch, lights, acc, status, me
     acc = PixelSums(unowned(acc.sums), unowned(acc.sq_sums), unowned(acc.counts), unowned(acc.rays))
     scratch = new_scratch()
     direction = np.empty(3)
-    packets, prims, owners = ao_work_for(scene, batch.ao_distance, packed)
-    prims = unowned(prims)
+    packets, answers, weights, owners = chunk_work_for(scene, lights.shape[0] + 1, packed)
+    answers, weights = unowned(answers), unowned(weights)
     first, end, per_band, run, n = blocks
     for it in range(first, end):
         start, stop = block_range(it, per_band, run, n, PIXELS_PER_TASK)
         for a in range(start, stop):
             status[a] = _sample_pixel(scene, frames, active[a], batch, lights, acc, (scratch, direction), memo,
-                                      (packets, prims))
+                                      (packets, answers, weights))
     keep_alive(owners)
 
 
 @njit(cache=True, inline="always")
-def _sample_pixel(scene, frames, i, batch, lights, acc, buffers, memo, ao_packets):
+def _sample_pixel(scene, frames, i, batch, lights, acc, buffers, memo, chunk_packets):
     """All of one pixel's new samples. Returns NO_HIT, or the suspended prim of a ray that reached an
     unbuilt subtree, after restoring the pixel's sums. buffers: (single-ray scratch, a direction);
-    ao_packets: (packets, prims) of ao_packets.ao_work_for (packets None in the kernel without them).
+    chunk_packets: (packets, answers, weights) of sample_packets.chunk_work_for (packets None in the
+    kernel without them).
 
     Every ray a sample needs (its AO ray, then one per light) that nothing answers beforehand is traced
     at one place in the loop, the one inlined traversal; the pixel's point, normal, ray start and light
-    rows are unowned views (array_views.py). Where AO packets apply, the AO rays of each CHUNK of
-    samples are answered first (ao_packets.py), and the loop traces only those their packets left."""
+    rows are unowned views (array_views.py). Where packets apply, the rays of each CHUNK of samples that
+    go in packets (sample_packets.in_chunk) are answered first, and the loop traces only those their
+    packets left."""
     first, count, mode, seed = batch.first, batch.count, batch.mode, batch.seed
     sums, sq_sums, counts, rays = acc.sums, acc.sq_sums, acc.counts, acc.rays
     scratch, direction = buffers
-    packets, prims = ao_packets
+    packets, answers, weights = chunk_packets
     point, normal = rows(frames.points, i, i + 1)[0], rows(frames.normals, i, i + 1)[0]
     origin = rows(frames.starts, i, i + 1)[0]
     ps = pixel_seed(frames.pixels[i], seed)
@@ -154,26 +154,28 @@ def _sample_pixel(scene, frames, i, batch, lights, acc, buffers, memo, ao_packet
     before = (sums[i, 0], sums[i, 1], sums[i, 2], sq_sums[i], rays[i], memo.reused[i], memo.repeated[i])
     n_lights = lights.shape[0]
     uses = 1 + n_lights
-    first_use = USE_AO if mode != SHADOW else USE_AO + 1
-    last_use = USE_AO + 1 if mode == AO else uses
+    first_use, last_use = uses_of_mode(mode, uses)
     packets_apply = in_packets(packets)
     for chunk in range(first, first + count, CHUNK):
         chunk_end = min(first + count, chunk + CHUNK)
         if packets_apply:
-            answer_ao_chunk(scene, packets, (i, origin, normal, ao_seeds, uses), (chunk, chunk_end), batch, memo,
-                            rays)
+            answer_chunk(scene, packets, (i, point, origin, normal, ps, ao_seeds, uses), (chunk, chunk_end), batch,
+                         lights, memo, rays)
         for s in range(chunk, chunk_end):
             ao = 1.0
             lr = lg = lb = 0.0
             for use in range(first_use, last_use):
-                from_chunk = use == USE_AO and packets_apply  # answered by the chunk (counted, kept), or TRACE
-                prim = prims[s - chunk] if from_chunk else TRACE
-                tmax, weight = batch.ao_distance, 1.0
-                if not from_chunk or prim == TRACE:
+                from_chunk = packets_apply and in_chunk(lights, use)  # answered (counted, kept), or TRACE
+                prim, tmax, weight = TRACE, batch.ao_distance, 1.0
+                if from_chunk:
+                    prim, weight = answers[use, s - chunk], weights[use, s - chunk]
+                    if weight <= 0.0:
+                        continue  # behind the surface or outside the light: no ray needed
+                if prim == TRACE:
                     tmax, weight = _ray_of_sample(use, lights, (point, normal, ps, ao_seeds, s, i), batch, memo,
                                                   direction)
                     if weight <= 0.0:
-                        continue  # behind the surface or outside the light: no ray needed
+                        continue
                     if not from_chunk:
                         prim = _answered_visibility(lights, use, (i, s, uses), origin, direction, tmax, memo, rays)
                 if prim == TRACE:
@@ -196,14 +198,14 @@ def _sample_pixel(scene, frames, i, batch, lights, acc, buffers, memo, ao_packet
 @njit(cache=True, inline="always")
 def _ray_of_sample(use, lights, at_pixel, batch, memo, direction):
     """(tmax, weight) of ray `use` of a sample, at_pixel = (point, normal, pixel seed, AO seeds, s, i), and
-    its direction into `direction`: _ray_of_use's, except that the weight of a light's ray made
+    its direction into `direction`: sample_rays.ray_of_use's, except that the weight of a light's ray made
     beforehand (RayMemo.weights) is taken as it is, with no direction: a weight above 0 means the hard-
     shadow pass traced that ray, so _answered_visibility takes its answer and nothing traces it here."""
     point, normal, ps, ao_seeds, s, i = at_pixel
     if use != USE_AO and memo.weights.shape[0] > 0 and not np.isnan(memo.weights[i, use - 1]):
         return 0.0, memo.weights[i, use - 1]
-    return _ray_of_use(use, lights, point, normal, batch.ao_distance, batch.sampler, ps, ao_seeds, s, batch.dim1,
-                       direction)
+    return ray_of_use(use, lights, point, normal, batch.ao_distance, batch.sampler, ps, ao_seeds, s, batch.dim1,
+                      direction)
 
 
 @njit(cache=True, inline="always")
@@ -240,27 +242,6 @@ def _add_sample(acc, i, mode, ambient, ao, light):
     acc.sums[i, 2] += b
     grey = (r + g + b) / 3.0
     acc.sq_sums[i] += grey * grey
-
-
-@njit(cache=True, inline="always")
-def _ray_of_use(use, lights, point, normal, ao_distance, sampler, ps, ao_seeds, s, dim1, direction):
-    """The ray of one use of sample s: its direction (into `direction`), its tmax and its weight; the
-    AO use's seeds `ao_seeds` (sampling.use_seeds) come made once per pixel.
-    USE_AO: cosine-weighted about the normal within ao_distance, weight 1. Light k (use 1 + k): toward a
-    sampled light point, tmax a step short of it (shading.short_of_light), weight max(0, N.L) * mask;
-    weight 0 needs no ray."""
-    if use == USE_AO:
-        ao_direction(sampler, ao_seeds, s, dim1, normal, direction)
-        return ao_distance, 1.0
-    light = rows(lights, use - 1, use)[0]
-    # A light without extent ignores its sample numbers (lights.DELTA), so none are drawn: Owen-scrambled
-    # Sobol costs three nested scrambles a ray (docs/choices.md#no-samples-for-delta-lights).
-    u1, u2 = (0.0, 0.0) if light[DELTA] != 0.0 else sample_2d(sampler, ps, s, use, dim1)
-    dist, mask = sample_light(light, point, u1, u2, direction)
-    cos_nl = normal[0] * direction[0] + normal[1] * direction[1] + normal[2] * direction[2]
-    if mask <= 0.0 or cos_nl <= 0.0:
-        return dist, 0.0
-    return short_of_light(point, direction, dist), cos_nl * mask
 
 
 @njit(cache=True, inline="always")
@@ -306,7 +287,7 @@ def _pretraced_visibility(memo, i, use, s, bit, rays):
 @njit(cache=True, parallel=True)
 def hard_shadow_rays(frames, lights, k, dim1, directions, tmax, weights):
     """The shadow ray of light k, one without extent (every sample's is the same), from each pixel
-    of the PixelFrames `frames`, made as the sampling kernel makes it (_ray_of_use): its direction into
+    of the PixelFrames `frames`, made as the sampling kernel makes it (sample_rays.ray_of_use): its direction into
     directions (M, 3), tmax (M,), and its weight into weights[:, k], above 0 where the pixel faces the
     light inside its mask, 0 where it takes no ray (RayMemo.weights: the sampling kernel then takes it
     and the pretraced answer without making the ray again). The rays start at frames.starts.
@@ -327,9 +308,9 @@ def _hard_shadow_block(frames, lights, k, dim1, out, start, stop):
     points, normals, directions, lights = (unowned(frames.points), unowned(frames.normals), unowned(directions),
                                            unowned(lights))
     for i in range(start, stop):
-        tmax[i], weights[i, k] = _ray_of_use(USE_AO + 1 + k, lights, rows(points, i, i + 1)[0],
-                                             rows(normals, i, i + 1)[0], 0.0, 0, 0, (0, 0, 0, 0), 0, dim1,
-                                             rows(directions, i, i + 1)[0])
+        tmax[i], weights[i, k] = ray_of_use(USE_AO + 1 + k, lights, rows(points, i, i + 1)[0],
+                                            rows(normals, i, i + 1)[0], 0.0, 0, 0, (0, 0, 0, 0), 0, dim1,
+                                            rows(directions, i, i + 1)[0])
 
 
 @njit(cache=True, parallel=True)

@@ -9,7 +9,7 @@ import numpy as np
 
 from ..inputs import as_number
 from .lights import Light, pack_lights
-from .render_kernels import MODES
+from .sample_rays import MODES
 from .sampling import SAMPLERS
 
 

@@ -1,16 +1,17 @@
-"""The renderer's AO rays in packets (core.render.ao_packets): a render in batches of PACKED_BATCH or
-more samples, which trace AO rays in packets, gives the image, sample counts, ray counts and memo bits of
-the same render in steps of one sample, whose kernel traces every AO ray alone through the two-level
-traversal. Scenes: one instance, the same with a second one far away, and several instances that occlude
-one another (mirrored, rotated, one that shadow rays do not see, one out of reach). Cases: a soup, a
-lattice (triangles in split planes, points on them), a rotated and scaled instance far from the origin,
-AO and AO + shadows, a chunk of samples and a short one reached in one step or several, adaptive
-sampling, a lazy tree."""
+"""The renderer's sample rays in packets (core.render.sample_packets): a render in batches of PACKED_BATCH
+or more samples, which trace AO rays and the rays towards lights with extent in packets, gives the image,
+sample counts, ray counts and memo bits of the same render in steps of one sample, whose kernel traces
+every ray alone through the two-level traversal. Scenes: one instance, the same with a second one far
+away, and several instances that occlude one another (mirrored, rotated, one that shadow rays do not see,
+one out of reach). Cases: a soup, a lattice (triangles in split planes, points on them), a rotated and
+scaled instance far from the origin, AO, shadows and both with lights of every kind, with and without
+extent, a chunk of samples and a short one reached in one step or several, adaptive sampling, a lazy
+tree."""
 import numpy as np
 import pytest
 
 import core
-from core.render.ao_packets import MAX_PACKET_INSTANCES, packets_take
+from core.render.sample_packets import MAX_PACKET_INSTANCES, packets_take
 from core.render.render_kernels import PACKED_BATCH
 from core.scene.ray_visibility import CAMERA_RAYS, SHADOW_RAYS
 from core.scene.two_level import build_two_level
@@ -49,25 +50,40 @@ def assert_same_render(scene, camera, steps, **settings):
     return a.image()
 
 
+def shadowed_share(image):
+    """The share of hit pixels below the brightest (some light rays met something)."""
+    hit = image[..., 3] > 0
+    grey = image[..., :3].mean(axis=2)[hit]
+    return float((grey < 0.999 * grey.max()).mean())
+
+
 def occluded_share(image):
     """The share of hit pixels darkened by AO (some rays met something): a case that exercises hits."""
     hit = image[..., 3] > 0
     return float((image[..., 0][hit] < 1.0).mean())
 
 
+def soft_and_hard_lights():
+    """A light of every kind: with extent (packets take their rays), without (a ray repeated from sample 0),
+    and one that casts no shadow (no ray)."""
+    down = _placed((0.0, 0.0, 3.0))
+    return [core.Light.point((2.0, -3.0, 4.0)), core.Light.area(down, size=1.0),
+            core.Light.point((-2.0, -2.5, 2.0), radius=0.6), core.Light.sun((-0.3, 0.5, -1.0), angle=0.3),
+            core.Light.spot((1.0, -2.0, 2.5), (-0.4, 0.8, -1.0), spot_size=1.2, radius=0.3),
+            core.Light.point((0.0, -3.0, 1.0), radius=0.5, cast_shadow=False)]
+
+
 @pytest.mark.parametrize("steps", [(70,), (1, 2, 67), (64, 6)])
-@pytest.mark.parametrize("mode", ["ao", "ao+shadow"])
-def test_soup_renders_as_single_rays(mode, steps, monkeypatch):
-    """70 samples: a chunk of CHUNK (64) samples and a short one, in one call or cut into steps. The
-    packed kernel takes light samples too, though PreviewRender gives it only AO renders: forced here."""
-    monkeypatch.setattr(core.PreviewRender, "_ao_packets", lambda self, batch: True if batch >= PACKED_BATCH else None)
+@pytest.mark.parametrize("mode", ["ao", "ao+shadow", "shadow"])
+def test_soup_renders_as_single_rays(mode, steps):
+    """70 samples: a chunk of CHUNK (64) samples and a short one, in one call or cut into steps."""
     tree = core.build_kdtree(random_soup(np.random.default_rng(2), 3000, size=0.2))
     packed, single = with_far_instance(tree, np.eye(4))
-    lights = [core.Light.point((2.0, -3.0, 4.0)), core.Light.area(_placed((0.0, 0.0, 3.0)), size=1.0)]
+    lights = soft_and_hard_lights()
     for scene in (packed, single):
         image = assert_same_render(scene, look_at((2.5, -3.0, 1.5), (0.0, 0.0, 0.0)), steps, mode=mode,
                                    samples=70, ao_distance=0.8, lights=lights if mode != "ao" else ())
-        assert occluded_share(image) > 0.3
+        assert occluded_share(image) > 0.3 if mode != "shadow" else shadowed_share(image) > 0.1
 
 
 @pytest.mark.parametrize("builder, offset", [("binned", 0.0), ("median", 0.0), ("binned", 2.0 ** 20)])
@@ -127,6 +143,10 @@ def test_several_instances_render_as_single_rays():
         camera = look_at(np.array([0.5, -4.0, 2.0]) + offset, np.full(3, offset), fov=1.2)
         image = assert_same_render(scene, camera, (24,), samples=24, ao_distance=0.9)
         assert occluded_share(image) > 0.3
+        lit = assert_same_render(scene, camera, (24,), samples=24, mode="shadow",
+                                 lights=[core.Light.point(np.array([0.4, -1.0, 2.5]) + offset, radius=0.5),
+                                         core.Light.sun((0.2, 0.1, -1.0), angle=0.2)])
+        assert shadowed_share(lit) > 0.1
         unseen = build_two_level([soup, plate], [0, 1, 0, 0, 0], matrices)  # the copy at x - 1.1 occludes now
         assert not np.array_equal(image, rendered(unseen, camera, (24,), samples=24, ao_distance=0.9).image())
 
@@ -156,9 +176,10 @@ def _placed(position):
 
 def test_only_batches_of_eight_or_more_on_few_instances_take_the_packed_kernel(monkeypatch):
     """The sampling kernel's `packed` argument: None (the version without packets, the only one a
-    progressive renderer compiles) for steps under PACKED_BATCH samples, renders with shadow rays and
-    scenes the packets do not take (more than MAX_PACKET_INSTANCES instances); True for a batch of 8 or
-    more samples of an AO render on a scene of a few instances."""
+    progressive renderer compiles) for steps under PACKED_BATCH samples, shadow renders whose lights have
+    no extent (no ray to put in packets) and scenes the packets do not take (more than
+    MAX_PACKET_INSTANCES instances); True for a batch of 8 or more samples of an AO render, or of one with
+    a light of extent, on a scene of a few instances."""
     import core.render.preview_render as preview_render
 
     calls = []
@@ -174,22 +195,25 @@ def test_only_batches_of_eight_or_more_on_few_instances_take_the_packed_kernel(m
     camera = look_at((2.5, -3.0, 1.5), (0.0, 0.0, 0.0))
     many = build_two_level([tree], [0] * (MAX_PACKET_INSTANCES + 1),
                            np.stack([_placed((3.0 * k, 0.0, 0.0)) for k in range(MAX_PACKET_INSTANCES + 1)]))
-    cases = [(packed, "ao", (1, 2, 4, 8), [None, None, None, True]),
-             (packed, "ao+shadow", (7, 9), [None, None]),
-             (packed, "ao", (7, 9), [None, True]),
-             (packed, "shadow", (16,), [None]),
-             (single, "ao", (16,), [True]),
-             (many, "ao", (16,), [None])]
-    for scene, mode, steps, expected in cases:
+    hard, soft = core.Light.point((2.0, -3.0, 4.0)), core.Light.point((2.0, -3.0, 4.0), radius=0.2)
+    unshadowed = core.Light.point((2.0, -3.0, 4.0), radius=0.2, cast_shadow=False)
+    cases = [(packed, "ao", (1, 2, 4, 8), [None, None, None, True], [hard]),
+             (packed, "ao+shadow", (7, 9), [None, True], [hard]),
+             (packed, "ao", (7, 9), [None, True], [hard]),
+             (packed, "shadow", (16,), [None], [hard, unshadowed]),
+             (packed, "shadow", (7, 9), [None, True], [hard, soft]),
+             (single, "ao", (16,), [True], [hard]),
+             (many, "ao", (16,), [None], [hard]),
+             (many, "shadow", (16,), [None], [soft])]
+    for scene, mode, steps, expected, lights in cases:
         calls.clear()
-        rendered(scene, camera, steps, mode=mode, samples=sum(steps), ao_distance=0.8,
-                 lights=[core.Light.point((2.0, -3.0, 4.0))] if mode != "ao" else ())
+        rendered(scene, camera, steps, mode=mode, samples=sum(steps), ao_distance=0.8, lights=lights)
         assert calls == expected, (mode, steps)
 
 
 def test_a_batch_that_would_compile_the_packed_version_is_cut_below_it(monkeypatch):
-    """PreviewRender.batch_without_compile: a batch that would take the packed kernel (8+ AO samples, few
-    instances) is cut to PACKED_BATCH - 1 while that version is neither loaded nor cached; other batches
+    """PreviewRender.batch_without_compile: a batch that would take the packed kernel (8+ samples with AO
+    or a light of extent, few instances) is cut to PACKED_BATCH - 1 while that version is neither loaded nor cached; other batches
     and scenes keep their size. A batch so cut gives the image of the batch asked for."""
     import core.render.preview_render as preview_render
     from core.render.render_kernels import PACKED_BATCH
@@ -204,7 +228,10 @@ def test_a_batch_that_would_compile_the_packed_version_is_cut_below_it(monkeypat
         monkeypatch.setattr(preview_render, "packed_version_ready", lambda: ready)
         render = core.PreviewRender(packed, camera, 8, 8, samples=16, mode="ao")
         assert [render.batch_without_compile(n) for n in (1, 7, 16)] == [1, 7, expected]
-        for scene, mode in ((packed, "shadow"), (packed, "ao+shadow"), (single, "ao")):
+        soft = core.PreviewRender(packed, camera, 8, 8, samples=16, mode="shadow",
+                                  lights=[core.Light.sun((0.0, 0.0, -1.0), angle=0.1)])
+        assert soft.batch_without_compile(16) == expected
+        for scene, mode in ((packed, "shadow"), (single, "ao")):
             other = core.PreviewRender(scene, camera, 8, 8, samples=16, mode=mode, lights=light)
             assert other.batch_without_compile(16) == 16
     cut = rendered(packed, camera, (PACKED_BATCH - 1, 16 - PACKED_BATCH + 1), samples=16, ao_distance=0.8)

@@ -1,0 +1,303 @@
+"""A pixel's sample rays traced as any-hit packets inside the sampling kernel (render_kernels.py).
+
+All rays of a pixel start at its ray start: its AO rays, and its shadow rays towards each light with
+extent that casts shadows, make one-origin any-hit packets (occlusion_packets.py: lanes of every sign,
+each lane's answer the single ray's, so images do not change). A chunk of a pixel's samples is traced use
+by use (the AO ray, then each such light's ray), each ray with its own tmax. Sobol's consecutive samples
+are spread over the hemisphere on purpose, so a chunk's AO rays are first put in order of where they
+fall: quarter of azimuth, then the inner or outer half of Malley's disk (u1 < 1/2), by a counting sort
+that keeps sample order inside a cell. A packet's lanes then point roughly one way and walk the same
+nodes (docs/choices.md#ao-rays-in-packets-inside-the-sampling-kernel). A light's rays all point at the
+light already, so they go in sample order (docs/choices.md#light-samples-in-packets). Lights without
+extent repeat sample 0's ray (render_kernels.py) and are not in packets.
+Packets apply to batches of at least render_kernels.PACKED_BATCH samples (a progressive step of one
+sample gives each packet one lane) on a scene of at most MAX_PACKET_INSTANCES instances, lazy trees
+included: a packet that meets an unbuilt node leaves its lanes to single rays, which stop there as
+before. The chunk's rays go through each instance that shadow rays see and whose world box reaches
+within the rays' longest tmax of the origin, in that instance's object space (instance_traversal._to_object,
+as single rays go); a ray that one instance occludes leaves the packets, and a ray clear of all of them
+is clear, as an any-hit query through the top level finds (docs/choices.md#ao-packets-through-several-instances).
+Rays the memo answers (ray_memo.py) are not traced, and rays a packet leaves are traced one by one by
+the sampling kernel, through the whole scene. The sampling kernel takes
+`packed`: for None it is compiled without any of this code (the helpers below are overloads that are
+nothing for None), so a renderer that steps one sample at a time (the add-on's first step, and its steps
+until the packed version is cached) compiles what it did before packets (docs/choices.md#ao-packets-compiled-only-for-batches).
+"""
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit, types
+from numba.extending import overload
+
+from ..scene.instance_traversal import _to_object, mesh_tree, unowned_scene
+from ..scene.ray_visibility import SHADOW_RAYS
+from ..trace import simd as S
+from ..trace.array_views import rows, unowned
+from ..trace.layout import LEAF
+from ..trace.packet_traversal import (PacketOutputs, PacketRays, box_fits_float32, new_packet_work, trace_packet,
+                                     unowned_outputs, unowned_packet_work, unowned_rays)
+from .lights import DELTA, NO_SHADOW
+from .ray_memo import TRACE, keep_traced, reused_visibility, unowned_memo
+from .sample_rays import USE_AO, ao_direction, ray_of_use, uses_of_mode
+
+L = S.LANES
+CHUNK = 8 * L  # samples of a pixel whose rays are traced together, use by use
+CELLS = 8  # hemisphere cells of the AO sort: 4 quarters of azimuth x 2 halves of the disk
+MAX_PACKET_INSTANCES = 16  # most instances a scene's sample packets take: every chunk tests each one's box
+ANSWERED, DECIDED = -1, -2  # ChunkWork.cells of a ray the memo answered (or that needs none), of one traced or left
+
+
+class ChunkWork(NamedTuple):
+    """A thread's buffers for one chunk (CHUNK samples): `rays` (PacketRays: object-space origins and
+    directions, tmin, each ray's tmax, the packets' lane order), `out` (PacketOutputs), `world` (CHUNK, 3)
+    the world-space directions of the use being traced, `cells` (CHUNK,) int64 each pending ray's cell
+    (else ANSWERED, DECIDED), `starts` (CELLS + 1,) int64 the sort's cell offsets, and for every use (row)
+    and sample (column): `answers` (uses, CHUNK) int64 the ray's any-hit prim or ray_memo.TRACE,
+    `weights` (uses, CHUNK) its weight (sample_rays.ray_of_use: 0 when it needs no ray)."""
+
+    rays: PacketRays
+    out: PacketOutputs
+    world: np.ndarray
+    cells: np.ndarray
+    starts: np.ndarray
+    answers: np.ndarray
+    weights: np.ndarray
+
+
+def chunk_work_for(scene, uses, packed):
+    """(packets, answers, weights, owners): new_chunk_work's packets, their chunk's answers and weights
+    (ChunkWork.answers, .weights) and the arrays to keep alive when `packed` is not None; else (None, two
+    empty arrays, None). Jitted code only. These helpers are overloads that Numba compiles as small
+    functions of their own: inlined, with a None argument, they gave wrong indices
+    (docs/choices.md#ao-packets-compiled-only-for-batches)."""
+    raise NotImplementedError("called from jitted code only")
+
+
+@overload(chunk_work_for)
+def _chunk_work_for(scene, uses, packed):
+    if isinstance(packed, types.NoneType):
+        return lambda scene, uses, packed: (None, np.empty((0, 0), np.int64), np.empty((0, 0)), None)
+
+    def work(scene, uses, packed):
+        packets, owners = new_chunk_work(scene, uses)
+        return packets, packets[0].answers, packets[0].weights, owners
+    return work
+
+
+def in_packets(packets):
+    """Whether the sample rays go in packets: `packets` from chunk_work_for, not None, the scene one they take."""
+    raise NotImplementedError("called from jitted code only")
+
+
+@overload(in_packets)
+def _in_packets(packets):
+    if isinstance(packets, types.NoneType):
+        return lambda packets: False
+    return lambda packets: packets[2]
+
+
+@njit(cache=True, inline="always")
+def in_chunk(lights, use):
+    """Whether the rays of `use` go in packets: the AO rays, and those of a light with extent that casts
+    shadows (a light without extent repeats sample 0's ray; one without shadows needs none)."""
+    return use == USE_AO or (lights[use - 1, DELTA] == 0.0 and lights[use - 1, NO_SHADOW] == 0.0)
+
+
+def answer_chunk(scene, packets, pixel, samples, batch, lights, memo, rays):
+    """trace_chunk with packets from chunk_work_for; nothing for None."""
+    raise NotImplementedError("called from jitted code only")
+
+
+@overload(answer_chunk)
+def _answer_chunk(scene, packets, pixel, samples, batch, lights, memo, rays):
+    if isinstance(packets, types.NoneType):
+        return lambda scene, packets, pixel, samples, batch, lights, memo, rays: None
+
+    def answer(scene, packets, pixel, samples, batch, lights, memo, rays):
+        # A function of its own: its arrays become unowned views again, as packet_traversal.trace_packet's.
+        i, point, origin, normal, ps, ao_seeds, uses = pixel
+        trace_chunk(unowned_scene(scene), _unowned_packets(packets),
+                    (i, unowned(point), unowned(origin), unowned(normal), ps, ao_seeds, uses), samples, batch,
+                    unowned(lights), unowned_memo(memo), unowned(rays))
+    return answer
+
+
+@njit(cache=True, inline="always")
+def _unowned_packets(packets):
+    """new_chunk_work's packets as unowned views (array_views.py)."""
+    work, packet_work, apply = packets
+    work = ChunkWork(unowned_rays(work.rays), unowned_outputs(work.out), unowned(work.world), unowned(work.cells),
+                     unowned(work.starts), unowned(work.answers), unowned(work.weights))
+    return work, unowned_packet_work(packet_work), apply
+
+
+@njit(cache=True, inline="always")
+def packets_take(scene):
+    """Whether the sample rays of a scene (SceneArrays) go in packets: it has at most MAX_PACKET_INSTANCES
+    instances, each of which a chunk tests (render_kernels' rule, and PreviewRender's through py_func)."""
+    return scene.mesh_of.shape[0] <= MAX_PACKET_INSTANCES
+
+
+@njit(cache=True, inline="always")
+def new_chunk_work(scene, uses):
+    """((ChunkWork, packet work, whether packets apply: packets_take), owners): a thread's packet buffers
+    for `uses` uses a sample as unowned views, and the arrays owning them, which the caller keeps alive."""
+    owned = (np.zeros((CHUNK, 3)), np.zeros((CHUNK, 3)), np.zeros(CHUNK), np.zeros(CHUNK),
+             np.full(CHUNK, -1, np.int64), np.empty(CHUNK), np.empty(CHUNK, np.int32), np.empty(CHUNK),
+             np.empty(CHUNK), np.zeros(CHUNK, np.uint8), np.empty((CHUNK, 3)), np.empty(CHUNK, np.int64),
+             np.empty(CELLS + 1, np.int64), np.empty((uses, CHUNK), np.int64), np.empty((uses, CHUNK)))
+    rays = PacketRays(unowned(owned[0]), unowned(owned[1]), unowned(owned[2]), unowned(owned[3]),
+                      unowned(owned[4]))
+    out = PacketOutputs(unowned(owned[5]), unowned(owned[6]), unowned(owned[7]), unowned(owned[8]),
+                        unowned(owned[9]))
+    work = ChunkWork(rays, out, unowned(owned[10]), unowned(owned[11]), unowned(owned[12]), unowned(owned[13]),
+                     unowned(owned[14]))
+    sc, stack, packet_owned = new_packet_work()
+    return (work, (sc, stack), packets_take(scene)), (owned, packet_owned)
+
+
+@njit(cache=True, inline="always")
+def trace_chunk(scene, packets, pixel, samples, batch, lights, memo, rays):
+    """The rays of samples[0]..samples[1]-1 of pixel = (i, point, origin, normal, pixel seed, AO seeds,
+    uses) for every use of the batch's mode that goes in packets (in_chunk), use by use (trace_use)."""
+    uses = pixel[6]
+    first_use, last_use = uses_of_mode(batch.mode, uses)
+    for use in range(first_use, last_use):
+        if in_chunk(lights, use):
+            trace_use(scene, packets, pixel, samples, batch, lights, use, memo, rays)
+
+
+@njit(cache=True, inline="always")
+def trace_use(scene, packets, pixel, samples, batch, lights, use, memo, rays):
+    """The rays of one use of the chunk's samples: each one's weight into packets[0].weights[use] and
+    its any-hit prim (>= 0 occluded, -1 clear) into packets[0].answers[use, s - samples[0]], from the
+    memo or the packets, kept in the memo; ray_memo.TRACE for a ray a packet left (or all, once fewer
+    than two are pending), which the caller traces alone through the scene. Every ray is counted in
+    rays[i], as render_kernels' single rays are. The packets go through packet_traversal.trace_packet,
+    one compiled function shared with the packet kernel
+    (docs/choices.md#ao-rays-in-packets-inside-the-sampling-kernel), instance by instance (_through_instance)."""
+    work, packet_work, _ = packets
+    i, origin, first, end, uses = pixel[0], pixel[2], samples[0], samples[1], pixel[6]
+    answers = rows(work.answers, use, use + 1)[0]
+    n = end - first
+    pending, reach = _rays_of_use(work, pixel, samples, batch, lights, use, memo, rays)
+    inst, instances = 0, scene.mesh_of.shape[0]
+    while pending > 1 and inst < instances:
+        if _reached(scene, inst, origin, reach):
+            pending = _through_instance(scene, inst, work, packet_work, (origin, answers), n, pending)
+        inst += 1
+    unfinished = inst < instances  # a ray left pending has not met every instance: the caller traces it
+    for k in range(n):
+        if work.cells[k] == ANSWERED:
+            continue
+        if work.cells[k] >= 0:
+            answers[k] = TRACE if unfinished else -1
+        if answers[k] != TRACE:
+            keep_traced(memo, i, (first + k) * uses + use, answers[k])
+
+
+@njit(cache=True, inline="always")
+def _reached(scene, inst, origin, reach):
+    """Whether rays from origin, at most `reach` long, may meet instance inst, as trace_scene decides:
+    shadow rays see it, its mesh has nodes, the top level holds it (two_level.build_top_level leaves out
+    a box with box[0] <= box[3] false), and, unless the top level is flat (trace_scene then tests no box),
+    its world box (rounded outward) comes within `reach` of the origin on every axis, widened by 2^-20 of
+    the reach (a unit direction's length rounds to 1 within far less) and 2^-50 of the coordinate (the
+    sum's rounding)."""
+    if scene.visibility[inst] & SHADOW_RAYS == 0:
+        return False
+    m = scene.mesh_of[inst]
+    if scene.node_start[m + 1] == scene.node_start[m] or not scene.world_boxes[inst, 0] <= scene.world_boxes[inst, 3]:
+        return False
+    if scene.top_items.shape[0] == 1 and scene.top_axis[0] == LEAF:
+        return True
+    for k in range(3):
+        slack = reach * (1.0 + 2.0 ** -20) + (abs(origin[k]) + reach) * 2.0 ** -50
+        if scene.world_boxes[inst, k] > origin[k] + slack or scene.world_boxes[inst, k + 3] < origin[k] - slack:
+            return False
+    return True
+
+
+@njit(cache=True, inline="always")
+def _through_instance(scene, inst, work, packet_work, ray_answers, n, pending):
+    """The pending rays (work.cells >= 0) from ray_answers[0] through instance inst in packets, in its
+    object space (the single rays' arithmetic); a ray it occludes, or one a packet leaves
+    (work.out.single), is decided: its prim, or TRACE, into ray_answers[1]. Returns how many stay
+    pending (clear of every instance so far)."""
+    origin, answers = ray_answers
+    tree = mesh_tree(scene, scene.mesh_of[inst])
+    w2o = rows(scene.world_to_object, inst, inst + 1)[0]
+    for k in range(n):
+        if work.cells[k] >= 0:
+            _to_object(w2o, origin, rows(work.world, k, k + 1)[0], rows(work.rays.origins, k, k + 1)[0],
+                       rows(work.rays.directions, k, k + 1)[0])
+            work.out.single[k] = 0
+    _sort_into_packets(work, n, pending)
+    any_hit = pending > 1  # True, as a bool value: a literal True would compile trace_packet again
+    box_fits = box_fits_float32(tree.bounds)
+    for p in range((pending + L - 1) // L):
+        trace_packet(tree, work.rays, rows(work.rays.order, p * L, p * L + L), packet_work, work.out, box_fits,
+                     any_hit)
+    pending = 0
+    for k in range(n):
+        if work.cells[k] < 0:
+            continue
+        if work.out.single[k] != 0 or work.out.prim[k] >= 0:
+            answers[k] = TRACE if work.out.single[k] != 0 else work.out.prim[k]
+            work.cells[k] = DECIDED
+        else:
+            pending += 1
+    return pending
+
+
+@njit(cache=True, inline="always")
+def _rays_of_use(work, pixel, samples, batch, lights, use, memo, rays):
+    """Each sample's ray of `use` (sample_rays.ray_of_use's) into work.world, work.rays.tmax and
+    work.weights[use]; rays the memo answers, and light rays that need none (weight 0), get their prim
+    and cell ANSWERED, the others their cell (AO rays their hemisphere cell, light rays cell 0). Returns
+    (how many rays are left to trace, their longest tmax)."""
+    i, point, origin, normal, ps, ao_seeds, uses = pixel
+    first, end = samples
+    answers, weights = rows(work.answers, use, use + 1)[0], rows(work.weights, use, use + 1)[0]
+    pending, reach = 0, 0.0
+    for k in range(end - first):
+        s = first + k
+        d = rows(work.world, k, k + 1)[0]
+        cell = 0
+        if use == USE_AO:
+            u1, u2 = ao_direction(batch.sampler, ao_seeds, s, batch.dim1, normal, d)
+            tmax, weights[k] = batch.ao_distance, 1.0
+            cell = 2 * min(int(4.0 * u2), 3) + (1 if u1 >= 0.5 else 0)
+        else:
+            tmax, weights[k] = ray_of_use(use, lights, point, normal, batch.ao_distance, batch.sampler, ps, ao_seeds,
+                                          s, batch.dim1, d)
+        answers[k], work.cells[k] = -1, ANSWERED
+        if weights[k] <= 0.0:
+            continue  # behind the surface or outside the light: no ray, as in the sampling loop
+        rays[i] += 1
+        answers[k] = reused_visibility(memo, i, s * uses + use, origin, d, tmax)
+        if answers[k] != TRACE:
+            continue
+        work.cells[k], work.rays.tmax[k] = cell, tmax
+        reach = max(reach, tmax)
+        pending += 1
+    return pending, reach
+
+
+@njit(cache=True, inline="always")
+def _sort_into_packets(work, n, pending):
+    """work.rays.order: the n rays' indices to trace, by cell then sample (a counting sort), -1 up to
+    a whole packet."""
+    cells, starts, order = work.cells, work.starts, work.rays.order
+    starts[:] = 0
+    for k in range(n):
+        if cells[k] >= 0:
+            starts[cells[k] + 1] += 1
+    for c in range(CELLS):
+        starts[c + 1] += starts[c]
+    for k in range(n):
+        if cells[k] >= 0:
+            order[starts[cells[k]]] = k
+            starts[cells[k]] += 1
+    for k in range(pending, (pending + L - 1) // L * L):
+        order[k] = -1
