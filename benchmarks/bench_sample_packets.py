@@ -2,8 +2,10 @@
 in one process, by turns.
 
 Usage: python benchmarks/bench_sample_packets.py [--scene suzanne-251k] [--size 256] [--samples 16] [--rounds 7]
+                                                [--copies N]
 
-On a prebuilt tree (default build), `PreviewRender.step(samples)` of three renders: mode ao (AO within
+On a prebuilt tree (default build; with --copies N a two-level scene of N copies of the mesh side by
+side, 1.2 of its width apart, on a ground plate: N + 1 instances), `PreviewRender.step(samples)` of three renders: mode ao (AO within
 1), mode shadow with lights of extent (a point light of radius 0.25 and a sun of 2 degrees: Blender's
 defaults are a 0.1 m point and a 0.526 degree sun), and ao+shadow with the same lights. Each render
 runs with packets (the renderer's own rule) and without (`packed` None: every ray alone through the
@@ -47,16 +49,33 @@ def step(tree, camera, size, samples, settings, packets):
     return seconds, render.image(), render.rays_traced
 
 
+def copies_on_plate(triangles, copies):
+    """A TwoLevelScene: `copies` instances of the mesh's tree along x, centred on the first (the camera's
+    view), and a ground plate under them."""
+    lo, hi = triangles.reshape(-1, 3).min(axis=0), triangles.reshape(-1, 3).max(axis=0)
+    width = float(hi[0] - lo[0])
+    a, b = (lo - 4.0 * width).astype(np.float32), (hi + 4.0 * width).astype(np.float32)
+    z = np.float32(lo[2] - 0.05 * width)
+    plate = np.array([[[a[0], a[1], z], [b[0], a[1], z], [b[0], b[1], z]],
+                      [[a[0], a[1], z], [b[0], b[1], z], [a[0], b[1], z]]], np.float32)
+    matrices = [np.eye(4) for _ in range(copies + 1)]
+    for k in range(copies):
+        matrices[k][0, 3] = 1.2 * width * (k - (copies - 1) / 2.0)
+    mesh = core.build_kdtree(triangles)
+    return core.build_two_level([mesh, core.build_kdtree(plate)], [0] * copies + [1], np.stack(matrices))
+
+
 def main():
     ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--scene", default="suzanne-251k")
     ap.add_argument("--size", type=int, default=256)
     ap.add_argument("--samples", type=int, default=16)
     ap.add_argument("--rounds", type=int, default=7)
+    ap.add_argument("--copies", type=int, default=0, help="N copies of the mesh and a ground plate as instances")
     args = ap.parse_args()
     scene = load_scene(args.scene)
     camera = core.Camera(scene.camera_matrix, scene.camera_fov)
-    tree = core.build_kdtree(scene.triangles)
+    tree = core.build_kdtree(scene.triangles) if not args.copies else copies_on_plate(scene.triangles, args.copies)
     t = time.perf_counter()
     for settings in RENDERS.values():
         images = [step(tree, camera, args.size, args.samples, settings, packets)[1] for packets in (True, False)]
@@ -77,8 +96,9 @@ def main():
         print(f"{name:>10}: packets {out[name]['packets_ms']:7.1f} ms, single rays {out[name]['single_ms']:7.1f} ms, "
               f"time ratio {out[name]['ratio']:.3f} ({rays / statistics.median(times[True]) / 1e6:.2f} "
               f"against {rays / statistics.median(times[False]) / 1e6:.2f} Mrays/s)")
-    results.write("bench_sample_packets", {"scene": args.scene, "size": args.size, "samples": args.samples,
-                                           "rounds": args.rounds, "renders": out}, jit_seconds)
+    name = "bench_sample_packets" + (f"_copies{args.copies}" if args.copies else "")
+    results.write(name, {"scene": args.scene, "size": args.size, "samples": args.samples, "copies": args.copies,
+                         "rounds": args.rounds, "renders": out}, jit_seconds)
 
 
 if __name__ == "__main__":

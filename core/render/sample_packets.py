@@ -13,8 +13,8 @@ extent repeat sample 0's ray (render_kernels.py) and are not in packets.
 Packets apply to batches of at least render_kernels.PACKED_BATCH samples (a progressive step of one
 sample gives each packet one lane) on a scene of at most MAX_PACKET_INSTANCES instances, lazy trees
 included: a packet that meets an unbuilt node leaves its lanes to single rays, which stop there as
-before. The chunk's rays go through each instance that shadow rays see and whose world box reaches
-within the rays' longest tmax of the origin, in that instance's object space (instance_traversal._to_object,
+before. The chunk's rays go through each instance that shadow rays see and whose world box their
+segments' box meets, those whose segment enters it, in that instance's object space (instance_traversal._to_object,
 as single rays go); a ray that one instance occludes leaves the packets, and a ray clear of all of them
 is clear, as an any-hit query through the top level finds (docs/choices.md#ao-packets-through-several-instances).
 Rays the memo answers (ray_memo.py) are not traced, and rays a packet leaves are traced one by one by
@@ -29,11 +29,12 @@ import numpy as np
 from numba import njit, types
 from numba.extending import overload
 
-from ..scene.instance_traversal import _to_object, mesh_tree, unowned_scene
+from ..scene.instance_traversal import _misses_box, _to_object, mesh_tree, unowned_scene
 from ..scene.ray_visibility import SHADOW_RAYS
 from ..trace import simd as S
 from ..trace.array_views import rows, unowned
 from ..trace.layout import LEAF
+from ..trace.traversal import clip_to_box
 from ..trace.packet_traversal import (PacketOutputs, PacketRays, box_fits_float32, new_packet_work, trace_packet,
                                      unowned_outputs, unowned_packet_work, unowned_rays)
 from .lights import DELTA, NO_SHADOW
@@ -45,6 +46,7 @@ CHUNK = 8 * L  # samples of a pixel whose rays are traced together, use by use
 CELLS = 8  # hemisphere cells of the AO sort: 4 quarters of azimuth x 2 halves of the disk
 MAX_PACKET_INSTANCES = 16  # most instances a scene's sample packets take: every chunk tests each one's box
 ANSWERED, DECIDED = -1, -2  # ChunkWork.cells of a ray the memo answered (or that needs none), of one traced or left
+PASSED = -3  # cells <= PASSED: a pending ray outside the instance being traced (_enters)
 
 
 class ChunkWork(NamedTuple):
@@ -53,7 +55,9 @@ class ChunkWork(NamedTuple):
     the world-space directions of the use being traced, `cells` (CHUNK,) int64 each pending ray's cell
     (else ANSWERED, DECIDED), `starts` (CELLS + 1,) int64 the sort's cell offsets, and for every use (row)
     and sample (column): `answers` (uses, CHUNK) int64 the ray's any-hit prim or ray_memo.TRACE,
-    `weights` (uses, CHUNK) its weight (sample_rays.ray_of_use: 0 when it needs no ray)."""
+    `weights` (uses, CHUNK) its weight (sample_rays.ray_of_use: 0 when it needs no ray); `inv` (3,) a
+    direction's reciprocals for a box clip (_enters); `reach` (6,) the box of the pending rays' segments
+    (_extend_reach)."""
 
     rays: PacketRays
     out: PacketOutputs
@@ -62,6 +66,8 @@ class ChunkWork(NamedTuple):
     starts: np.ndarray
     answers: np.ndarray
     weights: np.ndarray
+    inv: np.ndarray
+    reach: np.ndarray
 
 
 def chunk_work_for(scene, uses, packed):
@@ -127,7 +133,8 @@ def _unowned_packets(packets):
     """new_chunk_work's packets as unowned views (array_views.py)."""
     work, packet_work, apply = packets
     work = ChunkWork(unowned_rays(work.rays), unowned_outputs(work.out), unowned(work.world), unowned(work.cells),
-                     unowned(work.starts), unowned(work.answers), unowned(work.weights))
+                     unowned(work.starts), unowned(work.answers), unowned(work.weights), unowned(work.inv),
+                     unowned(work.reach))
     return work, unowned_packet_work(packet_work), apply
 
 
@@ -145,13 +152,14 @@ def new_chunk_work(scene, uses):
     owned = (np.zeros((CHUNK, 3)), np.zeros((CHUNK, 3)), np.zeros(CHUNK), np.zeros(CHUNK),
              np.full(CHUNK, -1, np.int64), np.empty(CHUNK), np.empty(CHUNK, np.int32), np.empty(CHUNK),
              np.empty(CHUNK), np.zeros(CHUNK, np.uint8), np.empty((CHUNK, 3)), np.empty(CHUNK, np.int64),
-             np.empty(CELLS + 1, np.int64), np.empty((uses, CHUNK), np.int64), np.empty((uses, CHUNK)))
+             np.empty(CELLS + 1, np.int64), np.empty((uses, CHUNK), np.int64), np.empty((uses, CHUNK)), np.empty(3),
+             np.empty(6))
     rays = PacketRays(unowned(owned[0]), unowned(owned[1]), unowned(owned[2]), unowned(owned[3]),
                       unowned(owned[4]))
     out = PacketOutputs(unowned(owned[5]), unowned(owned[6]), unowned(owned[7]), unowned(owned[8]),
                         unowned(owned[9]))
     work = ChunkWork(rays, out, unowned(owned[10]), unowned(owned[11]), unowned(owned[12]), unowned(owned[13]),
-                     unowned(owned[14]))
+                     unowned(owned[14]), unowned(owned[15]), unowned(owned[16]))
     sc, stack, packet_owned = new_packet_work()
     return (work, (sc, stack), packets_take(scene)), (owned, packet_owned)
 
@@ -180,10 +188,10 @@ def trace_use(scene, packets, pixel, samples, batch, lights, use, memo, rays):
     i, origin, first, end, uses = pixel[0], pixel[2], samples[0], samples[1], pixel[6]
     answers = rows(work.answers, use, use + 1)[0]
     n = end - first
-    pending, reach = _rays_of_use(work, pixel, samples, batch, lights, use, memo, rays)
+    pending = _rays_of_use(scene, work, pixel, samples, batch, lights, use, memo, rays)
     inst, instances = 0, scene.mesh_of.shape[0]
     while pending > 1 and inst < instances:
-        if _reached(scene, inst, origin, reach):
+        if _reached(scene, inst, work.reach):
             pending = _through_instance(scene, inst, work, packet_work, (origin, answers), n, pending)
         inst += 1
     unfinished = inst < instances  # a ray left pending has not met every instance: the caller traces it
@@ -197,13 +205,13 @@ def trace_use(scene, packets, pixel, samples, batch, lights, use, memo, rays):
 
 
 @njit(cache=True, inline="always")
-def _reached(scene, inst, origin, reach):
-    """Whether rays from origin, at most `reach` long, may meet instance inst, as trace_scene decides:
-    shadow rays see it, its mesh has nodes, the top level holds it (two_level.build_top_level leaves out
-    a box with box[0] <= box[3] false), and, unless the top level is flat (trace_scene then tests no box),
-    its world box (rounded outward) comes within `reach` of the origin on every axis, widened by 2^-20 of
-    the reach (a unit direction's length rounds to 1 within far less) and 2^-50 of the coordinate (the
-    sum's rounding)."""
+def _reached(scene, inst, reach):
+    """Whether rays whose segments lie in the box `reach` (_extend_reach) may meet instance inst, as
+    trace_scene decides: shadow rays see it, its mesh has nodes, the top level holds it
+    (two_level.build_top_level leaves out a box with box[0] <= box[3] false), and, unless the top level
+    is flat (trace_scene then tests no box), its world box (rounded outward) overlaps `reach` widened by
+    2^-20 of its size (a unit direction's length rounds to 1 within far less) and 2^-50 of its
+    coordinates (the end points' rounding). A test for the whole chunk; _enters then tests each ray."""
     if scene.visibility[inst] & SHADOW_RAYS == 0:
         return False
     m = scene.mesh_of[inst]
@@ -212,37 +220,61 @@ def _reached(scene, inst, origin, reach):
     if scene.top_items.shape[0] == 1 and scene.top_axis[0] == LEAF:
         return True
     for k in range(3):
-        slack = reach * (1.0 + 2.0 ** -20) + (abs(origin[k]) + reach) * 2.0 ** -50
-        if scene.world_boxes[inst, k] > origin[k] + slack or scene.world_boxes[inst, k + 3] < origin[k] - slack:
+        slack = (reach[k + 3] - reach[k]) * 2.0 ** -20 + (abs(reach[k]) + abs(reach[k + 3])) * 2.0 ** -50
+        if scene.world_boxes[inst, k] > reach[k + 3] + slack or scene.world_boxes[inst, k + 3] < reach[k] - slack:
             return False
     return True
 
 
 @njit(cache=True, inline="always")
+def _extend_reach(scene, work, origin, d, tmax):
+    """Grow work.reach by the segment from origin along d to tmax, or, for an endless ray (a sun's), to
+    where the single ray's clip of the scene's top-level box ends it (no instance lies beyond)."""
+    end = tmax
+    if end == np.inf:
+        inv = work.inv
+        for a in range(3):
+            inv[a] = 1.0 / d[a] if d[a] != 0.0 else 0.0
+        t0, t1 = clip_to_box(scene.top_bounds, origin, d, inv, 0.0, tmax)
+        end = t1 if t0 <= t1 else 0.0
+    box = work.reach
+    for a in range(3):
+        far = origin[a] + d[a] * end
+        box[a] = min(box[a], origin[a], far)
+        box[a + 3] = max(box[a + 3], origin[a], far)
+
+
+@njit(cache=True, inline="always")
 def _through_instance(scene, inst, work, packet_work, ray_answers, n, pending):
-    """The pending rays (work.cells >= 0) from ray_answers[0] through instance inst in packets, in its
-    object space (the single rays' arithmetic); a ray it occludes, or one a packet leaves
-    (work.out.single), is decided: its prim, or TRACE, into ray_answers[1]. Returns how many stay
-    pending (clear of every instance so far)."""
+    """The pending rays (work.cells >= 0) from ray_answers[0] that enter instance inst's world box
+    (_enters) through it in packets, in its object space (the single rays' arithmetic); a ray it
+    occludes, or one a packet leaves (work.out.single), is decided: its prim, or TRACE, into
+    ray_answers[1]. Returns how many stay pending (clear of every instance so far)."""
     origin, answers = ray_answers
     tree = mesh_tree(scene, scene.mesh_of[inst])
     w2o = rows(scene.world_to_object, inst, inst + 1)[0]
+    entering = _enters(scene, inst, work, origin, n)
+    if entering == 0:
+        return pending
     for k in range(n):
         if work.cells[k] >= 0:
             _to_object(w2o, origin, rows(work.world, k, k + 1)[0], rows(work.rays.origins, k, k + 1)[0],
                        rows(work.rays.directions, k, k + 1)[0])
             work.out.single[k] = 0
-    _sort_into_packets(work, n, pending)
-    any_hit = pending > 1  # True, as a bool value: a literal True would compile trace_packet again
+    _sort_into_packets(work, n, entering)
+    any_hit = entering > 0  # True, as a bool value: a literal True would compile trace_packet again
     box_fits = box_fits_float32(tree.bounds)
-    for p in range((pending + L - 1) // L):
+    for p in range((entering + L - 1) // L):
         trace_packet(tree, work.rays, rows(work.rays.order, p * L, p * L + L), packet_work, work.out, box_fits,
                      any_hit)
     pending = 0
     for k in range(n):
-        if work.cells[k] < 0:
+        if work.cells[k] <= PASSED:  # missed this instance's box: still pending, in its cell again
+            work.cells[k] = PASSED - work.cells[k]
+            pending += 1
+        elif work.cells[k] < 0:
             continue
-        if work.out.single[k] != 0 or work.out.prim[k] >= 0:
+        elif work.out.single[k] != 0 or work.out.prim[k] >= 0:
             answers[k] = TRACE if work.out.single[k] != 0 else work.out.prim[k]
             work.cells[k] = DECIDED
         else:
@@ -251,15 +283,42 @@ def _through_instance(scene, inst, work, packet_work, ray_answers, n, pending):
 
 
 @njit(cache=True, inline="always")
-def _rays_of_use(work, pixel, samples, batch, lights, use, memo, rays):
+def _enters(scene, inst, work, origin, n):
+    """How many pending rays may meet instance inst: in a flat top level all (trace_scene tests no box
+    there), else those whose segment (0, tmax) the single ray's clip of the instance's world box keeps
+    (instance_traversal._misses_box, the same float64 arithmetic, so a ray left out here is one
+    trace_scene would not enter either). The others' cells become PASSED - cell until the instance is done:
+    long rays (a light's) pass most instances' boxes."""
+    if scene.top_items.shape[0] == 1 and scene.top_axis[0] == LEAF:
+        inside = 0
+        for k in range(n):
+            inside += 1 if work.cells[k] >= 0 else 0
+        return inside
+    inv, inside = work.inv, 0
+    for k in range(n):
+        if work.cells[k] < 0:
+            continue
+        d = rows(work.world, k, k + 1)[0]
+        for a in range(3):
+            inv[a] = 1.0 / d[a] if d[a] != 0.0 else 0.0
+        if _misses_box(scene.world_boxes, inst, origin, d, inv, 0.0, work.rays.tmax[k]):
+            work.cells[k] = PASSED - work.cells[k]
+        else:
+            inside += 1
+    return inside
+
+
+@njit(cache=True, inline="always")
+def _rays_of_use(scene, work, pixel, samples, batch, lights, use, memo, rays):
     """Each sample's ray of `use` (sample_rays.ray_of_use's) into work.world, work.rays.tmax and
     work.weights[use]; rays the memo answers, and light rays that need none (weight 0), get their prim
-    and cell ANSWERED, the others their cell (AO rays their hemisphere cell, light rays cell 0). Returns
-    (how many rays are left to trace, their longest tmax)."""
+    and cell ANSWERED, the others their cell (AO rays their hemisphere cell, light rays cell 0) and
+    their segment in work.reach. Returns how many rays are left to trace."""
     i, point, origin, normal, ps, ao_seeds, uses = pixel
     first, end = samples
     answers, weights = rows(work.answers, use, use + 1)[0], rows(work.weights, use, use + 1)[0]
-    pending, reach = 0, 0.0
+    pending = 0
+    work.reach[:3], work.reach[3:] = np.inf, -np.inf
     for k in range(end - first):
         s = first + k
         d = rows(work.world, k, k + 1)[0]
@@ -279,9 +338,9 @@ def _rays_of_use(work, pixel, samples, batch, lights, use, memo, rays):
         if answers[k] != TRACE:
             continue
         work.cells[k], work.rays.tmax[k] = cell, tmax
-        reach = max(reach, tmax)
+        _extend_reach(scene, work, origin, d, tmax)
         pending += 1
-    return pending, reach
+    return pending
 
 
 @njit(cache=True, inline="always")
