@@ -24,7 +24,8 @@ ROOT = Path(__file__).resolve().parents[1]
 OUT_DIR = ROOT / "benchmarks" / "out"
 README = ROOT / "README.md"
 BENCH_DOC = ROOT / "docs" / "benchmarks.md"
-FILES = ("bench_core", "bench_seed000", "bench_render", "bench_first_render", "bench_instances", "bench_big_mesh")
+FILES = ("bench_core", "bench_seed000", "bench_render", "bench_sample_packets", "bench_first_render", "bench_instances",
+         "bench_big_mesh")
 FIGURE_SCENE = "suzanne-251k"
 
 
@@ -110,6 +111,15 @@ def figures_block(data):
                              f"raw {entry['ours_raw']}, denoised {entry['ours_denoised']}",
                              f"Cycles: {entry['cycles_seconds']:.2f} s, RMSE {entry['cycles_rmse']:.4f}"])
         notes.append(provenance(data["bench_render"]))
+    if "bench_sample_packets" in data:
+        r = data["bench_sample_packets"]["results"]
+        for name in ("ao", "shadow"):
+            f = r["renders"][name]
+            what = "AO" if name == "ao" else "shadows of a soft point light and sun"
+            rows.append([f"render step in packets, {what}, {r['size']}x{r['size']} at {r['samples']} spp",
+                         f"{ms(f['packets_ms'])} ({1 / f['ratio']:.2f}x faster)",
+                         f"the same rays one by one: {ms(f['single_ms'])}"])
+        notes.append(provenance(data["bench_sample_packets"]))
     if not rows:
         return missing("bench_core", "python benchmarks/bench_core.py")
     return table(["figure", "KD Preview", "reference, same run"], rows) + "\n\n" + "\n".join(
