@@ -15,7 +15,7 @@ Disabling the add-on lets a running compile finish: it only fills the cache. KD_
 turns the warm-up off (then a first render compiles as before: pipeline.FrameJob).
 
 Once those kernels are cached, a second process of lower priority compiles the sampling kernel's
-packed version (AO packets in batches of 8+ samples, core/jit/first_frame.compile_packed_samples), which
+packed version (sample packets in batches of 8+ samples, core/jit/first_frame.compile_packed_samples), which
 no render waits for: renders step in batches that large only once it is cached (sampling_steps.py).
 
 API for the UI and a render engine: start(), status() -> WarmupStatus (state, elapsed seconds,

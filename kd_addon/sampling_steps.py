@@ -4,7 +4,7 @@ One sample first, then as many as the last step's rate fits in the step time, at
 its samples, and never so many that the sampling kernel's packed version would compile (core
 PreviewRender.batch_without_compile: it waits until the warm-up's packed stage cached it,
 kernel_warmup.py). Batches do not change the image; fewer kernel calls are faster, and batches of 8 or
-more take the AO packets (docs/choices.md#the-add-on-steps-in-growing-batches).
+more take the sample packets (docs/choices.md#the-add-on-steps-in-growing-batches).
 """
 
 from __future__ import annotations

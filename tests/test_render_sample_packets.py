@@ -84,6 +84,11 @@ def test_soup_renders_as_single_rays(mode, steps):
         image = assert_same_render(scene, look_at((2.5, -3.0, 1.5), (0.0, 0.0, 0.0)), steps, mode=mode,
                                    samples=70, ao_distance=0.8, lights=lights if mode != "ao" else ())
         assert occluded_share(image) > 0.3 if mode != "shadow" else shadowed_share(image) > 0.1
+    if mode == "shadow":  # the lights with extent alone cast shadows (their rays are the packets')
+        soft = lights[1:5]  # soft_and_hard_lights' lights with extent that cast shadows
+        image = assert_same_render(packed, look_at((2.5, -3.0, 1.5), (0.0, 0.0, 0.0)), steps, mode=mode,
+                                   samples=70, lights=soft)
+        assert shadowed_share(image) > 0.1
 
 
 @pytest.mark.parametrize("builder, offset", [("binned", 0.0), ("median", 0.0), ("binned", 2.0 ** 20)])
@@ -143,10 +148,11 @@ def test_several_instances_render_as_single_rays():
         camera = look_at(np.array([0.5, -4.0, 2.0]) + offset, np.full(3, offset), fov=1.2)
         image = assert_same_render(scene, camera, (24,), samples=24, ao_distance=0.9)
         assert occluded_share(image) > 0.3
-        lit = assert_same_render(scene, camera, (24,), samples=24, mode="shadow",
-                                 lights=[core.Light.point(np.array([0.4, -1.0, 2.5]) + offset, radius=0.5),
-                                         core.Light.sun((0.2, 0.1, -1.0), angle=0.2)])
-        assert shadowed_share(lit) > 0.1
+        for mode in ("shadow", "ao+shadow"):
+            lit = assert_same_render(scene, camera, (24,), samples=24, mode=mode, ao_distance=0.9,
+                                     lights=[core.Light.point(np.array([0.4, -1.0, 2.5]) + offset, radius=0.5),
+                                             core.Light.sun((0.2, 0.1, -1.0), angle=0.2)])
+            assert shadowed_share(lit) > 0.1
         unseen = build_two_level([soup, plate], [0, 1, 0, 0, 0], matrices)  # the copy at x - 1.1 occludes now
         assert not np.array_equal(image, rendered(unseen, camera, (24,), samples=24, ao_distance=0.9).image())
 
@@ -156,16 +162,17 @@ def test_lazy_tree_renders_as_the_eager_tree():
     redone once they are built, so the image is the eager tree's."""
     tris = random_soup(np.random.default_rng(5), 4000, size=0.2)
     camera = look_at((2.5, -3.0, 1.5), (0.0, 0.0, 0.0))
-    settings = dict(samples=20, ao_distance=0.8)
-    eager = rendered(core.build_kdtree(tris), camera, (20,), **settings)
-    lazy = core.build_kdtree(tris, lazy=True, lazy_subtree_size=256)
-    got = core.PreviewRender(lazy, camera, 40, 32, **settings)
-    built_by_camera = lazy.stats()["subtrees_built"]
-    got.step(20)
-    assert lazy.stats()["subtrees_built"] > built_by_camera  # the AO rays met unbuilt subtrees
-    np.testing.assert_array_equal(got.image(), eager.image())
-    np.testing.assert_array_equal(got.sample_counts(), eager.sample_counts())
-    assert got.rays_traced == eager.rays_traced
+    soft = [core.Light.point((-2.0, 3.0, 0.5), radius=0.5)]  # behind the soup: its rays cross unbuilt parts
+    for settings in (dict(samples=20, ao_distance=0.8), dict(samples=20, mode="shadow", lights=soft)):
+        eager = rendered(core.build_kdtree(tris), camera, (20,), **settings)
+        lazy = core.build_kdtree(tris, lazy=True, lazy_subtree_size=256)
+        got = core.PreviewRender(lazy, camera, 40, 32, **settings)
+        built_by_camera = lazy.stats()["subtrees_built"]
+        got.step(20)
+        assert lazy.stats()["subtrees_built"] > built_by_camera  # the sample rays met unbuilt subtrees
+        np.testing.assert_array_equal(got.image(), eager.image())
+        np.testing.assert_array_equal(got.sample_counts(), eager.sample_counts())
+        assert got.rays_traced == eager.rays_traced
 
 
 def _placed(position):

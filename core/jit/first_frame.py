@@ -8,8 +8,8 @@ one-instance packet kernels compiled by the helper beside the build and camera p
 warmup=True), an ao+shadow render with one light of each kind, then a second frame with one object
 moved that continues from the first one's pixels (the pixel-reuse kernels), the tree statistics the
 panel shows, and last the factory scene's first frame: one cube, a one-instance scene traced in packets.
-compile_packed_samples is the warm-up's second stage: the sampling kernel's packed version (AO packets in
-batches of 8 or more samples), which the add-on steps into once it is cached (kd_addon/kernel_warmup.py).
+compile_packed_samples is the warm-up's second stage: the sampling kernel's packed version (sample packets
+in batches of 8 or more samples), which the add-on steps into once it is cached (kd_addon/kernel_warmup.py).
 Numba compiles one version per argument types, so the arrays have the add-on's dtypes
 (tree_cache.mesh_inputs). Sizes, modes and sample counts are runtime values and need no second compile.
 """

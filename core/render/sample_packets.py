@@ -9,13 +9,13 @@ fall: quarter of azimuth, then the inner or outer half of Malley's disk (u1 < 1/
 that keeps sample order inside a cell. A packet's lanes then point roughly one way and walk the same
 nodes (docs/choices.md#ao-rays-in-packets-inside-the-sampling-kernel). A light's rays all point at the
 light already, so they go in sample order (docs/choices.md#light-samples-in-packets). Lights without
-extent repeat sample 0's ray (render_kernels.py) and are not in packets.
+extent repeat sample 0's ray (render_kernels.py) and lights without shadows need none: neither is in packets.
 Packets apply to batches of at least render_kernels.PACKED_BATCH samples (a progressive step of one
 sample gives each packet one lane) on a scene of at most MAX_PACKET_INSTANCES instances, lazy trees
 included: a packet that meets an unbuilt node leaves its lanes to single rays, which stop there as
-before. The chunk's rays go through each instance that shadow rays see and whose world box their
-segments' box meets, those whose segment enters it, in that instance's object space (instance_traversal._to_object,
-as single rays go); a ray that one instance occludes leaves the packets, and a ray clear of all of them
+before. The chunk's rays go through each instance that shadow rays see and whose world box meets the
+box of their segments, each ray only where the single ray's clip lets it into the instance's box, in that
+instance's object space (instance_traversal._to_object, as single rays go); a ray that one instance occludes leaves the packets, and a ray clear of all of them
 is clear, as an any-hit query through the top level finds (docs/choices.md#ao-packets-through-several-instances).
 Rays the memo answers (ray_memo.py) are not traced, and rays a packet leaves are traced one by one by
 the sampling kernel, through the whole scene. The sampling kernel takes
@@ -53,7 +53,7 @@ class ChunkWork(NamedTuple):
     """A thread's buffers for one chunk (CHUNK samples): `rays` (PacketRays: object-space origins and
     directions, tmin, each ray's tmax, the packets' lane order), `out` (PacketOutputs), `world` (CHUNK, 3)
     the world-space directions of the use being traced, `cells` (CHUNK,) int64 each pending ray's cell
-    (else ANSWERED, DECIDED), `starts` (CELLS + 1,) int64 the sort's cell offsets, and for every use (row)
+    (else ANSWERED, DECIDED, or PASSED - cell while set aside by _enters), `starts` (CELLS + 1,) int64 the sort's cell offsets, and for every use (row)
     and sample (column): `answers` (uses, CHUNK) int64 the ray's any-hit prim or ray_memo.TRACE,
     `weights` (uses, CHUNK) its weight (sample_rays.ray_of_use: 0 when it needs no ray); `inv` (3,) a
     direction's reciprocals for a box clip (_enters); `reach` (6,) the box of the pending rays' segments
@@ -210,8 +210,9 @@ def _reached(scene, inst, reach):
     trace_scene decides: shadow rays see it, its mesh has nodes, the top level holds it
     (two_level.build_top_level leaves out a box with box[0] <= box[3] false), and, unless the top level
     is flat (trace_scene then tests no box), its world box (rounded outward) overlaps `reach` widened by
-    2^-20 of its size (a unit direction's length rounds to 1 within far less) and 2^-50 of its
-    coordinates (the end points' rounding). A test for the whole chunk; _enters then tests each ray."""
+    2^-20 of its size (more than the single ray's clips widen a segment, traversal._slack, and than the
+    triangle test's t carries) and 2^-50 of its coordinates (the end points' rounding). A test for the
+    whole chunk; _enters then tests each ray."""
     if scene.visibility[inst] & SHADOW_RAYS == 0:
         return False
     m = scene.mesh_of[inst]
@@ -255,6 +256,7 @@ def _through_instance(scene, inst, work, packet_work, ray_answers, n, pending):
     w2o = rows(scene.world_to_object, inst, inst + 1)[0]
     entering = _enters(scene, inst, work, origin, n)
     if entering == 0:
+        _restore_passed(work, n)
         return pending
     for k in range(n):
         if work.cells[k] >= 0:
@@ -269,17 +271,25 @@ def _through_instance(scene, inst, work, packet_work, ray_answers, n, pending):
                      any_hit)
     pending = 0
     for k in range(n):
-        if work.cells[k] <= PASSED:  # missed this instance's box: still pending, in its cell again
-            work.cells[k] = PASSED - work.cells[k]
-            pending += 1
-        elif work.cells[k] < 0:
+        if work.cells[k] < 0:
             continue
-        elif work.out.single[k] != 0 or work.out.prim[k] >= 0:
+        if work.out.single[k] != 0 or work.out.prim[k] >= 0:
             answers[k] = TRACE if work.out.single[k] != 0 else work.out.prim[k]
             work.cells[k] = DECIDED
         else:
             pending += 1
-    return pending
+    return pending + _restore_passed(work, n)
+
+
+@njit(cache=True, inline="always")
+def _restore_passed(work, n):
+    """Put the rays _enters set aside (cells <= PASSED) back in their cells; returns how many there were."""
+    passed = 0
+    for k in range(n):
+        if work.cells[k] <= PASSED:
+            work.cells[k] = PASSED - work.cells[k]
+            passed += 1
+    return passed
 
 
 @njit(cache=True, inline="always")

@@ -217,7 +217,7 @@ def new_packet_work():
 
 @njit(cache=True)
 def trace_packet(tree, rays_in, lanes, work, out, box_fits, any_hit):
-    """_trace_packet compiled as a function of its own, for the sampling kernel's AO packets
+    """_trace_packet compiled as a function of its own, for the sampling kernel's sample packets
     (sample_packets.py), so that kernel does not carry a second inlined copy of the packet traversal. The
     arrays are taken as unowned views again at entry: the caller's views are not known to be unowned
     in here, and every view made inside would count references, at twice the packet's time
