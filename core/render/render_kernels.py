@@ -287,8 +287,8 @@ def _pretraced_visibility(memo, i, use, s, bit, rays):
 @njit(cache=True, parallel=True)
 def hard_shadow_rays(frames, lights, k, dim1, directions, tmax, weights):
     """The shadow ray of light k, one without extent (every sample's is the same), from each pixel
-    of the PixelFrames `frames`, made as the sampling kernel makes it (sample_rays.ray_of_use): its direction into
-    directions (M, 3), tmax (M,), and its weight into weights[:, k], above 0 where the pixel faces the
+    of the PixelFrames `frames`, made as the sampling kernel makes it (sample_rays.ray_of_use): its
+    direction into directions (M, 3), tmax (M,), and its weight into weights[:, k], above 0 where the pixel faces the
     light inside its mask, 0 where it takes no ray (RayMemo.weights: the sampling kernel then takes it
     and the pretraced answer without making the ray again). The rays start at frames.starts.
     The block index is passed as int64: Numba types a prange's index int64 in one place and uint64 in

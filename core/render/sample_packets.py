@@ -15,8 +15,9 @@ sample gives each packet one lane) on a scene of at most MAX_PACKET_INSTANCES in
 included: a packet that meets an unbuilt node leaves its lanes to single rays, which stop there as
 before. The chunk's rays go through each instance that shadow rays see and whose world box meets the
 box of their segments, each ray only where the single ray's clip lets it into the instance's box, in that
-instance's object space (instance_traversal._to_object, as single rays go); a ray that one instance occludes leaves the packets, and a ray clear of all of them
-is clear, as an any-hit query through the top level finds (docs/choices.md#ao-packets-through-several-instances).
+instance's object space (instance_traversal._to_object, as single rays go); a ray that one instance
+occludes leaves the packets, and a ray clear of all of them is clear, as an any-hit query through the top
+level finds (docs/choices.md#ao-packets-through-several-instances).
 Rays the memo answers (ray_memo.py) are not traced, and rays a packet leaves are traced one by one by
 the sampling kernel, through the whole scene. The sampling kernel takes
 `packed`: for None it is compiled without any of this code (the helpers below are overloads that are
@@ -45,7 +46,7 @@ L = S.LANES
 CHUNK = 8 * L  # samples of a pixel whose rays are traced together, use by use
 CELLS = 8  # hemisphere cells of the AO sort: 4 quarters of azimuth x 2 halves of the disk
 MAX_PACKET_INSTANCES = 16  # most instances a scene's sample packets take: every chunk tests each one's box
-ANSWERED, DECIDED = -1, -2  # ChunkWork.cells of a ray the memo answered (or that needs none), of one traced or left
+ANSWERED, DECIDED = -1, -2  # ChunkWork.cells of a ray answered beforehand (or needing none), of one traced or left
 PASSED = -3  # cells <= PASSED: a pending ray outside the instance being traced (_enters)
 
 
@@ -53,8 +54,9 @@ class ChunkWork(NamedTuple):
     """A thread's buffers for one chunk (CHUNK samples): `rays` (PacketRays: object-space origins and
     directions, tmin, each ray's tmax, the packets' lane order), `out` (PacketOutputs), `world` (CHUNK, 3)
     the world-space directions of the use being traced, `cells` (CHUNK,) int64 each pending ray's cell
-    (else ANSWERED, DECIDED, or PASSED - cell while set aside by _enters), `starts` (CELLS + 1,) int64 the sort's cell offsets, and for every use (row)
-    and sample (column): `answers` (uses, CHUNK) int64 the ray's any-hit prim or ray_memo.TRACE,
+    (else ANSWERED, DECIDED, or PASSED - cell while set aside by _enters), `starts` (CELLS + 1,) int64
+    the sort's cell offsets, and for every use (row) and sample (column): `answers` (uses, CHUNK) int64
+    the ray's any-hit prim or ray_memo.TRACE,
     `weights` (uses, CHUNK) its weight (sample_rays.ray_of_use: 0 when it needs no ray); `inv` (3,) a
     direction's reciprocals for a box clip (_enters); `reach` (6,) the box of the pending rays' segments
     (_extend_reach)."""
@@ -218,13 +220,19 @@ def _reached(scene, inst, reach):
     m = scene.mesh_of[inst]
     if scene.node_start[m + 1] == scene.node_start[m] or not scene.world_boxes[inst, 0] <= scene.world_boxes[inst, 3]:
         return False
-    if scene.top_items.shape[0] == 1 and scene.top_axis[0] == LEAF:
+    if _flat_top(scene):
         return True
     for k in range(3):
         slack = (reach[k + 3] - reach[k]) * 2.0 ** -20 + (abs(reach[k]) + abs(reach[k + 3])) * 2.0 ** -50
         if scene.world_boxes[inst, k] > reach[k + 3] + slack or scene.world_boxes[inst, k + 3] < reach[k] - slack:
             return False
     return True
+
+
+@njit(cache=True, inline="always")
+def _flat_top(scene):
+    """A one-leaf top level of one instance, where trace_scene tests no instance box."""
+    return scene.top_items.shape[0] == 1 and scene.top_axis[0] == LEAF
 
 
 @njit(cache=True, inline="always")
@@ -254,7 +262,7 @@ def _through_instance(scene, inst, work, packet_work, ray_answers, n, pending):
     origin, answers = ray_answers
     tree = mesh_tree(scene, scene.mesh_of[inst])
     w2o = rows(scene.world_to_object, inst, inst + 1)[0]
-    entering = _enters(scene, inst, work, origin, n)
+    entering = _enters(scene, inst, work, origin, n) if not _flat_top(scene) else pending
     if entering == 0:
         _restore_passed(work, n)
         return pending
@@ -294,16 +302,11 @@ def _restore_passed(work, n):
 
 @njit(cache=True, inline="always")
 def _enters(scene, inst, work, origin, n):
-    """How many pending rays may meet instance inst: in a flat top level all (trace_scene tests no box
-    there), else those whose segment (0, tmax) the single ray's clip of the instance's world box keeps
+    """How many pending rays may meet instance inst, in a top level that is not flat (a flat one tests no
+    box: all enter): those whose segment (0, tmax) the single ray's clip of the instance's world box keeps
     (instance_traversal._misses_box, the same float64 arithmetic, so a ray left out here is one
     trace_scene would not enter either). The others' cells become PASSED - cell until the instance is done:
     long rays (a light's) pass most instances' boxes."""
-    if scene.top_items.shape[0] == 1 and scene.top_axis[0] == LEAF:
-        inside = 0
-        for k in range(n):
-            inside += 1 if work.cells[k] >= 0 else 0
-        return inside
     inv, inside = work.inv, 0
     for k in range(n):
         if work.cells[k] < 0:
