@@ -10,7 +10,8 @@ side, 1.2 of its width apart, on a ground plate: N + 1 instances), `PreviewRende
 defaults are a 0.1 m point and a 0.526 degree sun), and ao+shadow with the same lights. Each render
 runs with packets (the renderer's own rule) and without (`packed` None: every ray alone through the
 scene), alternating; the images must be equal. Printed and written to benchmarks/out/bench_sample_packets.json:
-per render the median step time of each way, the median of the per-round ratios, and the rays a second.
+per render the median step time of each way, the median of the per-round ratios, the rays a second, and
+how many of the packed render's rays no packet answered (PreviewRender.rays_alone).
 The untimed first round is the compile or cache load (jit_seconds).
 """
 import argparse
@@ -34,8 +35,8 @@ RENDERS = {"ao": dict(mode="ao", ao_distance=1.0), "shadow": dict(mode="shadow",
 
 
 def step(tree, camera, size, samples, settings, packets):
-    """(seconds of step(samples), image, rays traced) of one render; packets False forces the kernel
-    without them."""
+    """(seconds of step(samples), image, rays traced, rays no packet answered) of one render; packets False
+    forces the kernel without them."""
     rule = core.PreviewRender._sample_packets
     if not packets:
         core.PreviewRender._sample_packets = lambda self, batch: None
@@ -46,7 +47,7 @@ def step(tree, camera, size, samples, settings, packets):
         seconds = time.perf_counter() - t
     finally:
         core.PreviewRender._sample_packets = rule
-    return seconds, render.image(), render.rays_traced
+    return seconds, render.image(), render.rays_traced, render.rays_alone
 
 
 def copies_on_plate(triangles, copies):
@@ -83,19 +84,21 @@ def main():
     jit_seconds = time.perf_counter() - t
     out = {}
     for name, settings in RENDERS.items():
-        times, rays = {True: [], False: []}, 0
+        times, rays, alone = {True: [], False: []}, 0, 0
         for round_ in range(args.rounds):
             for packets in ((True, False) if round_ % 2 == 0 else (False, True)):
-                seconds, _, rays = step(tree, camera, args.size, args.samples, settings, packets)
+                seconds, _, rays, left = step(tree, camera, args.size, args.samples, settings, packets)
                 times[packets].append(seconds)
+                alone = left if packets else alone
         ratios = [a / b for a, b in zip(times[True], times[False])]
         out[name] = {"packets_ms": 1e3 * statistics.median(times[True]),
                      "single_ms": 1e3 * statistics.median(times[False]),
-                     "ratio": statistics.median(ratios), "rays": rays,
+                     "ratio": statistics.median(ratios), "rays": rays, "rays_alone": alone,
                      "packets_runs": times[True], "single_runs": times[False]}
         print(f"{name:>10}: packets {out[name]['packets_ms']:7.1f} ms, single rays {out[name]['single_ms']:7.1f} ms, "
               f"time ratio {out[name]['ratio']:.3f} ({rays / statistics.median(times[True]) / 1e6:.2f} "
-              f"against {rays / statistics.median(times[False]) / 1e6:.2f} Mrays/s)")
+              f"against {rays / statistics.median(times[False]) / 1e6:.2f} Mrays/s; {alone / rays:.2%} of the rays "
+              f"fell to single rays)")
     name = "bench_sample_packets" + (f"_copies{args.copies}" if args.copies else "")
     results.write(name, {"scene": args.scene, "size": args.size, "samples": args.samples, "copies": args.copies,
                          "rounds": args.rounds, "renders": out}, jit_seconds)

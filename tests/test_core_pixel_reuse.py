@@ -380,7 +380,7 @@ def test_memo_answers_clear_and_occluded_rays_without_a_trace():
     bits = np.zeros((1, 2), np.uint8)
     keep_memo_bit(bits, 0, 3, True)
     memo = RayMemo(bits, np.array([9]), np.zeros((0, 6)), np.zeros(1, np.int64), np.zeros(1, np.int64),
-                   np.full((1, 0), -1, np.int8), np.empty((0, 0)))
+                   np.full((1, 0), -1, np.int8), np.empty((0, 0)), np.zeros(1, np.int64))
     o, d = np.zeros(3), np.array([0.0, 0.0, 1.0])
     assert reused_visibility(memo, 0, 2, o, d, 1.0) == -1
     assert reused_visibility(memo, 0, 3, o, d, 1.0) == 0

@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 
 import core
-from core.render.sample_packets import MAX_PACKET_INSTANCES, packets_take
 from core.render.render_kernels import PACKED_BATCH
 from core.scene.ray_visibility import CAMERA_RAYS, SHADOW_RAYS
 from core.scene.two_level import build_two_level
@@ -19,17 +18,17 @@ from tests.meshes import lattice, random_soup
 from tests.render_scenes import look_at
 
 FAR = 1e4  # the second instance's distance: beyond every AO ray
+ALONE = 0.03  # most of a packed render's rays that may fall to single rays (assert_same_render)
 
 
 def with_far_instance(tree, matrix):
     """The scene [tree at matrix] and the same with a small soup FAR away (two instances, one beyond every
-    AO ray's reach); the packets take both."""
+    AO ray's reach)."""
     far = core.build_kdtree(random_soup(np.random.default_rng(1), 20))
     away = np.eye(4)
     away[:3, 3] = matrix[:3, 3] + FAR
     one = build_two_level([tree], [0], matrix[None])
     two = build_two_level([tree, far], [0, 1], np.stack([matrix, away]))
-    assert packets_take.py_func(one.arrays) and packets_take.py_func(two.arrays)
     return one, two
 
 
@@ -40,13 +39,18 @@ def rendered(scene, camera, steps, **settings):
     return render
 
 
-def assert_same_render(scene, camera, steps, **settings):
-    """The render in `steps` equals the one in steps of one sample (no packets); returns its image."""
+def assert_same_render(scene, camera, steps, alone_below=None, **settings):
+    """The render in `steps` equals the one in steps of one sample (no packets); returns its image. With
+    `alone_below`, the packets answered all but that share of the rays (the rest fell to single rays,
+    which give the same answers: only this count shows them)."""
     a, b = rendered(scene, camera, steps, **settings), rendered(scene, camera, (1,) * sum(steps), **settings)
     np.testing.assert_array_equal(a.image(), b.image())
     np.testing.assert_array_equal(a.sample_counts(), b.sample_counts())
     np.testing.assert_array_equal(a.memo, b.memo)  # every ray's visibility bit, for the next frame
     assert a.rays_traced == b.rays_traced
+    assert b.rays_alone == 0  # no packets in steps of one sample
+    if alone_below is not None:
+        assert a.rays_alone < alone_below * a.rays_traced, (a.rays_alone, a.rays_traced)
     return a.image()
 
 
@@ -81,12 +85,12 @@ def test_soup_renders_as_single_rays(mode, steps):
     packed, single = with_far_instance(tree, np.eye(4))
     lights = soft_and_hard_lights()
     for scene in (packed, single):
-        image = assert_same_render(scene, look_at((2.5, -3.0, 1.5), (0.0, 0.0, 0.0)), steps, mode=mode,
+        image = assert_same_render(scene, look_at((2.5, -3.0, 1.5), (0.0, 0.0, 0.0)), steps, ALONE, mode=mode,
                                    samples=70, ao_distance=0.8, lights=lights if mode != "ao" else ())
         assert occluded_share(image) > 0.3 if mode != "shadow" else shadowed_share(image) > 0.1
     if mode == "shadow":  # the lights with extent alone cast shadows (their rays are the packets')
         soft = lights[1:5]  # soft_and_hard_lights' lights with extent that cast shadows
-        image = assert_same_render(packed, look_at((2.5, -3.0, 1.5), (0.0, 0.0, 0.0)), steps, mode=mode,
+        image = assert_same_render(packed, look_at((2.5, -3.0, 1.5), (0.0, 0.0, 0.0)), steps, ALONE, mode=mode,
                                    samples=70, lights=soft)
         assert shadowed_share(image) > 0.1
 
@@ -99,7 +103,7 @@ def test_lattice_renders_as_single_rays(builder, offset):
     packed, single = with_far_instance(tree, _placed((offset, offset, offset)))
     camera = look_at(np.array([2.5, 2.45, 2.4]) + offset, np.array([2.0, 3.0, 2.0]) + offset, fov=1.6)
     for scene in (packed, single):
-        image = assert_same_render(scene, camera, (16,), samples=16, ao_distance=1.0)
+        image = assert_same_render(scene, camera, (16,), ALONE, samples=16, ao_distance=1.0)
         assert occluded_share(image) > 0.3
 
 
@@ -115,7 +119,7 @@ def test_transformed_instance_renders_as_single_rays():
     packed, single = with_far_instance(core.build_kdtree(verts_tris), m)
     camera = look_at(np.array([5.0, -6.0, 3.0]) + offset, np.full(3, offset))
     for scene in (packed, single):
-        image = assert_same_render(scene, camera, (9, 24), samples=33, ao_distance=1.2)
+        image = assert_same_render(scene, camera, (9, 24), ALONE, samples=33, ao_distance=1.2)
         assert occluded_share(image) > 0.3
 
 
@@ -146,15 +150,91 @@ def test_several_instances_render_as_single_rays():
         visibility = np.array([SHADOW_RAYS | CAMERA_RAYS] * 3 + [CAMERA_RAYS, SHADOW_RAYS | CAMERA_RAYS], np.uint8)
         scene = build_two_level([soup, plate], [0, 1, 0, 0, 0], matrices, visibility=visibility)
         camera = look_at(np.array([0.5, -4.0, 2.0]) + offset, np.full(3, offset), fov=1.2)
-        image = assert_same_render(scene, camera, (24,), samples=24, ao_distance=0.9)
+        image = assert_same_render(scene, camera, (24,), ALONE, samples=24, ao_distance=0.9)
         assert occluded_share(image) > 0.3
         for mode in ("shadow", "ao+shadow"):
-            lit = assert_same_render(scene, camera, (24,), samples=24, mode=mode, ao_distance=0.9,
+            lit = assert_same_render(scene, camera, (24,), ALONE, samples=24, mode=mode, ao_distance=0.9,
                                      lights=[core.Light.point(np.array([0.4, -1.0, 2.5]) + offset, radius=0.5),
                                              core.Light.sun((0.2, 0.1, -1.0), angle=0.2)])
             assert shadowed_share(lit) > 0.1
         unseen = build_two_level([soup, plate], [0, 1, 0, 0, 0], matrices)  # the copy at x - 1.1 occludes now
         assert not np.array_equal(image, rendered(unseen, camera, (24,), samples=24, ao_distance=0.9).image())
+
+
+def _grid_of_copies(offset=0.0):
+    """Thirty-six soup copies on a 6 x 6 grid (every fifth rotated and scaled, one that shadow rays do not
+    see) over one plate under all of them, and four copies beyond every ray's reach: (meshes, mesh_of,
+    matrices, visibility, the plate's instance)."""
+    soup = core.build_kdtree(random_soup(np.random.default_rng(11), 300, size=0.06, extent=0.3))
+    plate = core.build_kdtree(np.array([[[-4, -4, -0.4], [4, -4, -0.4], [4, 4, -0.4]],
+                                        [[-4, -4, -0.4], [4, 4, -0.4], [-4, 4, -0.4]]], np.float32))
+    matrices = []
+    for k in range(36):
+        m = _placed((offset + 0.9 * (k % 6) - 2.25, offset + 0.9 * (k // 6) - 2.25, offset))
+        if k % 5 == 0:
+            c, s_ = np.cos(0.4 * k), np.sin(0.4 * k)
+            m[:3, :3] = np.array([[c, -s_, 0], [s_, c, 0], [0, 0, 1]]) @ np.diag([1.3, 0.8, 1.1])
+        matrices.append(m)
+    matrices += [_placed((offset, offset, offset)), *(_placed((offset + FAR * k, offset, offset)) for k in (1, 2, 3, 4))]
+    visibility = np.full(len(matrices), SHADOW_RAYS | CAMERA_RAYS, np.uint8)
+    visibility[14] = CAMERA_RAYS
+    return [soup, plate], [0] * 36 + [1, 0, 0, 0, 0], np.stack(matrices), visibility, 36
+
+
+def test_many_instances_render_as_single_rays():
+    """Forty-one instances (scene/box_query.py finds those a chunk's rays may meet down the top level): a
+    grid of copies whose AO and light rays meet their neighbours, one that shadow rays do not see, a
+    plate that several top-level leaves list (found once), copies out of reach; also far from the origin.
+    The AO rays, which reach a few copies, are answered by the packets."""
+    for offset in (0.0, 2.0 ** 18):
+        meshes, mesh_of, matrices, visibility, plate = _grid_of_copies(offset)
+        scene = build_two_level(meshes, mesh_of, matrices, visibility=visibility)
+        assert (scene.arrays.top_items == plate).sum() > 1  # the plate straddles top-level planes
+        camera = look_at(np.array([0.3, -3.5, 3.0]) + offset, np.full(3, offset), fov=1.3)
+        image = assert_same_render(scene, camera, (24,), ALONE, samples=24, ao_distance=0.9)
+        assert occluded_share(image) > 0.3
+        lights = [core.Light.point(np.array([0.4, -1.0, 2.5]) + offset, radius=0.5),
+                  core.Light.sun((0.3, 0.2, -1.0), angle=0.2)]
+        for mode in ("shadow", "ao+shadow"):
+            # no share asserted: the sun's rays may cross more than MAX_CHUNK_INSTANCES copies (then alone)
+            lit = assert_same_render(scene, camera, (24,), samples=24, mode=mode, ao_distance=0.9, lights=lights)
+            assert shadowed_share(lit) > 0.1
+
+
+def test_box_query_finds_every_instance_a_box_meets_once():
+    """scene/box_query.instances_meeting_box against every instance's world box: the instances of the top
+    level whose box overlaps the query box (touching counts) are found, each once, and no other; the
+    walk stops once it found more than it was asked for."""
+    from numba import njit
+
+    from core.scene.box_query import instances_meeting_box, new_box_query
+
+    @njit
+    def query_all(arrays, boxes, most):
+        query = new_box_query(arrays.mesh_of.shape[0])
+        found = []
+        for b in range(boxes.shape[0]):
+            n = instances_meeting_box(arrays, boxes[b], query, most)
+            found.append(query[0][:n].copy())
+        return found
+
+    rng = np.random.default_rng(12)
+    meshes, mesh_of, matrices, visibility, _ = _grid_of_copies()
+    empty = core.build_kdtree(np.zeros((0, 3, 3), np.float32))
+    scene = build_two_level([*meshes, empty], [*mesh_of, 2], np.concatenate([matrices, np.eye(4)[None]]),
+                            visibility=np.append(visibility, SHADOW_RAYS))
+    world = scene.arrays.world_boxes
+    listed = set(scene.arrays.top_items.tolist())
+    lo = rng.uniform(-3.5, 3.5, (300, 3))
+    boxes = np.concatenate([lo, lo + rng.uniform(0.0, 1.5, (300, 3)) ** 2], axis=1)
+    boxes[:20, :3], boxes[:20, 3:] = world[:20, :3], world[:20, :3]  # a box touching an instance's corner
+    boxes[20] = [-1e30, -1e30, -1e30, 1e30, 1e30, 1e30]
+    for box, found in zip(boxes, query_all(scene.arrays, boxes, len(world))):
+        assert len(set(found.tolist())) == len(found)
+        meets = (world[:, :3] <= box[3:]).all(axis=1) & (world[:, 3:] >= box[:3]).all(axis=1)
+        assert set(found.tolist()) == set(np.flatnonzero(meets).tolist()) & listed
+    assert len(query_all(scene.arrays, boxes[20:21], len(world))[0]) == len(listed)
+    assert len(query_all(scene.arrays, boxes[20:21], 5)[0]) == 6  # the walk stops past `most`
 
 
 def test_lazy_tree_renders_as_the_eager_tree():
@@ -181,12 +261,11 @@ def _placed(position):
     return m
 
 
-def test_only_batches_of_eight_or_more_on_few_instances_take_the_packed_kernel(monkeypatch):
+def test_only_batches_of_eight_or_more_take_the_packed_kernel(monkeypatch):
     """The sampling kernel's `packed` argument: None (the version without packets, the only one a
-    progressive renderer compiles) for steps under PACKED_BATCH samples, shadow renders whose lights have
-    no extent (no ray to put in packets) and scenes the packets do not take (more than
-    MAX_PACKET_INSTANCES instances); True for a batch of 8 or more samples of an AO render, or of one with
-    a light of extent, on a scene of a few instances."""
+    progressive renderer compiles) for steps under PACKED_BATCH samples and shadow renders whose lights
+    have no extent (no ray to put in packets); True for a batch of 8 or more samples of an AO render, or
+    of one with a light of extent, on a scene of one, two or many instances."""
     import core.render.preview_render as preview_render
 
     calls = []
@@ -200,8 +279,7 @@ def test_only_batches_of_eight_or_more_on_few_instances_take_the_packed_kernel(m
     tree = core.build_kdtree(random_soup(np.random.default_rng(6), 500, size=0.2))
     packed, single = with_far_instance(tree, np.eye(4))
     camera = look_at((2.5, -3.0, 1.5), (0.0, 0.0, 0.0))
-    many = build_two_level([tree], [0] * (MAX_PACKET_INSTANCES + 1),
-                           np.stack([_placed((3.0 * k, 0.0, 0.0)) for k in range(MAX_PACKET_INSTANCES + 1)]))
+    many = build_two_level([tree], [0] * 40, np.stack([_placed((3.0 * k, 0.0, 0.0)) for k in range(40)]))
     hard, soft = core.Light.point((2.0, -3.0, 4.0)), core.Light.point((2.0, -3.0, 4.0), radius=0.2)
     unshadowed = core.Light.point((2.0, -3.0, 4.0), radius=0.2, cast_shadow=False)
     cases = [(packed, "ao", (1, 2, 4, 8), [None, None, None, True], [hard]),
@@ -210,8 +288,8 @@ def test_only_batches_of_eight_or_more_on_few_instances_take_the_packed_kernel(m
              (packed, "shadow", (16,), [None], [hard, unshadowed]),
              (packed, "shadow", (7, 9), [None, True], [hard, soft]),
              (single, "ao", (16,), [True], [hard]),
-             (many, "ao", (16,), [None], [hard]),
-             (many, "shadow", (16,), [None], [soft])]
+             (many, "ao", (4, 12), [None, True], [hard]),
+             (many, "shadow", (16,), [True], [soft])]
     for scene, mode, steps, expected, lights in cases:
         calls.clear()
         rendered(scene, camera, steps, mode=mode, samples=sum(steps), ao_distance=0.8, lights=lights)
@@ -220,15 +298,14 @@ def test_only_batches_of_eight_or_more_on_few_instances_take_the_packed_kernel(m
 
 def test_a_batch_that_would_compile_the_packed_version_is_cut_below_it(monkeypatch):
     """PreviewRender.batch_without_compile: a batch that would take the packed kernel (8+ samples with AO
-    or a light of extent, few instances) is cut to PACKED_BATCH - 1 while that version is neither loaded nor cached; other batches
+    or a light of extent) is cut to PACKED_BATCH - 1 while that version is neither loaded nor cached; other batches
     and scenes keep their size. A batch so cut gives the image of the batch asked for."""
     import core.render.preview_render as preview_render
     from core.render.render_kernels import PACKED_BATCH
 
     tree = core.build_kdtree(random_soup(np.random.default_rng(7), 500, size=0.2))
     packed, _ = with_far_instance(tree, np.eye(4))
-    single = build_two_level([tree], [0] * (MAX_PACKET_INSTANCES + 1),
-                             np.stack([_placed((3.0 * k, 0.0, 0.0)) for k in range(MAX_PACKET_INSTANCES + 1)]))
+    many = build_two_level([tree], [0] * 40, np.stack([_placed((3.0 * k, 0.0, 0.0)) for k in range(40)]))
     camera = look_at((2.5, -3.0, 1.5), (0.0, 0.0, 0.0))
     light = [core.Light.point((2.0, -3.0, 4.0))]
     for ready, expected in ((False, PACKED_BATCH - 1), (True, 16)):
@@ -238,9 +315,9 @@ def test_a_batch_that_would_compile_the_packed_version_is_cut_below_it(monkeypat
         soft = core.PreviewRender(packed, camera, 8, 8, samples=16, mode="shadow",
                                   lights=[core.Light.sun((0.0, 0.0, -1.0), angle=0.1)])
         assert soft.batch_without_compile(16) == expected
-        for scene, mode in ((packed, "shadow"), (single, "ao")):
-            other = core.PreviewRender(scene, camera, 8, 8, samples=16, mode=mode, lights=light)
-            assert other.batch_without_compile(16) == 16
+        assert core.PreviewRender(many, camera, 8, 8, samples=16, mode="ao").batch_without_compile(16) == expected
+        hard = core.PreviewRender(packed, camera, 8, 8, samples=16, mode="shadow", lights=light)
+        assert hard.batch_without_compile(16) == 16
     cut = rendered(packed, camera, (PACKED_BATCH - 1, 16 - PACKED_BATCH + 1), samples=16, ao_distance=0.8)
     np.testing.assert_array_equal(cut.image(), rendered(packed, camera, (16,), samples=16, ao_distance=0.8).image())
 

@@ -25,7 +25,6 @@ from .lights import DELTA, NO_SHADOW
 from ..memory import check_render_memory
 from .pixel_reuse import PixelState, prepared_boxes, segments_touch, settings_key, surface_rays_touch
 from ..scene.ray_visibility import CAMERA_RAYS, HOLDOUT, SHADOW_RAYS
-from .sample_packets import packets_take
 from .sample_rays import MODES
 from .render_kernels import (MEMO_BITS, PACKED_BATCH, PixelFrames, PixelSums, RayMemo, SampleBatch, add_samples,
                              assemble_image, hard_shadow_rays, packed_version_ready, surface_frames)
@@ -132,6 +131,7 @@ class PreviewRender:
         self.active, self.memo = active, memo
         self.memo_reused = np.zeros(len(pixels), np.int64)
         self.repeated = np.zeros(len(pixels), np.int64)  # rays of lights without extent (render_kernels.py)
+        self.alone = np.zeros(len(pixels), np.int64)  # rays the sample packets left to single rays (RayMemo)
         self.pretraced = np.full((len(pixels), len(self.lights)), -1, np.int8)
         self.pretraced_weights = np.empty((0, len(self.lights)))  # none made (RayMemo.weights)
         self._hard_shadows_due = False  # only a frame traced from scratch (_trace_camera)
@@ -216,6 +216,13 @@ class PreviewRender:
         return self.camera_rays + int(self.ray_counts.sum()) - self._rays_before - int(self.memo_reused.sum())
 
     @property
+    def rays_alone(self):
+        """Rays of samples traced in packets (sample_packets.py) that no packet answered and the sampling
+        loop traced alone: lanes a packet left (a zero direction component, an unbuilt node) and the last
+        ray of a chunk. Part of rays_traced."""
+        return int(self.alone.sum())
+
+    @property
     def hit_pixels(self):
         return len(self.pixels)
 
@@ -240,14 +247,13 @@ class PreviewRender:
 
     def _sample_packets(self, batch):
         """True when this batch's rays go in packets (sample_packets.py: a batch of at least PACKED_BATCH
-        samples, a scene of at most MAX_PACKET_INSTANCES instances, and rays the packets take: AO rays,
-        or those of a light with extent that casts shadows), else None: the sampling kernel's version
+        samples, and rays the packets take: AO rays, or those of a light with extent that casts
+        shadows), else None: the sampling kernel's version
         without packets, the only one a renderer stepping one sample at a time compiles
         (batch_without_compile keeps a stepping caller there until the packed version is cached)."""
         soft = (self.lights[:, DELTA] == 0.0) & (self.lights[:, NO_SHADOW] == 0.0)
         rays = "ao" in self.mode or ("shadow" in self.mode and soft.any())
-        taken = packets_take.py_func(self.scene.arrays)
-        return True if rays and batch >= PACKED_BATCH and taken else None
+        return True if rays and batch >= PACKED_BATCH else None
 
     def batch_without_compile(self, samples):
         """`samples`, or PACKED_BATCH - 1 when a step of that many would run the sampling kernel's packed
@@ -274,7 +280,7 @@ class PreviewRender:
                                     self.sampler, self.seed, SOBOL_DIM1), self.lights,
                         PixelSums(self.sums, self.sq_sums, self.counts, self.ray_counts), status,
                         RayMemo(self.memo, self.known, self.boxes, self.memo_reused, self.repeated,
-                                self.pretraced, self.pretraced_weights), packed)
+                                self.pretraced, self.pretraced_weights, self.alone), packed)
             return status
 
         with thread_count(self.threads):

@@ -24,7 +24,9 @@ class RayMemo(NamedTuple):
     rays of lights without extent that took sample 0's bit (not counted in PixelSums.rays), `pretraced`
     (M, lights) int8 the visibility of light k's ray traced beforehand (1 occluded, 0 clear, -1 none), and
     `weights` (M, lights) float64 that ray's weight (0 where the pixel takes no ray; NaN where no ray of
-    light k was made beforehand; (0, lights) when none was)."""
+    light k was made beforehand; (0, lights) when none was), and `alone` (M,) int64 rays of a chunk traced
+    in packets that no packet answered, which the sampling loop traced alone (sample_packets.trace_use;
+    counted in PixelSums.rays as well)."""
 
     bits: np.ndarray
     known: np.ndarray
@@ -33,6 +35,7 @@ class RayMemo(NamedTuple):
     repeated: np.ndarray
     pretraced: np.ndarray
     weights: np.ndarray
+    alone: np.ndarray
 
 
 @njit(cache=True, inline="always")
@@ -73,4 +76,4 @@ def keep_memo_bit(bits, i, bit, occluded):
 def unowned_memo(memo):
     """The RayMemo as unowned views (array_views.py)."""
     return RayMemo(unowned(memo.bits), unowned(memo.known), unowned(memo.boxes), unowned(memo.reused),
-                   unowned(memo.repeated), unowned(memo.pretraced), unowned(memo.weights))
+                   unowned(memo.repeated), unowned(memo.pretraced), unowned(memo.weights), unowned(memo.alone))

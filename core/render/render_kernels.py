@@ -8,8 +8,7 @@ The ray memo (ray_memo.py) keeps each ray's visibility for the next frame, and a
 (lights.DELTA) repeats sample 0's bit in later samples (counted in `repeated`, not `rays`). Such a
 light's ray may also come traced beforehand (`pretraced`: hard_shadow_rays' rays, traced in packets by
 the caller, with its weight: `weights`), counted as if sample 0 had traced it and later samples repeated
-it. In a batch of PACKED_BATCH samples or more on a scene of a few instances (sample_packets.packets_take),
-a pixel's AO rays and its rays towards lights with extent are traced in packets (sample_packets.py), with
+it. In a batch of PACKED_BATCH samples or more, a pixel's AO rays and its rays towards lights with extent are traced in packets (sample_packets.py), with
 the same answers, by a version of the kernel compiled apart.
 """
 from typing import NamedTuple
@@ -151,7 +150,7 @@ def _sample_pixel(scene, frames, i, batch, lights, acc, buffers, memo, chunk_pac
     origin = rows(frames.starts, i, i + 1)[0]
     ps = pixel_seed(frames.pixels[i], seed)
     ao_seeds = use_seeds(ps, USE_AO)
-    before = (sums[i, 0], sums[i, 1], sums[i, 2], sq_sums[i], rays[i], memo.reused[i], memo.repeated[i])
+    before = (sums[i, 0], sums[i, 1], sums[i, 2], sq_sums[i], rays[i], memo.reused[i], memo.repeated[i], memo.alone[i])
     n_lights = lights.shape[0]
     uses = 1 + n_lights
     first_use, last_use = uses_of_mode(mode, uses)
@@ -247,7 +246,7 @@ def _add_sample(acc, i, mode, ambient, ao, light):
 @njit(cache=True, inline="always")
 def _restore(sums, sq_sums, rays, memo, i, before, prim):
     """Put pixel i's sums and counts back as they were before the batch; pass on the suspended prim."""
-    sums[i, 0], sums[i, 1], sums[i, 2], sq_sums[i], rays[i], memo.reused[i], memo.repeated[i] = before
+    sums[i, 0], sums[i, 1], sums[i, 2], sq_sums[i], rays[i], memo.reused[i], memo.repeated[i], memo.alone[i] = before
     return prim
 
 

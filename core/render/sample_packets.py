@@ -11,10 +11,11 @@ nodes (docs/choices.md#ao-rays-in-packets-inside-the-sampling-kernel). A light's
 light already, so they go in sample order (docs/choices.md#light-samples-in-packets). Lights without
 extent repeat sample 0's ray (render_kernels.py) and lights without shadows need none: neither is in packets.
 Packets apply to batches of at least render_kernels.PACKED_BATCH samples (a progressive step of one
-sample gives each packet one lane) on a scene of at most MAX_PACKET_INSTANCES instances, lazy trees
-included: a packet that meets an unbuilt node leaves its lanes to single rays, which stop there as
-before. The chunk's rays go through each instance that shadow rays see and whose world box meets the
-box of their segments, each ray only where the single ray's clip lets it into the instance's box, in that
+sample gives each packet one lane) on any scene, lazy trees included: a packet that meets an unbuilt
+node leaves its lanes to single rays, which stop there as before. The chunk's rays go through each
+instance that shadow rays see and whose world box meets the box of their segments (found down the top
+level: scene/box_query.py; where that box meets more than MAX_CHUNK_INSTANCES, each ray walks the top
+level alone), each ray only where the single ray's clip lets it into the instance's box, in that
 instance's object space (instance_traversal._to_object, as single rays go); a ray that one instance
 occludes leaves the packets, and a ray clear of all of them is clear, as an any-hit query through the top
 level finds (docs/choices.md#ao-packets-through-several-instances).
@@ -30,6 +31,7 @@ import numpy as np
 from numba import njit, types
 from numba.extending import overload
 
+from ..scene.box_query import instances_meeting_box, new_box_query
 from ..scene.instance_traversal import _misses_box, _to_object, mesh_tree, unowned_scene
 from ..scene.ray_visibility import SHADOW_RAYS
 from ..trace import simd as S
@@ -45,7 +47,9 @@ from .sample_rays import USE_AO, ao_direction, ray_of_use, uses_of_mode
 L = S.LANES
 CHUNK = 8 * L  # samples of a pixel whose rays are traced together, use by use
 CELLS = 8  # hemisphere cells of the AO sort: 4 quarters of azimuth x 2 halves of the disk
-MAX_PACKET_INSTANCES = 16  # most instances a scene's sample packets take: every chunk tests each one's box
+# most instances a chunk's rays are traced through in packets: where the box of their segments meets more
+# (long light rays across a scene of many instances), each ray's own walk of the top level does better
+MAX_CHUNK_INSTANCES = 16
 ANSWERED, DECIDED = -1, -2  # ChunkWork.cells of a ray answered beforehand (or needing none), of one traced or left
 PASSED = -3  # cells <= PASSED: a pending ray outside the instance being traced (_enters)
 
@@ -59,7 +63,7 @@ class ChunkWork(NamedTuple):
     the ray's any-hit prim or ray_memo.TRACE,
     `weights` (uses, CHUNK) its weight (sample_rays.ray_of_use: 0 when it needs no ray); `inv` (3,) a
     direction's reciprocals for a box clip (_enters); `reach` (6,) the box of the pending rays' segments
-    (_extend_reach)."""
+    (_extend_reach); `query` box_query.new_box_query's buffers, for the instances that box may meet."""
 
     rays: PacketRays
     out: PacketOutputs
@@ -70,6 +74,7 @@ class ChunkWork(NamedTuple):
     weights: np.ndarray
     inv: np.ndarray
     reach: np.ndarray
+    query: tuple
 
 
 def chunk_work_for(scene, uses, packed):
@@ -93,7 +98,7 @@ def _chunk_work_for(scene, uses, packed):
 
 
 def in_packets(packets):
-    """Whether the sample rays go in packets: `packets` from chunk_work_for, not None, the scene one they take."""
+    """Whether the sample rays go in packets: `packets` from chunk_work_for is not None."""
     raise NotImplementedError("called from jitted code only")
 
 
@@ -101,7 +106,7 @@ def in_packets(packets):
 def _in_packets(packets):
     if isinstance(packets, types.NoneType):
         return lambda packets: False
-    return lambda packets: packets[2]
+    return lambda packets: True
 
 
 @njit(cache=True, inline="always")
@@ -133,37 +138,32 @@ def _answer_chunk(scene, packets, pixel, samples, batch, lights, memo, rays):
 @njit(cache=True, inline="always")
 def _unowned_packets(packets):
     """new_chunk_work's packets as unowned views (array_views.py)."""
-    work, packet_work, apply = packets
+    work, packet_work = packets
+    query = (unowned(work.query[0]), unowned(work.query[1]), unowned(work.query[2]))
     work = ChunkWork(unowned_rays(work.rays), unowned_outputs(work.out), unowned(work.world), unowned(work.cells),
                      unowned(work.starts), unowned(work.answers), unowned(work.weights), unowned(work.inv),
-                     unowned(work.reach))
-    return work, unowned_packet_work(packet_work), apply
-
-
-@njit(cache=True, inline="always")
-def packets_take(scene):
-    """Whether the sample rays of a scene (SceneArrays) go in packets: it has at most MAX_PACKET_INSTANCES
-    instances, each of which a chunk tests (render_kernels' rule, and PreviewRender's through py_func)."""
-    return scene.mesh_of.shape[0] <= MAX_PACKET_INSTANCES
+                     unowned(work.reach), query)
+    return work, unowned_packet_work(packet_work)
 
 
 @njit(cache=True, inline="always")
 def new_chunk_work(scene, uses):
-    """((ChunkWork, packet work, whether packets apply: packets_take), owners): a thread's packet buffers
-    for `uses` uses a sample as unowned views, and the arrays owning them, which the caller keeps alive."""
+    """((ChunkWork, packet work), owners): a thread's packet buffers for `uses` uses a sample as unowned
+    views, and the arrays owning them, which the caller keeps alive."""
     owned = (np.zeros((CHUNK, 3)), np.zeros((CHUNK, 3)), np.zeros(CHUNK), np.zeros(CHUNK),
              np.full(CHUNK, -1, np.int64), np.empty(CHUNK), np.empty(CHUNK, np.int32), np.empty(CHUNK),
              np.empty(CHUNK), np.zeros(CHUNK, np.uint8), np.empty((CHUNK, 3)), np.empty(CHUNK, np.int64),
              np.empty(CELLS + 1, np.int64), np.empty((uses, CHUNK), np.int64), np.empty((uses, CHUNK)), np.empty(3),
-             np.empty(6))
+             np.empty(6), new_box_query(scene.mesh_of.shape[0]))
     rays = PacketRays(unowned(owned[0]), unowned(owned[1]), unowned(owned[2]), unowned(owned[3]),
                       unowned(owned[4]))
     out = PacketOutputs(unowned(owned[5]), unowned(owned[6]), unowned(owned[7]), unowned(owned[8]),
                         unowned(owned[9]))
+    query = (unowned(owned[17][0]), unowned(owned[17][1]), unowned(owned[17][2]))
     work = ChunkWork(rays, out, unowned(owned[10]), unowned(owned[11]), unowned(owned[12]), unowned(owned[13]),
-                     unowned(owned[14]), unowned(owned[15]), unowned(owned[16]))
+                     unowned(owned[14]), unowned(owned[15]), unowned(owned[16]), query)
     sc, stack, packet_owned = new_packet_work()
-    return (work, (sc, stack), packets_take(scene)), (owned, packet_owned)
+    return (work, (sc, stack)), (owned, packet_owned)
 
 
 @njit(cache=True, inline="always")
@@ -182,21 +182,26 @@ def trace_use(scene, packets, pixel, samples, batch, lights, use, memo, rays):
     """The rays of one use of the chunk's samples: each one's weight into packets[0].weights[use] and
     its any-hit prim (>= 0 occluded, -1 clear) into packets[0].answers[use, s - samples[0]], from the
     memo or the packets, kept in the memo; ray_memo.TRACE for a ray a packet left (or all, once fewer
-    than two are pending), which the caller traces alone through the scene. Every ray is counted in
-    rays[i], as render_kernels' single rays are. The packets go through packet_traversal.trace_packet,
-    one compiled function shared with the packet kernel
-    (docs/choices.md#ao-rays-in-packets-inside-the-sampling-kernel), instance by instance (_through_instance)."""
-    work, packet_work, _ = packets
+    than two are pending), which the caller traces alone through the scene (counted in memo.alone[i]).
+    Every ray is counted in rays[i], as render_kernels' single rays are. The packets go through
+    packet_traversal.trace_packet, one compiled function shared with the packet kernel
+    (docs/choices.md#ao-rays-in-packets-inside-the-sampling-kernel), through each instance the rays'
+    segments may meet (_instances_reached, then _through_instance)."""
+    work, packet_work = packets
     i, origin, first, end, uses = pixel[0], pixel[2], samples[0], samples[1], pixel[6]
     answers = rows(work.answers, use, use + 1)[0]
     n = end - first
     pending = _rays_of_use(scene, work, pixel, samples, batch, lights, use, memo, rays)
-    inst, instances = 0, scene.mesh_of.shape[0]
-    while pending > 1 and inst < instances:
-        if _reached(scene, inst, work.reach):
-            pending = _through_instance(scene, inst, work, packet_work, (origin, answers), n, pending)
-        inst += 1
-    unfinished = inst < instances  # a ray left pending has not met every instance: the caller traces it
+    unfinished = pending > 0  # a ray left pending has not met every instance it may: the caller traces it
+    if pending > 1:
+        near = _instances_reached(scene, work)
+        k = 0
+        while pending > 1 and k < near <= MAX_CHUNK_INSTANCES:
+            inst = work.query[0][k]
+            if _seen_by_shadow_rays(scene, inst):
+                pending = _through_instance(scene, inst, work, packet_work, (origin, answers), n, pending)
+            k += 1
+        unfinished = k < near
     for k in range(n):
         if work.cells[k] == ANSWERED:
             continue
@@ -204,29 +209,39 @@ def trace_use(scene, packets, pixel, samples, batch, lights, use, memo, rays):
             answers[k] = TRACE if unfinished else -1
         if answers[k] != TRACE:
             keep_traced(memo, i, (first + k) * uses + use, answers[k])
+        else:
+            memo.alone[i] += 1
 
 
 @njit(cache=True, inline="always")
-def _reached(scene, inst, reach):
-    """Whether rays whose segments lie in the box `reach` (_extend_reach) may meet instance inst, as
-    trace_scene decides: shadow rays see it, its mesh has nodes, the top level holds it
-    (two_level.build_top_level leaves out a box with box[0] <= box[3] false), and, unless the top level
-    is flat (trace_scene then tests no box), its world box (rounded outward) overlaps `reach` widened by
-    2^-20 of its size (more than the single ray's clips widen a segment, traversal._slack, and than the
-    triangle test's t carries) and 2^-50 of its coordinates (the end points' rounding). A test for the
-    whole chunk; _enters then tests each ray."""
-    if scene.visibility[inst] & SHADOW_RAYS == 0:
-        return False
-    m = scene.mesh_of[inst]
-    if scene.node_start[m + 1] == scene.node_start[m] or not scene.world_boxes[inst, 0] <= scene.world_boxes[inst, 3]:
-        return False
+def _instances_reached(scene, work):
+    """How many instances the pending rays, whose segments lie in the box work.reach (_extend_reach),
+    may meet, as trace_scene decides, listed in work.query[0]; MAX_CHUNK_INSTANCES + 1 when more. A flat
+    top level's one instance (trace_scene tests no box there); else those of the top level (build_top_level
+    leaves out empty boxes) whose world box (rounded outward) overlaps work.reach widened (_widen_reach),
+    found down the top level (box_query.py). A test for the whole chunk; _enters then tests each ray."""
     if _flat_top(scene):
-        return True
+        work.query[0][0] = scene.top_items[0]
+        return 1
+    _widen_reach(work.reach)
+    return instances_meeting_box(scene, work.reach, work.query, MAX_CHUNK_INSTANCES)
+
+
+@njit(cache=True, inline="always")
+def _seen_by_shadow_rays(scene, inst):
+    """Whether trace_scene's shadow rays enter instance inst: they see it and its mesh has nodes."""
+    m = scene.mesh_of[inst]
+    return scene.visibility[inst] & SHADOW_RAYS != 0 and scene.node_start[m + 1] != scene.node_start[m]
+
+
+@njit(cache=True, inline="always")
+def _widen_reach(reach):
+    """Widen the box of the pending rays' segments by 2^-20 of its size (more than the single ray's clips
+    widen a segment, traversal._slack, and than the triangle test's t carries) and 2^-50 of its
+    coordinates (the end points' rounding): the box the instances are tested against (_instances_reached)."""
     for k in range(3):
         slack = (reach[k + 3] - reach[k]) * 2.0 ** -20 + (abs(reach[k]) + abs(reach[k + 3])) * 2.0 ** -50
-        if scene.world_boxes[inst, k] > reach[k + 3] + slack or scene.world_boxes[inst, k + 3] < reach[k] - slack:
-            return False
-    return True
+        reach[k], reach[k + 3] = reach[k] - slack, reach[k + 3] + slack
 
 
 @njit(cache=True, inline="always")
