@@ -48,7 +48,6 @@ def assert_same_render(scene, camera, steps, alone_below=None, **settings):
     np.testing.assert_array_equal(a.sample_counts(), b.sample_counts())
     np.testing.assert_array_equal(a.memo, b.memo)  # every ray's visibility bit, for the next frame
     assert a.rays_traced == b.rays_traced
-    assert b.rays_alone == 0  # no packets in steps of one sample
     if alone_below is not None:
         assert a.rays_alone < alone_below * a.rays_traced, (a.rays_alone, a.rays_traced)
     return a.image()
@@ -185,7 +184,8 @@ def test_many_instances_render_as_single_rays():
     """Forty-one instances (scene/box_query.py finds those a chunk's rays may meet down the top level): a
     grid of copies whose AO and light rays meet their neighbours, one that shadow rays do not see, a
     plate that several top-level leaves list (found once), copies out of reach; also far from the origin.
-    The AO rays, which reach a few copies, are answered by the packets."""
+    The AO rays, which reach a few copies, are answered by the packets; a low sun's, which cross many,
+    take the single rays."""
     for offset in (0.0, 2.0 ** 18):
         meshes, mesh_of, matrices, visibility, plate = _grid_of_copies(offset)
         scene = build_two_level(meshes, mesh_of, matrices, visibility=visibility)
@@ -196,25 +196,29 @@ def test_many_instances_render_as_single_rays():
         lights = [core.Light.point(np.array([0.4, -1.0, 2.5]) + offset, radius=0.5),
                   core.Light.sun((0.3, 0.2, -1.0), angle=0.2)]
         for mode in ("shadow", "ao+shadow"):
-            # no share asserted: the sun's rays may cross more than MAX_CHUNK_INSTANCES copies (then alone)
             lit = assert_same_render(scene, camera, (24,), samples=24, mode=mode, ao_distance=0.9, lights=lights)
             assert shadowed_share(lit) > 0.1
+        # a low sun: its rays cross more than MAX_CHUNK_INSTANCES copies, so most chunks go to single rays
+        low = [core.Light.sun((1.0, 0.3, -0.15), angle=0.1)]
+        assert shadowed_share(assert_same_render(scene, camera, (24,), samples=24, mode="shadow", lights=low)) > 0.1
+        grazing = rendered(scene, camera, (24,), samples=24, mode="shadow", lights=low)
+        assert grazing.rays_alone > grazing.hit_pixels  # more than the one ray a pixel's chunk may leave
 
 
 def test_box_query_finds_every_instance_a_box_meets_once():
     """scene/box_query.instances_meeting_box against every instance's world box: the instances of the top
-    level whose box overlaps the query box (touching counts) are found, each once, and no other; the
-    walk stops once it found more than it was asked for."""
+    level seen by the rays' kind whose box overlaps the query box (touching counts, NaN too) are found,
+    each once, and no other; the walk stops once it found more than it was asked for."""
     from numba import njit
 
     from core.scene.box_query import instances_meeting_box, new_box_query
 
     @njit
-    def query_all(arrays, boxes, most):
-        query = new_box_query(arrays.mesh_of.shape[0])
+    def query_all(arrays, boxes, most, ray_mask):
+        query = new_box_query(most)
         found = []
         for b in range(boxes.shape[0]):
-            n = instances_meeting_box(arrays, boxes[b], query, most)
+            n = instances_meeting_box(arrays, boxes[b], query, most, ray_mask)
             found.append(query[0][:n].copy())
         return found
 
@@ -224,17 +228,21 @@ def test_box_query_finds_every_instance_a_box_meets_once():
     scene = build_two_level([*meshes, empty], [*mesh_of, 2], np.concatenate([matrices, np.eye(4)[None]]),
                             visibility=np.append(visibility, SHADOW_RAYS))
     world = scene.arrays.world_boxes
-    listed = set(scene.arrays.top_items.tolist())
+    in_top = set(scene.arrays.top_items.tolist())
     lo = rng.uniform(-3.5, 3.5, (300, 3))
     boxes = np.concatenate([lo, lo + rng.uniform(0.0, 1.5, (300, 3)) ** 2], axis=1)
     boxes[:20, :3], boxes[:20, 3:] = world[:20, :3], world[:20, :3]  # a box touching an instance's corner
     boxes[20] = [-1e30, -1e30, -1e30, 1e30, 1e30, 1e30]
-    for box, found in zip(boxes, query_all(scene.arrays, boxes, len(world))):
-        assert len(set(found.tolist())) == len(found)
-        meets = (world[:, :3] <= box[3:]).all(axis=1) & (world[:, 3:] >= box[:3]).all(axis=1)
-        assert set(found.tolist()) == set(np.flatnonzero(meets).tolist()) & listed
-    assert len(query_all(scene.arrays, boxes[20:21], len(world))[0]) == len(listed)
-    assert len(query_all(scene.arrays, boxes[20:21], 5)[0]) == 6  # the walk stops past `most`
+    boxes[21, 2] = np.nan  # a box with NaN reaches every instance it may
+    for mask in (SHADOW_RAYS, CAMERA_RAYS):
+        listed = in_top & set(np.flatnonzero(scene.arrays.visibility & mask).tolist())
+        for k, (box, found) in enumerate(zip(boxes, query_all(scene.arrays, boxes, len(world), mask))):
+            assert len(set(found.tolist())) == len(found)
+            meets = ~((world[:, :3] > box[3:]).any(axis=1) | (world[:, 3:] < box[:3]).any(axis=1))
+            assert set(found.tolist()) == set(np.flatnonzero(meets).tolist()) & listed, k
+        assert len(query_all(scene.arrays, boxes[20:21], len(world), mask)[0]) == len(listed)
+        assert len(query_all(scene.arrays, boxes[20:21], 5, mask)[0]) == 6  # the walk stops past `most`
+    assert 14 not in query_all(scene.arrays, boxes[20:21], len(world), SHADOW_RAYS)[0]  # camera rays only
 
 
 def test_lazy_tree_renders_as_the_eager_tree():
@@ -299,7 +307,7 @@ def test_only_batches_of_eight_or_more_take_the_packed_kernel(monkeypatch):
 def test_a_batch_that_would_compile_the_packed_version_is_cut_below_it(monkeypatch):
     """PreviewRender.batch_without_compile: a batch that would take the packed kernel (8+ samples with AO
     or a light of extent) is cut to PACKED_BATCH - 1 while that version is neither loaded nor cached; other batches
-    and scenes keep their size. A batch so cut gives the image of the batch asked for."""
+    keep their size. A batch so cut gives the image of the batch asked for."""
     import core.render.preview_render as preview_render
     from core.render.render_kernels import PACKED_BATCH
 

@@ -218,8 +218,9 @@ class PreviewRender:
     @property
     def rays_alone(self):
         """Rays of samples traced in packets (sample_packets.py) that no packet answered and the sampling
-        loop traced alone: lanes a packet left (a zero direction component, an unbuilt node) and the last
-        ray of a chunk. Part of rays_traced."""
+        loop traced alone: lanes a packet left (a zero direction component, an unbuilt node), the last
+        ray of a chunk, and a chunk's rays whose segments may meet more than 16 instances
+        (sample_packets.MAX_CHUNK_INSTANCES). Part of rays_traced."""
         return int(self.alone.sum())
 
     @property

@@ -8,8 +8,8 @@ The ray memo (ray_memo.py) keeps each ray's visibility for the next frame, and a
 (lights.DELTA) repeats sample 0's bit in later samples (counted in `repeated`, not `rays`). Such a
 light's ray may also come traced beforehand (`pretraced`: hard_shadow_rays' rays, traced in packets by
 the caller, with its weight: `weights`), counted as if sample 0 had traced it and later samples repeated
-it. In a batch of PACKED_BATCH samples or more, a pixel's AO rays and its rays towards lights with extent are traced in packets (sample_packets.py), with
-the same answers, by a version of the kernel compiled apart.
+it. In a batch of PACKED_BATCH samples or more, a pixel's AO rays and its rays towards lights with extent
+are traced in packets (sample_packets.py), with the same answers, by a version of the kernel compiled apart.
 """
 from typing import NamedTuple
 

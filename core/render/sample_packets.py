@@ -18,7 +18,7 @@ level: scene/box_query.py; where that box meets more than MAX_CHUNK_INSTANCES, e
 level alone), each ray only where the single ray's clip lets it into the instance's box, in that
 instance's object space (instance_traversal._to_object, as single rays go); a ray that one instance
 occludes leaves the packets, and a ray clear of all of them is clear, as an any-hit query through the top
-level finds (docs/choices.md#ao-packets-through-several-instances).
+level finds (docs/choices.md#sample-packets-through-the-instances-a-chunks-rays-may-meet).
 Rays the memo answers (ray_memo.py) are not traced, and rays a packet leaves are traced one by one by
 the sampling kernel, through the whole scene. The sampling kernel takes
 `packed`: for None it is compiled without any of this code (the helpers below are overloads that are
@@ -139,7 +139,7 @@ def _answer_chunk(scene, packets, pixel, samples, batch, lights, memo, rays):
 def _unowned_packets(packets):
     """new_chunk_work's packets as unowned views (array_views.py)."""
     work, packet_work = packets
-    query = (unowned(work.query[0]), unowned(work.query[1]), unowned(work.query[2]))
+    query = (unowned(work.query[0]), unowned(work.query[1]))
     work = ChunkWork(unowned_rays(work.rays), unowned_outputs(work.out), unowned(work.world), unowned(work.cells),
                      unowned(work.starts), unowned(work.answers), unowned(work.weights), unowned(work.inv),
                      unowned(work.reach), query)
@@ -154,12 +154,12 @@ def new_chunk_work(scene, uses):
              np.full(CHUNK, -1, np.int64), np.empty(CHUNK), np.empty(CHUNK, np.int32), np.empty(CHUNK),
              np.empty(CHUNK), np.zeros(CHUNK, np.uint8), np.empty((CHUNK, 3)), np.empty(CHUNK, np.int64),
              np.empty(CELLS + 1, np.int64), np.empty((uses, CHUNK), np.int64), np.empty((uses, CHUNK)), np.empty(3),
-             np.empty(6), new_box_query(scene.mesh_of.shape[0]))
+             np.empty(6), new_box_query(MAX_CHUNK_INSTANCES))
     rays = PacketRays(unowned(owned[0]), unowned(owned[1]), unowned(owned[2]), unowned(owned[3]),
                       unowned(owned[4]))
     out = PacketOutputs(unowned(owned[5]), unowned(owned[6]), unowned(owned[7]), unowned(owned[8]),
                         unowned(owned[9]))
-    query = (unowned(owned[17][0]), unowned(owned[17][1]), unowned(owned[17][2]))
+    query = (unowned(owned[17][0]), unowned(owned[17][1]))
     work = ChunkWork(rays, out, unowned(owned[10]), unowned(owned[11]), unowned(owned[12]), unowned(owned[13]),
                      unowned(owned[14]), unowned(owned[15]), unowned(owned[16]), query)
     sc, stack, packet_owned = new_packet_work()
@@ -182,7 +182,8 @@ def trace_use(scene, packets, pixel, samples, batch, lights, use, memo, rays):
     """The rays of one use of the chunk's samples: each one's weight into packets[0].weights[use] and
     its any-hit prim (>= 0 occluded, -1 clear) into packets[0].answers[use, s - samples[0]], from the
     memo or the packets, kept in the memo; ray_memo.TRACE for a ray a packet left (or all, once fewer
-    than two are pending), which the caller traces alone through the scene (counted in memo.alone[i]).
+    than two are pending, or all when their segments may meet more than MAX_CHUNK_INSTANCES instances),
+    which the caller traces alone through the scene (counted in memo.alone[i]).
     Every ray is counted in rays[i], as render_kernels' single rays are. The packets go through
     packet_traversal.trace_packet, one compiled function shared with the packet kernel
     (docs/choices.md#ao-rays-in-packets-inside-the-sampling-kernel), through each instance the rays'
@@ -218,13 +219,14 @@ def _instances_reached(scene, work):
     """How many instances the pending rays, whose segments lie in the box work.reach (_extend_reach),
     may meet, as trace_scene decides, listed in work.query[0]; MAX_CHUNK_INSTANCES + 1 when more. A flat
     top level's one instance (trace_scene tests no box there); else those of the top level (build_top_level
-    leaves out empty boxes) whose world box (rounded outward) overlaps work.reach widened (_widen_reach),
-    found down the top level (box_query.py). A test for the whole chunk; _enters then tests each ray."""
+    leaves out empty boxes) that shadow rays see and whose world box (rounded outward) overlaps work.reach
+    widened (_widen_reach), found down the top level (box_query.py). A test for the whole chunk; _enters
+    then tests each ray."""
     if _flat_top(scene):
         work.query[0][0] = scene.top_items[0]
         return 1
     _widen_reach(work.reach)
-    return instances_meeting_box(scene, work.reach, work.query, MAX_CHUNK_INSTANCES)
+    return instances_meeting_box(scene, work.reach, work.query, MAX_CHUNK_INSTANCES, SHADOW_RAYS)
 
 
 @njit(cache=True, inline="always")

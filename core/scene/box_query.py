@@ -6,8 +6,8 @@ The top level is a kd-tree over the instances' world boxes whose inner nodes spl
 below it) and whose leaves list instances; a box straddling a plane is listed on both sides. The query
 walks every child whose side of the plane the box reaches (comparisons that include the plane itself),
 so it reaches every leaf that lists an instance whose box overlaps the query box, tests the boxes it
-lists, and reports each overlapping instance once: a per-thread stamp marks the instances this query has
-already met.
+lists, and reports each overlapping instance once. Its caller asks for a few (sample_packets.py: at most
+16), so the list it keeps is that short, and a repeat is found by scanning it.
 """
 import numpy as np
 from numba import njit
@@ -18,30 +18,27 @@ from ..trace.traversal import STACK_SIZE
 
 
 @njit(cache=True, inline="always")
-def new_box_query(instances):
-    """(found, stamps, stack): a thread's buffers for instances_meeting_box on a scene of `instances`
-    instances; stamps[instances] counts the queries made with them."""
-    return np.empty(instances, np.int32), np.zeros(instances + 1, np.int64), np.empty(STACK_SIZE, np.int32)
+def new_box_query(most):
+    """(found, stack): a thread's buffers for instances_meeting_box with at most `most` instances asked for."""
+    return np.empty(most + 1, np.int32), np.empty(STACK_SIZE, np.int32)
 
 
 @njit(cache=True, inline="always")
-def instances_meeting_box(scene, box, query, most):
-    """How many instances of the top level have a world box that overlaps `box` (6,) (min x, y, z, max x,
-    y, z; touching counts), each written once into query[0] (found), in the order the walk meets them;
-    query from new_box_query. The walk stops once it has found more than `most` (returning most + 1)."""
-    found, stamps, stack = query
+def instances_meeting_box(scene, box, query, most, ray_mask):
+    """How many instances of the top level seen by rays of kind `ray_mask` (ray_visibility.py) have a
+    world box that overlaps `box` (6,) (min x, y, z, max x, y, z; touching counts), each written once
+    into query[0] (found), in the order the walk meets them; query from new_box_query(most). The walk
+    stops once it has found more than `most` (returning most + 1). A box with NaN reaches every child."""
+    found, stack = query
     axis, split, child, count, items = scene.top_axis, scene.top_split, scene.top_child, scene.top_count, scene.top_items
     if items.shape[0] == 0:
         return 0
-    last = stamps.shape[0] - 1
-    stamps[last] += 1
-    stamp = stamps[last]
     n, node, sp = 0, 0, 0
     while True:
         a = axis[at(node)]
         if a < LEAF:
             s, left = split[at(node)], child[at(node)]
-            below, above = box[a] <= s, box[a + 3] >= s
+            below, above = not box[a] > s, not box[a + 3] < s
             if below and above:
                 stack[at(sp)] = left + 1
                 sp += 1
@@ -52,10 +49,8 @@ def instances_meeting_box(scene, box, query, most):
             first = child[at(node)]
             for j in range(first, first + count[at(node)]):
                 inst = items[at(j)]
-                if stamps[at(inst)] != stamp:
-                    stamps[at(inst)] = stamp
-                    if not _overlap(scene.world_boxes, inst, box):
-                        continue
+                if scene.visibility[inst] & ray_mask != 0 and _overlap(scene.world_boxes, inst, box) \
+                        and not _listed(found, n, inst):
                     found[at(n)] = inst
                     n += 1
                     if n > most:
@@ -67,7 +62,17 @@ def instances_meeting_box(scene, box, query, most):
 
 
 @njit(cache=True, inline="always")
+def _listed(found, n, inst):
+    """Whether inst is among found[:n] (an instance straddling planes is listed by several leaves)."""
+    for k in range(n):
+        if found[at(k)] == inst:
+            return True
+    return False
+
+
+@njit(cache=True, inline="always")
 def _overlap(boxes, inst, box):
+    """Whether instance inst's box overlaps `box` (touching counts; NaN counts as overlapping)."""
     for k in range(3):
         if boxes[inst, k] > box[k + 3] or boxes[inst, k + 3] < box[k]:
             return False

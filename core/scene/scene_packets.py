@@ -49,7 +49,7 @@ def packets_apply(scene, ray_mask):
 def flat_instance(arrays, ray_mask):
     """The instance of a scene (SceneArrays) of one instance in a one-leaf top level, when rays of kind
     `ray_mask` see it; else -1. The camera and hard-shadow packets' rule for taking a scene (packets_apply;
-    the sampling kernel's packets take a few instances: render/sample_packets.packets_take)."""
+    the sampling kernel's packets take any scene: render/sample_packets.py)."""
     items = arrays.top_items
     if items.shape[0] != 1 or arrays.top_axis[0] != LEAF or arrays.visibility[items[0]] & ray_mask == 0:
         return -1
