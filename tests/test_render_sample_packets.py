@@ -174,7 +174,8 @@ def _grid_of_copies(offset=0.0):
             c, s_ = np.cos(0.4 * k), np.sin(0.4 * k)
             m[:3, :3] = np.array([[c, -s_, 0], [s_, c, 0], [0, 0, 1]]) @ np.diag([1.3, 0.8, 1.1])
         matrices.append(m)
-    matrices += [_placed((offset, offset, offset)), *(_placed((offset + FAR * k, offset, offset)) for k in (1, 2, 3, 4))]
+    matrices += [_placed((offset, offset, offset))]  # the plate
+    matrices += [_placed((offset + FAR * k, offset, offset)) for k in (1, 2, 3, 4)]
     visibility = np.full(len(matrices), SHADOW_RAYS | CAMERA_RAYS, np.uint8)
     visibility[14] = CAMERA_RAYS
     return [soup, plate], [0] * 36 + [1, 0, 0, 0, 0], np.stack(matrices), visibility, 36

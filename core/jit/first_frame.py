@@ -119,8 +119,8 @@ def compile_first_frames() -> None:
 
 def compile_packed_samples() -> None:
     """The sampling kernel's packed version (sample packets in batches of PACKED_BATCH or more samples:
-    render/sample_packets.py), which the add-on's first steps of one sample
-    never run: the factory scene's frame in one batch, mode ao (one version serves every mode). The
-    add-on compiles it after the first frames, in a process of lower priority (kd_addon/kernel_warmup.py),
-    and steps in batches that large once it is cached."""
+    render/sample_packets.py), which the add-on's first steps of one sample never run: the factory scene's
+    frame in one batch, mode ao (one version serves every mode). The add-on compiles it after the first
+    frames, in a process of lower priority (kd_addon/kernel_warmup.py), and steps in batches that large
+    once it is cached."""
     _frame(SceneBuilder("auto"), _one_cube(), None, first=False, batch=PACKED_BATCH, mode="ao")

@@ -248,10 +248,10 @@ class PreviewRender:
 
     def _sample_packets(self, batch):
         """True when this batch's rays go in packets (sample_packets.py: a batch of at least PACKED_BATCH
-        samples, and rays the packets take: AO rays, or those of a light with extent that casts
-        shadows), else None: the sampling kernel's version
-        without packets, the only one a renderer stepping one sample at a time compiles
-        (batch_without_compile keeps a stepping caller there until the packed version is cached)."""
+        samples, and rays the packets take: AO rays, or those of a light with extent that casts shadows),
+        else None: the sampling kernel's version without packets, the only one a renderer stepping one
+        sample at a time compiles (batch_without_compile keeps a stepping caller there until the packed
+        version is cached)."""
         soft = (self.lights[:, DELTA] == 0.0) & (self.lights[:, NO_SHADOW] == 0.0)
         rays = "ao" in self.mode or ("shadow" in self.mode and soft.any())
         return True if rays and batch >= PACKED_BATCH else None

@@ -198,9 +198,7 @@ def trace_use(scene, packets, pixel, samples, batch, lights, use, memo, rays):
         near = _instances_reached(scene, work)
         k = 0
         while pending > 1 and k < near <= MAX_CHUNK_INSTANCES:
-            inst = work.query[0][k]
-            if _seen_by_shadow_rays(scene, inst):
-                pending = _through_instance(scene, inst, work, packet_work, (origin, answers), n, pending)
+            pending = _through_instance(scene, work.query[0][k], work, packet_work, (origin, answers), n, pending)
             k += 1
         unfinished = k < near
     for k in range(n):
@@ -217,23 +215,16 @@ def trace_use(scene, packets, pixel, samples, batch, lights, use, memo, rays):
 @njit(cache=True, inline="always")
 def _instances_reached(scene, work):
     """How many instances the pending rays, whose segments lie in the box work.reach (_extend_reach),
-    may meet, as trace_scene decides, listed in work.query[0]; MAX_CHUNK_INSTANCES + 1 when more. A flat
-    top level's one instance (trace_scene tests no box there); else those of the top level (build_top_level
-    leaves out empty boxes) that shadow rays see and whose world box (rounded outward) overlaps work.reach
-    widened (_widen_reach), found down the top level (box_query.py). A test for the whole chunk; _enters
-    then tests each ray."""
+    may meet, as trace_scene decides, listed in work.query[0]; MAX_CHUNK_INSTANCES + 1 when more. Only
+    instances shadow rays see: a flat top level's one instance (trace_scene tests no box there; its box
+    holds triangles, so its mesh has nodes); else those of the top level (build_top_level leaves out
+    empty boxes) whose world box (rounded outward) overlaps work.reach widened (_widen_reach), found down
+    the top level (box_query.py). A test for the whole chunk; _enters then tests each ray."""
     if _flat_top(scene):
         work.query[0][0] = scene.top_items[0]
-        return 1
+        return 1 if scene.visibility[scene.top_items[0]] & SHADOW_RAYS != 0 else 0
     _widen_reach(work.reach)
     return instances_meeting_box(scene, work.reach, work.query, MAX_CHUNK_INSTANCES, SHADOW_RAYS)
-
-
-@njit(cache=True, inline="always")
-def _seen_by_shadow_rays(scene, inst):
-    """Whether trace_scene's shadow rays enter instance inst: they see it and its mesh has nodes."""
-    m = scene.mesh_of[inst]
-    return scene.visibility[inst] & SHADOW_RAYS != 0 and scene.node_start[m + 1] != scene.node_start[m]
 
 
 @njit(cache=True, inline="always")
