@@ -309,9 +309,9 @@ def _hard_shadow_scene():
 def test_the_hard_shadow_pass_gives_the_images_of_single_shadow_rays(mode, lights):
     """A flat tree's lights without extent have their shadow rays traced in packets before the first
     sample (PreviewRender._trace_hard_shadows: only the rays of pixels facing the light, read in place).
-    Neither a two-instance scene (the packets do not take it: the sampling kernel traces every ray) nor
-    the flat tree with the lights' flag cleared (every sample traces its own ray) takes that pass: all
-    three images are bit-identical, in every mode, with lit, shadowed and unlit pixels."""
+    A two-instance scene takes that pass through its instances one at a time (instance_packets.py) with
+    the same answers; the flat tree with the lights' flag cleared does not (every sample traces its own
+    ray): all three images are bit-identical, in every mode, with lit, shadowed and unlit pixels."""
     ground, objects = _hard_shadow_scene()
     camera = look_at((0.3, -2.2, 2.4), (0.0, 0.1, 0.2), fov=1.0)
     settings = dict(samples=4, mode=mode, lights=lights, ao_distance=0.5)
@@ -328,10 +328,12 @@ def test_the_hard_shadow_pass_gives_the_images_of_single_shadow_rays(mode, light
     if "shadow" in mode:  # the last light is the one without extent
         pretraced = flat.pretraced[:, -1]
         assert (pretraced == 1).any() and (pretraced == 0).any() and (pretraced == -1).any()  # -1: no ray
-        assert (separate.pretraced == -1).all()
+        np.testing.assert_array_equal(separate.pretraced, flat.pretraced)
+        assert (drawn.pretraced == -1).all()
         weights = flat.pretraced_weights[:, -1]  # what the sampling kernel takes instead of making the ray
         assert (weights[pretraced >= 0] > 0.0).all() and (weights[pretraced == -1] == 0.0).all()
-        assert separate.pretraced_weights.shape[0] == 0
+        np.testing.assert_array_equal(separate.pretraced_weights, flat.pretraced_weights)
+        assert drawn.pretraced_weights.shape[0] == 0
         if lights[-1].kind == POINT:  # cos(N, L) towards the light's position: an independent weight
             towards = lights[-1].params["position"] - flat.points
             cosine = (flat.normals * towards).sum(axis=1) / np.linalg.norm(towards, axis=1)

@@ -1,14 +1,16 @@
 """Camera rays in packets through two-level scenes (core.scene.scene_packets) against the single-ray
 scene kernel (trace_valid_rays): the same t, instance, prim, u, v for every ray, on a flat tree, on one
 rotated and scaled instance, far from the origin, with rays lying in split planes and with zero
-components (left to single rays), and on scenes the packets do not take (several instances, lazy trees)."""
+components (left to single rays), on several instances (one at a time: instance_packets.py), and on
+scenes the packets do not take (more than MOST_INSTANCES instances, lazy trees)."""
 import numpy as np
 import pytest
 
 import core
 from core.render.camera import tiled_packets, tiled_pixels
 from core.scene.ray_visibility import CAMERA_RAYS, SHADOW_RAYS
-from core.scene.scene_packets import occluded_in_packets, trace_camera_packets
+from core.scene.instance_packets import MOST_INSTANCES
+from core.scene.scene_packets import occluded_in_packets, packets_apply, trace_camera_packets
 from core.scene.scene_queries import trace_valid_rays
 from core.scene.two_level import build_two_level
 from core.trace.packet_traversal import L
@@ -88,12 +90,78 @@ def test_rays_in_split_planes_and_zero_components():
     assert_same_as_single_rays(tree, o, d, lo, hi, 33, 33)
 
 
+def _rotation(angle, scale=1.0):
+    m = np.eye(4)
+    m[:3, :3] = np.array([[np.cos(angle), -np.sin(angle), 0], [np.sin(angle), np.cos(angle), 0], [0, 0, 1]]) * scale
+    return m
+
+
+def _crowd(offset=0.0):
+    """Instances whose world boxes overlap: a lattice (triangles in split planes) twice at the same place
+    (every hit on it an exact tie between two instances), a sphere scaled and rotated in front of it, soups
+    around, one seen by shadow rays only, one behind the camera; all moved by `offset`."""
+    rng = np.random.default_rng(25)
+    verts, faces = icosphere(3)
+    trees = [core.build_kdtree(lattice(3)), core.build_kdtree(mesh_triangles(verts, faces)),
+             core.build_kdtree(random_soup(rng, 800)), core.build_kdtree(random_soup(rng, 800))]
+    placements = [(0, np.eye(4)), (0, np.eye(4)), (1, _rotation(0.7, 1.3)), (2, _rotation(0.3)),
+                  (3, _rotation(-1.1, 0.5)), (2, _rotation(2.0, 2.0)), (3, np.eye(4))]
+    placements[2][1][:3, 3] = (3.5, -1.5, 1.0)
+    placements[3][1][:3, 3] = (-1.0, 2.5, 0.5)
+    placements[4][1][:3, 3] = (0.0, -1.5, 3.5)
+    placements[5][1][:3, 3] = (0.5, 3.0, 2.5)
+    placements[6][1][:3, 3] = (9.0, -12.0, 3.0)  # behind the camera
+    matrices = np.stack([m for _, m in placements])
+    matrices[:, :3, 3] += offset
+    visibility = np.full(len(placements), CAMERA_RAYS | SHADOW_RAYS, np.uint8)
+    visibility[5] = SHADOW_RAYS
+    return build_two_level(trees, [m for m, _ in placements], matrices, visibility=visibility)
+
+
+@pytest.mark.parametrize("offset", [0.0, 2.0 ** 18])
+def test_several_instances_in_packets_equal_single_rays(offset):
+    """Several instances (instance_packets.py): every ray's t, instance, prim, u, v as the single-ray
+    scene kernel gives them, with exact ties between two instances (the first its top-level walk meets
+    wins), rays in the lattice's split planes, an instance only shadow rays see, far from the origin."""
+    scene = _crowd(offset)
+    assert packets_apply(scene, CAMERA_RAYS)
+    o, d, lo, hi = camera_rays(np.array([6.0, -7.0, 4.0]) + offset, np.array([1.0, 1.0, 1.0]) + offset, 48, 40)
+    _, inst, prim, _, _ = assert_same_as_single_rays(scene, o, d, lo, hi, 48, 40)
+    seen = set(inst[prim >= 0].tolist())
+    assert {0, 2, 3, 4} <= seen and 5 not in seen
+
+
+def test_shadow_rays_through_several_instances_occluded_as_any_hit_rays():
+    """occluded_in_packets through several instances: from the camera hits towards one point, each ray
+    occluded exactly when the single-ray any-hit query says so; some occluded, some clear, and the
+    shadow-only instance occludes some."""
+    scene = _crowd()
+    o, d, lo, hi = camera_rays([6.0, -7.0, 4.0], [1.0, 1.0, 1.0], 48, 40)
+    t, _, prim, _, _ = trace_valid_rays(scene, o, d, lo, hi, False, 2, CAMERA_RAYS)
+    hit = prim >= 0
+    points = o[hit] + t[hit, None] * d[hit]
+    towards = np.array([1.0, 3.5, 6.0]) - points
+    length = np.linalg.norm(towards, axis=1)
+    towards /= length[:, None]
+    starts = np.ascontiguousarray(points + 1e-6 * towards)
+    order = np.full(-(-len(starts) // L) * L, -1, np.int64)
+    order[:len(starts)] = np.arange(len(starts))
+    lows, tmax = np.zeros(len(starts)), length * (1.0 - 1e-6)
+    got = occluded_in_packets(scene, starts, towards, lows, tmax, order, 2, SHADOW_RAYS)
+    want = trace_valid_rays(scene, starts, towards, lows, tmax, True, 2, SHADOW_RAYS)
+    np.testing.assert_array_equal(got, want[2] >= 0)
+    assert 0 < got.sum() < len(got) and (want[1] == 5).any()
+
+
 def test_scenes_packets_do_not_take_are_traced_as_before():
+    """More than MOST_INSTANCES instances the rays see, and lazy trees, go to single rays."""
     rng = np.random.default_rng(23)
-    trees = [core.build_kdtree(random_soup(rng, 500)) for _ in range(2)]
-    m = np.repeat(np.eye(4)[None], 3, axis=0)
-    m[1, :3, 3], m[2, :3, 3] = (2.5, 0, 0), (-2.5, 0, 0)
-    scene = build_two_level(trees, [0, 1, 0], m)
+    trees = [core.build_kdtree(random_soup(rng, 200)) for _ in range(2)]
+    count = MOST_INSTANCES + 1
+    m = np.repeat(np.eye(4)[None], count, axis=0)
+    m[:, 0, 3] = np.linspace(-4.0, 4.0, count)
+    scene = build_two_level(trees, np.arange(count) % 2, m)
+    assert not packets_apply(scene, CAMERA_RAYS)
     o, d, lo, hi = camera_rays([0.0, -9.0, 1.0], [0.0, 0.0, 0.0], 32, 24)
     assert_same_as_single_rays(scene, o, d, lo, hi, 32, 24)
     lazy = core.build_kdtree(random_soup(rng, 3000), lazy=True, lazy_subtree_size=256)
