@@ -305,12 +305,14 @@ def test_the_status_bar_and_panel_show_the_compile_until_ready(warmup, monkeypat
 
 
 def compiled_versions() -> dict:
-    """Every Numba dispatcher alive in this process and the argument types it holds compiled (or loaded)."""
+    """Every Numba dispatcher alive in this process and the argument types it holds compiled (or loaded).
+    By the object's own type: isinstance would ask a weak proxy among gc's objects for its referent's
+    class, which raises once the referent is gone."""
     import gc
 
     from numba.core.registry import CPUDispatcher
 
-    return {d: set(d.overloads) for d in gc.get_objects() if isinstance(d, CPUDispatcher)}
+    return {d: set(d.overloads) for d in gc.get_objects() if issubclass(type(d), CPUDispatcher)}
 
 
 @pytest.mark.slow
