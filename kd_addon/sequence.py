@@ -15,6 +15,7 @@ from pathlib import Path
 
 from . import background, output
 from .run_record import run_record
+from .signals_held import signals_held
 from .config import RenderConfig
 from .errors import Cancelled, PreviewError
 from .pipeline import FrameJob, FrameResult
@@ -188,12 +189,13 @@ class SequenceJob:
 
     def _write(self, result: FrameResult) -> Path:
         path = self.out_dir / frame_filename(self.frames[len(self.results)], self.config.file_extension)
-        try:
-            output.save_frame(result.image, path, self.config.settings.output_format)
-        except (OSError, RuntimeError) as error:  # RuntimeError: Image.save's own failure
-            raise PreviewError(f"could not write {path}: {error}") from None
-        self.results.append(result)
-        self.files.append(path)
+        with signals_held():  # the file on disk and its report entry come together
+            try:
+                output.save_frame(result.image, path, self.config.settings.output_format)
+            except (OSError, RuntimeError) as error:  # RuntimeError: Image.save's own failure
+                raise PreviewError(f"could not write {path}: {error}") from None
+            self.results.append(result)
+            self.files.append(path)
         return path
 
     def close(self, stopped_by: BaseException | None = None) -> None:

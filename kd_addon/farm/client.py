@@ -24,6 +24,7 @@ import bpy
 from .. import cli, corelib, output
 from ..errors import Cancelled, PreviewError
 from ..sequence import frame_filename, prepare_folder, remove_empty_folders, stop_reason, summarize, write_report
+from ..signals_held import signals_held
 from . import bootstrap, cluster
 from .progress import ProgressLine
 
@@ -234,10 +235,11 @@ class FarmRun:
             self.duplicates += 1
             return
         path = self.out_dir / frame_filename(frame, self.config.file_extension)
-        _write_file(path, message["data"])
         result = RemoteFrame(dict(message["row"], file=path.name, worker=message["worker"], chunk=message["chunk"],
                                   attempt=message["attempt"]))
-        self.written[frame], self.files[frame] = result, path
+        with signals_held():  # the file on disk and its report entry come together
+            _write_file(path, message["data"])
+            self.written[frame], self.files[frame] = result, path
         self.progress.clear()
         cli._print_row(self.args.prog, result, path)
         self.progress.update(len(self.written))
