@@ -9,6 +9,7 @@ import pytest
 import core
 from core.render.camera import tiled_packets, tiled_pixels
 from core.scene.ray_visibility import CAMERA_RAYS, SHADOW_RAYS
+from core.scene import instance_packets
 from core.scene.instance_packets import MOST_INSTANCES
 from core.scene.scene_packets import occluded_in_packets, packets_apply, trace_camera_packets
 from core.scene.scene_queries import trace_valid_rays
@@ -118,11 +119,14 @@ def _crowd(offset=0.0):
     return build_two_level(trees, [m for m, _ in placements], matrices, visibility=visibility)
 
 
-@pytest.mark.parametrize("offset", [0.0, 2.0 ** 18])
-def test_several_instances_in_packets_equal_single_rays(offset):
+@pytest.mark.parametrize("offset, batch", [(0.0, None), (2.0 ** 18, None), (0.0, 7)])
+def test_several_instances_in_packets_equal_single_rays(offset, batch, monkeypatch):
     """Several instances (instance_packets.py): every ray's t, instance, prim, u, v as the single-ray
     scene kernel gives them, with exact ties between two instances (the first its top-level walk meets
-    wins), rays in the lattice's split planes, an instance only shadow rays see, far from the origin."""
+    wins), rays in the lattice's split planes, an instance only shadow rays see, far from the origin,
+    and with the packets in batches of 7 (the last one shorter)."""
+    if batch is not None:
+        monkeypatch.setattr(instance_packets, "BATCH_PACKETS", batch)
     scene = _crowd(offset)
     assert packets_apply(scene, CAMERA_RAYS)
     o, d, lo, hi = camera_rays(np.array([6.0, -7.0, 4.0]) + offset, np.array([1.0, 1.0, 1.0]) + offset, 48, 40)

@@ -23,6 +23,7 @@ from ..trace.traversal import clip_to_box
 from .instance_traversal import _to_object, trace_scene_rays
 
 MOST_INSTANCES = 16  # visible instances traced packet by packet, one at a time; more: single rays
+BATCH_PACKETS = 65536  # packets a batch: 524,288 lanes of buffers (49 MB at most), whatever the frame size
 DECIDED = np.uint8(1)  # a lane's state: an any-hit lane that something occludes
 RETRACE = np.uint8(2)  # a lane left to trace_scene (a packet left it, or two instances tie)
 
@@ -35,33 +36,45 @@ def visible_instances(arrays, ray_mask):
 def trace_instances_in_packets(arrays, o, d, lo, hi, order, threads, ray_mask, any_hit):
     """(t, instance, prim, u, v) as trace_valid_rays gives them for coherent rays grouped by `order`
     (L ray indices a packet, -1 for none, read-only) through the instances (SceneArrays) rays of kind
-    `ray_mask` see. Closest hits, or any hit when `any_hit`."""
+    `ray_mask` see. Closest hits, or any hit when `any_hit`. The packets go in batches of BATCH_PACKETS,
+    each through every instance, so the per-lane buffers (new_lane_work) do not grow with the frame."""
     n = len(o)
     hits = (np.full(n, np.inf), np.full(n, -1, np.int32), np.full(n, -1, np.int32), np.zeros(n), np.zeros(n))
     state = np.zeros(n, np.uint8)
-    work = (np.empty_like(o), np.empty_like(d), np.empty(n),
-            PacketOutputs(np.empty(n), np.empty(n, np.int32), np.empty(n), np.empty(n), np.zeros(n, np.uint8)))
+    instances = _nearest_first(arrays, visible_instances(arrays, ray_mask), o, order)
+    lanes = min(len(order), BATCH_PACKETS * L)
+    work = new_lane_work(lanes)
     with thread_count(threads):
-        for k in _nearest_first(arrays, visible_instances(arrays, ray_mask), o, order):
-            _through_instance(arrays, int(k), (o, d, lo, hi, order), hits, state, work, any_hit)
+        for start in range(0, len(order), lanes):
+            batch = order[start:start + lanes]
+            for k in instances:
+                _through_instance(arrays, int(k), (o, d, lo, hi, batch), hits, state, work, any_hit)
         retrace(arrays, (o, d, lo, hi), np.flatnonzero(state == RETRACE), any_hit, ray_mask, hits)
     return hits
 
 
+def new_lane_work(lanes):
+    """Buffers of a batch's lanes, indexed by lane: the object-space origins and directions, tmin, the
+    lane's limit (tmax of its search) and the packet outputs (PacketOutputs)."""
+    return (np.empty((lanes, 3)), np.empty((lanes, 3)), np.empty(lanes), np.empty(lanes),
+            PacketOutputs(np.empty(lanes), np.empty(lanes, np.int32), np.empty(lanes), np.empty(lanes),
+                          np.zeros(lanes, np.uint8)))
+
+
 def _through_instance(arrays, k, rays, hits, state, work, any_hit):
-    """Instance k's packets (those _enter_instance marks) traced and folded into `hits` (_take_hits).
-    work: (o_obj, d_obj, limit, PacketOutputs), rows for every ray."""
-    o, d, lo, hi, order = rays
+    """Instance k's packets of the batch rays[4] (those _enter_instance marks) traced lane by lane in the
+    work buffers (new_lane_work) and folded into `hits` (_take_hits)."""
+    batch = rays[4]
     t, _, prim, _, _ = hits
-    o_obj, d_obj, limit, found = work
-    keep = np.zeros(len(order) // L, np.bool_)
-    _enter_instance(arrays.world_boxes[k], arrays.world_to_object[k], rays, (t, prim, state), (o_obj, d_obj, limit),
-                    found.single, keep)
+    o_obj, d_obj, lo_lane, limit, found = work
+    keep = np.zeros(len(batch) // L, np.bool_)
+    _enter_instance(arrays.world_boxes[k], arrays.world_to_object[k], rays, (t, prim, state),
+                    (o_obj, d_obj, lo_lane, limit, found.single), keep)
     if keep.any():
-        packets = _open_lanes(order, keep, state)
+        packets = _open_lanes(batch, keep, state)
         tree = packed_mesh_tree(arrays, int(arrays.mesh_of[k]))
-        trace_packets(tree, PacketRays(o_obj, d_obj, lo, limit, packets), found, any_hit)
-        _take_hits(found, k, packets, hits, state, any_hit)
+        trace_packets(tree, PacketRays(o_obj, d_obj, lo_lane, limit, packets), found, any_hit)
+        _take_hits(found, k, (packets, batch), hits, state, any_hit)
 
 
 def retrace(arrays, rays, rest, any_hit, ray_mask, hits):
@@ -86,13 +99,14 @@ def packed_mesh_tree(arrays, m):
                       arrays.mesh_bounds[m], arrays.leaf_triangles, int(r0))
 
 
-def _open_lanes(order, keep, state):
-    """The packets marked in `keep`, their closed lanes (state not 0) as -1: read-only, as the renderer's
-    order is (one compiled packet kernel)."""
-    packets = order.reshape(-1, L)[keep].ravel()
-    listed = packets >= 0
-    listed[listed] = state[packets[listed]] != 0
-    packets[listed] = -1
+def _open_lanes(batch, keep, state):
+    """The lanes (indices into `batch`) of the packets marked in `keep`, their closed lanes (state not 0)
+    as -1: read-only, as the renderer's order is (one compiled packet kernel)."""
+    packets = np.arange(len(batch), dtype=np.int64).reshape(-1, L)[keep].ravel()
+    rays = batch[packets]
+    closed = rays < 0
+    closed[~closed] = state[rays[~closed]] != 0
+    packets[closed] = -1
     packets.setflags(write=False)
     return packets
 
@@ -110,51 +124,55 @@ def _nearest_first(arrays, instances, o, order):
 
 
 @njit(cache=True, parallel=True)
-def _enter_instance(box, w2o, rays, best, rays_obj, single, keep):
-    """Mark in `keep` the packets with an open lane (state 0: neither RETRACE nor DECIDED) whose segment
-    (lo, limit) meets the world box; every open lane gets its limit (its best hit's t moved up one float,
-    so that a tie is found; else its tmax), and those of marked packets the instance's object-space ray
-    and a clear `single` flag. rays: (o, d, lo, hi, order); best: (t, prim, state); rays_obj: (o_obj, d_obj, limit)."""
-    o, d, lo, hi, order = rays
+def _enter_instance(box, w2o, rays, best, lanes, keep):
+    """Mark in `keep` the packets of the batch with an open lane (state 0: neither RETRACE nor DECIDED)
+    whose segment (lo, limit) meets the world box; every open lane gets its limit (its best hit's t moved
+    up one float, so that a tie is found; else its tmax), and those of marked packets their tmin, the
+    instance's object-space ray and a clear `single` flag. rays: (o, d, lo, hi, batch); best: (t, prim,
+    state), by ray; lanes: (o_obj, d_obj, lo_lane, limit, single), by lane of the batch."""
+    o, d, lo, hi, batch = rays
     t, prim, state = best
-    o_obj, d_obj, limit = rays_obj
-    inv = np.empty((order.shape[0] // L, 3))
-    for p in prange(order.shape[0] // L):
+    o_obj, d_obj, lo_lane, limit, single = lanes
+    inv = np.empty((batch.shape[0] // L, 3))
+    for p in prange(batch.shape[0] // L):
         met = False
-        for lane in range(p * L, p * L + L):
-            r = order[lane]
+        for j in range(p * L, p * L + L):
+            r = batch[j]
             if r < 0 or state[r] != 0:
                 continue
-            limit[r] = np.nextafter(t[r], np.inf) if prim[r] >= 0 else hi[r]
+            limit[j] = np.nextafter(t[r], np.inf) if prim[r] >= 0 else hi[r]
             for a in range(3):
                 inv[p, a] = 1.0 / d[r, a] if d[r, a] != 0.0 else 0.0
-            t0, t1 = clip_to_box(box, o[r], d[r], inv[p], lo[r], limit[r])
+            t0, t1 = clip_to_box(box, o[r], d[r], inv[p], lo[r], limit[j])
             met = met or t0 <= t1
         keep[p] = met
         if met:
-            for lane in range(p * L, p * L + L):
-                r = order[lane]
+            for j in range(p * L, p * L + L):
+                r = batch[j]
                 if r >= 0 and state[r] == 0:
-                    _to_object(w2o, o[r], d[r], o_obj[r], d_obj[r])
-                    single[r] = 0
+                    _to_object(w2o, o[r], d[r], o_obj[j], d_obj[j])
+                    lo_lane[j] = lo[r]
+                    single[j] = 0
 
 
 @njit(cache=True, parallel=True)
-def _take_hits(found, k, packets, best, state, any_hit):
-    """Fold instance k's packet hits into the best ones: a closer hit replaces the best, an exact tie
-    with another instance's hit, or a lane the packet left, is marked RETRACE; with `any_hit`, a hit
-    closes its lane (DECIDED)."""
+def _take_hits(found, k, lanes, best, state, any_hit):
+    """Fold instance k's packet hits (`found`, by lane) into the best ones (by ray): a closer hit
+    replaces the best, an exact tie with another instance's hit, or a lane the packet left, is marked
+    RETRACE; with `any_hit`, a hit closes its lane (DECIDED). lanes: (the packets' lanes, the batch)."""
+    packets, batch = lanes
     t, inst, prim, u, v = best
     for i in prange(packets.shape[0]):
-        r = packets[i]
-        if r < 0 or state[r] != 0:
+        j = packets[i]
+        if j < 0:
             continue
-        if found.single[r]:
+        r = batch[j]
+        if found.single[j]:
             state[r] = RETRACE
-        elif found.prim[r] >= 0:
-            if prim[r] >= 0 and found.t[r] == t[r]:
+        elif found.prim[j] >= 0:
+            if prim[r] >= 0 and found.t[j] == t[r]:
                 state[r] = RETRACE
             else:  # below the limit: closer than the best
-                t[r], inst[r], prim[r], u[r], v[r] = found.t[r], k, found.prim[r], found.u[r], found.v[r]
+                t[r], inst[r], prim[r], u[r], v[r] = found.t[j], k, found.prim[j], found.u[j], found.v[j]
                 if any_hit:
                     state[r] = DECIDED
