@@ -22,12 +22,12 @@ def signals_held():
         yield
         return
     noted, previous = [], {}
-    for signum in HELD:
-        handler = signal.getsignal(signum)
-        if callable(handler):
-            previous[signum] = handler
-            signal.signal(signum, lambda number, frame: noted.append(number))
-    try:
+    try:  # every handler swapped is put back, even if a signal comes while they are swapped
+        for signum in HELD:
+            handler = signal.getsignal(signum)
+            if callable(handler):
+                previous[signum] = handler
+                signal.signal(signum, lambda number, frame: noted.append(number))
         yield
     finally:
         for signum, handler in previous.items():

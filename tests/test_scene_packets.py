@@ -157,6 +157,23 @@ def test_shadow_rays_through_several_instances_occluded_as_any_hit_rays():
     assert 0 < got.sum() < len(got) and (want[1] == 5).any()
 
 
+def test_several_instances_take_empty_orders_and_skip_empty_meshes():
+    """No rays (a frame whose hits all face away from the light gives the shadow pass none): empty
+    answers. An empty mesh's instance (an inverted world box, which the top level leaves out) is not one
+    the rays see, so it neither costs a pass nor counts towards MOST_INSTANCES."""
+    scene = _crowd()
+    o, d, lo, hi = camera_rays([6.0, -7.0, 4.0], [1.0, 1.0, 1.0], 8, 8)
+    empty = np.zeros(0, np.int64)
+    got = trace_camera_packets(scene, o[:0], d[:0], lo[:0], hi[:0], empty, 2, CAMERA_RAYS)
+    assert all(len(a) == 0 for a in got)
+    assert len(occluded_in_packets(scene, o[:0], d[:0], lo[:0], hi[:0], empty, 2, SHADOW_RAYS)) == 0
+    rng = np.random.default_rng(26)
+    trees = [core.build_kdtree(np.zeros((0, 3, 3), np.float32)), core.build_kdtree(random_soup(rng, 300))]
+    with_empty = build_two_level(trees, [0, 1], np.stack([np.eye(4)] * 2))
+    np.testing.assert_array_equal(instance_packets.visible_instances(with_empty.arrays, CAMERA_RAYS), [1])
+    assert_same_as_single_rays(with_empty, o, d, lo, hi, 8, 8)
+
+
 def test_scenes_packets_do_not_take_are_traced_as_before():
     """More than MOST_INSTANCES instances the rays see, and lazy trees, go to single rays."""
     rng = np.random.default_rng(23)

@@ -72,3 +72,18 @@ def test_a_farm_frame_written_when_ctrl_c_lands_is_recorded(tmp_path, monkeypatc
         farm._on_frame(message)
     assert written_files == ["frame_0007.png"]
     assert list(farm.written) == [7] and farm.files[7].name == "frame_0007.png"
+
+
+def test_a_farm_run_stopped_after_its_last_frame_was_recorded_reports_it_complete():
+    """The interrupt held back until the last frame was recorded: every frame is written when the run
+    stops, and the report is written as complete (no frame left to name as where it stopped)."""
+    farm = object.__new__(client.FarmRun)
+    farm.client, farm.futures = SimpleNamespace(status="closed"), {}
+    farm.frames, farm.written = [7, 8], {7: object(), 8: object()}
+    reports = []
+    farm._write_report = lambda stopped=None: reports.append(stopped)
+    farm._stop(KeyboardInterrupt())
+    assert reports == [None]
+    del farm.written[8]
+    farm._stop(KeyboardInterrupt())
+    assert reports[1]["frame"] == 8

@@ -23,23 +23,28 @@ from ..trace.traversal import clip_to_box
 from .instance_traversal import _to_object, trace_scene_rays
 
 MOST_INSTANCES = 16  # visible instances traced packet by packet, one at a time; more: single rays
-BATCH_PACKETS = 65536  # packets a batch: 524,288 lanes of buffers (49 MB at most), whatever the frame size
+BATCH_PACKETS = 65536  # packets a batch: 524,288 lanes of work buffers (49 MB at most), whatever the frame size
 DECIDED = np.uint8(1)  # a lane's state: an any-hit lane that something occludes
 RETRACE = np.uint8(2)  # a lane left to trace_scene (a packet left it, or two instances tie)
 
 
 def visible_instances(arrays, ray_mask):
-    """The instances (SceneArrays) that rays of kind `ray_mask` see."""
-    return np.flatnonzero(arrays.visibility & ray_mask)
+    """The instances (SceneArrays) that rays of kind `ray_mask` see and that hold something: an empty
+    mesh's inverted world box, which the top level leaves out, would clip as the whole line."""
+    boxes = arrays.world_boxes
+    return np.flatnonzero(((arrays.visibility & ray_mask) != 0) & (boxes[:, 0] <= boxes[:, 3]))
 
 
 def trace_instances_in_packets(arrays, o, d, lo, hi, order, threads, ray_mask, any_hit):
     """(t, instance, prim, u, v) as trace_valid_rays gives them for coherent rays grouped by `order`
     (L ray indices a packet, -1 for none, read-only) through the instances (SceneArrays) rays of kind
-    `ray_mask` see. Closest hits, or any hit when `any_hit`. The packets go in batches of BATCH_PACKETS,
-    each through every instance, so the per-lane buffers (new_lane_work) do not grow with the frame."""
+    `ray_mask` see. Closest hits; with `any_hit`, whether there is a hit (prim >= 0) as trace_valid_rays
+    says, the hit itself being any one. The packets go in batches of BATCH_PACKETS, each through every
+    instance, so the per-lane buffers (new_lane_work) do not grow with the frame."""
     n = len(o)
     hits = (np.full(n, np.inf), np.full(n, -1, np.int32), np.full(n, -1, np.int32), np.zeros(n), np.zeros(n))
+    if not len(order):
+        return hits
     state = np.zeros(n, np.uint8)
     instances = _nearest_first(arrays, visible_instances(arrays, ray_mask), o, order)
     lanes = min(len(order), BATCH_PACKETS * L)
@@ -127,8 +132,9 @@ def _nearest_first(arrays, instances, o, order):
 def _enter_instance(box, w2o, rays, best, lanes, keep):
     """Mark in `keep` the packets of the batch with an open lane (state 0: neither RETRACE nor DECIDED)
     whose segment (lo, limit) meets the world box; every open lane gets its limit (its best hit's t moved
-    up one float, so that a tie is found; else its tmax), and those of marked packets their tmin, the
-    instance's object-space ray and a clear `single` flag. rays: (o, d, lo, hi, batch); best: (t, prim,
+    up one float, so that a tie is found; else its tmax; lo where its segment misses the box, as
+    trace_scene then skips the instance), and those of marked packets their tmin, the instance's
+    object-space ray and a clear `single` flag. rays: (o, d, lo, hi, batch); best: (t, prim,
     state), by ray; lanes: (o_obj, d_obj, lo_lane, limit, single), by lane of the batch."""
     o, d, lo, hi, batch = rays
     t, prim, state = best
@@ -144,7 +150,10 @@ def _enter_instance(box, w2o, rays, best, lanes, keep):
             for a in range(3):
                 inv[p, a] = 1.0 / d[r, a] if d[r, a] != 0.0 else 0.0
             t0, t1 = clip_to_box(box, o[r], d[r], inv[p], lo[r], limit[j])
-            met = met or t0 <= t1
+            if t0 <= t1:
+                met = True
+            else:  # trace_scene does not enter the instance: an empty interval, no hit accepted
+                limit[j] = lo[r]
         keep[p] = met
         if met:
             for j in range(p * L, p * L + L):

@@ -273,9 +273,9 @@ class FarmRun:
             except Exception:  # noqa: BLE001  (the error that stopped the run is the one to report)
                 pass
         if self.written:
-            missing = next(f for f in self.frames if f not in self.written)
-            try:
-                self._write_report({"frame": missing, "reason": stop_reason(error)})
+            missing = next((f for f in self.frames if f not in self.written), None)
+            try:  # every frame written (an interrupt held back until the last one was recorded): complete
+                self._write_report(None if missing is None else {"frame": missing, "reason": stop_reason(error)})
             except PreviewError:
                 pass
 
