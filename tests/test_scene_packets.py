@@ -135,6 +135,25 @@ def test_several_instances_in_packets_equal_single_rays(offset, batch, monkeypat
     assert {0, 2, 3, 4} <= seen and 5 not in seen
 
 
+@pytest.mark.parametrize("wide_first", [False, True])
+def test_exact_ties_go_where_the_top_level_walk_sends_them(wide_first):
+    """Two instances of the same lattice at the same place, one of them with a triangle behind the
+    camera, so its world box holds the camera and the packets take it first; the single-ray kernel's
+    walk decides which instance wins each tie, in both index orders. A pass searching only up to the best
+    hit (not one float past it) would give every tie to the wide instance."""
+    walls = lattice(3)
+    behind = np.array([[[9.0, -11.0, 6.0], [9.5, -11.0, 6.0], [9.0, -10.5, 6.0]]])
+    trees = [core.build_kdtree(walls), core.build_kdtree(np.concatenate([walls, behind]))]
+    meshes = [1, 0] if wide_first else [0, 1]
+    scene = build_two_level(trees, meshes, np.stack([np.eye(4)] * 2))
+    o, d, lo, hi = camera_rays([6.0, -7.0, 4.0], [1.5, 1.5, 1.5], 40, 32)
+    order = instance_packets._nearest_first(scene.arrays, np.array([0, 1]), o, tiled_packets(40, 32))
+    assert meshes[order[0]] == 1  # the wide instance's box holds the camera: the packets take it first
+    _, inst, prim, _, _ = assert_same_as_single_rays(scene, o, d, lo, hi, 40, 32)
+    assert (prim >= 0).mean() > 0.1
+    assert len(np.unique(inst[prim >= 0])) == 1  # every hit a tie, all won by one instance
+
+
 def test_shadow_rays_through_several_instances_occluded_as_any_hit_rays():
     """occluded_in_packets through several instances: from the camera hits towards one point, each ray
     occluded exactly when the single-ray any-hit query says so; some occluded, some clear, and the

@@ -60,10 +60,13 @@ def trace_instances_in_packets(arrays, o, d, lo, hi, order, threads, ray_mask, a
 
 def new_lane_work(lanes):
     """Buffers of a batch's lanes, indexed by lane: the object-space origins and directions, tmin, the
-    lane's limit (tmax of its search) and the packet outputs (PacketOutputs)."""
+    lane's limit (tmax of its search) and the packet outputs (PacketOutputs); and by packet: the
+    world-space inverse direction of the lane being clipped and whether the instance takes the packet,
+    so that no instance pass allocates."""
+    packets = -(-lanes // L)
     return (np.empty((lanes, 3)), np.empty((lanes, 3)), np.empty(lanes), np.empty(lanes),
             PacketOutputs(np.empty(lanes), np.empty(lanes, np.int32), np.empty(lanes), np.empty(lanes),
-                          np.zeros(lanes, np.uint8)))
+                          np.zeros(lanes, np.uint8)), np.empty((packets, 3)), np.empty(packets, np.bool_))
 
 
 def _through_instance(arrays, k, rays, hits, state, work, any_hit):
@@ -71,10 +74,10 @@ def _through_instance(arrays, k, rays, hits, state, work, any_hit):
     work buffers (new_lane_work) and folded into `hits` (_take_hits)."""
     batch = rays[4]
     t, _, prim, _, _ = hits
-    o_obj, d_obj, lo_lane, limit, found = work
-    keep = np.zeros(len(batch) // L, np.bool_)
+    o_obj, d_obj, lo_lane, limit, found, inv, keep = work
+    keep = keep[:len(batch) // L]
     _enter_instance(arrays.world_boxes[k], arrays.world_to_object[k], rays, (t, prim, state),
-                    (o_obj, d_obj, lo_lane, limit, found.single), keep)
+                    (o_obj, d_obj, lo_lane, limit, found.single), inv, keep)
     if keep.any():
         packets = _open_lanes(batch, keep, state)
         tree = packed_mesh_tree(arrays, int(arrays.mesh_of[k]))
@@ -129,17 +132,17 @@ def _nearest_first(arrays, instances, o, order):
 
 
 @njit(cache=True, parallel=True)
-def _enter_instance(box, w2o, rays, best, lanes, keep):
+def _enter_instance(box, w2o, rays, best, lanes, inv, keep):
     """Mark in `keep` the packets of the batch with an open lane (state 0: neither RETRACE nor DECIDED)
     whose segment (lo, limit) meets the world box; every open lane gets its limit (its best hit's t moved
     up one float, so that a tie is found; else its tmax; lo where its segment misses the box, as
     trace_scene then skips the instance), and those of marked packets their tmin, the instance's
     object-space ray and a clear `single` flag. rays: (o, d, lo, hi, batch); best: (t, prim,
-    state), by ray; lanes: (o_obj, d_obj, lo_lane, limit, single), by lane of the batch."""
+    state), by ray; lanes: (o_obj, d_obj, lo_lane, limit, single), by lane of the batch; inv: a row a
+    packet of scratch for the inverse direction."""
     o, d, lo, hi, batch = rays
     t, prim, state = best
     o_obj, d_obj, lo_lane, limit, single = lanes
-    inv = np.empty((batch.shape[0] // L, 3))
     for p in prange(batch.shape[0] // L):
         met = False
         for j in range(p * L, p * L + L):
