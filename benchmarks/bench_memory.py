@@ -118,16 +118,28 @@ def measure_build(path, builder):
             "refs_per_triangle": tree.stats()["references_per_triangle"]}
 
 
-def measure_render_pixels(width, height):
-    """A floor covering the whole view (every pixel hit, the worst case for the hit buffers)."""
+PIXEL_CASES = ("ao", "shadow", "ao+shadow", "shadow, 2 instances")  # the render paths' different buffers
+
+
+def measure_render_pixels(width, height, case="ao"):
+    """A floor covering the whole view (every pixel hit, the worst case for the hit buffers), rendered one
+    sample a pixel: AO; hard shadows of four point lights (the camera and shadow packets and the stored
+    weights); AO with those lights; and hard shadows with the floor as two instances (their packets' lane
+    buffers)."""
     import core
+    from core.scene.two_level import build_two_level
     tris = np.array([[[-50, -50, 0], [50, -50, 0], [50, 50, 0]], [[-50, -50, 0], [50, 50, 0], [-50, 50, 0]]],
                     np.float32)
     tree = core.build_kdtree(tris)
+    if case.endswith("2 instances"):
+        tree = build_two_level([core.build_kdtree(tris[:1]), core.build_kdtree(tris[1:])], [0, 1],
+                               np.stack([np.eye(4)] * 2))
+    mode = case.split(",")[0]
+    lights = [core.Light.point((x, y, 4.0)) for x in (-3.0, 3.0) for y in (-3.0, 3.0)] if "shadow" in mode else []
     camera = core.Camera(np.array([[1.0, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 5], [0, 0, 0, 1]]), fov=0.8)
-    core.render_preview(tree, camera, 32, 32, samples=1)
+    core.render_preview(tree, camera, 32, 32, samples=1, mode=mode, lights=lights)
     base = peak_kib()
-    render = core.PreviewRender(tree, camera, width, height, samples=1)
+    render = core.PreviewRender(tree, camera, width, height, samples=1, mode=mode, lights=lights)
     render.step(1)
     render.image()
     grow = (peak_kib() - base) * 1024
@@ -172,7 +184,7 @@ def run_child(argv):
     if kind == "build":
         result = measure_build(argv[1], argv[2])
     elif kind == "pixels":
-        result = measure_render_pixels(int(argv[1]), int(argv[2]))
+        result = measure_render_pixels(int(argv[1]), int(argv[2]), argv[3])
     else:
         result = measure_five_million(argv[1], argv[2])
     print(json.dumps(result))
@@ -198,9 +210,10 @@ def calibrate(scenes, builders, runs):
         print(f"worst {builder}: {value:.1f} B/tri measured; core.memory.BUILD_BYTES_PER_TRIANGLE "
               f"{core.memory.BUILD_BYTES_PER_TRIANGLE[builder]:.0f} x margin {core.memory.MARGIN}")
     for width, height in ((960, 540), (1920, 1080)):
-        px = float(np.median([child("pixels", width, height)["bytes_per_pixel"] for _ in range(runs)]))
-        print(f"render {width}x{height}: {px:.1f} B/pixel measured; core.memory.RENDER_BYTES_PER_PIXEL "
-              f"{core.memory.RENDER_BYTES_PER_PIXEL:.0f} x margin {core.memory.MARGIN}")
+        for case in PIXEL_CASES:
+            px = float(np.median([child("pixels", width, height, case)["bytes_per_pixel"] for _ in range(runs)]))
+            print(f"render {width}x{height} {case}: {px:.1f} B/pixel measured; core.memory.RENDER_BYTES_PER_PIXEL "
+                  f"{core.memory.RENDER_BYTES_PER_PIXEL:.0f} x margin {core.memory.MARGIN}", flush=True)
 
 
 def five_million(builder, runs):
@@ -227,7 +240,7 @@ def main():
     ap.add_argument("--runs", type=int, default=3)
     args = ap.parse_args()
     if args.calibrate:
-        calibrate(args.scenes.split(","), args.builders.split(","), args.runs)
+        calibrate([name for name in args.scenes.split(",") if name], args.builders.split(","), args.runs)
     else:
         five_million(args.builder, args.runs)
 

@@ -16,12 +16,13 @@ MARGIN = 1.25  # peaks vary by scene (references per triangle); the limit is a p
 # calibration scene (dense coplanar cards; docs/choices.md#build-memory-per-triangle).
 BUILD_BYTES_PER_TRIANGLE = {"binned": 620.0, "exact": 600.0, "median": 620.0}
 TRIANGLE_BYTES = 36  # (3, 3) float32: the array the tree keeps
-# Peak RSS growth of PreviewRender plus image(), per pixel, every pixel hit (the worst case, 200 B), plus
-# each pixel's 24 B ray start, up to 64 B of ray-memo bits (render_kernels.MEMO_BITS), three int64 counts
-# and with an error target a float64 variance per check (convergence.py; 64 B: eight checks, up to 1,024
-# samples from min_samples 8), and for lights without extent the hard-shadow pass's answer and weight
-# (9 B a light; 36 B: four lights).
-RENDER_BYTES_PER_PIXEL = 200.0 + 24.0 + 64.0 + 3 * 8.0 + 64.0 + 36.0
+# Peak RSS growth of PreviewRender plus image(), per pixel, every pixel hit (the worst case: 230 B, the
+# hard-shadow pass's camera and shadow packets), plus each pixel's 24 B ray start, up to 64 B of ray-memo
+# bits (render_kernels.MEMO_BITS), three int64 counts and with an error target a float64 variance per check
+# (convergence.py; 64 B: eight checks, up to 1,024 samples from min_samples 8), and for lights without
+# extent the hard-shadow pass's answer and weight (9 B a light; 36 B: four lights). Calibrated by
+# bench_memory.py --calibrate (docs/choices.md#render-memory-per-pixel-with-the-packet-passes).
+RENDER_BYTES_PER_PIXEL = 230.0 + 24.0 + 64.0 + 3 * 8.0 + 64.0 + 36.0
 # The last frame's pixel state kept for pixel reuse (PreviewRender.pixel_state): index, depth, point,
 # normal, ray start, sums, counts (float64 / int64), up to 64 bytes of visibility bits and the checks'
 # variances (64 B, as above) per hit pixel.
