@@ -106,7 +106,9 @@ def _top_split(task, params, strategy, threads, nchunks):
         planar_left = False
     if axis < 0 or not beats_leaf(cost, n, task.box, params):
         return -1, 0.0, False
-    return axis, pos, planar_left
+    # float32, as a split plane is: a compiled split returns it to Python as a float, and a float64 pos
+    # would compile partition_parallel a second time (the same value, so the same partition)
+    return axis, np.float32(pos), planar_left
 
 
 def _object_median(min_bins, max_bins, box):

@@ -75,6 +75,7 @@ class Camera:
         y = top - (np.arange(height) + 0.5) / height * (top - bottom)
         rot = self.matrix_world[:3, :3] / np.linalg.norm(self.matrix_world[:3, :3], axis=0)
         rot = without_negligible_components(rot.T).T  # per axis, as for query rays (inputs.py says why)
+        rot = np.ascontiguousarray(rot)  # one compiled _pixel_rays, whether or not the call above copied
         pixels = np.arange(width * height, dtype=np.int64) if pixels is None else _pixel_indices(pixels, width, height)
         n = len(pixels)
         origins, directions = np.empty((n, 3)), np.empty((n, 3))

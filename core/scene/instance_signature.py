@@ -43,8 +43,7 @@ def instance_signature(digests, bounds, mesh_of, o2w, origin, rounding, visibili
         mesh_of, o2w, rounding, visibility = mesh_of[solid], o2w[solid], rounding[solid], visibility[solid]
     o2w, rounding = np.ascontiguousarray(o2w, np.float64), np.ascontiguousarray(rounding)
     visibility = visibility.reshape(-1, 1)
-    table = np.frombuffer(b"".join(digests), np.uint8).reshape(len(digests), 8) if digests else \
-        np.zeros((0, 8), np.uint8)
+    table = np.frombuffer(b"".join(digests), np.uint8).reshape(len(digests), 8)  # read-only, even when empty
     raw = _row_bytes(table, mesh_of, o2w.reshape(len(o2w), 16).view(np.uint8), rounding.view(np.uint8),
                      visibility)
     rows = raw.view(np.dtype((np.void, raw.shape[1]))).reshape(-1)

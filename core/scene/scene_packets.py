@@ -45,6 +45,8 @@ def _traced(scene, rays, threads, ray_mask, any_hit):
     """(t, instance, prim, u, v) of rays = (o, d, lo, hi, order): in packets through one instance of a
     flat top level, through several one at a time, or singly where the packets do not apply."""
     o, d, lo, hi, order = rays
+    order = np.asarray(order).view()
+    order.setflags(write=False)  # as the renderer's orders: one compiled version of each packet kernel
     if not packets_apply(scene, ray_mask):
         return trace_valid_rays(scene, o, d, lo, hi, any_hit, threads, ray_mask)
     if flat_instance.py_func(scene.arrays, ray_mask) >= 0:
