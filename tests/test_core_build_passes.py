@@ -131,3 +131,18 @@ def test_keep_alive_keeps_the_owner_of_an_unowned_view():
     """The subtree kernel's unowned views stay valid while their owners are named after its loop
     (array_views.keep_alive): Numba frees an array after its last use otherwise."""
     assert _view_after_more_allocations(True) == 1.0
+
+
+def test_the_top_levels_partition_compiles_once_for_every_builder():
+    """The parallel top levels' split plane reaches partition_parallel as float32 whichever split chose
+    it (a compiled split returns its float32 plane to Python as a float), so the partition compiles one
+    version (docs/choices.md#one-compiled-version-of-each-kernel)."""
+    import core
+    from core.build import top_levels
+
+    rng = np.random.default_rng(31)
+    tris = (rng.uniform(-1.0, 1.0, (40000, 1, 3)) + rng.normal(0.0, 0.02, (40000, 3, 3))).astype(np.float32)
+    for options in ({"top": "sah"}, {"top": "clustering"}, {"builder": "exact"}, {"builder": "median"}):
+        core.build_kdtree(tris, threads=2, **options)
+    planes = {str(sig[4]) for sig in top_levels.partition_parallel.signatures}
+    assert planes == {"float32"}

@@ -14,6 +14,7 @@ from core.scene.instance_packets import MOST_INSTANCES
 from core.scene.scene_packets import occluded_in_packets, packets_apply, trace_camera_packets
 from core.scene.scene_queries import trace_valid_rays
 from core.scene.two_level import build_two_level
+from core.trace import packet_traversal
 from core.trace.packet_traversal import L
 from tests.meshes import icosphere, lattice, mesh_triangles, random_soup
 
@@ -271,3 +272,20 @@ def test_shadow_rays_of_mixed_signs_from_lattice_points_occluded_as_any_hit_rays
         assert 0 < want.sum() < len(want)
     signs = np.sign(towards[order[:len(starts) // L * L]].reshape(-1, L, 3))
     assert ((signs > 0).any(axis=1) & (signs < 0).any(axis=1)).any(axis=1).mean() > 0.5
+
+
+def test_orders_a_caller_made_take_the_renderers_compiled_version():
+    """The renderer's packet orders are read-only; a writable order of a caller's own is taken as a
+    read-only view (left writable for the caller), so each packet kernel compiles one version
+    (docs/choices.md#one-compiled-version-of-each-kernel)."""
+    o, d, lo, hi = camera_rays([6.0, -7.0, 4.0], [1.0, 1.0, 1.0], 16, 16)
+    order = np.array(tiled_packets(16, 16))
+    assert order.flags.writeable
+    for scene in (core.build_kdtree(random_soup(np.random.default_rng(27), 300)), _crowd()):
+        trace_camera_packets(scene, o, d, lo, hi, order, 2, CAMERA_RAYS)
+        occluded_in_packets(scene, o, d, lo, hi, order, 2, SHADOW_RAYS)
+    assert order.flags.writeable
+    orders = [sig[1].types[-1] for sig in packet_traversal.trace_packets.signatures]  # PacketRays.order
+    orders += [sig[2].types[-1] for sig in instance_packets._enter_instance.signatures]
+    orders += [kind for sig in instance_packets._take_hits.signatures for kind in sig[2].types]
+    assert orders and not any(kind.mutable for kind in orders), orders
