@@ -118,7 +118,9 @@ def measure_build(path, builder):
             "refs_per_triangle": tree.stats()["references_per_triangle"]}
 
 
-PIXEL_CASES = ("ao", "shadow", "ao+shadow", "shadow, 2 instances")  # the render paths' different buffers
+# the render paths' different buffers: case -> (render mode, instances the floor is split into)
+PIXEL_CASES = {"ao": ("ao", 1), "shadow": ("shadow", 1), "ao+shadow": ("ao+shadow", 1),
+               "shadow, 2 instances": ("shadow", 2)}
 
 
 def measure_render_pixels(width, height, case="ao"):
@@ -130,11 +132,11 @@ def measure_render_pixels(width, height, case="ao"):
     from core.scene.two_level import build_two_level
     tris = np.array([[[-50, -50, 0], [50, -50, 0], [50, 50, 0]], [[-50, -50, 0], [50, 50, 0], [-50, 50, 0]]],
                     np.float32)
+    mode, instances = PIXEL_CASES[case]
     tree = core.build_kdtree(tris)
-    if case.endswith("2 instances"):
+    if instances == 2:
         tree = build_two_level([core.build_kdtree(tris[:1]), core.build_kdtree(tris[1:])], [0, 1],
                                np.stack([np.eye(4)] * 2))
-    mode = case.split(",")[0]
     lights = [core.Light.point((x, y, 4.0)) for x in (-3.0, 3.0) for y in (-3.0, 3.0)] if "shadow" in mode else []
     camera = core.Camera(np.array([[1.0, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 5], [0, 0, 0, 1]]), fov=0.8)
     core.render_preview(tree, camera, 32, 32, samples=1, mode=mode, lights=lights)
