@@ -9,13 +9,14 @@ Before any timing, every method runs once untimed (JIT compile and cache load, r
    new one).
 2. A sweep over samples per pixel, samplers (sobol, random), builders and a few builder settings:
    time (build + trace, median of --runs) and RMSE against the reference on hit pixels. The binned
-   rows are repeated with the denoiser (core/render/denoise.py, time includes the filter), "... denoised".
+   rows, with the default build and told the frame's rays (the add-on's setup: DEFAULT_METHOD), are
+   repeated with the denoiser (core/render/denoise.py, time includes the filter), "... denoised".
    Written to OUT/render_sweep.csv (the run's settings in OUT/render_sweep.json) and plotted to
    OUT/render_rmse_vs_time.png with two Pareto fronts marked: raw estimates only, and with denoised rows.
    Also the denoiser's bias at convergence: RMSE between the reference and the denoised reference.
-   Adaptive rows (ours with each --error-targets, at most each --adaptive-max samples) are timed in the same
-   round-robin as the fixed rows of that sample count, with their mean samples a hit pixel; --methods
-   keeps only some of our fixed methods (a shorter run).
+   Adaptive rows (ours with each --error-targets, at most each --adaptive-max samples, the build told the
+   frame's rays as the add-on's) are timed in the same round-robin as the fixed rows of that sample
+   count, with their mean samples a hit pixel; --methods keeps only some of our fixed methods (a shorter run).
 3. Cycles' AO pass of the same .blend (the subdivided mesh, no modifier left to evaluate) and camera
    at matching sample counts (raw: Cycles has no denoiser for that pass), on as many threads as ours,
    timed in the same run, round-robin with our rows of the same sample count (sweep() says why), RMSE
@@ -54,6 +55,7 @@ from core.render.denoise import SOBOL_VARIANCE_DECAY  # noqa: E402
 from core.jit.sources_digest import sources_digest  # noqa: E402
 from scenes import DATA_DIR, blend_path, load_scene  # noqa: E402
 
+TOLD = {"rays": "frame"}  # the add-on tells each frame's build the frame's rays (kd_addon/pipeline.py)
 BUILD_CONFIGS = {
     "binned": {},
     "exact": {"builder": "exact"},
@@ -61,7 +63,7 @@ BUILD_CONFIGS = {
     "binned leaf_size=8": {"leaf_size": 8},
     "binned max_depth=28": {"max_depth": 28},
     "binned clip=False": {"clip": False},
-    "binned rays=frame": {"rays": "frame"},  # told the render's ray count (core.frame_ray_count): seed 003 §3.5
+    "binned rays=frame": TOLD,  # told the render's ray count (core.frame_ray_count): seed 003 §3.5
 }
 
 
@@ -107,7 +109,7 @@ def our_methods(only=None):
     methods = []
     for label, options in BUILD_CONFIGS.items():
         for sampler in ("sobol", "random") if label == "binned" else ("sobol",):
-            for denoise in (False, True) if label == "binned" else (False,):
+            for denoise in (False, True) if label in DENOISED_BUILDS else (False,):
                 methods.append((f"kd {label} {sampler}" + (" denoised" if denoise else ""), options, sampler,
                                 denoise))
     return [m for m in methods if only is None or m[0] in only]
@@ -124,7 +126,7 @@ def renders_of(spp, args):
             scene, camera, args.size, o, spp, sa, args.ao_distance, denoise=d)
     adaptive = spp in args.adaptive_max
     for target in args.error_targets if adaptive else ():
-        jobs[(ADAPTIVE, target)] = lambda t=target: one_render(scene, camera, args.size, {}, spp, "sobol",
+        jobs[(ADAPTIVE, target)] = lambda t=target: one_render(scene, camera, args.size, TOLD, spp, "sobol",
                                                                args.ao_distance, error_target=t)
     if not args.no_cycles:
         jobs[(CYCLES, None)] = lambda: cycles_image(scene, ref, args, spp)
@@ -164,8 +166,9 @@ def sweep(scene, camera, ref, args):
 
 CYCLES = "cycles ao pass"
 CYCLES_ADAPTIVE = "cycles ao pass adaptive"  # Cycles' adaptive sampling, error_target its adaptive_threshold
-ADAPTIVE = "kd binned sobol adaptive"  # ours with an error target
-DEFAULT_METHOD = "kd binned sobol"  # what the add-on renders with
+ADAPTIVE = "kd binned rays=frame sobol adaptive"  # ours with an error target, as the add-on renders it
+DEFAULT_METHOD = "kd binned rays=frame sobol"  # what the add-on renders with (Denoise off)
+DENOISED_BUILDS = ("binned", "binned rays=frame")  # the builds whose rows are repeated with the denoiser
 
 
 def is_cycles(row):
@@ -463,7 +466,7 @@ def main():
         "cycles_threads": args.threads, "core_sources": meta["core_sources"],
         "rows": [{**r, "all_seconds": sweep_runs.get((r["method"], r["samples"], r.get("error_target")))}
                  for r in rows],
-        "time_ratio_at_equal_rmse": ratios_out, "denoiser_bias_rmse": bias,
+        "time_ratio_at_equal_rmse": ratios_out, "default_method": DEFAULT_METHOD, "denoiser_bias_rmse": bias,
     }, args.jit_seconds, args.quick, out)
     print(f"\nwrote {out / 'render_sweep.csv'}, {out / 'render_sweep.json'} (the run's settings) and "
           f"{out / 'render_rmse_vs_time.png'}")

@@ -43,7 +43,8 @@ def provenance(result):
     """One line naming the run: date, host, software and command."""
     h = result["host"]
     quick = " **Quick run** (a check that the benchmark works, not a final figure)." if result.get("quick") else ""
-    return (f"_{result['benchmark']}: {result['date']}, {h['cpu']}, {h['cores']} cores "
+    cpu = f"{h['cpu']} ({h['cpu_target']})" if h.get("cpu_target") else h["cpu"]
+    return (f"_{result['benchmark']}: {result['date']}, {cpu}, {h['cores']} cores "
             f"({h['numba_threads']} Numba threads), Python {h['python']}, Numba {h['numba']}; "
             f"JIT compile {result['jit_seconds']:.1f} s, not in any figure; "
             f"`{result['command']}`._{quick}")
@@ -192,8 +193,9 @@ def bench_render_block(data):
                         [[row["method"], row["error_target"], row["samples"], _mean_samples(row),
                           f"{row['rmse']:.4f}", f"{row['seconds']:.2f}"] for row in adaptive])]
     if r["time_ratio_at_equal_rmse"]:
+        default = f" ours default: `{r['default_method']}`, the add-on's setup;" if r.get("default_method") else ""
         parts += ["", "Our time / Cycles' time at Cycles' RMSE (`<= x`: Cycles is less accurate than our fastest "
-                  "row, whose ratio is given):\n",
+                  f"row, whose ratio is given;{default} raw and denoised: the fastest of all our rows):\n",
                   table(["Cycles", "Cycles spp", "Cycles RMSE", "Cycles s", "ours raw", "ours denoised",
                          "ours default"],
                         [[_cycles_kind(e), e["cycles_samples"], f"{e['cycles_rmse']:.4f}",

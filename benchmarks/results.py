@@ -1,8 +1,9 @@
 """Benchmark results as JSON under benchmarks/out/, the files benchmarks/report.py renders the docs from.
 
 Every result file holds the figures of one benchmark run and the run's context: the command line, the
-date (UTC), the host's CPU model, its core count, the Numba thread count, the Python, numpy and Numba
-versions, and the JIT compile (or cache load) time, which no figure includes.
+date (UTC), the host's CPU model and LLVM's name and vector extension for it, its core count, the Numba
+thread count, the Python, numpy and Numba versions, and the JIT compile (or cache load) time, which no
+figure includes.
 """
 import json
 import os
@@ -28,11 +29,23 @@ def cpu_model() -> str:
     return platform.processor() or platform.machine()
 
 
+def cpu_target() -> str:
+    """The CPU as LLVM compiles for it, e.g. "znver4, AVX-512": the vector width Numba's kernels get
+    (core/trace/simd.py) sets the figures more than the model name, which may not tell two
+    generations apart ("AMD EPYC")."""
+    from llvmlite import binding
+    features = binding.get_host_cpu_features()
+    simd = next((name for flag, name in (("avx512f", "AVX-512"), ("avx2", "AVX2"), ("neon", "NEON"))
+                 if features.get(flag)), "no AVX2")
+    return f"{binding.get_host_cpu_name()}, {simd}"
+
+
 def host() -> dict:
     """The run's machine and software, recorded beside its figures."""
     import numba
     return {
         "cpu": cpu_model(),
+        "cpu_target": cpu_target(),
         "cores": os.cpu_count(),
         "numba_threads": numba.get_num_threads(),
         "python": platform.python_version(),

@@ -64,3 +64,32 @@ def test_check_mode_fails_when_the_committed_tables_differ_from_the_json(report)
 
 def test_the_committed_tables_are_what_the_committed_json_gives(report):
     assert report.main(["--check"]) == 0, "run: python benchmarks/report.py"
+
+
+def test_the_provenance_names_the_vector_extension_the_kernels_were_compiled_for(report):
+    """Two hosts of one model name ("AMD EPYC") may differ in vector width, which sets the figures
+    (docs/choices.md#four-and-sixteen-lanes-on-avx2-dropped): the line says LLVM's CPU and extension."""
+    run = {"benchmark": "b", "date": "d", "jit_seconds": 1.0, "command": "c",
+           "host": {"cpu": "AMD EPYC", "cores": 2, "numba_threads": 2, "python": "3.11", "numba": "0.68"}}
+    assert "AMD EPYC, 2 cores" in report.provenance(run)  # results written before the field existed
+    run["host"]["cpu_target"] = "znver4, AVX-512"
+    assert "AMD EPYC (znver4, AVX-512), 2 cores" in report.provenance(run)
+    results = load_benchmark("results")
+    name, simd = results.host()["cpu_target"].split(", ")
+    assert name and simd in ("AVX-512", "AVX2", "NEON", "no AVX2")
+
+
+def test_the_cycles_ratios_name_the_setup_the_default_column_measures(report):
+    data = report.load(FIXTURE)
+    data["bench_render"]["results"]["default_method"] = "kd binned rays=frame sobol"
+    assert "ours default: `kd binned rays=frame sobol`, the add-on's setup" in report.bench_render_block(data)
+
+
+def test_the_render_benchmarks_default_is_the_addons_setup():
+    """The add-on tells each frame's build the frame's rays (kd_addon/pipeline.py), so the row the
+    Cycles ratios call our default, and its denoised twin, are built so."""
+    bench = load_benchmark("bench_render")
+    methods = {name: (options, sampler, denoise) for name, options, sampler, denoise in bench.our_methods()}
+    assert methods[bench.DEFAULT_METHOD] == ({"rays": "frame"}, "sobol", False)
+    assert methods[bench.DEFAULT_METHOD + " denoised"] == ({"rays": "frame"}, "sobol", True)
+    assert "kd binned sobol denoised" in methods  # the default build's rows stay, for comparison
