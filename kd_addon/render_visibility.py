@@ -31,6 +31,7 @@ class RenderVisibility:
 
     def __init__(self, depsgraph: bpy.types.Depsgraph):
         self.view_layer = depsgraph.view_layer
+        self.view_layer_eval = depsgraph.view_layer_eval  # its bases hold the evaluated objects
         self.scene_objects = _layer_render_objects(self.view_layer.layer_collection)
         for background in set_scenes(depsgraph.scene):
             self.scene_objects |= _layer_render_objects(render_view_layer(background).layer_collection)

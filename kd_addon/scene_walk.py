@@ -122,10 +122,11 @@ class EntryReader:
         orig = ob.original
         memo_key = (orig.as_pointer(), parent.as_pointer() if parent else 0)
         if memo_key not in self._verdicts:
-            camera, shadow = ray_flags(orig) if parent is None else ray_flags(orig, parent.original)
-            owner = orig if parent is None else parent.original  # Cycles reads these from the instancer
-            holdout = owner.holdout_get(view_layer=self.vis.view_layer)
-            if not holdout and owner.indirect_only_get(view_layer=self.vis.view_layer):
+            flagged, view_layer = self._flag_holders(ob, parent)
+            camera, shadow = ray_flags(*flagged)
+            owner = flagged[-1]  # Cycles reads Holdout and Indirect Only from the instancer
+            holdout = owner.holdout_get(view_layer=view_layer)
+            if not holdout and owner.indirect_only_get(view_layer=view_layer):
                 camera = False  # Indirect Only hides from camera rays; a holdout stays a holdout
             visible = (camera or shadow) and (self.render_mode or entry_visible(self.vis, parent, ob))
             instancer = parent.original.name if parent is not None else None
@@ -133,6 +134,16 @@ class EntryReader:
                 self._note_instanced(parent, ob)
             self._verdicts[memo_key] = (orig.name, instancer, camera, shadow, holdout) if visible else None
         return self._verdicts[memo_key]
+
+    def _flag_holders(self, ob, parent) -> tuple[tuple, bpy.types.ViewLayer]:
+        """(the object and its instancer if any, the view layer) to read the ray flags, Holdout and
+        Indirect Only from. A render's own depsgraph (an engine's, F12 or an animation) animates its
+        evaluated copies only, so keyed flags are read there, with its evaluated view layer; the
+        viewport's depsgraph is the active one, whose animation is written back to the originals,
+        which also hold edits the depsgraph has not evaluated yet."""
+        if self.render_mode:
+            return ((ob,) if parent is None else (ob, parent)), self.vis.view_layer_eval
+        return ((ob.original,) if parent is None else (ob.original, parent.original)), self.vis.view_layer
 
     def _note_instanced(self, parent, ob) -> None:
         """Record that `parent` instanced `ob` (whatever its type: Blender counts a geometry-nodes

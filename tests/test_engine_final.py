@@ -152,6 +152,28 @@ def test_animation_writes_the_frame_range_by_step_and_reuses_trees(addon, tmp_pa
     assert np.array_equal(last, panel_image(scene))  # a kept pixel is the pixel a fresh render makes
 
 
+def test_an_animation_follows_keyed_ray_visibility_and_holdout(addon, tmp_path):
+    """A render's own depsgraph animates its evaluated objects only, not the originals the viewport's
+    flags are read from: an animation through the engine (Ctrl-F12, `-a`) takes each frame's keyed
+    Ray Visibility > Camera and Holdout, as the panel's render of that frame does."""
+    scene = engine_scene(tmp_path, name="anim_")
+    box = bpy.data.objects["Box"]
+    for frame, camera, holdout in ((1, True, False), (2, False, False), (3, True, True)):
+        box.visible_camera, box.is_holdout = camera, holdout
+        box.keyframe_insert("visible_camera", frame=frame)
+        box.keyframe_insert("is_holdout", frame=frame)
+    scene.frame_start, scene.frame_end = 1, 3
+    scene.frame_set(1)  # the originals hold frame 1's flags while the engine renders frames 2 and 3
+    tree_cache.clear()
+    assert bpy.ops.render.render(animation=True) == {"FINISHED"}
+    frames = [read_rgba(tmp_path / f"anim_{frame:04d}.exr") for frame in (1, 2, 3)]
+    box_pixels = frames[0][..., 3] - frames[2][..., 3] == 1.0  # the holdout's hole in frame 3
+    assert box_pixels.any() and not np.array_equal(frames[0], frames[1])
+    for frame, image in zip((1, 2, 3), frames):
+        scene.frame_set(frame)
+        assert np.array_equal(image, panel_image(scene)), f"frame {frame}"
+
+
 
 def render_multilayer_exr(scene, folder):
     """F12 into an uncompressed multilayer EXR (the scene writes `frame.exr` in `folder`): its channels."""
