@@ -250,8 +250,28 @@ def test_sun_of_blenders_largest_angle_lights_a_floor_by_half():
     img = core.render_preview(tree, look_down((0.0, 0.0, 1.0)), 16, 16, samples=1024, mode="shadow", lights=[sun])
     assert hit_mask(img).all()
     assert img[..., 0].mean() == pytest.approx(0.5, abs=0.005)
-    with pytest.raises(ValueError, match="sun angle must be <= pi"):
+    with pytest.raises(ValueError, match="sun angle must be at most pi"):
         core.Light.sun((0.0, 0.0, -1.0), angle=3.2)
+
+
+def test_spot_of_blenders_largest_size_lights_what_a_point_light_does():
+    """Blender's largest Spot Size, 180 degrees, is stored as float32 pi, a hair above np.pi. Pointing
+    down from above a floor with no blend, its cone holds the whole lower half-space: every floor pixel
+    gets what a point light at the same place gives it."""
+    tree = core.build_kdtree(floor(0.0))
+    camera = look_down((0.0, 0.0, 3.0), fov=1.6)
+    largest = float(np.float32(np.pi))
+    assert largest > np.pi
+    spot = core.Light.spot((0.0, 0.0, 2.0), (0.0, 0.0, -1.0), spot_size=largest, spot_blend=0.0)
+    point = core.Light.point((0.0, 0.0, 2.0))
+    images = [core.render_preview(tree, camera, 16, 16, samples=1, mode="shadow", lights=[light])
+              for light in (spot, point)]
+    assert hit_mask(images[1]).all() and images[1][..., 0].min() > 0.0
+    np.testing.assert_allclose(images[0], images[1], rtol=1e-6, atol=1e-7)
+    with pytest.raises(ValueError, match="spot_size must be at most pi"):
+        core.Light.spot((0.0, 0.0, 2.0), (0.0, 0.0, -1.0), spot_size=3.2)
+    with pytest.raises(ValueError, match="spot_size must be finite and > 0"):
+        core.Light.spot((0.0, 0.0, 2.0), (0.0, 0.0, -1.0), spot_size=0.0)
 
 
 @pytest.mark.parametrize("spread_degrees", [10.0, 60.0, 120.0])

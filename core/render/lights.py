@@ -45,10 +45,7 @@ class Light:
     @classmethod
     def sun(cls, direction, angle=0.0, strength=1.0, color=(1.0, 1.0, 1.0), cast_shadow=True):
         """`direction` is the direction the light travels (Blender: matrix_world @ (0, 0, -1))."""
-        angle = _non_negative("sun angle", angle)
-        if angle > np.pi * (1.0 + 1e-6):  # Blender's own limit (180 degrees: a hemisphere of directions)
-            raise ValueError(f"sun angle must be <= pi, got {angle}")
-        angle = min(angle, np.pi)  # Blender's 180 degrees is float32 pi, a hair above np.pi
+        angle = _at_most_half_turn("sun angle", _non_negative("sun angle", angle))
         return cls(SUN, color, strength, cast_shadow, direction=_unit("sun direction", direction), angle=angle)
 
     @classmethod
@@ -58,8 +55,7 @@ class Light:
         scale included (Blender's matrix_world.to_3x3()), with `direction` along minus its Z. The
         cone is then taken in the object's own frame, as Cycles does (spot_light_to_local): a
         non-uniform scale makes it elliptical."""
-        if not 0.0 < as_number("spot_size", spot_size) <= np.pi:
-            raise ValueError(f"spot_size must be in (0, pi], got {spot_size}")
+        spot_size = _at_most_half_turn("spot_size", _positive("spot_size", spot_size))
         if not 0.0 <= as_number("spot_blend", spot_blend) <= 1.0:
             raise ValueError(f"spot_blend must be in [0, 1], got {spot_blend}")
         direction = _unit("spot direction", direction)
@@ -89,11 +85,9 @@ class Light:
                              "light has no area, or emits along its own plane")
         size = _positive("area light size", size)
         size_y = size if size_y is None or shape in ("SQUARE", "DISK") else _positive("area light size_y", size_y)
-        spread = _non_negative("area light spread", spread)
-        if spread > FULL_SPREAD:
-            raise ValueError(f"area light spread must be at most pi (180 degrees), got {spread}")
+        spread = _at_most_half_turn("area light spread", _non_negative("area light spread", spread))
         return cls(AREA, color, power, cast_shadow, matrix_world=m, shape=shape, size=size, size_y=size_y,
-                   spread=min(spread, np.pi))
+                   spread=spread)
 
     def translated(self, offset):
         """The same light in a frame whose origin is at `offset`."""
@@ -221,6 +215,15 @@ def _non_negative(name, x):
     if not (np.isfinite(as_number(name, x)) and x >= 0):
         raise ValueError(f"{name} must be finite and >= 0, got {x}")
     return float(x)
+
+
+def _at_most_half_turn(name, angle):
+    """`angle` (radians) checked against Blender's limit of 180 degrees and clamped to np.pi: Blender
+    stores 180 degrees as float32 pi, a hair above float64's, so its largest spot size, sun angle or
+    spread must not be refused."""
+    if angle > FULL_SPREAD:
+        raise ValueError(f"{name} must be at most pi (180 degrees), got {angle}")
+    return min(angle, np.pi)
 
 
 def _positive(name, x):
