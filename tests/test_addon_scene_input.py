@@ -391,6 +391,22 @@ def test_lights_are_accepted_by_core(scene):
         getattr(core.Light, light.kind)(**light.keywords).translated(np.ones(3))
 
 
+def test_lights_at_blenders_largest_angles_are_accepted_by_core(scene):
+    """180 degrees, the most Blender allows for a spot's size, a sun's angle and an area light's
+    spread, is stored as float32 pi, a hair above np.pi: core takes each as pi."""
+    import core
+
+    light_object("SPOT", spot_size=math.pi)
+    light_object("SUN", angle=math.pi)
+    light_object("AREA", spread=math.pi)
+    lights = {light.kind: light for light in scene_input.read_lights(bpy.context.evaluated_depsgraph_get())}
+    assert lights["spot"].keywords["spot_size"] > math.pi  # what Blender stores
+    spot = core.Light.spot(**lights["spot"].keywords)
+    sun = core.Light.sun(**lights["sun"].keywords)
+    area = core.Light.area(**lights["area"].keywords)
+    assert spot.params["spot_size"] == sun.params["angle"] == area.params["spread"] == math.pi
+
+
 def test_read_scene_uses_the_evaluated_camera(scene):
     cam = add_top_camera(location=(0, 0, 5), lens=50.0)
     cam.data.lens = 25.0
