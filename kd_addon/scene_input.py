@@ -225,7 +225,9 @@ def read_camera(scene, depsgraph, width: int, height: int) -> tuple[CameraInput,
     if scene.camera is None:
         raise PreviewError(f"scene '{scene.name}' has no active camera: add one and set it as the scene camera")
     if scene.camera.type != "CAMERA":
-        raise PreviewError(f"the scene camera '{scene.camera.name}' is a {scene.camera.type}, not a camera object")
+        kind = scene.camera.type.replace("_", " ").lower()
+        raise PreviewError(f"the scene camera '{scene.camera.name}' is {'an' if kind[0] in 'aeiou' else 'a'} {kind} "
+                           "object, which the preview cannot look through: set a camera object as the scene camera")
     evaluated = scene.camera.evaluated_get(depsgraph)
     try:
         camera, warnings = camera_input(evaluated.data, evaluated.matrix_world, width, height,

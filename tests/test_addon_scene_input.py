@@ -99,6 +99,15 @@ def test_no_scene_camera_is_named(scene):
         scene_input.read_camera(scene, bpy.context.evaluated_depsgraph_get(), 10, 10)
 
 
+def test_a_scene_camera_that_is_no_camera_is_named(scene):
+    """Blender lets any object be the scene camera (Ctrl+Numpad 0 on an empty or a light)."""
+    empty = scenes.link(bpy.data.objects.new("Rig", None))
+    scene.camera = empty
+    with pytest.raises(PreviewError, match="^the scene camera 'Rig' is an empty object, which the preview cannot "
+                                           "look through: set a camera object as the scene camera$"):
+        scene_input.read_camera(scene, bpy.context.evaluated_depsgraph_get(), 10, 10)
+
+
 def test_the_scene_camera_a_problem_is_found_in_is_named(scene):
     """With timeline markers switching cameras, "panoramic cameras are not supported" must say which
     camera."""
