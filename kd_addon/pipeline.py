@@ -28,6 +28,7 @@ from .background import BackgroundCall
 from .config import RenderConfig, frame_size
 from .errors import Cancelled, PreviewError
 from .extract import extract_scene
+from .light_use import refused_lights, resolved_mode, usable_light
 from .scene_records import ExtractedScene
 
 KERNEL_LOCK = threading.Lock()
@@ -160,7 +161,7 @@ class FrameJob:
         self._kernel_ms = {"compile_ms": 0.0, "load_ms": 0.0}  # timed apart from the frame (_await_kernels)
         self._kernels_checked = False
         self._waiting_since = None  # when the first tick found the kernels' compile running
-        self.mode = None  # the mode this frame renders in: the setting, "auto" resolved (_resolved_mode)
+        self.mode = None  # the mode this frame renders in: the setting, "auto" resolved (light_use.resolved_mode)
         self._depth = None  # the finished image's depth_image
         self._last_step = None  # (samples, ms) of the last sampling step, for the next one's batch
 
@@ -286,7 +287,7 @@ class FrameJob:
         inputs = self._scene_inputs()
         extracted = self._extract()
         core = corelib.load_core()
-        self.mode = _resolved_mode(core, self.config.settings.mode, inputs.lights)
+        self.mode = resolved_mode(core, self.config.settings.mode, inputs.lights)
         meshes, mesh_of, matrices, visibility = tree_cache.mesh_inputs(core, extracted)
         visibility, unapplied = self._lazy_visibility(core, extracted, visibility)
         # an AO image does not depend on the lights: animated lights must not stop its reuse
@@ -354,11 +355,14 @@ class FrameJob:
         except ValueError as error:  # core's own checks, e.g. clip start >= clip end
             raise PreviewError(f"the scene's camera cannot be used: {error}") from None
         if self.mode == "ao":
+            if self.config.settings.mode == "auto":  # a light core refuses, not a dark one, made it AO
+                self._info["warnings"] += [f"light '{light.name}' left out: {error}; mode Automatic renders AO"
+                                           for light, error in refused_lights(core, inputs.lights)]
             return camera, []
         lights, left_out, unapplied = [], [], []
         for light in inputs.lights:
             try:
-                lights.append(_usable_light(core, light).translated(offset))
+                lights.append(usable_light(core, light).translated(offset))
             except ValueError as error:
                 left_out.append(f"light '{light.name}' left out: {error}")
                 continue
@@ -537,42 +541,12 @@ def run_job(job, cancel=None, progress=None) -> None:
             return
 
 
-def _resolved_mode(core, mode: str, lights: list) -> str:
-    """`mode`, with "auto" made "ao+shadow" when one of the scene's lights emits (_usable_light) and
-    "ao" otherwise (docs/choices.md#automatic-mode-ao-and-shadows-where-a-light-emits)."""
-    if mode != "auto":
-        return mode
-    for light in lights:
-        try:
-            _usable_light(core, light)
-        except ValueError:
-            continue
-        return "ao+shadow"
-    return "ao"
-
-
 def depth_image(renderer) -> np.ndarray:
     """(H, W) float32 view-axis distance of every pixel's camera hit, inf where none: the camera's ray
     directions have unit length along the view axis (core.Camera.rays), so a hit's t is its depth."""
     depth = np.full(renderer.height * renderer.width, np.inf, np.float32)
     depth[renderer.pixels] = renderer.depths
     return depth.reshape(renderer.height, renderer.width)
-
-
-def _usable_light(core, light: scene_input.LightInput):
-    """The core.Light of a scene light; ValueError saying why when it emits nothing or core rejects it."""
-    power = light.keywords.get("power", light.keywords.get("strength"))
-    if not power > 0.0:
-        raise ValueError(f"its power is {power:g}, so it emits no light")
-    if light.emits_nothing:
-        raise ValueError(f"{light.emits_nothing}, so it emits no light")
-    if not max(light.keywords["color"]) > 0.0:
-        raise ValueError("its colour is black, so it emits no light")
-    if light.portal:
-        raise ValueError("it is a Cycles light portal, which emits no light")
-    if light.no_diffuse:
-        raise ValueError(f"{light.no_diffuse}, so it lights no diffuse surface")
-    return getattr(core.Light, light.kind)(**light.keywords)
 
 
 def image_key_now(scene, depsgraph, config: RenderConfig) -> bytes:

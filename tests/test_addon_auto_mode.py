@@ -55,6 +55,18 @@ def test_auto_renders_ao_when_no_light_emits(addon, lights):
             render(scene, "ao+shadow")
 
 
+def test_auto_names_a_light_core_refuses(addon):
+    """A light that emits but cannot be used (a sun scaled to zero along its Z has no direction) leaves
+    "auto" at AO, as a dark one does, but the frame says which light and why."""
+    scene = half_plane_scene()
+    bpy.data.objects["Sun"].scale = (1.0, 1.0, 0.0)
+    auto = render(scene, "auto")
+    assert auto.mode == "ao"
+    assert [w for w in auto.warnings if "light 'Sun' left out" in w and "sun direction" in w
+            and "mode Automatic renders AO" in w]
+    np.testing.assert_array_equal(auto.image, render(scene, "ao").image)
+
+
 def test_ao_stays_a_choice(addon):
     scene = half_plane_scene()
     result = render(scene, "ao")
