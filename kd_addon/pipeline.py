@@ -467,6 +467,8 @@ class FrameJob:
         self._finished = (image, self.renderer.scene.stats() if lazy else None, self.renderer.pixel_state())
         self._depth = depth_image(self.renderer)
         self._timings["other_ms"] += _ms_since(t0)
+        if self.config.denoise and not _denoiser_ready:  # the warm-up leaves the denoiser out: its kernels
+            self._first_run = True  # compiled or loaded in this frame's time, which first_run marks ("*")
         _denoiser_ready = _denoiser_ready or self.config.denoise
 
     def result(self) -> FrameResult:

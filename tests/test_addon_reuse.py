@@ -47,6 +47,18 @@ def render(scene, frame, **changes):
     return pipeline.render_frame(scene, bpy.context.evaluated_depsgraph_get(), make_config(scene.kd_preview))
 
 
+def test_the_first_denoised_frame_is_marked_as_a_first_run(addon, monkeypatch):
+    """The kernels' warm-up runs a default frame, without the denoiser: the first frame that denoises
+    compiles or loads its kernels in its own time, so it carries first_run (the CLI's "*"); the next
+    does not."""
+    scene = animated_scene()
+    tree_cache.clear()
+    render(scene, 1)  # the tracing kernels loaded
+    monkeypatch.setattr(pipeline, "_denoiser_ready", False)
+    frames = [render(scene, f, denoise=True) for f in (2, 3)]
+    assert [r.first_run for r in frames] == [True, False]
+
+
 def test_static_and_moved_objects_keep_their_trees_deforming_ones_are_rebuilt(addon):
     scene = animated_scene()
     tree_cache.clear()
