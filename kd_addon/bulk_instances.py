@@ -122,8 +122,8 @@ def _carrier_rows(carrier, reader: EntryReader, alive: list, memos: dict) -> Ins
     if memo is None or not memo.matches(world, gathered):
         memo = compose_rows(world, gathered)
     memos[memo_key] = memo
-    for (name, instancer), message in memo.non_finite.items():
-        reader.non_finite_placements.setdefault((name, instancer), message)
+    for key, instances in memo.non_finite.items():
+        reader.note_non_finite(key, instances)
     reader.meshed.update(memo.meshed)
     return memo.table(gathered.keys)
 

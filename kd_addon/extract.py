@@ -26,7 +26,7 @@ from .extraction_warnings import (left_out_warnings, objects_shown, surfaces_off
                                   unused_layer_warnings)
 from .instance_table import as_table, concatenated
 from .render_visibility import RenderVisibility
-from .scene_records import ExtractedScene
+from .scene_records import ExtractedScene, non_finite_warnings
 from .scene_walk import EntryReader, SelfEntry, hidden_by_viewport_flag_only
 from .viewport_evaluation import viewport_evaluation_warning
 
@@ -64,7 +64,7 @@ def extract_scene(depsgraph: bpy.types.Depsgraph | None = None) -> ExtractedScen
         geometries=walker.geometries.geometries,
         instances=instances,
         warnings=(surfaces_off + unused_layer_warnings(depsgraph) + walker.geometries.warnings
-                  + list(walker.non_finite_placements.values()) + list(walker.not_triangles.values())
+                  + non_finite_warnings(walker.non_finite_placements) + list(walker.not_triangles.values())
                   + left_out_warnings(depsgraph, vis, walker.instanced_by, viewport_shown, walker.paths.blocked,
                                     walker.meshed, render_mode)
                   + ([] if render_mode else viewport_evaluation_warning(shown_objects, depsgraph.scene))

@@ -16,7 +16,6 @@ from typing import NamedTuple
 import numpy as np
 
 from .instance_table import InstanceTable, Kind
-from .scene_records import object_label
 
 
 class Reference(NamedTuple):
@@ -62,7 +61,8 @@ class Gathered:
 
 class CarrierRows:
     """One carrier's rows: matrices (I, 4, 4) float64, mesh slot and kind per row, and what they were
-    made of (world matrix, the GeometrySets' arrays, slot fingerprints, kinds)."""
+    made of (world matrix, the GeometrySets' arrays, slot fingerprints, kinds); `non_finite`: the
+    rows left out for a non-finite matrix, counted by (object name, instancer name)."""
 
     def __init__(self, world, gathered: Gathered, slots, matrices, kind_of, non_finite, meshed):
         self.world, self.sets = world.copy(), gathered.sets
@@ -88,7 +88,7 @@ class CarrierRows:
 def compose_rows(world: np.ndarray, gathered: Gathered) -> CarrierRows:
     """Rows of every mesh the carrier's instances place, nested GeometrySets level by level, in the
     walk's order (an instance's mesh, then its own instances, depth first); rows whose matrix is not
-    finite are left out and named once per object, as the walk does."""
+    finite are left out and counted per object, as the walk counts them."""
     parts = _Parts()
     parents, set_of, path = world[None], np.zeros(1, np.int64), []
     while len(parents):
@@ -98,8 +98,7 @@ def compose_rows(world: np.ndarray, gathered: Gathered) -> CarrierRows:
     non_finite = {}
     for kind in np.unique(kind_of[~finite]):
         name, instancer = gathered.kinds[kind].name, gathered.kinds[kind].instancer
-        non_finite[(name, instancer)] = (f"{object_label(name, instancer)} has a non-finite transform (NaN or "
-                                         "infinite location, rotation or scale); left out")
+        non_finite[(name, instancer)] = int(np.count_nonzero(kind_of[~finite] == kind))
     if not finite.all():
         slots, matrices, kind_of, paths = slots[finite], matrices[finite], kind_of[finite], [p[finite] for p in paths]
     if len(parts.slots) > 1:

@@ -55,6 +55,17 @@ def object_label(name: str, instancer: str | None) -> str:
     return f"object '{name}'" if instancer in (None, name) else f"object '{name}' instanced by '{instancer}'"
 
 
+def non_finite_warnings(placements: dict[tuple[str, str | None], int]) -> list[str]:
+    """One warning per (object name, instancer name or None) of `placements`, the number of its
+    placements (instances, or None: the object's own entry) whose transform is not finite (a NaN
+    location or scale from a driver or a script), which are left out: how many, when they are
+    instances, since the object's other instances stay."""
+    cause = "a non-finite transform (NaN or infinite location, rotation or scale)"
+    return [f"{object_label(name, instancer)} has {cause}; left out" if count is None
+            else f"{object_label(name, instancer)}: {count} instance{'s' * (count != 1)} with {cause} left out"
+            for (name, instancer), count in placements.items()]
+
+
 @dataclass
 class ExtractedScene:
     """The render-visible triangles of one evaluated depsgraph. `instances`: a list of Instance records

@@ -37,7 +37,7 @@ class EntryReader:
         self._verdicts: dict[tuple[int, int], tuple[str, str | None, bool, bool, bool] | None] = {}
         self.instanced_by: dict[int, set[int]] = {}  # instancer (original) -> the originals it instanced
         self.not_triangles: dict[tuple[str, str | None], str] = {}
-        self.non_finite_placements: dict[tuple[str, str | None], str] = {}  # one warning each
+        self.non_finite_placements: dict[tuple[str, str | None], int | None] = {}  # scene_records.non_finite_warnings
         self._own_entries_hidden_if_instancing: list[tuple[int, Instance]] = []
         self.meshed: set[str] = set()  # names of the originals whose own geometry gave triangles
         # The path walk's rule depends on what an instancer instances only, not on whether the
@@ -67,9 +67,7 @@ class EntryReader:
         name, instancer, camera, shadow, holdout = verdict
         matrix = np.array(inst.matrix_world, dtype=np.float64)
         if not np.isfinite(matrix).all():  # a NaN location or scale (a driver, a script): not placeable
-            self.non_finite_placements.setdefault(
-                (name, instancer), f"{object_label(name, instancer)} has a non-finite transform (NaN or infinite "
-                "location, rotation or scale); left out")
+            self.note_non_finite((name, instancer), None if parent is None else 1)
             return None
         key = self.geometries.get(ob, name)
         if key is None:
@@ -96,6 +94,12 @@ class EntryReader:
         name (_instancer_hides_self), and, whatever the order of the walk, after their instances."""
         hidden = {id(r) for pointer, r in self._own_entries_hidden_if_instancing if pointer in self.instanced_by}
         return [r for r in records if id(r) not in hidden] if hidden else records
+
+    def note_non_finite(self, key: tuple[str, str | None], instances: int | None) -> None:
+        """Count placements of `key` (object name, instancer name) left out for a non-finite transform:
+        `instances` of them, or None for the object's own entry."""
+        known = self.non_finite_placements.get(key, 0)
+        self.non_finite_placements[key] = None if instances is None or known is None else known + instances
 
     def verdict(self, ob, parent) -> tuple[str, str | None, bool, bool, bool] | None:
         """(object name, instancer name, camera, shadow, holdout) of the entries of the evaluated `ob`

@@ -113,8 +113,8 @@ def test_non_finite_objects_are_named_and_nothing_else_changes(addon):
     assert sorted(w for w in result.warnings if "non-finite" in w) == [
         "object 'Exploded' has non-finite vertex coordinates; left out",
         "object 'Lost' has a non-finite transform (NaN or infinite location, rotation or scale); left out",
-        "object 'Member' instanced by 'Blown' has a non-finite transform (NaN or infinite location, rotation "
-        "or scale); left out",
+        "object 'Member' instanced by 'Blown': 1 instance with a non-finite transform (NaN or infinite location, "
+        "rotation or scale) left out",
         "object 'NaNTri' has non-finite vertex coordinates; left out"]
     assert result.triangles == reference.triangles == 14
     np.testing.assert_array_equal(result.image, reference.image)
