@@ -55,7 +55,7 @@ def object_label(name: str, instancer: str | None) -> str:
     return f"object '{name}'" if instancer in (None, name) else f"object '{name}' instanced by '{instancer}'"
 
 
-def non_finite_warnings(placements: dict[tuple[str, str | None], int]) -> list[str]:
+def non_finite_warnings(placements: dict[tuple[str, str | None], int | None]) -> list[str]:
     """One warning per (object name, instancer name or None) of `placements`, the number of its
     placements (instances, or None: the object's own entry) whose transform is not finite (a NaN
     location or scale from a driver or a script), which are left out: how many, when they are
