@@ -373,7 +373,8 @@ def main():
     ap.add_argument("--cycles-thresholds", default="0.1,0.05,0.02,0.01",
                     help="Cycles' adaptive rows: its adaptive_threshold (empty: none)")
     ap.add_argument("--methods", default=None,
-                    help="only these of our fixed methods (comma list of names, e.g. 'kd binned sobol')")
+                    help="only these of our fixed methods (comma list of names, e.g. "
+                         "'kd binned rays=frame sobol,kd binned rays=frame sobol denoised'; the first is required)")
     ap.add_argument("--ao-distance", type=float, default=1.0)
     ap.add_argument("--threads", type=int, default=numba.get_num_threads(),
                     help="Cycles' thread count (default: Numba's, which ours uses)")

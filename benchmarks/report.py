@@ -195,7 +195,8 @@ def bench_render_block(data):
     if r["time_ratio_at_equal_rmse"]:
         default = f" ours default: `{r['default_method']}`, the add-on's setup;" if r.get("default_method") else ""
         parts += ["", "Our time / Cycles' time at Cycles' RMSE (`<= x`: Cycles is less accurate than our fastest "
-                  f"row, whose ratio is given;{default} raw and denoised: the fastest of all our rows):\n",
+                  f"row, whose ratio is given;{default} raw and denoised: interpolated on the Pareto front of all our rows, "
+                  "which may pass above one setup's own interpolation):\n",
                   table(["Cycles", "Cycles spp", "Cycles RMSE", "Cycles s", "ours raw", "ours denoised",
                          "ours default"],
                         [[_cycles_kind(e), e["cycles_samples"], f"{e['cycles_rmse']:.4f}",

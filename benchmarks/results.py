@@ -34,9 +34,12 @@ def cpu_target() -> str:
     (core/trace/simd.py) sets the figures more than the model name, which may not tell two
     generations apart ("AMD EPYC")."""
     from llvmlite import binding
-    features = binding.get_host_cpu_features()
+    from numba.core import config
+    features = binding.get_host_cpu_features()  # empty when LLVM cannot tell
     simd = next((name for flag, name in (("avx512f", "AVX-512"), ("avx2", "AVX2"), ("neon", "NEON"))
-                 if features.get(flag)), "no AVX2")
+                 if features.get(flag)), "no AVX2" if features else "vector extension unknown")
+    if config.CPU_NAME:  # NUMBA_CPU_NAME: Numba compiles for that CPU, not the host's
+        return f"{config.CPU_NAME} (NUMBA_CPU_NAME; host {binding.get_host_cpu_name()}, {simd})"
     return f"{binding.get_host_cpu_name()}, {simd}"
 
 

@@ -98,7 +98,8 @@ def compose_rows(world: np.ndarray, gathered: Gathered) -> CarrierRows:
     non_finite = {}
     for kind in np.unique(kind_of[~finite]):
         name, instancer = gathered.kinds[kind].name, gathered.kinds[kind].instancer
-        non_finite[(name, instancer)] = int(np.count_nonzero(kind_of[~finite] == kind))
+        key = (name, instancer)  # kinds of other ray flags may share it
+        non_finite[key] = non_finite.get(key, 0) + int(np.count_nonzero(kind_of[~finite] == kind))
     if not finite.all():
         slots, matrices, kind_of, paths = slots[finite], matrices[finite], kind_of[finite], [p[finite] for p in paths]
     if len(parts.slots) > 1:

@@ -21,7 +21,8 @@ def resolved_mode(core, mode: str, lights: list) -> str:
 
 
 class EmitsNothing(ValueError):
-    """A scene light that lights no surface of the preview: left out without a word in mode "auto"."""
+    """A scene light that lights no surface of the preview; in mode "auto" one leaves the frame at AO
+    without a word (a light core refuses is named: refused_lights)."""
 
 
 def usable_light(core, light: scene_input.LightInput):

@@ -225,7 +225,7 @@ def read_camera(scene, depsgraph, width: int, height: int) -> tuple[CameraInput,
     if scene.camera is None:
         raise PreviewError(f"scene '{scene.name}' has no active camera: add one and set it as the scene camera")
     if scene.camera.type != "CAMERA":
-        kind = scene.camera.type.replace("_", " ").lower()
+        kind = scene.camera.bl_rna.properties["type"].enum_items[scene.camera.type].name.lower()  # as the UI
         raise PreviewError(f"the scene camera '{scene.camera.name}' is {'an' if kind[0] in 'aeiou' else 'a'} {kind} "
                            "object, which the preview cannot look through: set a camera object as the scene camera")
     evaluated = scene.camera.evaluated_get(depsgraph)
@@ -284,7 +284,7 @@ def diffuse_switched_off(ob, instancer=None) -> str:
     is (docs/choices.md#lights-with-diffuse-ray-visibility-off-are-left-out)."""
     if not getattr(ob, "visible_diffuse", True):
         return "its Ray Visibility > Diffuse is off"
-    if instancer is not None and not getattr(instancer.original, "visible_diffuse", True):
+    if instancer is not None and not getattr(instancer, "visible_diffuse", True):  # evaluated, as `ob`: keyed
         return f"its instancer '{instancer.original.name}''s Ray Visibility > Diffuse is off"
     return ""
 

@@ -59,11 +59,17 @@ def non_finite_warnings(placements: dict[tuple[str, str | None], int | None]) ->
     """One warning per (object name, instancer name or None) of `placements`, the number of its
     placements (instances, or None: the object's own entry) whose transform is not finite (a NaN
     location or scale from a driver or a script), which are left out: how many, when they are
-    instances, since the object's other instances stay."""
+    instances, since the object's other instances stay. A carrier whose own transform is not finite
+    takes its instances of itself with it: they are not named again."""
     cause = "a non-finite transform (NaN or infinite location, rotation or scale)"
-    return [f"{object_label(name, instancer)} has {cause}; left out" if count is None
-            else f"{object_label(name, instancer)}: {count} instance{'s' * (count != 1)} with {cause} left out"
-            for (name, instancer), count in placements.items()]
+    warnings = []
+    for (name, instancer), count in placements.items():
+        if count is None:
+            warnings.append(f"{object_label(name, instancer)} has {cause}; left out")
+        elif not (instancer in (None, name) and (name, None) in placements):
+            warnings.append(f"{object_label(name, instancer)}: {count} instance{'s' * (count != 1)} with {cause} "
+                            "left out")
+    return warnings
 
 
 @dataclass

@@ -99,7 +99,7 @@ class EntryReader:
         """Count placements of `key` (object name, instancer name) left out for a non-finite transform:
         `instances` of them, or None for the object's own entry."""
         known = self.non_finite_placements.get(key, 0)
-        self.non_finite_placements[key] = None if instances is None or known is None else known + instances
+        self.non_finite_placements[key] = None if instances is None else known + instances
 
     def verdict(self, ob, parent) -> tuple[str, str | None, bool, bool, bool] | None:
         """(object name, instancer name, camera, shadow, holdout) of the entries of the evaluated `ob`

@@ -54,6 +54,8 @@ def test_the_first_denoised_frame_is_marked_as_a_first_run(addon, monkeypatch):
     scene = animated_scene()
     tree_cache.clear()
     render(scene, 1)  # the tracing kernels loaded
+    for ready in ("_kernels_ready", "_reuse_kernels_ready"):  # only the denoiser may mark a frame
+        monkeypatch.setattr(pipeline, ready, True)
     monkeypatch.setattr(pipeline, "_denoiser_ready", False)
     frames = [render(scene, f, denoise=True) for f in (2, 3)]
     assert [r.first_run for r in frames] == [True, False]

@@ -9,6 +9,8 @@ NaN scale; the carriers' own ray flags, holdout, Show Instancer and Disable in R
 """
 from __future__ import annotations
 
+import math
+
 import bpy
 import numpy as np
 import pytest
@@ -143,6 +145,17 @@ def test_non_finite_instance_transforms_are_left_out_and_named(scene, extraction
     assert [w for w in extracted.warnings if "non-finite transform" in w] == [  # the others are kept: say so
         "object 'Host': 3 instances with a non-finite transform (NaN or infinite location, rotation or scale) left out"]
 
+
+
+def test_a_carrier_placed_at_nan_is_named_once(scene, extraction_path):
+    """A carrier whose own location is NaN takes its instances with it: one warning for the object, not
+    a second one counting its instances as if the others stayed."""
+    host = scenes.add_gn_instancer("Host", count=5, offset=(1.5, 0.2, 0))
+    host.location.x = math.nan
+    extracted = extract_scene()
+    assert extracted.path == extraction_path and extracted.triangle_count == 0
+    assert [w for w in extracted.warnings if "non-finite" in w] == [
+        "object 'Host' has a non-finite transform (NaN or infinite location, rotation or scale); left out"]
 
 
 def test_unchanged_instances_keep_their_rows_and_changed_ones_are_read_anew(scene, extraction_path):
