@@ -174,6 +174,31 @@ def test_an_animation_follows_keyed_ray_visibility_and_holdout(addon, tmp_path):
         assert np.array_equal(image, panel_image(scene)), f"frame {frame}"
 
 
+def test_an_animation_follows_a_light_instancers_keyed_diffuse_visibility(addon, tmp_path):
+    """An instanced sun whose instancer's Ray Visibility > Diffuse is keyed off on frame 2 lights no
+    diffuse surface there (Cycles ANDs the flags): the shadow term is 0 on that frame of an engine
+    animation, as in the panel's render of it."""
+    scene = engine_scene(tmp_path, name="anim_")
+    scene.kd_preview.mode = "shadow"
+    sun = bpy.data.objects["Sun"]
+    source = scenes.new_collection("Lamps", exclude=True)
+    scene.collection.objects.unlink(sun)
+    source.objects.link(sun)
+    instancer = scenes.add_collection_instance("LampRig", source)
+    for frame, diffuse in ((1, True), (2, False)):
+        instancer.visible_diffuse = diffuse
+        instancer.keyframe_insert("visible_diffuse", frame=frame)
+    scene.frame_start, scene.frame_end = 1, 2
+    scene.frame_set(1)
+    tree_cache.clear()
+    assert bpy.ops.render.render(animation=True) == {"FINISHED"}
+    frames = [read_rgba(tmp_path / f"anim_{frame:04d}.exr") for frame in (1, 2)]
+    assert frames[0][..., 0].max() > 0.0 and frames[1][..., :3].max() == 0.0
+    for frame, image in zip((1, 2), frames):
+        scene.frame_set(frame)
+        assert np.array_equal(image, panel_image(scene)), f"frame {frame}"
+
+
 
 def render_multilayer_exr(scene, folder):
     """F12 into an uncompressed multilayer EXR (the scene writes `frame.exr` in `folder`): its channels."""
