@@ -254,6 +254,22 @@ def test_sun_of_blenders_largest_angle_lights_a_floor_by_half():
         core.Light.sun((0.0, 0.0, -1.0), angle=3.2)
 
 
+def test_a_light_of_power_zero_emits_nothing():
+    """The preview does not weight power, but a light of power 0 emits nothing (as Blender's does), as a
+    black one: alone it leaves the shadow term 0; beside another light it changes nothing, where counted
+    in the lights' mean it would halve the term."""
+    tree = core.build_kdtree(floor(0.0))
+    camera = look_down((0.0, 0.0, 3.0), fov=1.6)
+    lit = core.Light.point((0.0, 0.0, 2.0))
+    lit_only = core.render_preview(tree, camera, 16, 16, samples=1, mode="shadow", lights=[lit])
+    assert hit_mask(lit_only).all() and lit_only[..., 0].min() > 0.0
+    for dark in (core.Light.point((0.5, 0.0, 2.0), power=0.0), core.Light.sun((0, 0, -1), color=(0, 0, 0))):
+        alone, beside = (core.render_preview(tree, camera, 16, 16, samples=1, mode="shadow", lights=lights)
+                         for lights in ([dark], [dark, lit]))
+        assert hit_mask(alone).all() and (alone[..., :3] == 0.0).all()
+        np.testing.assert_array_equal(beside, lit_only)
+
+
 def test_spot_of_blenders_largest_size_lights_what_a_point_light_does():
     """Blender's largest Spot Size, 180 degrees, is stored as float32 pi, a hair above np.pi. Pointing
     down from above a floor with no blend, its cone holds the whole lower half-space: every floor pixel

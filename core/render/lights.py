@@ -164,7 +164,9 @@ def _spot_frame(direction, axes):
 
 
 def pack_lights(lights):
-    """All lights as an (L, ROW) float64 array."""
+    """The lights that emit as an (L, ROW) float64 array. The shadow term is their mean
+    (docs/architecture.md), so a light of power 0 or a black colour, which emits nothing, is left out
+    rather than counted; when none emits, the first one's row, black, makes the term 0."""
     if isinstance(lights, Light):
         raise ValueError("lights must be a list of core.Light, got one Light: pass [light]")
     try:
@@ -176,7 +178,12 @@ def pack_lights(lights):
             raise ValueError(f"lights[{i}] is not a core.Light: {light!r}")
     if not lights:
         return np.zeros((0, ROW))
-    return np.stack([light.packed() for light in lights])
+    emitting = [light.packed() for light in lights if light.power > 0.0 and light.color.max() > 0.0]
+    if emitting:
+        return np.stack(emitting)
+    row = lights[0].packed()
+    row[COLOR:COLOR + 3] = 0.0  # power 0 is as dark as black
+    return row[None]
 
 
 def _floats(value):
