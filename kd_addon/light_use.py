@@ -11,13 +11,7 @@ def resolved_mode(core, mode: str, lights: list) -> str:
     "ao" otherwise (docs/choices.md#automatic-mode-ao-and-shadows-where-a-light-emits)."""
     if mode != "auto":
         return mode
-    for light in lights:
-        try:
-            usable_light(core, light)
-        except ValueError:
-            continue
-        return "ao+shadow"
-    return "ao"
+    return "ao+shadow" if any(isinstance(used, core.Light) for _, used in classified(core, lights)) else "ao"
 
 
 class EmitsNothing(ValueError):
@@ -41,14 +35,18 @@ def usable_light(core, light: scene_input.LightInput):
     return getattr(core.Light, light.kind)(**light.keywords)
 
 
-def refused_lights(core, lights: list) -> list:
-    """(light, error) of the scene lights that emit but that core refuses (a setting it cannot take)."""
-    refused = []
+def classified(core, lights: list) -> list:
+    """(scene light, its core.Light or the ValueError why it cannot be used) for each of `lights`."""
+    out = []
     for light in lights:
         try:
-            usable_light(core, light)
-        except EmitsNothing:
-            continue
+            out.append((light, usable_light(core, light)))
         except ValueError as error:
-            refused.append((light, error))
-    return refused
+            out.append((light, error))
+    return out
+
+
+def refused_lights(core, lights: list) -> list:
+    """(light, error) of the scene lights that emit but that core refuses (a setting it cannot take)."""
+    return [(light, used) for light, used in classified(core, lights)
+            if isinstance(used, ValueError) and not isinstance(used, EmitsNothing)]

@@ -28,7 +28,7 @@ from .background import BackgroundCall
 from .config import RenderConfig, frame_size
 from .errors import Cancelled, PreviewError
 from .extract import extract_scene
-from .light_use import refused_lights, resolved_mode, usable_light
+from .light_use import classified, refused_lights, resolved_mode
 from .scene_records import ExtractedScene
 
 KERNEL_LOCK = threading.Lock()
@@ -360,12 +360,11 @@ class FrameJob:
                                            for light, error in refused_lights(core, inputs.lights)]
             return camera, []
         lights, left_out, unapplied = [], [], []
-        for light in inputs.lights:
-            try:
-                lights.append(usable_light(core, light).translated(offset))
-            except ValueError as error:
-                left_out.append(f"light '{light.name}' left out: {error}")
+        for light, used in classified(core, inputs.lights):
+            if isinstance(used, ValueError):
+                left_out.append(f"light '{light.name}' left out: {used}")
                 continue
+            lights.append(used.translated(offset))
             unapplied += [f"light '{light.name}': {what} not applied by the preview" for what in light.unapplied]
         self._info["warnings"] += left_out + unapplied
         self._info["lights"] = len(lights)
