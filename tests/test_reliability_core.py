@@ -82,7 +82,8 @@ def test_memory_limit_holds_while_splitting_past_the_sah():
     limit = 512 * KIB
     forced = dict(leaf_size=1, cost_ratio=100.0, max_depth=40, memory_limit=limit)
     with pytest.raises(core.MemoryLimitError, match=r"outgrew memory_limit \(0.5 MB\) while splitting: .*cost_ratio "
-                                                    r"100, leaf_size 1, max_depth 40"):
+                                                    r"100, leaf_size 1, max_depth 40, duplication_budget off "
+                                                    r"\(None\)\) do; .*set a duplication_budget"):
         core.build_kdtree(tris, duplication_budget=None, **forced)
     assert core.build_kdtree(tris, **forced).stats()["references_per_triangle"] <= 32
     tree = core.build_kdtree(tris, leaf_size=1, max_depth=40, memory_limit=limit, duplication_budget=None)

@@ -42,7 +42,8 @@ def build_kdtree(triangles, **options):
                     f"({opts.memory_limit / MB:,.1f} MB) while splitting: the triangles need more references "
                     "than the estimate allows, as dense overlapping triangles and settings that force splits "
                     f"(here cost_ratio {opts.cost_ratio:g}, leaf_size {opts.leaf_size}, max_depth "
-                    f"{opts.depth_for(len(tris))}) do; raise memory_limit, or lower max_depth or cost_ratio") from None
+                    f"{opts.depth_for(len(tris))}, {_budget_text(opts.duplication_budget)}) do; raise memory_limit, "
+                    f"or {_budget_advice(opts.duplication_budget)}lower max_depth or cost_ratio") from None
         del prims, boxes  # the initial references; the leaf copy below may take their memory
         release_before_copy(LEAF_COPY_BYTES * len(arrays.leaf_prims), opts.memory_limit)
         leaf_tris = leaf_triangles(tris, arrays.leaf_prims)  # part of the build: the traversal reads it
@@ -85,3 +86,13 @@ def _build_arrays(tris, prims, boxes, bounds, opts, threads, timings):
 
 def _ms_since(start):
     return (perf_counter() - start) * 1000.0
+
+
+def _budget_text(budget):
+    """How the memory error names BuildOptions.duplication_budget: its value, or that it is off."""
+    return "duplication_budget off (None)" if budget is None else f"duplication_budget {budget:g}"
+
+
+def _budget_advice(budget):
+    """The memory error's advice on the budget: with it off, splitting may copy straddlers without end."""
+    return "set a duplication_budget (16 by default), or " if budget is None else ""
