@@ -15,6 +15,7 @@ parses those options and hands the run over.
 from __future__ import annotations
 
 import argparse
+import os
 import signal
 import sys
 import threading
@@ -32,7 +33,7 @@ from .errors import Cancelled, PreviewError
 from .operators import depsgraph_source
 from .pipeline import claim, release, run_job
 from .render_visibility import render_view_layer
-from .sequence import SequenceJob, parse_frames
+from .sequence import SequenceJob, check_folder_path, parse_frames
 
 COMMAND_ID = "kdpreview"
 FORMAT_ALIASES = {"PNG": "PNG", "EXR": "OPEN_EXR", "OPEN_EXR": "OPEN_EXR"}
@@ -288,6 +289,7 @@ def prepare(args) -> Prepared:
     _check_options(args)  # bad options fail before a file is opened
     if not args.out.strip():
         raise PreviewError("--out is empty: give the folder to write the frames to")
+    check_folder_path(Path(os.path.abspath(args.out)))  # before the scene loads and the table starts
     scene, layer_name = pick_scene(load_scene(args), args.scene)
     settings = saved_settings_with_overrides(scene, args)
     config = make_config(settings)

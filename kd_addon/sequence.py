@@ -70,11 +70,10 @@ def check_frames_in_range(frames) -> None:
             raise PreviewError(f"frame {frame} is outside Blender's frame range ({FIRST_FRAME} to {LAST_FRAME})")
 
 
-def prepare_folder(folder: Path) -> list[Path]:
-    """Make `folder` (absolute and normalised; and missing parents) and check that files can be
-    written there, before the first frame renders: a folder under a file, or on a read-only disk, was
-    found only when frame 1 was written, after its render (minutes on a first run: the kernels
-    compile). Returns the folders made, innermost first, for remove_empty_folders."""
+def check_folder_path(folder: Path) -> list[Path]:
+    """Check, without making anything, that `folder` is or can become a folder: its nearest existing
+    ancestor must be one (the command line checks this before its first output line). Returns the
+    missing folders, innermost first."""
     missing = []
     probe = folder
     while not probe.exists() and probe != probe.parent:
@@ -82,6 +81,15 @@ def prepare_folder(folder: Path) -> list[Path]:
         probe = probe.parent
     if not probe.is_dir():  # mkdir would say "File exists"
         raise PreviewError(f"cannot write to the output folder {folder}: {probe} is a file, not a folder")
+    return missing
+
+
+def prepare_folder(folder: Path) -> list[Path]:
+    """Make `folder` (absolute and normalised; and missing parents) and check that files can be
+    written there, before the first frame renders: a folder under a file, or on a read-only disk, was
+    found only when frame 1 was written, after its render (minutes on a first run: the kernels
+    compile). Returns the folders made, innermost first, for remove_empty_folders."""
+    missing = check_folder_path(folder)
     try:
         folder.mkdir(parents=True, exist_ok=True)
         tempfile.TemporaryFile(dir=folder).close()

@@ -246,13 +246,14 @@ def test_frames_with_nothing_visible_are_transparent_and_the_sequence_goes_on(tm
 
 def test_unwritable_output_folder_is_named_before_a_frame_renders(tmp_path, capsys):
     """Checked before any render: otherwise the problem shows only when frame 1 is written, after its
-    render (minutes on a first run)."""
+    render (minutes on a first run). An --out under a file is refused before the scene loads, so no
+    run line or table header precedes the error."""
     blocker = tmp_path / "a_file"
     blocker.write_text("not a folder")
     assert cli.execute(["render", "--frames", "1", "--out", str(blocker / "sub"), *SMALL]) == 1
     out, err = capsys.readouterr()
     assert f"error: cannot write to the output folder {blocker / 'sub'}: {blocker} is a file, not a folder" in err
-    assert "frame 1:" not in err and out.rstrip().endswith(cli.HEADER)  # stopped before frame 1 started
+    assert "frame 1:" not in err and out == ""  # stopped before the run's first line
     assert cli.execute(["render", "--frames", "1", "--out", str(blocker), *SMALL]) == 1  # the file itself
     assert f"{blocker}: {blocker} is a file, not a folder" in capsys.readouterr().err
     assert blocker.read_text() == "not a folder"
