@@ -7,9 +7,11 @@ across consecutive frames, tree_cache.py) at the scene's resolution and %, for t
 the Render Region. The result is opened only once the frame is finished, so a cancel (test_break, polled
 every pipeline.POLL_SECONDS) or an error leaves no partial image to write.
 
-Passes: Combined (RGBA, alpha 1 where a surface is hit) always; with the view layer's passes on, Depth
-(view-axis distance), AO and Shadow: the mode's own term is the Combined image, the other term is traced
-as a second job over the same trees (its own lane of tree_cache, so each keeps its pixels across frames).
+Every view of a multiview render (render_views.py) is rendered and written. Passes: Combined (RGBA, alpha
+1 where a surface is hit; opaque over the world's viewport colour with Film > Transparent off) always;
+with the view layer's passes on, Depth (view-axis distance), AO and Shadow: the mode's own term is the
+Combined image, the other term is traced as a second job over the same trees (its own lane of
+tree_cache, so each keeps its pixels across frames).
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ import numpy as np
 from .config import make_config
 from .errors import Cancelled, PreviewError
 from .pipeline import FrameJob, FrameResult, FrameView, claim, release
+from .render_views import Eye, eye_camera, eye_of, lane_of, view_names
 from .scene_input import CameraInput, read_camera
 
 # (pass name, channels, channel ids, Blender's pass type, the view layer switch that asks for it)
@@ -68,11 +71,12 @@ def crop_camera(camera: CameraInput, width: int, height: int, region: tuple[int,
     return replace(camera, ortho_scale=float(sub_larger), shift=shift)
 
 
-def final_view(scene, depsgraph, width: int, height: int) -> tuple[FrameView, list[str]]:
+def final_view(scene, depsgraph, width: int, height: int, eye: Eye | None = None) -> tuple[FrameView, list[str]]:
     """(the frame a final render makes, the camera's warnings): the scene camera at width x height (the
-    scene's resolution and %), cut to the Render Region (Blender pastes a region without Crop back into
-    the whole frame)."""
+    scene's resolution and %), moved to a multiview render's `eye` (render_views.py), cut to the Render
+    Region (Blender pastes a region without Crop back into the whole frame)."""
     camera, warnings = read_camera(scene, depsgraph, width, height)
+    camera = eye_camera(camera, scene.camera.data, eye, width, height)
     region = border_region(scene.render, width, height)
     if region is None:
         return FrameView(width, height, camera), warnings
@@ -101,14 +105,12 @@ class FinalRender:
         self.engine, self.depsgraph, self.scene = engine, depsgraph, depsgraph.scene
 
     def run(self) -> None:
-        """Render the frame; a PreviewError is reported (no traceback), a cancel writes nothing."""
+        """Render the frame, each of its views; a PreviewError is reported (no traceback), a cancel writes
+        nothing."""
         try:
             config = make_config(self.scene.kd_preview)
-            view, camera_warnings = final_view(self.scene, self.depsgraph, self.engine.resolution_x,
-                                               self.engine.resolution_y)
             passes = requested_passes(self.depsgraph.view_layer)
-            result = self._frame(config, view, "", "Combined")
-            images = self._pass_images(config, view, result, passes)
+            views = {name: self._view(config, name, passes) for name in view_names(self.scene.render)}
         except Cancelled:
             self.engine.update_stats("", "KD Preview | cancelled")
             return
@@ -116,10 +118,23 @@ class FinalRender:
             self.engine.report({"ERROR"}, f"KD Preview: {error}")
             self.engine.error_set(f"KD Preview: {error}")
             return
-        for warning in camera_warnings + result.warnings:
-            self._report_warning(warning)
-        self._write(view, result.image, images)
-        self.engine.update_stats("", stats_line(result))
+        for warning in dict.fromkeys(w for _, warnings, _, _ in views.values() for w in warnings):
+            self._report_warning(warning)  # once, though every view warns alike
+        self._write(views)
+        self.engine.update_stats("", stats_line(next(iter(views.values()))[2]))
+
+    def _view(self, config, name: str, passes: list[tuple]) -> tuple:
+        """(FrameView, warnings, FrameResult, pass images) of view `name` ("" without multiview)."""
+        camera = self.scene.camera
+        eye = None
+        if name and camera is not None and camera.type == "CAMERA":  # else read_camera names the problem
+            eye = eye_of(self.engine, camera.evaluated_get(self.depsgraph), name)
+        view, camera_warnings = final_view(self.scene, self.depsgraph, self.engine.resolution_x,
+                                           self.engine.resolution_y, eye)
+        label = f"Combined {name}".rstrip()
+        result = self._frame(config, view, lane_of(name), label)
+        images = self._pass_images(config, view, result, passes, name)
+        return view, camera_warnings + result.warnings, result, images
 
     def _report_warning(self, text: str) -> None:
         self.engine.report({"WARNING"}, f"KD Preview: {text}")
@@ -139,8 +154,8 @@ class FinalRender:
         finally:
             release(job)
 
-    def _pass_images(self, config, view: FrameView, result: FrameResult, passes: list[tuple]) -> dict:
-        """{pass name: (H, W, C) image} of the requested passes."""
+    def _pass_images(self, config, view: FrameView, result: FrameResult, passes: list[tuple], view_name: str) -> dict:
+        """{pass name: (H, W, C) image} of the requested passes of view `view_name`."""
         images = {}
         for name, channels, *_ in passes:
             if name == "Depth":
@@ -153,14 +168,17 @@ class FinalRender:
                 continue
             term_config = make_config(replace(config.settings, mode=term))
             try:
-                images[name] = self._frame(term_config, view, f"pass:{term}", f"{name} pass").image[..., :channels]
+                images[name] = self._frame(term_config, view, lane_of(view_name, f"pass:{term}"),
+                                           f"{name} pass {view_name}".rstrip()).image[..., :channels]
             except PreviewError as error:  # e.g. a Shadow pass in a scene without lights
                 self._report_warning(f"the {name} pass is left black: {error}")
                 images[name] = np.zeros((view.height, view.width, channels), np.float32)
         return images
 
-    def _write(self, view: FrameView, combined: np.ndarray, images: dict) -> None:
-        """Fill the RenderResult; Blender writes it (output path and format) and shows it."""
+    def _write(self, views: dict) -> None:
+        """Fill the RenderResult, every view's passes; Blender writes it (output path and format) and shows
+        it. views: {view name: _view's tuple}."""
+        view, _, _, images = next(iter(views.values()))  # every view has the same size and passes
         for name, channels, ids, *_ in PASSES:
             if name in images:
                 self.engine.add_pass(name, channels, ids, layer=self.depsgraph.view_layer.name)
@@ -168,10 +186,36 @@ class FinalRender:
         layer_name = self.depsgraph.view_layer.name
         result = self.engine.begin_result(0, 0, view.width, view.height, layer=layer_name)
         layer = result.layers[0]
-        layer.passes["Combined"].rect.foreach_set(to_rect(combined))
-        for name, image in images.items():
-            layer.passes[name].rect.foreach_set(to_rect(image))
+        background = film_background(self.scene)
+        for view_name, (_, _, frame, images) in views.items():
+            combined = frame.image if background is None else opaque(frame.image, background)
+            _pass(layer, "Combined", view_name).rect.foreach_set(to_rect(combined))
+            for name, image in images.items():
+                _pass(layer, name, view_name).rect.foreach_set(to_rect(image))
         self.engine.end_result(result)
+
+
+def _pass(layer, name: str, view_name: str):
+    """The render layer's pass `name` of view `view_name` ("": the one view without multiview)."""
+    return layer.passes.find_by_name(name, view_name) if view_name else layer.passes[name]
+
+
+def film_background(scene) -> np.ndarray | None:
+    """The RGB the Combined pass shows where nothing is hit, None when Film > Transparent is on (alpha 0
+    there). The world's viewport colour (World > Viewport Display), as Workbench renders it: the preview
+    reads no shaders, the world's nodes included."""
+    if scene.render.film_transparent:
+        return None
+    return np.array(scene.world.color[:3], np.float32) if scene.world is not None else np.zeros(3, np.float32)
+
+
+def opaque(image: np.ndarray, background: np.ndarray) -> np.ndarray:
+    """The (H, W, 4) image (premultiplied, as Blender's render results) over `background`: alpha 1."""
+    alpha = image[..., 3:4]
+    out = np.empty_like(image)
+    out[..., :3] = image[..., :3] + background * (1.0 - alpha)
+    out[..., 3] = 1.0
+    return out
 
 
 def update_render_passes(engine, scene, view_layer) -> None:

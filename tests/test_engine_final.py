@@ -18,9 +18,11 @@ from tests.addon_support import (add_quad, add_sun, check_half_plane_image, exr_
 
 
 def engine_scene(tmp_path, *, exr=True, name="frame"):
-    """half_plane_scene (64 x 32 at 100 %) on the engine, writing an uncompressed RGBA EXR (or PNG)."""
+    """half_plane_scene (64 x 32 at 100 %) on the engine, writing an uncompressed RGBA EXR (or PNG), with
+    Film > Transparent on: alpha is the hit coverage, as in the panel's image."""
     scene = half_plane_scene()
     scene.render.engine = "KD_PREVIEW"
+    scene.render.film_transparent = True
     scene.render.resolution_percentage = 100
     settings = scene.render.image_settings
     if exr:
@@ -90,6 +92,28 @@ def test_still_render_writes_the_panels_image_to_the_output_path(addon, tmp_path
     check_half_plane_image(written)
     assert np.array_equal(written, panel_image(scene))
     assert results[0].rays > 0 and results[0].triangles == 14
+
+
+@pytest.mark.parametrize("world", [True, False])
+def test_film_not_transparent_puts_the_worlds_viewport_colour_behind(addon, tmp_path, world):
+    """Film > Transparent off, as Cycles, EEVEE and Workbench: alpha 1 everywhere, and where nothing is hit
+    the world's viewport colour (what Workbench shows; the preview reads no world shader), black without
+    a world. Hit pixels keep the transparent render's values."""
+    scene = engine_scene(tmp_path)
+    bpy.ops.render.render(write_still=True)
+    transparent = read_rgba(tmp_path / "frame.exr")
+    scene.render.film_transparent = False
+    scene.world = bpy.data.worlds.new("Sky") if world else None
+    if world:
+        scene.world.color = (0.2, 0.3, 0.4)
+    scene.render.filepath = str(tmp_path / "opaque")
+    assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
+    opaque = read_rgba(tmp_path / "opaque.exr")
+    hit = transparent[..., 3] == 1.0
+    assert hit.any() and not hit.all() and (opaque[..., 3] == 1.0).all()
+    assert np.array_equal(opaque[hit], transparent[hit])
+    expected = np.float32([0.2, 0.3, 0.4]) if world else np.zeros(3, np.float32)
+    assert (opaque[~hit][:, :3] == expected).all()
 
 
 def test_png_and_the_scenes_resolution_percentage(addon, tmp_path):

@@ -1,0 +1,61 @@
+"""The views of a final render (Output > Views: Stereo 3D or Multi-View), each seen by its own camera.
+
+Blender hands an engine one render() per view layer and leaves the views to it, as Cycles takes them
+(BlenderSession::render): make a view active (RenderEngine.active_view_set) and ask for that view's
+camera matrix and horizontal shift (camera_model_matrix, camera_shift_x), which carry the stereo eye's
+offset, toe-in or off-axis shift, or a Multi-View camera's suffix. Without multiview there is one view,
+named "" here, seen by the scene camera as read.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .scene_input import CameraInput, normalized_matrix, shift_to_larger_dimension
+
+STEREO_VIEWS = ("left", "right")  # Blender's STEREO_LEFT_NAME, STEREO_RIGHT_NAME
+
+
+@dataclass(frozen=True)
+class Eye:
+    """One view's camera as Blender places it: the world matrix and the horizontal lens shift (in the
+    camera's own shift units, as Camera.shift_x)."""
+
+    matrix_world: np.ndarray
+    shift_x: float
+
+
+def view_names(render) -> list[str]:
+    """The views a final render makes, in Blender's order: [""] without multiview; in Stereo 3D the left
+    and right views that are on; in Multi-View every view that is on (BKE_scene_multiview_is_render_view_active)."""
+    if not render.use_multiview:
+        return [""]
+    names = [view.name for view in render.views if view.use]
+    if render.views_format == "STEREO_3D":
+        names = [name for name in names if name in STEREO_VIEWS]
+    return names or [""]
+
+
+def eye_of(engine, camera_object, name: str) -> Eye | None:
+    """View `name`'s camera from the engine (None for the one view without multiview). `camera_object`:
+    the evaluated scene camera, whose animation and constraints the matrix includes."""
+    if not name:
+        return None
+    engine.active_view_set(name)
+    matrix = np.array(engine.camera_model_matrix(camera_object, use_spherical_stereo=False), np.float64)
+    return Eye(matrix.reshape(4, 4), float(engine.camera_shift_x(camera_object, use_spherical_stereo=False)))
+
+
+def eye_camera(camera: CameraInput, data, eye: Eye | None, width: int, height: int) -> CameraInput:
+    """`camera` (read for the scene camera, camera data `data`, at width x height) moved to the eye."""
+    if eye is None:
+        return camera
+    shift_x = shift_to_larger_dimension(eye.shift_x, data.sensor_fit, width, height * camera.pixel_aspect)
+    return replace(camera, matrix_world=normalized_matrix(eye.matrix_world), shift=(shift_x, camera.shift[1]))
+
+
+def lane_of(name: str, lane: str = "") -> str:
+    """The tree_cache lane of view `name`'s image (each view keeps its own pixels across frames)."""
+    return lane if not name else f"view:{name}|{lane}"

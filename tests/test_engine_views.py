@@ -1,0 +1,78 @@
+"""A final render's views (Output > Views > Stereo 3D): each eye is rendered through its own camera.
+
+The reference is Cycles rendering the same stereo frame: with its pixel filter at the minimum width it
+takes each pixel at its centre, as the preview's one camera ray a pixel does, so both engines must hit
+the same pixels in each eye (silhouette pixels aside, where the filter's 0.01 px reaches past the edge).
+"""
+
+from __future__ import annotations
+
+import math
+
+import bpy
+import numpy as np
+import pytest
+
+from kd_addon import render_views
+from tests import bpy_scenes as scenes
+from tests.addon_support import exr_channels
+
+SIZE = (80, 60)
+
+
+def stereo_scene(tmp_path, convergence_mode):
+    """A floor and two boxes seen from above at an angle, an exaggerated interocular distance (so the
+    eyes differ by many pixels), each view written to its own RGBA EXR."""
+    scene = scenes.reset()
+    scenes.add_mesh("Floor", [(-5, -5, 0), (5, -5, 0), (5, 5, 0), (-5, 5, 0)], [(0, 1, 2, 3)])
+    scenes.add_cube("Box", location=(0.0, 0.0, 1.0))
+    scenes.add_cube("Small", scale=0.5, location=(2.5, 1.5, 0.5))
+    camera = scenes.add_camera("Cam")
+    camera.location, camera.rotation_euler = (0.0, -8.0, 5.0), (math.radians(60), 0.0, 0.0)
+    camera.data.stereo.convergence_mode = convergence_mode
+    camera.data.stereo.interocular_distance = 1.0
+    scene.camera = camera
+    render = scene.render
+    render.resolution_x, render.resolution_y = SIZE
+    render.resolution_percentage = 100
+    render.film_transparent = True
+    render.use_multiview, render.views_format = True, "STEREO_3D"
+    settings = render.image_settings
+    settings.file_format, settings.color_mode, settings.exr_codec = "OPEN_EXR", "RGBA", "NONE"
+    settings.views_format = "INDIVIDUAL"
+    scene.kd_preview.mode, scene.kd_preview.samples = "ao", 1
+    scene.cycles.samples, scene.cycles.use_denoising, scene.cycles.use_adaptive_sampling = 1, False, False
+    scene.cycles.pixel_filter_type, scene.cycles.filter_width = "BLACKMAN_HARRIS", 0.01  # a pixel's centre
+    return scene
+
+
+def eye_masks(scene, engine, path) -> dict:
+    """{"L": (H, W) bool, "R": ...}: the pixels `engine` hits in each eye's image."""
+    scene.render.engine = engine
+    scene.render.filepath = str(path)
+    assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
+    return {eye: exr_channels(f"{path}_{eye}.exr")["A"] > 0.5 for eye in "LR"}
+
+
+@pytest.mark.parametrize("convergence_mode", ["OFFAXIS", "PARALLEL", "TOE"])
+def test_each_stereo_eye_hits_the_pixels_cycles_hits(addon, tmp_path, convergence_mode):
+    scene = stereo_scene(tmp_path, convergence_mode)
+    ours = eye_masks(scene, "KD_PREVIEW", tmp_path / "kd")
+    cycles = eye_masks(scene, "CYCLES", tmp_path / "cycles")
+    assert (ours["L"] ^ ours["R"]).sum() > 100  # the eyes see differently: the check below can tell them apart
+    for eye in "LR":
+        assert ours[eye].sum() > 1000
+        assert (ours[eye] ^ cycles[eye]).sum() <= 4, eye
+
+
+def test_views_a_render_makes():
+    render = scenes.reset().render
+    assert render_views.view_names(render) == [""]
+    render.use_multiview = True
+    assert render_views.view_names(render) == ["left", "right"]
+    render.views_format = "MULTIVIEW"
+    render.views["right"].use = False
+    extra = render.views.new("centre")
+    assert render_views.view_names(render) == ["left", extra.name]
+    render.views_format = "STEREO_3D"  # only the left and right views count there
+    assert render_views.view_names(render) == ["left"]
