@@ -128,6 +128,30 @@ def test_farm_options_exclude_each_other_and_are_checked(tmp_path, capsys):
     assert "--local-workers must be 1 or more, got 0" in capsys.readouterr().err
 
 
+def test_cluster_options_without_a_cluster_are_noted(tmp_path, capsys):
+    """Checked as with a cluster (bad values are errors: test_addon_cli), and a note says they change
+    nothing: the frames render here."""
+    out = tmp_path / "x"
+    assert cli.execute(["render", "--demo", "--frames", "1", "--resolution", "5", "--samples", "1", "--out", str(out),
+                        "--chunk-size", "3", "--ship-blend"]) == 0
+    assert ("note: --chunk-size, --ship-blend apply only with --dask or --local-workers"
+            in capsys.readouterr().err)
+    assert (out / "frame_0001.png").is_file()
+
+
+@pytest.mark.parametrize("address, problem", [("notanaddress", "missing port number"),
+                                              ("foo://host:1", "unknown address scheme 'foo'")])
+def test_a_bad_scheduler_address_is_named_at_once(tmp_path, address, problem):
+    """No Client is made for an address Dask cannot parse: a half-made one waited in its finaliser and
+    printed a traceback after the error."""
+    proc = run_python(["-m", "kd_addon", "render", "--demo", "--out", str(tmp_path / "x"), "--dask", address,
+                       "--connect-timeout", "30"], timeout=120)
+    assert proc.returncode == 1
+    assert f"bad Dask scheduler address {address!r}: " in proc.stderr and problem in proc.stderr
+    assert "Traceback" not in proc.stderr and "Exception ignored" not in proc.stderr
+    assert not (tmp_path / "x").exists()
+
+
 def _free_port() -> int:
     with socket.socket() as probe:
         probe.bind(("127.0.0.1", 0))

@@ -109,8 +109,6 @@ class FarmRun:
         self.workers_at_start = len(client.scheduler_info()["workers"])
         self.chunk_size = args.chunk_size or auto_chunk_size(len(self.frames), self.workers_at_start)
         self.chunks = chunk_frames(self.frames, self.chunk_size)
-        if args.retries < 0:
-            raise PreviewError(f"--retries must be 0 or more, got {args.retries}")
         run_id = uuid.uuid4().hex[:12]
         self.queue = Queue(f"kd-preview-frames-{run_id}", client=client)
         self.cancel_event = Event(f"kd-preview-cancel-{run_id}", client=client)

@@ -54,8 +54,6 @@ def dask_client(address: str | None, local_workers: int | None, connect_timeout:
         finally:
             client.close(timeout=connect_timeout)
         return
-    if local_workers < 1:
-        raise PreviewError(f"--local-workers must be 1 or more, got {local_workers}")
     threads = local_worker_threads(local_workers)
     # One task at a time a process (bpy holds one open file); its kernels use `threads` threads (Numba's
     # pool is sized by NUMBA_NUM_THREADS when the worker process starts).
@@ -73,12 +71,26 @@ def dask_client(address: str | None, local_workers: int | None, connect_timeout:
 
 
 def _connect(distributed, address: str, timeout: float):
-    if timeout <= 0:
-        raise PreviewError(f"--connect-timeout must be above 0 seconds, got {timeout:g}")
+    _check_address(address)
     try:
         return distributed.Client(address, timeout=timeout, set_as_default=False)
     except (OSError, TimeoutError) as error:
         raise PreviewError(f"cannot reach the Dask scheduler at {address} within {timeout:g} s ({error}); "
                            "is it running (dask scheduler) and is the address right?") from None
     except ValueError as error:  # an address Dask cannot parse
+        raise PreviewError(f"bad Dask scheduler address {address!r}: {error}") from None
+
+
+def _check_address(address: str) -> None:
+    """Refuse an address Dask cannot parse before a Client is made: a Client that fails on it in its
+    constructor is half made, and its finaliser then waits for a connection and prints a traceback."""
+    from distributed.comm.addressing import parse_address, parse_host_port
+    from distributed.comm.registry import get_backend
+
+    try:
+        scheme, location = parse_address(address)
+        get_backend(scheme)  # an unknown scheme
+        if scheme in ("tcp", "tls"):
+            parse_host_port(location)  # a missing or bad port
+    except ValueError as error:
         raise PreviewError(f"bad Dask scheduler address {address!r}: {error}") from None
