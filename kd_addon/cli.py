@@ -352,6 +352,32 @@ def _check_options(args) -> None:
             raise
         flag = FLAG_OF_SETTING.get(error.setting, "--" + error.setting.replace("_", "-"))
         raise PreviewError(f"{flag}: {error}") from None
+    _check_farm_options(args)
+
+
+def _check_farm_options(args) -> None:
+    """The cluster options' values, checked with or without a cluster (a bad one is never silently
+    taken); given without --dask or --local-workers they change nothing, which a note on stderr says."""
+    local_workers = getattr(args, "local_workers", None)
+    chunk_size, retries = getattr(args, "chunk_size", 0), getattr(args, "retries", 2)
+    timeout = getattr(args, "connect_timeout", 10.0)
+    if local_workers is not None and local_workers < 1:
+        raise PreviewError(f"--local-workers must be 1 or more, got {local_workers}")
+    if chunk_size < 0:
+        raise PreviewError(f"--chunk-size must be 1 or more (0: automatic), got {chunk_size}")
+    if retries < 0:
+        raise PreviewError(f"--retries must be 0 or more, got {retries}")
+    if not 0.0 < timeout < float("inf"):
+        raise PreviewError(f"--connect-timeout must be above 0 seconds, got {timeout:g}")
+    if getattr(args, "dask", None) is None and local_workers is None:
+        given = [flag for flag, value, default in (("--chunk-size", chunk_size, 0), ("--retries", retries, 2),
+                                                   ("--connect-timeout", timeout, 10.0),
+                                                   ("--ship-blend", getattr(args, "ship_blend", False), False))
+                 if value != default]
+        if given:
+            prog = getattr(args, "prog", "kd_addon")
+            print(f"{prog}: note: {', '.join(given)} apply only with --dask or --local-workers; the frames render "
+                  "in this process", file=sys.stderr, flush=True)
 
 
 def _run_claimed(job, cancelled) -> None:

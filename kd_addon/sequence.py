@@ -34,15 +34,18 @@ def frame_filename(frame: int, extension: str) -> str:
 
 def parse_frames(text: str) -> list[int]:
     """Frames from "7", "1-24", "1-24:2" or a comma list of those; raises PreviewError naming the problem."""
-    frames: list[int] = []
-    for part in filter(None, (p.strip() for p in str(text).split(","))):
-        frames += _parse_range(part)
-    if not frames:
+    parts = [p.strip() for p in str(text).split(",")]
+    if not any(parts):
         raise PreviewError(f"bad frame range {text!r}: no frames")
+    if not all(parts):  # "1,,2" or a trailing comma: a typo, not a request
+        raise PreviewError(f"bad frame range {text!r}: an empty item in the comma list")
+    frames: list[int] = []
+    for part in parts:
+        frames += _parse_range(part)
     return list(dict.fromkeys(frames))
 
 
-_RANGE = re.compile(r"^(-?\d+)(?:-(-?\d+))?(?::(\d+))?$")
+_RANGE = re.compile(r"^(-?\d+)(?:-(-?\d+))?(?::(-?\d+))?$")  # a negative step is matched, then named
 # Blender's frame limits (Scene.frame_current's hard range, MINAFRAME and MAXFRAME): frame_set clamps a
 # frame beyond them silently, which would render the last frame again under the requested frame's name.
 FIRST_FRAME, LAST_FRAME = -1048574, 1048574

@@ -149,6 +149,11 @@ def test_cli_takes_the_files_saved_settings_and_options_override_them(tmp_path, 
     (["render", "--out", "X", "--frames", "1-5:0"], 1, "bad frame range '1-5:0': the step must be 1 or more, got 0"),
     (["render", "--out", "X", "--frames", "1,x"], 1, "bad frame range 'x': use N, A-B or A-B:STEP, or a comma list"),
     (["render", "--out", "X", "--frames", ""], 1, "bad frame range '': no frames"),  # not the scene's range
+    (["render", "--out", "X", "--frames", "1,,2"], 1, "bad frame range '1,,2': an empty item in the comma list"),
+    (["render", "--out", "X", "--frames", "1-6:-1"], 1, "bad frame range '1-6:-1': the step must be 1 or more, got -1"),
+    (["render", "--out", "X", "--chunk-size", "-1"], 1, "--chunk-size must be 1 or more (0: automatic), got -1"),
+    (["render", "--out", "X", "--retries", "-1"], 1, "--retries must be 0 or more, got -1"),
+    (["render", "--out", "X", "--connect-timeout", "0"], 1, "--connect-timeout must be above 0 seconds, got 0"),
     # the flag typed, then the setting behind it (the setting's name alone is not what the user typed)
     (["render", "--out", "X", "--resolution", "0"], 1,
      "--resolution: resolution_percentage must be an integer from 1 to 100"),
