@@ -142,6 +142,20 @@ def test_each_zip_names_the_blender_versions_of_its_python():
     assert py311["wheels"] == tomllib.loads(text)["wheels"]  # nothing else changes
 
 
+def test_a_zips_manifest_says_what_it_is_for_without_the_repositorys_comments():
+    """The repository manifest's comments speak of every zip's wheels (3.13, 3.14): a py311 zip's would
+    mislead. Its fields are the subset's, its one comment names the platform and Python."""
+    text = (REPO / "blender_manifest.toml").read_text()
+    wheels = [build_extension.parse_wheel(path) for path in tomllib.loads(text)["wheels"]]
+    chosen = build_extension.wheels_for_platforms([w for w in wheels if w.python_version == "3.11"], ["linux-x64"])
+    staged = build_extension.subset_manifest_text(text, ["linux-x64"], chosen, "3.11")
+    comments = [line for line in staged.splitlines() if line.lstrip().startswith("#")]
+    assert comments == ["# KD Preview for linux-x64, Blender's Python 3.11 (made by tools/build_extension.py)"]
+    fields = tomllib.loads(staged)
+    assert fields["platforms"] == ["linux-x64"] and len(fields["wheels"]) == 2
+    assert all("cp311" in path for path in fields["wheels"]) and fields["license"] == ["SPDX:GPL-3.0-or-later"]
+
+
 def fake_zip(path, wheels, python, versions=None):
     text = build_extension.versions_text((REPO / "blender_manifest.toml").read_text(), versions or python)
     with zipfile.ZipFile(path, "w") as zf:

@@ -226,7 +226,18 @@ def subset_manifest_text(text: str, platforms: list[str], wheels: list[Wheel], p
         return new
     text = replace("platforms", platforms, text)
     text = replace("wheels", [w.path for w in wheels], text)
-    return text if python is None else versions_text(text, python)
+    if python is None:
+        return text
+    return _zip_comments(versions_text(text, python), platforms, python)
+
+
+def _zip_comments(text: str, platforms: list[str], python: str) -> str:
+    """A zip's manifest without the repository manifest's comments (they speak of every zip's wheels),
+    headed by what this zip is for."""
+    kept = [line for line in text.splitlines() if not line.lstrip().startswith("#")]
+    header = "# KD Preview for {}, Blender's Python {} (made by tools/build_extension.py)".format(
+        ", ".join(platforms), python)
+    return "\n".join([header] + kept) + "\n"
 
 
 def versions_text(text: str, python: str) -> str:
