@@ -231,7 +231,8 @@ def first_use_block(data):
             parts.append(f"{words}, {f['enable_to_image_s']['median']:.1f} s from enabling to the image, of which "
                          f"{f['kernels_ms']['median'] / 1e3:.1f} s the kernels' compile and load")
     runs = len(next(iter(r[k] for k in ("cold", "warm") if k in r))["enable_to_image_s"]["runs"])
-    return ("Measured with the bpy module on the factory startup scene (medians of " + str(runs) + "): "
+    how_many = "one run each" if runs == 1 else f"medians of {runs} runs"
+    return ("Measured with the bpy module on the factory startup scene (" + how_many + "): "
             + "; ".join(parts) + ".\n" + provenance(data["bench_first_render"]))
 
 
