@@ -7,7 +7,7 @@ packets apply to batches of 8+ samples on both. Per round, alternating: (a) grow
 step one sample (STEP_GROWTH 0), the add-on's stepping before batches, (c) growing batches without AO
 packets (the sampling kernel's other version), which tells the packets' share. Each run
 changes the AO distance by a hair so that the frame is traced anew on the kept tree. Before the rounds,
-the warm-up's packed stage (core/jit/first_frame.compile_packed_samples) makes sure the packed version
+the warm-up's packed stage (core/jit/first_frame.compile_second_stage) makes sure the packed version
 is loaded, as the add-on's background compile leaves it. Prints medians of the frames' trace and total
 times, the ratios (b) / (a) and (c) / (a), and the steps each took; writes benchmarks/out/bench_addon_steps.json.
 
@@ -58,7 +58,7 @@ def main() -> None:
     settings.resolution_percentage, settings.mode, settings.samples, settings.ao_distance = 100, args.mode, args.samples, 1.0
     t0 = time.perf_counter()
     core = corelib.load_core()
-    importlib.import_module(core.__name__ + ".jit.first_frame").compile_packed_samples()
+    importlib.import_module(core.__name__ + ".jit.first_frame").compile_second_stage()
     jit_seconds = time.perf_counter() - t0
     steps = {}
     preview_render = core.PreviewRender

@@ -15,8 +15,9 @@ Disabling the add-on lets a running compile finish: it only fills the cache. KD_
 turns the warm-up off (then a first render compiles as before: pipeline.FrameJob).
 
 Once those kernels are cached, a second process of lower priority compiles the sampling kernel's
-packed version (sample packets in batches of 8+ samples, core/jit/first_frame.compile_packed_samples), which
-no render waits for: renders step in batches that large only once it is cached (sampling_steps.py).
+packed version (sample packets in batches of 8+ samples) and the denoiser
+(core/jit/first_frame.compile_second_stage), which no render waits for: renders step in batches that large
+only once it is cached (sampling_steps.py), and a denoised frame before then compiles the denoiser itself.
 
 API for the UI and a render engine: start(), status() -> WarmupStatus (state, elapsed seconds,
 message; `.text` is the line to show), wait(cancel=None, timeout=None).
@@ -38,7 +39,7 @@ from . import corelib
 NOT_STARTED, COMPILING, READY, FAILED = "not started", "compiling", "ready", "failed"
 SWITCH = "KD_PREVIEW_WARMUP"  # "0": no background compile
 TASK = "jit.first_frame:compile_first_frames"
-PACKED_TASK = "jit.first_frame:compile_packed_samples"
+PACKED_TASK = "jit.first_frame:compile_second_stage"
 PACKED_NICE = 10  # the packed stage's niceness (POSIX): a render running meanwhile keeps the cores
 POLL_SECONDS = 0.05
 

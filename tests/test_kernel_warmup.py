@@ -120,7 +120,7 @@ def test_the_packed_stage_runs_at_lower_priority(warmup, monkeypatch, tmp_path):
     for folder in (core, core / "jit"):
         (folder / "__init__.py").write_text("")
     (core / "jit" / "first_frame.py").write_text(
-        "import os, sys\nfrom pathlib import Path\n\ndef compile_packed_samples():\n"
+        "import os, sys\nfrom pathlib import Path\n\ndef compile_second_stage():\n"
         "    Path(sys.argv[2], 'nice.txt').write_text(str(os.nice(0)))\n")
     shutil.copy(REAL_PROGRAM, core / "jit" / "helper_program.py")
     monkeypatch.setattr(corelib, "CORE_FOLDER", core)
@@ -320,7 +320,8 @@ def test_after_the_warm_up_the_factory_scenes_first_frame_compiles_nothing(monke
     """The warm-up's made-up frames (core/jit/first_frame.py, both stages) run every kernel, with every
     argument type, that a first render of the factory scene (one cube, one point light, the default
     settings) runs: after them, in this process, Render adds no compiled version to any kernel, so in
-    Blender the frame only loads kernels from the cache the warm-up filled."""
+    Blender the frame only loads kernels from the cache the warm-up filled. A denoised frame after it
+    compiles nothing either (the second stage runs the denoiser)."""
     import bpy
 
     import kd_addon
@@ -329,12 +330,14 @@ def test_after_the_warm_up_the_factory_scenes_first_frame_compiles_nothing(monke
 
     monkeypatch.setenv(parallel_compile.HELPER_SWITCH, "0")  # the helper's side runs here too
     first_frame.compile_first_frames()
-    first_frame.compile_packed_samples()  # the packed stage: the batches a render steps in once it is cached
+    first_frame.compile_second_stage()  # packed samples (the batches a render steps in once cached), denoiser
     before = compiled_versions()
     bpy.ops.wm.read_homefile(use_factory_startup=True)
     kd_addon.register()
     try:
         bpy.context.scene.kd_preview.resolution_percentage = 5
+        assert bpy.ops.kdpreview.render() == {"FINISHED"}
+        bpy.context.scene.kd_preview.denoise = True
         assert bpy.ops.kdpreview.render() == {"FINISHED"}
     finally:
         kd_addon.unregister()

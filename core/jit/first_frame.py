@@ -8,8 +8,9 @@ one-instance packet kernels compiled by the helper beside the build and camera p
 warmup=True), an ao+shadow render with one light of each kind, then a second frame with one object
 moved that continues from the first one's pixels (the pixel-reuse kernels), the tree statistics the
 panel shows, and last the factory scene's first frame: one cube, a one-instance scene traced in packets.
-compile_packed_samples is the warm-up's second stage: the sampling kernel's packed version (sample packets
-in batches of 8 or more samples), which the add-on steps into once it is cached (kd_addon/kernel_warmup.py).
+compile_second_stage is the warm-up's second stage: the sampling kernel's packed version (sample packets
+in batches of 8 or more samples), which the add-on steps into once it is cached (kd_addon/kernel_warmup.py),
+and the denoiser, which a first denoised frame would otherwise compile (several seconds).
 Numba compiles one version per argument types, so the arrays have the add-on's dtypes
 (tree_cache.mesh_inputs). Sizes, modes and sample counts are runtime values and need no second compile.
 """
@@ -82,9 +83,10 @@ def _camera(offset) -> Camera:
 
 
 def _frame(builder: SceneBuilder, scene_inputs, previous, first: bool, batch: int = 1,
-           mode: str = "ao+shadow"):
+           mode: str = "ao+shadow", denoise: bool = False):
     """One frame as the add-on renders it (kd_addon/pipeline.py), relative to the camera's position, in
-    steps of `batch` samples, in `mode`; `scene_inputs`: (meshes, mesh_of, matrices, visibility). The
+    steps of `batch` samples, in `mode`, its image denoised or not; `scene_inputs`: (meshes, mesh_of,
+    matrices, visibility). The
     first frame's build and camera pass run beside the helper's compile (parallel_compile.py: the
     warm-up's split)."""
     offset = np.array([0.0, 0.0, 4.0])
@@ -98,7 +100,7 @@ def _frame(builder: SceneBuilder, scene_inputs, previous, first: bool, batch: in
         render = PreviewRender(scene, _camera(offset), WIDTH, HEIGHT, options, previous=previous)
     while not render.done:
         render.step(batch)
-    render.image()
+    render.image(denoise=denoise)
     return render.pixel_state()
 
 
@@ -117,10 +119,11 @@ def compile_first_frames() -> None:
     _frame(SceneBuilder("auto"), _one_cube(), None, first=False)
 
 
-def compile_packed_samples() -> None:
+def compile_second_stage() -> None:
     """The sampling kernel's packed version (sample packets in batches of PACKED_BATCH or more samples:
     render/sample_packets.py), which the add-on's first steps of one sample never run: the factory scene's
-    frame in one batch, mode ao (one version serves every mode). The add-on compiles it after the first
-    frames, in a process of lower priority (kd_addon/kernel_warmup.py), and steps in batches that large
-    once it is cached."""
-    _frame(SceneBuilder("auto"), _one_cube(), None, first=False, batch=PACKED_BATCH, mode="ao")
+    frame in one batch, mode ao (one version serves every mode), its image denoised (the denoiser's
+    kernels, which no undenoised frame runs). The add-on compiles these after the first frames, in a
+    process of lower priority (kd_addon/kernel_warmup.py), and steps in batches that large once they are
+    cached."""
+    _frame(SceneBuilder("auto"), _one_cube(), None, first=False, batch=PACKED_BATCH, mode="ao", denoise=True)
