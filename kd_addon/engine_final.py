@@ -186,7 +186,7 @@ class FinalRender:
         layer_name = self.depsgraph.view_layer.name
         result = self.engine.begin_result(0, 0, view.width, view.height, layer=layer_name)
         layer = result.layers[0]
-        background = film_background(self.scene)
+        background = film_background(self.scene, next(iter(views.values()))[2], self._report_warning)
         for view_name, (_, _, frame, images) in views.items():
             combined = frame.image if background is None else opaque(frame.image, background)
             _pass(layer, "Combined", view_name).rect.foreach_set(to_rect(combined))
@@ -200,11 +200,17 @@ def _pass(layer, name: str, view_name: str):
     return layer.passes.find_by_name(name, view_name) if view_name else layer.passes[name]
 
 
-def film_background(scene) -> np.ndarray | None:
+def film_background(scene, result: FrameResult, warn) -> np.ndarray | None:
     """The RGB the Combined pass shows where nothing is hit, None when Film > Transparent is on (alpha 0
     there). The world's viewport colour (World > Viewport Display), as Workbench renders it: the preview
-    reads no shaders, the world's nodes included."""
+    reads no shaders, the world's nodes included. A frame with holdouts stays transparent, with a warning:
+    Cycles keeps a holdout's pixels at alpha 0 over an opaque film, and the image does not tell them from
+    the background's."""
     if scene.render.film_transparent:
+        return None
+    if result.holdouts:
+        warn("Film > Transparent off is not applied to a frame with holdout objects: where nothing is hit stays "
+             "transparent, as the holdouts' pixels are (turn Film > Transparent on to silence this)")
         return None
     return np.array(scene.world.color[:3], np.float32) if scene.world is not None else np.zeros(3, np.float32)
 

@@ -116,6 +116,23 @@ def test_film_not_transparent_puts_the_worlds_viewport_colour_behind(addon, tmp_
     assert (opaque[~hit][:, :3] == expected).all()
 
 
+def test_film_not_transparent_with_a_holdout_stays_transparent_and_says_so(addon, tmp_path, monkeypatch):
+    """Cycles keeps a holdout's pixels at alpha 0 over an opaque film; the image cannot tell them from the
+    background's, so the frame is written as with Film > Transparent on, and a warning says why."""
+    scene = engine_scene(tmp_path)
+    bpy.data.objects["Box"].is_holdout = True
+    bpy.ops.render.render(write_still=True)
+    transparent = read_rgba(tmp_path / "frame.exr")
+    scene.render.film_transparent = False
+    reported = []
+    monkeypatch.setattr(engine_final.FinalRender, "_report_warning", lambda self, text: reported.append(text))
+    scene.render.filepath = str(tmp_path / "opaque")
+    assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
+    assert np.array_equal(read_rgba(tmp_path / "opaque.exr"), transparent)
+    assert (transparent[..., 3] == 0.0).sum() > 32 * 32  # the right half and the box's top
+    assert any("Film > Transparent off is not applied to a frame with holdout objects" in text for text in reported)
+
+
 def test_png_and_the_scenes_resolution_percentage(addon, tmp_path):
     scene = engine_scene(tmp_path, exr=False)
     scene.render.resolution_percentage = 50
