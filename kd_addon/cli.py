@@ -113,6 +113,10 @@ def build_parser(prog: str = COMMAND_ID) -> argparse.ArgumentParser:
     return parser
 
 
+# The cluster options' defaults: the parser's, and what _check_farm_options compares against.
+FARM_DEFAULTS = {"chunk_size": 0, "retries": 2, "connect_timeout": 10.0, "ship_blend": False}
+
+
 def _add_farm_options(render) -> None:
     """Rendering on a Dask cluster (kd_addon/farm/, docs/farm.md); without --dask or --local-workers the
     frames render in this process."""
@@ -122,14 +126,16 @@ def _add_farm_options(render) -> None:
                                                          "ADDRESS, e.g. tcp://HOST:8786")
     where.add_argument("--local-workers", dest="local_workers", type=int, metavar="N",
                        help="start a Dask cluster of N worker processes on this machine for the run")
-    farm.add_argument("--chunk-size", dest="chunk_size", type=int, default=0, metavar="FRAMES",
+    farm.add_argument("--chunk-size", dest="chunk_size", type=int, default=FARM_DEFAULTS["chunk_size"],
+                      metavar="FRAMES",
                       help="frames a task renders in a row, reusing trees and pixels (default 0 = automatic: "
                            "about three chunks a worker, 2 to 24 frames each)")
     farm.add_argument("--ship-blend", dest="ship_blend", action="store_true",
                       help="send the .blend's bytes to the workers (for workers without a shared filesystem)")
-    farm.add_argument("--connect-timeout", dest="connect_timeout", type=float, default=10.0, metavar="SECONDS",
+    farm.add_argument("--connect-timeout", dest="connect_timeout", type=float, default=FARM_DEFAULTS["connect_timeout"],
+                      metavar="SECONDS",
                       help="give up on an unreachable scheduler after this long (default 10)")
-    farm.add_argument("--retries", type=int, default=2,
+    farm.add_argument("--retries", type=int, default=FARM_DEFAULTS["retries"],
                       help="times a chunk whose task failed is rerun (default 2; a chunk whose worker died is "
                            "rerun by the scheduler in any case)")
 
@@ -310,8 +316,8 @@ def _run(args, cancelled) -> int:
         print(f"KD Preview: scene '{scene.name}', {len(frames)} frame(s), mode {config.settings.mode}, "
               f"{config.settings.samples} samples, {config.resolution_percentage}% resolution -> {args.out}")
         if not corelib.cache_is_warm():  # else a first run looks hung for minutes
-            print(f"First run with these sources and this Python: compiling the kernels (first use) takes a "
-                  f"minute or more before frame 1; its time is printed apart from the frame's (kept in "
+            print(f"First run with these sources and this Python: compiling the kernels (first use) takes one "
+                  f"to two minutes on 2 cores before frame 1; its time is printed apart from the frame's (kept in "
                   f"{corelib.numba_cache_dir()})", flush=True)
         print(HEADER, flush=True)  # piped, it would wait for the first frame: minutes on a first run
         _run_claimed(job, cancelled)
@@ -359,8 +365,8 @@ def _check_farm_options(args) -> None:
     """The cluster options' values, checked with or without a cluster (a bad one is never silently
     taken); given without --dask or --local-workers they change nothing, which a note on stderr says."""
     local_workers = getattr(args, "local_workers", None)
-    chunk_size, retries = getattr(args, "chunk_size", 0), getattr(args, "retries", 2)
-    timeout = getattr(args, "connect_timeout", 10.0)
+    given = {name: getattr(args, name, default) for name, default in FARM_DEFAULTS.items()}
+    chunk_size, retries, timeout = given["chunk_size"], given["retries"], given["connect_timeout"]
     if local_workers is not None and local_workers < 1:
         raise PreviewError(f"--local-workers must be 1 or more, got {local_workers}")
     if chunk_size < 0:
@@ -370,13 +376,10 @@ def _check_farm_options(args) -> None:
     if not 0.0 < timeout < float("inf"):
         raise PreviewError(f"--connect-timeout must be above 0 seconds, got {timeout:g}")
     if getattr(args, "dask", None) is None and local_workers is None:
-        given = [flag for flag, value, default in (("--chunk-size", chunk_size, 0), ("--retries", retries, 2),
-                                                   ("--connect-timeout", timeout, 10.0),
-                                                   ("--ship-blend", getattr(args, "ship_blend", False), False))
-                 if value != default]
-        if given:
+        changed = ["--" + name.replace("_", "-") for name, value in given.items() if value != FARM_DEFAULTS[name]]
+        if changed:
             prog = getattr(args, "prog", "kd_addon")
-            print(f"{prog}: note: {', '.join(given)} apply only with --dask or --local-workers; the frames render "
+            print(f"{prog}: note: {', '.join(changed)} apply only with --dask or --local-workers; the frames render "
                   "in this process", file=sys.stderr, flush=True)
 
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import replace
+from typing import NamedTuple
 
 import numpy as np
 
@@ -75,8 +76,10 @@ def final_view(scene, depsgraph, width: int, height: int, eye: Eye | None = None
     """(the frame a final render makes, the camera's warnings): the scene camera at width x height (the
     scene's resolution and %), moved to a multiview render's `eye` (render_views.py), cut to the Render
     Region (Blender pastes a region without Crop back into the whole frame)."""
-    camera, warnings = read_camera(scene, depsgraph, width, height)
-    camera = eye_camera(camera, scene.camera.data, eye, width, height)
+    camera_object = eye.camera_object if eye is not None else None
+    camera, warnings = read_camera(scene, depsgraph, width, height, camera_object)
+    data = (camera_object or scene.camera).evaluated_get(depsgraph).data
+    camera = eye_camera(camera, data.sensor_fit, eye, width, height)
     region = border_region(scene.render, width, height)
     if region is None:
         return FrameView(width, height, camera), warnings
@@ -98,6 +101,16 @@ def stats_line(result: FrameResult) -> str:
             f"{reused}")
 
 
+class RenderedView(NamedTuple):
+    """One view of a final render: its frame, the warnings to report, the Combined result and the pass
+    images ({pass name: (H, W, C)})."""
+
+    view: FrameView
+    warnings: list
+    result: FrameResult
+    images: dict
+
+
 class FinalRender:
     """One render() call: the frame, its passes, and the RenderResult."""
 
@@ -111,6 +124,7 @@ class FinalRender:
             config = make_config(self.scene.kd_preview)
             passes = requested_passes(self.depsgraph.view_layer)
             views = {name: self._view(config, name, passes) for name in view_names(self.scene.render)}
+            first = next(iter(views.values()))
         except Cancelled:
             self.engine.update_stats("", "KD Preview | cancelled")
             return
@@ -118,23 +132,26 @@ class FinalRender:
             self.engine.report({"ERROR"}, f"KD Preview: {error}")
             self.engine.error_set(f"KD Preview: {error}")
             return
-        for warning in dict.fromkeys(w for _, warnings, _, _ in views.values() for w in warnings):
+        background = film_background(self.scene)
+        if background is not None and first.result.holdouts:
+            background = None
+            first.warnings.append("Film > Transparent off is not applied to a frame with holdout objects: where "
+                                  "nothing is hit stays transparent, as the holdouts' pixels are (turn Film > "
+                                  "Transparent on to silence this)")
+        for warning in dict.fromkeys(w for rendered in views.values() for w in rendered.warnings):
             self._report_warning(warning)  # once, though every view warns alike
-        self._write(views)
-        self.engine.update_stats("", stats_line(next(iter(views.values()))[2]))
+        self._write(views, first, background)
+        self.engine.update_stats("", stats_line(first.result))
 
-    def _view(self, config, name: str, passes: list[tuple]) -> tuple:
-        """(FrameView, warnings, FrameResult, pass images) of view `name` ("" without multiview)."""
-        camera = self.scene.camera
-        eye = None
-        if name and camera is not None and camera.type == "CAMERA":  # else read_camera names the problem
-            eye = eye_of(self.engine, camera.evaluated_get(self.depsgraph), name)
+    def _view(self, config, name: str, passes: list[tuple]) -> RenderedView:
+        """View `name` ("" without multiview) rendered, with its passes."""
+        eye = eye_of(self.engine, self.depsgraph, name)
         view, camera_warnings = final_view(self.scene, self.depsgraph, self.engine.resolution_x,
                                            self.engine.resolution_y, eye)
         label = f"Combined {name}".rstrip()
         result = self._frame(config, view, lane_of(name), label)
-        images = self._pass_images(config, view, result, passes, name)
-        return view, camera_warnings + result.warnings, result, images
+        images, pass_warnings = self._pass_images(config, view, result, passes, name)
+        return RenderedView(view, camera_warnings + result.warnings + pass_warnings, result, images)
 
     def _report_warning(self, text: str) -> None:
         self.engine.report({"WARNING"}, f"KD Preview: {text}")
@@ -154,9 +171,10 @@ class FinalRender:
         finally:
             release(job)
 
-    def _pass_images(self, config, view: FrameView, result: FrameResult, passes: list[tuple], view_name: str) -> dict:
-        """{pass name: (H, W, C) image} of the requested passes of view `view_name`."""
-        images = {}
+    def _pass_images(self, config, view: FrameView, result: FrameResult, passes: list[tuple],
+                     view_name: str) -> tuple[dict, list[str]]:
+        """({pass name: (H, W, C) image} of the requested passes of view `view_name`, warnings)."""
+        images, warnings = {}, []
         for name, channels, *_ in passes:
             if name == "Depth":
                 depth = result.depth if result.depth is not None else np.full((view.height, view.width), np.inf)
@@ -171,26 +189,27 @@ class FinalRender:
                 images[name] = self._frame(term_config, view, lane_of(view_name, f"pass:{term}"),
                                            f"{name} pass {view_name}".rstrip()).image[..., :channels]
             except PreviewError as error:  # e.g. a Shadow pass in a scene without lights
-                self._report_warning(f"the {name} pass is left black: {error}")
+                warnings.append(f"the {name} pass is left black: {error}")
                 images[name] = np.zeros((view.height, view.width, channels), np.float32)
-        return images
+        return images, warnings
 
-    def _write(self, views: dict) -> None:
-        """Fill the RenderResult, every view's passes; Blender writes it (output path and format) and shows
-        it. views: {view name: _view's tuple}."""
-        view, _, _, images = next(iter(views.values()))  # every view has the same size and passes
+    def _write(self, views: dict, first: RenderedView, background: np.ndarray | None) -> None:
+        """Fill the RenderResult, every view's passes ({view name: RenderedView}; every view has the size
+        and passes of the `first`), the Combined pass opaque over `background` unless None; Blender writes
+        it (output path and format) and shows it."""
+        view = first.view
         for name, channels, ids, *_ in PASSES:
-            if name in images:
+            if name in first.images:
                 self.engine.add_pass(name, channels, ids, layer=self.depsgraph.view_layer.name)
         # Blender calls render() once per view layer, each with its own depsgraph: fill that layer only
         layer_name = self.depsgraph.view_layer.name
         result = self.engine.begin_result(0, 0, view.width, view.height, layer=layer_name)
         layer = result.layers[0]
-        background = film_background(self.scene, next(iter(views.values()))[2], self._report_warning)
-        for view_name, (_, _, frame, images) in views.items():
-            combined = frame.image if background is None else opaque(frame.image, background)
+        for view_name, rendered in views.items():
+            image = rendered.result.image
+            combined = image if background is None else opaque(image, background)
             _pass(layer, "Combined", view_name).rect.foreach_set(to_rect(combined))
-            for name, image in images.items():
+            for name, image in rendered.images.items():
                 _pass(layer, name, view_name).rect.foreach_set(to_rect(image))
         self.engine.end_result(result)
 
@@ -200,17 +219,12 @@ def _pass(layer, name: str, view_name: str):
     return layer.passes.find_by_name(name, view_name) if view_name else layer.passes[name]
 
 
-def film_background(scene, result: FrameResult, warn) -> np.ndarray | None:
+def film_background(scene) -> np.ndarray | None:
     """The RGB the Combined pass shows where nothing is hit, None when Film > Transparent is on (alpha 0
     there). The world's viewport colour (World > Viewport Display), as Workbench renders it: the preview
-    reads no shaders, the world's nodes included. A frame with holdouts stays transparent, with a warning:
-    Cycles keeps a holdout's pixels at alpha 0 over an opaque film, and the image does not tell them from
-    the background's."""
+    reads no shaders, the world's nodes included. (A frame with holdouts stays transparent: Cycles keeps a
+    holdout's pixels at alpha 0 over an opaque film, and the image does not tell them from the background's.)"""
     if scene.render.film_transparent:
-        return None
-    if result.holdouts:
-        warn("Film > Transparent off is not applied to a frame with holdout objects: where nothing is hit stays "
-             "transparent, as the holdouts' pixels are (turn Film > Transparent on to silence this)")
         return None
     return np.array(scene.world.color[:3], np.float32) if scene.world is not None else np.zeros(3, np.float32)
 

@@ -1,7 +1,7 @@
 """The kernels' first compile, started in the background when the add-on is enabled.
 
-A first render on a machine compiles Numba kernels for about a minute. `start()` (register() calls it)
-begins that at once in a separate process, which runs a made-up first and second frame
+A first render on a machine compiles Numba kernels for one to two minutes on 2 cores. `start()`
+(register() calls it) begins that at once in a separate process, which runs a made-up first and second frame
 (core/jit/first_frame.py, with its own helper process for the rendering kernels: the same two-core
 split as a first render, docs/choices.md#the-first-renders-compile-on-two-cores) into the add-on's
 Numba cache; a render then waits for it and only loads the kernels. A process, not a thread: the
@@ -150,10 +150,12 @@ def _spawn(errors, task=TASK, low_priority=False) -> subprocess.Popen:
 
 def _start_packed_stage() -> None:
     """Start the packed stage once the first frames' kernels are cached, unless it ran in this process
-    or the cache already holds the packed version (corelib.packed_version_cached). Never raises: without
-    it, renders keep their batches under 8 samples (core PreviewRender.batch_without_compile)."""
+    or the cache already holds what it compiles: the packed version (corelib.packed_version_cached) and
+    the denoiser (compiled after it: a stage stopped in between runs again). Never raises: without it,
+    renders keep their batches under 8 samples (core PreviewRender.batch_without_compile)."""
     with _packed_lock:  # status() on the UI's timer and start() on a render's thread may both get here
-        if _warmup.packed is not None or corelib.packed_version_cached():
+        cached = corelib.packed_version_cached() and corelib.cache_is_warm(corelib.DENOISE_KERNEL)
+        if _warmup.packed is not None or cached:
             return
         try:
             _warmup.packed = _spawn_packed_stage()

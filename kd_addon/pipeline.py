@@ -77,7 +77,7 @@ class FrameResult:
     compile_ms: float = 0.0  # waited for the kernels' background compile (kernel_warmup.py); not in total_ms
     load_ms: float = 0.0  # loading the compiled kernels into this process before the frame; not in total_ms
     depth: np.ndarray | None = None  # (H, W) view-axis distance of each pixel's hit, inf where nothing is hit
-    holdouts: bool = False  # some object is a holdout: its pixels are alpha 0, as those where nothing is hit
+    holdouts: bool = False  # an object the camera sees is a holdout: its pixels are alpha 0, as the background
 
     @property
     def height(self) -> int:
@@ -270,7 +270,7 @@ class FrameJob:
         self._timings["other_ms"] += _ms_since(t0) - self._timings["extract_ms"]
         self._info = dict(triangles=extracted.triangle_count, objects=extracted.object_count,
                           lights=len(inputs.lights), frame=extracted.frame, mode=self.mode,
-                          holdouts=any(kind.holdout for kind in extracted.table().kinds),
+                          holdouts=any(kind.holdout and kind.camera for kind in extracted.table().kinds),
                           warnings=inputs.warnings + extracted.warnings + read.unapplied)
         if reuse and self._state.image is not None and self._state.image_key == self._image_key:
             self._reused_image = self._state.image

@@ -1,10 +1,11 @@
 """The views of a final render (Output > Views: Stereo 3D or Multi-View), each seen by its own camera.
 
 Blender hands an engine one render() per view layer and leaves the views to it, as Cycles takes them
-(BlenderSession::render): make a view active (RenderEngine.active_view_set) and ask for that view's
-camera matrix and horizontal shift (camera_model_matrix, camera_shift_x), which carry the stereo eye's
-offset, toe-in or off-axis shift, or a Multi-View camera's suffix. Without multiview there is one view,
-named "" here, seen by the scene camera as read.
+(BlenderSession::render): make a view active (RenderEngine.active_view_set), take that view's camera
+(camera_override: in Multi-View the camera named with the view's suffix, else the scene camera), and
+ask for its matrix and horizontal shift (camera_model_matrix, camera_shift_x), which carry the stereo
+eye's offset, toe-in or off-axis shift. Without multiview there is one view, named "" here, seen by the
+scene camera as read.
 """
 
 from __future__ import annotations
@@ -20,9 +21,10 @@ STEREO_VIEWS = ("left", "right")  # Blender's STEREO_LEFT_NAME, STEREO_RIGHT_NAM
 
 @dataclass(frozen=True)
 class Eye:
-    """One view's camera as Blender places it: the world matrix and the horizontal lens shift (in the
-    camera's own shift units, as Camera.shift_x)."""
+    """One view's camera as Blender places it: the camera object (its lens and clipping are read as the
+    scene camera's), the world matrix and the horizontal lens shift (in Camera.shift_x's units)."""
 
+    camera_object: object
     matrix_world: np.ndarray
     shift_x: float
 
@@ -38,21 +40,27 @@ def view_names(render) -> list[str]:
     return names or [""]
 
 
-def eye_of(engine, camera_object, name: str) -> Eye | None:
-    """View `name`'s camera from the engine (None for the one view without multiview). `camera_object`:
-    the evaluated scene camera, whose animation and constraints the matrix includes."""
+def eye_of(engine, depsgraph, name: str) -> Eye | None:
+    """View `name`'s camera from the engine (None for the one view without multiview, or when the view
+    has no camera object, which read_camera then names). The matrix is the evaluated camera's, so its
+    animation and constraints count."""
     if not name:
         return None
     engine.active_view_set(name)
-    matrix = np.array(engine.camera_model_matrix(camera_object, use_spherical_stereo=False), np.float64)
-    return Eye(matrix.reshape(4, 4), float(engine.camera_shift_x(camera_object, use_spherical_stereo=False)))
+    camera = engine.camera_override
+    if camera is None or camera.type != "CAMERA":
+        return None
+    evaluated = camera.evaluated_get(depsgraph)
+    matrix = np.array(engine.camera_model_matrix(evaluated, use_spherical_stereo=False), np.float64)
+    return Eye(camera, matrix.reshape(4, 4), float(engine.camera_shift_x(evaluated, use_spherical_stereo=False)))
 
 
-def eye_camera(camera: CameraInput, data, eye: Eye | None, width: int, height: int) -> CameraInput:
-    """`camera` (read for the scene camera, camera data `data`, at width x height) moved to the eye."""
+def eye_camera(camera: CameraInput, sensor_fit: str, eye: Eye | None, width: int, height: int) -> CameraInput:
+    """`camera` (read for the eye's camera object at width x height, whose sensor fit is `sensor_fit`)
+    moved to the eye."""
     if eye is None:
         return camera
-    shift_x = shift_to_larger_dimension(eye.shift_x, data.sensor_fit, width, height * camera.pixel_aspect)
+    shift_x = shift_to_larger_dimension(eye.shift_x, sensor_fit, width, height * camera.pixel_aspect)
     return replace(camera, matrix_world=normalized_matrix(eye.matrix_world), shift=(shift_x, camera.shift[1]))
 
 

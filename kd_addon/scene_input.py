@@ -220,22 +220,24 @@ def light_input(name: str, data, matrix_world) -> LightInput | None:
 # --------------------------------------------------------------------------
 
 
-def read_camera(scene, depsgraph, width: int, height: int) -> tuple[CameraInput, list[str]]:
-    """The scene camera, evaluated (so animated lens or constraints count)."""
-    if scene.camera is None:
+def read_camera(scene, depsgraph, width: int, height: int, camera_object=None) -> tuple[CameraInput, list[str]]:
+    """The scene camera (or `camera_object`, a multiview render's camera of one view), evaluated (so
+    animated lens or constraints count)."""
+    ob = scene.camera if camera_object is None else camera_object
+    if ob is None:
         raise PreviewError(f"scene '{scene.name}' has no active camera: add one and set it as the scene camera")
-    if scene.camera.type != "CAMERA":
-        kind = scene.camera.bl_rna.properties["type"].enum_items[scene.camera.type].name.lower()  # as the UI
-        raise PreviewError(f"the scene camera '{scene.camera.name}' is {'an' if kind[0] in 'aeiou' else 'a'} {kind} "
+    if ob.type != "CAMERA":
+        kind = ob.bl_rna.properties["type"].enum_items[ob.type].name.lower()  # as the UI
+        raise PreviewError(f"the scene camera '{ob.name}' is {'an' if kind[0] in 'aeiou' else 'a'} {kind} "
                            "object, which the preview cannot look through: set a camera object as the scene camera")
-    evaluated = scene.camera.evaluated_get(depsgraph)
+    evaluated = ob.evaluated_get(depsgraph)
     try:
         camera, warnings = camera_input(evaluated.data, evaluated.matrix_world, width, height,
                                         scene.render.pixel_aspect_y / scene.render.pixel_aspect_x)
     except PreviewError as error:  # named: timeline markers may switch between several cameras
-        raise PreviewError(f"scene camera '{scene.camera.name}': {error}") from None
+        raise PreviewError(f"scene camera '{ob.name}': {error}") from None
     if evaluated.data.dof.use_dof:  # Cycles blurs the silhouettes
-        warnings.append(f"the depth of field of camera '{scene.camera.name}' is ignored by the preview: it renders "
+        warnings.append(f"the depth of field of camera '{ob.name}' is ignored by the preview: it renders "
                         "a pinhole camera, everything in focus")
     return camera, warnings
 

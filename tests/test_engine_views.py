@@ -65,6 +65,24 @@ def test_each_stereo_eye_hits_the_pixels_cycles_hits(addon, tmp_path, convergenc
         assert (ours[eye] ^ cycles[eye]).sum() <= 4, eye
 
 
+def test_multiview_renders_each_view_through_its_suffixed_camera(addon, tmp_path):
+    """Multi-View: view "left" (suffix _L) and "right" (_R) are seen by the cameras named with those
+    suffixes, their placement and lens both (Cycles takes them from RenderEngine.camera_override)."""
+    scene = stereo_scene(tmp_path, "OFFAXIS")
+    left = scene.camera
+    left.name = left.data.name = "Cam_L"
+    right = scenes.add_camera("Cam_R")
+    right.location, right.rotation_euler = (2.0, -7.0, 4.0), (math.radians(65), 0.0, math.radians(10))
+    right.data.lens = 28.0
+    scene.render.views_format = "MULTIVIEW"
+    assert [(v.name, v.camera_suffix) for v in scene.render.views] == [("left", "_L"), ("right", "_R")]
+    ours = eye_masks(scene, "KD_PREVIEW", tmp_path / "kd")
+    cycles = eye_masks(scene, "CYCLES", tmp_path / "cycles")
+    assert (ours["L"] ^ ours["R"]).sum() > 300  # the cameras see very differently
+    for eye in "LR":
+        assert (ours[eye] ^ cycles[eye]).sum() <= 4, eye
+
+
 def test_views_a_render_makes():
     render = scenes.reset().render
     assert render_views.view_names(render) == [""]

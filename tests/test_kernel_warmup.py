@@ -94,6 +94,15 @@ def test_without_the_ui_or_with_the_packed_version_cached_no_packed_stage(warmup
     assert warmup.start(packed=True).state == warmup.READY and started == []
 
 
+def test_a_packed_version_cached_without_the_denoiser_starts_the_stage_again(warmup, monkeypatch, packed_starts):
+    """The stage compiles the denoiser after the packed version: a stage stopped in between (Blender
+    quit) must run again, or the denoiser would never be warmed."""
+    monkeypatch.setattr(corelib, "cache_is_warm", lambda kernel=corelib.WARM_KERNEL: kernel != corelib.DENOISE_KERNEL)
+    monkeypatch.setattr(corelib, "packed_version_cached", lambda: True)
+    assert warmup.start(packed=True).state == warmup.READY and len(packed_starts) == 1
+    warmup.stop()
+
+
 def test_the_packed_version_counts_as_cached_from_a_second_sampling_kernel_file(tmp_path, monkeypatch):
     monkeypatch.setattr(corelib, "numba_cache_dir", lambda package=None: tmp_path)
     python = f"py{sys.version_info[0]}{sys.version_info[1]}"

@@ -11,7 +11,7 @@ from .lazy import DeferredSubtrees
 from .leaf_triangles import BYTES_PER_REFERENCE as LEAF_COPY_BYTES, leaf_triangles
 from ..memory import MB, MemoryLimitError, check_build_memory, release_before_copy
 from .merge import merge_tree
-from .options import make_options
+from .options import BuildOptions, make_options
 from .subtree import build_subtrees
 from ..jit.threads import thread_count
 from .top_levels import build_top_levels
@@ -95,4 +95,5 @@ def _budget_text(budget):
 
 def _budget_advice(budget):
     """The memory error's advice on the budget: with it off, splitting may copy straddlers without end."""
-    return "set a duplication_budget (16 by default), or " if budget is None else ""
+    default = BuildOptions.__dataclass_fields__["duplication_budget"].default
+    return f"set a duplication_budget ({default:g} by default), or " if budget is None else ""
