@@ -55,9 +55,9 @@ class Settings:
     lazy: build the kd-tree on demand (seed 003): only the parts rays reach; the same image. The
         scene then goes into one flat tree (core.SceneBuilder layout "flat"), since a two-level
         scene's mesh trees are built eagerly. Pays when most of the scene is hidden.
-    rebuild_all: build every kd-tree and trace every frame anew (turns off tree, pixel and image reuse;
-        for comparisons and benchmarks). The scene's layout still follows the motion of earlier frames
-        (core SceneBuilder), so a frame can differ from a fresh process's in a few edge pixels.
+    rebuild_all: build every kd-tree and trace every frame anew, as a fresh process would (turns off
+        tree, pixel and image reuse and the layout's memory of earlier frames' motion; for comparisons and
+        benchmarks).
     """
 
     mode: str = "auto"

@@ -262,7 +262,8 @@ class FrameJob:
         read = self._read_scene()
         core = corelib.load_core()
         inputs, extracted = read.inputs, read.extracted
-        self._state = tree_cache.state_for(self.scene, core, self.config.build_options, self.group, self.lane)
+        self._state = tree_cache.state_for(self.scene, core, self.config.build_options, self.group, self.lane,
+                                           fresh=self.config.settings.rebuild_all)
         reuse = not self.config.settings.rebuild_all
         memory_limit.check_frame(extracted.triangle_count, inputs.width, inputs.height, self.config,
                                  keeps_previous=reuse and self._state.pixels is not None)

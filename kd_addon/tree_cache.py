@@ -41,12 +41,14 @@ _builders: dict[tuple, tuple[dict, object]] = {}  # (scene uid, group) -> (build
 _states: dict[tuple, SceneState] = {}  # (scene uid, group, lane) -> its state
 
 
-def state_for(scene, core, build_options: dict, group: str = "", lane: str = "") -> SceneState:
+def state_for(scene, core, build_options: dict, group: str = "", lane: str = "", fresh: bool = False) -> SceneState:
     """The state of the scene's `group` and `lane`; fresh trees when the build options changed (trees
-    built otherwise differ)."""
+    built otherwise differ). `fresh` (Rebuild All): a new builder, so the frame is also laid out as a
+    first frame is: a builder's layout follows the motion of the frames it saw (core SceneBuilder), which
+    can move a few edge pixels by a sample against a fresh process's render."""
     uid = getattr(scene, "session_uid", None) or id(scene)
     kept = _builders.get((uid, group))
-    if kept is None or kept[0] != build_options:
+    if fresh or kept is None or kept[0] != build_options:
         # A lazy tree must be the scene's one mesh tree (core.build_two_level): one flat tree then.
         layout = "flat" if build_options.get("lazy") else "auto"
         kept = _builders[(uid, group)] = (dict(build_options), core.SceneBuilder(layout, **build_options))

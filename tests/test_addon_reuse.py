@@ -61,6 +61,29 @@ def test_the_first_denoised_frame_is_marked_as_a_first_run(addon, monkeypatch):
     assert [r.first_run for r in frames] == [True, False]
 
 
+def test_rebuild_all_lays_a_frame_out_as_a_fresh_process_does(addon):
+    """A builder's layout follows the motion of the frames it saw (core SceneBuilder: an object that moved
+    leaves the merged soup for a tree of its own), which can move a few edge pixels by a sample against a
+    fresh process's render of the frame. Rebuild All takes a new builder every frame, so frame 3 after
+    frames 1 and 2 is frame 3 rendered alone; with reuse the builder is kept."""
+    scene = animated_scene()
+
+    def builders_over(frames, **settings):
+        tree_cache.clear()
+        seen = []
+        for frame in frames:
+            result = render(scene, frame, **settings)
+            seen += [builder for _, builder in tree_cache._builders.values()]
+        return seen, result
+
+    fresh, after = builders_over((1, 2, 3), rebuild_all=True)
+    assert len(fresh) == 3 and len({id(b) for b in fresh}) == 3
+    _, alone = builders_over((3,), rebuild_all=True)
+    np.testing.assert_array_equal(after.image, alone.image)
+    kept, _ = builders_over((1, 2, 3), rebuild_all=False)  # render() leaves its settings set
+    assert len({id(b) for b in kept}) == 1
+
+
 def test_static_and_moved_objects_keep_their_trees_deforming_ones_are_rebuilt(addon):
     scene = animated_scene()
     tree_cache.clear()
