@@ -76,10 +76,8 @@ def final_view(scene, depsgraph, width: int, height: int, eye: Eye | None = None
     """(the frame a final render makes, the camera's warnings): the scene camera at width x height (the
     scene's resolution and %), moved to a multiview render's `eye` (render_views.py), cut to the Render
     Region (Blender pastes a region without Crop back into the whole frame)."""
-    camera_object = eye.camera_object if eye is not None else None
-    camera, warnings = read_camera(scene, depsgraph, width, height, camera_object)
-    data = (camera_object or scene.camera).evaluated_get(depsgraph).data
-    camera = eye_camera(camera, data.sensor_fit, eye, width, height)
+    camera, warnings = read_camera(scene, depsgraph, width, height, eye.camera_object if eye is not None else None)
+    camera = eye_camera(camera, eye, width, height)
     region = border_region(scene.render, width, height)
     if region is None:
         return FrameView(width, height, camera), warnings

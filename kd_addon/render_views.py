@@ -22,11 +22,13 @@ STEREO_VIEWS = ("left", "right")  # Blender's STEREO_LEFT_NAME, STEREO_RIGHT_NAM
 @dataclass(frozen=True)
 class Eye:
     """One view's camera as Blender places it: the camera object (its lens and clipping are read as the
-    scene camera's), the world matrix and the horizontal lens shift (in Camera.shift_x's units)."""
+    scene camera's), the world matrix, the horizontal lens shift (in Camera.shift_x's units) and the
+    sensor fit that shift is measured by."""
 
     camera_object: object
     matrix_world: np.ndarray
     shift_x: float
+    sensor_fit: str
 
 
 def view_names(render) -> list[str]:
@@ -52,15 +54,15 @@ def eye_of(engine, depsgraph, name: str) -> Eye | None:
         return None
     evaluated = camera.evaluated_get(depsgraph)
     matrix = np.array(engine.camera_model_matrix(evaluated, use_spherical_stereo=False), np.float64)
-    return Eye(camera, matrix.reshape(4, 4), float(engine.camera_shift_x(evaluated, use_spherical_stereo=False)))
+    shift_x = float(engine.camera_shift_x(evaluated, use_spherical_stereo=False))
+    return Eye(camera, matrix.reshape(4, 4), shift_x, evaluated.data.sensor_fit)
 
 
-def eye_camera(camera: CameraInput, sensor_fit: str, eye: Eye | None, width: int, height: int) -> CameraInput:
-    """`camera` (read for the eye's camera object at width x height, whose sensor fit is `sensor_fit`)
-    moved to the eye."""
+def eye_camera(camera: CameraInput, eye: Eye | None, width: int, height: int) -> CameraInput:
+    """`camera` (read for the eye's camera object at width x height) moved to the eye."""
     if eye is None:
         return camera
-    shift_x = shift_to_larger_dimension(eye.shift_x, sensor_fit, width, height * camera.pixel_aspect)
+    shift_x = shift_to_larger_dimension(eye.shift_x, eye.sensor_fit, width, height * camera.pixel_aspect)
     return replace(camera, matrix_world=normalized_matrix(eye.matrix_world), shift=(shift_x, camera.shift[1]))
 
 
