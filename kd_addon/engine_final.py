@@ -25,7 +25,8 @@ import numpy as np
 from .config import make_config
 from .errors import Cancelled, PreviewError
 from .pipeline import FrameJob, FrameResult, FrameView, claim, release
-from .render_views import Eye, eye_camera, eye_of, lane_of, view_names
+from . import tree_cache
+from .render_views import FINAL_LANES, Eye, eye_camera, eye_of, lane_of, view_names
 from .scene_input import CameraInput, read_camera
 
 # (pass name, channels, channel ids, Blender's pass type, the view layer switch that asks for it)
@@ -114,6 +115,7 @@ class FinalRender:
 
     def __init__(self, engine, depsgraph):
         self.engine, self.depsgraph, self.scene = engine, depsgraph, depsgraph.scene
+        self.lanes: set[str] = set()  # the tree_cache lanes this frame rendered
 
     def run(self) -> None:
         """Render the frame, each of its views; a PreviewError is reported (no traceback), a cancel writes
@@ -123,6 +125,7 @@ class FinalRender:
             passes = requested_passes(self.depsgraph.view_layer)
             views = {name: self._view(config, name, passes) for name in view_names(self.scene.render)}
             first = next(iter(views.values()))
+            tree_cache.keep_lanes(self.scene, "", self.lanes, FINAL_LANES)
         except Cancelled:
             self.engine.update_stats("", "KD Preview | cancelled")
             return
@@ -157,6 +160,7 @@ class FinalRender:
     def _frame(self, config, view: FrameView, lane: str, label: str) -> FrameResult:
         """One FrameJob to the end, polling test_break between its short ticks."""
         job = FrameJob(self.scene, self.depsgraph, config, view=view, lane=lane)
+        self.lanes.add(lane)
         claim(job)  # no panel or Live Update run beside it (a frame change during an animation render)
         try:
             t0 = time.perf_counter()
@@ -184,7 +188,7 @@ class FinalRender:
                 continue
             term_config = make_config(replace(config.settings, mode=term))
             try:
-                images[name] = self._frame(term_config, view, lane_of(view_name, f"pass:{term}"),
+                images[name] = self._frame(term_config, view, lane_of(view_name, f"{FINAL_LANES[1]}{term}"),
                                            f"{name} pass {view_name}".rstrip()).image[..., :channels]
             except PreviewError as error:  # e.g. a Shadow pass in a scene without lights
                 warnings.append(f"the {name} pass is left black: {error}")

@@ -27,24 +27,28 @@ def frame_bytes(n_triangles: int, width: int, height: int, builder: str,
     return geometry, memory.render_bytes(width, height, keeps_previous)
 
 
-def check_frame(n_triangles: int, width: int, height: int, config, keeps_previous: bool = False) -> None:
+def check_frame(n_triangles: int, width: int, height: int, config, keeps_previous: bool = False,
+                held: int = 0) -> None:
     """Raise MemoryLimitError when the frame would need more than config.memory_limit bytes
-    (keeps_previous: the last frame's pixel state is held while this one renders). With no limit set,
+    (keeps_previous: the last frame's pixel state is held while this one renders; held: bytes other
+    views' and passes' kept images hold meanwhile, tree_cache.held_bytes). With no limit set,
     only the pixel buffers are checked, against the machine's physical memory: their estimate is
     close, while the geometry's covers the worst scene and would refuse typical ones that fit
     (docs/choices.md#without-a-memory-limit-only-the-pixel-buffers-are-checked)."""
     geometry, pixels = frame_bytes(n_triangles, width, height, config.settings.builder, keeps_previous)
+    pixels += held
+    kept = f", of which {held / MIB:,.0f} MiB other views' and passes' kept pixels" if held else ""
     limit = config.memory_limit
     if limit is None:
         machine = corelib.load_core().memory.physical_memory()
         if machine is not None and pixels > machine:
             raise MemoryLimitError(
-                f"this frame's {width}x{height} pixels need about {pixels / MIB:,.0f} MiB, above this machine's "
-                f"memory of {machine / MIB:,.0f} MiB: lower the resolution")
+                f"this frame's {width}x{height} pixels need about {pixels / MIB:,.0f} MiB{kept}, above this "
+                f"machine's memory of {machine / MIB:,.0f} MiB: lower the resolution")
         return
     if geometry + pixels > limit:
         raise MemoryLimitError(
             f"this frame needs about {(geometry + pixels) / MIB:,.0f} MiB ({n_triangles:,} triangles and their "
-            f"kd-tree: {geometry / MIB:,.0f} MiB; {width}x{height} pixels: {pixels / MIB:,.0f} MiB), above the "
-            f"memory limit of {limit / MIB:,.0f} MiB: lower the resolution, hide objects, or raise the memory "
+            f"kd-tree: {geometry / MIB:,.0f} MiB; {width}x{height} pixels: {pixels / MIB:,.0f} MiB{kept}), above "
+            f"the memory limit of {limit / MIB:,.0f} MiB: lower the resolution, hide objects, or raise the memory "
             "limit (0 = no limit)")

@@ -266,7 +266,8 @@ class FrameJob:
                                            fresh=self.config.settings.rebuild_all)
         reuse = not self.config.settings.rebuild_all
         memory_limit.check_frame(extracted.triangle_count, inputs.width, inputs.height, self.config,
-                                 keeps_previous=reuse and self._state.pixels is not None)
+                                 keeps_previous=reuse and self._state.pixels is not None,
+                                 held=tree_cache.held_bytes(self.scene, self.group, self.lane))
         self._image_key = read.image_key
         self._timings["other_ms"] += _ms_since(t0) - self._timings["extract_ms"]
         self._info = dict(triangles=extracted.triangle_count, objects=extracted.object_count,

@@ -66,6 +66,12 @@ def eye_camera(camera: CameraInput, eye: Eye | None, width: int, height: int) ->
     return replace(camera, matrix_world=normalized_matrix(eye.matrix_world), shift=(shift_x, camera.shift[1]))
 
 
+# How the lanes only final renders use begin: a view's, a pass's (tree_cache.keep_lanes drops those a frame
+# no longer renders).
+FINAL_LANES = ("view:", "pass:")
+
+
 def lane_of(name: str, lane: str = "") -> str:
-    """The tree_cache lane of view `name`'s image (each view keeps its own pixels across frames)."""
-    return lane if not name else f"view:{name}|{lane}"
+    """The tree_cache lane of view `name`'s image (each view keeps its own pixels across frames); `lane`
+    a pass's ("pass:<term>") or "" (the Combined image)."""
+    return lane if not name else f"{FINAL_LANES[0]}{name}|{lane}"

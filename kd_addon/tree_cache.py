@@ -8,7 +8,8 @@ pixels whose rays cannot reach what changed. State lives per scene (`session_uid
 trees: the panel, the command line and final renders share the default group; the viewport's Rendered
 shading, whose depsgraph evaluates geometry as the viewport does, keeps its own trees so the two never
 rebuild each other's. Within a group each `lane` (an extra pass's term) keeps its own last image and
-pixels over the group's trees. `clear()` drops it all.
+pixels over the group's trees; a final render drops the lanes of views and passes it no longer makes,
+and the frame's memory check counts the other lanes' pixels (held_bytes). `clear()` drops it all.
 """
 
 from __future__ import annotations
@@ -46,7 +47,7 @@ def state_for(scene, core, build_options: dict, group: str = "", lane: str = "",
     built otherwise differ). `fresh` (Rebuild All): a new builder, so the frame is also laid out as a
     first frame is: a builder's layout follows the motion of the frames it saw (core SceneBuilder), which
     can move a few edge pixels by a sample against a fresh process's render."""
-    uid = getattr(scene, "session_uid", None) or id(scene)
+    uid = _uid(scene)
     kept = _builders.get((uid, group))
     if fresh or kept is None or kept[0] != build_options:
         # A lazy tree must be the scene's one mesh tree (core.build_two_level): one flat tree then.
@@ -56,6 +57,30 @@ def state_for(scene, core, build_options: dict, group: str = "", lane: str = "",
     if state is None or state.builder is not kept[1]:
         state = _states[(uid, group, lane)] = SceneState(kept[1], dict(build_options))
     return state
+
+
+def held_bytes(scene, group: str = "", lane: str = "") -> int:
+    """Bytes of the last images and pixel states that the scene's other lanes and groups keep: they stay
+    in memory while (group, lane) renders (its own last pixels are memory.render_bytes' keeps_previous)."""
+    uid = _uid(scene)
+    return sum(_state_bytes(state) for (u, g, l), state in _states.items() if u == uid and (g, l) != (group, lane))
+
+
+def keep_lanes(scene, group: str, lanes, prefixes: tuple[str, ...]) -> None:
+    """Forget the scene's lanes of `group` named with one of `prefixes` but not among `lanes`: a final
+    render's views and passes that its last frame did not render (their pixels would be held for good)."""
+    uid, lanes = _uid(scene), set(lanes)
+    for key in [k for k in _states if k[:2] == (uid, group) and k[2].startswith(prefixes) and k[2] not in lanes]:
+        del _states[key]
+
+
+def _uid(scene):
+    return getattr(scene, "session_uid", None) or id(scene)
+
+
+def _state_bytes(state: SceneState) -> int:
+    pixel_arrays = [a for a in state.pixels if isinstance(a, np.ndarray)] if state.pixels is not None else []
+    return sum(a.nbytes for a in [state.image, state.depth, *pixel_arrays] if a is not None)
 
 
 def clear() -> None:

@@ -13,9 +13,10 @@ import bpy
 import numpy as np
 import pytest
 
-from kd_addon import render_views
+from kd_addon import memory_limit, render_views, tree_cache
 from tests import bpy_scenes as scenes
 from tests.addon_support import exr_channels
+from tests.byte_counts import MIB
 
 SIZE = (80, 60)
 
@@ -94,3 +95,42 @@ def test_views_a_render_makes():
     assert render_views.view_names(render) == ["left", extra.name]
     render.views_format = "STEREO_3D"  # only the left and right views count there
     assert render_views.view_names(render) == ["left"]
+
+
+def test_views_no_longer_rendered_drop_their_kept_pixels(addon, tmp_path):
+    """Each view keeps its last pixels for the next frame (its tree_cache lane); once a render no longer
+    makes a view, its lane is dropped, so its pixels are not held for good. The panel's lane stays."""
+    scene = stereo_scene(tmp_path, "OFFAXIS")
+    assert bpy.ops.kdpreview.render() == {"FINISHED"}  # the panel's image: lane ""
+    eye_masks(scene, "KD_PREVIEW", tmp_path / "stereo")
+    assert {"view:left|", "view:right|", ""} <= lanes_of(scene)
+    scene.render.views["right"].use = False
+    scene.render.views_format = "MULTIVIEW"
+    scene.render.views["left"].camera_suffix = ""
+    scene.render.filepath = str(tmp_path / "left")
+    assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
+    assert "view:right|" not in lanes_of(scene) and {"view:left|", ""} <= lanes_of(scene)
+
+
+def test_other_views_kept_pixels_count_towards_the_memory_limit(addon, tmp_path):
+    """While one eye renders, the other eye's last pixels are held: the frame's memory check counts them
+    (tree_cache.held_bytes), so a limit that one view's frame fits, but not with the other's pixels
+    kept, refuses the frame and says why."""
+    scene = stereo_scene(tmp_path, "OFFAXIS")
+    scene.render.resolution_x, scene.render.resolution_y = 320, 240
+    eye_masks(scene, "KD_PREVIEW", tmp_path / "first")
+    held = tree_cache.held_bytes(scene, "", "view:left|")
+    right = tree_cache._states[(scene.session_uid, "", "view:right|")]
+    expected = sum(a.nbytes for a in [right.image, right.depth, *right.pixels] if isinstance(a, np.ndarray))
+    assert held == expected > 2 * MIB
+    geometry, pixels = memory_limit.frame_bytes(26, 320, 240, "binned", keeps_previous=True)
+    scene.kd_preview.memory_limit_mb = math.ceil((geometry + pixels + held / 2) / MIB)
+    scene.render.filepath = str(tmp_path / "second")
+    with pytest.raises(RuntimeError, match="of which [0-9]+ MiB other views' and passes' kept pixels"):
+        bpy.ops.render.render(write_still=True)
+    scene.kd_preview.memory_limit_mb = math.ceil((geometry + pixels + 2 * held) / MIB)
+    assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
+
+
+def lanes_of(scene) -> set:
+    return {lane for uid, group, lane in tree_cache._states if uid == scene.session_uid and group == ""}
