@@ -42,6 +42,16 @@ def requested_passes(view_layer) -> list[tuple]:
     return [row for row in PASSES if getattr(view_layer, row[4], False)]
 
 
+def passes_left_out(view_layer) -> list[str]:
+    """The names of the passes the view layer asks for (its use_pass_* switches, its AOVs) that the engine
+    does not make: Blender makes only those an engine registers, so they would be missing without a word."""
+    made = {row[4] for row in PASSES} | {"use_pass_combined", "use_pass_cryptomatte_accurate"}  # the last: an option
+    names = [prop.name for prop in view_layer.bl_rna.properties
+             if prop.identifier.startswith("use_pass_") and prop.identifier not in made
+             and getattr(view_layer, prop.identifier) is True]
+    return names + [f"AOV {aov.name}" for aov in getattr(view_layer, "aovs", ())]
+
+
 def border_region(render, width: int, height: int) -> tuple[int, int, int, int] | None:
     """(x, y from the top, w, h) in pixels of the Render Region of a width x height frame, None without
     one; Blender rounds the region's edges down (its render result is that size, checked by a test)."""
@@ -119,7 +129,10 @@ class FinalRender:
 
     def run(self) -> None:
         """Render the frame, each of its views; a PreviewError is reported (no traceback), a cancel writes
-        nothing."""
+        nothing. Ctrl-C in a script driving the bpy module (a KeyboardInterrupt here: Blender's own
+        binary takes SIGINT itself) is reported as an error, so Blender writes nothing for the frame (it
+        wrote an empty image over the output when the exception left render()) and the script's render
+        call fails instead of going on."""
         try:
             config = make_config(self.scene.kd_preview)
             passes = requested_passes(self.depsgraph.view_layer)
@@ -129,11 +142,17 @@ class FinalRender:
         except Cancelled:
             self.engine.update_stats("", "KD Preview | cancelled")
             return
-        except PreviewError as error:
-            self.engine.report({"ERROR"}, f"KD Preview: {error}")
-            self.engine.error_set(f"KD Preview: {error}")
+        except (PreviewError, KeyboardInterrupt) as error:
+            text = "interrupted (Ctrl-C): nothing written for this frame" if isinstance(error, KeyboardInterrupt) \
+                else str(error)
+            self.engine.report({"ERROR"}, f"KD Preview: {text}")
+            self.engine.error_set(f"KD Preview: {text}")
             return
-        background = film_background(self.scene)
+        left_out = passes_left_out(self.depsgraph.view_layer)
+        if left_out:
+            first.warnings.append(f"passes this engine does not make are left out: {', '.join(left_out)} (it makes "
+                                  f"Combined, {', '.join(row[0] for row in PASSES)})")
+        background = film_background(self.scene, self.depsgraph)
         if background is not None and first.result.holdouts:
             background = None
             first.warnings.append("Film > Transparent off is not applied to a frame with holdout objects: where "
@@ -221,14 +240,17 @@ def _pass(layer, name: str, view_name: str):
     return layer.passes.find_by_name(name, view_name) if view_name else layer.passes[name]
 
 
-def film_background(scene) -> np.ndarray | None:
+def film_background(scene, depsgraph) -> np.ndarray | None:
     """The RGB the Combined pass shows where nothing is hit, None when Film > Transparent is on (alpha 0
     there). The world's viewport colour (World > Viewport Display), as Workbench renders it: the preview
-    reads no shaders, the world's nodes included. (A frame with holdouts stays transparent: Cycles keeps a
+    reads no shaders, the world's nodes included. Read from the evaluated world: a keyed colour is the
+    frame's only there during an animation render. (A frame with holdouts stays transparent: Cycles keeps a
     holdout's pixels at alpha 0 over an opaque film, and the image does not tell them from the background's.)"""
     if scene.render.film_transparent:
         return None
-    return np.array(scene.world.color[:3], np.float32) if scene.world is not None else np.zeros(3, np.float32)
+    if scene.world is None:
+        return np.zeros(3, np.float32)
+    return np.array(scene.world.evaluated_get(depsgraph).color[:3], np.float32)
 
 
 def opaque(image: np.ndarray, background: np.ndarray) -> np.ndarray:

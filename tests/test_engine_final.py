@@ -11,7 +11,7 @@ import bpy
 import numpy as np
 import pytest
 
-from kd_addon import engine_final, tree_cache
+from kd_addon import engine_final, pipeline, tree_cache
 from tests import bpy_scenes as scenes
 from tests.addon_support import (add_quad, add_sun, check_half_plane_image, exr_channels, half_plane_scene,
                                  preview_pixels)
@@ -114,6 +114,27 @@ def test_film_not_transparent_puts_the_worlds_viewport_colour_behind(addon, tmp_
     assert np.array_equal(opaque[hit], transparent[hit])
     expected = np.float32([0.2, 0.3, 0.4]) if world else np.zeros(3, np.float32)
     assert (opaque[~hit][:, :3] == expected).all()
+
+
+def test_an_animation_puts_each_frames_keyed_world_colour_behind(addon, tmp_path):
+    """A keyed world colour is the frame's in an animation render too (read from the evaluated world:
+    the original one keeps the colour of the frame the render started at)."""
+    scene = engine_scene(tmp_path)
+    scene.render.film_transparent = False
+    scene.world = bpy.data.worlds.new("Keyed")
+    for frame, colour in ((1, (0.1, 0.1, 0.1)), (3, (0.8, 0.2, 0.1))):
+        scene.world.color = colour
+        scene.world.keyframe_insert("color", frame=frame)
+    scene.frame_start, scene.frame_end = 1, 3
+    scene.frame_set(1)
+    scene.render.filepath = str(tmp_path / "anim_")
+    assert bpy.ops.render.render(animation=True) == {"FINISHED"}
+    for frame in (1, 2, 3):
+        scene.frame_set(frame)
+        expected = np.float32(scene.world.color[:3])
+        background = read_rgba(tmp_path / f"anim_{frame:04d}.exr")[0, -1]  # top right: nothing hit there
+        assert background[3] == 1.0 and np.allclose(background[:3], expected, atol=1e-6), frame
+    assert not np.allclose(read_rgba(tmp_path / "anim_0001.exr")[0, -1], read_rgba(tmp_path / "anim_0003.exr")[0, -1])
 
 
 def test_film_not_transparent_with_a_holdout_stays_transparent_and_says_so(addon, tmp_path, monkeypatch):
@@ -304,6 +325,55 @@ def test_cancel_mid_frame_hands_blender_no_result(addon, tmp_path, breaks_at):
     assert sorted(ob.name for ob in scene.objects) == objects_before
     assert bpy.ops.render.render(write_still=True) == {"FINISHED"}  # the cancelled job left no claim behind
     check_half_plane_image(read_rgba(tmp_path / "frame.exr"))
+
+
+def test_ctrl_c_in_a_script_writes_nothing_and_fails_the_render(addon, tmp_path, monkeypatch):
+    """Ctrl-C while a script drives the bpy module raises KeyboardInterrupt where the frame polls its
+    worker (FrameJob.tick). The engine reports it, so Blender keeps the last good file instead of writing
+    an empty image over it, and the script's render call fails instead of going on."""
+    scene = engine_scene(tmp_path)
+    assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
+    before = (tmp_path / "frame.exr").read_bytes()
+    bpy.data.objects["Box"].location.x += 0.5
+    ticks = []
+    original = pipeline.FrameJob.tick
+
+    def interrupted_tick(job):
+        ticks.append(job)
+        if len(ticks) == 2:
+            raise KeyboardInterrupt
+        return original(job)
+
+    monkeypatch.setattr(pipeline.FrameJob, "tick", interrupted_tick)
+    with pytest.raises(RuntimeError, match=r"interrupted \(Ctrl-C\): nothing written for this frame"):
+        bpy.ops.render.render(write_still=True)
+    assert (tmp_path / "frame.exr").read_bytes() == before
+    monkeypatch.setattr(pipeline.FrameJob, "tick", original)
+    assert bpy.ops.render.render(write_still=True) == {"FINISHED"}  # no claim left behind
+    assert (tmp_path / "frame.exr").read_bytes() != before
+
+
+def test_passes_the_engine_does_not_make_are_named_in_a_warning(addon, tmp_path, monkeypatch):
+    """Blender makes only the passes an engine registers: the others a view layer asks for (here Normal,
+    Mist, Cryptomatte Object and an AOV) are missing from the file, and a warning names them."""
+    scene = engine_scene(tmp_path)
+    layer = bpy.context.view_layer
+    layer.use_pass_normal = layer.use_pass_mist = layer.use_pass_cryptomatte_object = layer.use_pass_z = True
+    layer.aovs.add().name = "Mask"
+    reported = []
+    monkeypatch.setattr(engine_final.FinalRender, "_report_warning", lambda self, text: reported.append(text))
+    assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
+    left_out = [text for text in reported if "passes this engine does not make are left out" in text]
+    assert len(left_out) == 1
+    for name in ("Normal", "Mist", "Cryptomatte Object", "AOV Mask"):
+        assert name in left_out[0]
+    assert "Depth, " not in left_out[0].split("(")[0] and "Cryptomatte Accurate" not in left_out[0]
+    for switch in ("use_pass_normal", "use_pass_mist", "use_pass_cryptomatte_object", "use_pass_z"):
+        setattr(layer, switch, False)
+    layer.aovs.remove(layer.aovs[0])
+    reported.clear()
+    assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
+    assert not any("left out" in text for text in reported)
 
 
 def test_an_error_is_reported_not_raised_and_writes_nothing(addon, tmp_path):
