@@ -353,6 +353,23 @@ def test_ctrl_c_in_a_script_writes_nothing_and_fails_the_render(addon, tmp_path,
     assert (tmp_path / "frame.exr").read_bytes() != before
 
 
+def test_ctrl_c_in_a_script_stops_an_animation_and_keeps_the_frames_written(addon, tmp_path, monkeypatch):
+    scene = engine_scene(tmp_path, name="anim_")
+    scene.frame_start, scene.frame_end = 1, 3
+    original = pipeline.FrameJob.tick
+
+    def tick(job):
+        if scene.frame_current == 2:
+            raise KeyboardInterrupt
+        return original(job)
+
+    monkeypatch.setattr(pipeline.FrameJob, "tick", tick)
+    with pytest.raises(RuntimeError, match=r"interrupted \(Ctrl-C\)"):
+        bpy.ops.render.render(animation=True)
+    assert sorted(path.name for path in tmp_path.iterdir()) == ["anim_0001.exr"]
+    check_half_plane_image(read_rgba(tmp_path / "anim_0001.exr"))
+
+
 def test_passes_the_engine_does_not_make_are_named_in_a_warning(addon, tmp_path, monkeypatch):
     """Blender makes only the passes an engine registers: the others a view layer asks for (here Normal,
     Mist, Cryptomatte Object and an AOV) are missing from the file, and a warning names them."""
