@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 import core
-from core.scene.scene_policy import OVERLAP_LIMIT, PRECISION_RATIO, SMALL_OBJECT, overlap_depth, plan_soup, soup_zones
+from core.scene.scene_policy import (OVERLAP_LIMIT, PRECISION_RATIO, SMALL_OBJECT, overlap_depth, plan_soup, soup_zones,
+                                     sparse_mesh)
 from tests.meshes import icosphere
 from tests.oracles import moller_trumbore
 
@@ -193,6 +194,60 @@ def test_a_loose_vertex_far_away_does_not_move_the_mesh(layout):
     directions = np.array([[0, 0, -1.0], [0, 0, -1.0], [-1.0, -1.0, 0]])
     scene = core.build_scene([(loose, faces)], [0], np.eye(4)[None], layout=layout)
     np.testing.assert_allclose(core.intersect_scene(scene, origins, directions).t, [0.99, 0.99, 0.49], rtol=1e-6)
+
+
+def _grid_with_a_far_corner(distance):
+    """(vertices, triangles) of a 3 x 3-vertex grid 3 wide in z = 0, its first corner moved to x = distance:
+    six small triangles and two reaching out to it."""
+    vertices = np.array([[x, y, 0.0] for y in (-1.5, 0.0, 1.5) for x in (-1.5, 0.0, 1.5)])
+    vertices[0, 0] = distance
+    quads = [(0, 1, 4, 3), (1, 2, 5, 4), (3, 4, 7, 6), (4, 5, 8, 7)]
+    return vertices, np.array([tri for a, b, c, d in quads for tri in ((a, b, c), (a, c, d))])
+
+
+@pytest.mark.parametrize("distance", [1e6, 1e8, 1e10])
+@pytest.mark.parametrize("layout", ["auto", "two_level"])
+def test_a_mesh_with_one_far_vertex_keeps_its_small_triangles(layout, distance):
+    """A small grid one of whose corners lies far away (a stray vertex a triangle uses), beside a box: in
+    the soup, float32 relative to an anchor near the middle of its huge box rounded the small triangles
+    away (hundreds of rays missed or hit wrongly at 1e8). Such a mesh keeps its own tree
+    (scene_policy.sparse_mesh). Reference: Moller-Trumbore on the world triangles (origin at the camera)."""
+    grid = _grid_with_a_far_corner(distance)
+    box = (np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float),
+           np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
+                     [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]]))
+    mats = np.stack([np.eye(4), np.eye(4)])
+    mats[0, 0, 3], mats[1, 0, 3] = 2.0, 6.0
+    camera = np.array([0.0, 0.0, 20.0])
+    scene = core.build_scene([grid, box], [0, 1], mats, origin=camera, layout=layout)
+    xs, ys = np.meshgrid(np.linspace(-1.37, 1.41, 23), np.linspace(-1.43, 1.39, 23))
+    kept = (xs > 0) | (ys > 0)  # the corner square went with its vertex
+    targets = np.stack([xs[kept] + 2.0, ys[kept], np.zeros(kept.sum())], axis=1)
+    origins, directions = targets + (0.0, 0.0, 5.0) - camera, np.tile([0.0, 0.0, -1.0], (len(targets), 1))
+    world = np.concatenate([mesh[0][mesh[1]] + m[:3, 3] for mesh, m in zip((grid, box), mats)]) - camera
+    with np.errstate(invalid="ignore"):  # rays in the plane of the box's sides
+        t_ref, prim_ref = moller_trumbore(world, origins, directions)
+    assert (prim_ref >= 0).all()  # every ray meets the grid's small triangles
+    hits = core.intersect_scene(scene, origins, directions)
+    assert (hits.instance == 0).all()
+    np.testing.assert_allclose(hits.t, t_ref, rtol=1e-6)
+
+
+def test_sparse_meshes():
+    vertices, triangles = _grid_with_a_far_corner(1.5)
+    box = np.concatenate([vertices.min(axis=0), vertices.max(axis=0)])
+    assert not sparse_mesh(vertices, triangles, box)
+    vertices[0, 0] = 1e4
+    assert sparse_mesh(vertices, triangles, np.concatenate([vertices.min(axis=0), vertices.max(axis=0)]))
+    sphere = icosphere(3)
+    assert not sparse_mesh(*sphere, np.concatenate([sphere[0].min(axis=0), sphere[0].max(axis=0)]))
+    assert not sparse_mesh(vertices, np.zeros((0, 3), np.int64), box)
+    bounds, small = np.array([[-1, -1, -1, 1, 1, 1]], np.float32), np.array([SMALL_OBJECT // 2])
+    assert plan_soup("auto", small, bounds, np.zeros(1, np.int64), np.eye(4)[None], np.zeros(1, bool))[0]
+    assert not plan_soup("auto", small, bounds, np.zeros(1, np.int64), np.eye(4)[None], np.zeros(1, bool),
+                         sparse=np.ones(1, bool))[0]
+    assert plan_soup("flat", small, bounds, np.zeros(1, np.int64), np.eye(4)[None], np.zeros(1, bool),
+                     sparse=np.ones(1, bool))[0]
 
 
 def test_a_small_convex_soup_member_far_from_the_soups_centre_is_unoccluded():

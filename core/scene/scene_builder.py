@@ -18,7 +18,7 @@ from ..inputs import FLOAT32_MAX, first_row_beyond_float32, is_real_dtype
 from .instance_signature import instance_signature, mesh_digest
 from ..build.options import make_options
 from .ray_visibility import ALL_RAYS, as_visibility, stops_rays
-from .scene_policy import LAYOUTS, plan_soup, soup_zones
+from .scene_policy import LAYOUTS, plan_soup, soup_zones, sparse_mesh
 from .two_level import build_two_level, check_placement, transformed_boxes
 
 
@@ -89,6 +89,7 @@ class SceneBuilder:
         self._dynamic = set()  # keys that changed or moved in an earlier frame
         self._deforming = set()  # keys whose geometry changed in an earlier frame: rebuilt every frame
         self._soups = {}  # (visibility, zone) -> (signature, KdTree, anchor): _soup_zones
+        self._sparse = {}  # key -> (fingerprint, scene_policy.sparse_mesh of its triangles)
 
     def build(self, meshes, mesh_of, matrices, origin=None, reuse=True, visibility=None, rays=None):
         """(TwoLevelScene, BuildReport) for one frame. meshes: list of MeshInput; mesh_of (I,) index
@@ -125,8 +126,10 @@ class SceneBuilder:
         self._track_changes(meshes, mesh_of, o2w, visibility)
         shown = np.flatnonzero(met)
         soup = np.zeros(len(mesh_of), bool)
+        dynamic = np.array([k in self._dynamic for k in keys], bool)
         soup[shown] = plan_soup(self.layout, np.array([len(m.triangles) for m in meshes], np.int64), bounds,
-                                mesh_of[shown], o2w[shown], np.array([k in self._dynamic for k in keys], bool))
+                                mesh_of[shown], o2w[shown], dynamic,
+                                self._sparse_meshes(meshes, bounds, mesh_of, dynamic))
         if self.options["lazy"]:
             soup[shown] = self._lazy_plan(soup[shown], mesh_of[shown])
             if len(set(visibility[soup].tolist())) > 1:
@@ -167,6 +170,19 @@ class SceneBuilder:
         report = BuildReport(rebuilt, reused, len(trees) - len(groups), int(soup.sum()), soup_rebuilt,
                              (perf_counter() - start) * 1e3, top_ms)
         return scene, report
+
+    def _sparse_meshes(self, meshes, bounds, mesh_of, dynamic):
+        """(M,) bool scene_policy.sparse_mesh of the meshes the soup may take (placed once, not dynamic),
+        kept per key while its fingerprint holds; the others False. bounds (M, 6): _bounds(meshes)."""
+        uses = np.bincount(mesh_of, minlength=len(meshes))
+        out = np.zeros(len(meshes), bool)
+        for i in np.flatnonzero((uses == 1) & ~dynamic):
+            m = meshes[i]
+            cached = self._sparse.get(m.key)
+            if cached is None or cached[0] != m.fingerprint:
+                cached = self._sparse[m.key] = (m.fingerprint, sparse_mesh(m.vertices, m.triangles, bounds[i]))
+            out[i] = cached[1]
+        return out
 
     def _lazy_plan(self, soup, mesh_of):
         """A lazy build has to be the scene's one tree: one mesh kept apart or one soup. Where the plan gives
@@ -245,7 +261,7 @@ class SceneBuilder:
 
     def _forget_absent(self, keys):
         present = set(keys)
-        for table in (self._trees, self._fingerprints, self._placements):
+        for table in (self._trees, self._fingerprints, self._placements, self._sparse):
             for key in [k for k in table if k not in present]:
                 del table[key]
         self._dynamic &= present

@@ -21,12 +21,20 @@ OVERLAP_SAMPLE = 2048  # boxes compared against all others when there are more (
 # rounds them by at most 2^-24 * 16384 = 2^-10 of the member's size (its own tree: ~2^-24), under a
 # pixel until the member spans a thousand. Zones cost render and build time (docs/choices.md#soup-zones-at-16384-box-diagonals).
 PRECISION_RATIO = 16384.0
+# So a soup may round a member's vertices by 2^-10 of its box's diagonal: a mesh whose typical triangle is
+# smaller than that (triangles in one spot and a vertex far away, a sparse scatter) would lose their shape
+# there, so it keeps its own tree, whose object-space float32 is as precise as its vertices
+# (docs/choices.md#meshes-whose-triangles-are-far-smaller-than-their-box-keep-their-own-tree).
+DETAIL_RATIO = 1.0 / 1024.0
+DETAIL_SAMPLE = 4096  # triangles whose sizes stand for a larger mesh's (evenly strided)
 
 
-def plan_soup(layout, mesh_triangles, mesh_bounds, mesh_of, o2w, dynamic):
+def plan_soup(layout, mesh_triangles, mesh_bounds, mesh_of, o2w, dynamic, sparse=None):
     """(I,) bool: which instances are merged into the soup.
     mesh_triangles (M,) triangle counts; mesh_bounds (M, 6) object-space boxes; mesh_of (I,);
-    o2w (I, 4, 4) float64; dynamic (M,) bool: the mesh changed or moved in an earlier frame."""
+    o2w (I, 4, 4) float64; dynamic (M,) bool: the mesh changed or moved in an earlier frame; sparse (M,)
+    bool (None: none is): its triangles are far smaller than its box (sparse_mesh), so it keeps its tree
+    unless its matrix cannot be inverted ("flat" merges every mesh)."""
     if layout not in LAYOUTS:
         raise ValueError(f"layout must be one of {LAYOUTS}, got {layout!r}")
     singular = ~invertible(o2w) if len(o2w) else np.zeros(0, bool)
@@ -36,11 +44,25 @@ def plan_soup(layout, mesh_triangles, mesh_bounds, mesh_of, o2w, dynamic):
         return singular
     uses = np.bincount(mesh_of, minlength=len(mesh_triangles))
     candidate = (uses[mesh_of] == 1) & ~dynamic[mesh_of] & ~singular
+    if sparse is not None:
+        candidate &= ~sparse[mesh_of]
     soup = singular | (candidate & (mesh_triangles[mesh_of] < SMALL_OBJECT))
     big = np.flatnonzero(candidate & ~soup)
     if len(big) > 1 and overlap_depth(transformed_boxes(mesh_bounds[mesh_of[big]], o2w[big])) > OVERLAP_LIMIT:
         soup[big] = True
     return soup
+
+
+def sparse_mesh(vertices, triangles, box):
+    """True when the median triangle of a mesh (object-space (N, 3) vertices, (T, 3) indices; at most
+    DETAIL_SAMPLE triangles, evenly strided) spans less than DETAIL_RATIO of the diagonal of `box` (6,),
+    the box of the vertices its triangles use."""
+    if len(triangles) == 0:
+        return False
+    sample = np.asarray(vertices, np.float64)[np.asarray(triangles)[::-(-len(triangles) // DETAIL_SAMPLE)]]
+    sizes = np.linalg.norm(sample.max(axis=1) - sample.min(axis=1), axis=1)
+    box = np.asarray(box, np.float64)
+    return bool(np.median(sizes) < DETAIL_RATIO * np.linalg.norm(box[3:] - box[:3]))
 
 
 def overlap_depth(boxes):

@@ -254,12 +254,14 @@ def transformed_boxes(bounds, o2w, origin=(0.0, 0.0, 0.0)):
 
 def _round_down(x):
     f = x.astype(np.float32)
-    return np.where(f > x, np.nextafter(f, np.float32(-np.inf)), f).astype(np.float32)
+    with np.errstate(over="ignore"):  # past float32's largest: -inf, which still holds the box
+        return np.where(f > x, np.nextafter(f, np.float32(-np.inf)), f).astype(np.float32)
 
 
 def _round_up(x):
     f = x.astype(np.float32)
-    return np.where(f < x, np.nextafter(f, np.float32(np.inf)), f).astype(np.float32)
+    with np.errstate(over="ignore"):  # past float32's largest: inf, which still holds the box
+        return np.where(f < x, np.nextafter(f, np.float32(np.inf)), f).astype(np.float32)
 
 
 def build_top_level(boxes, opts):
