@@ -54,13 +54,24 @@ def read_object_mesh(ob: bpy.types.Object, mesh: bpy.types.Mesh) -> tuple[np.nda
         ob.to_mesh_clear()
 
 
+def without_non_finite(verts: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+    """(vertices, triangles, how many triangles were dropped): the triangles that use a NaN or infinite
+    vertex left out, as Cycles leaves them, and such vertices (now unused) set to 0, which core accepts."""
+    finite = np.isfinite(verts).all(axis=1)
+    kept = finite[tris].all(axis=1)
+    verts = np.where(finite[:, None], verts, np.float32(0.0))
+    return verts, tris[kept], int(len(tris) - kept.sum())
+
+
 class GeometryReader:
-    """Reads each evaluated mesh once; a rejected mesh warns once, naming every object that uses it."""
+    """Reads each evaluated mesh once; a mesh with non-finite vertices warns once, naming every object
+    that uses it and how many of its triangles were left out."""
 
     def __init__(self):
         self.geometries: dict[int, MeshGeometry] = {}
         self.rejected: set[int] = set()
-        self.non_finite: dict[int, tuple[str, set[str]]] = {}  # key -> (mesh name, its objects)
+        # key -> (mesh name, its objects, triangles left out, triangles read)
+        self.non_finite: dict[int, tuple[str, set[str], int, int]] = {}
 
     def get(self, ob: bpy.types.Object, object_name: str) -> int | None:
         """Geometry key for the evaluated object `ob`'s mesh, or None when it has no usable triangles."""
@@ -69,16 +80,15 @@ class GeometryReader:
     def get_mesh(self, ob: bpy.types.Object, mesh: bpy.types.Mesh, object_name: str) -> int | None:
         """`get` of a mesh `ob` places other than its own data (a geometry-nodes instance's mesh)."""
         key = mesh.as_pointer()
-        if key in self.geometries:
-            return key
-        if key in self.rejected:
+        if key in self.geometries or key in self.rejected:
             if key in self.non_finite:
                 self.non_finite[key][1].add(object_name)
-            return None
+            return key if key in self.geometries else None
         verts, tris = read_object_mesh(ob, mesh)
         if len(tris) and not np.isfinite(verts).all():
-            self.non_finite[key] = (mesh.name, {object_name})
-            tris = tris[:0]
+            verts, kept, dropped = without_non_finite(verts, tris)
+            self.non_finite[key] = (mesh.name, {object_name}, dropped, len(tris))
+            tris = kept
         if len(tris) == 0:
             self.rejected.add(key)
             return None
@@ -88,11 +98,11 @@ class GeometryReader:
     @property
     def warnings(self) -> list[str]:
         out = []
-        for mesh_name, users in self.non_finite.values():
+        for mesh_name, users, dropped, read in self.non_finite.values():
             names = ", ".join(f"'{n}'" for n in sorted(users))
+            what = "left out" if dropped == read else f"the {dropped:,} of its {read:,} triangles that use them left out"
             if len(users) == 1:
-                out.append(f"object {names} has non-finite vertex coordinates; left out")
+                out.append(f"object {names} has non-finite vertex coordinates; {what}")
             else:
-                out.append(f"objects {names} (sharing mesh '{mesh_name}') have non-finite vertex coordinates; "
-                           "left out")
+                out.append(f"objects {names} (sharing mesh '{mesh_name}') have non-finite vertex coordinates; {what}")
         return out

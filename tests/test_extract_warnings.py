@@ -276,6 +276,19 @@ def test_a_shared_non_finite_mesh_warns_once_naming_every_user(scene):
                                "vertex coordinates; left out"]
 
 
+def test_a_meshs_finite_triangles_stay_and_the_warning_counts_the_others(scene):
+    """As Cycles: only the triangles that use a non-finite vertex are left out; every user of the shared
+    mesh keeps the others."""
+    verts = [(0, 0, 0), (1, 0, 0), (0, 1, 0), (float("inf"), 1, 0)]
+    first = scenes.add_mesh("Half", verts, [(0, 1, 2), (1, 3, 2)])
+    scenes.link(bpy.data.objects.new("Twin", first.data))
+    result = extract_scene()
+    assert sorted(result.object_names) == ["Half", "Twin"]
+    assert result.triangle_count == 2
+    assert result.warnings == ["objects 'Half', 'Twin' (sharing mesh 'Half') have non-finite vertex coordinates; the 1 "
+                               "of its 2 triangles that use them left out"]
+
+
 def _evaluation_warnings(result: ExtractedScene) -> list[str]:
     return [w for w in result.warnings if w.startswith("the preview evaluates geometry as the viewport does")]
 

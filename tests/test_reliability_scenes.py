@@ -94,15 +94,25 @@ def test_non_finite_object_warns_on_the_command_line_and_the_rest_renders(tmp_pa
 # -- objects that are left out -------------------------------------------------------------
 
 
+# Four triangles in view above the ground, around vertex 0; vertex 4 is used by the last two only.
+FAN_VERTS = [(0.0, 0.0, 0.0), (0.4, 0.0, 0.0), (0.0, 0.4, 0.0), (-0.4, 0.0, 0.0), (0.0, -0.4, 0.0), (0.3, -0.3, 0.1)]
+FAN_FACES = [(0, 1, 2), (0, 2, 3), (0, 3, 4), (0, 4, 5)]
+
+
 def test_non_finite_objects_are_named_and_nothing_else_changes(addon):
+    """Objects with a non-finite transform are left out; a mesh's triangles that use a NaN or infinite
+    vertex are left out and the rest render, as Cycles does. Reference: the same scene with those
+    triangles' mesh made without them."""
     scene = half_plane_scene()
+    fan = [list(v) for v in FAN_VERTS]
+    scenes.add_mesh("Kept", fan[:4], FAN_FACES[:2], location=(-2, 1, 1))
     reference = render(scene)
+    bpy.data.objects.remove(bpy.data.objects["Kept"])
     scenes.add_mesh("NaNTri", [(-3, 0, 2), (-1, 0, 2), (math.nan, 1, 2)], [(0, 1, 2)])
-    # A cube in view above the ground with one vertex at infinity, as a script or a broken modifier may
-    # leave it (setting vertex.co through RNA would clamp inf to the largest float; from_pydata does not).
-    verts = [(0.3 * x, 0.3 * y, 0.3 * z) for x, y, z in scenes.CUBE_VERTS]
-    verts[5] = (math.inf, 0.3, -0.3)
-    scenes.add_mesh("Exploded", verts, scenes.CUBE_FACES, location=(-2, 1, 1))
+    # One vertex at infinity, as a script or a broken modifier may leave it (setting vertex.co through
+    # RNA would clamp inf to the largest float; from_pydata does not).
+    fan[4] = (math.inf, -0.4, 0.0)
+    scenes.add_mesh("Exploded", fan, FAN_FACES, location=(-2, 1, 1))
     # Transforms no placement can use, named by object (not core's "instance 1 has a non-finite
     # matrix" failing the whole frame): a NaN location, and an instancer's NaN rotation.
     scenes.add_cube("Lost", scale=0.3, location=(-2, 1, 1)).location.x = math.nan
@@ -111,12 +121,12 @@ def test_non_finite_objects_are_named_and_nothing_else_changes(addon):
     scenes.add_collection_instance("Blown", source, location=(-2, 1, 1)).rotation_euler.z = math.nan
     result = render(scene)
     assert sorted(w for w in result.warnings if "non-finite" in w) == [
-        "object 'Exploded' has non-finite vertex coordinates; left out",
+        "object 'Exploded' has non-finite vertex coordinates; the 2 of its 4 triangles that use them left out",
         "object 'Lost' has a non-finite transform (NaN or infinite location, rotation or scale); left out",
         "object 'Member' instanced by 'Blown': 1 instance with a non-finite transform (NaN or infinite location, "
         "rotation or scale) left out",
         "object 'NaNTri' has non-finite vertex coordinates; left out"]
-    assert result.triangles == reference.triangles == 14
+    assert result.triangles == reference.triangles == 14 + 2
     np.testing.assert_array_equal(result.image, reference.image)
 
 
