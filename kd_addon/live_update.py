@@ -2,8 +2,12 @@
 
 Frame changes: the handler renders synchronously, so playback waits for each frame (the point of the
 option). It stays out while an operator renders (Render Animation's own frame_set calls) and while
-Blender renders (the handler then runs on the render thread, where touching images is unsafe); a
-frame the user moves to during a render is left to the edit timer.
+Blender renders (the handler then runs on the render thread, where touching images is unsafe, and a
+farm's or script's render would pay for a preview a frame); a frame the user moves to during a render
+is left to the edit timer. A render that blocks (`blender -b`, bpy.ops.render.render from a script) is
+no job to bpy.app.is_job_running, so renders are also followed by their render_init and
+render_complete / render_cancel handlers (blender_renders); the frame change with which Blender puts the
+start frame back after a render is skipped too (render_restores_frame).
 
 Edits: each depsgraph update (re)starts a timer, so a drag renders once, when it pauses for
 EDIT_DELAY; the timer runs the Render operator modal, so Esc cancels. A running Live Update render
@@ -30,11 +34,44 @@ EDIT_DELAY = 0.3  # seconds without edits before live update renders them
 INTERACTIVE_TOOLS = {"TRANSFORM", "VIEW3D", "MESH", "SCULPT", "PAINT", "GIZMO", "GIZMOGROUP"}
 
 
+_render_running = False  # between a render's render_init and its render_complete / render_cancel
+_frame_to_restore = None  # the frame a render started at, until the frame change after it ends
+
+
+@bpy.app.handlers.persistent
+def kd_preview_render_started(scene, *_args):
+    """render_init: Blender starts a render (a still, an animation; a blocking one too)."""
+    global _render_running, _frame_to_restore
+    _render_running, _frame_to_restore = True, scene.frame_current
+
+
+@bpy.app.handlers.persistent
+def kd_preview_render_ended(*_args):
+    """render_complete and render_cancel: the render ended (Blender then sets the start frame back)."""
+    global _render_running
+    _render_running = False
+
+
+def render_restores_frame(scene) -> bool:
+    """Whether this frame change is the first after a render ended and goes back to the frame it started
+    at: Blender restoring it, no move of the user's (taken once either way)."""
+    global _frame_to_restore
+    restored, _frame_to_restore = _frame_to_restore, None
+    return restored is not None and restored == scene.frame_current
+
+
+def blender_renders() -> bool:
+    """Whether Blender renders now: a render job (F12 in the interface) or a blocking render."""
+    return _render_running or bpy.app.is_job_running("RENDER")
+
+
 @bpy.app.handlers.persistent
 def kd_preview_frame_change(scene, depsgraph=None):
     """frame_change_post: re-render the preview of the new frame when live update is on."""
+    if blender_renders() or render_restores_frame(scene):
+        return
     settings = getattr(scene, "kd_preview", None)
-    if settings is None or not settings.live_update or bpy.app.is_job_running("RENDER"):
+    if settings is None or not settings.live_update:
         return
     if job_running():
         if operators.running_frame_render() is not None:  # the user changed the frame during a Render run:
@@ -91,7 +128,7 @@ def render_edits():
     settings = getattr(window.scene, "kd_preview", None) if window is not None else None
     if settings is None or not settings.live_update:
         return None
-    if bpy.app.is_job_running("RENDER") or interactive_tool_running([op.bl_idname for op in window.modal_operators]):
+    if blender_renders() or interactive_tool_running([op.bl_idname for op in window.modal_operators]):
         return EDIT_DELAY  # Blender renders (and may set frames) or a tool edits: read the scene after
     if not background.wait_for_work(background.SCENE_READ_WAIT):
         return EDIT_DELAY  # a build or trace step is still on the worker (SCENE_READ_WAIT)
@@ -131,7 +168,9 @@ def interactive_tool_running(idnames) -> bool:
     return any(group(idname) in INTERACTIVE_TOOLS for idname in idnames)
 
 
-HANDLERS = (("frame_change_post", kd_preview_frame_change), ("depsgraph_update_post", kd_preview_scene_edit))
+HANDLERS = (("frame_change_post", kd_preview_frame_change), ("depsgraph_update_post", kd_preview_scene_edit),
+            ("render_init", kd_preview_render_started), ("render_complete", kd_preview_render_ended),
+            ("render_cancel", kd_preview_render_ended))
 
 
 def register():

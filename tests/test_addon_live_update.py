@@ -30,6 +30,28 @@ def test_live_update_renders_on_frame_change_only_when_enabled(addon):
     assert handlers == [live_update.kd_preview_frame_change]
 
 
+@pytest.mark.parametrize("engine", ["BLENDER_WORKBENCH", "KD_PREVIEW"])
+def test_live_update_stays_out_of_a_blocking_render(addon, tmp_path, monkeypatch, engine):
+    """A file saved with Live Update on, rendered by a script or a farm (`blender -b -a`): the render
+    blocks, so bpy.app.is_job_running("RENDER") is False in the frame handler, which rendered a preview
+    of every frame beside the real render. Blender's render handlers now say it renders; afterwards a
+    frame change renders the preview again."""
+    scene = half_plane_scene()
+    scene.render.engine = engine
+    scene.frame_start, scene.frame_end = 1, 3
+    scene.render.filepath = str(tmp_path / "frame_")
+    scene.kd_preview.live_update = True
+    previews = []
+    original = live_update.render_frame
+    monkeypatch.setattr(live_update, "render_frame",
+                        lambda s, *args, **kwargs: previews.append(s.frame_current) or original(s, *args, **kwargs))
+    assert bpy.ops.render.render(animation=True) == {"FINISHED"}
+    assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
+    assert previews == [] and len(list(tmp_path.glob("frame_*"))) == 4
+    scene.frame_set(2)
+    assert previews == [2]
+
+
 def test_live_update_renders_an_edit_once_edits_pause(addon):
     """Each depsgraph update (re)starts a timer (EDIT_DELAY); when it fires, the Render operator renders
     the edit. Timers never fire in background mode, so the test calls the timer's function itself."""
