@@ -17,6 +17,7 @@ import numpy as np
 IMAGE_NAME = "KD Preview"
 IMAGE_TAG = "kd_preview_image"  # custom property marking the image this add-on owns
 _last_frame: np.ndarray | None = None  # the last frame stored in this file and session
+_ours: int | None = None  # session_uid of the preview image this session last wrote
 
 
 def preview_image(width: int, height: int) -> bpy.types.Image:
@@ -26,17 +27,29 @@ def preview_image(width: int, height: int) -> bpy.types.Image:
     the image carrying IMAGE_TAG (or an untagged float "KD Preview" from an earlier version, adopted);
     a user's own image of that name is never touched: ours then gets Blender's next free name.
     """
+    global _ours
     image = _current_preview()
     if image is None or not _writable(image):
+        if image is not None and IMAGE_TAG in image:
+            del image[IMAGE_TAG]  # saved or unpacked to a file: the user's image now, as its copies are
         image = bpy.data.images.new(IMAGE_NAME, width, height, alpha=True, float_buffer=True)
     elif tuple(image.size) != (width, height):
         image.scale(width, height)
     image[IMAGE_TAG] = True
+    _ours = getattr(image, "session_uid", None)
+    for other in bpy.data.images:  # copies carry the tag (Image.copy, the editor's duplicate): the user's
+        if other != image and IMAGE_TAG in other:
+            del other[IMAGE_TAG]
     return image
 
 
 def tagged_image() -> bpy.types.Image | None:
-    return next((im for im in bpy.data.images if im.get(IMAGE_TAG)), None)
+    """Ours: the tagged image this session wrote last (by session_uid, which a copy does not share); in a
+    file just opened, a tagged one, one we can write named IMAGE_NAME first."""
+    tagged = [im for im in bpy.data.images if im.get(IMAGE_TAG)]
+    mine = [im for im in tagged if _ours is not None and getattr(im, "session_uid", None) == _ours]
+    writable = [im for im in tagged if _writable(im)]
+    return next(iter(mine + [im for im in writable if im.name == IMAGE_NAME] + writable + tagged), None)
 
 
 def _current_preview() -> bpy.types.Image | None:

@@ -130,3 +130,43 @@ def test_handlers_are_registered_once_and_removed(addon, kind):
     image_keeping.unregister()
     assert ours() == []
     image_keeping.register()  # for the fixture's unregister
+
+
+def test_a_copy_of_the_preview_is_the_users_and_the_next_render_goes_to_the_preview(addon):
+    """A snapshot made by copying the image (Image.copy, as the editor's duplicate) carries the add-on's
+    tag too; named to sort first, it took the next frame and the preview stayed stale."""
+    scene = half_plane_scene()
+    before = rendered()
+    snapshot = bpy.data.images[IMAGE_NAME].copy()
+    snapshot.name = "A before"
+    kept = preview_pixels("A before").copy()  # (bpy regenerates a generated image's copy: not `before`)
+    scene.objects["Box"].location.x = -1.0
+    after = rendered()
+    assert np.abs(after - before).max() > 0.1
+    assert np.array_equal(preview_pixels("A before"), kept)
+    assert [im.name for im in bpy.data.images if im.get(IMAGE_TAG)] == [IMAGE_NAME]
+
+
+@pytest.mark.parametrize("how", ["unpacked", "saved"])
+def test_a_preview_saved_to_a_file_is_the_users_and_one_new_preview_takes_later_renders(addon, tmp_path, how):
+    """Once the user unpacks the preview (saving the .blend packs it) or saves it as a file, it is theirs:
+    the next render makes one new preview, which later renders reuse (each render made another)."""
+    scene = half_plane_scene()
+    first = rendered()
+    image = bpy.data.images[IMAGE_NAME]
+    image.use_fake_user = True
+    if how == "unpacked":
+        bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "scene.blend"))
+        image = bpy.data.images[IMAGE_NAME]
+        assert image.packed_file is not None
+        image.unpack(method="WRITE_LOCAL")
+    else:
+        image.filepath_raw, image.file_format = str(tmp_path / "mine.exr"), "OPEN_EXR"
+        image.save()
+    users = image.name
+    for seed in (1, 2, 3):
+        scene.kd_preview.seed = seed
+        rendered()
+    ours = [im.name for im in bpy.data.images if im.get(IMAGE_TAG)]
+    assert len(ours) == 1 and ours[0] != users and len(bpy.data.images) == 2
+    assert np.allclose(preview_pixels(users), first, atol=1e-3)  # the user's image left as it was
