@@ -16,7 +16,7 @@ from pathlib import Path
 from . import background, output
 from .run_record import run_record
 from .signals_held import signals_held
-from .config import RenderConfig
+from .config import RenderConfig, make_config
 from .errors import Cancelled, PreviewError
 from .pipeline import FrameJob, FrameResult
 
@@ -140,6 +140,8 @@ class SequenceJob:
         self._next_report = 0.0  # perf_counter time before which _report_progress writes none
         self.totals: dict = {}
         self._preview_before = output.preview_state()  # put back by close() when the run does not finish
+        self._first_settings: dict | None = None  # the scene's KD Preview settings at the first frame
+        self._keyed_note: str | None = None  # said once, on the first frame whose settings differ
 
     @property
     def done(self) -> bool:
@@ -168,6 +170,9 @@ class SequenceJob:
             if not self.job.tick():
                 return False
             result = self.job.result()
+            if self._keyed_note is not None:
+                result.warnings.append(self._keyed_note)
+                self._keyed_note = ""  # said: "" never again
             path = self._write(result)
             self.job = None
         except PreviewError as error:
@@ -196,7 +201,21 @@ class SequenceJob:
 
     def _evaluated_at(self, frame: int):
         self.scene.frame_set(frame)
+        self._note_keyed_settings()
         return self.depsgraph_for(self.scene)
+
+    def _note_keyed_settings(self) -> None:
+        """A sequence renders with the settings it started with (report.json records one set): settings
+        keyed to change over the frames are named once, in the first frame where they differ."""
+        now = make_config(self.scene.kd_preview).as_dict()
+        if self._first_settings is None:
+            self._first_settings = now
+            return
+        changed = sorted(k for k in now if now[k] != self._first_settings[k])
+        if changed and self._keyed_note is None:
+            self._keyed_note = (f"KD Preview settings keyed to change over the frames ({', '.join(changed)}) keep their "
+                                "first frame's values in this run; the render engine's animation (Ctrl-F12) follows "
+                                "them frame by frame")
 
     def _write(self, result: FrameResult) -> Path:
         path = self.out_dir / frame_filename(self.frames[len(self.results)], self.config.file_extension)
