@@ -30,8 +30,8 @@ RUN_ROWS = (
     ("Trees Kept", "objects_reused", "{:,}"),
 )
 LAZY_ROWS = (  # a lazy tree (Lazy Build): how much of it the rays made it build
-    ("Subtrees Built", "subtrees_built", "{:,}"),
-    ("Subtrees Deferred", "subtrees_total", "{:,}"),
+    ("Subtrees Deferred", "subtrees_total", "{:,}"),  # at the build: left for the rays to ask for
+    ("Built On Demand", "subtrees_built", "{:,}"),  # of those, the ones the rays asked for
     ("Lazy Build", "lazy_build_ms", "{:.1f} ms"),
 )
 TREE_ROWS = (
