@@ -26,7 +26,7 @@ from .config import make_config
 from .errors import Cancelled, PreviewError
 from .pipeline import FrameJob, FrameResult, FrameView, claim, release
 from . import tree_cache
-from .render_views import FINAL_LANES, Eye, eye_camera, eye_of, lane_of, view_names
+from .render_views import Eye, eye_camera, eye_of, final_lanes, lane_of, view_names
 from .scene_input import CameraInput, read_camera
 
 # (pass name, channels, channel ids, Blender's pass type, the view layer switch that asks for it)
@@ -136,9 +136,12 @@ class FinalRender:
         try:
             config = make_config(self.scene.kd_preview)
             passes = requested_passes(self.depsgraph.view_layer)
-            views = {name: self._view(config, name, passes) for name in view_names(self.scene.render)}
+            names = view_names(self.scene.render)
+            # before the memory check counts them: the lanes this frame may render, then those it did
+            self._keep_lanes({self._lane(name, term) for name in names for term in ["", *self._terms(passes)]})
+            views = {name: self._view(config, name, passes) for name in names}
             first = next(iter(views.values()))
-            tree_cache.keep_lanes(self.scene, "", self.lanes, FINAL_LANES)
+            self._keep_lanes(self.lanes)
         except Cancelled:
             self.engine.update_stats("", "KD Preview | cancelled")
             return
@@ -169,9 +172,21 @@ class FinalRender:
         view, camera_warnings = final_view(self.scene, self.depsgraph, self.engine.resolution_x,
                                            self.engine.resolution_y, eye)
         label = f"Combined {name}".rstrip()
-        result = self._frame(config, view, lane_of(name), label)
+        result = self._frame(config, view, self._lane(name), label)
         images, pass_warnings = self._pass_images(config, view, result, passes, name)
         return RenderedView(view, camera_warnings + result.warnings + pass_warnings, result, images)
+
+    def _lane(self, view_name: str, term: str = "") -> str:
+        return lane_of(self.depsgraph.view_layer.name, view_name, term)
+
+    @staticmethod
+    def _terms(passes: list[tuple]) -> list[str]:
+        """The render terms of the requested passes that may need a trace of their own."""
+        return [TERM_OF_PASS[row[0]] for row in passes if row[0] in TERM_OF_PASS]
+
+    def _keep_lanes(self, lanes) -> None:
+        """Drop the lanes of this view layer's final renders that are not among `lanes`."""
+        tree_cache.keep_lanes(self.scene, "", lanes, (final_lanes(self.depsgraph.view_layer.name),))
 
     def _report_warning(self, text: str) -> None:
         self.engine.report({"WARNING"}, f"KD Preview: {text}")
@@ -207,7 +222,7 @@ class FinalRender:
                 continue
             term_config = make_config(replace(config.settings, mode=term))
             try:
-                images[name] = self._frame(term_config, view, lane_of(view_name, f"{FINAL_LANES[1]}{term}"),
+                images[name] = self._frame(term_config, view, self._lane(view_name, term),
                                            f"{name} pass {view_name}".rstrip()).image[..., :channels]
             except PreviewError as error:  # e.g. a Shadow pass in a scene without lights
                 warnings.append(f"the {name} pass is left black: {error}")

@@ -5,9 +5,9 @@ option). It stays out while an operator renders (Render Animation's own frame_se
 Blender renders (the handler then runs on the render thread, where touching images is unsafe, and a
 farm's or script's render would pay for a preview a frame); a frame the user moves to during a render
 is left to the edit timer. A render that blocks (`blender -b`, bpy.ops.render.render from a script) is
-no job to bpy.app.is_job_running, so renders are also followed by their render_init and
-render_complete / render_cancel handlers (blender_renders); the frame change with which Blender puts the
-start frame back after a render is skipped too (render_restores_frame).
+no job to bpy.app.is_job_running: its frame changes are told by their depsgraph's mode ("RENDER"), and
+the one with which Blender puts the start frame back after a render is skipped too
+(render_restores_frame).
 
 Edits: each depsgraph update (re)starts a timer, so a drag renders once, when it pauses for
 EDIT_DELAY; the timer runs the Render operator modal, so Esc cancels. A running Live Update render
@@ -34,41 +34,36 @@ EDIT_DELAY = 0.3  # seconds without edits before live update renders them
 INTERACTIVE_TOOLS = {"TRANSFORM", "VIEW3D", "MESH", "SCULPT", "PAINT", "GIZMO", "GIZMOGROUP"}
 
 
-_render_running = False  # between a render's render_init and its render_complete / render_cancel
-_frame_to_restore = None  # the frame a render started at, until the frame change after it ends
+_frame_to_restore = None  # the frame a render started at, until the first frame change outside renders
 
 
 @bpy.app.handlers.persistent
 def kd_preview_render_started(scene, *_args):
-    """render_init: Blender starts a render (a still, an animation; a blocking one too)."""
-    global _render_running, _frame_to_restore
-    _render_running, _frame_to_restore = True, scene.frame_current
-
-
-@bpy.app.handlers.persistent
-def kd_preview_render_ended(*_args):
-    """render_complete and render_cancel: the render ended (Blender then sets the start frame back)."""
-    global _render_running
-    _render_running = False
+    """render_init: Blender starts a render (a still, an animation; a blocking one too), and after it
+    sets the frame it started at back."""
+    global _frame_to_restore
+    _frame_to_restore = scene.frame_current
 
 
 def render_restores_frame(scene) -> bool:
-    """Whether this frame change is the first after a render ended and goes back to the frame it started
-    at: Blender restoring it, no move of the user's (taken once either way)."""
+    """Whether this frame change, the first outside a render since one started, goes back to the frame
+    that render started at: Blender restoring it, no move of the user's (taken once either way)."""
     global _frame_to_restore
     restored, _frame_to_restore = _frame_to_restore, None
     return restored is not None and restored == scene.frame_current
 
 
-def blender_renders() -> bool:
-    """Whether Blender renders now: a render job (F12 in the interface) or a blocking render."""
-    return _render_running or bpy.app.is_job_running("RENDER")
+def blender_renders(depsgraph=None) -> bool:
+    """Whether Blender renders now: a render job (F12 in the interface), or a render that blocks, whose
+    frame changes come with the render's depsgraph (a flag kept from render_init to render_complete
+    would stay set after a render that fails before its first frame, which fires neither end handler)."""
+    return bpy.app.is_job_running("RENDER") or (depsgraph is not None and depsgraph.mode == "RENDER")
 
 
 @bpy.app.handlers.persistent
 def kd_preview_frame_change(scene, depsgraph=None):
     """frame_change_post: re-render the preview of the new frame when live update is on."""
-    if blender_renders() or render_restores_frame(scene):
+    if blender_renders(depsgraph) or render_restores_frame(scene):
         return
     settings = getattr(scene, "kd_preview", None)
     if settings is None or not settings.live_update:
@@ -128,7 +123,8 @@ def render_edits():
     settings = getattr(window.scene, "kd_preview", None) if window is not None else None
     if settings is None or not settings.live_update:
         return None
-    if blender_renders() or interactive_tool_running([op.bl_idname for op in window.modal_operators]):
+    # (a render that blocks runs no timer: only a render job can be running here)
+    if bpy.app.is_job_running("RENDER") or interactive_tool_running([op.bl_idname for op in window.modal_operators]):
         return EDIT_DELAY  # Blender renders (and may set frames) or a tool edits: read the scene after
     if not background.wait_for_work(background.SCENE_READ_WAIT):
         return EDIT_DELAY  # a build or trace step is still on the worker (SCENE_READ_WAIT)
@@ -169,8 +165,7 @@ def interactive_tool_running(idnames) -> bool:
 
 
 HANDLERS = (("frame_change_post", kd_preview_frame_change), ("depsgraph_update_post", kd_preview_scene_edit),
-            ("render_init", kd_preview_render_started), ("render_complete", kd_preview_render_ended),
-            ("render_cancel", kd_preview_render_ended))
+            ("render_init", kd_preview_render_started))
 
 
 def register():

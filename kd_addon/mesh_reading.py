@@ -87,7 +87,8 @@ class GeometryReader:
         verts, tris = read_object_mesh(ob, mesh)
         if len(tris) and not np.isfinite(verts).all():
             verts, kept, dropped = without_non_finite(verts, tris)
-            self.non_finite[key] = (mesh.name, {object_name}, dropped, len(tris))
+            if dropped:  # a loose non-finite vertex costs nothing: said nothing, as in Cycles
+                self.non_finite[key] = (mesh.name, {object_name}, dropped, len(tris))
             tris = kept
         if len(tris) == 0:
             self.rejected.add(key)

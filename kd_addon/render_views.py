@@ -66,12 +66,16 @@ def eye_camera(camera: CameraInput, eye: Eye | None, width: int, height: int) ->
     return replace(camera, matrix_world=normalized_matrix(eye.matrix_world), shift=(shift_x, camera.shift[1]))
 
 
-# How the lanes only final renders use begin: a view's, a pass's (tree_cache.keep_lanes drops those a frame
-# no longer renders).
-FINAL_LANES = ("view:", "pass:")
+def lane_of(layer: str, name: str, term: str = "") -> str:
+    """The tree_cache lane of view `name`'s image (each view keeps its own pixels across frames), or of
+    its pass of `term` ("ao", "shadow"), in view layer `layer`; "" for the Combined image without views,
+    which the panel's renders share. The others begin with final_lanes(layer)."""
+    if not name and not term:
+        return ""
+    return f"{final_lanes(layer)}view:{name}|pass:{term}"
 
 
-def lane_of(name: str, lane: str = "") -> str:
-    """The tree_cache lane of view `name`'s image (each view keeps its own pixels across frames); `lane`
-    a pass's ("pass:<term>") or "" (the Combined image)."""
-    return lane if not name else f"{FINAL_LANES[0]}{name}|{lane}"
+def final_lanes(layer: str) -> str:
+    """How the lanes only view layer `layer`'s final renders use begin (tree_cache.keep_lanes drops those
+    a frame of that layer no longer renders)."""
+    return f"layer:{layer}|"

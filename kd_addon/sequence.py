@@ -140,7 +140,9 @@ class SequenceJob:
         self._next_report = 0.0  # perf_counter time before which _report_progress writes none
         self.totals: dict = {}
         self._preview_before = output.preview_state()  # put back by close() when the run does not finish
-        self._first_settings: dict | None = None  # the scene's KD Preview settings at the first frame
+        # the scene's KD Preview settings when the run's config was made (now: the current frame's); None
+        # where the add-on's settings are not registered (the command line reads the .blend's itself)
+        self._first_settings = _scene_settings(scene)
         self._keyed_note: str | None = None  # said once, on the first frame whose settings differ
 
     @property
@@ -205,17 +207,16 @@ class SequenceJob:
         return self.depsgraph_for(self.scene)
 
     def _note_keyed_settings(self) -> None:
-        """A sequence renders with the settings it started with (report.json records one set): settings
-        keyed to change over the frames are named once, in the first frame where they differ."""
-        now = make_config(self.scene.kd_preview).as_dict()
-        if self._first_settings is None:
-            self._first_settings = now
+        """A sequence renders with the settings it started with (report.json records one set): the scene's
+        settings keyed to differ from them are named once, in the first frame where they do."""
+        now = _scene_settings(self.scene)
+        if now is None or self._first_settings is None:
             return
         changed = sorted(k for k in now if now[k] != self._first_settings[k])
         if changed and self._keyed_note is None:
-            self._keyed_note = (f"KD Preview settings keyed to change over the frames ({', '.join(changed)}) keep their "
-                                "first frame's values in this run; the render engine's animation (Ctrl-F12) follows "
-                                "them frame by frame")
+            self._keyed_note = (f"KD Preview settings keyed to change over the frames ({', '.join(changed)}) are not "
+                                "followed: this run keeps the values it started with (report.json's settings); the "
+                                "render engine's animation (Ctrl-F12) follows them frame by frame")
 
     def _write(self, result: FrameResult) -> Path:
         path = self.out_dir / frame_filename(self.frames[len(self.results)], self.config.file_extension)
@@ -277,6 +278,12 @@ class SequenceJob:
         self.report_path = write_report(self.out_dir, self.scene_name(), self.config, self.results, self.files,
                                         self.totals, len(self.frames), self._stopped, started_at=self._started_at)
         self._reported = len(self.results)
+
+
+def _scene_settings(scene) -> dict | None:
+    """The scene's KD Preview settings (RenderConfig.as_dict), None without the add-on's properties."""
+    settings = getattr(scene, "kd_preview", None)
+    return None if settings is None else make_config(settings).as_dict()
 
 
 def stop_reason(error: BaseException) -> str:

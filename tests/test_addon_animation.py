@@ -52,9 +52,10 @@ def test_animation_writes_frames_and_report(addon, tmp_path):
     assert img[16, column_of(-1.0), 0] == pytest.approx(1.0, abs=1e-3)  # box moved to x = -1: its top is open
 
 
-def test_settings_keyed_over_the_frames_are_named_and_the_first_frames_kept(addon, tmp_path):
-    """Animation renders with the settings it starts with (report.json records one set); settings keyed to
-    change are named once, in the first frame where they differ, and say what follows them instead."""
+@pytest.mark.parametrize("start", [1, 3])
+def test_settings_keyed_over_the_frames_are_named_and_the_starting_ones_kept(addon, tmp_path, start):
+    """Animation renders with the settings it starts with, at the current frame (report.json records one
+    set); settings keyed to differ are named once, in the first frame where they do."""
     scene = half_plane_scene()
     settings = scene.kd_preview
     settings.samples = 2
@@ -63,13 +64,14 @@ def test_settings_keyed_over_the_frames_are_named_and_the_first_frames_kept(addo
     settings.keyframe_insert("samples", frame=3)
     scene.frame_start, scene.frame_end = 1, 3
     settings.output_dir = str(tmp_path / "seq")
-    scene.frame_set(1)
+    scene.frame_set(start)
     assert bpy.ops.kdpreview.render_animation() == {"FINISHED"}
     report = json.loads((tmp_path / "seq" / "report.json").read_text())
-    assert report["settings"]["samples"] == 2
+    assert report["settings"]["samples"] == (2 if start == 1 else 8)
     notes = [[w for w in row["warnings"] if "keyed to change over the frames" in w] for row in report["frames"]]
-    assert [len(n) for n in notes] == [0, 1, 0]  # frame 2: samples 5 by then
-    assert "(samples)" in notes[1][0] and "Ctrl-F12" in notes[1][0]
+    assert [len(n) for n in notes] == ([0, 1, 0] if start == 1 else [1, 0, 0])  # samples 2, 5, 8
+    said = notes[1 if start == 1 else 0][0]
+    assert "(samples)" in said and "keeps the values it started with" in said and "Ctrl-F12" in said
 
 
 def test_exr_frames_hold_the_linear_values(tmp_path):

@@ -50,6 +50,14 @@ def test_live_update_stays_out_of_a_blocking_render(addon, tmp_path, monkeypatch
     assert previews == [] and len(list(tmp_path.glob("frame_*"))) == 4
     scene.frame_set(2)
     assert previews == [2]
+    # A render that fails before its first frame (Blender refuses 4 x 4 at 1 %) fires render_init but
+    # neither render_complete nor render_cancel: Live Update must still follow the frames after it.
+    scene.render.resolution_x = scene.render.resolution_y = 4
+    scene.render.resolution_percentage = 1
+    with pytest.raises(RuntimeError, match="too small"):
+        bpy.ops.render.render(animation=True)
+    scene.frame_set(3)
+    assert previews == [2, 3]
 
 
 def test_live_update_renders_an_edit_once_edits_pause(addon):

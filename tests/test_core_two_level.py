@@ -205,7 +205,7 @@ def _grid_with_a_far_corner(distance):
     return vertices, np.array([tri for a, b, c, d in quads for tri in ((a, b, c), (a, c, d))])
 
 
-@pytest.mark.parametrize("distance", [1e6, 1e8, 1e10])
+@pytest.mark.parametrize("distance", [3e4, 1e6, 1e8, 1e10])
 @pytest.mark.parametrize("layout", ["auto", "two_level"])
 def test_a_mesh_with_one_far_vertex_keeps_its_small_triangles(layout, distance):
     """A small grid one of whose corners lies far away (a stray vertex a triangle uses), beside a box: in
@@ -237,7 +237,9 @@ def test_sparse_meshes():
     vertices, triangles = _grid_with_a_far_corner(1.5)
     box = np.concatenate([vertices.min(axis=0), vertices.max(axis=0)])
     assert not sparse_mesh(vertices, triangles, box)
-    vertices[0, 0] = 1e4
+    vertices[0, 0] = 3e4  # median triangle 7e-5 of the diagonal: a zone anchor keeps them
+    assert not sparse_mesh(vertices, triangles, np.concatenate([vertices.min(axis=0), vertices.max(axis=0)]))
+    vertices[0, 0] = 1e6
     assert sparse_mesh(vertices, triangles, np.concatenate([vertices.min(axis=0), vertices.max(axis=0)]))
     sphere = icosphere(3)
     assert not sparse_mesh(*sphere, np.concatenate([sphere[0].min(axis=0), sphere[0].max(axis=0)]))

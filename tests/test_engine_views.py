@@ -13,9 +13,9 @@ import bpy
 import numpy as np
 import pytest
 
-from kd_addon import memory_limit, render_views, tree_cache
+from kd_addon import corelib, engine_final, memory_limit, render_views, tree_cache
 from tests import bpy_scenes as scenes
-from tests.addon_support import exr_channels
+from tests.addon_support import add_sun, exr_channels
 from tests.byte_counts import MIB
 
 SIZE = (80, 60)
@@ -101,35 +101,62 @@ def test_views_no_longer_rendered_drop_their_kept_pixels(addon, tmp_path):
     """Each view keeps its last pixels for the next frame (its tree_cache lane); once a render no longer
     makes a view, its lane is dropped, so its pixels are not held for good. The panel's lane stays."""
     scene = stereo_scene(tmp_path, "OFFAXIS")
+    left, right = (render_views.lane_of("ViewLayer", name) for name in ("left", "right"))
     assert bpy.ops.kdpreview.render() == {"FINISHED"}  # the panel's image: lane ""
     eye_masks(scene, "KD_PREVIEW", tmp_path / "stereo")
-    assert {"view:left|", "view:right|", ""} <= lanes_of(scene)
-    scene.render.views["right"].use = False
-    scene.render.views_format = "MULTIVIEW"
-    scene.render.views["left"].camera_suffix = ""
-    scene.render.filepath = str(tmp_path / "left")
+    assert {left, right, ""} <= lanes_of(scene)
+    only_left(scene, tmp_path / "left")
     assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
-    assert "view:right|" not in lanes_of(scene) and {"view:left|", ""} <= lanes_of(scene)
+    assert right not in lanes_of(scene) and {left, ""} <= lanes_of(scene)
 
 
 def test_other_views_kept_pixels_count_towards_the_memory_limit(addon, tmp_path):
     """While one eye renders, the other eye's last pixels are held: the frame's memory check counts them
     (tree_cache.held_bytes), so a limit that one view's frame fits, but not with the other's pixels
-    kept, refuses the frame and says why."""
+    kept, refuses the frame and says why. A frame that no longer renders the other eye does not count
+    them: its lanes are dropped before the check, so a refused frame cannot keep refusing later ones."""
     scene = stereo_scene(tmp_path, "OFFAXIS")
     scene.render.resolution_x, scene.render.resolution_y = 320, 240
     eye_masks(scene, "KD_PREVIEW", tmp_path / "first")
-    held = tree_cache.held_bytes(scene, "", "view:left|")
-    right = tree_cache._states[(scene.session_uid, "", "view:right|")]
-    expected = sum(a.nbytes for a in [right.image, right.depth, *right.pixels] if isinstance(a, np.ndarray))
-    assert held == expected > 2 * MIB
+    held = tree_cache.held_bytes(scene, "", render_views.lane_of("ViewLayer", "left"))
+    image_and_depth = 320 * 240 * (4 * 4 + 4)  # float32 RGBA and depth: a floor under the pixel state too
+    assert image_and_depth < held < corelib.load_core().memory.render_bytes(320, 240, keeps_previous=True)
     geometry, pixels = memory_limit.frame_bytes(26, 320, 240, "binned", keeps_previous=True)
     scene.kd_preview.memory_limit_mb = math.ceil((geometry + pixels + held / 2) / MIB)
     scene.render.filepath = str(tmp_path / "second")
     with pytest.raises(RuntimeError, match="of which [0-9]+ MiB other views' and passes' kept pixels"):
         bpy.ops.render.render(write_still=True)
-    scene.kd_preview.memory_limit_mb = math.ceil((geometry + pixels + 2 * held) / MIB)
+    only_left(scene, tmp_path / "left")
     assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
+    scene.kd_preview.memory_limit_mb = 0
+
+
+def test_each_view_layer_keeps_its_own_pass_lanes(addon, tmp_path, monkeypatch):
+    """Blender renders each view layer in its own call: one without the AO pass must not drop the lanes
+    of another that has it (its AO pass would lose its kept pixels every frame)."""
+    rendered = []
+    original = engine_final.FinalRender.run
+    monkeypatch.setattr(engine_final.FinalRender, "run",
+                        lambda self: rendered.append(self.depsgraph.view_layer.name) or original(self))
+    scene = stereo_scene(tmp_path, "OFFAXIS")
+    scene.render.use_multiview, scene.render.engine = False, "KD_PREVIEW"
+    scene.kd_preview.mode = "shadow"
+    add_sun("Sun", rotation=(0.3, 0.2, 0.0))
+    first = scene.view_layers[0]
+    first.use_pass_ambient_occlusion = True
+    second = scene.view_layers.new("Second")
+    assert not second.use_pass_ambient_occlusion
+    assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
+    assert rendered == [first.name, second.name]  # the layer without the pass rendered last
+    assert render_views.lane_of(first.name, "", "ao") in lanes_of(scene)
+
+
+def only_left(scene, path) -> None:
+    """Multi-View with the left view alone, through the scene camera; the file written to `path`."""
+    scene.render.views["right"].use = False
+    scene.render.views_format = "MULTIVIEW"
+    scene.render.views["left"].camera_suffix = ""
+    scene.render.filepath = str(path)
 
 
 def lanes_of(scene) -> set:

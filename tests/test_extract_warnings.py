@@ -289,6 +289,12 @@ def test_a_meshs_finite_triangles_stay_and_the_warning_counts_the_others(scene):
                                "of its 2 triangles that use them left out"]
 
 
+def test_a_loose_non_finite_vertex_changes_nothing(scene):
+    scenes.add_mesh("Loose", [(0, 0, 0), (1, 0, 0), (0, 1, 0), (float("nan"), 1, 0)], [(0, 1, 2)])
+    result = extract_scene()
+    assert result.object_names == ["Loose"] and result.triangle_count == 1 and result.warnings == []
+
+
 def _evaluation_warnings(result: ExtractedScene) -> list[str]:
     return [w for w in result.warnings if w.startswith("the preview evaluates geometry as the viewport does")]
 

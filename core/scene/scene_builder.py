@@ -129,7 +129,7 @@ class SceneBuilder:
         dynamic = np.array([k in self._dynamic for k in keys], bool)
         soup[shown] = plan_soup(self.layout, np.array([len(m.triangles) for m in meshes], np.int64), bounds,
                                 mesh_of[shown], o2w[shown], dynamic,
-                                self._sparse_meshes(meshes, bounds, mesh_of, dynamic))
+                                self._sparse_meshes(meshes, bounds, mesh_of[shown], dynamic))
         if self.options["lazy"]:
             soup[shown] = self._lazy_plan(soup[shown], mesh_of[shown])
             if len(set(visibility[soup].tolist())) > 1:
@@ -172,10 +172,13 @@ class SceneBuilder:
         return scene, report
 
     def _sparse_meshes(self, meshes, bounds, mesh_of, dynamic):
-        """(M,) bool scene_policy.sparse_mesh of the meshes the soup may take (placed once, not dynamic),
-        kept per key while its fingerprint holds; the others False. bounds (M, 6): _bounds(meshes)."""
-        uses = np.bincount(mesh_of, minlength=len(meshes))
+        """(M,) bool scene_policy.sparse_mesh of the meshes an "auto" eager build's soup may take (placed
+        once by the instances rays meet, `mesh_of`; not dynamic), kept per key while its fingerprint
+        holds; the others False (the other layouts and lazy builds do not ask). bounds: _bounds(meshes)."""
         out = np.zeros(len(meshes), bool)
+        if self.layout != "auto" or self.options["lazy"]:
+            return out
+        uses = np.bincount(mesh_of, minlength=len(meshes))
         for i in np.flatnonzero((uses == 1) & ~dynamic):
             m = meshes[i]
             cached = self._sparse.get(m.key)

@@ -21,11 +21,12 @@ OVERLAP_SAMPLE = 2048  # boxes compared against all others when there are more (
 # rounds them by at most 2^-24 * 16384 = 2^-10 of the member's size (its own tree: ~2^-24), under a
 # pixel until the member spans a thousand. Zones cost render and build time (docs/choices.md#soup-zones-at-16384-box-diagonals).
 PRECISION_RATIO = 16384.0
-# So a soup may round a member's vertices by 2^-10 of its box's diagonal: a mesh whose typical triangle is
-# smaller than that (triangles in one spot and a vertex far away, a sparse scatter) would lose their shape
-# there, so it keeps its own tree, whose object-space float32 is as precise as its vertices
+# A member's triangles keep that precision (2^-10 of their size) only within PRECISION_RATIO of their size
+# of the anchor. A mesh whose median triangle is under 2^-15 of its box's diagonal has half the diagonal
+# beyond that from any anchor (triangles in one spot and a vertex far away): no zone keeps its shape, so
+# it keeps its own tree, whose object-space float32 is as precise as its vertices
 # (docs/choices.md#meshes-whose-triangles-are-far-smaller-than-their-box-keep-their-own-tree).
-DETAIL_RATIO = 1.0 / 1024.0
+DETAIL_RATIO = 0.5 / PRECISION_RATIO
 DETAIL_SAMPLE = 4096  # triangles whose sizes stand for a larger mesh's (evenly strided)
 
 
