@@ -77,5 +77,5 @@ def lane_of(layer: str, name: str, term: str = "") -> str:
 
 def final_lanes(layer: str) -> str:
     """How the lanes only view layer `layer`'s final renders use begin (tree_cache.keep_lanes drops those
-    a frame of that layer no longer renders)."""
-    return f"layer:{layer}|"
+    a frame of that layer no longer renders); the name's length first, so no layer's begins another's."""
+    return f"layer:{len(layer)}:{layer}|"

@@ -151,6 +151,14 @@ def test_each_view_layer_keeps_its_own_pass_lanes(addon, tmp_path, monkeypatch):
     assert render_views.lane_of(first.name, "", "ao") in lanes_of(scene)
 
 
+def test_one_layers_final_lanes_never_begin_another_layers():
+    """keep_lanes drops by prefix: layer "A"'s must not take layer "A|B"'s lanes (names may hold any
+    character)."""
+    for kept, other in (("A", "A|B"), ("A|B", "A"), ("", "x"), ("x", "")):
+        assert not render_views.lane_of(other, "left", "ao").startswith(render_views.final_lanes(kept))
+        assert render_views.lane_of(kept, "left", "ao").startswith(render_views.final_lanes(kept))
+
+
 def only_left(scene, path) -> None:
     """Multi-View with the left view alone, through the scene camera; the file written to `path`."""
     scene.render.views["right"].use = False
