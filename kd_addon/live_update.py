@@ -42,7 +42,7 @@ def kd_preview_render_started(scene, *_args):
     """render_init: Blender starts a render (a still, an animation; a blocking one too), and after it
     sets the frame it started at back."""
     global _frame_to_restore
-    _frame_to_restore = scene.frame_current
+    _frame_to_restore = getattr(scene, "frame_current", None)
 
 
 def render_restores_frame(scene) -> bool:

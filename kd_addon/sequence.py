@@ -172,7 +172,7 @@ class SequenceJob:
             if not self.job.tick():
                 return False
             result = self.job.result()
-            if self._keyed_note is not None:
+            if self._keyed_note:
                 result.warnings.append(self._keyed_note)
                 self._keyed_note = ""  # said: "" never again
             path = self._write(result)

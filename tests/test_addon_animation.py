@@ -70,6 +70,7 @@ def test_settings_keyed_over_the_frames_are_named_and_the_starting_ones_kept(add
     assert report["settings"]["samples"] == (2 if start == 1 else 8)
     notes = [[w for w in row["warnings"] if "keyed to change over the frames" in w] for row in report["frames"]]
     assert [len(n) for n in notes] == ([0, 1, 0] if start == 1 else [1, 0, 0])  # samples 2, 5, 8
+    assert all(all(row["warnings"]) for row in report["frames"])  # no empty warning once it is said
     said = notes[1 if start == 1 else 0][0]
     assert "(samples)" in said and "keeps the values it started with" in said and "Ctrl-F12" in said
 
