@@ -145,11 +145,11 @@ class FinalRender:
         except Cancelled:
             self.engine.update_stats("", "KD Preview | cancelled")
             return
-        except (PreviewError, KeyboardInterrupt) as error:
-            text = "interrupted (Ctrl-C): nothing written for this frame" if isinstance(error, KeyboardInterrupt) \
-                else str(error)
-            self.engine.report({"ERROR"}, f"KD Preview: {text}")
-            self.engine.error_set(f"KD Preview: {text}")
+        except PreviewError as error:
+            self._report_error(str(error))
+            return
+        except KeyboardInterrupt:
+            self._report_error("interrupted (Ctrl-C): nothing written for this frame")
             return
         left_out = passes_left_out(self.depsgraph.view_layer)
         if left_out:
@@ -186,7 +186,12 @@ class FinalRender:
 
     def _keep_lanes(self, lanes) -> None:
         """Drop the lanes of this view layer's final renders that are not among `lanes`."""
-        tree_cache.keep_lanes(self.scene, "", lanes, (final_lanes(self.depsgraph.view_layer.name),))
+        tree_cache.keep_lanes(self.scene, "", lanes, final_lanes(self.depsgraph.view_layer.name))
+
+    def _report_error(self, text: str) -> None:
+        """The frame failed: Blender shows `text` and writes nothing for it."""
+        self.engine.report({"ERROR"}, f"KD Preview: {text}")
+        self.engine.error_set(f"KD Preview: {text}")
 
     def _report_warning(self, text: str) -> None:
         self.engine.report({"WARNING"}, f"KD Preview: {text}")

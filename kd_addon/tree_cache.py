@@ -66,12 +66,12 @@ def held_bytes(scene, group: str = "", lane: str = "") -> int:
     return sum(_state_bytes(state) for (u, g, l), state in _states.items() if u == uid and (g, l) != (group, lane))
 
 
-def keep_lanes(scene, group: str, lanes, prefixes: tuple[str, ...]) -> None:
-    """Forget the scene's lanes of `group` named with one of `prefixes` but not among `lanes`: a view
-    layer's final-render views and passes that its frame does not render (their pixels would be held,
-    and counted by the memory check, for good)."""
+def keep_lanes(scene, group: str, lanes, prefix: str) -> None:
+    """Forget the scene's lanes of `group` named with `prefix` but not among `lanes`: a view layer's
+    final-render views and passes that its frame does not render (their pixels would be held, and
+    counted by the memory check, for good)."""
     uid, lanes = _uid(scene), set(lanes)
-    for key in [k for k in _states if k[:2] == (uid, group) and k[2].startswith(prefixes) and k[2] not in lanes]:
+    for key in [k for k in _states if k[:2] == (uid, group) and k[2].startswith(prefix) and k[2] not in lanes]:
         del _states[key]
 
 

@@ -86,9 +86,8 @@ def _frame(builder: SceneBuilder, scene_inputs, previous, first: bool, batch: in
            mode: str = "ao+shadow", denoise: bool = False):
     """One frame as the add-on renders it (kd_addon/pipeline.py), relative to the camera's position, in
     steps of `batch` samples, in `mode`, its image denoised or not; `scene_inputs`: (meshes, mesh_of,
-    matrices, visibility). The
-    first frame's build and camera pass run beside the helper's compile (parallel_compile.py: the
-    warm-up's split)."""
+    matrices, visibility). The first frame's build and camera pass run beside the helper's compile
+    (parallel_compile.py: the warm-up's split)."""
     offset = np.array([0.0, 0.0, 4.0])
     lights = _lights(offset)
     options = RenderOptions(mode=mode, samples=max(SAMPLES, batch), lights=lights)
