@@ -223,8 +223,9 @@ def _print_row(prog, result, path) -> None:
                        "reused" if result.image_reused else "new", *_top_level(result.tree_stats)), flush=True)
     if result.compile_ms or result.load_ms:
         compiled = f"compiled in {result.compile_ms / 1e3:.1f} s (first use), " if result.compile_ms else ""
+        loaded_in_frame = f", but frame {result.frame} (*) loaded more itself" if result.first_run else ""
         print(f"kernels: {compiled}loaded in {result.load_ms / 1e3:.1f} s; not in frame {result.frame}'s times or "
-              "Mrays/s", flush=True)
+              f"Mrays/s{loaded_in_frame}", flush=True)
     for warning in result.warnings:  # e.g. an object left out for non-finite vertices
         print(f"{prog}: warning: frame {result.frame}: {warning}", file=sys.stderr, flush=True)
 
@@ -302,6 +303,7 @@ def prepare(args) -> Prepared:
     frames = parse_frames(args.frames if args.frames is not None  # --frames "" is an error, not the default
                           else f"{scene.frame_start}-{scene.frame_end}:{max(1, scene.frame_step)}")
     _note_frames_outside(args.prog, scene, frames)
+    _note_threads_beyond(args.prog, int(settings.threads))
     return Prepared(scene, layer_name, settings, config, frames)
 
 
@@ -316,9 +318,9 @@ def _run(args, cancelled) -> int:
         print(f"KD Preview: scene '{scene.name}', {len(frames)} frame(s), mode {config.settings.mode}, "
               f"{config.settings.samples} samples, {config.resolution_percentage}% resolution -> {args.out}")
         if not corelib.cache_is_warm():  # else a first run looks hung for minutes
-            print(f"First run with these sources and this Python: compiling the kernels (first use) takes one "
-                  f"to two minutes on 2 cores before frame 1; its time is printed apart from the frame's (kept in "
-                  f"{corelib.numba_cache_dir()})", flush=True)
+            print("First run with these sources and this Python: compiling the kernels (first use) takes about two "
+                  "minutes on 2 idle cores (longer on a busy machine) before frame 1; its time is printed apart from "
+                  f"the frame's (kept in {corelib.numba_cache_dir()})", flush=True)
         print(HEADER, flush=True)  # piped, it would wait for the first frame: minutes on a first run
         _run_claimed(job, cancelled)
     except PreviewError as error:
@@ -329,7 +331,7 @@ def _run(args, cancelled) -> int:
         print(f"{args.prog}: interrupted; " + (f"the {written} frame(s) already written are kept" if written
                                                 else "no frame was written"), file=sys.stderr)
         return 130
-    _print_totals(job)
+    _print_totals(job, any(r.first_run for r in job.results))
     return 0
 
 
@@ -341,6 +343,16 @@ def _note_frames_outside(prog, scene, frames: list[int]) -> None:
               + (f" ... {outside[-1]}" if len(outside) > 1 else "")
               + f") are outside the frame range {scene.frame_start}-{scene.frame_end} of scene '{scene.name}'; "
               "rendering them anyway", file=sys.stderr, flush=True)
+
+
+def _note_threads_beyond(prog, threads: int) -> None:
+    """Threads beyond what Numba was started with run as that many (report.json's run.threads); say so."""
+    import numba  # core's dependency, imported by the render anyway
+
+    available = int(numba.config.NUMBA_NUM_THREADS)
+    if threads > available:
+        print(f"{prog}: note: threads {threads} is more than the {available} this machine runs; using {available}",
+              file=sys.stderr, flush=True)
 
 
 # Options whose flag is not the setting's name with dashes (build_parser's dest=).
@@ -379,7 +391,8 @@ def _check_farm_options(args) -> None:
         changed = ["--" + name.replace("_", "-") for name, value in given.items() if value != FARM_DEFAULTS[name]]
         if changed:
             prog = getattr(args, "prog", "kd_addon")
-            print(f"{prog}: note: {', '.join(changed)} apply only with --dask or --local-workers; the frames render "
+            verb = "applies" if len(changed) == 1 else "apply"
+            print(f"{prog}: note: {', '.join(changed)} {verb} only with --dask or --local-workers; the frames render "
                   "in this process", file=sys.stderr, flush=True)
 
 
@@ -396,12 +409,13 @@ def _run_claimed(job, cancelled) -> None:
         job.close(stopped_by)
 
 
-def _print_totals(job) -> None:
+def _print_totals(job, starred: bool) -> None:
+    """The run's totals; `starred`: some frame's row is marked "*" (so the legend is printed)."""
     t = job.totals
     print(f"total: {t['frames']} frames, {t['triangles']:,} triangles, extract {t['extract_ms']:.0f} ms, "
           f"build {t['build_ms']:.0f} ms, trace {t['trace_ms']:.0f} ms, {t['mrays_per_s']:.2f} Mrays/s; "
           + (f"mean frame after the first {t['mean_total_ms_after_first']:.0f} ms" if t['frames'] > 1 else
-             f"frame {t['mean_total_ms_after_first']:.0f} ms") + "  (* = includes kernel compile/load)")
+             f"frame {t['mean_total_ms_after_first']:.0f} ms") + ("  (* = includes loading kernels)" if starred else ""))
     print(f"reuse: {t['objects_rebuilt']} kd-trees built, {t['objects_reused']} kept, {t['images_reused']} of "
           f"{t['frames']} images reused" + (" (--rebuild-all)" if job.config.settings.rebuild_all else ""))
     print(f"report: {job.report_path}")

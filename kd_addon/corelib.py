@@ -124,6 +124,14 @@ def is_loaded() -> bool:
     return core_module_name() in sys.modules
 
 
+def compile_seconds() -> float:
+    """Seconds core's kernels have spent compiling in this process (core/jit/compile_clock.py); 0 before
+    core is imported, so differences of it are the compiles between two readings."""
+    if not is_loaded():
+        return 0.0
+    return importlib.import_module(core_module_name() + ".jit.compile_clock").compile_seconds()
+
+
 def load_core():
     """Import and return the core package, configuring the Numba cache on first import."""
     name = core_module_name()

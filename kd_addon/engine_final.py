@@ -103,7 +103,7 @@ def to_rect(image: np.ndarray) -> np.ndarray:
 
 def stats_line(result: FrameResult) -> str:
     """The engine's stats line: frame size, triangles, build and trace times, speed."""
-    first = " (includes kernel compile)" if result.first_run else ""
+    first = " (includes loading kernels)" if result.first_run else ""
     reused = " | image reused" if result.image_reused else ""
     return (f"KD Preview | {result.width}x{result.height} | {result.triangles:,} triangles | build "
             f"{result.build_ms:.1f} ms | trace {result.trace_ms:.1f} ms{first} | {result.mrays_per_s:.2f} Mrays/s"

@@ -1,6 +1,6 @@
 """The kernels' first compile, started in the background when the add-on is enabled.
 
-A first render on a machine compiles Numba kernels for one to two minutes on 2 cores. `start()`
+A first render on a machine compiles Numba kernels for about two minutes on 2 idle cores. `start()`
 (register() calls it) begins that at once in a separate process, which runs a made-up first and second frame
 (core/jit/first_frame.py, with its own helper process for the rendering kernels: the same two-core
 split as a first render, docs/choices.md#the-first-renders-compile-on-two-cores) into the add-on's

@@ -148,7 +148,7 @@ class KDPREVIEW_PT_last_run(_SubPanel, bpy.types.Panel):
             return
         last.setdefault("size", f"{last.get('width')} x {last.get('height')}")
         if last.get("first_run"):
-            layout.label(text="Includes kernel compile / cache load", icon="TIME")
+            layout.label(text="Includes loading kernels", icon="TIME")
         if last.get("compile_ms") or last.get("load_ms"):
             wrapped_label(layout, context, kernels_note(last), "TIME")
         if last.get("image_reused"):

@@ -44,8 +44,15 @@ _reuse_kernels_ready = False
 _denoiser_ready = False  # ... and the denoiser's, first run by the first denoised frame
 
 
+def _now() -> float:
+    """A clock that stands still while core's kernels compile: a frame's times leave a compile inside the
+    frame out (it goes to compile_ms), as they leave out the background compile a first frame waits for."""
+    return time.perf_counter() - corelib.compile_seconds()
+
+
 def _ms_since(t0: float) -> float:
-    return (time.perf_counter() - t0) * 1e3
+    """Milliseconds since the _now() reading t0."""
+    return (_now() - t0) * 1e3
 
 
 @dataclass
@@ -64,7 +71,7 @@ class FrameResult:
     rays: int
     rays_saved: int
     samples: int
-    first_run: bool  # kernels were compiled or loaded from cache during this frame
+    first_run: bool  # kernels were loaded from cache in this frame's time (a compile goes to compile_ms)
     objects_rebuilt: int = 0  # meshes whose kd-tree was built this frame
     objects_reused: int = 0  # meshes whose kd-tree was kept from an earlier frame
     image_reused: bool = False  # nothing affecting the image changed: the last image was reused
@@ -74,7 +81,8 @@ class FrameResult:
     warnings: list[str] = field(default_factory=list)
     compile_helper: str | None = None  # a first frame's helper process (core/jit/parallel_compile.py): its outcome
     mode: str = ""  # the mode rendered: the setting, or what "auto" chose
-    compile_ms: float = 0.0  # waited for the kernels' background compile (kernel_warmup.py); not in total_ms
+    compile_ms: float = 0.0  # kernel compiles: the background one waited for (kernel_warmup.py) and any in
+    # this process during the frame (pipeline._now); not in total_ms
     load_ms: float = 0.0  # loading the compiled kernels into this process before the frame; not in total_ms
     depth: np.ndarray | None = None  # (H, W) view-axis distance of each pixel's hit, inf where nothing is hit
     holdouts: bool = False  # an object the camera sees is a holdout: its pixels are alpha 0, as the background
@@ -99,7 +107,7 @@ class FrameResult:
             "objects_reused", "image_reused", "pixels_reused", "rays_reused", "compile_helper", "compile_ms",
             "load_ms")}
         # Not the tree stats' build_ms (the sum over trees, kept ones included): the row's is the frame's.
-        row["tree"] = {k: _plain(v) for k, v in self.tree_stats.items() if k != "build_ms"}
+        row["tree"] = {k: _plain(v) for k, v in self.tree_stats.items() if k not in ("build_ms", "compile_ms")}
         if self.tree_stats.get("instances"):  # the top level's duplication (two_level.TOP_LEVEL_DUPLICATION)
             row["tree"]["top_references_per_instance"] = self.tree_stats["top_references"] / self.tree_stats["instances"]
         row["warnings"] = list(self.warnings)
@@ -160,6 +168,7 @@ class FrameJob:
         self._finished = None  # (image, lazy tree's stats or None, PixelState) once the worker made the image
         self._pending: BackgroundCall | None = None  # the kernel call running on the worker
         self._kernel_ms = {"compile_ms": 0.0, "load_ms": 0.0}  # timed apart from the frame (_await_kernels)
+        self._compiled_before = corelib.compile_seconds()  # compiles in this frame's time: compile_ms (_now)
         self._kernels_checked = False
         self._waiting_since = None  # when the first tick found the kernels' compile running
         self.mode = None  # the mode this frame renders in: the setting, "auto" resolved (light_use.resolved_mode)
@@ -232,7 +241,7 @@ class FrameJob:
             return False
         warmup = kernel_warmup.start()
         if warmup.state == kernel_warmup.COMPILING:
-            self._waiting_since = self._waiting_since or time.perf_counter()  # ticks apart: from the first
+            self._waiting_since = self._waiting_since or _now()  # ticks apart: from the first
             warmup = kernel_warmup.wait(timeout=POLL_SECONDS)
             self._kernel_ms["compile_ms"] = _ms_since(self._waiting_since)
             if warmup.state == kernel_warmup.COMPILING:
@@ -240,7 +249,7 @@ class FrameJob:
         self._kernels_checked = True
         if warmup.state != kernel_warmup.READY:
             return False
-        t1 = time.perf_counter()
+        t1 = _now()
         core = corelib.load_core()  # on this thread, as prepare() imports it
         self._kernel_ms["load_ms"] += _ms_since(t1)
         self._pending = BackgroundCall(KERNEL_LOCK, self._load_kernels, core)
@@ -249,7 +258,7 @@ class FrameJob:
     def _load_kernels(self, core) -> None:
         """On the worker: run core's made-up frames, which load every kernel of a default frame."""
         global _kernels_ready, _reuse_kernels_ready
-        t0 = time.perf_counter()
+        t0 = _now()
         importlib.import_module(core.__name__ + ".jit.first_frame").compile_first_frames()
         self._kernel_ms["load_ms"] += _ms_since(t0)
         self._first_run, _kernels_ready, _reuse_kernels_ready = False, True, True
@@ -258,7 +267,7 @@ class FrameJob:
         """Camera, lights and meshes from the scene (here: bpy is not thread-safe); then the last image
         if nothing changed, else, on the worker, the two-level scene (reusing unchanged trees) and the
         renderer."""
-        t0 = time.perf_counter()
+        t0 = _now()
         read = self._read_scene()
         core = corelib.load_core()
         inputs, extracted = read.inputs, read.extracted
@@ -319,7 +328,7 @@ class FrameJob:
         # A process's first frame: with an empty kernel cache a helper process compiles the sampling
         # kernel while this one builds and then compiles the camera pass (core/jit/parallel_compile.py); the
         # block ends once both are done, and the build's time includes that.
-        t0 = time.perf_counter()
+        t0 = _now()
         alongside = (core.rendering_kernels_alongside(self.config.denoise) if self._first_run
                      else contextlib.nullcontext())
         with alongside as helper:
@@ -387,7 +396,7 @@ class FrameJob:
         frame's pixels where their rays cannot reach what changed; the first such frame of a process
         also counts as a first run (it loads the pixel-reuse kernels)."""
         global _reuse_kernels_ready
-        t0 = time.perf_counter()
+        t0 = _now()
         try:
             options = core.RenderOptions(lights=lights, **self._render_options())
             self.renderer = core.PreviewRender(scene, camera, width, height, options, previous=previous)
@@ -398,7 +407,7 @@ class FrameJob:
             self._first_run, _reuse_kernels_ready = True, True
 
     def _extract(self) -> ExtractedScene:
-        t0 = time.perf_counter()
+        t0 = _now()
         extracted = extract_scene(self.depsgraph)
         if extracted.triangle_count == 0:
             # A warning, not an error: in an animation, objects may appear later (keyed hide_render), and
@@ -450,7 +459,7 @@ class FrameJob:
 
     def _step_once(self, samples: int) -> None:
         global _kernels_ready
-        t0 = time.perf_counter()
+        t0 = _now()
         added = self.renderer.step(samples)
         ms = _ms_since(t0)
         self._timings["trace_ms"] += ms
@@ -464,15 +473,21 @@ class FrameJob:
 
     def _finish_once(self) -> None:
         global _denoiser_ready
-        t0 = time.perf_counter()
+        t0 = _now()
         image = np.array(self.renderer.image(denoise=self.config.denoise), dtype=np.float32, copy=True)
         lazy = self.renderer.scene.lazy_tree is not None  # then the stats of what the rays made it build
         self._finished = (image, self.renderer.scene.stats() if lazy else None, self.renderer.pixel_state())
         self._depth = depth_image(self.renderer)
         self._timings["other_ms"] += _ms_since(t0)
         if self.config.denoise and not _denoiser_ready:  # the warm-up leaves the denoiser out: its kernels
-            self._first_run = True  # compiled or loaded in this frame's time, which first_run marks ("*")
+            self._first_run = True  # loaded in this frame's time (a compile goes to compile_ms), marked "*"
         _denoiser_ready = _denoiser_ready or self.config.denoise
+
+    def _kernel_times(self) -> dict:
+        """compile_ms and load_ms: the background compile waited for, the loads, and what compiled in
+        this process during the frame (left out of its times by _now)."""
+        compiled = (corelib.compile_seconds() - self._compiled_before) * 1e3
+        return dict(self._kernel_ms, compile_ms=self._kernel_ms["compile_ms"] + compiled)
 
     def result(self) -> FrameResult:
         """The finished frame; call only once `done`. Also remembers it for image reuse."""
@@ -482,7 +497,7 @@ class FrameJob:
         if self._reused_image is not None:
             depth = None if self._state.depth is None else self._state.depth.copy()
             return FrameResult(image=self._reused_image.copy(), extract_ms=t["extract_ms"], build_ms=0.0, trace_ms=0.0,
-                               total_ms=sum(t.values()), rays=0, rays_saved=0, first_run=False, **self._kernel_ms,
+                               total_ms=sum(t.values()), rays=0, rays_saved=0, first_run=False, **self._kernel_times(),
                                pixels_reused=int((self._reused_image[..., 3] > 0).sum()), depth=depth, **self._info)
         image, lazy_stats, pixels = self._finished
         if lazy_stats is not None:
@@ -491,7 +506,7 @@ class FrameJob:
                              total_ms=sum(t.values()), rays=int(self.renderer.rays_traced),
                              rays_saved=int(self.renderer.rays_saved), samples=int(self.renderer.samples_done),
                              first_run=self._first_run, pixels_reused=int(self.renderer.pixels_reused),
-                             rays_reused=int(self.renderer.rays_reused), depth=self._depth, **self._kernel_ms,
+                             rays_reused=int(self.renderer.rays_reused), depth=self._depth, **self._kernel_times(),
                              **self._info)
         self._state.image_key, self._state.image, self._state.pixels = self._image_key, image.copy(), pixels
         self._state.depth = self._depth.copy()

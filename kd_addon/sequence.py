@@ -84,6 +84,8 @@ def check_folder_path(folder: Path) -> list[Path]:
         probe = probe.parent
     if not probe.is_dir():  # mkdir would say "File exists"
         raise PreviewError(f"cannot write to the output folder {folder}: {probe} is a file, not a folder")
+    if not os.access(probe, os.W_OK | os.X_OK):  # a read-only disk or a folder of another user's
+        raise PreviewError(f"cannot write to the output folder {folder}: {probe} is not writable")
     return missing
 
 

@@ -281,6 +281,61 @@ def test_a_first_run_says_that_it_compiles(tmp_path, capsys, monkeypatch, warm):
     assert ("compiling the kernels (first use)" in capsys.readouterr().out) is not warm
 
 
+def test_a_compile_inside_a_frame_is_timed_apart_from_it(tmp_path, capsys, monkeypatch):
+    """A kernel compiled during a frame (the denoiser's on a first denoised frame, every kernel without
+    the warm-up) goes to the frame's compile_ms, out of its times, as the background compile does."""
+    import time
+
+    from numba import njit
+
+    import core.render.preview_render as preview_render
+    spent = []
+
+    def compiling_image(render, *args, **kwargs):
+        start = time.perf_counter()
+        for k in range(3):  # functions this process has never compiled: each run compiles them
+            njit(cache=False)(lambda x, k=float(k + len(spent)): np.sin(x * k).sum() + np.cos(x + k).sum())(np.ones(3))
+        spent.append(time.perf_counter() - start)
+        return original(render, *args, **kwargs)
+
+    out = tmp_path / "o"
+    assert cli.execute(["render", "--frames", "1", "--out", str(out), *SMALL]) == 0  # kernels loaded
+    warm = frame_rows(out)[0]
+    original = preview_render.PreviewRender.image
+    monkeypatch.setattr(preview_render.PreviewRender, "image", compiling_image)
+    assert cli.execute(["render", "--frames", "1", "--out", str(out), *SMALL]) == 0
+    row, compiled_ms = frame_rows(out)[0], spent[0] * 1e3
+    assert row["compile_ms"] >= 0.8 * compiled_ms
+    assert row["total_ms"] < warm["total_ms"] + 0.5 * compiled_ms  # without the compile
+    assert "kernels: compiled in" in capsys.readouterr().out
+
+
+def test_unwritable_output_folder_is_named_before_the_run_starts(tmp_path, capsys, monkeypatch):
+    """A folder that cannot be written (a read-only disk, another user's folder; tested through
+    os.access, as this suite may run as root) is named before the run's first line."""
+    import os
+    readonly = tmp_path / "ro"
+    readonly.mkdir()
+    real_access = os.access
+    monkeypatch.setattr(os, "access", lambda path, mode, **kw: False if str(path) == str(readonly)
+                        else real_access(path, mode, **kw))
+    assert cli.execute(["render", "--frames", "1", "--out", str(readonly / "sub"), *SMALL]) == 1
+    out, err = capsys.readouterr()
+    assert f"error: cannot write to the output folder {readonly / 'sub'}: {readonly} is not writable" in err
+    assert out == "" and not (readonly / "sub").exists()
+
+
+def test_more_threads_than_the_machine_runs_are_noted(tmp_path, capsys):
+    import numba
+    available = numba.config.NUMBA_NUM_THREADS
+    assert cli.execute(["render", "--frames", "1", "--out", str(tmp_path), "--threads", str(available + 3), *SMALL]) == 0
+    assert (f"note: threads {available + 3} is more than the {available} this machine runs; using {available}"
+            in capsys.readouterr().err)
+    assert json.loads((tmp_path / "report.json").read_text())["run"]["threads"] == available
+    assert cli.execute(["render", "--frames", "1", "--out", str(tmp_path), "--threads", str(available), *SMALL]) == 0
+    assert "note:" not in capsys.readouterr().err
+
+
 def test_empty_output_folder_is_named(capsys):
     assert cli.execute(["render", "--frames", "1", "--out", " ", *SMALL]) == 1
     assert "--out is empty: give the folder to write the frames to" in capsys.readouterr().err

@@ -137,6 +137,9 @@ def test_cluster_options_without_a_cluster_are_noted(tmp_path, capsys):
     assert ("note: --chunk-size, --ship-blend apply only with --dask or --local-workers"
             in capsys.readouterr().err)
     assert (out / "frame_0001.png").is_file()
+    assert cli.execute(["render", "--demo", "--frames", "1", "--resolution", "5", "--samples", "1", "--out", str(out),
+                        "--retries", "5"]) == 0
+    assert "note: --retries applies only with --dask or --local-workers" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("address, problem", [("notanaddress", "missing port number"),

@@ -1,6 +1,4 @@
 """build_kdtree: checks the input, then runs the parallel top levels, the subtree builds and the merge."""
-from time import perf_counter
-
 import numpy as np
 
 from ..geometry import triangle_boxes, union_of_boxes
@@ -13,6 +11,7 @@ from ..memory import MB, MemoryLimitError, check_build_memory, release_before_co
 from .merge import merge_tree
 from .options import BuildOptions, make_options
 from .subtree import build_subtrees
+from ..jit.compile_clock import clock, compile_seconds
 from ..jit.threads import thread_count
 from .top_levels import build_top_levels
 
@@ -25,7 +24,7 @@ def build_kdtree(triangles, **options):
     opts = make_options(options)
     check_build_memory(triangles, opts)
     tris = as_triangles(triangles)
-    start = perf_counter()
+    start, compiled = clock(), compile_seconds()
     timings = {}
     with thread_count(opts.threads) as threads:
         prims, boxes, bounds, dropped = _initial_references(tris)
@@ -47,6 +46,7 @@ def build_kdtree(triangles, **options):
         del prims, boxes  # the initial references; the leaf copy below may take their memory
         release_before_copy(LEAF_COPY_BYTES * len(arrays.leaf_prims), opts.memory_limit)
         leaf_tris = leaf_triangles(tris, arrays.leaf_prims)  # part of the build: the traversal reads it
+    timings["compile"] = (compile_seconds() - compiled) * 1000.0  # not in build_ms or the steps' times
     return KdTree(tris, bounds, arrays, options=opts, build_ms=_ms_since(start), dropped=dropped,
                   timings=timings, deferred=deferred, leaf_tris=leaf_tris)
 
@@ -68,14 +68,14 @@ def _initial_references(tris):
 
 def _build_arrays(tris, prims, boxes, bounds, opts, threads, timings):
     params = opts.params(len(prims), bounds)
-    t = perf_counter()
+    t = clock()
     top_nodes, tasks = build_top_levels(tris, prims, boxes, bounds, params, opts.top, threads)
     del prims, boxes
     timings["top"] = _ms_since(t)
-    t = perf_counter()
+    t = clock()
     subtrees = build_subtrees(tris, tasks, params, threads)
     timings["subtrees"] = _ms_since(t)
-    t = perf_counter()
+    t = clock()
     arrays = NodeArrays(*merge_tree(top_nodes, subtrees))
     deferred = None
     if opts.lazy:
@@ -85,7 +85,8 @@ def _build_arrays(tris, prims, boxes, bounds, opts, threads, timings):
 
 
 def _ms_since(start):
-    return (perf_counter() - start) * 1000.0
+    """Milliseconds since the clock() reading `start`, the Numba compiles in between left out."""
+    return (clock() - start) * 1000.0
 
 
 def _budget_text(budget):

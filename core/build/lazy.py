@@ -6,10 +6,10 @@ parallel, exactly as the eager build would (subtree.py), splices them in (merge.
 stopped rays, so results equal the eager tree's. Seed 003 interleaves building and tracing in one
 GPU task pool; on a few CPU cores this alternation keeps one traversal and one builder.
 """
-from time import perf_counter
 
 import numpy as np
 
+from ..jit.compile_clock import clock
 from ..trace.layout import NO_HIT, UNBUILT, subtree_of
 from .leaf_triangles import BYTES_PER_REFERENCE as LEAF_COPY_BYTES
 from ..memory import MB, MemoryLimitError
@@ -84,7 +84,7 @@ def build_requested(tree, requested, threads=None):
     ids = deferred.select(requested)
     if len(ids) == 0:
         return
-    start = perf_counter()
+    start = clock()
     with thread_count(threads) as n_threads:
         subtrees = build_subtrees(tree.triangles, deferred.tasks(ids), deferred.params, n_threads)
     _check_memory_limit(tree, subtrees)
@@ -93,7 +93,7 @@ def build_requested(tree, requested, threads=None):
     if deferred.built.all():  # nothing left to build: let the kept references go
         deferred.prims, deferred.boxes = deferred.prims[:0], deferred.boxes[:0]
     deferred.rounds += 1
-    deferred.build_ms += (perf_counter() - start) * 1e3
+    deferred.build_ms += (clock() - start) * 1e3
 
 
 def _check_memory_limit(tree, subtrees):

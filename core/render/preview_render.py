@@ -10,10 +10,10 @@ Deterministic for a seed. With an error target a pixel stops after `min_samples`
 standard error of its mean is below it (convergence.py: Sobol's variance decay, pooled over the 5x5
 neighbourhood, Laplace's floor), checked at power-of-two sample counts so batching does not change the image.
 """
-from time import perf_counter
 
 import numpy as np
 
+from ..jit.compile_clock import clock
 from .camera import Camera, tiled_packets, tiled_pixels
 from .convergence import checks, dependence_radius, is_check, near, next_check, sample_variances, standard_errors
 from .denoise import SOBOL_VARIANCE_DECAY, denoise_pixels
@@ -75,13 +75,13 @@ class PreviewRender:
         self.settings = settings_key(camera, self.width, self.height, o.mode, self.target_samples, self.ao_distance,
                                      self.lights, self.seed, self.sampler, o.error_target, self.min_samples,
                                      self.ambient)
-        start = perf_counter()
+        start = clock()
         boxes = self._changed_boxes(previous)
         if boxes is None:
             self._trace_camera()
         else:
             self._continue(previous, boxes)
-        self.trace_ms += (perf_counter() - start) * 1e3
+        self.trace_ms += (clock() - start) * 1e3
 
     def _trace_camera(self):
         """Every pixel from scratch."""
@@ -237,9 +237,9 @@ class PreviewRender:
             batch = samples - added  # one kernel call: a pixel's rays follow each other while its nodes are in cache
             if self.error_target is not None:  # up to the next convergence check
                 batch = min(batch, next_check(self.samples_done, self.min_samples) - self.samples_done)
-            start = perf_counter()
+            start = clock()
             self._add_samples(batch)
-            self.trace_ms += (perf_counter() - start) * 1e3
+            self.trace_ms += (clock() - start) * 1e3
             self.samples_done += batch
             added += batch
             if self.error_target is not None and is_check(self.samples_done, self.min_samples):

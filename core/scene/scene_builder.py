@@ -8,11 +8,11 @@ fingerprints and matrices are unchanged, stored relative to an anchor so a movin
 rebuilds it; each ray visibility gets its own soup. Every matrix is shifted by minus `origin` (the
 camera position) in float64 before anything is rounded, so nothing far from the origin loses precision.
 """
-from time import perf_counter
 from typing import Hashable, NamedTuple
 
 import numpy as np
 
+from ..jit.compile_clock import clock
 from ..build.builder import build_kdtree
 from ..inputs import FLOAT32_MAX, first_row_beyond_float32, is_real_dtype
 from .instance_signature import instance_signature, mesh_digest
@@ -97,7 +97,7 @@ class SceneBuilder:
         every position (float64) before anything is rounded; visibility (I,) ray_visibility bits per
         instance (None: every instance stops every ray); rays: this frame's ray count (e.g.
         render.frame_ray_count), for the trees of deforming meshes (module docstring), or None."""
-        start = perf_counter()
+        start = clock()
         mesh_of, o2w = check_placement(len(meshes), mesh_of, matrices)
         mesh_of = mesh_of.astype(np.int64)
         visibility = as_visibility(visibility, len(mesh_of))
@@ -159,16 +159,16 @@ class SceneBuilder:
             groups.append(group)
         self._soups = soups
         self._forget_absent(keys)
-        t = perf_counter()
+        t = clock()
         scene = build_two_level(trees, new_mesh_of, shifted, np.concatenate(scene_visibility).astype(np.uint8),
                                 **self.options)
-        top_ms = (perf_counter() - t) * 1e3
+        top_ms = (clock() - t) * 1e3
         scene.signature = instance_signature([mesh_digest(m.key, m.fingerprint) for m in meshes], bounds, mesh_of,
                                              o2w, origin, rounding, visibility)
         scene.origin = origin.copy()
         scene.caller_ids = _caller_ids(meshes, mesh_of, np.flatnonzero(own), groups)
         report = BuildReport(rebuilt, reused, len(trees) - len(groups), int(soup.sum()), soup_rebuilt,
-                             (perf_counter() - start) * 1e3, top_ms)
+                             (clock() - start) * 1e3, top_ms)
         return scene, report
 
     def _sparse_meshes(self, meshes, bounds, mesh_of, dynamic):

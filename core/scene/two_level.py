@@ -6,11 +6,11 @@ traversal (instance_traversal.py); an object that only moves keeps its tree. The
 into contiguous arrays with per-mesh offsets, so kernels take plain arrays, all in one named tuple
 (SceneArrays; `mesh_tree` views one mesh's tree).
 """
-from time import perf_counter
 from typing import NamedTuple
 
 import numpy as np
 
+from ..jit.compile_clock import clock
 from ..build.box_tree import build_box_tree
 from ..geometry import half_area
 from ..trace.kdtree import KdTree, empty_arrays
@@ -157,11 +157,11 @@ def build_two_level(meshes, mesh_of, matrices, visibility=None, **options):
     opts = make_options(options)
     mesh_of, o2w = _check_instances(meshes, mesh_of, matrices)
     visibility = as_visibility(visibility, len(mesh_of))
-    start = perf_counter()
+    start = clock()
     w2o = world_to_object(o2w)
     boxes = world_boxes(mesh_bounds(meshes), mesh_of, o2w)
     top = build_top_level(boxes, opts)
-    return TwoLevelScene(meshes, mesh_of, o2w, w2o, boxes, top, (perf_counter() - start) * 1e3, visibility)
+    return TwoLevelScene(meshes, mesh_of, o2w, w2o, boxes, top, (clock() - start) * 1e3, visibility)
 
 
 def as_two_level(tree):

@@ -213,12 +213,12 @@ class FarmRun:
             self.retries.append({"chunk": index, "frames": _span(self.chunks[index]), "failed_on": last["worker"],
                                  "rerun_on": message["worker"], "reason": last.get("error", last["outcome"]),
                                  "frames_sent_before": last["frames_sent"]})
-            self._print(f"chunk {index} (frames {_span_text(self.chunks[index])}): rerun on {message['worker']} "
+            self._print(f"chunk {index} ({_span_text(self.chunks[index])}): rerun on {message['worker']} "
                         f"after {last['worker']}: {self.retries[-1]['reason']}")
         attempts.append({"attempt": message["attempt"], "worker": message["worker"], "host": message["host"],
                          "pid": message["pid"], "started_s": round(time.perf_counter() - self._t0, 3),
                          "frames_sent": 0, "outcome": "running"})
-        self._print(f"chunk {index} (frames {_span_text(self.chunks[index])}) started on {message['worker']} "
+        self._print(f"chunk {index} ({_span_text(self.chunks[index])}) started on {message['worker']} "
                     f"(host {message['host']}, pid {message['pid']})")
 
     def _on_failed(self, message: dict) -> None:
@@ -252,14 +252,14 @@ class FarmRun:
         frames = self.chunks[index]
         if future.status != "finished":
             error = future.exception() if future.status == "error" else future.status
-            raise PreviewError(f"chunk {index} (frames {_span_text(frames)}) failed: {error}")
+            raise PreviewError(f"chunk {index} ({_span_text(frames)}) failed: {error}")
         timing = future.result()
         self.timings[index] = timing
         self._attempt(timing).update(outcome="done", ended_s=round(time.perf_counter() - self._t0, 3))
         missing = [f for f in frames if f not in self.written]
         if missing:
             raise PreviewError(f"chunk {index} ended on {timing['worker']} without sending frame(s) "
-                               f"{_span_text(missing)}")
+                               + ", ".join(map(str, missing)))
 
     def _stop(self, error: BaseException) -> None:
         """Cancel what still runs (a worker stops its chunk after the frame it is on) and write the report
@@ -332,7 +332,8 @@ class FarmRun:
             print(f"reruns: {len(self.retries)} chunk(s) rerun ("
                   + "; ".join(f"chunk {r['chunk']} after {r['failed_on']}: {r['reason']}" for r in self.retries)
                   + f"); {self.duplicates} frame(s) sent twice were dropped")
-        cli._print_totals(SimpleNamespace(totals=self.totals, config=self.config, report_path=self.report_path))
+        cli._print_totals(SimpleNamespace(totals=self.totals, config=self.config, report_path=self.report_path),
+                          any(r.first_run for r in self.written.values()))
 
 
 def blender_script_paths() -> list[str]:
@@ -361,4 +362,5 @@ def _span(frames: list[int]) -> list[int]:
 
 
 def _span_text(frames: list[int]) -> str:
-    return f"{frames[0]}-{frames[-1]}" if len(frames) > 1 else f"{frames[0]}"
+    """"frames 3-7", or "frame 3" for a chunk of one frame."""
+    return f"frames {frames[0]}-{frames[-1]}" if len(frames) > 1 else f"frame {frames[0]}"
