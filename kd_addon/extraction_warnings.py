@@ -15,6 +15,9 @@ from .render_visibility import (INSTANCING_PARENT_TYPES, RenderVisibility, insta
                                 rendered_layers_objects)
 from .scene_records import NOT_TRIANGLES, TRIANGLE_TYPES, Instance
 
+# Drawn by Blender over any engine's final image (the grease pencil pass), so there only the rays miss it.
+DRAWN_OVER_RENDERS = {"GREASEPENCIL", "GPENCIL"}
+
 
 def surfaces_off_warnings(view_layer) -> list[str]:
     """A view layer whose Filter > Surfaces is off renders no surfaces at all (Cycles: no hit pixel)."""
@@ -64,6 +67,7 @@ def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: RenderVisibility, ins
     in the viewport: only what is not triangles and hair strands are named."""
     warnings = []
     instancers = {}
+    instanced = set().union(*instanced_by.values()) | not_made
     for ob in rendered_layers_objects(depsgraph):
         kind = ob.type
         if kind in TRIANGLE_TYPES and ob.as_pointer() in evaluated:
@@ -84,19 +88,22 @@ def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: RenderVisibility, ins
             if kind in NOT_TRIANGLES:
                 if not _own_elements(ob.evaluated_get(depsgraph)):
                     pass  # its nodes made it all triangles or instances, or it is empty
+                elif render_mode and kind in DRAWN_OVER_RENDERS:
+                    warnings.append(f"object '{ob.name}' is {NOT_TRIANGLES[kind]}, not triangles: Blender draws it "
+                                    "over the image, but the preview's rays pass through it (no AO or shadow)")
                 elif ob.name not in meshed:
                     warnings.append(f"object '{ob.name}' is {NOT_TRIANGLES[kind]}, not triangles: left out of "
                                     "the preview")
                 else:
                     warnings.append(f"object '{ob.name}' is {NOT_TRIANGLES[kind]}: the preview shows the triangles its "
                                     f"geometry nodes make and leaves the rest out")
-            elif not render_mode:
+            elif not render_mode and not (instanced_by_its_parent(ob) and ob.as_pointer() in instanced):
+                # (a child its parent instances shows only as those instances, which the eye icon keeps)
                 what = ("it and the instances it makes" if ob.instance_type in INSTANCING_PARENT_TYPES
                         or len(ob.particle_systems) else "it")
                 warnings.append(f"object '{ob.name}' is hidden in the viewport (eye icon, Disable in Viewports or "
                                 f"a hidden collection): the preview reads the viewport's scene and leaves {what} out, "
                                 "a final render shows it")
-    instanced = set().union(*instanced_by.values()) | not_made
     for collection, hosts in instancers.values():
         members = list(_members(collection, (), {collection.as_pointer()}))
         pointers = {ob.as_pointer() for ob, _, _ in members}

@@ -93,3 +93,20 @@ def test_the_render_path_keeps_what_the_viewport_path_loses(scene):
     assert len(by_name["Subdivided"].triangles) == 6 * 16 * 2
     assert any("hidden in the viewport" in w for w in viewport.warnings)
     assert any("levels in the viewport" in w for w in viewport.warnings)
+
+
+@pytest.mark.skipif(bpy.app.version < (4, 3, 0), reason="Blender 4.3's grease pencil API makes the strokes")
+def test_grease_pencil_in_a_final_render_is_named_as_drawn_over_the_image(scene):
+    """Blender draws grease pencil over any engine's final image, so there the warning says that the
+    rays pass through it, not that it is left out (the panel's image does leave it out)."""
+    scenes.add_cube("Shown")
+    pencil = bpy.data.grease_pencils.new("Pencil")
+    drawing = pencil.layers.new("Layer").frames.new(1).drawing
+    drawing.add_strokes([3])
+    scenes.link(bpy.data.objects.new("Pencil", pencil))
+    from kd_addon.extract import extract_scene
+    viewport = extract_scene(bpy.context.evaluated_depsgraph_get())
+    rendered, _ = extraction_in_render()
+    assert "object 'Pencil' is grease pencil, not triangles: left out of the preview" in viewport.warnings
+    assert ("object 'Pencil' is grease pencil, not triangles: Blender draws it over the image, but the preview's "
+            "rays pass through it (no AO or shadow)") in rendered.warnings

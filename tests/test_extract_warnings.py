@@ -42,6 +42,22 @@ def test_viewport_hidden_and_non_triangle_objects_are_named(scene):
         "collection): the preview reads the viewport's scene and leaves it out, a final render shows it"]
 
 
+def test_an_eye_hidden_child_of_an_instancing_parent_is_not_named(scene):
+    """A vertex parent's child shows only as the parent's instances, in renders as in the viewport, and
+    the eye icon keeps those instances in the viewport: nothing differs, so nothing is named. Disabled
+    in viewports, its instances go: named."""
+    parent = scenes.add_cube("Parent")
+    parent.instance_type = "VERTS"
+    child = scenes.add_cube("Child", scale=0.2)
+    child.parent = parent
+    child.hide_set(True)
+    result = extract_scene()
+    assert len(instances_by_host(result)["Parent"]) == 8 and result.warnings == []
+    child.hide_set(False)
+    child.hide_viewport = True
+    assert [w for w in extract_scene().warnings if "'Child'" in w]
+
+
 def test_hidden_instancers_and_viewport_disabled_members_are_named(scene):
     """A collection instancer hidden in the viewport takes its instances with it, and a member of an
     instanced collection disabled in viewports is not evaluated for the instances: a final render
