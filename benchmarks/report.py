@@ -9,7 +9,7 @@ between them is replaced, the rest of the file is left alone. Blocks:
 - `figures` (README.md): one small table: build, camera and AO rays against Embree, seed 000's setting,
   our time against Cycles' at equal error.
 - `first-use` (README.md): the first render's wait in a fresh Blender, cold and warm (bench_first_render).
-- `bench_core`, `bench_seed000`, `bench_render` (docs/benchmarks.md): each benchmark's full table.
+- `bench_core`, `bench_seed000`, `profile_seed000`, `bench_render` (docs/benchmarks.md): each benchmark's full table.
 
 Every block names the run it comes from (date, CPU, cores, Numba version, command, and whether it was a
 --quick run), so no date or host appears in hand-written prose.
@@ -24,8 +24,8 @@ ROOT = Path(__file__).resolve().parents[1]
 OUT_DIR = ROOT / "benchmarks" / "out"
 README = ROOT / "README.md"
 BENCH_DOC = ROOT / "docs" / "benchmarks.md"
-FILES = ("bench_core", "bench_seed000", "bench_render", "bench_sample_packets", "bench_first_render", "bench_instances",
-         "bench_big_mesh")
+FILES = ("bench_core", "bench_seed000", "profile_seed000", "bench_render", "bench_sample_packets", "bench_first_render",
+         "bench_instances", "bench_big_mesh")
 FIGURE_SCENE = "suzanne-251k"
 
 
@@ -171,6 +171,18 @@ def bench_seed000_block(data):
             + "\n\n" + provenance(data["bench_seed000"]))
 
 
+def profile_seed000_block(data):
+    if "profile_seed000" not in data:
+        return missing("profile_seed000", "python benchmarks/profile_seed000.py")
+    r = data["profile_seed000"]["results"]
+    configs = list(r["ms_medians"])
+    steps = list(r["ms_medians"][configs[0]])
+    rows = [[step, *(ms(r["ms_medians"][c][step]) for c in configs)] for step in steps]
+    return (f"suzanne-251k, {r['size'][0]}x{r['size'][1]}, one point light at {tuple(r['light'])}; medians of "
+            f"{r['runs']} runs each (each row its own median, so the rows need not add up).\n\n"
+            + table(["step", *configs], rows) + "\n\n" + provenance(data["profile_seed000"]))
+
+
 def bench_render_block(data):
     if "bench_render" not in data:
         return missing("bench_render", "python benchmarks/bench_render.py")
@@ -265,6 +277,7 @@ def instances_block(data):
 
 BLOCKS = {README: {"figures": figures_block, "first-use": first_use_block},
           BENCH_DOC: {"bench_core": bench_core_block, "bench_seed000": bench_seed000_block,
+                      "profile_seed000": profile_seed000_block,
                       "bench_render": bench_render_block, "bench_instances": instances_block}}
 
 
