@@ -303,7 +303,6 @@ def prepare(args) -> Prepared:
     frames = parse_frames(args.frames if args.frames is not None  # --frames "" is an error, not the default
                           else f"{scene.frame_start}-{scene.frame_end}:{max(1, scene.frame_step)}")
     _note_frames_outside(args.prog, scene, frames)
-    _note_threads_beyond(args.prog, int(settings.threads))
     return Prepared(scene, layer_name, settings, config, frames)
 
 
@@ -312,6 +311,7 @@ def _run(args, cancelled) -> int:
     try:
         prepared = prepare(args)
         scene, config, frames = prepared.scene, prepared.config, prepared.frames
+        _note_threads_beyond(args.prog, int(prepared.settings.threads))  # a cluster's workers have their own
         job = SequenceJob(scene, config, frames, Path(args.out),
                           depsgraph_source(scene, scene.view_layers[prepared.layer_name]),
                           on_frame=partial(_print_row, args.prog))
@@ -346,13 +346,13 @@ def _note_frames_outside(prog, scene, frames: list[int]) -> None:
 
 
 def _note_threads_beyond(prog, threads: int) -> None:
-    """Threads beyond what Numba was started with run as that many (report.json's run.threads); say so."""
+    """More threads than Numba was started with run as that many (report.json's run.threads); say so."""
     import numba  # core's dependency, imported by the render anyway
 
     available = int(numba.config.NUMBA_NUM_THREADS)
     if threads > available:
-        print(f"{prog}: note: threads {threads} is more than the {available} this machine runs; using {available}",
-              file=sys.stderr, flush=True)
+        print(f"{prog}: note: threads {threads} is more than Numba's {available} threads in this process; using "
+              f"{available}", file=sys.stderr, flush=True)
 
 
 # Options whose flag is not the setting's name with dashes (build_parser's dest=).
@@ -415,7 +415,8 @@ def _print_totals(job, starred: bool) -> None:
     print(f"total: {t['frames']} frames, {t['triangles']:,} triangles, extract {t['extract_ms']:.0f} ms, "
           f"build {t['build_ms']:.0f} ms, trace {t['trace_ms']:.0f} ms, {t['mrays_per_s']:.2f} Mrays/s; "
           + (f"mean frame after the first {t['mean_total_ms_after_first']:.0f} ms" if t['frames'] > 1 else
-             f"frame {t['mean_total_ms_after_first']:.0f} ms") + ("  (* = includes loading kernels)" if starred else ""))
+             f"frame {t['mean_total_ms_after_first']:.0f} ms")
+          + ("  (* = includes loading kernels)" if starred else ""))
     print(f"reuse: {t['objects_rebuilt']} kd-trees built, {t['objects_reused']} kept, {t['images_reused']} of "
           f"{t['frames']} images reused" + (" (--rebuild-all)" if job.config.settings.rebuild_all else ""))
     print(f"report: {job.report_path}")

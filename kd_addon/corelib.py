@@ -125,8 +125,8 @@ def is_loaded() -> bool:
 
 
 def compile_seconds() -> float:
-    """Seconds core's kernels have spent compiling in this process (core/jit/compile_clock.py); 0 before
-    core is imported, so differences of it are the compiles between two readings."""
+    """Seconds Numba has spent compiling in this process (core/jit/compile_clock.py counts every compile
+    once core is imported; 0 before), so differences of it are the compiles between two readings."""
     if not is_loaded():
         return 0.0
     return importlib.import_module(core_module_name() + ".jit.compile_clock").compile_seconds()

@@ -15,7 +15,8 @@ from .render_visibility import (INSTANCING_PARENT_TYPES, RenderVisibility, insta
                                 rendered_layers_objects)
 from .scene_records import NOT_TRIANGLES, TRIANGLE_TYPES, Instance
 
-# Drawn by Blender over any engine's final image (the grease pencil pass), so there only the rays miss it.
+# Drawn by Blender over any engine's final image (with the view layer's Filter > Grease Pencil on), so there
+# only the rays miss it.
 DRAWN_OVER_RENDERS = {"GREASEPENCIL", "GPENCIL"}
 
 
@@ -89,6 +90,8 @@ def left_out_warnings(depsgraph: bpy.types.Depsgraph, vis: RenderVisibility, ins
                 if not _own_elements(ob.evaluated_get(depsgraph)):
                     pass  # its nodes made it all triangles or instances, or it is empty
                 elif render_mode and kind in DRAWN_OVER_RENDERS:
+                    if not depsgraph.view_layer.use_grease_pencil:
+                        continue  # the layer's Filter > Grease Pencil is off: no render draws it
                     warnings.append(f"object '{ob.name}' is {NOT_TRIANGLES[kind]}, not triangles: Blender draws it "
                                     "over the image, but the preview's rays pass through it (no AO or shadow)")
                 elif ob.name not in meshed:

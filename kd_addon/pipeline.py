@@ -44,15 +44,22 @@ _reuse_kernels_ready = False
 _denoiser_ready = False  # ... and the denoiser's, first run by the first denoised frame
 
 
-def _now() -> float:
-    """A clock that stands still while core's kernels compile: a frame's times leave a compile inside the
-    frame out (it goes to compile_ms), as they leave out the background compile a first frame waits for."""
-    return time.perf_counter() - corelib.compile_seconds()
+def _now() -> tuple[float, float]:
+    """A reading for _ms_since: (wall seconds, seconds Numba has compiled in this process). A frame's times
+    leave a compile inside them out (it goes to compile_ms, FrameJob._spent), as they leave out the
+    background compile a first frame waits for."""
+    return time.perf_counter(), corelib.compile_seconds()
 
 
-def _ms_since(t0: float) -> float:
-    """Milliseconds since the _now() reading t0."""
-    return (_now() - t0) * 1e3
+def _ms_since(t0: tuple[float, float], t1: tuple[float, float] | None = None) -> float:
+    """Milliseconds from the _now() reading t0 to t1 (default: now), the compiles in between left out."""
+    wall, compiled = t1 or _now()
+    return ((wall - t0[0]) - (compiled - t0[1])) * 1e3
+
+
+def _compile_ms(t0: tuple[float, float], t1: tuple[float, float] | None = None) -> float:
+    """Milliseconds Numba compiled in this process between the _now() readings t0 and t1 (default: now)."""
+    return ((t1 or _now())[1] - t0[1]) * 1e3
 
 
 @dataclass
@@ -168,7 +175,7 @@ class FrameJob:
         self._finished = None  # (image, lazy tree's stats or None, PixelState) once the worker made the image
         self._pending: BackgroundCall | None = None  # the kernel call running on the worker
         self._kernel_ms = {"compile_ms": 0.0, "load_ms": 0.0}  # timed apart from the frame (_await_kernels)
-        self._compiled_before = corelib.compile_seconds()  # compiles in this frame's time: compile_ms (_now)
+        self._compiled_ms = 0.0  # compiled in this process inside the frame's timed spans (_spent)
         self._kernels_checked = False
         self._waiting_since = None  # when the first tick found the kernels' compile running
         self.mode = None  # the mode this frame renders in: the setting, "auto" resolved (light_use.resolved_mode)
@@ -241,9 +248,9 @@ class FrameJob:
             return False
         warmup = kernel_warmup.start()
         if warmup.state == kernel_warmup.COMPILING:
-            self._waiting_since = self._waiting_since or _now()  # ticks apart: from the first
+            self._waiting_since = self._waiting_since or time.perf_counter()  # ticks apart: from the first
             warmup = kernel_warmup.wait(timeout=POLL_SECONDS)
-            self._kernel_ms["compile_ms"] = _ms_since(self._waiting_since)
+            self._kernel_ms["compile_ms"] = (time.perf_counter() - self._waiting_since) * 1e3  # another process's
             if warmup.state == kernel_warmup.COMPILING:
                 return True
         self._kernels_checked = True
@@ -251,7 +258,7 @@ class FrameJob:
             return False
         t1 = _now()
         core = corelib.load_core()  # on this thread, as prepare() imports it
-        self._kernel_ms["load_ms"] += _ms_since(t1)
+        self._kernel_ms["load_ms"] += self._spent(t1)
         self._pending = BackgroundCall(KERNEL_LOCK, self._load_kernels, core)
         return True
 
@@ -260,7 +267,7 @@ class FrameJob:
         global _kernels_ready, _reuse_kernels_ready
         t0 = _now()
         importlib.import_module(core.__name__ + ".jit.first_frame").compile_first_frames()
-        self._kernel_ms["load_ms"] += _ms_since(t0)
+        self._kernel_ms["load_ms"] += self._spent(t0)
         self._first_run, _kernels_ready, _reuse_kernels_ready = False, True, True
 
     def prepare(self) -> None:
@@ -278,7 +285,7 @@ class FrameJob:
                                  keeps_previous=reuse and self._state.pixels is not None,
                                  held=tree_cache.held_bytes(self.scene, self.group, self.lane))
         self._image_key = read.image_key
-        self._timings["other_ms"] += _ms_since(t0) - self._timings["extract_ms"]
+        self._timings["other_ms"] += self._spent(t0) - self._timings["extract_ms"]  # extraction: its own row
         self._info = dict(triangles=extracted.triangle_count, objects=extracted.object_count,
                           lights=len(inputs.lights), frame=extracted.frame, mode=self.mode,
                           holdouts=any(kind.holdout and kind.camera for kind in extracted.table().kinds),
@@ -327,14 +334,16 @@ class FrameJob:
         rays = core.frame_ray_count(width, height, options["mode"], options["samples"], lights)
         # A process's first frame: with an empty kernel cache a helper process compiles the sampling
         # kernel while this one builds and then compiles the camera pass (core/jit/parallel_compile.py); the
-        # block ends once both are done, and the build's time includes that.
+        # block ends once both are done, and that end, all compiling, goes to compile_ms.
         t0 = _now()
         alongside = (core.rendering_kernels_alongside(self.config.denoise) if self._first_run
                      else contextlib.nullcontext())
         with alongside as helper:
             scene, report = self._build_placeable(core, instances, placed, origin, reuse, rays)
-        self._timings["build_ms"] = _ms_since(t0)
+            built = _now()
+        self._timings["build_ms"] = self._spent(t0, built)
         if helper is not None:
+            self._kernel_ms["compile_ms"] += (time.perf_counter() - built[0]) * 1e3
             self._info["compile_helper"] = helper.outcome
         self._info.update(tree_stats=scene.stats(), objects_rebuilt=report.meshes_rebuilt,
                           objects_reused=report.meshes_reused)
@@ -402,7 +411,7 @@ class FrameJob:
             self.renderer = core.PreviewRender(scene, camera, width, height, options, previous=previous)
         except ValueError as error:  # core's own checks (its MemoryLimitError is one): a message, not a traceback
             raise PreviewError(f"the frame cannot be rendered: {error}") from None
-        self._timings["trace_ms"] += _ms_since(t0)
+        self._timings["trace_ms"] += self._spent(t0)
         if previous is not None and previous.settings == self.renderer.settings and not _reuse_kernels_ready:
             self._first_run, _reuse_kernels_ready = True, True
 
@@ -461,7 +470,7 @@ class FrameJob:
         global _kernels_ready
         t0 = _now()
         added = self.renderer.step(samples)
-        ms = _ms_since(t0)
+        ms = self._spent(t0)
         self._timings["trace_ms"] += ms
         self._last_step = (max(1, added), ms)
         _kernels_ready = True
@@ -478,16 +487,21 @@ class FrameJob:
         lazy = self.renderer.scene.lazy_tree is not None  # then the stats of what the rays made it build
         self._finished = (image, self.renderer.scene.stats() if lazy else None, self.renderer.pixel_state())
         self._depth = depth_image(self.renderer)
-        self._timings["other_ms"] += _ms_since(t0)
+        self._timings["other_ms"] += self._spent(t0)
         if self.config.denoise and not _denoiser_ready:  # the warm-up leaves the denoiser out: its kernels
             self._first_run = True  # loaded in this frame's time (a compile goes to compile_ms), marked "*"
         _denoiser_ready = _denoiser_ready or self.config.denoise
 
+    def _spent(self, t0: tuple[float, float], t1: tuple[float, float] | None = None) -> float:
+        """_ms_since(t0, t1) for one of this frame's timed spans (spans do not nest), whose compiles are
+        added to the frame's compile_ms."""
+        self._compiled_ms += _compile_ms(t0, t1)
+        return _ms_since(t0, t1)
+
     def _kernel_times(self) -> dict:
         """compile_ms and load_ms: the background compile waited for, the loads, and what compiled in
-        this process during the frame (left out of its times by _now)."""
-        compiled = (corelib.compile_seconds() - self._compiled_before) * 1e3
-        return dict(self._kernel_ms, compile_ms=self._kernel_ms["compile_ms"] + compiled)
+        this process inside the frame's timed spans (left out of their times)."""
+        return dict(self._kernel_ms, compile_ms=self._kernel_ms["compile_ms"] + self._compiled_ms)
 
     def result(self) -> FrameResult:
         """The finished frame; call only once `done`. Also remembers it for image reuse."""

@@ -328,12 +328,25 @@ def test_unwritable_output_folder_is_named_before_the_run_starts(tmp_path, capsy
 def test_more_threads_than_the_machine_runs_are_noted(tmp_path, capsys):
     import numba
     available = numba.config.NUMBA_NUM_THREADS
-    assert cli.execute(["render", "--frames", "1", "--out", str(tmp_path), "--threads", str(available + 3), *SMALL]) == 0
-    assert (f"note: threads {available + 3} is more than the {available} this machine runs; using {available}"
-            in capsys.readouterr().err)
+    out = str(tmp_path)
+    assert cli.execute(["render", "--frames", "1", "--out", out, "--threads", str(available + 3), *SMALL]) == 0
+    assert (f"note: threads {available + 3} is more than Numba's {available} threads in this process; using "
+            f"{available}" in capsys.readouterr().err)
     assert json.loads((tmp_path / "report.json").read_text())["run"]["threads"] == available
     assert cli.execute(["render", "--frames", "1", "--out", str(tmp_path), "--threads", str(available), *SMALL]) == 0
     assert "note:" not in capsys.readouterr().err
+
+
+def test_the_star_legend_is_printed_only_with_a_starred_frame(capsys):
+    from types import SimpleNamespace
+    totals = dict(frames=1, triangles=2, extract_ms=1.0, build_ms=1.0, trace_ms=1.0, mrays_per_s=1.0,
+                  mean_total_ms_after_first=3.0, objects_rebuilt=1, objects_reused=0, images_reused=0)
+    job = SimpleNamespace(totals=totals, config=SimpleNamespace(settings=SimpleNamespace(rebuild_all=False)),
+                          report_path="report.json")
+    cli._print_totals(job, False)
+    assert "(* =" not in capsys.readouterr().out
+    cli._print_totals(job, True)
+    assert "(* = includes loading kernels)" in capsys.readouterr().out
 
 
 def test_empty_output_folder_is_named(capsys):

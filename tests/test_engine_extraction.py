@@ -110,3 +110,6 @@ def test_grease_pencil_in_a_final_render_is_named_as_drawn_over_the_image(scene)
     assert "object 'Pencil' is grease pencil, not triangles: left out of the preview" in viewport.warnings
     assert ("object 'Pencil' is grease pencil, not triangles: Blender draws it over the image, but the preview's "
             "rays pass through it (no AO or shadow)") in rendered.warnings
+    bpy.context.view_layer.use_grease_pencil = False  # Filter > Grease Pencil off: no render draws it
+    rendered, _ = extraction_in_render()
+    assert not [w for w in rendered.warnings if "'Pencil'" in w]

@@ -39,6 +39,11 @@ WORKER_ENV = {"PYTHONPATH": str(REPO), "NUMBA_NUM_THREADS": "1"}
 # -- pieces, without a cluster -----------------------------------------------------------------------------
 
 
+def test_a_chunk_of_one_frame_is_named_as_one_frame():
+    assert farm_client._span_text([16]) == "frame 16"
+    assert farm_client._span_text([3, 5, 7]) == "frames 3-7"
+
+
 def test_chunks_are_contiguous_and_cover_every_frame_once():
     frames = list(range(1, 25))
     chunks = farm_client.chunk_frames(frames, 5)

@@ -2,9 +2,10 @@
 call's compile: without it a script's first two-triangle tree reported minutes of build
 (docs/choices.md#core-timings-without-the-compile).
 
-Numba announces each compile as a "numba:compile" event (numba.core.event; cache loads are not
-compiles). One listener, registered at import, adds up the outermost events' durations; Numba compiles
-under one global lock, so the events of different threads never interleave.
+Numba announces each compile as a "numba:compile" event (numba.core.event; loading from the cache, and
+writing to it, are not in it). One listener, registered at import, adds up the outermost events' durations;
+Numba compiles under one global lock, so the events of different threads never interleave. The count is
+the process's: a compile on another thread stops the clock for every thread.
 """
 from time import perf_counter
 
@@ -12,10 +13,11 @@ from numba.core import event
 
 
 class _CompileSeconds(event.Listener):
-    """Seconds this process has spent compiling since the listener was registered."""
+    """Seconds this process has spent compiling since the listener was registered, the compile under way
+    included, so clock() stands still during a compile instead of jumping back at its end."""
 
     def __init__(self):
-        self.seconds = 0.0
+        self._done = 0.0
         self._depth = 0
         self._start = 0.0
 
@@ -25,9 +27,15 @@ class _CompileSeconds(event.Listener):
         self._depth += 1  # a kernel's callees compile inside its own event
 
     def on_end(self, ev):
+        if self._depth == 0:
+            return  # registered while a compile was under way: its start was not seen
         self._depth -= 1
         if self._depth == 0:
-            self.seconds += perf_counter() - self._start
+            self._done += perf_counter() - self._start
+
+    @property
+    def seconds(self):
+        return self._done + (perf_counter() - self._start if self._depth else 0.0)
 
 
 _COMPILES = _CompileSeconds()
@@ -35,11 +43,11 @@ event.register("numba:compile", _COMPILES)
 
 
 def compile_seconds():
-    """Seconds spent in Numba compiles since core was imported."""
+    """Seconds spent in Numba compiles in this process (any thread, any code) since core was imported."""
     return _COMPILES.seconds
 
 
 def clock():
-    """perf_counter() less compile_seconds(): the difference of two readings is the time between them
-    without the compiles in between."""
+    """perf_counter() less compile_seconds(): it stands still while Numba compiles, so the difference of
+    two readings is the time between them without the compiles in between."""
     return perf_counter() - _COMPILES.seconds
