@@ -186,6 +186,27 @@ def test_pixels_that_stopped_early_and_now_need_more_samples_continue_exactly(la
     assert more.sum() >= 20 and second.memo_reused.sum() > 0  # the case: early stops now sampled further
 
 
+def test_build_scene_of_other_meshes_keeps_no_pixel_of_the_last():
+    """build_scene keys meshes by their index: two scenes of different meshes with the same boxes and
+    placements must still differ by signature (their contents), or `previous=` keeps the wrong pixels."""
+    cam = camera()
+    v, f = cube()
+    flipped = (v, f[:, ::-1][::2])  # half the faces, the same box
+    first = render(core.build_scene([GROUND, (v, f)], [0, 1], np.stack([np.eye(4), moved(0, 0, 1)])), cam, samples=2)
+    other = core.build_scene([GROUND, flipped], [0, 1], np.stack([np.eye(4), moved(0, 0, 1)]))
+    continued = render(other, cam, previous=first.pixel_state(), samples=2)
+    np.testing.assert_array_equal(continued.image(), render(other, cam, samples=2).image())
+    assert not np.array_equal(continued.image(), first.image())
+
+
+def test_build_scene_names_a_mesh_that_is_not_a_pair():
+    for bad, what in ((np.zeros((3, 3)), "ndarray"), (None, "NoneType"), ({0: 1}, "dict"),
+                      ((np.zeros((3, 3)), np.zeros((1, 3), int), 7), "a tuple of length 3")):
+        with pytest.raises(ValueError, match=rf"meshes\[1\] must be a \(vertices, triangles\) pair or a "
+                                             rf"core.MeshInput, got {what}"):
+            core.build_scene([GROUND, bad], [0], np.eye(4)[None])
+
+
 def test_unchanged_frame_traces_nothing():
     anim, cam = Animation(np.random.default_rng(5)), camera()
     builder, local = SceneBuilder(), cam.translated(cam.position)

@@ -155,6 +155,15 @@ def test_bad_options_are_named(bad, message):
         core.build_kdtree(np.zeros((1, 3, 3)), **bad)
 
 
+def test_options_take_numpy_scalars_and_name_a_list():
+    """BuildOptions itself, not only build_kdtree, takes numpy scalars as the values they hold; a list
+    where a name is wanted is named, not a bare TypeError."""
+    opts = core.BuildOptions(bins=np.int64(8), intersection_cost=np.float32(0.5), clip=np.True_)
+    assert (opts.bins, opts.intersection_cost, opts.clip) == (8, 0.5, True) and type(opts.bins) is int
+    with pytest.raises(ValueError, match=r"build option 'builder' must be one of .* got \['binned'\]"):
+        core.BuildOptions(builder=["binned"])
+
+
 def test_unknown_option_is_named():
     with pytest.raises(TypeError, match="colour"):
         core.build_kdtree(np.zeros((1, 3, 3)), colour="red")

@@ -169,12 +169,16 @@ def test_drawing_needs_a_gpu_context(addon):
     It needs a GPU context: Blender's window has one; the bpy module has none before 5.3, whose gpu.init()
     makes an offscreen (EGL) one, so the test runs there and skips elsewhere."""
     import gpu
+
+    def texture():  # what draw_image needs: a buffer may be made without a context, a texture not
+        gpu.types.GPUTexture((1, 1), format="RGBA16F", data=gpu.types.Buffer("FLOAT", 4, [0.0] * 4))
+
     try:
-        gpu.types.Buffer("FLOAT", 4, [0.0] * 4)
-    except SystemError as error:
+        texture()
+    except (SystemError, RuntimeError) as error:
         try:
             gpu.init()  # bpy 5.3 on; an AttributeError before
-            gpu.types.Buffer("FLOAT", 4, [0.0] * 4)
+            texture()
         except (AttributeError, SystemError, RuntimeError):
             reason = f"no GPU context here ({error})"
             print(f"SKIPPED drawing test: {reason}")

@@ -26,7 +26,8 @@ def test_defaults_and_frozen():
 
 
 @pytest.mark.parametrize("settings, message", [
-    (dict(mode="normals"), "mode must be one of"), (dict(samples=0), "samples must be an integer >= 1"),
+    (dict(mode="normals"), "mode must be one of"), (dict(mode=["ao"]), r"mode must be one of .* got \[.ao.\]"),
+    (dict(samples=0), "samples must be an integer >= 1"),
     (dict(ao_distance=-1.0), "ao_distance must be finite and >= 0"), (dict(sampler="halton"), "sampler must be"),
     (dict(error_target=0.0), "error_target must be None or > 0"), (dict(min_samples=1), "min_samples must be"),
     (dict(ambient=1.5), r"ambient must be in \[0, 1\]"), (dict(seed=0.5), "seed must be an integer"),

@@ -88,6 +88,9 @@ class BuildOptions:
     rays: Optional[int] = None
 
     def __post_init__(self):
+        for name in self.__dataclass_fields__:  # numpy scalars (np.int64(4), np.True_) are the values they hold
+            if isinstance(getattr(self, name), np.generic):
+                object.__setattr__(self, name, getattr(self, name).item())
         _check_choice("builder", self.builder, BUILDERS)
         _check_choice("top", self.top, TOP_STRATEGIES)
         _check_choice("split_axes", self.split_axes, SPLIT_AXES)
@@ -186,12 +189,11 @@ def make_options(options):
     unknown = sorted(set(options) - set(known))
     if unknown:
         raise TypeError(f"unknown build option(s) {unknown}; known: {sorted(known)}")
-    # numpy scalars (np.int64(4), np.True_) are the Python values they hold
-    return BuildOptions(**{k: v.item() if isinstance(v, np.generic) else v for k, v in options.items()})
+    return BuildOptions(**options)
 
 
 def _check_choice(name, value, choices):
-    if value not in choices:
+    if not isinstance(value, str) or value not in choices:  # not a list, whose `in` would fail unnamed
         raise ValueError(f"build option {name!r} must be one of {choices}, got {value!r}")
 
 

@@ -90,14 +90,17 @@ class Light:
                    spread=spread)
 
     def translated(self, offset):
-        """The same light in a frame whose origin is at `offset`."""
-        offset = np.asarray(offset, np.float64)
+        """The same light in a frame whose origin is at `offset` (3 finite numbers; the moved light must be
+        finite too)."""
+        offset = _vector("offset", offset)
         params = dict(self.params)
-        if "position" in params:
-            params["position"] = params["position"] - offset
-        if "matrix_world" in params:
-            params["matrix_world"] = params["matrix_world"].copy()
-            params["matrix_world"][:3, 3] -= offset
+        with np.errstate(over="ignore"):  # an overflow to inf is named below
+            if "position" in params:
+                params["position"] = _vector("the translated light's position", params["position"] - offset)
+            if "matrix_world" in params:
+                params["matrix_world"] = params["matrix_world"].copy()
+                params["matrix_world"][:3, 3] = _vector("the translated light's position",
+                                                        params["matrix_world"][:3, 3] - offset)
         return Light(self.kind, self.color, self.power, self.cast_shadow, **params)
 
     def packed(self):

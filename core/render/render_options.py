@@ -76,7 +76,7 @@ def _as_tuple(lights):
 
 
 def check_mode_and_samples(mode, samples):
-    if mode not in MODES:
+    if not isinstance(mode, str) or mode not in MODES:  # a list would fail unhashable, unnamed
         raise ValueError(f"mode must be one of {sorted(MODES)}, got {mode!r}")
     if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or samples < 1:
         raise ValueError(f"samples must be an integer >= 1, got {samples!r}")

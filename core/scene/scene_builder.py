@@ -8,6 +8,7 @@ fingerprints and matrices are unchanged, stored relative to an anchor so a movin
 rebuilds it; each ray visibility gets its own soup. Every matrix is shifted by minus `origin` (the
 camera position) in float64 before anything is rounded, so nothing far from the origin loses precision.
 """
+import hashlib
 from typing import Hashable, NamedTuple
 
 import numpy as np
@@ -384,5 +385,35 @@ def _bounds(meshes):
 def build_scene(meshes, mesh_of, matrices, origin=None, layout="auto", visibility=None, **options):
     """One frame's TwoLevelScene without reuse: meshes are (vertices, triangles) pairs or MeshInputs;
     visibility (I,) ray_visibility bits per instance (None: all rays)."""
-    inputs = [m if isinstance(m, MeshInput) else MeshInput(i, m[0], m[1], i) for i, m in enumerate(meshes)]
+    inputs = [_mesh_input(i, m) for i, m in enumerate(meshes)]
     return SceneBuilder(layout, **options).build(inputs, mesh_of, matrices, origin, visibility=visibility)[0]
+
+
+def _mesh_input(i, mesh):
+    """meshes[i] of build_scene as a MeshInput: key i, and a fingerprint of the arrays' contents, so that
+    two scenes built from different meshes never share a signature (a render continued from one with
+    `previous=` would otherwise keep the other's pixels)."""
+    if isinstance(mesh, MeshInput):
+        return mesh
+    if not isinstance(mesh, (tuple, list)) or len(mesh) != 2:
+        raise ValueError(f"meshes[{i}] must be a (vertices, triangles) pair or a core.MeshInput, got "
+                         + (f"a {type(mesh).__name__} of length {len(mesh)}" if isinstance(mesh, (tuple, list))
+                            else type(mesh).__name__))
+    vertices, triangles = mesh
+    return MeshInput(i, vertices, triangles, _contents_digest(vertices, triangles))
+
+
+def _contents_digest(*arrays):
+    """A digest of the arrays' dtypes, shapes and bytes (None where one is not an array of numbers:
+    _check_mesh then names the problem)."""
+    digest = hashlib.blake2b(digest_size=16)
+    for a in arrays:
+        try:
+            a = np.ascontiguousarray(a)
+        except (TypeError, ValueError):
+            return None
+        if a.dtype.kind not in "biuf":
+            return None
+        digest.update(f"{a.dtype.str}{a.shape}".encode())
+        digest.update(a.view(np.uint8).reshape(-1) if a.size else b"")
+    return digest.hexdigest()
