@@ -16,6 +16,7 @@ import importlib
 import importlib.util
 import os
 import sys
+import time
 from pathlib import Path
 
 APP_NAME = "kd_preview"
@@ -124,12 +125,13 @@ def is_loaded() -> bool:
     return core_module_name() in sys.modules
 
 
-def compile_seconds() -> float:
-    """Seconds Numba has spent compiling in this process (core/jit/compile_clock.py counts every compile
-    once core is imported; 0 before), so differences of it are the compiles between two readings."""
+def compile_reading() -> tuple[float, float]:
+    """(perf_counter(), seconds Numba has spent compiling in this process), read at one instant
+    (core/jit/compile_clock.py counts every compile once core is imported; 0 before), so differences of
+    the second are the compiles between two readings."""
     if not is_loaded():
-        return 0.0
-    return importlib.import_module(core_module_name() + ".jit.compile_clock").compile_seconds()
+        return time.perf_counter(), 0.0
+    return importlib.import_module(core_module_name() + ".jit.compile_clock").reading()
 
 
 def load_core():

@@ -48,7 +48,7 @@ def _now() -> tuple[float, float]:
     """A reading for _ms_since: (wall seconds, seconds Numba has compiled in this process). A frame's times
     leave a compile inside them out (it goes to compile_ms, FrameJob._spent), as they leave out the
     background compile a first frame waits for."""
-    return time.perf_counter(), corelib.compile_seconds()
+    return corelib.compile_reading()
 
 
 def _ms_since(t0: tuple[float, float], t1: tuple[float, float] | None = None) -> float:
@@ -494,7 +494,7 @@ class FrameJob:
 
     def _spent(self, t0: tuple[float, float], t1: tuple[float, float] | None = None) -> float:
         """_ms_since(t0, t1) for one of this frame's timed spans (spans do not nest), whose compiles are
-        added to the frame's compile_ms."""
+        added to the frame's compile_ms (the process's: another job's compile meanwhile counts too)."""
         self._compiled_ms += _compile_ms(t0, t1)
         return _ms_since(t0, t1)
 

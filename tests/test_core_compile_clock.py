@@ -1,4 +1,5 @@
 """Kernel timings leave out Numba compiles: a first call's build_ms is the build's, not the compile's."""
+import threading
 import time
 
 import numpy as np
@@ -6,7 +7,7 @@ from numba import njit
 
 import core
 import core.build.builder as builder
-from core.jit.compile_clock import clock, compile_seconds
+from core.jit.compile_clock import _CompileSeconds, clock, compile_seconds
 from tests.meshes import random_soup
 
 
@@ -32,6 +33,37 @@ def test_the_clock_stands_still_while_numba_compiles():
     compiled = compile_seconds()
     f(np.arange(4.0))  # compiled already: nothing to add
     assert compile_seconds() == compiled
+
+
+def test_a_reading_on_another_thread_never_goes_back_while_a_compile_runs():
+    """The count includes the compile under way, so a thread timing its own work while another thread
+    compiles sees the clock stand still, never jump back when the compile ends."""
+    f = fresh_function(7.0)
+    compiling = threading.Thread(target=f, args=(np.arange(4.0),))
+    readings, before = [], compile_seconds()
+    compiling.start()
+    while compiling.is_alive():
+        readings.append(clock())
+    compiling.join()
+    readings.append(clock())
+    assert compile_seconds() > before
+    assert min(np.diff(readings)) >= 0.0
+
+
+def test_an_end_without_its_start_is_ignored():
+    """A listener registered while a compile runs sees that compile's end only: no count, no negative depth."""
+    listener = _CompileSeconds()
+    listener.on_end(None)
+    assert listener.reading()[1] == 0.0
+    listener.on_start(None)
+    listener.on_start(None)  # a callee compiling inside its caller's event
+    listener.on_end(None)
+    time.sleep(0.01)
+    assert listener.reading()[1] >= 0.01  # the compile under way counts
+    listener.on_end(None)
+    done = listener.reading()[1]
+    time.sleep(0.01)
+    assert listener.reading()[1] == done >= 0.01
 
 
 def test_build_ms_leaves_out_a_compile_inside_the_build(monkeypatch):

@@ -176,6 +176,8 @@ def test_drawing_needs_a_gpu_context(addon):
     try:
         texture()
     except (SystemError, RuntimeError) as error:
+        if not any(word in str(error) for word in ("context", "background mode")):
+            raise  # another failure of the texture draw_image makes: the test's to report
         try:
             gpu.init()  # bpy 5.3 on; an AttributeError before
             texture()
