@@ -123,8 +123,8 @@ def render_edits():
     settings = getattr(window.scene, "kd_preview", None) if window is not None else None
     if settings is None or not settings.live_update:
         return None
-    # (a render that blocks runs no timer: only a render job can be running here)
-    if bpy.app.is_job_running("RENDER") or interactive_tool_running([op.bl_idname for op in window.modal_operators]):
+    # (a render that blocks runs no timer: only a render job can be running here, so no depsgraph to ask)
+    if blender_renders() or interactive_tool_running([op.bl_idname for op in window.modal_operators]):
         return EDIT_DELAY  # Blender renders (and may set frames) or a tool edits: read the scene after
     if not background.wait_for_work(background.SCENE_READ_WAIT):
         return EDIT_DELAY  # a build or trace step is still on the worker (SCENE_READ_WAIT)
