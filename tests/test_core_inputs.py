@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 import core
+from core.render.denoise import FilterSettings
 
 
 @pytest.fixture
@@ -314,8 +315,10 @@ def denoise_inputs(pixels, counts=(1, 1)):
 @pytest.mark.parametrize("pixels, counts, word", [([0, -1], (1, 1), r"pixels must be in \[0, 4\)"),
                                                   ([0, 9], (1, 1), r"pixels must be in \[0, 4\)"),
                                                   ([0.0, 1.0], (1, 1), "integer pixel indices"),
-                                                  ([0, 1], (1, -3), "counts must be >= 0"),
-                                                  ([0, 1], (1,), r"counts must have shape \(2,\)")])
+                                                  ([0, 1], (1, -3), r"counts must be >= 0 .*got -3.0 at row 1"),
+                                                  ([0, 1], (1,), r"counts must have shape \(2,\)"),
+                                                  ([3, 3], (1, 1), "each pixel once, got pixel 3 2 times"),
+                                                  ([0, 1], (np.nan, 1), r"counts must be finite, got nan at row 0")])
 def test_denoise_pixels_names_bad_inputs(pixels, counts, word):
     """A negative index must not wrap round and light the last pixel, nor a negative count pass."""
     with pytest.raises(ValueError, match=word):
@@ -327,6 +330,36 @@ def test_denoise_pixels_names_bad_inputs(pixels, counts, word):
     empty = list(denoise_inputs([], counts=()))
     empty[2] = np.zeros(0)  # no hit pixels, whatever the empty array's dtype
     assert not core.denoise_pixels(*empty).any()
+
+
+@pytest.mark.parametrize("argument, value, word", [
+    (0, -2, "width must be an integer"), (1, 2.5, "height must be an integer"), (0, "2", "width must be an integer"),
+    (3, np.full((2, 3), np.nan), r"points must be finite, got \[nan, nan, nan\] at row 0"),
+    (4, np.array([[0, 0, 1.0], [0, np.inf, 1]]), r"normals must be finite, got \[0.0, inf, 1.0\] at row 1"),
+    (5, np.full((2, 3), np.inf), "sums must be finite"), (6, np.array([0.25, -1.0]), "sq_sums must be >= 0"),
+    (3, np.array([["a", "b", "c"]] * 2), "points must be an array of numbers, got dtype <U1"),
+    (5, np.zeros((2, 3), complex), "sums must be an array of numbers")])
+def test_denoise_pixels_names_bad_arrays(argument, value, word):
+    """Unchecked, NaN points and inf sums gave NaN or inf pixels, a string width or array passed through
+    int() or numpy's own message, and a negative size named the pixels."""
+    args = list(denoise_inputs([0, 3]))
+    args[argument] = value
+    with pytest.raises(ValueError, match=word):
+        core.denoise_pixels(*args)
+
+
+@pytest.mark.parametrize("keywords, word", [
+    ({"variance_decay": np.nan}, r"variance_decay must be in \[0, 1\]"),
+    ({"variance_decay": -5}, r"variance_decay must be in \[0, 1\]"), ({"variance_decay": "0.5"}, "must be a number"),
+    ({"settings": (1, 2)}, "settings must be a FilterSettings"),
+    ({"settings": FilterSettings(iterations=2.0)}, "settings.iterations must be an integer"),
+    ({"settings": FilterSettings(iterations=40)}, "settings.iterations must be an integer in"),
+    ({"settings": FilterSettings(sigma_plane=0.0)}, "settings.sigma_plane must be a positive number, got 0.0")])
+def test_denoise_pixels_names_bad_settings(keywords, word):
+    with pytest.raises(ValueError, match=word):
+        core.denoise_pixels(*denoise_inputs([0, 3]), **keywords)
+    assert core.denoise_pixels(*denoise_inputs([0, 3]), variance_decay=0.5,
+                               settings=FilterSettings(iterations=0)).shape == (2, 2, 4)
 
 
 def test_scene_builder_inputs_that_are_not_mesh_inputs_or_hashable_keys_are_named():

@@ -19,6 +19,7 @@ from numba import njit, prange
 
 from ..jit.threads import thread_count
 from ..trace.traversal import block_range, interleaved_blocks
+from .denoise_inputs import checked_denoise_inputs
 
 ITERATIONS = 4  # taps 1, 2, 4, 8 pixels apart: a 61x61 footprint (docs/choices.md#four-denoise-passes)
 SIGMA_LUMINANCE = 4.0  # SVGF's sigma_l
@@ -45,47 +46,28 @@ class FilterSettings(NamedTuple):
     sigma_plane: float = SIGMA_PLANE
 
 
-def _checked_pixels(n, pixels, points, normals, sums, sq_sums, counts):
-    """The pixel indices as an integer array, or a ValueError naming the argument: they must be
-    integers in [0, n) (a negative one would wrap around to another pixel), counts non-negative, and
-    every array one row per pixel."""
-    pixels = np.asarray(pixels)
-    if pixels.ndim != 1 or (pixels.size and pixels.dtype.kind not in "iu"):
-        raise ValueError(f"pixels must be a 1-D array of integer pixel indices, got shape {pixels.shape}, "
-                         f"dtype {pixels.dtype}")
-    if pixels.size and (pixels.min() < 0 or pixels.max() >= n):
-        raise ValueError(f"pixels must be in [0, {n}) (width x height), got {pixels.min()} to {pixels.max()}")
-    m = len(pixels)
-    for name, a, tail in (("points", points, (3,)), ("normals", normals, (3,)), ("sums", sums, (3,)),
-                          ("sq_sums", sq_sums, ()), ("counts", counts, ())):
-        if np.shape(a) != (m, *tail):
-            raise ValueError(f"{name} must have shape {(m, *tail)} (one row per pixel), got {np.shape(a)}")
-    if m and np.asarray(counts).min() < 0:
-        raise ValueError("counts must be >= 0 (samples taken per pixel)")
-    return pixels.astype(np.int64, copy=False)
-
-
 def denoise_pixels(width, height, pixels, points, normals, sums, sq_sums, counts, *, variance_decay=0.0,
                    threads=None, settings=FilterSettings()):
     """The denoised (H, W, 4) float32 image of a PreviewRender's accumulators (row 0 at the top).
     pixels (M,): flat indices of the hit pixels; points, normals (M, 3); sums (M, 3), sq_sums (M,) (of the
     grey value), counts (M,): the per-pixel sample sums; variance_decay: a pixel mean's variance falls as
     n^-(1 + variance_decay) (0 for independent samples, 0.5 for scrambled Sobol); settings: FilterSettings."""
+    pixels, (points, normals, sums, sq_sums, counts), variance_decay = checked_denoise_inputs(
+        width, height, pixels, (points, normals, sums, sq_sums, counts), variance_decay, settings)
     iterations, sigma_luminance, sigma_normal, sigma_plane = settings
     width, height = int(width), int(height)
     n = width * height
-    pixels = _checked_pixels(n, pixels, points, normals, sums, sq_sums, counts)
     valid = np.zeros(n, np.bool_)
-    sampled = np.asarray(counts) > 0
+    sampled = counts > 0
     valid[pixels[sampled]] = True
     cnt = np.zeros(n)
     cnt[pixels] = counts
     s1 = np.zeros(n)
     s2 = np.zeros(n)
     col = np.zeros((n, 3))
-    s1[pixels] = np.asarray(sums).sum(axis=1) / 3.0
+    s1[pixels] = sums.sum(axis=1) / 3.0
     s2[pixels] = sq_sums
-    col[pixels] = np.asarray(sums) / np.maximum(np.asarray(counts), 1)[:, None]
+    col[pixels] = sums / np.maximum(counts, 1)[:, None]
     pos = np.zeros((n, 3))
     nrm = np.zeros((n, 3))
     pos[pixels] = points
