@@ -166,6 +166,20 @@ def is_real_dtype(dtype):
     return np.issubdtype(dtype, np.floating) or np.issubdtype(dtype, np.integer)
 
 
+def as_real_array(name, value):
+    """`value` as a float64 array, or a ValueError naming `name` when it does not hold real numbers: numpy
+    would parse strings of digits, cut complex values to their real part with only a warning, take bools
+    as 0 and 1, and word its own errors without the argument's name."""
+    try:
+        arr = np.asarray(value)
+    except (TypeError, ValueError):  # ragged nesting
+        raise ValueError(f"{name} must be an array of numbers, got {value!r:.80}") from None
+    if not is_real_dtype(arr.dtype):
+        got = f"{value!r:.80}" if arr.dtype == object else f"dtype {arr.dtype}"
+        raise ValueError(f"{name} must be an array of numbers, got {got}")
+    return arr.astype(np.float64)
+
+
 def _as_points(name, values):
     arr = np.asarray(values)
     if arr.ndim != 2 or arr.shape[1] != 3:

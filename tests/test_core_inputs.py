@@ -486,3 +486,32 @@ def test_the_parallel_ray_check_names_the_first_bad_ray_of_all_blocks():
     d[5, 2], d[BLOCK + 3, 0] = 1.0, 2.0 ** -700
     _, fixed = as_rays(o, d)
     assert fixed[BLOCK + 3, 0] == 0.0 and fixed[BLOCK + 3, 2] == 1.0
+
+
+def _strings(matrix):
+    return np.asarray(matrix).astype(str)
+
+
+@pytest.mark.parametrize("kind", ["strings", "complex", "bool"])
+def test_matrices_of_other_than_real_numbers_are_named(kind):
+    """numpy would parse strings of digits, keep a complex matrix's real part with only a warning and take
+    bools as 0 and 1: each is refused with the argument's name, wherever a matrix or a point enters."""
+    def bad(value):
+        return {"strings": _strings, "complex": lambda m: np.asarray(m, complex),
+                "bool": lambda m: np.asarray(m, bool)}[kind](value)
+    vertices, triangles = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]]), np.array([[0, 1, 2]])
+    calls = [(lambda: core.build_scene([(vertices, triangles)], [0], bad(np.eye(4)[None])), "matrices .* must be"),
+             (lambda: core.build_scene([(vertices, triangles)], [0], np.eye(4)[None], origin=bad([1, 2, 3])),
+              "origin must be"),
+             (lambda: core.Camera(bad(np.eye(4)), 0.8), "camera matrix_world must be"),
+             (lambda: core.Camera(np.eye(4), 0.8, shift=bad([0.1, 0.2])), "camera shift must be"),
+             (lambda: core.Camera(np.eye(4), 0.8).translated(bad([1, 2, 3])), "camera offset must be"),
+             (lambda: core.Light.area(bad(np.eye(4))), "area light matrix_world must be"),
+             (lambda: core.Light.point(bad([1, 2, 3])), "point light position must be"),
+             (lambda: core.Light.spot((0, 0, 1), (0, 0, -1), 0.5, axes=bad(np.eye(3))), "spot axes must be"),
+             (lambda: core.Light.point((0, 0, 1), color=bad([1, 1, 1])), "light color must be")]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # numpy's ComplexWarning would turn into an error here
+        for call, word in calls:
+            with pytest.raises(ValueError, match=word):
+                call()

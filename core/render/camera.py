@@ -4,7 +4,7 @@ import functools
 import numpy as np
 from numba import njit, prange
 
-from ..inputs import as_number, check_image_size, without_negligible_components
+from ..inputs import as_number, as_real_array, check_image_size, without_negligible_components
 from ..trace.packet_traversal import L, packet_order
 
 TILE = 8  # tiled_pixels: 8 x 8 = 64 rays, one traversal task (traversal.RAYS_PER_TASK)
@@ -22,7 +22,7 @@ class Camera:
 
     def __init__(self, matrix_world, fov=None, *, ortho_scale=None, clip_start=0.0, clip_end=np.inf,
                  shift=(0.0, 0.0), pixel_aspect=1.0):
-        m = np.asarray(matrix_world, np.float64)
+        m = as_real_array("camera matrix_world", matrix_world)
         if m.shape != (4, 4):
             raise ValueError(f"camera matrix_world must be a 4x4 matrix, got shape {m.shape}")
         if not np.isfinite(m).all():
@@ -40,7 +40,7 @@ class Camera:
             raise ValueError("camera matrix_world is singular (zero scale or collapsed axes)")
         if not (m[3] == (0.0, 0.0, 0.0, 1.0)).all():
             raise ValueError(f"camera matrix_world must be affine (bottom row 0 0 0 1), got {m[3].tolist()}")
-        shift = np.asarray(shift, np.float64)
+        shift = as_real_array("camera shift", shift)
         if shift.shape != (2,) or not (np.abs(shift) <= 1e6).all():
             raise ValueError(f"camera shift must be two numbers (x, y) within +-1e6, got {shift.tolist()}")
         self.shift = (float(shift[0]), float(shift[1]))
@@ -60,7 +60,7 @@ class Camera:
     def translated(self, offset):
         """The same camera in a frame whose origin is at `offset` (positions minus offset)."""
         m = self.matrix_world.copy()
-        m[:3, 3] -= np.asarray(offset, np.float64)
+        m[:3, 3] -= as_real_array("camera offset", offset)
         return Camera(m, self.fov, ortho_scale=self.ortho_scale, clip_start=self.clip_start,
                       clip_end=self.clip_end, shift=self.shift, pixel_aspect=self.pixel_aspect)
 

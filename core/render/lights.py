@@ -5,7 +5,7 @@ diameter, an area light's shape); cast_shadow=False lights every surface facing 
 """
 import numpy as np
 
-from ..inputs import as_number, without_negligible_components
+from ..inputs import as_number, is_real_dtype, without_negligible_components
 
 POINT, SUN, SPOT, AREA = 0, 1, 2, 3
 AREA_SHAPES = {"SQUARE": 0, "RECTANGLE": 1, "DISK": 2, "ELLIPSE": 3}
@@ -151,7 +151,7 @@ def _spot_frame(direction, axes):
         u = np.cross(direction, (1.0, 0.0, 0.0) if abs(direction[0]) < 0.9 else (0.0, 1.0, 0.0))
         u /= np.linalg.norm(u)
         return u, np.cross(direction, u), direction, 1.0
-    a = np.asarray(axes, np.float64)
+    a = _floats(axes)
     if a.shape != (3, 3) or not np.isfinite(a).all():
         raise ValueError(f"spot axes must be a finite 3x3 matrix (columns X, Y, Z), got shape {a.shape}")
     lengths = np.linalg.norm(a, axis=0)
@@ -190,12 +190,14 @@ def pack_lights(lights):
 
 
 def _floats(value):
-    """`value` as a float64 array, or an empty one when it is not numbers: the caller's shape check then
-    names the argument (numpy's own error would not)."""
+    """`value` as a float64 array, or an empty one when it is not real numbers (strings, complex values,
+    bools, None): the caller's shape check then names the argument (numpy's own error would not, and it
+    would parse strings of digits and cut complex values with only a warning)."""
     try:
-        return np.asarray(value, np.float64)
+        arr = np.asarray(value)
     except (TypeError, ValueError):
         return np.full(0, np.nan)
+    return arr.astype(np.float64) if is_real_dtype(arr.dtype) else np.full(0, np.nan)
 
 
 def _vector(name, v):

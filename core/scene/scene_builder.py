@@ -15,7 +15,7 @@ import numpy as np
 
 from ..jit.compile_clock import clock
 from ..build.builder import build_kdtree
-from ..inputs import FLOAT32_MAX, first_row_beyond_float32, is_real_dtype
+from ..inputs import FLOAT32_MAX, as_real_array, first_row_beyond_float32, is_real_dtype
 from .instance_signature import instance_signature, mesh_digest
 from ..build.options import make_options
 from .ray_visibility import ALL_RAYS, as_visibility, stops_rays
@@ -284,7 +284,7 @@ def _caller_ids(meshes, mesh_of, own, groups):
 def _checked_origin(origin):
     if origin is None:
         return np.zeros(3)
-    out = np.asarray(origin, np.float64)
+    out = as_real_array("origin", origin)
     if out.shape != (3,) or not np.isfinite(out).all():
         raise ValueError(f"origin must be 3 finite numbers, got {np.asarray(origin).tolist()}")
     return out

@@ -19,6 +19,7 @@ from ..build.options import make_options
 from .instance_transforms import affine_boxes, affine_inverses, relative_determinants
 from .ray_visibility import as_visibility
 from ..jit.threads import thread_count
+from ..inputs import as_real_array
 
 # An instance test (a matrix product, then the mesh tree's own traversal) costs the SAH this many triangle
 # tests: at the default intersection_cost (0.3, options.py) the top level keeps the 1.5 it was tuned with
@@ -196,10 +197,7 @@ def check_placement(n_meshes, mesh_of, matrices):
         bad = int(np.flatnonzero(out_of_range)[0])
         raise ValueError(f"instance {bad} names mesh {raw[bad]}, but there are {n_meshes} meshes")
     mesh_of = np.ascontiguousarray(raw, np.int32)
-    try:
-        o2w = np.ascontiguousarray(matrices, np.float64)
-    except (TypeError, ValueError):
-        raise ValueError("matrices must be an (I, 4, 4) array of numbers") from None
+    o2w = np.ascontiguousarray(as_real_array("matrices (one 4x4 an instance)", matrices))
     if o2w.shape != (len(mesh_of), 4, 4):
         raise ValueError(f"matrices must have shape ({len(mesh_of)}, 4, 4), one per instance, got {o2w.shape}")
     finite = np.isfinite(o2w).reshape(len(o2w), 16).all(axis=1)
