@@ -30,6 +30,7 @@ import bpy
 from . import background, corelib, demo_scene, properties
 from .config import DEFAULTS, OUTPUT_FORMATS, SETTING_NAMES, SettingsError, make_config
 from .errors import Cancelled, PreviewError
+from .keyed_settings import keyed_settings_note
 from .operators import depsgraph_source
 from .pipeline import claim, release, run_job
 from .render_visibility import render_view_layer
@@ -288,6 +289,7 @@ class Prepared:
     settings: SimpleNamespace  # the scene's saved settings with the options given
     config: object  # config.RenderConfig
     frames: list
+    keyed_note: str = ""  # settings keyed to change over the frames, not followed (keyed_settings.py)
 
 
 def prepare(args) -> Prepared:
@@ -303,7 +305,8 @@ def prepare(args) -> Prepared:
     frames = parse_frames(args.frames if args.frames is not None  # --frames "" is an error, not the default
                           else f"{scene.frame_start}-{scene.frame_end}:{max(1, scene.frame_step)}")
     _note_frames_outside(args.prog, scene, frames)
-    return Prepared(scene, layer_name, settings, config, frames)
+    keyed = keyed_settings_note(scene, frames, given=[n for n in SETTING_NAMES if hasattr(args, n)])
+    return Prepared(scene, layer_name, settings, config, frames, keyed)
 
 
 def _run(args, cancelled) -> int:
@@ -314,7 +317,7 @@ def _run(args, cancelled) -> int:
         _note_threads_beyond(args.prog, int(prepared.settings.threads))  # a cluster's workers have their own
         job = SequenceJob(scene, config, frames, Path(args.out),
                           depsgraph_source(scene, scene.view_layers[prepared.layer_name]),
-                          on_frame=partial(_print_row, args.prog))
+                          on_frame=partial(_print_row, args.prog), note=prepared.keyed_note)
         print(f"KD Preview: scene '{scene.name}', {len(frames)} frame(s), mode {config.settings.mode}, "
               f"{config.settings.samples} samples, {config.resolution_percentage}% resolution -> {args.out}")
         if not corelib.cache_is_warm():  # else a first run looks hung for minutes

@@ -266,6 +266,13 @@ def read_lights(depsgraph, visibility: RenderVisibility | None = None, instanced
     return lights
 
 
+def render_hidden_lights(depsgraph) -> list[str]:
+    """The view layer's lights when none of them is read (read_lights) and none is hidden in the viewport:
+    all are switched off for renders on this frame (Disable in Renders, keyed or a collection's), which
+    an animation does to turn its lights off, so the frame renders dark rather than stopping the run."""
+    return sorted(ob.name for ob in depsgraph.view_layer.objects if ob.type == "LIGHT")
+
+
 def unapplied_light_settings(ob) -> tuple[str, ...]:
     """What Cycles would apply and the preview does not, named so a warning can say so: the object's
     light and shadow linking (Blender 4.0+: which objects the light lights, which block it). The

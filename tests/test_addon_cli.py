@@ -383,3 +383,67 @@ def test_denoise_flag_filters_the_frames(tmp_path):
     raw, den = images["raw"], images["denoised"]
     np.testing.assert_array_equal(raw[:, 3], den[:, 3])
     assert np.isfinite(den).all() and not np.array_equal(raw[:, :3], den[:, :3])
+
+
+@pytest.mark.parametrize("saved_at", [1, 3])
+def test_settings_keyed_over_the_frames_are_named_and_the_saved_frames_kept(tmp_path, capsys, saved_at):
+    """The command line reads the settings once, at the frame the file was saved at (as Animation reads the
+    current frame's): settings keyed to differ on the run's frames are named on its first frame, even for
+    one frame; one that an option replaces, or one keyed constant, is not."""
+    scene = floor_scene(40, 30)
+    add_sun()
+    kd_addon.register()
+    try:
+        settings = scene.kd_preview
+        for frame, samples, distance, seed in ((1, 2, 0.5, 3), (3, 4, 2.0, 3)):
+            settings.samples, settings.ao_distance, settings.seed = samples, distance, seed
+            for name in ("samples", "ao_distance", "seed"):
+                settings.keyframe_insert(name, frame=frame)
+        scene.frame_set(saved_at)
+        blend = tmp_path / "keyed.blend"
+        bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    finally:
+        kd_addon.unregister()
+    runs = {"range": ["--frames", "1-3"], "one": ["--frames", str(4 - saved_at)],
+            "given": ["--frames", "1-3", "--ao-distance", "1", "--samples", "2"], "same": ["--frames", str(saved_at)]}
+    for run, frames in runs.items():
+        out = tmp_path / run
+        assert cli.execute(["render", str(blend), "--out", str(out), *frames]) == 0
+        report = json.loads((out / "report.json").read_text())
+        notes = [[w for w in row["warnings"] if "keyed to change over the frames" in w] for row in report["frames"]]
+        err = capsys.readouterr().err
+        if run in ("same", "given"):
+            assert not any(notes) and "keyed" not in err, run
+            continue
+        assert report["settings"]["samples"] == (2 if saved_at == 1 else 4)
+        assert [len(n) for n in notes] == [1] + [0] * (len(notes) - 1), run
+        assert "(ao_distance, samples)" in notes[0][0] and f"values at frame {saved_at}" in notes[0][0]
+        assert "keyed to change over the frames (ao_distance, samples)" in err
+
+
+def test_a_light_switched_off_for_renders_darkens_its_frames_and_the_run_goes_on(tmp_path, capsys):
+    """The only light keyed Disable in Renders on frame 2 renders that frame dark with a warning, as a light
+    keyed to emit nothing does, rather than stopping the run; a scene with no light stays an error."""
+    floor_scene(40, 30)
+    sun = add_sun()
+    for frame, hidden in ((1, False), (2, True), (3, False)):
+        sun.hide_render = hidden
+        sun.keyframe_insert("hide_render", frame=frame)
+    bpy.context.scene.frame_set(1)
+    blend = tmp_path / "switched.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    out = tmp_path / "seq"
+    assert cli.execute(["render", str(blend), "--out", str(out), "--frames", "1-3", "--mode", "shadow",
+                        "--format", "exr", "--samples", "2"]) == 0
+    err = capsys.readouterr().err
+    assert "frame 2: light 'Sun' is not visible in renders on this frame" in err
+    assert "frame 2: no light of scene 'Scene' emits on this frame: the shadow term is 0" in err
+    assert "frame 1: light" not in err and "frame 3: light" not in err
+    rgb = [exr_channels(out / f"frame_000{f}.exr")["R"] for f in (1, 2, 3)]
+    assert rgb[0].min() > 0.5 and not rgb[1].any()
+    np.testing.assert_array_equal(rgb[2], rgb[0])
+    bpy.data.objects.remove(bpy.data.objects["Sun"])  # the run loaded the file: `sun` is gone
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    assert cli.execute(["render", str(blend), "--out", str(tmp_path / "none"), "--frames", "1", "--mode",
+                        "shadow"]) == 1
+    assert "mode 'shadow' needs a light, but scene 'Scene' has no render-visible light" in capsys.readouterr().err

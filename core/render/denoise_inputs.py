@@ -19,10 +19,9 @@ def checked_denoise_inputs(width, height, pixels, arrays, variance_decay, settin
     for name, a, tail in zip(("points", "normals", "sums", "sq_sums", "counts"), arrays,
                              ((3,), (3,), (3,), (), ())):
         checked.append(_checked_rows(name, a, (m, *tail)))
-    for name, a in (("sq_sums", checked[3]), ("counts", checked[4])):
+    for name, a, what in (("sq_sums", checked[3], "sums of squares"), ("counts", checked[4], "samples taken")):
         if m and a.min() < 0:
-            raise ValueError(f"{name} must be >= 0 (sums of squares and samples taken per pixel), got {a.min()} "
-                             f"at row {int(np.argmin(a))}")
+            raise ValueError(f"{name} must be >= 0 ({what} per pixel), got {a.min()} at row {int(np.argmin(a))}")
     decay = as_number("variance_decay", variance_decay)
     if not 0.0 <= decay <= 1.0:
         raise ValueError(f"variance_decay must be in [0, 1] (0 for independent samples), got {decay}")

@@ -233,8 +233,11 @@ class FarmRun:
             self.duplicates += 1
             return
         path = self.out_dir / frame_filename(frame, self.config.file_extension)
-        result = RemoteFrame(dict(message["row"], file=path.name, worker=message["worker"], chunk=message["chunk"],
-                                  attempt=message["attempt"]))
+        row = dict(message["row"], file=path.name, worker=message["worker"], chunk=message["chunk"],
+                   attempt=message["attempt"])
+        if self.prepared.keyed_note and not self.written:  # the first frame taken back says it, as in one process
+            row["warnings"] = [*row.get("warnings", []), self.prepared.keyed_note]
+        result = RemoteFrame(row)
         with signals_held():  # the file on disk and its report entry come together
             _write_file(path, message["data"])
             self.written[frame], self.files[frame] = result, path
