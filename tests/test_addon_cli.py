@@ -161,6 +161,7 @@ def test_cli_takes_the_files_saved_settings_and_options_override_them(tmp_path, 
     (["render", "--out", "X", "--ao-distance", "-1"], 1, "--ao-distance: ao_distance must be a finite number"),
     (["render", "--out", "X", "--memory-limit", "-1"], 1, "--memory-limit: memory_limit_mb must be an integer"),
     (["render", "--out", "X", "--mode", "normals"], 1, "--mode: mode must be one of auto, ao, shadow, ao+shadow"),
+    (["render", "missing.blend", "--out", "X", "--frames", "5-1"], 1, "bad frame range '5-1'"),  # before the file
     (["render", "missing.blend", "--out", "X"], 1, "no such .blend file: missing.blend"),
     (["render", ".", "--out", "X"], 1, ". is a folder, not a .blend file"),
     (["render", "scene.blend", "--demo", "--out", "X"], 1, "give a .blend file or --demo, not both"),
@@ -433,8 +434,9 @@ def test_a_light_switched_off_for_renders_darkens_its_frames_and_the_run_goes_on
     blend = tmp_path / "switched.blend"
     bpy.ops.wm.save_as_mainfile(filepath=str(blend))
     out = tmp_path / "seq"
-    assert cli.execute(["render", str(blend), "--out", str(out), "--frames", "1-3", "--mode", "shadow",
-                        "--format", "exr", "--samples", "2"]) == 0
+    assert cli.execute(["render", str(blend), "--out", str(out), "--frames", "1-3", "--mode", "Shadow",  # any case,
+                        "--format", "exr", "--samples", "2"]) == 0  # as --format takes
+    assert json.loads((out / "report.json").read_text())["settings"]["mode"] == "shadow"
     err = capsys.readouterr().err
     assert "frame 2: light 'Sun' is not visible in renders on this frame" in err
     assert "frame 2: no light of scene 'Scene' emits on this frame: the shadow term is 0" in err

@@ -232,6 +232,19 @@ class Cluster:
             proc.wait()
 
 
+def test_a_scheduler_without_workers_is_named_within_the_timeout(tmp_path):
+    """Chunks would wait for a worker silently, like a hung run: the run says it waits, then stops."""
+    empty = Cluster(tmp_path)
+    try:
+        proc = run_python(["-m", "kd_addon", "render", "--demo", "--out", str(tmp_path / "x"), "--dask",
+                           empty.address, "--connect-timeout", "2"], timeout=120)
+    finally:
+        empty.close()
+    assert proc.returncode == 1 and "Traceback" not in proc.stderr
+    assert f"no worker has joined the Dask scheduler at {empty.address} yet; waiting up to 2 s" in proc.stdout
+    assert f"no worker joined the Dask scheduler at {empty.address} within 2 s: start workers" in proc.stderr
+
+
 @pytest.fixture(scope="module")
 def cluster(tmp_path_factory):
     running = Cluster(tmp_path_factory.mktemp("dask"))

@@ -29,3 +29,22 @@ def test_the_core_api_example_runs_and_means_what_its_comments_say():
     assert render.done and render.stats()["converged_pixels"] > 0  # error_target stopped pixels early
     origins, directions, tmin, tmax = names["origins"], names["directions"], names["tmin"], names["tmax"]
     assert origins.shape == directions.shape == (640 * 480, 3) and tmin.shape == tmax.shape == (640 * 480,)
+
+
+def test_the_bpy_script_example_renders_through_the_engine_and_the_panels_animation(tmp_path):
+    """The README's script for the add-on on the bpy module, with its clone path and output folders put in
+    tmp_path, in a fresh process (the factory scene: cube, camera, light): F12's file and the Animation's
+    frames and report.json appear."""
+    from tests.addon_support import REPO, run_python
+
+    text = README.read_text(encoding="utf-8")
+    section = text[text.index("### The add-on from a `bpy` script"):]
+    code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
+    code = code.replace("/path/to/kd-preview", str(REPO)).replace("/tmp/kd", str(tmp_path))
+    code = code.replace("scene.render.engine = ", "scene.render.resolution_percentage = 10\nscene.frame_end = 2\n"
+                        "scene.render.engine = ")  # small and short, the example's own lines unchanged
+    proc = run_python(code, timeout=900)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert (tmp_path / "frame_.png").is_file()
+    assert sorted(p.name for p in (tmp_path / "preview").iterdir()) == ["frame_0001.png", "frame_0002.png",
+                                                                          "report.json"]

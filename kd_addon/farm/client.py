@@ -75,6 +75,7 @@ def run(args, cancelled) -> int:
         cluster.import_distributed()  # before a file is opened: say how to install it
         prepared = cli.prepare(args)
         with cluster.dask_client(args.dask, args.local_workers, args.connect_timeout) as client:
+            cluster.wait_for_a_worker(client, args.dask, args.connect_timeout)
             farm = FarmRun(client, args, prepared)
             farm.run(cancelled)
     except PreviewError as error:

@@ -70,6 +70,20 @@ def dask_client(address: str | None, local_workers: int | None, connect_timeout:
         cluster.close(timeout=connect_timeout)
 
 
+def wait_for_a_worker(client, address: str | None, timeout: float) -> None:
+    """Return once the scheduler has a worker; a PreviewError after `timeout` seconds without one (the
+    chunks would wait for one silently, which looks like a hung run)."""
+    if address is None or client.scheduler_info()["workers"]:
+        return
+    print(f"KD Preview: no worker has joined the Dask scheduler at {address} yet; waiting up to {timeout:g} s "
+          "(--connect-timeout)", flush=True)
+    try:
+        client.wait_for_workers(1, timeout=timeout)
+    except TimeoutError:
+        raise PreviewError(f"no worker joined the Dask scheduler at {address} within {timeout:g} s: start workers "
+                           f"(dask worker {address}) or give them longer with --connect-timeout") from None
+
+
 def _connect(distributed, address: str, timeout: float):
     _check_address(address)
     try:
