@@ -391,6 +391,8 @@ def test_ctrl_c_cancels_the_chunks_and_reports_what_finished(cluster, tmp_path):
     assert report["complete"] is False and report["stopped"]["reason"] == "cancelled"
     written = sorted(p.name for p in out.glob("frame_*"))
     assert written == [r["file"] for r in report["frames"]] and 1 <= len(written) < 40
+    outcomes = [a["outcome"] for chunk in report["farm"]["chunks"] for a in chunk["attempts"]]
+    assert "running" not in outcomes and "cancelled" in outcomes, outcomes  # none left "running"
 
 
 @pytest.mark.slow

@@ -274,6 +274,9 @@ class FarmRun:
                 self.client.cancel(list(self.futures), force=True)
             except Exception:  # noqa: BLE001  (the error that stopped the run is the one to report)
                 pass
+        ended = round(time.perf_counter() - self._t0, 3)
+        for attempt in (a for attempts in self.attempts.values() for a in attempts if a["outcome"] == "running"):
+            attempt.update(outcome=stop_reason(error), ended_s=ended)  # the report says how they ended
         if self.written:
             missing = next((f for f in self.frames if f not in self.written), None)
             try:  # every frame written (an interrupt held back until the last one was recorded): complete
