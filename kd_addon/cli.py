@@ -80,8 +80,9 @@ def build_parser(prog: str = COMMAND_ID) -> argparse.ArgumentParser:
     render.add_argument("--demo", action="store_true", help="render the built-in animated demo scene")
     render.add_argument("--scene", help="the scene to render, by name (default: the file's current scene)")
     s = argparse.SUPPRESS
-    render.add_argument("--mode", type=str.lower, default=s, help=f"ao, shadow, ao+shadow or auto (ao+shadow when a light emits, else ao; "
-                                               f"default {DEFAULTS.mode})")
+    render.add_argument("--mode", type=str.lower, default=s,  # any case, as --format
+                        help=f"ao, shadow, ao+shadow or auto (ao+shadow when a light emits, else ao; "
+                             f"default {DEFAULTS.mode})")
     render.add_argument("--samples", type=int, default=s, help=f"samples per pixel (default {DEFAULTS.samples})")
     render.add_argument("--ao-distance", dest="ao_distance", type=float, default=s,
                         help=f"AO ray length (default {DEFAULTS.ao_distance})")
@@ -374,8 +375,8 @@ def _check_options(args) -> None:
         flag = FLAG_OF_SETTING.get(error.setting, "--" + error.setting.replace("_", "-"))
         raise PreviewError(f"{flag}: {error}") from None
     _check_farm_options(args)
-    if getattr(args, "frames", None) is not None:  # a typo must not cost the load of a large .blend (prepare parses it again)
-        parse_frames(args.frames)
+    if getattr(args, "frames", None) is not None:  # a typo must not cost the load of a large .blend
+        parse_frames(args.frames)  # (prepare parses them again, with the scene's range as the default)
 
 
 def _check_farm_options(args) -> None:

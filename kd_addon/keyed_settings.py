@@ -16,9 +16,10 @@ def keyed_settings_note(scene, frames, given=()) -> str:
     changed -= set(given)
     if not changed:
         return ""
-    return (f"KD Preview settings keyed to change over the frames ({', '.join(sorted(changed))}) are not followed: "
-            f"this run uses their values at frame {saved}, the frame the file was saved at (an option given "
-            "replaces them); the render engine's animation (blender -b FILE -a) follows them frame by frame")
+    return (f"KD Preview settings keyed to change over the frames ({', '.join(sorted(changed))}) are not "
+            f"followed: this run uses their values at frame {saved}, the frame the file was saved at (an option "
+            "given replaces them); the render engine's animation (blender -b FILE -E KD_PREVIEW -a) follows them "
+            "frame by frame")
 
 
 def _setting(curve) -> str:

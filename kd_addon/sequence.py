@@ -117,10 +117,11 @@ class SequenceJob:
     """Renders `frames` of `scene` into `out_dir`; drive with tick(), then call close()."""
 
     def __init__(self, scene, config: RenderConfig, frames: list[int], out_dir: Path, depsgraph_for, on_frame=None,
-                 note: str = ""):
+                 note: str | None = None):
         """`depsgraph_for(scene)` returns the evaluated depsgraph after frame_set (e.g.
         operators.depsgraph_source(scene, view_layer)); `on_frame(result, path)` is called
-        after each frame is written; `note`: a warning for the first frame (the command line's keyed settings)."""
+        after each frame is written; `note`: the caller's own check of keyed settings (the command line's), said
+        on the first frame ("" for none), in place of this job's."""
         if not frames:
             raise PreviewError("no frames to render")
         check_frames_in_range(frames)
@@ -146,8 +147,8 @@ class SequenceJob:
         # the scene's KD Preview settings when the run's config was made (now: the current frame's); None
         # where the add-on's settings are not registered (the command line reads the .blend's itself)
         self._first_settings = _scene_settings(scene)
-        # said once, on the first frame whose settings differ; `note`: the caller's, said on the first frame
-        self._keyed_note: str | None = note or None
+        # said once, on the first frame whose settings differ ("" once said, or when the caller checked)
+        self._keyed_note: str | None = note
 
     @property
     def done(self) -> bool:
