@@ -89,7 +89,7 @@ def build_parser(prog: str = COMMAND_ID) -> argparse.ArgumentParser:
     render.add_argument("--resolution", dest="resolution_percentage", type=int, default=s,
                         help=f"percent of the scene's base render resolution, resolution_x/y (the scene's own %% "
                              f"is not applied; default {DEFAULTS.resolution_percentage})")
-    render.add_argument("--builder", default=s, help=f"binned, exact or median (default {DEFAULTS.builder})")
+    render.add_argument("--builder", type=str.lower, default=s, help=f"binned, exact or median (default {DEFAULTS.builder})")
     render.add_argument("--leaf-size", dest="leaf_size", type=int, default=s,
                         help=f"(default {DEFAULTS.leaf_size})")
     render.add_argument("--max-depth", dest="max_depth", type=int, default=s, help="0 = automatic (default)")
@@ -136,7 +136,8 @@ def _add_farm_options(render) -> None:
                       help="send the .blend's bytes to the workers (for workers without a shared filesystem)")
     farm.add_argument("--connect-timeout", dest="connect_timeout", type=float, default=FARM_DEFAULTS["connect_timeout"],
                       metavar="SECONDS",
-                      help="give up on an unreachable scheduler after this long (default 10)")
+                      help="give up on an unreachable scheduler after this long, and on one without workers "
+                           "after this long again (default 10)")
     farm.add_argument("--retries", type=int, default=FARM_DEFAULTS["retries"],
                       help="times a chunk whose task failed is rerun (default 2; a chunk whose worker died is "
                            "rerun by the scheduler in any case)")

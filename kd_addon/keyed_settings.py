@@ -2,18 +2,24 @@
 curves. The command line and the farm read the settings once, at the frame the file was saved at (as the
 panel's Animation reads them at the current frame); without the settings group registered a frame change
 does not show keyed values, so the curves themselves are read (sequence.py names them for the panel)."""
+from .animation_curves import active_curves, animated_paths
+from .config import SETTING_NAMES
 
 SETTINGS_PATH = "kd_preview."
 
 
 def keyed_settings_note(scene, frames, given=()) -> str:
-    """A warning naming the settings whose keyed value on one of `frames` differs from the frame the file
-    was saved at, or driven ones; "" when none. `given`: settings the command line replaced."""
-    curves, drivers = _settings_curves(scene)
+    """A warning naming the render settings whose keyed value on one of `frames` differs from the frame the
+    file was saved at, or that NLA strips or drivers animate; "" when none. `given`: settings the command
+    line replaced."""
     saved = scene.frame_current
-    changed = {_setting(c) for c in curves if any(c.evaluate(f) != c.evaluate(saved) for f in frames)}
-    changed |= {_setting(d) for d in drivers}
-    changed -= set(given)
+    changed = set()
+    for curve in active_curves(scene, SETTINGS_PATH):
+        base = curve.evaluate(saved)
+        if any(curve.evaluate(f) != base for f in frames):
+            changed.add(_setting(curve.data_path))
+    changed |= {_setting(path) for path in animated_paths(scene, SETTINGS_PATH, active=False)}  # NLA, drivers
+    changed = (changed & set(SETTING_NAMES)) - set(given)  # not the panel's own switches (Live Update)
     if not changed:
         return ""
     return (f"KD Preview settings keyed to change over the frames ({', '.join(sorted(changed))}) are not "
@@ -22,25 +28,5 @@ def keyed_settings_note(scene, frames, given=()) -> str:
             "frame by frame")
 
 
-def _setting(curve) -> str:
-    return curve.data_path[len(SETTINGS_PATH):].split("[")[0]
-
-
-def _settings_curves(scene):
-    """(keyframe curves, drivers) of the scene's KD Preview settings: from a layered action's channel bag
-    for the scene's slot (Blender 4.4 and later), else the action's own curves (4.2, 4.3)."""
-    data = scene.animation_data
-    if data is None:
-        return [], []
-    drivers = [d for d in data.drivers if d.data_path.startswith(SETTINGS_PATH)]
-    action, curves = data.action, []
-    if action is not None:
-        slot = getattr(data, "action_slot", None)
-        if getattr(action, "layers", None) and slot is not None:
-            for layer in action.layers:
-                for strip in layer.strips:
-                    bag = strip.channelbag(slot)
-                    curves += list(bag.fcurves) if bag is not None else []
-        elif hasattr(action, "fcurves"):
-            curves = list(action.fcurves)
-    return [c for c in curves if c.data_path.startswith(SETTINGS_PATH)], drivers
+def _setting(data_path: str) -> str:
+    return data_path[len(SETTINGS_PATH):].split("[")[0]

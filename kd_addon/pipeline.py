@@ -360,16 +360,7 @@ class FrameJob:
                                         camera=None if self.view is None else self.view.camera)
         if not uses_lights:
             return inputs
-        needs_light = not inputs.lights and self.config.settings.mode != "auto"  # "auto" renders AO then
-        switched_off = (scene_input.render_hidden_lights(self.depsgraph) if needs_light and not inputs.hidden_lights
-                        else [])
-        if switched_off:  # keyed off in an animation: the frame goes dark, as for a light keyed to emit nothing
-            inputs.warnings.append(f"{_names('light', switched_off)} not visible in renders on this frame "
-                                   "(Disable in Renders, its own or a collection's)")
-        elif needs_light:
-            raise PreviewError(f"mode '{self.config.settings.mode}' needs a light, but scene '{self.scene.name}' "
-                               + ("has no light the preview can see: " + "; ".join(inputs.hidden_lights)
-                                  if inputs.hidden_lights else "has no render-visible light: add one or use mode 'ao'"))
+        scene_input.check_lights_present(inputs, self.depsgraph, self.config.settings.mode, self.scene.name)
         inputs.warnings += inputs.hidden_lights
         return inputs
 
@@ -602,8 +593,3 @@ def render_frame(scene, depsgraph, config: RenderConfig, *, cancel=None, progres
     run_job(job, cancel, progress)
     return job.result()
 
-
-def _names(kind: str, names: list[str]) -> str:
-    """"light 'A' is" / "lights 'A', 'B' are" for a warning."""
-    quoted = ", ".join(f"'{name}'" for name in names)
-    return f"{kind} {quoted} is" if len(names) == 1 else f"{kind}s {quoted} are"

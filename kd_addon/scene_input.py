@@ -16,6 +16,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from . import bulk_instances
+from .animation_curves import animated_paths
 from .errors import PreviewError
 from .extraction_warnings import hidden_light_warnings
 from .render_visibility import RenderVisibility, entry_visible  # the meshes' visibility rules
@@ -266,11 +267,30 @@ def read_lights(depsgraph, visibility: RenderVisibility | None = None, instanced
     return lights
 
 
-def render_hidden_lights(depsgraph) -> list[str]:
-    """The view layer's lights when none of them is read (read_lights) and none is hidden in the viewport:
-    all are switched off for renders on this frame (Disable in Renders, keyed or a collection's), which
-    an animation does to turn its lights off, so the frame renders dark rather than stopping the run."""
-    return sorted(ob.name for ob in depsgraph.view_layer.objects if ob.type == "LIGHT")
+def check_lights_present(inputs: SceneInputs, depsgraph, mode: str, scene_name: str) -> None:
+    """A light mode needs a light: without one read, a PreviewError naming why, unless the view layer's
+    lights are keyed off for renders (their Disable in Renders animated): an animation that turns its
+    lights off renders those frames dark with a warning, as for lights keyed to emit nothing, rather than
+    stopping. "auto" renders AO then."""
+    if inputs.lights or mode == "auto":
+        return
+    switched_off = [] if inputs.hidden_lights else lights_keyed_off(depsgraph)
+    if not switched_off:
+        raise PreviewError(f"mode '{mode}' needs a light, but scene '{scene_name}' "
+                           + ("has no light the preview can see: " + "; ".join(inputs.hidden_lights)
+                              if inputs.hidden_lights else "has no render-visible light: add one or use mode 'ao'"))
+    quoted = ", ".join(f"'{name}'" for name in switched_off)
+    inputs.warnings.append(f"light {quoted} is not visible in renders on this frame (its Disable in Renders is "
+                           "keyed)" if len(switched_off) == 1 else
+                           f"lights {quoted} are not visible in renders on this frame (their Disable in Renders "
+                           "is keyed)")
+
+
+def lights_keyed_off(depsgraph) -> list[str]:
+    """The view layer's lights whose Disable in Renders is animated (a collection's is not animatable):
+    none is read on this frame, so the animation turned them off."""
+    return sorted(ob.name for ob in depsgraph.view_layer.objects
+                  if ob.type == "LIGHT" and "hide_render" in animated_paths(ob))
 
 
 def unapplied_light_settings(ob) -> tuple[str, ...]:

@@ -422,6 +422,37 @@ def test_settings_keyed_over_the_frames_are_named_and_the_saved_frames_kept(tmp_
         assert "keyed to change over the frames (ao_distance, samples)" in err
 
 
+def test_driven_settings_are_named_and_muted_curves_and_panel_switches_are_not(tmp_path):
+    """A driver sets its setting on every frame, so it is named; a muted curve animates nothing, and Live
+    Update is the panel's switch, not a render setting."""
+    scene = floor_scene(40, 30)
+    kd_addon.register()
+    try:
+        settings = scene.kd_preview
+        for frame, value in ((1, 2), (3, 4)):
+            settings.samples, settings.live_update = value, value == 2
+            settings.keyframe_insert("samples", frame=frame)
+            settings.keyframe_insert("live_update", frame=frame)
+        scene.driver_add("kd_preview.seed").driver.expression = "frame"
+        for curve in _action_curves(scene.animation_data):
+            curve.mute = curve.data_path == "kd_preview.samples"
+        blend = tmp_path / "driven.blend"
+        bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    finally:
+        kd_addon.unregister()
+    assert cli.execute(["render", str(blend), "--out", str(tmp_path / "o"), "--frames", "1-3"]) == 0
+    notes = [w for w in frame_rows(tmp_path / "o")[0]["warnings"] if "keyed to change" in w]
+    assert len(notes) == 1 and "over the frames (seed) are not followed" in notes[0], notes
+
+
+def _action_curves(data):
+    """Every F-curve of the scene's action, muted ones too (Blender 4.4+: the slot's channel bags)."""
+    slot = getattr(data, "action_slot", None)
+    if not hasattr(data, "action_slot"):
+        return list(data.action.fcurves)
+    return [c for layer in data.action.layers for strip in layer.strips for c in strip.channelbag(slot).fcurves]
+
+
 def test_a_light_switched_off_for_renders_darkens_its_frames_and_the_run_goes_on(tmp_path, capsys):
     """The only light keyed Disable in Renders on frame 2 renders that frame dark with a warning, as a light
     keyed to emit nothing does, rather than stopping the run; a scene with no light stays an error."""
@@ -438,13 +469,15 @@ def test_a_light_switched_off_for_renders_darkens_its_frames_and_the_run_goes_on
                         "--format", "exr", "--samples", "2"]) == 0  # as --format takes
     assert json.loads((out / "report.json").read_text())["settings"]["mode"] == "shadow"
     err = capsys.readouterr().err
-    assert "frame 2: light 'Sun' is not visible in renders on this frame" in err
+    assert "frame 2: light 'Sun' is not visible in renders on this frame (its Disable in Renders is keyed)" in err
     assert "frame 2: no light of scene 'Scene' emits on this frame: the shadow term is 0" in err
     assert "frame 1: light" not in err and "frame 3: light" not in err
     rgb = [exr_channels(out / f"frame_000{f}.exr")["R"] for f in (1, 2, 3)]
     assert rgb[0].min() > 0.5 and not rgb[1].any()
     np.testing.assert_array_equal(rgb[2], rgb[0])
-    bpy.data.objects.remove(bpy.data.objects["Sun"])  # the run loaded the file: `sun` is gone
+    sun = bpy.data.objects["Sun"]  # the run loaded the file: `sun` above is gone
+    sun.animation_data_clear()
+    sun.hide_render = True  # switched off for good, not keyed: an error, as without any light
     bpy.ops.wm.save_as_mainfile(filepath=str(blend))
     assert cli.execute(["render", str(blend), "--out", str(tmp_path / "none"), "--frames", "1", "--mode",
                         "shadow"]) == 1

@@ -506,6 +506,7 @@ def test_matrices_of_other_than_real_numbers_are_named(kind):
              (lambda: core.Camera(bad(np.eye(4)), 0.8), "camera matrix_world must be"),
              (lambda: core.Camera(np.eye(4), 0.8, shift=bad([0.1, 0.2])), "camera shift must be"),
              (lambda: core.Camera(np.eye(4), 0.8).translated(bad([1, 2, 3])), "camera offset must be"),
+             (lambda: core.Camera(np.eye(4), 0.8).translated([1, 2, 3, 4]), "camera offset must be 3 finite"),
              (lambda: core.Light.area(bad(np.eye(4))), "area light matrix_world must be"),
              (lambda: core.Light.point(bad([1, 2, 3])), "point light position must be"),
              (lambda: core.Light.spot((0, 0, 1), (0, 0, -1), 0.5, axes=bad(np.eye(3))), "spot axes must be"),

@@ -235,6 +235,7 @@ class Cluster:
 def test_a_scheduler_without_workers_is_named_within_the_timeout(tmp_path):
     """Chunks would wait for a worker silently, like a hung run: the run says it waits, then stops."""
     empty = Cluster(tmp_path)
+    t0 = time.perf_counter()
     try:
         proc = run_python(["-m", "kd_addon", "render", "--demo", "--out", str(tmp_path / "x"), "--dask",
                            empty.address, "--connect-timeout", "2"], timeout=120)
@@ -243,6 +244,14 @@ def test_a_scheduler_without_workers_is_named_within_the_timeout(tmp_path):
     assert proc.returncode == 1 and "Traceback" not in proc.stderr
     assert f"no worker has joined the Dask scheduler at {empty.address} yet; waiting up to 2 s" in proc.stdout
     assert f"no worker joined the Dask scheduler at {empty.address} within 2 s: start workers" in proc.stderr
+    assert time.perf_counter() - t0 < 60  # the process's own start (bpy, the demo) is most of it
+
+
+def test_the_keyed_settings_note_goes_on_the_lowest_frame_whatever_came_back_first():
+    rows = [farm_client.RemoteFrame({"frame": f, "warnings": ["w"] if f == 3 else []}) for f in (2, 3, 5)]
+    noted = farm_client.noted_first(rows, "keyed")
+    assert [r.row["warnings"] for r in noted] == [["keyed"], ["w"], []] and rows[0].row["warnings"] == []
+    assert farm_client.noted_first(rows, "") is rows
 
 
 @pytest.fixture(scope="module")

@@ -60,7 +60,10 @@ class Camera:
     def translated(self, offset):
         """The same camera in a frame whose origin is at `offset` (positions minus offset)."""
         m = self.matrix_world.copy()
-        m[:3, 3] -= as_real_array("camera offset", offset)
+        offset = as_real_array("camera offset", offset)
+        if offset.shape != (3,) or not np.isfinite(offset).all():
+            raise ValueError(f"camera offset must be 3 finite numbers, got {offset.tolist()}")
+        m[:3, 3] -= offset
         return Camera(m, self.fov, ortho_scale=self.ortho_scale, clip_start=self.clip_start,
                       clip_end=self.clip_end, shift=self.shift, pixel_aspect=self.pixel_aspect)
 

@@ -39,10 +39,13 @@ def _checked_indices(n, pixels):
     if pixels.size and (pixels.min() < 0 or pixels.max() >= n):
         raise ValueError(f"pixels must be in [0, {n}) (width x height), got {pixels.min()} to {pixels.max()}")
     pixels = pixels.astype(np.int64, copy=False)
-    seen = np.bincount(pixels, minlength=n)
-    if (seen > 1).any():
-        twice = int(np.argmax(seen > 1))
-        raise ValueError(f"pixels must name each pixel once, got pixel {twice} {int(seen[twice])} times")
+    seen = np.zeros(n, np.bool_)  # a byte a pixel (counts would take eight)
+    seen[pixels] = True
+    if np.count_nonzero(seen) != len(pixels):
+        ordered = np.sort(pixels)
+        twice = int(ordered[np.flatnonzero(ordered[1:] == ordered[:-1])[0]])
+        raise ValueError(f"pixels must name each pixel once, got pixel {twice} "
+                         f"{int(np.count_nonzero(pixels == twice))} times")
     return pixels
 
 

@@ -153,7 +153,8 @@ def _spot_frame(direction, axes):
         return u, np.cross(direction, u), direction, 1.0
     a = _floats(axes)
     if a.shape != (3, 3) or not np.isfinite(a).all():
-        raise ValueError(f"spot axes must be a finite 3x3 matrix (columns X, Y, Z), got shape {a.shape}")
+        got = f"shape {a.shape}" if a.size else repr(axes)  # empty: not numbers (_floats)
+        raise ValueError(f"spot axes must be a finite 3x3 matrix (columns X, Y, Z), got {got}")
     lengths = np.linalg.norm(a, axis=0)
     if not (lengths > 0.0).all():
         raise ValueError("spot axes have a zero-length axis (zero scale): the cone is undefined")

@@ -49,6 +49,15 @@ def chunk_frames(frames: list[int], size: int) -> list[list[int]]:
     return [frames[i:i + size] for i in range(0, len(frames), size)]
 
 
+def noted_first(results: list, note: str) -> list:
+    """The report's rows (in frame order) with `note` added to the warnings of the lowest frame, wherever
+    the frames came back in, as an in-process run says it on its first frame."""
+    if not note or not results:
+        return results
+    first = results[0].row
+    return [RemoteFrame(dict(first, warnings=[*first.get("warnings", []), note])), *results[1:]]
+
+
 class RemoteFrame:
     """A frame rendered on a worker: its report row, read as pipeline.FrameResult's fields are (so the
     in-process report writer, totals and table row take it)."""
@@ -236,8 +245,6 @@ class FarmRun:
         path = self.out_dir / frame_filename(frame, self.config.file_extension)
         row = dict(message["row"], file=path.name, worker=message["worker"], chunk=message["chunk"],
                    attempt=message["attempt"])
-        if self.prepared.keyed_note and not self.written:  # the first frame taken back says it, as in one process
-            row["warnings"] = [*row.get("warnings", []), self.prepared.keyed_note]
         result = RemoteFrame(row)
         with signals_held():  # the file on disk and its report entry come together
             _write_file(path, message["data"])
@@ -275,8 +282,9 @@ class FarmRun:
             except Exception:  # noqa: BLE001  (the error that stopped the run is the one to report)
                 pass
         ended = round(time.perf_counter() - self._t0, 3)
+        how = "cancelled" if isinstance(error, (Cancelled, KeyboardInterrupt)) else "stopped"
         for attempt in (a for attempts in self.attempts.values() for a in attempts if a["outcome"] == "running"):
-            attempt.update(outcome=stop_reason(error), ended_s=ended)  # the report says how they ended
+            attempt.update(outcome=how, reason=stop_reason(error), ended_s=ended)  # not left "running"
         if self.written:
             missing = next((f for f in self.frames if f not in self.written), None)
             try:  # every frame written (an interrupt held back until the last one was recorded): complete
@@ -297,7 +305,7 @@ class FarmRun:
 
     def _write_report(self, stopped: dict | None = None) -> None:
         order = sorted(self.written)
-        results = [self.written[f] for f in order]
+        results = noted_first([self.written[f] for f in order], self.prepared.keyed_note)
         self.totals = summarize(results, (time.perf_counter() - self._t0) * 1e3)
         self.report_path = write_report(self.out_dir, self.scene_name, self.config, results,
                                         [self.files[f] for f in order], self.totals, len(self.frames), stopped,
@@ -326,6 +334,8 @@ class FarmRun:
               f"{settings.samples} samples, {self.config.resolution_percentage}% resolution -> {self.args.out}; "
               f"on {where} with {self.workers_at_start} worker(s), {len(self.chunks)} chunk(s) of up to "
               f"{self.chunk_size} frames", flush=True)
+        if self.prepared.keyed_note:  # known before any chunk runs; the report puts it on the lowest frame
+            print(f"{self.args.prog}: warning: {self.prepared.keyed_note}", file=sys.stderr, flush=True)
         print(cli.HEADER, flush=True)
 
     def _print(self, line: str) -> None:

@@ -79,9 +79,11 @@ def wait_for_a_worker(client, address: str | None, timeout: float) -> None:
           "(--connect-timeout)", flush=True)
     try:
         client.wait_for_workers(1, timeout=timeout)
-    except TimeoutError:
+    except TimeoutError:  # Dask's WorkerStartTimeoutError is one
         raise PreviewError(f"no worker joined the Dask scheduler at {address} within {timeout:g} s: start workers "
                            f"(dask worker {address}) or give them longer with --connect-timeout") from None
+    except OSError as error:  # the scheduler went away meanwhile (distributed's CommClosedError is one)
+        raise PreviewError(f"lost the Dask scheduler ({address}): {error or type(error).__name__}") from None
 
 
 def _connect(distributed, address: str, timeout: float):
