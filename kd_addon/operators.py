@@ -18,6 +18,7 @@ from .errors import Cancelled, PreviewError, Superseded
 from .pipeline import FrameJob, claim, release, release_any, run_job
 from .properties import run_state, set_last_run
 from .sequence import SequenceJob
+from .signals_held import signals_held
 
 # What a run reports when Blender freed the scene it renders (scene_removed).
 REMOVED_DURING_RUN = "the scene was removed or reloaded during the render (deleted, an undo): render again"
@@ -50,6 +51,9 @@ class _JobOperator:
 
     def cleanup(self, job, error) -> None:
         """Called after success (error None), cancel and failure alike."""
+
+    def cancelled_status(self, job) -> str:
+        return "Cancelled: the previous preview is unchanged"
 
     # -- synchronous ----------------------------------------------------------
 
@@ -181,8 +185,12 @@ class _JobOperator:
                 state.running = False
                 redraw_panels(context)  # on every outcome (a tag: the panel draws the final status later)
             if error is None:
-                message = self.finish(context, job) + self._wall_time()
-                state.status, state.progress = message, 1.0
+                try:
+                    with signals_held():  # a Ctrl-C lands after the frame is stored and the figures set
+                        message = self.finish(context, job) + self._wall_time()
+                        state.status, state.progress = message, 1.0
+                except KeyboardInterrupt:  # then the run has finished: as execute does, no traceback
+                    pass
                 self.report({"INFO"}, message)
                 return {"FINISHED"}
         except PreviewError as late_error:
@@ -191,7 +199,7 @@ class _JobOperator:
             state.status = "Live: restarting for the newer edit…"
             return {"CANCELLED"}
         if isinstance(error, Cancelled):
-            state.status = "Cancelled: the previous preview is unchanged"
+            state.status = self.cancelled_status(job)
             self.report({"WARNING"}, state.status)
             return {"CANCELLED"}
         return self._fail(context, error)
@@ -259,6 +267,11 @@ class KDPREVIEW_OT_render_animation(_JobOperator, bpy.types.Operator):
 
     def cleanup(self, job, error) -> None:
         job.close(error)
+
+    def cancelled_status(self, job) -> str:
+        if job.done:  # the cancel came while the last report was written: nothing was put back
+            return f"Cancelled after the last frame: all {len(job.results)} frames are written and shown"
+        return super().cancelled_status(job)
 
     def finish(self, context, job) -> str:
         last = job.results[-1].summary()

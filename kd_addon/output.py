@@ -190,12 +190,36 @@ def save_frame(image: np.ndarray, path: Path, file_format: str) -> Path:
             _save_linear_exr(target, partial)
         else:
             _save_png(image, partial)
-        if not partial.is_file():
-            raise OSError(f"Blender did not write {partial}")
+        check_written(partial, file_format)
         replace_file(partial, path)
     finally:
-        partial.unlink(missing_ok=True)
+        remove_partial(partial)
     return path
+
+
+PNG_END = b"\x00\x00\x00\x00IEND\xaeB`\x82"  # a PNG's last chunk: empty IEND and its CRC
+
+
+def check_written(partial: Path, file_format: str) -> None:
+    """An OSError unless Blender wrote the whole file: Image.save() of a PNG does not fail on a full disk,
+    it leaves an empty or cut file, which must not be renamed over an earlier run's whole frame."""
+    if not partial.is_file():
+        raise OSError(f"Blender did not write {partial}")
+    with open(partial, "rb") as written:
+        size = written.seek(0, os.SEEK_END)
+        written.seek(max(0, size - len(PNG_END)))
+        tail = written.read()
+    if size == 0 or (file_format != "OPEN_EXR" and tail != PNG_END):
+        raise OSError(f"Blender wrote {partial.name} incomplete ({size} bytes): is the disk full?")
+
+
+def remove_partial(partial: Path) -> None:
+    """Remove a write's leftover, if any. Best effort: with the folder gone or replaced by a file the write
+    itself has failed, and its error is the one to report (a second one here would hide it)."""
+    try:
+        partial.unlink(missing_ok=True)
+    except OSError:
+        pass
 
 
 def partial_path(path: Path) -> Path:

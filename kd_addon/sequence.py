@@ -341,5 +341,5 @@ def write_report(out_dir: Path, scene_name: str, config: RenderConfig, results: 
     except OSError as error:
         raise PreviewError(f"could not write {path}: {error}") from None
     finally:
-        partial.unlink(missing_ok=True)
+        output.remove_partial(partial)
     return path

@@ -17,6 +17,7 @@ import pytest
 from kd_addon.config import make_config
 from kd_addon.errors import PreviewError
 from kd_addon.output import IMAGE_NAME, save_frame
+from kd_addon.properties import run_state
 from tests import bpy_scenes as scenes
 from tests.addon_support import column_of, exr_channels, half_plane_scene, preview_pixels
 
@@ -110,6 +111,53 @@ def test_a_frame_that_fails_to_save_leaves_the_earlier_file_whole(tmp_path, monk
     assert [p.name for p in tmp_path.iterdir()] == [name]
 
 
+@pytest.mark.parametrize("cut", [0, 100])
+def test_a_png_blender_wrote_incomplete_without_an_error_is_refused_and_the_earlier_file_kept(
+        tmp_path, monkeypatch, cut):
+    """On a full disk Blender's PNG save returns normally and leaves an empty or cut file (an exploratory
+    run on a 300 KiB tmpfs: an empty frame renamed over the earlier run's whole one, and no error)."""
+    from kd_addon import output
+    scenes.reset()
+    path = save_frame(np.full((30, 50, 4), 0.5, np.float32), tmp_path / "f.png", "PNG")
+    before = path.read_bytes()
+    real = output._save_png
+
+    def cut_short(image, partial):
+        real(image, partial)
+        partial.write_bytes(partial.read_bytes()[:cut])
+
+    monkeypatch.setattr(output, "_save_png", cut_short)
+    with pytest.raises(OSError, match=f"Blender wrote .f.partial.png incomplete \\({cut} bytes\\): is the disk full"):
+        save_frame(np.zeros((30, 50, 4), np.float32), path, "PNG")
+    assert path.read_bytes() == before and [p.name for p in tmp_path.iterdir()] == ["f.png"]
+
+
+def test_an_output_folder_replaced_by_a_file_mid_run_is_named_and_the_scene_put_back(addon, tmp_path,
+                                                                                      monkeypatch):
+    """The leftover's removal failed too (not a folder) and its error, raised from close(), hid the write's
+    and left the scene on the run's frame (an exploratory run)."""
+    from kd_addon import sequence
+    scene = half_plane_scene()
+    scene.frame_start, scene.frame_end = 1, 3
+    scene.frame_set(2)
+    out = tmp_path / "seq"
+    scene.kd_preview.output_dir = str(out)
+    real = sequence.SequenceJob._write
+
+    def folder_gone(job, result):
+        if len(job.results) == 1:  # frame 2: the folder is a file now
+            for child in out.iterdir():
+                child.unlink()
+            out.rmdir()
+            out.write_text("not a folder")
+        return real(job, result)
+
+    monkeypatch.setattr(sequence.SequenceJob, "_write", folder_gone)
+    with pytest.raises(RuntimeError, match="frame 2: could not write"):
+        bpy.ops.kdpreview.render_animation()
+    assert scene.frame_current == 2 and "Error: frame 2: could not write" in run_state(bpy.context).status
+
+
 def test_a_report_that_fails_on_the_last_frame_is_written_when_the_sequence_closes(addon, tmp_path,
                                                                                      monkeypatch):
     """A signal (or a full disk) while the last frame's report is written: close() writes it (review:
@@ -137,6 +185,27 @@ def test_a_report_that_fails_on_the_last_frame_is_written_when_the_sequence_clos
     report = json.loads((tmp_path / "seq" / "report.json").read_text())
     assert report["complete"] is True and [f["file"] for f in report["frames"]] == ["frame_0001.png", "frame_0002.png"]
     assert sorted(p.name for p in (tmp_path / "seq").iterdir()) == ["frame_0001.png", "frame_0002.png", "report.json"]
+
+
+def test_a_cancel_while_the_last_report_is_written_says_the_frames_are_this_runs(addon, tmp_path, monkeypatch):
+    """The frames were all written and shown: "the previous preview is unchanged" would be untrue
+    (an exploratory run's Ctrl-C after the last frame)."""
+    from kd_addon import sequence
+    scene = half_plane_scene()
+    scene.frame_start, scene.frame_end = 1, 2
+    scene.kd_preview.output_dir = str(tmp_path / "seq")
+    real, calls = sequence.write_report, []
+
+    def interrupted_last(out_dir, scene_name, config, results, *rest, **keywords):
+        calls.append(len(results))
+        if len(results) == 2 and calls.count(2) == 1:
+            raise KeyboardInterrupt
+        return real(out_dir, scene_name, config, results, *rest, **keywords)
+
+    monkeypatch.setattr(sequence, "write_report", interrupted_last)
+    assert bpy.ops.kdpreview.render_animation() == {"CANCELLED"}
+    assert run_state(bpy.context).status == "Cancelled after the last frame: all 2 frames are written and shown"
+    assert json.loads((tmp_path / "seq" / "report.json").read_text())["complete"] is True
 
 
 def _fail_at_frame_3(scene):
@@ -182,3 +251,30 @@ def test_animation_needs_a_saved_file_for_relative_output(addon):
     half_plane_scene()
     with pytest.raises(RuntimeError, match="relative to the .blend file, which is not saved"):
         bpy.ops.kdpreview.render_animation()
+
+
+def test_a_ctrl_c_while_a_finished_frame_is_stored_lands_after_it(addon, monkeypatch):
+    """An exploratory run's Ctrl-C landed inside the preview's update: the image was resized but held the
+    old pixels, the status stayed "Tracing", and a traceback came out. The store and the figures now
+    finish first, and the run ends as finished."""
+    import signal
+    from kd_addon import output
+    scene = half_plane_scene()
+    real = output.store_preview
+
+    def interrupted_store(image, **keywords):
+        signal.raise_signal(signal.SIGINT)  # Python's handler: KeyboardInterrupt here, without the hold
+        return real(image, **keywords)
+
+    monkeypatch.setattr(output, "store_preview", interrupted_store)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        assert bpy.ops.kdpreview.render() == {"FINISHED"}  # the interrupt came once the frame was done
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    monkeypatch.setattr(output, "store_preview", real)
+    status = run_state(bpy.context).status
+    assert status.startswith("KD Preview: 64x32"), status
+    stored = preview_pixels()
+    assert bpy.ops.kdpreview.render() == {"FINISHED"}  # the same frame again, uninterrupted
+    np.testing.assert_array_equal(stored, preview_pixels())

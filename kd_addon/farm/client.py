@@ -371,7 +371,7 @@ def _write_file(path: Path, data: bytes) -> None:
     except OSError as error:
         raise PreviewError(f"could not write {path}: {error.strerror or error}") from None
     finally:
-        partial.unlink(missing_ok=True)
+        output.remove_partial(partial)
 
 
 def _span(frames: list[int]) -> list[int]:
