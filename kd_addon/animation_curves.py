@@ -20,13 +20,25 @@ def animated_paths(id_data, prefix: str = "", *, active: bool = True) -> set[str
     if data is None:
         return set()
     curves = _action_curves(data, data.action, getattr(data, "action_slot", None)) if active else []
-    for track in data.nla_tracks:
-        if not track.mute:
-            for strip in track.strips:
-                if not strip.mute:
-                    curves += _action_curves(data, strip.action, getattr(strip, "action_slot", None))
+    for strip in _nla_strips(data):
+        curves += _action_curves(data, strip.action, getattr(strip, "action_slot", None))
     curves += list(data.drivers)
     return {c.data_path for c in curves if c.data_path.startswith(prefix) and not c.mute}
+
+
+def _nla_strips(data) -> list:
+    """The NLA strips Blender evaluates: none with the NLA off, a solo track's alone, unmuted ones, the
+    strips inside meta strips."""
+    if not data.use_nla:
+        return []
+    tracks = [t for t in data.nla_tracks if t.is_solo] or [t for t in data.nla_tracks if not t.mute]
+    found, pending = [], [s for t in tracks for s in t.strips]
+    while pending:
+        strip = pending.pop()
+        if not strip.mute:
+            found.append(strip)
+            pending += list(strip.strips)  # a meta strip's own
+    return [s for s in found if s.action is not None]
 
 
 def _action_curves(data, action, slot) -> list:

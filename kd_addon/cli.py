@@ -89,7 +89,8 @@ def build_parser(prog: str = COMMAND_ID) -> argparse.ArgumentParser:
     render.add_argument("--resolution", dest="resolution_percentage", type=int, default=s,
                         help=f"percent of the scene's base render resolution, resolution_x/y (the scene's own %% "
                              f"is not applied; default {DEFAULTS.resolution_percentage})")
-    render.add_argument("--builder", type=str.lower, default=s, help=f"binned, exact or median (default {DEFAULTS.builder})")
+    render.add_argument("--builder", type=str.lower, default=s,  # any case, as --mode
+                        help=f"binned, exact or median (default {DEFAULTS.builder})")
     render.add_argument("--leaf-size", dest="leaf_size", type=int, default=s,
                         help=f"(default {DEFAULTS.leaf_size})")
     render.add_argument("--max-depth", dest="max_depth", type=int, default=s, help="0 = automatic (default)")

@@ -189,9 +189,11 @@ class FinalRender:
         tree_cache.keep_lanes(self.scene, "", lanes, final_lanes(self.depsgraph.view_layer.name))
 
     def _report_error(self, text: str) -> None:
-        """The frame failed: Blender shows `text` and writes nothing for it."""
-        self.engine.report({"ERROR"}, f"KD Preview: {text}")
-        self.engine.error_set(f"KD Preview: {text}")
+        """The frame failed: Blender shows `text` and writes nothing for it; an animation's names the frame
+        it stopped at (Blender's own report names none), as the panel's Animation does."""
+        where = f"frame {self.scene.frame_current}: " if self.engine.is_animation else ""
+        self.engine.report({"ERROR"}, f"KD Preview: {where}{text}")
+        self.engine.error_set(f"KD Preview: {where}{text}")
 
     def _report_warning(self, text: str) -> None:
         self.engine.report({"WARNING"}, f"KD Preview: {text}")

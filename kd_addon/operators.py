@@ -185,14 +185,18 @@ class _JobOperator:
                 state.running = False
                 redraw_panels(context)  # on every outcome (a tag: the panel draws the final status later)
             if error is None:
+                message = None
                 try:
                     with signals_held():  # a Ctrl-C lands after the frame is stored and the figures set
                         message = self.finish(context, job) + self._wall_time()
                         state.status, state.progress = message, 1.0
-                except KeyboardInterrupt:  # then the run has finished: as execute does, no traceback
-                    pass
-                self.report({"INFO"}, message)
-                return {"FINISHED"}
+                except KeyboardInterrupt as interrupt:  # after a finished run: as execute does, no traceback
+                    if interrupt.__context__ is not None:  # raised over finish()'s own error: that one counts
+                        raise interrupt.__context__ from None
+                    error = Cancelled("cancelled") if message is None else None
+                if error is None:
+                    self.report({"INFO"}, message)
+                    return {"FINISHED"}
         except PreviewError as late_error:
             error = late_error
         if isinstance(error, Superseded):

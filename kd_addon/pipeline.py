@@ -592,4 +592,3 @@ def render_frame(scene, depsgraph, config: RenderConfig, *, cancel=None, progres
     job = FrameJob(scene, depsgraph, config)
     run_job(job, cancel, progress)
     return job.result()
-

@@ -287,10 +287,10 @@ def check_lights_present(inputs: SceneInputs, depsgraph, mode: str, scene_name: 
 
 
 def lights_keyed_off(depsgraph) -> list[str]:
-    """The view layer's lights whose Disable in Renders is animated (a collection's is not animatable):
-    none is read on this frame, so the animation turned them off."""
+    """The view layer's lights disabled in renders on this frame by their animation (a collection's Disable
+    in Renders is not animatable): the animation turned them off."""
     return sorted(ob.name for ob in depsgraph.view_layer.objects
-                  if ob.type == "LIGHT" and "hide_render" in animated_paths(ob))
+                  if ob.type == "LIGHT" and ob.hide_render and "hide_render" in animated_paths(ob))
 
 
 def unapplied_light_settings(ob) -> tuple[str, ...]:

@@ -139,7 +139,7 @@ def test_an_output_folder_replaced_by_a_file_mid_run_is_named_and_the_scene_put_
     from kd_addon import sequence
     scene = half_plane_scene()
     scene.frame_start, scene.frame_end = 1, 3
-    scene.frame_set(2)
+    scene.frame_set(3)  # not a frame the run stops at: close() must put it back
     out = tmp_path / "seq"
     scene.kd_preview.output_dir = str(out)
     real = sequence.SequenceJob._write
@@ -155,7 +155,7 @@ def test_an_output_folder_replaced_by_a_file_mid_run_is_named_and_the_scene_put_
     monkeypatch.setattr(sequence.SequenceJob, "_write", folder_gone)
     with pytest.raises(RuntimeError, match="frame 2: could not write"):
         bpy.ops.kdpreview.render_animation()
-    assert scene.frame_current == 2 and "Error: frame 2: could not write" in run_state(bpy.context).status
+    assert scene.frame_current == 3 and "Error: frame 2: could not write" in run_state(bpy.context).status
 
 
 def test_a_report_that_fails_on_the_last_frame_is_written_when_the_sequence_closes(addon, tmp_path,
@@ -278,3 +278,25 @@ def test_a_ctrl_c_while_a_finished_frame_is_stored_lands_after_it(addon, monkeyp
     stored = preview_pixels()
     assert bpy.ops.kdpreview.render() == {"FINISHED"}  # the same frame again, uninterrupted
     np.testing.assert_array_equal(stored, preview_pixels())
+
+
+def test_a_ctrl_c_held_over_an_error_while_a_frame_is_stored_reports_the_error(addon, monkeypatch):
+    """The held interrupt is raised over finish()'s own error; the error is what the user sees (a review
+    found `message` unbound there: a traceback instead)."""
+    import signal
+    from kd_addon import output
+    half_plane_scene()
+
+    def failing_store(image, **keywords):
+        signal.raise_signal(signal.SIGINT)
+        raise PreviewError("the preview image cannot be written")
+
+    monkeypatch.setattr(output, "store_preview", failing_store)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(RuntimeError, match="the preview image cannot be written") as error:
+            bpy.ops.kdpreview.render()
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert "Traceback" not in str(error.value)
+    assert run_state(bpy.context).status == "Error: the preview image cannot be written"

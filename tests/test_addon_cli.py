@@ -482,3 +482,12 @@ def test_a_light_switched_off_for_renders_darkens_its_frames_and_the_run_goes_on
     assert cli.execute(["render", str(blend), "--out", str(tmp_path / "none"), "--frames", "1", "--mode",
                         "shadow"]) == 1
     assert "mode 'shadow' needs a light, but scene 'Scene' has no render-visible light" in capsys.readouterr().err
+
+
+def test_choices_are_taken_in_any_case(tmp_path):
+    """--mode and --builder as --format: "MEDIAN" is the median builder, not an error."""
+    out = tmp_path / "cased"
+    assert cli.execute(["render", *SMALL, "--frames", "1", "--out", str(out), "--builder", "MEDIAN", "--mode", "AO",
+                        "--format", "exr"]) == 0
+    settings = json.loads((out / "report.json").read_text())["settings"]
+    assert (settings["builder"], settings["mode"], settings["output_format"]) == ("median", "ao", "OPEN_EXR")

@@ -247,11 +247,13 @@ def test_a_scheduler_without_workers_is_named_within_the_timeout(tmp_path):
     assert time.perf_counter() - t0 < 60  # the process's own start (bpy, the demo) is most of it
 
 
-def test_the_keyed_settings_note_goes_on_the_lowest_frame_whatever_came_back_first():
+def test_the_keyed_settings_note_goes_on_the_runs_first_frame_whatever_came_back_first():
+    """Rows are in frame order; the run's first frame (5 of --frames 5,2,3) gets the note, once."""
     rows = [farm_client.RemoteFrame({"frame": f, "warnings": ["w"] if f == 3 else []}) for f in (2, 3, 5)]
-    noted = farm_client.noted_first(rows, "keyed")
-    assert [r.row["warnings"] for r in noted] == [["keyed"], ["w"], []] and rows[0].row["warnings"] == []
-    assert farm_client.noted_first(rows, "") is rows
+    noted = farm_client.noted_first(rows, "keyed", [5, 2, 3])
+    assert [r.row["warnings"] for r in noted] == [[], ["w"], ["keyed"]] and rows[2].row["warnings"] == []
+    assert [r.row["warnings"] for r in farm_client.noted_first(rows, "keyed", [2, 3, 5])] == [["keyed"], ["w"], []]
+    assert farm_client.noted_first(rows, "", [2, 3, 5]) is rows
 
 
 @pytest.fixture(scope="module")

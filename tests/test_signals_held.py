@@ -80,10 +80,13 @@ def test_a_farm_run_stopped_after_its_last_frame_was_recorded_reports_it_complet
     farm = object.__new__(client.FarmRun)
     farm.client, farm.futures = SimpleNamespace(status="closed"), {}
     farm.frames, farm.written = [7, 8], {7: object(), 8: object()}
+    farm._t0, farm.attempts = 0.0, {0: [{"outcome": "done"}], 1: [{"outcome": "running"}]}
     reports = []
     farm._write_report = lambda stopped=None: reports.append(stopped)
     farm._stop(KeyboardInterrupt())
     assert reports == [None]
+    outcomes = [(a["outcome"], a.get("reason")) for attempts in farm.attempts.values() for a in attempts]
+    assert outcomes == [("done", None), ("cancelled", "cancelled")]  # none left "running" in the report
     del farm.written[8]
     farm._stop(KeyboardInterrupt())
     assert reports[1]["frame"] == 8

@@ -49,13 +49,17 @@ def chunk_frames(frames: list[int], size: int) -> list[list[int]]:
     return [frames[i:i + size] for i in range(0, len(frames), size)]
 
 
-def noted_first(results: list, note: str) -> list:
-    """The report's rows (in frame order) with `note` added to the warnings of the lowest frame, wherever
-    the frames came back in, as an in-process run says it on its first frame."""
+def noted_first(results: list, note: str, order: list[int]) -> list:
+    """The report's rows (in frame order) with `note` added to the warnings of the row written earliest in
+    the run's order `order` (its frames as given), whichever came back first, as an in-process run says it
+    on its first frame."""
     if not note or not results:
         return results
-    first = results[0].row
-    return [RemoteFrame(dict(first, warnings=[*first.get("warnings", []), note])), *results[1:]]
+    rank = {frame: index for index, frame in enumerate(order)}
+    first = min(range(len(results)), key=lambda i: rank[results[i].row["frame"]])
+    row = results[first].row
+    noted = RemoteFrame(dict(row, warnings=[*row.get("warnings", []), note]))
+    return [noted if i == first else r for i, r in enumerate(results)]
 
 
 class RemoteFrame:
@@ -151,7 +155,7 @@ class FarmRun:
                     self._step()
             except OSError as error:  # the scheduler went away (distributed's CommClosedError is one)
                 raise PreviewError(f"lost the Dask scheduler ({self.args.dask or 'the local cluster'}): "
-                                   f"{error or type(error).__name__}") from None
+                                   f"{str(error) or type(error).__name__}") from None
         except BaseException as error:  # noqa: B036  (a cancel too: the report says what finished)
             self._stop(error)
             if not self.written:
@@ -305,7 +309,7 @@ class FarmRun:
 
     def _write_report(self, stopped: dict | None = None) -> None:
         order = sorted(self.written)
-        results = noted_first([self.written[f] for f in order], self.prepared.keyed_note)
+        results = noted_first([self.written[f] for f in order], self.prepared.keyed_note, self.frames)
         self.totals = summarize(results, (time.perf_counter() - self._t0) * 1e3)
         self.report_path = write_report(self.out_dir, self.scene_name, self.config, results,
                                         [self.files[f] for f in order], self.totals, len(self.frames), stopped,
@@ -334,7 +338,7 @@ class FarmRun:
               f"{settings.samples} samples, {self.config.resolution_percentage}% resolution -> {self.args.out}; "
               f"on {where} with {self.workers_at_start} worker(s), {len(self.chunks)} chunk(s) of up to "
               f"{self.chunk_size} frames", flush=True)
-        if self.prepared.keyed_note:  # known before any chunk runs; the report puts it on the lowest frame
+        if self.prepared.keyed_note:  # known before any chunk runs; the report puts it on the run's first frame
             print(f"{self.args.prog}: warning: {self.prepared.keyed_note}", file=sys.stderr, flush=True)
         print(cli.HEADER, flush=True)
 

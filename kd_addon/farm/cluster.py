@@ -83,7 +83,7 @@ def wait_for_a_worker(client, address: str | None, timeout: float) -> None:
         raise PreviewError(f"no worker joined the Dask scheduler at {address} within {timeout:g} s: start workers "
                            f"(dask worker {address}) or give them longer with --connect-timeout") from None
     except OSError as error:  # the scheduler went away meanwhile (distributed's CommClosedError is one)
-        raise PreviewError(f"lost the Dask scheduler ({address}): {error or type(error).__name__}") from None
+        raise PreviewError(f"lost the Dask scheduler ({address}): {str(error) or type(error).__name__}") from None
 
 
 def _connect(distributed, address: str, timeout: float):
