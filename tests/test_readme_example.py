@@ -32,13 +32,13 @@ def test_the_core_api_example_runs_and_means_what_its_comments_say():
 
 
 def test_the_bpy_script_example_renders_through_the_engine_and_the_panels_animation(tmp_path):
-    """The README's script for the add-on on the bpy module, with its clone path and output folders put in
+    """docs/scripting.md's script for the add-on on the bpy module (the README links it), with its clone path and output folders put in
     tmp_path, in a fresh process (the factory scene: cube, camera, light): F12's file and the Animation's
     frames and report.json appear."""
     from tests.addon_support import REPO, run_python
 
-    text = README.read_text(encoding="utf-8")
-    section = text[text.index("### The add-on from a `bpy` script"):]
+    text = (README.parent / "docs" / "scripting.md").read_text(encoding="utf-8")
+    section = text[text.index("## The add-on from a `bpy` script"):]
     code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
     code = code.replace("/path/to/kd-preview", str(REPO)).replace("/tmp/kd", str(tmp_path))
     code = code.replace("scene.render.engine = ", "scene.render.resolution_percentage = 10\nscene.frame_end = 2\n"
