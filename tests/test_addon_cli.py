@@ -446,11 +446,10 @@ def test_driven_settings_are_named_and_muted_curves_and_panel_switches_are_not(t
 
 
 def _action_curves(data):
-    """Every F-curve of the scene's action, muted ones too (Blender 4.4+: the slot's channel bags)."""
-    slot = getattr(data, "action_slot", None)
-    if not hasattr(data, "action_slot"):
-        return list(data.action.fcurves)
-    return [c for layer in data.action.layers for strip in layer.strips for c in strip.channelbag(slot).fcurves]
+    """Every F-curve of the scene's action, muted ones too."""
+    from kd_addon.animation_curves import _action_curves as curves_of
+
+    return curves_of(data, data.action, getattr(data, "action_slot", None))
 
 
 def test_a_light_switched_off_for_renders_darkens_its_frames_and_the_run_goes_on(tmp_path, capsys):

@@ -4,7 +4,7 @@ import numbers
 
 import numpy as np
 
-from ..inputs import as_number, check_image_size, is_real_dtype
+from ..inputs import as_number, as_real_array, check_image_size
 
 MAX_ITERATIONS = 15  # taps 2^14 pixels apart already span the largest image (32,768 pixels)
 
@@ -53,10 +53,7 @@ def _checked_rows(name, values, shape):
     """`values` as a float64 array of `shape` with finite entries, or a ValueError naming the first bad row."""
     if np.shape(values) != shape:
         raise ValueError(f"{name} must have shape {shape} (one row per pixel), got {np.shape(values)}")
-    arr = np.asarray(values)
-    if arr.size and not is_real_dtype(arr.dtype):
-        raise ValueError(f"{name} must be an array of numbers, got dtype {arr.dtype}")
-    arr = arr.astype(np.float64, copy=False)
+    arr = as_real_array(name, values)
     finite = np.isfinite(arr) if arr.ndim == 1 else np.isfinite(arr).all(axis=1)
     if not finite.all():
         row = int(np.argmin(finite))

@@ -5,7 +5,7 @@ diameter, an area light's shape); cast_shadow=False lights every surface facing 
 """
 import numpy as np
 
-from ..inputs import as_number, is_real_dtype, without_negligible_components
+from ..inputs import as_number, as_real_array, without_negligible_components
 
 POINT, SUN, SPOT, AREA = 0, 1, 2, 3
 AREA_SHAPES = {"SQUARE": 0, "RECTANGLE": 1, "DISK": 2, "ELLIPSE": 3}
@@ -191,14 +191,12 @@ def pack_lights(lights):
 
 
 def _floats(value):
-    """`value` as a float64 array, or an empty one when it is not real numbers (strings, complex values,
-    bools, None): the caller's shape check then names the argument (numpy's own error would not, and it
-    would parse strings of digits and cut complex values with only a warning)."""
+    """`value` as a float64 array, or an empty one when it is not real numbers (inputs.as_real_array): the
+    caller's shape check then names the argument with its own words."""
     try:
-        arr = np.asarray(value)
-    except (TypeError, ValueError):
+        return as_real_array("", value)
+    except ValueError:
         return np.full(0, np.nan)
-    return arr.astype(np.float64) if is_real_dtype(arr.dtype) else np.full(0, np.nan)
 
 
 def _vector(name, v):
