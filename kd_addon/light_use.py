@@ -3,6 +3,8 @@ and the mode "auto" resolves to (docs/choices.md#automatic-mode-ao-and-shadows-w
 
 from __future__ import annotations
 
+import math
+
 from . import scene_input
 
 
@@ -26,7 +28,8 @@ def usable_light(core, light: scene_input.LightInput):
         raise EmitsNothing(f"its power is {power:g}, so it emits no light")
     if light.emits_nothing:
         raise EmitsNothing(f"{light.emits_nothing}, so it emits no light")
-    if not max(light.keywords["color"]) > 0.0:
+    color = light.keywords["color"]
+    if all(math.isfinite(c) for c in color) and not max(color) > 0.0:  # NaN or inf: core names the colour
         raise EmitsNothing("its colour is black, so it emits no light")
     if light.portal:
         raise EmitsNothing("it is a Cycles light portal, which emits no light")

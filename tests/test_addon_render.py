@@ -433,3 +433,18 @@ def test_a_frame_steps_in_growing_batches_with_the_one_sample_images(addon, monk
     single = pipeline.render_frame(scene, bpy.context.evaluated_depsgraph_get(), make_config(scene.kd_preview))
     assert list(steps.values()) == [[1] * 12]
     np.testing.assert_array_equal(batched.image, single.image)
+
+
+@pytest.mark.parametrize("color", [(math.nan, 1.0, 1.0), (math.inf, 0.0, 0.0)])
+def test_a_light_colour_that_is_not_a_number_is_named_not_called_black(color):
+    """A NaN or infinite colour (a driver dividing by zero) is core's to refuse, naming the colour; before,
+    max() of a NaN colour was not above 0 and the light was said to be black."""
+    import core
+    from kd_addon import light_use
+    from kd_addon.scene_input import LightInput
+
+    light = LightInput("Lamp", "sun", {"direction": (0.0, 0.0, -1.0), "strength": 1.0, "color": color})
+    with pytest.raises(ValueError, match="light color must be 3 finite") as raised:
+        light_use.usable_light(core, light)
+    assert not isinstance(raised.value, light_use.EmitsNothing)
+    assert light_use.refused_lights(core, [light])[0][0] is light

@@ -490,3 +490,24 @@ def test_frame_ray_count_counts_camera_ao_and_shadow_rays():
     assert core.frame_ray_count(4, 3, "shadow", 200, hard) == 12 * (1 + 200 * 2)  # too many bits to repeat
     with pytest.raises(ValueError, match="mode"):
         core.frame_ray_count(4, 3, "occlusion", 1)
+
+
+@pytest.mark.parametrize("layout, lazy", [("flat", False), ("auto", True)])
+def test_one_soup_keeps_small_triangles_beside_a_huge_mesh(layout, lazy):
+    """The "flat" layout and lazy builds put every mesh in one soup. Anchored at the centre of a box that
+    one huge mesh spans, far from the camera, float32 rounded a small box beside the camera away (a UV
+    sphere scaled 1e16 around a scene rendered empty): the anchor is now the box's point nearest the
+    camera. Reference: Moller-Trumbore on the world triangles (origin at the camera)."""
+    ground = (np.array([[-1e12, -1e12, -1.0], [3e12, -1e12, -1.0], [3e12, 3e12, -1.0], [-1e12, 3e12, -1.0]]),
+              np.array([[0, 1, 2], [0, 2, 3]]))
+    box = icosphere(2)
+    camera = np.array([0.3, -0.2, 10.0])
+    scene = core.build_scene([ground, box], [0, 1], np.stack([np.eye(4), np.eye(4)]), origin=camera,
+                             layout=layout, lazy=lazy)
+    xs, ys = np.meshgrid(np.linspace(-0.6, 0.6, 9), np.linspace(-0.6, 0.6, 9))
+    directions = np.stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)], axis=1) - camera
+    world = np.concatenate([mesh[0][mesh[1]] for mesh in (ground, box)]) - camera
+    t_ref, prim_ref = moller_trumbore(world, np.zeros_like(directions), directions)
+    assert (prim_ref >= 2).all()  # every ray meets the small sphere first
+    hits = core.intersect_scene(scene, np.zeros_like(directions), directions)
+    np.testing.assert_allclose(hits.t, t_ref, rtol=1e-6)

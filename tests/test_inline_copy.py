@@ -17,6 +17,10 @@ from numba.core import inline_closurecall, ir
 if {patched}:
     import core.jit.inline_copy  # installs itself
     assert inline_closurecall.InlineWorker.inline_ir.kd_preview_scope_sharing
+    # core's import also installs the memo of callee IR (tests/test_inline_memo.py): the copy alone here
+    from numba.core import untyped_passes
+    inline_closurecall.InlineWorker.inline_function = inline_closurecall.InlineWorker.inline_function.__wrapped__
+    untyped_passes.InlineInlinables.run_pass = untyped_passes.InlineInlinables.run_pass.__wrapped__
 copies = [0]
 numba_var_copy = ir.Var.__deepcopy__
 def counting_var_copy(self, memo):

@@ -100,7 +100,7 @@ def soup_zones(boxes, before=None, split=True):
     size = np.zeros(len(boxes))
     size[filled] = np.linalg.norm(hi[filled] - lo[filled], axis=1)
     main = np.ones(len(boxes), bool)
-    anchor = main_anchor(boxes[filled], before)
+    anchor = main_anchor(boxes[filled], before, near_origin=not split)
     while split:  # each pass either keeps every member or removes some: a few passes
         out = main & ~_near(boxes, size, anchor)
         if not out.any():
@@ -132,11 +132,15 @@ def _near(boxes, size, anchor):
     return (size == 0) | (farthest <= PRECISION_RATIO * size)
 
 
-def main_anchor(boxes, before=None):
+def main_anchor(boxes, before=None, near_origin=False):
     """The point a soup's main zone's float32 triangles are relative to, given its members' world boxes
     (K, 6, all filled): the last anchor `before` while it lies within the members' box grown by its
-    diagonal (and within float32's range of every vertex), else the box's centre. Re-anchoring
-    re-rounds every member and so costs kept pixels (instance_signature.py)."""
+    diagonal (and within float32's range of every vertex), else the box's centre, or with `near_origin`
+    the box's point nearest the origin (the camera, for the add-on), where float32 keeps the most
+    precision: a soup without zones (the "flat" layout, lazy builds) takes every member, and the centre of
+    a box one huge member spans can lie far from all the rest, whose triangles it rounded away
+    (docs/choices.md#one-soup-anchored-nearest-the-camera). Re-anchoring re-rounds every member and so
+    costs kept pixels (instance_signature.py)."""
     if len(boxes) == 0:
         return np.zeros(3) if before is None else before
     lo, hi = boxes[:, :3].min(axis=0), boxes[:, 3:].max(axis=0)
@@ -144,4 +148,4 @@ def main_anchor(boxes, before=None):
     if (before is not None and ((lo - grow <= before) & (before <= hi + grow)).all()
             and (np.maximum(before - lo, hi - before) <= FLOAT32_MAX).all()):
         return before
-    return (lo + hi) / 2
+    return np.clip(np.zeros(3), lo, hi) if near_origin else (lo + hi) / 2
