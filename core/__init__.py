@@ -22,7 +22,7 @@ Public API:
     denoise_pixels(width, height, pixels, points, normals, sums, sq_sums, counts) -> (H, W, 4) float32
 """
 from .jit import kernel_cache  # first: kernels are keyed by all of core's sources when decorated
-from .jit import inline_copy, inline_memo  # noqa: F401  (before any kernel compiles: docs/choices.md#numbas-inliner-copies-a-callees-scope-once)
+from .jit import inline_copy, inline_memo  # noqa: F401  (before any kernel compiles: the two modules' docstrings)
 from .build.builder import build_kdtree
 from .render.camera import Camera
 from .render.denoise import denoise_pixels

@@ -435,10 +435,10 @@ def test_a_frame_steps_in_growing_batches_with_the_one_sample_images(addon, monk
     np.testing.assert_array_equal(batched.image, single.image)
 
 
-@pytest.mark.parametrize("color", [(math.nan, 1.0, 1.0), (math.inf, 0.0, 0.0)])
+@pytest.mark.parametrize("color", [(math.nan, 1.0, 1.0), (-math.inf, 0.0, 0.0)])
 def test_a_light_colour_that_is_not_a_number_is_named_not_called_black(color):
     """A NaN or infinite colour (a driver dividing by zero) is core's to refuse, naming the colour; before,
-    max() of a NaN colour was not above 0 and the light was said to be black."""
+    max() of such a colour was not above 0 and the light was said to be black."""
     import core
     from kd_addon import light_use
     from kd_addon.scene_input import LightInput

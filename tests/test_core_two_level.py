@@ -497,16 +497,19 @@ def test_one_soup_keeps_small_triangles_beside_a_huge_mesh(layout, lazy):
     """The "flat" layout and lazy builds put every mesh in one soup. Anchored at the centre of a box that
     one huge mesh spans, far from the camera, float32 rounded a small box beside the camera away (a UV
     sphere scaled 1e16 around a scene rendered empty): the anchor is now the box's point nearest the
-    camera. Reference: Moller-Trumbore on the world triangles (origin at the camera)."""
+    camera, not the world origin (the scene lies 1e9 from it, inside the ground's box). Reference:
+    Moller-Trumbore on the world triangles (origin at the camera)."""
     ground = (np.array([[-1e12, -1e12, -1.0], [3e12, -1e12, -1.0], [3e12, 3e12, -1.0], [-1e12, 3e12, -1.0]]),
               np.array([[0, 1, 2], [0, 2, 3]]))
     box = icosphere(2)
-    camera = np.array([0.3, -0.2, 10.0])
-    scene = core.build_scene([ground, box], [0, 1], np.stack([np.eye(4), np.eye(4)]), origin=camera,
-                             layout=layout, lazy=lazy)
+    offset = np.array([1e9, -1e9, 0.0])
+    camera = offset + (0.3, -0.2, 10.0)
+    mats = np.stack([np.eye(4), np.eye(4)])
+    mats[:, :3, 3] = offset
+    scene = core.build_scene([ground, box], [0, 1], mats, origin=camera, layout=layout, lazy=lazy)
     xs, ys = np.meshgrid(np.linspace(-0.6, 0.6, 9), np.linspace(-0.6, 0.6, 9))
-    directions = np.stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)], axis=1) - camera
-    world = np.concatenate([mesh[0][mesh[1]] for mesh in (ground, box)]) - camera
+    directions = np.stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)], axis=1) + offset - camera
+    world = np.concatenate([mesh[0][mesh[1]] for mesh in (ground, box)]) + offset - camera
     t_ref, prim_ref = moller_trumbore(world, np.zeros_like(directions), directions)
     assert (prim_ref >= 2).all()  # every ray meets the small sphere first
     hits = core.intersect_scene(scene, np.zeros_like(directions), directions)

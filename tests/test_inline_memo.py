@@ -6,7 +6,7 @@ import re
 import pytest
 
 from tests.addon_support import run_python
-from tests.test_inline_copy import KERNEL, TYPED_TWICE, _python_reference
+from tests.test_inline_copy import KERNEL, PREAMBLE, TYPED_TWICE, _python_reference
 
 # Inserted into a kernel script of test_inline_copy.py (with core's scope-sharing copy and without the memo):
 # with the memo installed again or not, it prints the machine code, the number of untyped-pipeline runs for callees
@@ -23,7 +23,7 @@ def counting_run(self, *args, **kwargs):
 inline_closurecall.InlineWorker.run_untyped_passes = counting_run
 """
 REPORT = """
-asm = "\\n".join(kernel.inspect_asm().values())
+asm = "\\n".join(kernel.inspect_asm().values()) + "\\n".join(g.inspect_asm().values() if "g" in globals() else ())
 print(json.dumps({{"asm": asm, "runs": runs[0], "result": result, "open": inline_memo._MEMO["current"] is not None}}))
 """
 
@@ -61,4 +61,45 @@ def test_an_overload_inlined_during_an_inlining_compiles_the_same_with_the_memo(
     numba_own, memo = _compile(False, TYPED_TWICE), _compile(True, TYPED_TWICE)
     assert memo["result"] == numba_own["result"] == (4 + 70) + (4 + 70)
     assert _machine_code(memo["asm"]) == _machine_code(numba_own["asm"])
+    assert not memo["open"]
+
+
+# A function inlined twice into a kernel and twice into a parallel function (prange, whose parfor analyses
+# read variable versions: each reuse of the kept IR takes a fresh unique name, so two inlined copies never
+# share their variables' names), compiled in one process.
+NESTED_FLAGS = PREAMBLE + """
+from numba import prange
+
+@njit(inline="always")
+def h(x):
+    return x * 2 + 1
+
+@njit(parallel=True)
+def g(x):
+    s = 0
+    for i in prange(3):
+        s += h(x + i) - h(x - i)
+    return s
+
+@njit(inline="always")
+def f(x):
+    if isinstance(x, int):
+        return g(x) + h(x) + h(x + 1)
+    return g(x) + h(x)
+
+@njit
+def kernel(x):
+    return f(x)
+
+result = kernel(5)
+print(json.dumps({{"llvm": "", "copies": copies[0], "result": result}}))
+"""
+
+
+def test_a_callee_inlined_twice_into_a_parallel_function_compiles_the_same():
+    numba_own, memo = _compile(False, NESTED_FLAGS), _compile(True, NESTED_FLAGS)
+    assert memo["result"] == numba_own["result"] == (0 + 4 + 8) + 11 + 13  # g(5) + h(5) + h(6)
+    assert _machine_code(memo["asm"]) == _machine_code(numba_own["asm"])
+    # f once; h once in f's compile and once in g's, where Numba translates it at each of the four sites
+    assert memo["runs"] == 3 < numba_own["runs"], (memo["runs"], numba_own["runs"])
     assert not memo["open"]

@@ -11,6 +11,7 @@ contexts, pipeline), which the memo holds so their ids stay theirs. Same machine
 (tests/test_inline_memo.py); docs/choices.md#numbas-inliner-translates-a-callee-once-per-compile.
 Process-wide; relies on Numba's global compiler lock (numba 0.68.1 pinned).
 """
+import copy
 import functools
 
 from numba.core import inline_closurecall, untyped_passes
@@ -30,9 +31,14 @@ def _memoized(inline_function):
         key = tuple(id(x) for x in keyed)
         if key not in memo:
             memo[key] = (self.run_untyped_passes(function), keyed)
+            callee = memo[key][0]
         else:
             self.flags.enable_ssa = False  # what the pipeline's run leaves behind
-        return self.inline_ir(caller_ir, block, i, memo[key][0], function.__code__.co_freevars, arg_typs=arg_typs)
+            callee = copy.copy(memo[key][0])  # inline_ir copies the blocks it changes
+            # A fresh unique name, as a fresh translation has: the inlined variables are named after it,
+            # and two inlinings sharing one would make their variables versions of one another.
+            callee.func_id = callee.func_id.derive()
+        return self.inline_ir(caller_ir, block, i, callee, function.__code__.co_freevars, arg_typs=arg_typs)
 
     wrapped.kd_preview_memo = True
     return wrapped

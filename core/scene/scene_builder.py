@@ -143,7 +143,7 @@ class SceneBuilder:
         scene_visibility = [visibility[own]]
         rounding = np.zeros((len(mesh_of), 4))
         groups, soups, soup_rebuilt = [], {}, False
-        for key, group, anchor in self._soup_zones(soup, visibility, world_boxes):
+        for key, group, anchor in self._soup_zones(soup, visibility, world_boxes, origin):
             soups[key] = self._soup_tree(meshes, mesh_of, o2w, group, reuse, key, anchor)
             _, soup_tree, anchor = soups[key]
             built = soups[key] is not self._soups.get(key)
@@ -236,16 +236,17 @@ class SceneBuilder:
             trees.append(cached[1])
         return trees, index[mesh_of[instanced]], rebuilt, len(used) - rebuilt
 
-    def _soup_zones(self, soup, visibility, world_boxes):
+    def _soup_zones(self, soup, visibility, world_boxes, origin):
         """(key, members, anchor) of each soup tree: one per visibility (the usual one first) and, in "auto"
-        and eager builds, per zone (scene_policy.soup_zones); key (visibility, None | anchor)."""
+        and eager builds, per zone (scene_policy.soup_zones; a soup without zones anchored nearest
+        `origin`, the camera); key (visibility, None | anchor)."""
         out = []
         for kind in sorted(set(visibility[soup].tolist()), key=lambda k: (k != ALL_RAYS, -k)):
             group = np.flatnonzero(soup & (visibility == kind))
             boxes = world_boxes[group]
             before = self._soups.get((kind, None))
             before = before[2] if before is not None else None
-            zones = soup_zones(boxes, before, split=self.layout == "auto" and not self.options["lazy"])
+            zones = soup_zones(boxes, before, split=self.layout == "auto" and not self.options["lazy"], camera=origin)
             for z, (rows, anchor) in enumerate(zones):
                 if len(rows):
                     out.append(((kind, None if z == 0 else tuple(anchor.tolist())), group[rows], anchor))

@@ -87,10 +87,11 @@ def overlap_depth(boxes):
     return float(np.concatenate(shares).mean())
 
 
-def soup_zones(boxes, before=None, split=True):
+def soup_zones(boxes, before=None, split=True, camera=None):
     """The zones of one soup, as a list of (member rows, anchor), the main zone first (its rows may be
     empty). boxes (K, 6): the members' world boxes (inverted when empty); before: the main zone's
-    anchor last frame, or None; split False: the main zone alone (the "flat" layout, lazy builds).
+    anchor last frame, or None; split False: the main zone alone (the "flat" layout, lazy builds),
+    anchored nearest `camera` (3,), the point the scene is traced relative to, if given (main_anchor).
     The main zone (`main_anchor`) keeps every member whose farthest box corner is within PRECISION_RATIO
     of its diagonals of the anchor, re-found until stable so next frame's zone is the same. The rest,
     smallest first, join the nearest zone anchor within (PRECISION_RATIO - 1/2) diagonals of their
@@ -100,7 +101,7 @@ def soup_zones(boxes, before=None, split=True):
     size = np.zeros(len(boxes))
     size[filled] = np.linalg.norm(hi[filled] - lo[filled], axis=1)
     main = np.ones(len(boxes), bool)
-    anchor = main_anchor(boxes[filled], before, near_origin=not split)
+    anchor = main_anchor(boxes[filled], before, near=None if split else camera)
     while split:  # each pass either keeps every member or removes some: a few passes
         out = main & ~_near(boxes, size, anchor)
         if not out.any():
@@ -132,15 +133,16 @@ def _near(boxes, size, anchor):
     return (size == 0) | (farthest <= PRECISION_RATIO * size)
 
 
-def main_anchor(boxes, before=None, near_origin=False):
+def main_anchor(boxes, before=None, near=None):
     """The point a soup's main zone's float32 triangles are relative to, given its members' world boxes
     (K, 6, all filled): the last anchor `before` while it lies within the members' box grown by its
-    diagonal (and within float32's range of every vertex), else the box's centre, or with `near_origin`
-    the box's point nearest the origin (the camera, for the add-on), where float32 keeps the most
-    precision: a soup without zones (the "flat" layout, lazy builds) takes every member, and the centre of
-    a box one huge member spans can lie far from all the rest, whose triangles it rounded away
-    (docs/choices.md#one-soup-anchored-nearest-the-camera). Re-anchoring re-rounds every member and so
-    costs kept pixels (instance_signature.py)."""
+    diagonal (and within float32's range of every vertex), else the box's centre, or with `near` (3,)
+    the box's point nearest it (the camera), where float32 keeps the most precision: a soup without
+    zones (the "flat" layout, lazy builds) takes every member, and the centre of a box one huge member
+    spans can lie far from all the rest, whose triangles it rounded away
+    (docs/choices.md#one-soup-anchored-nearest-the-camera). That point is no farther from any vertex, axis
+    by axis, than `near` is, so the triangles stay within float32's range wherever the camera's
+    coordinates do. Re-anchoring re-rounds every member and so costs kept pixels (instance_signature.py)."""
     if len(boxes) == 0:
         return np.zeros(3) if before is None else before
     lo, hi = boxes[:, :3].min(axis=0), boxes[:, 3:].max(axis=0)
@@ -148,4 +150,4 @@ def main_anchor(boxes, before=None, near_origin=False):
     if (before is not None and ((lo - grow <= before) & (before <= hi + grow)).all()
             and (np.maximum(before - lo, hi - before) <= FLOAT32_MAX).all()):
         return before
-    return np.clip(np.zeros(3), lo, hi) if near_origin else (lo + hi) / 2
+    return (lo + hi) / 2 if near is None else np.clip(near, lo, hi)
