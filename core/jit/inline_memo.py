@@ -1,14 +1,14 @@
 """Numba's inliner rebuilds an inline="always" callee's IR at every call site; `install` makes it build
 each callee's IR once per compile.
 
-`InlineWorker.inline_function` runs the untyped pipeline over the callee's bytecode each time it
-inlines it (the InlineInlinables pass's only route), and that pipeline inlines the callee's own inline="always" callees the same way, so a
-function inlined k times whose callees are inlined m times each is translated k * m times. The IR it
-returns is only read: `inline_ir` deep-copies it before changing anything. The shim keeps it for the
-rest of the outermost InlineInlinables pass (one function's untyped pipeline, with everything inlined
-into it), keyed by the function and the objects the pipeline reads (flags, locals, typing and target
-contexts, pipeline), which the memo holds so their ids stay theirs. Same machine code
-(tests/test_inline_memo.py); docs/choices.md#numbas-inliner-translates-a-callee-once-per-compile.
+`InlineWorker.inline_function` (the InlineInlinables pass's only route) runs the untyped pipeline over
+the callee's bytecode each time it inlines it, and that pipeline inlines the callee's own inline="always"
+callees the same way, so a function inlined k times whose callees are inlined m times each is translated
+k * m times. The IR it returns is only read: `inline_ir` deep-copies it before changing anything. The
+shim keeps it for the rest of the outermost InlineInlinables pass (one function's untyped pipeline,
+with everything inlined into it), keyed by the function and the objects the pipeline reads (flags,
+locals, typing and target contexts, pipeline), which the memo holds so their ids stay theirs. Same
+machine code (tests/test_inline_memo.py); docs/choices.md#numbas-inliner-translates-a-callee-once-per-compile.
 Process-wide; relies on Numba's global compiler lock (numba 0.68.1 pinned).
 """
 import copy
