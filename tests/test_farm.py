@@ -207,11 +207,12 @@ class Cluster:
 
     def add_workers(self, count: int, preload: str | None = None) -> list[subprocess.Popen]:
         extra = ["--preload", preload] if preload else []
+        before = set(self.workers())
         procs = [self._spawn(f"worker{len(self.procs)}", ["worker", "--scheduler-file", str(self.file),
                                                           "--nthreads", "1", "--no-nanny", "--no-dashboard",
                                                           "--host", "127.0.0.1", *extra], env=WORKER_ENV)
                  for _ in range(count)]
-        self.wait_for_workers(len(self.workers()) + count)
+        self.wait_for_new_workers(before, count)
         return procs
 
     def workers(self) -> list[str]:
@@ -220,10 +221,12 @@ class Cluster:
         with Client(self.address, timeout=30) as client:
             return list(client.scheduler_info()["workers"])
 
-    def wait_for_workers(self, count: int) -> None:
+    def wait_for_new_workers(self, before: set, count: int) -> None:
+        """Until `count` workers not in `before` have registered. Counted as new names, not as a total: a
+        worker an earlier test killed can still be listed when `before` is read and leave meanwhile."""
         deadline = time.time() + 120
-        while len(self.workers()) != count:
-            assert time.time() < deadline, f"{count} workers never registered"
+        while len(set(self.workers()) - before) < count:
+            assert time.time() < deadline, f"{count} new workers never registered"
             time.sleep(0.2)
 
     def close(self) -> None:
