@@ -336,13 +336,13 @@ def _surface_block(scene, hits, hit_index, frames, start, stop):
         for k in range(3):
             point[k] = origins[r, k] + t[r] * directions[r, k]
         surface = hit_surface(scene, inst[r], prim[r])
-        onto_triangle_plane(surface, point)
+        moved = onto_triangle_plane(surface, point)
         world_normal(surface, normal)
         facing = normal[0] * directions[r, 0] + normal[1] * directions[r, 1] + normal[2] * directions[r, 2]
         if facing > 0.0:
             for k in range(3):
                 normal[k] = -normal[k]
-        offset_origin(point, normal, surface_error_scale(surface, point, normal), rows(starts, a, a + 1)[0])
+        offset_origin(point, normal, surface_error_scale(surface, point, normal, moved), rows(starts, a, a + 1)[0])
 
 
 @njit(cache=True, parallel=True)

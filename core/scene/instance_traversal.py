@@ -235,15 +235,18 @@ def _row_magnitude(a, k, p):
 
 
 @njit(cache=True, inline="always")
-def surface_error_scale(surface, p, n):
-    """A magnitude whose float64 rounding bounds how far hit point p, moved onto its triangle's plane, may
-    lie off it along unit normal n, and the rounding of the triangle test's t near it: the largest of
+def surface_error_scale(surface, p, n, moved):
+    """A magnitude whose float64 rounding bounds how far hit point p, moved onto its triangle's plane by
+    `moved` (onto_triangle_plane), may lie off it along unit normal n: the largest of
     - sum |n_k| |p_k|: p's world coordinates round to their own ulps, seen along the normal;
     - the same for the object-space point q = a p + a_t and the operands q - v0, as a world distance
       (|a^T n_o| / |n_o| times shorter, so a shear stretching along the normal makes it longer);
-    - the triangle's reach from p: the triangle test works on vertex-minus-origin differences.
+    - the move: p's coordinates and q - v0 rounded at the size they had before it.
     Not max |p_k| (a floor far along x would lift ray starts through a roof just above it), nor the
-    camera ray's |o| and t |d|, whose error moves p along the ray, which the projection takes out."""
+    camera ray's |o| and t |d|, whose error moves p along the ray, which the projection takes out, nor
+    the triangle's reach: the triangle test drops a t within its rounding bound of the start, and an
+    offset scaled by the reach lifted rays a unit off a ground 1e12 across
+    (docs/choices.md#the-hit-distance-on-huge-triangles)."""
     tri, a, parts, (nx, ny, nz) = surface
     world = abs(n[0] * p[0]) + abs(n[1] * p[1]) + abs(n[2] * p[2])
     qx, qy, qz = _object_point(a, p)
@@ -254,16 +257,13 @@ def surface_error_scale(surface, p, n):
                   a[0, 2] * nx + a[1, 2] * ny + a[2, 2] * nz)
     length = np.sqrt(wx * wx + wy * wy + wz * wz)
     objectspace = along / length if length > 0.0 else 0.0
-    reach = 0.0
-    for i in range(3):
-        x, y, z = _world_vector(parts, tri[i, 0] - qx, tri[i, 1] - qy, tri[i, 2] - qz)
-        reach = max(reach, abs(x), abs(y), abs(z))
-    return max(world, objectspace, reach)
+    return max(world, objectspace, moved)
 
 
 @njit(cache=True, inline="always")
 def onto_triangle_plane(surface, p):
-    """Move hit point p (in place) along its triangle's normal onto the triangle's plane.
+    """Move hit point p (in place) along its triangle's normal onto the triangle's plane; returns how far
+    (the move's |x| + |y| + |z|, for surface_error_scale).
 
     p = o + t d inherits t's error, and t is a ratio of terms of the size of the triangle's reach R
     that cancel down to its width w across the ray: an error of about eps R^2 / w, which can exceed the
@@ -274,9 +274,10 @@ def onto_triangle_plane(surface, p):
     qx, qy, qz = _object_point(a, p)
     nn = nx * nx + ny * ny + nz * nz
     if nn == 0.0:  # a degenerate triangle is never hit; nothing to project onto
-        return
+        return 0.0
     above = ((qx - tri[0, 0]) * nx + (qy - tri[0, 1]) * ny + (qz - tri[0, 2]) * nz) / nn
     x, y, z = _world_vector(parts, above * nx, above * ny, above * nz)
     p[0] -= x
     p[1] -= y
     p[2] -= z
+    return abs(x) + abs(y) + abs(z)
