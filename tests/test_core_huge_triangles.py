@@ -1,4 +1,4 @@
-"""Triangles far larger than the distances they are seen at: a ground plane up to 1e12 across.
+"""Triangles far larger than the distances they are seen at: a ground plane of half-size up to 1e12.
 
 The watertight test's t is a mean of the vertices' distances along the ray, so it rounds with the
 triangle's reach (4e-4 at 1e12), and secondary rays start off a surface by a
@@ -22,8 +22,8 @@ def ground(half):
 
 
 def t_rounding(half):
-    """What t may carry from the ground's reach: 16 float64 roundings of its width (float32 t adds its
-    own rounding, the tests' rtol)."""
+    """What t may carry from the ground's reach: 16 float64 roundings of its width. Hits return t in
+    float32, whose rounding (the tests' rtol) dominates below a half-size of about 1e12."""
     return 16 * 2.0 ** -53 * (2 * half)
 
 
@@ -63,8 +63,8 @@ def test_packets_meet_a_huge_ground_as_single_rays_do(half):
 
 @pytest.mark.parametrize("half", [1e12])
 def test_contact_ao_under_a_cube_does_not_depend_on_the_grounds_size(half):
-    """A unit cube on a ground 20 across and on one `half` across: the same AO image within noise.
-    The rays' start offset scaled with the hit triangle's reach, so on a ground 1e12 across the AO rays
+    """A unit cube on a ground of half-size 10 and on one of half-size `half`: the same AO image within
+    noise. The rays' start offset scaled with the hit triangle's reach, so at half-size 1e12 the AO rays
     started about a unit above it and the cube's contact shadow faded."""
     cube = box([0.0, 0.0, 0.5], [0.5, 0.5, 0.5])
     camera = look_at([2.5, -3.0, 1.5], [0.0, 0.0, 0.3], fov=0.9)

@@ -241,11 +241,12 @@ def surface_error_scale(surface, p, n, moved):
     - sum |n_k| |p_k|: p's world coordinates round to their own ulps, seen along the normal;
     - the same for the object-space point q = a p + a_t and the operands q - v0, as a world distance
       (|a^T n_o| / |n_o| times shorter, so a shear stretching along the normal makes it longer);
-    - the move: p's coordinates and q - v0 rounded at the size they had before it.
+    - the move: p, q = a p + a_t and q - v0 rounded at the size they had before it (bounded so for
+      rotations with per-axis scales; a near-singular shear can exceed it).
     Not max |p_k| (a floor far along x would lift ray starts through a roof just above it), nor the
     camera ray's |o| and t |d|, whose error moves p along the ray, which the projection takes out, nor
     the triangle's reach: the triangle test drops a t within its rounding bound of the start, and an
-    offset scaled by the reach lifted rays a unit off a ground 1e12 across
+    offset scaled by the reach lifted rays a unit off a ground of half-size 1e12
     (docs/choices.md#the-hit-distance-on-huge-triangles)."""
     tri, a, parts, (nx, ny, nz) = surface
     world = abs(n[0] * p[0]) + abs(n[1] * p[1]) + abs(n[2] * p[2])
@@ -268,8 +269,9 @@ def onto_triangle_plane(surface, p):
     p = o + t d inherits t's error, and t is a ratio of terms of the size of the triangle's reach R
     that cancel down to its width w across the ray: an error of about eps R^2 / w, which can exceed the
     ray offset on long thin triangles (AO rays starting under the face). The distance to the plane,
-    (q - v0) . n, errs by only eps R, as a point rebuilt from barycentrics (pbrt-v3 §3.9), so the offset
-    clears it. Done in object space, where the triangle is."""
+    (q - v0) . n, errs by only eps sum |n_k| |q_k - v0_k|, as a point rebuilt from barycentrics (pbrt-v3
+    §3.9), which surface_error_scale's object-space term carries. Done in object space, where the
+    triangle is."""
     tri, a, parts, (nx, ny, nz) = surface
     qx, qy, qz = _object_point(a, p)
     nn = nx * nx + ny * ny + nz * nz
