@@ -248,7 +248,7 @@ def surface_error_scale(surface, p, n, moved):
     the triangle's reach: the triangle test drops a t within its rounding bound of the start, and an
     offset scaled by the reach lifted rays a unit off a ground of half-size 1e12
     (docs/choices.md#the-hit-distance-on-huge-triangles)."""
-    tri, a, parts, (nx, ny, nz) = surface
+    tri, a, _, (nx, ny, nz) = surface
     world = abs(n[0] * p[0]) + abs(n[1] * p[1]) + abs(n[2] * p[2])
     qx, qy, qz = _object_point(a, p)
     along = (abs(nx) * (_row_magnitude(a, 0, p) + abs(qx - tri[0, 0]))
