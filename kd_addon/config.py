@@ -138,10 +138,29 @@ def make_config(source) -> RenderConfig:
 
     Raises SettingsError naming the first bad setting.
     """
-    values = {name: getattr(source, name, getattr(DEFAULTS, name)) for name in SETTING_NAMES}
+    values = {name: _read(source, name) for name in SETTING_NAMES}
     settings = Settings(**values)
     _validate(settings)
     return RenderConfig(settings, _build_options(settings), _render_options(settings))
+
+
+class _StoredItem(int):
+    """An enum setting's stored number that names none of its items: Blender reads such a setting as ''
+    (a file from another version, or a script's item assignment), so the message names the number."""
+
+    def __repr__(self) -> str:
+        return f"stored item number {int(self)}, which names none of them"
+
+
+def _read(source, name: str):
+    """`source`'s value of setting `name` (the default where it has none); an enum property that reads ''
+    gives its stored number (_StoredItem) when `source` keeps one (a property group's `get`)."""
+    value = getattr(source, name, getattr(DEFAULTS, name))
+    if value == "" and callable(getattr(source, "get", None)):
+        stored = source.get(name)
+        if isinstance(stored, int) and not isinstance(stored, bool):
+            return _StoredItem(stored)
+    return value
 
 
 def _build_options(s: Settings) -> dict:

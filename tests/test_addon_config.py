@@ -148,3 +148,18 @@ def test_frames_blender_cannot_go_to_are_named_before_any_list_is_made(text, nam
     with pytest.raises(PreviewError, match=f"frame {named} is outside Blender's frame range"):
         parse_frames(text)
     assert parse_frames("1048570-1048574:4") == [1048570, 1048574] and parse_frames("-1048574") == [-1048574]
+
+
+def test_an_enum_stored_as_a_number_that_names_no_item_is_named(addon):
+    """Blender reads an enum whose stored number names none of its items (a file from another version, a
+    script's `settings["mode"] = 7`) as ''; the message names the number instead of "got ''"."""
+    settings = bpy.context.scene.kd_preview
+    settings["mode"] = 7
+    try:
+        assert settings.mode == ""
+        with pytest.raises(SettingsError) as info:
+            make_config(settings)
+        assert "mode must be one of auto, ao, shadow, ao+shadow; got stored item number 7" in str(info.value)
+    finally:
+        del settings["mode"]
+    assert settings.mode == DEFAULTS.mode
