@@ -278,9 +278,9 @@ def run(args) -> int:
         if getattr(args, "dask", None) is not None or getattr(args, "local_workers", None) is not None:
             from .farm import client  # only here: dask is an optional extra, never imported otherwise
 
-            code = client.run(args, interrupted.is_set)
+            code = client.run(args, interrupted)
         else:
-            code = _run(args, interrupted.is_set)
+            code = _run(args, interrupted)
     return 128 + signal.SIGTERM if code == 130 and interrupted.signum == signal.SIGTERM else code
 
 
@@ -312,7 +312,16 @@ def prepare(args) -> Prepared:
     return Prepared(scene, layer_name, settings, config, frames, keyed)
 
 
-def _run(args, cancelled) -> int:
+def stopped_message(prog: str, written: int, interrupted) -> str:
+    """The line a run that Ctrl-C or SIGTERM stopped ends with; `interrupted`: interrupt_flag's Event."""
+    how = "terminated (SIGTERM)" if interrupted.signum == signal.SIGTERM else "interrupted"
+    kept = f"the {written} frame(s) already written are kept" if written else "no frame was written"
+    return f"{prog}: {how}; {kept}"
+
+
+def _run(args, interrupted) -> int:
+    """The in-process run; `interrupted`: interrupt_flag's Event, polled between steps."""
+    cancelled = interrupted.is_set
     job = None
     try:
         prepared = prepare(args)
@@ -333,9 +342,7 @@ def _run(args, cancelled) -> int:
         print(f"{args.prog}: error: {error}", file=sys.stderr)
         return 1
     except (Cancelled, KeyboardInterrupt):
-        written = len(job.results) if job is not None else 0
-        print(f"{args.prog}: interrupted; " + (f"the {written} frame(s) already written are kept" if written
-                                                else "no frame was written"), file=sys.stderr)
+        print(stopped_message(args.prog, len(job.results) if job is not None else 0, interrupted), file=sys.stderr)
         return 130
     _print_totals(job, any(r.first_run for r in job.results))
     return 0

@@ -252,6 +252,7 @@ def test_sigterm_mid_animation_ends_like_ctrl_c_with_an_incomplete_report(tmp_pa
     assert report["complete"] is False and 1 <= len(report["frames"]) == len(written) < 200
     assert [f["file"] for f in report["frames"]] == written
     assert sorted(p.name for p in out.iterdir()) == written + ["report.json"]
+    assert f"terminated (SIGTERM); the {len(written)} frame(s) already written are kept" in err
 
 
 @pytest.mark.slow

@@ -81,8 +81,9 @@ class RemoteFrame:
         return dict(self.row)
 
 
-def run(args, cancelled) -> int:
-    """`render --dask ADDRESS` / `--local-workers N`: the exit code, as cli._run's."""
+def run(args, interrupted) -> int:
+    """`render --dask ADDRESS` / `--local-workers N`: the exit code, as cli._run's; `interrupted`:
+    cli.interrupt_flag's Event, polled between frames."""
     farm = None
     try:
         cluster.import_distributed()  # before a file is opened: say how to install it
@@ -90,7 +91,7 @@ def run(args, cancelled) -> int:
         with cluster.dask_client(args.dask, args.local_workers, args.connect_timeout) as client:
             cluster.wait_for_a_worker(client, args.dask, args.connect_timeout)
             farm = FarmRun(client, args, prepared)
-            farm.run(cancelled)
+            farm.run(interrupted.is_set)
     except PreviewError as error:
         _clear(farm)
         print(f"{args.prog}: error: {error}", file=sys.stderr)
@@ -98,8 +99,7 @@ def run(args, cancelled) -> int:
     except (Cancelled, KeyboardInterrupt):
         _clear(farm)
         written = len(farm.written) if farm is not None else 0
-        print(f"{args.prog}: interrupted; " + (f"the {written} frame(s) already written are kept" if written
-                                                else "no frame was written"), file=sys.stderr)
+        print(cli.stopped_message(args.prog, written, interrupted), file=sys.stderr)
         return 130
     farm.print_totals()
     return 0
