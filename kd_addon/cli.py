@@ -30,7 +30,7 @@ import bpy
 from . import background, corelib, demo_scene, properties
 from .config import DEFAULTS, OUTPUT_FORMATS, SETTING_NAMES, SettingsError, make_config
 from .errors import Cancelled, PreviewError
-from .keyed_settings import keyed_settings_note
+from .keyed_settings import keyed_settings_note, stored_setting_values
 from .operators import depsgraph_source
 from .pipeline import claim, release, run_job
 from .render_visibility import render_view_layer
@@ -192,19 +192,20 @@ def pick_scene(current, name: str | None):
     return scene, (bpy.context.view_layer if scene == current else render_view_layer(scene)).name
 
 
-def saved_settings_with_overrides(scene, args) -> SimpleNamespace:
+def saved_settings_with_overrides(scene, args) -> tuple[SimpleNamespace, dict]:
     """The scene's own KD Preview settings (saved in the .blend by the panel), each replaced by the
     command-line option of the same name where one was given: so `blender -b scene.blend --command
-    kdpreview render` renders what the file's Render Animation would. Under `python -m kd_addon` the
-    add-on is not registered, so its settings group is registered for the reading (Blender keeps a
-    group's saved values as ID properties until a class claims them) and then removed again."""
+    kdpreview render` renders what the file's Render Animation would; and the values as stored
+    (keyed_settings.stored_setting_values). Under `python -m kd_addon` the add-on is not registered, so
+    its settings group is registered for the reading (Blender keeps a group's saved values as ID
+    properties until a class claims them) and then removed again."""
     registered = hasattr(bpy.types.Scene, "kd_preview")
     if not registered:
         properties.register()
     try:
         saved = scene.kd_preview
         return SimpleNamespace(**{name: getattr(args, name) if hasattr(args, name) else getattr(saved, name)
-                                  for name in SETTING_NAMES})
+                                  for name in SETTING_NAMES}), stored_setting_values(saved)
     finally:
         if not registered:
             properties.unregister()
@@ -303,12 +304,12 @@ def prepare(args) -> Prepared:
         raise PreviewError("--out is empty: give the folder to write the frames to")
     check_folder_path(Path(os.path.abspath(args.out)))  # before the scene loads and the table starts
     scene, layer_name = pick_scene(load_scene(args), args.scene)
-    settings = saved_settings_with_overrides(scene, args)
+    settings, stored = saved_settings_with_overrides(scene, args)
     config = make_config(settings)
     frames = parse_frames(args.frames if args.frames is not None  # --frames "" is an error, not the default
                           else f"{scene.frame_start}-{scene.frame_end}:{max(1, scene.frame_step)}")
     _note_frames_outside(args.prog, scene, frames)
-    keyed = keyed_settings_note(scene, frames, given=[n for n in SETTING_NAMES if hasattr(args, n)])
+    keyed = keyed_settings_note(scene, frames, given=[n for n in SETTING_NAMES if hasattr(args, n)], stored=stored)
     return Prepared(scene, layer_name, settings, config, frames, keyed)
 
 

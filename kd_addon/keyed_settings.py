@@ -8,24 +8,50 @@ from .config import SETTING_NAMES
 SETTINGS_PATH = "kd_preview."
 
 
-def keyed_settings_note(scene, frames, given=()) -> str:
+def keyed_settings_note(scene, frames, given=(), stored=None) -> str:
     """A warning naming the render settings whose keyed value on one of `frames` differs from the frame the
-    file was saved at, or that NLA strips or drivers animate; "" when none. `given`: settings the command
-    line replaced."""
+    file was saved at, or that NLA strips or drivers animate, and those edited after they were keyed; ""
+    when none. `given`: settings the command line replaced; `stored`: each setting's value as saved (its
+    ID property's number, None where never set: stored_setting_values)."""
     saved = scene.frame_current
-    changed = set()
+    changed, edited = set(), set()
     for curve in active_curves(scene, SETTINGS_PATH):
-        base = curve.evaluate(saved)
+        base, name = curve.evaluate(saved), _setting(curve.data_path)
         if any(curve.evaluate(f) != base for f in frames):
-            changed.add(_setting(curve.data_path))
+            changed.add(name)
+        if _edited((stored or {}).get(name), base):
+            edited.add(name)
     changed |= {_setting(path) for path in animated_paths(scene, SETTINGS_PATH, active=False)}  # NLA, drivers
     changed = (changed & set(SETTING_NAMES)) - set(given)  # not the panel's own switches (Live Update)
-    if not changed:
-        return ""
-    return (f"KD Preview settings keyed to change over the frames ({', '.join(sorted(changed))}) are not "
-            f"followed: this run uses their values at frame {saved}, the frame the file was saved at (an option "
-            "given replaces them); the render engine's animation (blender -b FILE -E KD_PREVIEW -a) follows them "
-            "frame by frame")
+    edited = (edited & set(SETTING_NAMES)) - set(given)
+    notes = []
+    if changed:
+        notes.append(f"KD Preview settings keyed to change over the frames ({', '.join(sorted(changed))}) are not "
+                     f"followed: this run uses their values at frame {saved}, the frame the file was saved at (an "
+                     "option given replaces them); the render engine's animation (blender -b FILE -E KD_PREVIEW -a) "
+                     "follows them frame by frame")
+    if edited:
+        notes.append(f"KD Preview settings edited after they were keyed ({', '.join(sorted(edited))}): this run uses "
+                     f"the edited values saved in the file, not their keys at frame {saved}; Blender puts the keyed "
+                     "values back at its next frame change, as the render engine's animation does (key the edit to "
+                     "keep it)")
+    return "; ".join(notes)
+
+
+def _edited(value, keyed: float) -> bool:
+    """Whether a stored value is not what its curve gives at that frame: an integer, enum or switch
+    that an interpolated key sets keeps within 1 of it, a float within float32's rounding."""
+    if value is None:
+        return False
+    if isinstance(value, int):
+        return abs(value - keyed) >= 1.0
+    return abs(float(value) - keyed) > 1e-6 * max(1.0, abs(keyed))
+
+
+def stored_setting_values(settings) -> dict:
+    """Each setting's value as the file stores it (an enum's item number, as its curve holds it; None where
+    the setting was never set), from the registered settings group `settings`."""
+    return {name: settings.get(name) for name in SETTING_NAMES}
 
 
 def _setting(data_path: str) -> str:

@@ -490,3 +490,39 @@ def test_choices_are_taken_in_any_case(tmp_path):
                         "--format", "exr"]) == 0
     settings = json.loads((out / "report.json").read_text())["settings"]
     assert (settings["builder"], settings["mode"], settings["output_format"]) == ("median", "ao", "OPEN_EXR")
+
+
+@pytest.mark.parametrize("edit", ["samples", "mode", "none"])
+def test_settings_edited_after_their_keys_are_named(tmp_path, capsys, edit):
+    """A keyed setting edited and saved without a new key renders with the edited value from the
+    command line, while Blender (and the render engine's animation) puts the key back at the next frame
+    change: the run says so. An interpolated integer between keys is not an edit."""
+    scene = floor_scene(40, 30)
+    add_sun()
+    kd_addon.register()
+    try:
+        settings = scene.kd_preview
+        for frame, samples, mode in ((1, 2, "ao"), (5, 6, "ao")):
+            settings.samples, settings.mode = samples, mode
+            settings.keyframe_insert("samples", frame=frame)
+            settings.keyframe_insert("mode", frame=frame)
+        scene.frame_set(2)  # samples interpolated between 2 and 6
+        if edit == "samples":
+            settings.samples = 9
+        elif edit == "mode":
+            settings.mode = "shadow"
+        blend = tmp_path / "edited.blend"
+        bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    finally:
+        kd_addon.unregister()
+    out = tmp_path / "out"
+    assert cli.execute(["render", str(blend), "--out", str(out), "--frames", "2", "--resolution", "10"]) == 0
+    report = json.loads((out / "report.json").read_text())
+    notes = [w for w in report["frames"][0]["warnings"] if "edited after they were keyed" in w]
+    err = capsys.readouterr().err
+    if edit == "none":
+        assert not notes and "edited after" not in err
+        return
+    assert report["settings"][edit] == {"samples": 9, "mode": "shadow"}[edit]
+    assert len(notes) == 1 and f"edited after they were keyed ({edit})" in notes[0], notes
+    assert "not their keys at frame 2" in err
