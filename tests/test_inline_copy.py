@@ -1,6 +1,6 @@
 """Numba's inliner with core's scope-sharing copy (core/jit/inline_copy.py) compiles to the same LLVM IR as
-Numba's own: a kernel of nested inline="always" functions (copying far fewer variables), and an
-@overload(inline="always") inlined twice in a function compiled during another inlining."""
+Numba's own: a kernel of nested inline="always" functions (copying far fewer variables, and each block
+once), and an @overload(inline="always") inlined twice in a function compiled during another inlining."""
 import json
 
 import pytest
@@ -27,6 +27,20 @@ def counting_var_copy(self, memo):
     copies[0] += 1
     return numba_var_copy(self, memo)
 ir.Var.__deepcopy__ = counting_var_copy
+# Blocks inlined (each callee's, at each inlining) and blocks deep-copied
+import copy as copy_module
+callee_blocks, block_copies = [0], [0]
+numba_inline_ir = inline_closurecall.InlineWorker.inline_ir
+def counting_inline_ir(self, caller_ir, block, i, callee_ir, *args, **kwargs):
+    callee_blocks[0] += len(callee_ir.blocks)
+    return numba_inline_ir(self, caller_ir, block, i, callee_ir, *args, **kwargs)
+inline_closurecall.InlineWorker.inline_ir = counting_inline_ir
+python_deepcopy = copy_module.deepcopy
+def counting_deepcopy(x, memo=None, _nil=[]):
+    if isinstance(x, ir.Block) and (memo is None or id(x) not in memo):
+        block_copies[0] += 1
+    return python_deepcopy(x, memo, _nil)
+copy_module.deepcopy = counting_deepcopy
 """
 
 # Three levels of inlined functions with loops and branches (many blocks, many variables).
@@ -66,7 +80,8 @@ def kernel(a, n):
 
 result = kernel(np.linspace(-2.0, 2.0, 7), 5)
 llvm = "\\n".join(kernel.inspect_llvm().values())
-print(json.dumps({{"llvm": llvm, "copies": copies[0], "result": result}}))
+print(json.dumps({{"llvm": llvm, "copies": copies[0], "result": result,
+                  "callee_blocks": callee_blocks[0], "block_copies": block_copies[0]}}))
 """
 
 
@@ -103,7 +118,8 @@ def kernel(x):
 
 result = kernel(5)
 llvm = "\\n".join(kernel.inspect_llvm().values()) + "\\n".join(g.inspect_llvm().values())
-print(json.dumps({{"llvm": llvm, "copies": copies[0], "result": result}}))
+print(json.dumps({{"llvm": llvm, "copies": copies[0], "result": result,
+                  "callee_blocks": callee_blocks[0], "block_copies": block_copies[0]}}))
 """
 
 
@@ -141,6 +157,17 @@ def test_scope_sharing_copy_compiles_the_same_code_with_fewer_copies():
     assert shared["result"] == numba_own["result"]
     # Numba's own copies each block's scope: at least one Var copy per block and variable
     assert shared["copies"] * 3 < numba_own["copies"], (shared["copies"], numba_own["copies"])
+
+
+@pytest.mark.parametrize("script", [KERNEL, TYPED_TWICE], ids=["nested", "typed-twice"])
+def test_each_inlined_block_is_copied_once(script):
+    """Numba's inline_ir copies a callee twice (the second copy: an unmutated original that its callers
+    discard); with the shim each block of each inlining is copied once, and the code is the same."""
+    numba_own, shared = _compile(False, script), _compile(True, script)
+    assert numba_own["callee_blocks"] == shared["callee_blocks"] > 0
+    assert numba_own["block_copies"] == 2 * numba_own["callee_blocks"]
+    assert shared["block_copies"] == shared["callee_blocks"]
+    assert shared["llvm"] == numba_own["llvm"] and shared["result"] == numba_own["result"]
 
 
 def test_overload_inlined_twice_during_another_inlining_compiles_the_same():

@@ -1,12 +1,16 @@
 """Numba's inliner copies a callee's IR one block at a time, and so its whole variable scope once per
-block; `install` makes it copy the scope once per callee. Same machine code, half the compile time.
+block, and then copies the copy; `install` makes it copy the scope once per callee and the callee once.
+Same machine code, a fraction of the compile time.
 
 `InlineWorker.inline_ir`'s `copy_ir` deep-copies each block with the function's Scope: blocks x
 variables copies at every nesting level of core's inline="always" hot paths (Numba issue #8989;
 docs/choices.md#numbas-inliner-copies-a-callees-scope-once). The shim (replacing `copy` in
 numba.core.inline_closurecall only; numba 0.68.1 pinned) gives `copy_ir` one memo per callee scope for
-one `inline_ir`, never longer, since an inlining may compile other functions; the LLVM IR is
-byte-identical (tests/test_inline_copy.py). Process-wide; relies on Numba's global compiler lock.
+one `inline_ir`, never longer, since an inlining may compile other functions. inline_ir's second
+`copy_ir`, of its own fresh copy, makes the unmutated original it returns first, which every caller in
+Numba discards (`_, _, _, new_blocks = ...`): the shim hands those blocks back uncopied
+(docs/choices.md#numbas-inliner-copies-each-callee-twice). The LLVM IR is byte-identical
+(tests/test_inline_copy.py). Process-wide; relies on Numba's global compiler lock.
 """
 import copy
 import functools
@@ -19,13 +23,18 @@ class _ScopeSharingCopy:
 
     def __init__(self):
         self.memos = None  # scope id -> deepcopy memo, while an inline_ir runs
+        self.made = None  # the blocks this inline_ir's copies made (kept alive by its callee copy)
 
     def deepcopy(self, value, memo=None):
         scope = getattr(value, "scope", None)
         if memo is not None or self.memos is None or scope is None:
             return copy.deepcopy(value, memo)
+        if id(value) in self.made:
+            return value  # copy_ir of the fresh copy: the discarded "original"
         # The memo keeps the scope alive (deepcopy's keep-alive list), so its id is not reused meanwhile.
-        return copy.deepcopy(value, self.memos.setdefault(id(scope), {}))
+        made = copy.deepcopy(value, self.memos.setdefault(id(scope), {}))
+        self.made[id(made)] = made
+        return made
 
     def __getattr__(self, name):
         return getattr(copy, name)
@@ -39,11 +48,12 @@ def _sharing_scope_copies(inline_ir):
     types the inlined body) nests, and they get theirs."""
     @functools.wraps(inline_ir)
     def wrapped(self, *args, **kwargs):
-        outer, _SHIM.memos = _SHIM.memos, {}
+        outer = _SHIM.memos, _SHIM.made
+        _SHIM.memos, _SHIM.made = {}, {}
         try:
             return inline_ir(self, *args, **kwargs)
         finally:
-            _SHIM.memos = outer
+            _SHIM.memos, _SHIM.made = outer
 
     wrapped.kd_preview_scope_sharing = True
     return wrapped
