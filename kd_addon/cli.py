@@ -74,7 +74,8 @@ def build_parser(prog: str = COMMAND_ID) -> argparse.ArgumentParser:
                                  epilog="Options not given take the scene's own KD Preview settings (saved in the "
                                         ".blend from the panel), else the defaults shown.")
     render.add_argument("blend", nargs="?", help=".blend file to render (default: the open file, else the demo)")
-    render.add_argument("--out", required=True, help="output folder (created if missing)")
+    render.add_argument("--out", required=True,
+                        help='output folder (created if missing; "//" starts it beside the .blend, as in Blender)')
     render.add_argument("--frames", help="N, A-B, A-B:STEP or a comma list (default: the scene's frame range); "
                                          "negative frames need '=': --frames=-3--1")
     render.add_argument("--demo", action="store_true", help="render the built-in animated demo scene")
@@ -302,6 +303,7 @@ def prepare(args) -> Prepared:
     _check_options(args)  # bad options fail before a file is opened
     if not args.out.strip():
         raise PreviewError("--out is empty: give the folder to write the frames to")
+    args.out = _beside_the_blend(args)
     check_folder_path(Path(os.path.abspath(args.out)))  # before the scene loads and the table starts
     scene, layer_name = pick_scene(load_scene(args), args.scene)
     settings, stored = saved_settings_with_overrides(scene, args)
@@ -311,6 +313,18 @@ def prepare(args) -> Prepared:
     _note_frames_outside(args.prog, scene, frames)
     keyed = keyed_settings_note(scene, frames, given=[n for n in SETTING_NAMES if hasattr(args, n)], stored=stored)
     return Prepared(scene, layer_name, settings, config, frames, keyed)
+
+
+def _beside_the_blend(args) -> str:
+    """--out with Blender's "//" (the .blend's folder) resolved against the .blend given, else the file
+    Blender has open; the demo has no folder, so "//" there is an error, not the filesystem's root."""
+    if not args.out.startswith("//"):
+        return args.out
+    blend = args.blend or (None if args.demo else bpy.data.filepath)
+    if not blend:
+        raise PreviewError(f"--out {args.out} is relative to the .blend file (Blender's //), but this run has none "
+                           "(the demo): give a folder path")
+    return os.path.join(os.path.dirname(os.path.abspath(blend)), args.out[2:])
 
 
 def stopped_message(prog: str, written: int, interrupted) -> str:

@@ -526,3 +526,27 @@ def test_settings_edited_after_their_keys_are_named(tmp_path, capsys, edit):
     assert report["settings"][edit] == {"samples": 9, "mode": "shadow"}[edit]
     assert len(notes) == 1 and f"edited after they were keyed ({edit})" in notes[0], notes
     assert "not their keys at frame 2" in err
+
+
+def test_out_starting_with_double_slash_is_beside_the_blend(tmp_path, capsys, monkeypatch):
+    """Blender's "//" means the .blend's folder (the panel's default output is //kd_preview/): --out
+    //renders writes beside the file given, or the file Blender has open, never under the filesystem's
+    root; the demo has no file, so there it is an error."""
+    scenes.reset()
+    add_quad("Floor", 5, 5)
+    add_top_camera(location=(0, 0, 12))
+    bpy.context.scene.render.resolution_x, bpy.context.scene.render.resolution_y = 20, 15
+    blend = tmp_path / "shot" / "scene.blend"
+    blend.parent.mkdir()
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    monkeypatch.chdir(tmp_path)  # a relative path would land here, not beside the file
+    assert cli.execute(["render", str(blend), "--out", "//renders/a", "--frames", "1", "--samples", "1"]) == 0
+    assert (tmp_path / "shot" / "renders" / "a" / "frame_0001.png").is_file()
+    # the file Blender has open (blender -b scene.blend --command kdpreview render ...)
+    assert cli.execute(["render", "--out", "//renders/b", "--frames", "1", "--samples", "1"]) == 0
+    assert (tmp_path / "shot" / "renders" / "b" / "frame_0001.png").is_file()
+    capsys.readouterr()
+    assert cli.execute(["render", "--out", "//renders/c", *SMALL]) == 1
+    assert "--out //renders/c is relative to the .blend file (Blender's //), but this run has none" in (
+        capsys.readouterr().err)
+    assert not (tmp_path / "shot" / "renders" / "c").exists()
