@@ -550,3 +550,21 @@ def test_out_starting_with_double_slash_is_beside_the_blend(tmp_path, capsys, mo
     assert "--out //renders/c is relative to the .blend file (Blender's //), but this run has none" in (
         capsys.readouterr().err)
     assert not (tmp_path / "shot" / "renders" / "c").exists()
+
+
+def test_a_ctrl_c_after_the_run_ended_keeps_its_exit_code():
+    """A Ctrl-C in the teardown after `python -m kd_addon` finished (its report written) does not turn
+    exit 0 into a death by SIGINT: a script or farm waiting for the run would call it interrupted."""
+    script = """
+import os, runpy, signal, sys, time
+sys.argv = ["kd_addon", "render", "--help"]
+try:
+    runpy.run_module("kd_addon", run_name="__main__")
+except SystemExit:
+    os.kill(os.getpid(), signal.SIGINT)  # Ctrl-C during the teardown
+    time.sleep(0.5)
+    raise
+"""
+    proc = run_python(script)
+    assert proc.returncode == 0, (proc.returncode, proc.stderr[-2000:])
+    assert "usage:" in proc.stdout and "Traceback" not in proc.stderr
