@@ -16,15 +16,17 @@ tree_cache, so each keeps its pixels across frames).
 
 from __future__ import annotations
 
+import re
 import time
 from dataclasses import replace
 from typing import NamedTuple
 
+import bpy
 import numpy as np
 
 from .config import make_config
 from .errors import Cancelled, PreviewError
-from .pipeline import FrameJob, FrameResult, FrameView, claim, release
+from .pipeline import FrameJob, FrameResult, FrameView, claim, release, waits_for_a_compile
 from . import tree_cache
 from .render_views import Eye, eye_camera, eye_of, final_lanes, lane_of, view_names
 from .scene_input import CameraInput, read_camera
@@ -204,12 +206,14 @@ class FinalRender:
         self.lanes.add(lane)
         claim(job)  # no panel or Live Update run beside it (a frame change during an animation render)
         try:
-            t0 = time.perf_counter()
+            t0, said = time.perf_counter(), ""
             while not job.tick():
                 if self.engine.test_break():
                     raise Cancelled("cancelled")
                 self.engine.update_progress(job.progress)
-                self.engine.update_stats("", f"KD Preview | {label} | {job.status} | {time.perf_counter() - t0:.1f} s")
+                status = job.status
+                self.engine.update_stats("", f"KD Preview | {label} | {status} | {time.perf_counter() - t0:.1f} s")
+                said = _say_compile_wait(status, said)
             return job.result()
         finally:
             release(job)
@@ -289,3 +293,14 @@ def update_render_passes(engine, scene, view_layer) -> None:
     engine.register_pass(scene, view_layer, "Combined", 4, "RGBA", "COLOR")
     for name, channels, ids, kind, _ in requested_passes(view_layer):
         engine.register_pass(scene, view_layer, name, channels, ids, kind)
+
+
+def _say_compile_wait(status: str, said: str) -> str:
+    """In a background render (blender -b, a bpy script) Blender shows no status line, so a frame that
+    waits minutes for the kernels' first compile would look hung: print the wait once (a counting
+    status such as "compiling kernels (first use) 12s" once, not every second). Returns what was said."""
+    kind = re.sub(r"\d+s\b", "", status)
+    if not bpy.app.background or kind == said or not waits_for_a_compile(status):
+        return said
+    print(f"KD Preview: {status} (once per installation)", flush=True)
+    return kind

@@ -44,6 +44,12 @@ _reuse_kernels_ready = False
 _denoiser_ready = False  # ... and the denoiser's, first run by the first denoised frame
 
 
+def waits_for_a_compile(status: str) -> bool:
+    """Whether a FrameJob.status says the frame waits for kernels' first compile (the warm-up's, this
+    process's or the denoiser's), which a background render prints (engine_final)."""
+    return status.lower().startswith("compiling")
+
+
 def _now() -> tuple[float, float]:
     """A reading for _ms_since: (wall seconds, seconds Numba has compiled in this process). A frame's times
     leave a compile inside them out (it goes to compile_ms, FrameJob._spent), as they leave out the

@@ -515,3 +515,24 @@ def test_warnings_are_reported_with_the_frame(addon, tmp_path, monkeypatch):
     assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
     assert any("depth of field" in text for text in reported)
     assert (tmp_path / "frame.exr").is_file()
+
+
+def test_a_background_render_says_once_that_it_waits_for_the_first_compile(addon, tmp_path, monkeypatch, capfd):
+    """Blender shows no status line in a background render (blender -b, a bpy script), so a frame that
+    waits for the kernels' first compile prints that wait, once while its counter ticks, and nothing
+    once the kernels are ready."""
+    real_status, seen = pipeline.FrameJob.status, []
+
+    def status(job):
+        seen.append(None)
+        if len(seen) <= 3:  # the warm-up's counting status (kernel_warmup), as a first render sees it
+            return f"compiling kernels (first use) {len(seen)}s" + pipeline.WARMUP_WAIT_NOTE
+        return real_status.fget(job)
+
+    monkeypatch.setattr(pipeline.FrameJob, "status", property(status))
+    engine_scene(tmp_path)
+    assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
+    said = [line for line in capfd.readouterr().out.splitlines() if line.startswith("KD Preview: ")]
+    assert len(seen) > 3 and said == [
+        "KD Preview: compiling kernels (first use) 1s: the render starts when they are ready "
+        "(once per installation)"]
