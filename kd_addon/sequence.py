@@ -97,6 +97,10 @@ def prepare_folder(folder: Path) -> list[Path]:
     missing = check_folder_path(folder)
     try:
         folder.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        remove_empty_folders(missing)
+        raise PreviewError(f"cannot create the output folder {folder}: {error.strerror or error}") from None
+    try:
         tempfile.TemporaryFile(dir=folder).close()
     except OSError as error:
         remove_empty_folders(missing)

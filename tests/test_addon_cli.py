@@ -568,3 +568,18 @@ except SystemExit:
     proc = run_python(script)
     assert proc.returncode == 0, (proc.returncode, proc.stderr[-2000:])
     assert "usage:" in proc.stdout and "Traceback" not in proc.stderr
+
+
+def test_an_output_folder_that_cannot_be_made_says_so(tmp_path, capsys, monkeypatch):
+    """A folder whose parent is writable but that cannot be made (/proc/x, a full disk, a name the file
+    system refuses) is named as not created, not as not writable, and the run writes nothing."""
+    from pathlib import Path
+
+    def refuse(self, *args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(Path, "mkdir", refuse)
+    out = tmp_path / "new"
+    assert cli.execute(["render", "--out", str(out), "--frames", "1", *SMALL]) == 1
+    assert f"error: cannot create the output folder {out}: No space left on device" in capsys.readouterr().err
+    assert not out.exists()
