@@ -25,7 +25,7 @@ import bpy
 import numpy as np
 
 from .config import make_config
-from .errors import Cancelled, PreviewError
+from .errors import Cancelled, NoLightError, PreviewError
 from .pipeline import FrameJob, FrameResult, FrameView, claim, release, waits_for_a_compile
 from . import tree_cache
 from .render_views import Eye, eye_camera, eye_of, final_lanes, lane_of, view_names
@@ -235,7 +235,10 @@ class FinalRender:
             try:
                 images[name] = self._frame(term_config, view, self._lane(view_name, term),
                                            f"{name} pass {view_name}".rstrip()).image[..., :channels]
-            except PreviewError as error:  # e.g. a Shadow pass in a scene without lights
+            except NoLightError as error:  # a Shadow pass beside an AO render, in a scene without lights
+                warnings.append(f"the {name} pass is left black: {error.why} (add a light, or turn the {name} pass off)")
+                images[name] = np.zeros((view.height, view.width, channels), np.float32)
+            except PreviewError as error:
                 warnings.append(f"the {name} pass is left black: {error}")
                 images[name] = np.zeros((view.height, view.width, channels), np.float32)
         return images, warnings

@@ -9,6 +9,15 @@ class PreviewError(Exception):
     """
 
 
+class NoLightError(PreviewError):
+    """A light mode in a scene without a light the preview can see; `why` says what the scene lacks (a
+    Shadow pass beside an AO render words its own remedy from it: engine_final)."""
+
+    def __init__(self, message: str, why: str):
+        super().__init__(message)
+        self.why = why
+
+
 class Cancelled(Exception):
     """The user cancelled (ESC, Ctrl-C or a cancel callback); nothing was written."""
 

@@ -17,7 +17,7 @@ import numpy as np
 
 from . import bulk_instances
 from .animation_curves import animated_paths
-from .errors import PreviewError
+from .errors import NoLightError, PreviewError
 from .extraction_warnings import hidden_light_warnings
 from .render_visibility import RenderVisibility, entry_visible  # the meshes' visibility rules
 from .light_nodes import NO_NODES, Emission, plain_emission
@@ -276,9 +276,10 @@ def check_lights_present(inputs: SceneInputs, depsgraph, mode: str, scene_name: 
         return
     switched_off = [] if inputs.hidden_lights else lights_keyed_off(depsgraph)
     if not switched_off:
-        raise PreviewError(f"mode '{mode}' needs a light, but scene '{scene_name}' "
-                           + ("has no light the preview can see: " + "; ".join(inputs.hidden_lights)
-                              if inputs.hidden_lights else "has no render-visible light: add one or use mode 'ao'"))
+        why = f"scene '{scene_name}' " + ("has no light the preview can see: " + "; ".join(inputs.hidden_lights)
+                                          if inputs.hidden_lights else "has no render-visible light")
+        remedy = "" if inputs.hidden_lights else ": add one or use mode 'ao'"
+        raise NoLightError(f"mode '{mode}' needs a light, but {why}{remedy}", why)
     quoted = ", ".join(f"'{name}'" for name in switched_off)
     inputs.warnings.append(f"light {quoted} is not visible in renders on this frame (its Disable in Renders is "
                            "keyed)" if len(switched_off) == 1 else

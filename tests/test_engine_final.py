@@ -536,3 +536,23 @@ def test_a_background_render_says_once_that_it_waits_for_the_first_compile(addon
     assert len(seen) > 3 and said == [
         "KD Preview: compiling kernels (first use) 1s: the render starts when they are ready "
         "(once per installation)"]
+
+
+@pytest.mark.parametrize("mode", ["ao", "auto"])
+def test_a_shadow_pass_without_lights_is_black_and_says_what_to_do(addon, tmp_path, monkeypatch, mode):
+    """An AO render (or "auto" without lights) with the Shadow pass on: the pass is black and the warning
+    names the missing light and the pass, not the mode error's "use mode 'ao'" (the render is in it)."""
+    scene = engine_scene(tmp_path)
+    for ob in [ob for ob in scene.objects if ob.type == "LIGHT"]:
+        bpy.data.objects.remove(ob)
+    scene.kd_preview.mode = mode
+    layer = scene.view_layers[0]
+    layer.use_pass_shadow = True
+    reported = []
+    monkeypatch.setattr(engine_final.FinalRender, "_report_warning", lambda self, text: reported.append(text))
+    channels = render_multilayer_exr(scene, tmp_path)
+    shadow = np.stack([channels[f"{layer.name}.Shadow.{c}"] for c in "RGB"], axis=-1)
+    assert (shadow == 0).all()
+    said = [text for text in reported if "Shadow pass is left black" in text]
+    assert len(said) == 1 and "scene 'Scene' has no render-visible light (add a light, or turn the Shadow pass " \
+        "off)" in said[0] and "use mode" not in said[0], reported
