@@ -455,13 +455,26 @@ def _print_totals(job, starred: bool) -> None:
 def execute(argv: list[str], prog: str = COMMAND_ID) -> int:
     """Parse argv (the words after the command id) and run; never raises SystemExit."""
     try:
-        args = build_parser(prog).parse_args(argv)
+        args = build_parser(prog).parse_args(_frames_joined(argv))
     except UsageError as error:
         print(error, file=sys.stderr)
         return 2
     except SystemExit as done:  # --help
         return int(done.code or 0)
     return run(args)
+
+
+def _frames_joined(argv: list[str]) -> list[str]:
+    """`--frames -2-1` as `--frames=-2-1`: argparse takes a value starting with "-" (Blender's negative
+    frames) that is not a plain number for an option and refuses it."""
+    joined, words = [], iter(argv)
+    for word in words:
+        value = next(words, None) if word == "--frames" else None
+        if value is not None and value[:1] == "-" and value[1:2].isdigit():
+            joined.append(f"--frames={value}")
+        else:
+            joined += [word] if value is None else [word, value]
+    return joined
 
 
 def main(argv: list[str] | None = None) -> int:

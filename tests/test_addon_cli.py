@@ -583,3 +583,13 @@ def test_an_output_folder_that_cannot_be_made_says_so(tmp_path, capsys, monkeypa
     assert cli.execute(["render", "--out", str(out), "--frames", "1", *SMALL]) == 1
     assert f"error: cannot create the output folder {out}: No space left on device" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_negative_frame_ranges_are_taken_as_blender_takes_them(tmp_path):
+    """Blender's frames go below 0: `--frames -2--1` is a range, not an unknown option."""
+    out = tmp_path / "o"
+    assert cli.execute(["render", "--out", str(out), "--frames", "-2--1", *SMALL]) == 0
+    assert [row["frame"] for row in json.loads((out / "report.json").read_text())["frames"]] == [-2, -1]
+    assert cli._frames_joined(["render", "--frames", "-2-1", "--samples", "2"]) == [
+        "render", "--frames=-2-1", "--samples", "2"]
+    assert cli._frames_joined(["--frames", "1-3", "--out", "-x"]) == ["--frames", "1-3", "--out", "-x"]
