@@ -76,8 +76,8 @@ def build_parser(prog: str = COMMAND_ID) -> argparse.ArgumentParser:
     render.add_argument("blend", nargs="?", help=".blend file to render (default: the open file, else the demo)")
     render.add_argument("--out", required=True,
                         help='output folder (created if missing; "//" starts it beside the .blend, as in Blender)')
-    render.add_argument("--frames", help="N, A-B, A-B:STEP or a comma list (default: the scene's frame range); "
-                                         "negative frames need '=': --frames=-3--1")
+    render.add_argument("--frames", help="N, A-B, A-B:STEP or a comma list, negative frames too (-3--1) "
+                                         "(default: the scene's frame range)")
     render.add_argument("--demo", action="store_true", help="render the built-in animated demo scene")
     render.add_argument("--scene", help="the scene to render, by name (default: the file's current scene)")
     s = argparse.SUPPRESS

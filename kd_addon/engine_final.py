@@ -235,11 +235,10 @@ class FinalRender:
             try:
                 images[name] = self._frame(term_config, view, self._lane(view_name, term),
                                            f"{name} pass {view_name}".rstrip()).image[..., :channels]
-            except NoLightError as error:  # a Shadow pass beside an AO render, in a scene without lights
-                warnings.append(f"the {name} pass is left black: {error.why} (add a light, or turn the {name} pass off)")
-                images[name] = np.zeros((view.height, view.width, channels), np.float32)
-            except PreviewError as error:
-                warnings.append(f"the {name} pass is left black: {error}")
+            except PreviewError as error:  # e.g. a Shadow pass beside an AO render, in a scene without lights
+                why = (f"{error.why} (add a light, or turn the {name} pass off)" if isinstance(error, NoLightError)
+                       else error)
+                warnings.append(f"the {name} pass is left black: {why}")
                 images[name] = np.zeros((view.height, view.width, channels), np.float32)
         return images, warnings
 
