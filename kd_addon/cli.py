@@ -28,7 +28,7 @@ from types import SimpleNamespace
 import bpy
 
 from . import background, corelib, demo_scene, properties
-from .config import DEFAULTS, OUTPUT_FORMATS, SETTING_NAMES, SettingsError, make_config
+from .config import DEFAULTS, OUTPUT_FORMATS, SETTING_NAMES, SettingsError, make_config, read_setting
 from .errors import Cancelled, PreviewError
 from .keyed_settings import keyed_settings_note, stored_setting_values
 from .operators import depsgraph_source
@@ -205,7 +205,7 @@ def saved_settings_with_overrides(scene, args) -> tuple[SimpleNamespace, dict]:
         properties.register()
     try:
         saved = scene.kd_preview
-        return SimpleNamespace(**{name: getattr(args, name) if hasattr(args, name) else getattr(saved, name)
+        return SimpleNamespace(**{name: getattr(args, name) if hasattr(args, name) else read_setting(saved, name)
                                   for name in SETTING_NAMES}), stored_setting_values(saved)
     finally:
         if not registered:

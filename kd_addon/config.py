@@ -138,7 +138,7 @@ def make_config(source) -> RenderConfig:
 
     Raises SettingsError naming the first bad setting.
     """
-    values = {name: _read(source, name) for name in SETTING_NAMES}
+    values = {name: read_setting(source, name) for name in SETTING_NAMES}
     settings = Settings(**values)
     _validate(settings)
     return RenderConfig(settings, _build_options(settings), _render_options(settings))
@@ -152,9 +152,10 @@ class _StoredItem(int):
         return f"stored item number {int(self)}, which names none of them"
 
 
-def _read(source, name: str):
+def read_setting(source, name: str):
     """`source`'s value of setting `name` (the default where it has none); an enum property that reads ''
-    gives its stored number (_StoredItem) when `source` keeps one (a property group's `get`)."""
+    gives its stored number (_StoredItem) when `source` keeps one (a property group's `get`), so a copy
+    of the settings (the command line's, a farm's) still names it."""
     value = getattr(source, name, getattr(DEFAULTS, name))
     if value == "" and callable(getattr(source, "get", None)):
         stored = source.get(name)

@@ -593,3 +593,18 @@ def test_negative_frame_ranges_are_taken_as_blender_takes_them(tmp_path):
     assert cli._frames_joined(["render", "--frames", "-2-1", "--samples", "2"]) == [
         "render", "--frames=-2-1", "--samples", "2"]
     assert cli._frames_joined(["--frames", "1-3", "--out", "-x"]) == ["--frames", "1-3", "--out", "-x"]
+
+
+def test_a_saved_enum_number_that_names_no_item_is_named_by_the_command_line(tmp_path, capsys):
+    """A file whose mode is stored as a number no item has (another version's, a script's) fails on the
+    command line with the number named, as in the panel (config.read_setting), not as "got ''"."""
+    scene = floor_scene(40, 30)
+    kd_addon.register()
+    try:
+        scene.kd_preview["mode"] = 7
+        blend = tmp_path / "odd.blend"
+        bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    finally:
+        kd_addon.unregister()
+    assert cli.execute(["render", str(blend), "--out", str(tmp_path / "o"), "--frames", "1"]) == 1
+    assert "mode must be one of auto, ao, shadow, ao+shadow; got stored item number 7" in capsys.readouterr().err
