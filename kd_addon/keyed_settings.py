@@ -11,19 +11,16 @@ SETTINGS_PATH = "kd_preview."
 def keyed_settings_note(scene, frames, given=(), stored=None) -> str:
     """A warning naming the render settings whose keyed value on one of `frames` differs from the frame the
     file was saved at, or that NLA strips or drivers animate, and those edited after they were keyed; ""
-    when none. `given`: settings the command line replaced; `stored`: each setting's value as saved (its
-    ID property's number, None where never set: stored_setting_values)."""
+    when none. `given`: settings the command line replaced; `stored`: stored_setting_values."""
     saved = scene.frame_current
-    changed, edited = set(), set()
+    changed = set()
     for curve in active_curves(scene, SETTINGS_PATH):
-        base, name = curve.evaluate(saved), _setting(curve.data_path)
+        base = curve.evaluate(saved)
         if any(curve.evaluate(f) != base for f in frames):
-            changed.add(name)
-        if _edited((stored or {}).get(name), base):
-            edited.add(name)
+            changed.add(_setting(curve.data_path))
     changed |= {_setting(path) for path in animated_paths(scene, SETTINGS_PATH, active=False)}  # NLA, drivers
     changed = (changed & set(SETTING_NAMES)) - set(given)  # not the panel's own switches (Live Update)
-    edited = (edited & set(SETTING_NAMES)) - set(given)
+    edited = (_edited_after_keys(scene, stored or {}) & set(SETTING_NAMES)) - set(given)
     notes = []
     if changed:
         notes.append(f"KD Preview settings keyed to change over the frames ({', '.join(sorted(changed))}) are not "
@@ -38,6 +35,29 @@ def keyed_settings_note(scene, frames, given=(), stored=None) -> str:
     return "; ".join(notes)
 
 
+def _edited_after_keys(scene, stored: dict) -> set[str]:
+    """Keyed settings whose stored value is not their curve's (clamped to the setting's bounds, as Blender
+    stores it) at the (sub)frame the file was saved at; not those that drivers or NLA strips also animate
+    (their stored value is not the curve's)."""
+    if not stored:
+        return set()
+    also = {_setting(path) for path in animated_paths(scene, SETTINGS_PATH, active=False)}
+    at = scene.frame_current + scene.frame_subframe
+    edited = set()
+    for curve in active_curves(scene, SETTINGS_PATH):
+        name = _setting(curve.data_path)
+        value, low, high = stored.get(name, (None, None, None))
+        if name not in also and _edited(value, _clamped(curve.evaluate(at), low, high)):
+            edited.add(name)
+    return edited
+
+
+def _clamped(keyed: float, low, high) -> float:
+    """The curve's value as Blender stores it in a setting bounded by [low, high] (None: unbounded)."""
+    keyed = keyed if low is None else max(low, keyed)
+    return keyed if high is None else min(high, keyed)
+
+
 def _edited(value, keyed: float) -> bool:
     """Whether a stored value is not what its curve gives at that frame: an integer, enum or switch
     that an interpolated key sets keeps within 1 of it, a float within float32's rounding."""
@@ -49,9 +69,11 @@ def _edited(value, keyed: float) -> bool:
 
 
 def stored_setting_values(settings) -> dict:
-    """Each setting's value as the file stores it (an enum's item number, as its curve holds it; None where
-    the setting was never set), from the registered settings group `settings`."""
-    return {name: settings.get(name) for name in SETTING_NAMES}
+    """{setting: (value as the file stores it, hard minimum, hard maximum)} from the registered settings group
+    `settings`: an enum's item number, as its curve holds it; None where the setting was never set; the
+    bounds of integer and float settings, else None."""
+    bounds = {p.identifier: (p.hard_min, p.hard_max) for p in settings.bl_rna.properties if p.type in ("INT", "FLOAT")}
+    return {name: (settings.get(name), *bounds.get(name, (None, None))) for name in SETTING_NAMES}
 
 
 def _setting(data_path: str) -> str:

@@ -608,3 +608,31 @@ def test_a_saved_enum_number_that_names_no_item_is_named_by_the_command_line(tmp
         kd_addon.unregister()
     assert cli.execute(["render", str(blend), "--out", str(tmp_path / "o"), "--frames", "1"]) == 1
     assert "mode must be one of auto, ao, shadow, ao+shadow; got stored item number 7" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("case", ["driven", "clamped"])
+def test_keyed_values_blender_itself_changed_are_not_called_edits(tmp_path, capsys, case):
+    """A stored value that is not its curve's because Blender made it so is no edit: a driver also sets
+    the setting, or the curve runs past the setting's bounds (stored clamped)."""
+    scene = floor_scene(40, 30)
+    kd_addon.register()
+    try:
+        settings = scene.kd_preview
+        for frame, percent in ((1, 20), (5, 40)):
+            settings.resolution_percentage = percent
+            settings.keyframe_insert("resolution_percentage", frame=frame)
+        if case == "clamped":  # a key beyond the setting's bound (100), as an edited key value leaves it
+            key = next(c for c in _action_curves(scene.animation_data)
+                       if c.data_path == "kd_preview.resolution_percentage").keyframe_points[1]
+            key.co.y = key.handle_left.y = key.handle_right.y = 150
+        else:
+            settings.driver_add("resolution_percentage").driver.expression = "30"
+        scene.frame_set(5)
+        stored = settings["resolution_percentage"]
+        blend = tmp_path / f"{case}.blend"
+        bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    finally:
+        kd_addon.unregister()
+    assert stored != 40  # Blender's value, not the curve's
+    assert cli.execute(["render", str(blend), "--out", str(tmp_path / "o"), "--frames", "5", "--samples", "1"]) == 0
+    assert "edited after they were keyed" not in capsys.readouterr().err
