@@ -324,7 +324,7 @@ def _beside_the_blend(args) -> str:
     if not blend:
         raise PreviewError(f"--out {args.out} is relative to the .blend file (Blender's //), but this run has none "
                            "(the demo): give a folder path")
-    return os.path.join(os.path.dirname(os.path.abspath(blend)), args.out[2:])
+    return os.path.join(os.path.dirname(os.path.realpath(blend)), args.out[2:])  # load_scene opens it resolved
 
 
 def stopped_message(prog: str, written: int, interrupted) -> str:

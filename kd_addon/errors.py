@@ -10,12 +10,16 @@ class PreviewError(Exception):
 
 
 class NoLightError(PreviewError):
-    """A light mode in a scene without a light the preview can see; `why` says what the scene lacks (a
-    Shadow pass beside an AO render words its own remedy from it: engine_final)."""
+    """A light mode in a scene without a light the preview can see; `why` says what the scene lacks and
+    `hidden` whether it has lights the preview cannot see (a Shadow pass beside an AO render words its
+    own remedy from them: engine_final)."""
 
-    def __init__(self, message: str, why: str):
+    def __init__(self, message: str, why: str, hidden: bool = False):
         super().__init__(message)
-        self.why = why
+        self.why, self.hidden = why, hidden
+
+    def __reduce__(self):  # pickled whole (a process boundary), not from `args` alone
+        return type(self), (str(self), self.why, self.hidden)
 
 
 class Cancelled(Exception):

@@ -279,7 +279,7 @@ def check_lights_present(inputs: SceneInputs, depsgraph, mode: str, scene_name: 
         why = f"scene '{scene_name}' " + ("has no light the preview can see: " + "; ".join(inputs.hidden_lights)
                                           if inputs.hidden_lights else "has no render-visible light")
         remedy = "" if inputs.hidden_lights else ": add one or use mode 'ao'"
-        raise NoLightError(f"mode '{mode}' needs a light, but {why}{remedy}", why)
+        raise NoLightError(f"mode '{mode}' needs a light, but {why}{remedy}", why, bool(inputs.hidden_lights))
     quoted = ", ".join(f"'{name}'" for name in switched_off)
     inputs.warnings.append(f"light {quoted} is not visible in renders on this frame (its Disable in Renders is "
                            "keyed)" if len(switched_off) == 1 else

@@ -545,6 +545,10 @@ def test_out_starting_with_double_slash_is_beside_the_blend(tmp_path, capsys, mo
     # the file Blender has open (blender -b scene.blend --command kdpreview render ...)
     assert cli.execute(["render", "--out", "//renders/b", "--frames", "1", "--samples", "1"]) == 0
     assert (tmp_path / "shot" / "renders" / "b" / "frame_0001.png").is_file()
+    link = tmp_path / "link.blend"  # Blender opens the file itself, so "//" is beside the link's target
+    link.symlink_to(blend)
+    assert cli.execute(["render", str(link), "--out", "//renders/l", "--frames", "1", "--samples", "1"]) == 0
+    assert (tmp_path / "shot" / "renders" / "l" / "frame_0001.png").is_file()
     capsys.readouterr()
     assert cli.execute(["render", "--out", "//renders/c", *SMALL]) == 1
     assert "--out //renders/c is relative to the .blend file (Blender's //), but this run has none" in (

@@ -556,3 +556,13 @@ def test_a_shadow_pass_without_lights_is_black_and_says_what_to_do(addon, tmp_pa
     said = [text for text in reported if "Shadow pass is left black" in text]
     assert len(said) == 1 and "scene 'Scene' has no render-visible light (add a light, or turn the Shadow pass " \
         "off)" in said[0] and "use mode" not in said[0], reported
+
+
+def test_the_no_light_error_crosses_a_process_boundary_whole():
+    """NoLightError keeps its reason and whether lights are hidden when pickled (a farm's worker)."""
+    import pickle
+
+    from kd_addon.errors import NoLightError
+
+    error = pickle.loads(pickle.dumps(NoLightError("mode 'shadow' needs a light", "scene 'S' has none", True)))
+    assert (str(error), error.why, error.hidden) == ("mode 'shadow' needs a light", "scene 'S' has none", True)
