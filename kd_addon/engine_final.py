@@ -236,8 +236,10 @@ class FinalRender:
                 images[name] = self._frame(term_config, view, self._lane(view_name, term),
                                            f"{name} pass {view_name}".rstrip()).image[..., :channels]
             except PreviewError as error:  # e.g. a Shadow pass beside an AO render, in a scene without lights
-                fix = "make one visible" if getattr(error, "hidden", False) else "add a light"
-                why = f"{error.why} ({fix}, or turn the {name} pass off)" if isinstance(error, NoLightError) else error
+                why = error
+                if isinstance(error, NoLightError):
+                    fix = "make one visible" if error.hidden else "add a light"
+                    why = f"{error.why} ({fix}, or turn the {name} pass off)"
                 warnings.append(f"the {name} pass is left black: {why}")
                 images[name] = np.zeros((view.height, view.width, channels), np.float32)
         return images, warnings

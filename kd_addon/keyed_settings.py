@@ -13,14 +13,15 @@ def keyed_settings_note(scene, frames, given=(), stored=None) -> str:
     file was saved at, or that NLA strips or drivers animate, and those edited after they were keyed; ""
     when none. `given`: settings the command line replaced; `stored`: stored_setting_values."""
     saved = scene.frame_current
-    changed = set()
-    for curve in active_curves(scene, SETTINGS_PATH):
+    curves = active_curves(scene, SETTINGS_PATH)
+    others = {_setting(path) for path in animated_paths(scene, SETTINGS_PATH, active=False)}  # NLA, drivers
+    changed = set(others)
+    for curve in curves:
         base = curve.evaluate(saved)
         if any(curve.evaluate(f) != base for f in frames):
             changed.add(_setting(curve.data_path))
-    changed |= {_setting(path) for path in animated_paths(scene, SETTINGS_PATH, active=False)}  # NLA, drivers
     changed = (changed & set(SETTING_NAMES)) - set(given)  # not the panel's own switches (Live Update)
-    edited = (_edited_after_keys(scene, stored or {}) & set(SETTING_NAMES)) - set(given)
+    edited = (_edited_after_keys(scene, curves, others, stored or {}) & set(SETTING_NAMES)) - set(given)
     notes = []
     if changed:
         notes.append(f"KD Preview settings keyed to change over the frames ({', '.join(sorted(changed))}) are not "
@@ -35,19 +36,18 @@ def keyed_settings_note(scene, frames, given=(), stored=None) -> str:
     return "; ".join(notes)
 
 
-def _edited_after_keys(scene, stored: dict) -> set[str]:
-    """Keyed settings whose stored value is not their curve's (clamped to the setting's bounds, as Blender
-    stores it) at the (sub)frame the file was saved at; not those that drivers or NLA strips also animate
-    (their stored value is not the curve's)."""
+def _edited_after_keys(scene, curves, others: set[str], stored: dict) -> set[str]:
+    """Settings keyed by `curves` whose stored value is not their curve's (clamped to the setting's bounds,
+    as Blender stores it) at the (sub)frame the file was saved at; not the `others` that drivers or NLA
+    strips also animate (their stored value is not the curve's)."""
     if not stored:
         return set()
-    also = {_setting(path) for path in animated_paths(scene, SETTINGS_PATH, active=False)}
     at = scene.frame_current + scene.frame_subframe
     edited = set()
-    for curve in active_curves(scene, SETTINGS_PATH):
+    for curve in curves:
         name = _setting(curve.data_path)
         value, low, high = stored.get(name, (None, None, None))
-        if name not in also and _edited(value, _clamped(curve.evaluate(at), low, high)):
+        if name not in others and _edited(value, _clamped(curve.evaluate(at), low, high)):
             edited.add(name)
     return edited
 
