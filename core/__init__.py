@@ -7,8 +7,8 @@ Public API:
     Camera(matrix_world, fov) / Camera(matrix_world, ortho_scale=s); Light.point / sun / spot / area
     RenderOptions(mode="ao", samples=16, ...): the render settings, validated and frozen
     render_preview(tree, camera, width, height, options=None, **settings) -> (H, W, 4) float32
-    PreviewRender(tree, camera, width, height, options=None, previous=None, **settings): step(), image(),
-        done, pixel_state(); keywords build a RenderOptions or replace fields of `options`
+    PreviewRender(tree, camera, width, height, options=None, previous=None, compile_packets=True, **settings):
+        step(), image(), done, pixel_state(); keywords build a RenderOptions or replace fields of `options`
     PixelState: a finished frame's pixels, passed as `previous` to keep what did not change
     frame_ray_count(width, height, mode, samples, lights) -> int: the build option `rays` for one frame
     memory.build_bytes / memory.render_bytes: peak-memory estimates; MemoryLimitError when above a limit

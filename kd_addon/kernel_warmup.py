@@ -14,10 +14,11 @@ cache file under a temporary name and renames it, so an interrupted compile leav
 Disabling the add-on lets a running compile finish: it only fills the cache. KD_PREVIEW_WARMUP=0
 turns the warm-up off (then a first render compiles as before: pipeline.FrameJob).
 
-Once those kernels are cached, a second process of lower priority compiles the sampling kernel's
-packed version (sample packets in batches of 8+ samples) and the denoiser
-(core/jit/first_frame.compile_second_stage), which no render waits for: renders step in batches that large
-only once it is cached (sampling_steps.py), and a denoised frame before then compiles the denoiser itself.
+Once those kernels are cached, a second process of lower priority compiles the camera and hard-shadow
+packets' kernels, the sampling kernel's packed version (sample packets in batches of 8+ samples) and the
+denoiser (core/jit/first_frame.compile_second_stage), which no render waits for: renders trace in packets
+(pipeline.FrameJob) and step in batches that large (sampling_steps.py) only once they are cached, and a
+denoised frame before then compiles the denoiser itself.
 
 API for the UI and a render engine: start(), status() -> WarmupStatus (state, elapsed seconds,
 message; `.text` is the line to show), wait(cancel=None, timeout=None).
@@ -150,9 +151,10 @@ def _spawn(errors, task=TASK, low_priority=False) -> subprocess.Popen:
 
 def _start_packed_stage() -> None:
     """Start the packed stage once the first frames' kernels are cached, unless it ran in this process
-    or the cache already holds what it compiles: the packed version (corelib.packed_version_cached) and
-    the denoiser (compiled after it: a stage stopped in between runs again). Never raises: without it,
-    renders keep their batches under 8 samples (core PreviewRender.batch_without_compile)."""
+    or the cache already holds what it compiles: the packets' kernels and the packed version, compiled
+    after them (corelib.packed_version_cached), and the denoiser, compiled last (a stage stopped part-way
+    runs again). Never raises: without it, renders trace camera rays singly and keep their batches under
+    8 samples (core PreviewRender's compile_packets and batch_without_compile)."""
     with _packed_lock:  # status() on the UI's timer and start() on a render's thread may both get here
         cached = corelib.packed_version_cached() and corelib.cache_is_warm(corelib.DENOISE_KERNEL)
         if _warmup.packed is not None or cached:

@@ -406,12 +406,12 @@ class FrameJob:
     def _start_tracing(self, core, scene, camera, lights, width, height, previous) -> None:
         """The renderer (its constructor traces the camera rays: trace time), continued from the last
         frame's pixels where their rays cannot reach what changed; the first such frame of a process
-        also counts as a first run (it loads the pixel-reuse kernels)."""
+        also counts as a first run (it loads the pixel-reuse kernels). Packets once cached: kernel_warmup.py."""
         global _reuse_kernels_ready
         t0 = _now()
         try:
-            options = core.RenderOptions(lights=lights, **self._render_options())
-            self.renderer = core.PreviewRender(scene, camera, width, height, options, previous=previous)
+            self.renderer = core.PreviewRender(scene, camera, width, height, previous=previous, lights=lights,
+                                               compile_packets=False, **self._render_options())
         except ValueError as error:  # core's own checks (its MemoryLimitError is one): a message, not a traceback
             raise PreviewError(f"the frame cannot be rendered: {error}") from None
         self._timings["trace_ms"] += self._spent(t0)

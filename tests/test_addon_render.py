@@ -435,6 +435,27 @@ def test_a_frame_steps_in_growing_batches_with_the_one_sample_images(addon, monk
     np.testing.assert_array_equal(batched.image, single.image)
 
 
+def test_a_frame_takes_the_camera_packets_once_their_kernels_are_cached(addon, monkeypatch):
+    """The add-on's renderer never waits for the packets' compile (core's compile_packets=False): while
+    core says their kernels are not ready, its camera rays go singly; once ready, in packets (the warm-up's
+    second stage caches them); the same image both ways."""
+    import importlib
+
+    from kd_addon import corelib, tree_cache
+
+    render_module = importlib.import_module(corelib.load_core().__name__ + ".render.preview_render")
+    scene, calls, images = half_plane_scene(), [], []
+    real = render_module.trace_camera_packets
+    monkeypatch.setattr(render_module, "trace_camera_packets", lambda *a: calls.append(1) or real(*a))
+    for ready in (False, True):
+        monkeypatch.setattr(render_module, "packet_kernels_ready", lambda: ready)
+        tree_cache.clear()  # no kept image
+        images.append(pipeline.render_frame(scene, bpy.context.evaluated_depsgraph_get(),
+                                            make_config(scene.kd_preview)).image)
+        assert bool(calls) == ready
+    np.testing.assert_array_equal(images[0], images[1])
+
+
 @pytest.mark.parametrize("color", [(math.nan, 1.0, 1.0), (-math.inf, 0.0, 0.0)])
 def test_a_light_colour_that_is_not_a_number_is_named_not_called_black(color):
     """A NaN or infinite colour (a driver dividing by zero) is core's to refuse, naming the colour; before,

@@ -3,14 +3,16 @@ first render (the add-on's kernel warm-up, kd_addon/kernel_warmup.py) can fill N
 with them, and the render itself only loads them.
 
 They take the add-on's path through core with the default settings: a SceneBuilder over several meshes
-(instanced, merged into a soup, and one large enough for its own tree), the rendering kernels and the
-one-instance packet kernels compiled by the helper beside the build and camera pass (parallel_compile.py,
-warmup=True), an ao+shadow render with one light of each kind, then a second frame with one object
-moved that continues from the first one's pixels (the pixel-reuse kernels), the tree statistics the
-panel shows, and last the factory scene's first frame: one cube, a one-instance scene traced in packets.
-compile_second_stage is the warm-up's second stage: the sampling kernel's packed version (sample packets
-in batches of 8 or more samples), which the add-on steps into once it is cached (kd_addon/kernel_warmup.py),
-and the denoiser, which a first denoised frame would otherwise compile (several seconds).
+(instanced, merged into a soup, and one large enough for its own tree), the rendering kernels compiled by
+the helper beside the build and camera pass (parallel_compile.py, warmup=True), an ao+shadow render with
+one light of each kind, then a second frame with one object moved that continues from the first one's
+pixels (the pixel-reuse kernels), the tree statistics the panel shows, and last the factory scene's first
+frame: one cube, a one-instance scene. Their camera rays and hard shadows go singly, as the add-on's do
+until the packets' kernels are cached (PreviewRender's compile_packets=False).
+compile_second_stage is the warm-up's second stage, which no render waits for: the camera and hard-shadow
+packets' kernels of both scenes (scene_packets.py), the sampling kernel's packed version (sample packets in
+batches of 8 or more samples), each taken by the add-on once it is cached (kd_addon/kernel_warmup.py), and
+the denoiser, which a first denoised frame would otherwise compile (several seconds).
 Numba compiles one version per argument types, so the arrays have the add-on's dtypes
 (tree_cache.mesh_inputs). Sizes, modes and sample counts are runtime values and need no second compile.
 """
@@ -83,11 +85,12 @@ def _camera(offset) -> Camera:
 
 
 def _frame(builder: SceneBuilder, scene_inputs, previous, first: bool, batch: int = 1,
-           mode: str = "ao+shadow", denoise: bool = False):
+           mode: str = "ao+shadow", denoise: bool = False, packets: bool = False):
     """One frame as the add-on renders it (kd_addon/pipeline.py), relative to the camera's position, in
     steps of `batch` samples, in `mode`, its image denoised or not; `scene_inputs`: (meshes, mesh_of,
     matrices, visibility). The first frame's build and camera pass run beside the helper's compile
-    (parallel_compile.py: the warm-up's split)."""
+    (parallel_compile.py: the warm-up's split). `packets`: camera rays and hard shadows in packets
+    (compiling their kernels), else as the add-on traces them (PreviewRender's compile_packets=False)."""
     offset = np.array([0.0, 0.0, 4.0])
     lights = _lights(offset)
     options = RenderOptions(mode=mode, samples=max(SAMPLES, batch), lights=lights)
@@ -96,7 +99,8 @@ def _frame(builder: SceneBuilder, scene_inputs, previous, first: bool, batch: in
     with rendering_kernels_alongside(warmup=True) if first else nullcontext():
         scene, _ = builder.build(meshes, mesh_of, matrices, origin=offset, visibility=visibility, rays=rays)
         scene.stats()  # the panel's tree figures (tree_stats.walk_stats)
-        render = PreviewRender(scene, _camera(offset), WIDTH, HEIGHT, options, previous=previous)
+        render = PreviewRender(scene, _camera(offset), WIDTH, HEIGHT, options, previous=previous,
+                               compile_packets=packets)
     while not render.done:
         render.step(batch)
     render.image(denoise=denoise)
@@ -111,18 +115,27 @@ def _one_cube():
 
 def compile_first_frames() -> None:
     """Run a first frame, a second one continued from it (see the module docstring), and a first frame
-    of one object (the factory scene: a one-instance scene, traced in packets)."""
+    of one object (the factory scene: a one-instance scene)."""
     builder = SceneBuilder("auto")
     pixels = _frame(builder, (_meshes(), *_placements(0.0)), None, first=True)
     _frame(builder, (_meshes(), *_placements(0.2)), pixels, first=False)
     _frame(SceneBuilder("auto"), _one_cube(), None, first=False)
 
 
+def compile_packet_kernels() -> None:
+    """The camera and hard-shadow packets' kernels with the add-on's argument types: the first frame's
+    scene (several instances, taken one at a time: instance_packets.py) and the factory scene's (one
+    placed instance: its rays carried into object space), traced in packets."""
+    _frame(SceneBuilder("auto"), (_meshes(), *_placements(0.0)), None, first=False, packets=True)
+    _frame(SceneBuilder("auto"), _one_cube(), None, first=False, packets=True)
+
+
 def compile_second_stage() -> None:
-    """The sampling kernel's packed version (sample packets in batches of PACKED_BATCH or more samples:
-    render/sample_packets.py), which the add-on's first steps of one sample never run: the factory scene's
-    frame in one batch, mode ao (one version serves every mode), its image denoised (the denoiser's
-    kernels, which no undenoised frame runs). The add-on compiles these after the first frames, in a
-    process of lower priority (kd_addon/kernel_warmup.py), and steps in batches that large once they are
-    cached."""
+    """The packets' kernels (compile_packet_kernels), then the sampling kernel's packed version (sample
+    packets in batches of PACKED_BATCH or more samples: render/sample_packets.py), which the add-on's first
+    steps of one sample never run: the factory scene's frame in one batch, mode ao (one version serves
+    every mode), its image denoised (the denoiser's kernels, which no undenoised frame runs). The add-on
+    compiles these after the first frames, in a process of lower priority (kd_addon/kernel_warmup.py),
+    and takes each once it is cached; a stage stopped part-way runs again."""
+    compile_packet_kernels()
     _frame(SceneBuilder("auto"), _one_cube(), None, first=False, batch=PACKED_BATCH, mode="ao", denoise=True)

@@ -159,6 +159,19 @@ def cached_signatures(dispatcher) -> list:
             if key[1] == magic and os.path.exists(cache_file._data_path(name))]
 
 
+def holds_version(dispatcher, accept=None) -> bool:
+    """Whether `dispatcher` has a version whose argument types `accept` takes (any version when None) that
+    runs without a compile: loaded in this process, or in the on-disk cache (cached_signatures). A loaded
+    one answers without reading the cache's index; an unreadable index reads as none."""
+    accept = accept or (lambda signature: True)
+    if any(accept(signature) for signature in dispatcher.signatures):
+        return True
+    try:
+        return any(accept(signature) for signature in cached_signatures(dispatcher))
+    except Exception:  # noqa: BLE001 (a broken or foreign index: Numba would recompile too)
+        return False
+
+
 def register(folder=CORE_FOLDER, sources=CORE_FOLDER) -> None:
     """Key the cached kernels of `folder` and its subfolders (core's, or e.g. a test's that inline
     core's functions) by the `*.py` files of `sources` (and its subfolders) too. Must run before the

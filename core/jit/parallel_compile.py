@@ -23,10 +23,7 @@ from ..render.lights import Light
 from ..build.options import BuildOptions
 from ..render.preview_render import PreviewRender
 from ..render.render_kernels import add_samples, surface_frames
-from ..render.camera import tiled_packets
-from ..scene.ray_visibility import CAMERA_RAYS
-from ..scene.scene_packets import trace_camera_packets
-from ..scene.two_level import as_two_level, build_two_level
+from ..scene.two_level import as_two_level
 
 CORE_PACKAGE = __package__.rpartition(".")[0]  # core's module name: "core", or bl_ext.<repo>.<id>.core
 
@@ -100,32 +97,6 @@ def compile_rendering_kernels(denoise=False) -> None:
     render.image(denoise=denoise)
 
 
-def compile_placed_packets() -> None:
-    """The packet kernels of a one-instance scene whose instance is placed by a matrix (as every object
-    of the add-on's scenes, extracted relative to the camera: the factory scene's cube): the rays carried
-    into object space (scene_packets._rays_to_object) and traced in packets (trace_packets), with the
-    camera pass's argument types (float64 rays, tiled_packets' read-only order). The directions share
-    one octant, so no lane is left to single rays (their kernel is the camera pass's, compiled apart)."""
-    placed = np.eye(4)
-    placed[:3, 3] = (0.25, -0.5, -3.0)
-    scene = build_two_level([hand_made_tree()], np.zeros(1, np.int32), placed[None], threads=1)
-    x, y = np.meshgrid(np.linspace(-0.5, 0.5, 4), np.linspace(-1.0, 0.0, 4))
-    origins = np.stack([x.ravel(), y.ravel(), np.zeros(16)], axis=1)
-    directions = np.tile([0.125, 0.25, -1.0], (16, 1))
-    trace_camera_packets(scene, origins, directions, np.zeros(16), np.full(16, np.inf), tiled_packets(4, 4), 1,
-                         CAMERA_RAYS)
-
-
-def compile_rendering_and_packet_kernels(denoise=False) -> None:
-    """The kernel warm-up's helper task (first_frame.py): the rendering kernels, then the placed
-    one-instance scene's packet kernels, which the warm-up's own process would otherwise compile
-    after its build, on the longer of the two processes' paths
-    (docs/choices.md#the-warm-up-covers-a-one-object-frame-and-splits-its-compile-evenly)."""
-    compile_rendering_kernels(denoise)
-    compile_placed_packets()
-
-
-WARMUP_TASK = "jit.parallel_compile:compile_rendering_and_packet_kernels"  # helper_program.py's TASK
 HELPER_SWITCH = "KD_PREVIEW_COMPILE_HELPER"  # "0": no helper process (e.g. where spawning one is not allowed)
 HELPER_TIMEOUT = 900.0  # seconds: a guard against a helper that never ends, far above its 1.5-4 minutes
 
@@ -136,13 +107,13 @@ def rendering_kernels_alongside(denoise=False, warmup=False):
     the cache holds the sampling kernel or HELPER_SWITCH is "0" (`denoise`: compile the denoiser too);
     yields the helper or None. On leaving, run the camera pass here, then wait for the helper (at most
     HELPER_TIMEOUT); if the block raised, end it at once. No helper runs afterwards. `warmup`: the
-    kernel warm-up's made-up frame (first_frame.py), whose block makes its own camera pass: the helper
-    also compiles the placed one-instance scene's packet kernels, and no camera pass runs on leaving."""
+    kernel warm-up's made-up frame (first_frame.py), whose block makes its own camera pass: none runs
+    on leaving."""
     helper = None
     if os.environ.get(HELPER_SWITCH, "1") != "0" and not rendering_kernels_cached():
         compile_scene_wrapping()
         try:
-            helper = RenderingKernelsHelper(denoise, WARMUP_TASK if warmup else None)
+            helper = RenderingKernelsHelper(denoise)
         except (OSError, ValueError, subprocess.SubprocessError):
             helper = None  # no interpreter to start (an embedded Python): this process compiles it all
     try:

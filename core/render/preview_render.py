@@ -30,7 +30,7 @@ from .render_kernels import (MEMO_BITS, PACKED_BATCH, PixelFrames, PixelSums, Ra
                              assemble_image, hard_shadow_rays, packed_version_ready, surface_frames)
 from .render_options import RenderOptions, check_mode_and_samples, packed_lights
 from .sampling import SAMPLERS, SOBOL_DIM1
-from ..scene.scene_packets import occluded_in_packets, packets_apply, trace_camera_packets
+from ..scene.scene_packets import occluded_in_packets, packet_kernels_ready, packets_apply, trace_camera_packets
 from ..trace.packet_traversal import L
 from ..scene.scene_queries import trace_valid_rays
 from ..jit.threads import thread_count
@@ -50,9 +50,14 @@ class PreviewRender:
     previous: the last frame's `pixel_state()`. With the same camera, lights and settings, and a scene
     from the same SceneBuilder (whose instance signature says what changed), pixels whose rays cannot
     reach changed geometry are kept as they were (pixel_reuse.py): the image is the full render's,
-    `pixels_reused` and `rays_reused` say what that saved. Anything else renders from scratch."""
+    `pixels_reused` and `rays_reused` say what that saved. Anything else renders from scratch.
 
-    def __init__(self, tree, camera, width, height, options=None, *, previous=None, **settings):
+    compile_packets: False to trace the camera rays and hard shadows in packets (scene_packets.py) only
+    when their kernels run without a compile (packet_kernels_ready), else singly: the same hits and image,
+    without waiting for that compile (the add-on, whose warm-up compiles them last: kd_addon/kernel_warmup.py)."""
+
+    def __init__(self, tree, camera, width, height, options=None, *, previous=None, compile_packets=True,
+                 **settings):
         _check_frame(tree, camera, width, height)
         options = RenderOptions.make(options, **settings)
         if previous is not None and not isinstance(previous, PixelState):
@@ -68,6 +73,7 @@ class PreviewRender:
         self.error_target, self.min_samples, self.ambient = o.error_target, int(o.min_samples), float(o.ambient)
         self.checks = checks(self.min_samples, self.target_samples) if o.error_target is not None else []
         self.threads = o.threads
+        self.packets = compile_packets or packet_kernels_ready()  # camera and hard-shadow packets
         self.samples_done = 0
         self.trace_ms = 0.0
         self.rays_saved = 0
@@ -86,8 +92,8 @@ class PreviewRender:
     def _trace_camera(self):
         """Every pixel from scratch."""
         self.camera_rays = self.width * self.height
-        pixels, depths, points, normals, starts = self._camera_hits(tiled_pixels(self.width, self.height),
-                                                                    tiled_packets(self.width, self.height))
+        packets = tiled_packets(self.width, self.height) if self.packets else None
+        pixels, depths, points, normals, starts = self._camera_hits(tiled_pixels(self.width, self.height), packets)
         zero = np.zeros(len(pixels), np.int64)
         self._start(pixels, depths, points, normals, starts, np.zeros((len(pixels), 3)), np.zeros(len(pixels)), zero,
                     zero.copy(), np.arange(len(pixels), dtype=np.int64), self._memo_rows(len(pixels)))
@@ -300,9 +306,10 @@ class PreviewRender:
         `pretraced`, their weights into `pretraced_weights`, where the sampling kernel takes both. The
         pixels are in tiled order, so a packet's rays leave neighbouring points towards one point or
         direction: coherent rays, as camera rays are.
-        Scenes the packets do not take leave the rays to the sampling kernel."""
+        Scenes the packets do not take, and a render without packets (self.packets), leave the rays to the
+        sampling kernel."""
         hard = np.flatnonzero((self.lights[:, DELTA] != 0.0) & (self.lights[:, NO_SHADOW] == 0.0))
-        if "shadow" not in self.mode or not len(hard) or not packets_apply(self.scene, SHADOW_RAYS):
+        if "shadow" not in self.mode or not len(hard) or not self.packets or not packets_apply(self.scene, SHADOW_RAYS):
             return
         frames = PixelFrames(self.points, self.normals, self.starts, self.pixels)
         self.pretraced_weights = np.full((len(self.points), len(self.lights)), np.nan)

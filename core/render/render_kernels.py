@@ -16,7 +16,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange, types
 
-from ..jit.kernel_cache import cached_signatures
+from ..jit.kernel_cache import holds_version
 from ..trace.array_views import keep_alive, rows, unowned
 from ..scene.instance_traversal import (hit_surface, new_scratch, onto_triangle_plane, surface_error_scale, trace_scene,
                                  unowned_scene, world_normal)
@@ -89,18 +89,8 @@ def packed_version_ready():
     """Whether add_samples' packed version (`packed` True) runs without a compile: loaded in this process,
     or in Numba's on-disk cache for this machine and these sources. Its first compile takes about a
     minute, so a caller stepping in growing batches stays under PACKED_BATCH until then
-    (PreviewRender.batch_without_compile). An unreadable cache index reads as not ready."""
-    if _holds_packed(add_samples.signatures):  # loaded here: no need to read the cache's index every step
-        return True
-    try:
-        return _holds_packed(cached_signatures(add_samples))
-    except Exception:  # noqa: BLE001 (a broken or foreign index: Numba would recompile too)
-        return False
-
-
-def _holds_packed(signatures):
-    """Whether add_samples' argument types `signatures` include the packed version's (`packed` a bool)."""
-    return any(isinstance(signature[-1], types.Boolean) for signature in signatures)
+    (PreviewRender.batch_without_compile)."""
+    return holds_version(add_samples, lambda signature: isinstance(signature[-1], types.Boolean))
 
 
 @njit(cache=True)

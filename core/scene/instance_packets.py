@@ -188,3 +188,6 @@ def _take_hits(found, k, lanes, best, state, any_hit):
                 t[r], inst[r], prim[r], u[r], v[r] = found.t[j], k, found.prim[j], found.u[j], found.v[j]
                 if any_hit:
                     state[r] = DECIDED
+
+
+KERNELS = (_enter_instance, _take_hits)  # called from Python for each instance, beside trace_packets

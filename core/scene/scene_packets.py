@@ -14,9 +14,11 @@ is one in (tmin, tmax), which is whether an any-hit query finds one.
 import numpy as np
 from numba import njit, prange
 
+from ..jit.kernel_cache import holds_version
 from ..jit.threads import thread_count
 from ..trace.layout import LEAF
 from ..trace.packet_traversal import PacketOutputs, PacketRays, trace_packets
+from . import instance_packets
 from .instance_packets import MOST_INSTANCES, packed_mesh_tree, retrace, trace_instances_in_packets, visible_instances
 from .instance_traversal import _to_object
 from .scene_queries import trace_valid_rays
@@ -39,6 +41,15 @@ def packets_apply(scene, ray_mask):
     """Whether rays of kind `ray_mask` through the TwoLevelScene are traced in packets: an eager scene
     with one to MOST_INSTANCES instances visible to them."""
     return scene.lazy_tree is None and 0 < len(visible_instances(scene.arrays, ray_mask)) <= MOST_INSTANCES
+
+
+def packet_kernels_ready():
+    """Whether the packets of trace_camera_packets and occluded_in_packets run without a compile: each
+    kernel they call from Python holds a version, loaded or cached (kernel_cache.holds_version). A
+    renderer's packets call each with one set of argument types (tests/test_scene_packets.py), so a
+    version held is theirs. Their first compile takes about half a minute, which a caller that must not
+    wait skips with single rays (docs/choices.md#the-first-frames-compile-without-the-packet-kernels)."""
+    return all(holds_version(kernel) for kernel in (trace_packets, _rays_to_object, *instance_packets.KERNELS))
 
 
 def _traced(scene, rays, threads, ray_mask, any_hit):
