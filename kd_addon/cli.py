@@ -27,7 +27,7 @@ from types import SimpleNamespace
 
 import bpy
 
-from . import background, corelib, demo_scene, properties
+from . import background, compile_command, corelib, demo_scene, properties
 from .config import DEFAULTS, OUTPUT_FORMATS, SETTING_NAMES, SettingsError, make_config, read_setting
 from .errors import Cancelled, PreviewError
 from .keyed_settings import keyed_settings_note, stored_setting_values
@@ -114,6 +114,8 @@ def build_parser(prog: str = COMMAND_ID) -> argparse.ArgumentParser:
                         help="rebuild every kd-tree and re-trace every frame (no reuse of unchanged objects' "
                              "trees or of unchanged images)")
     _add_farm_options(render)
+    commands.add_parser("compile", help="compile every kernel now (both warm-up stages), e.g. on a farm node, so "
+                                        "background renders take packets from their first frame")
     return parser
 
 
@@ -277,7 +279,9 @@ def run(args) -> int:
     """Render args.frames of the chosen scene into args.out (in this process, or on a Dask cluster with
     --dask / --local-workers); return the exit code."""
     with interrupt_flag() as interrupted:
-        if getattr(args, "dask", None) is not None or getattr(args, "local_workers", None) is not None:
+        if args.command == "compile":
+            code = compile_command.run(args.prog, interrupted)
+        elif getattr(args, "dask", None) is not None or getattr(args, "local_workers", None) is not None:
             from .farm import client  # only here: dask is an optional extra, never imported otherwise
 
             code = client.run(args, interrupted)
@@ -327,10 +331,11 @@ def _beside_the_blend(args) -> str:
     return os.path.join(os.path.dirname(os.path.realpath(blend)), args.out[2:])  # load_scene opens it resolved
 
 
-def stopped_message(prog: str, written: int, interrupted) -> str:
-    """The line a run that Ctrl-C or SIGTERM stopped ends with; `interrupted`: interrupt_flag's Event."""
+def stopped_message(prog: str, written: int, interrupted, kept: str = "") -> str:
+    """The line a run that Ctrl-C or SIGTERM stopped ends with; `interrupted`: interrupt_flag's Event;
+    `kept`: what the run keeps, if not frames."""
     how = "terminated (SIGTERM)" if interrupted.signum == signal.SIGTERM else "interrupted"
-    kept = f"the {written} frame(s) already written are kept" if written else "no frame was written"
+    kept = kept or (f"the {written} frame(s) already written are kept" if written else "no frame was written")
     return f"{prog}: {how}; {kept}"
 
 

@@ -1,6 +1,6 @@
 """The kernels' first compile, started in the background when the add-on is enabled.
 
-A first render on a machine compiles Numba kernels for about two minutes on 2 idle cores. `start()`
+A first render on a machine compiles Numba kernels for a minute or two on 2 idle cores. `start()`
 (register() calls it) begins that at once in a separate process, which runs a made-up first and second frame
 (core/jit/first_frame.py, with its own helper process for the rendering kernels: the same two-core
 split as a first render, docs/choices.md#the-first-renders-compile-on-two-cores) into the add-on's
@@ -202,6 +202,34 @@ def wait(cancel=None, timeout: float | None = None) -> WarmupStatus:
                                  max(0.0, min(POLL_SECONDS, deadline - time.perf_counter())))
         except subprocess.TimeoutExpired:
             pass
+
+
+def compile_both_stages(cancel=None) -> WarmupStatus:
+    """Compile both stages now and wait for them (the command line's `compile`: a farm node's set-up, a
+    batch job's first run), the second at normal priority: background renders, which start no second
+    stage, then take packets and packed batches from their first frame. READY, or FAILED with the failing
+    stage's message; NOT_STARTED when `cancel()` turned True (the running stage is ended: what it saved
+    stays valid). KD_PREVIEW_WARMUP does not apply: this compile is asked for."""
+    started = time.perf_counter()
+    for task, done in ((TASK, corelib.cache_is_warm),
+                       (PACKED_TASK, lambda: corelib.packed_version_cached() and
+                        corelib.cache_is_warm(corelib.DENOISE_KERNEL))):
+        if done():
+            continue
+        errors = tempfile.TemporaryFile()
+        process = _spawn(errors, task)
+        try:
+            while process.poll() is None:
+                if cancel is not None and cancel():
+                    return WarmupStatus(NOT_STARTED, time.perf_counter() - started)
+                time.sleep(POLL_SECONDS)
+        finally:
+            if process.poll() is None:
+                process.kill()
+                process.wait()
+        if process.returncode != 0:
+            return WarmupStatus(FAILED, time.perf_counter() - started, _failure(process.returncode, errors))
+    return WarmupStatus(READY, time.perf_counter() - started)
 
 
 def stop() -> None:

@@ -1,0 +1,33 @@
+"""`python -m kd_addon compile` (`blender -b --command kdpreview compile`): compile every kernel now.
+
+Background renders (the command line, `blender -b`, farm workers) start no second warm-up stage, so
+until a Blender session with its UI has cached it they trace camera rays singly and keep their sampling
+batches under 8 samples (kernel_warmup.py). This command runs both stages and waits for them: a farm
+node's set-up, or a long batch job's first step, then takes packets from its first frame.
+"""
+
+from __future__ import annotations
+
+import sys
+
+from . import corelib, kernel_warmup
+
+
+def run(prog: str, interrupted) -> int:
+    """Compile both stages into this installation's cache; the exit code (0, 1 failed, 130 stopped)."""
+    print(f"KD Preview: compiling every kernel into {corelib.numba_cache_dir()} (a few minutes on 2 idle cores; "
+          "what is cached already is skipped)", flush=True)
+    try:
+        status = kernel_warmup.compile_both_stages(cancel=interrupted.is_set)
+    except KeyboardInterrupt:
+        status = kernel_warmup.WarmupStatus(kernel_warmup.NOT_STARTED)
+    if status.state == kernel_warmup.READY:
+        print(f"KD Preview: kernels compiled and cached in {status.elapsed:.0f} s: renders load them from now on")
+        return 0
+    if status.state == kernel_warmup.FAILED:
+        print(f"{prog}: error: the kernels' compile failed: {status.message}", file=sys.stderr)
+        return 1
+    from .cli import stopped_message  # cli imports this module
+
+    print(stopped_message(prog, 0, interrupted, kept="the kernels compiled so far are kept"), file=sys.stderr)
+    return 130
