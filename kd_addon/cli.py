@@ -356,6 +356,10 @@ def _run(args, interrupted) -> int:
             print("First run with these sources and this Python: compiling the kernels (first use) takes about two "
                   "minutes on 2 idle cores (longer on a busy machine) before frame 1; its time is printed apart from "
                   f"the frame's (kept in {corelib.numba_cache_dir()})", flush=True)
+        if not corelib.packed_version_cached():  # with the packet kernels (kernel_warmup.compile_both_stages)
+            command = f"blender -b --command {COMMAND_ID}" if args.prog == COMMAND_ID else args.prog
+            print(f"Note: camera rays go one by one and samples in small batches (the same images, slower) until "
+                  f"`{command} compile` has compiled every kernel once", flush=True)
         print(HEADER, flush=True)  # piped, it would wait for the first frame: minutes on a first run
         _run_claimed(job, cancelled)
     except PreviewError as error:

@@ -22,7 +22,8 @@ def run(prog: str, interrupted) -> int:
     except KeyboardInterrupt:
         status = kernel_warmup.WarmupStatus(kernel_warmup.NOT_STARTED)
     if status.state == kernel_warmup.READY:
-        print(f"KD Preview: kernels compiled and cached in {status.elapsed:.0f} s: renders load them from now on")
+        done = f"compiled and cached in {status.elapsed:.0f} s" if status.elapsed else "cached already"
+        print(f"KD Preview: every kernel {done}: renders load them from now on")
         return 0
     if status.state == kernel_warmup.FAILED:
         print(f"{prog}: error: the kernels' compile failed: {status.message}", file=sys.stderr)

@@ -209,14 +209,15 @@ def compile_both_stages(cancel=None) -> WarmupStatus:
     batch job's first run), the second at normal priority: background renders, which start no second
     stage, then take packets and packed batches from their first frame. READY, or FAILED with the failing
     stage's message; NOT_STARTED when `cancel()` turned True (the running stage is ended: what it saved
-    stays valid). KD_PREVIEW_WARMUP does not apply: this compile is asked for."""
-    started = time.perf_counter()
+    stays valid). KD_PREVIEW_WARMUP does not apply: this compile is asked for. `elapsed` is 0 when the
+    cache held both stages already."""
+    started, ran = time.perf_counter(), False
     for task, done in ((TASK, corelib.cache_is_warm),
                        (PACKED_TASK, lambda: corelib.packed_version_cached() and
                         corelib.cache_is_warm(corelib.DENOISE_KERNEL))):
         if done():
             continue
-        errors = tempfile.TemporaryFile()
+        errors, ran = tempfile.TemporaryFile(), True
         process = _spawn(errors, task)
         try:
             while process.poll() is None:
@@ -229,7 +230,7 @@ def compile_both_stages(cancel=None) -> WarmupStatus:
                 process.wait()
         if process.returncode != 0:
             return WarmupStatus(FAILED, time.perf_counter() - started, _failure(process.returncode, errors))
-    return WarmupStatus(READY, time.perf_counter() - started)
+    return WarmupStatus(READY, time.perf_counter() - started if ran else 0.0)
 
 
 def stop() -> None:

@@ -39,7 +39,7 @@ def test_compile_runs_both_stages_in_turn_and_skips_what_is_cached(stages, capsy
     assert cli.execute(["compile"]) == 0
     assert stages["spawned"] == [(kernel_warmup.TASK, False), (kernel_warmup.PACKED_TASK, False)]
     out = capsys.readouterr().out
-    assert str(corelib.numba_cache_dir()) in out and "kernels compiled and cached" in out
+    assert str(corelib.numba_cache_dir()) in out and "every kernel compiled and cached in" in out
     stages["spawned"].clear()
     stages["cached"].add("first")
     assert cli.execute(["compile"]) == 0
@@ -47,6 +47,7 @@ def test_compile_runs_both_stages_in_turn_and_skips_what_is_cached(stages, capsy
     stages["spawned"].clear()
     stages["cached"].add("second")
     assert cli.execute(["compile"]) == 0 and stages["spawned"] == []
+    assert "every kernel cached already" in capsys.readouterr().out
 
 
 def test_a_failed_stage_is_named_and_the_next_one_not_started(stages, capsys):
@@ -68,3 +69,16 @@ def test_an_interrupted_compile_ends_its_stage_and_says_what_is_kept(stages, cap
     assert code == 130 and stages["last"].poll() is not None  # ended, not left behind
     assert stages["spawned"] == [(kernel_warmup.TASK, False)]
     assert "interrupted; the kernels compiled so far are kept" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("cached", [False, True])
+def test_a_render_without_the_packet_kernels_says_how_to_compile_them(cached, tmp_path, capsys, monkeypatch):
+    """A command-line render whose cache lacks the second stage's kernels says once that it runs without
+    them and names the command that compiles them (as run: python -m kd_addon, or Blender's)."""
+    monkeypatch.setattr(corelib, "packed_version_cached", lambda: cached)
+    for prog, command in (("python -m kd_addon", "python -m kd_addon compile"),
+                          (cli.COMMAND_ID, f"blender -b --command {cli.COMMAND_ID} compile")):
+        assert cli.execute(["render", "--demo", "--frames", "1", "--resolution", "5", "--out", str(tmp_path)],
+                           prog=prog) == 0
+        out = capsys.readouterr().out
+        assert (f"`{command}` has compiled every kernel once" in out) is not cached
