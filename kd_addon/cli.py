@@ -475,10 +475,11 @@ def execute(argv: list[str], prog: str = COMMAND_ID) -> int:
 
 def _frames_joined(argv: list[str]) -> list[str]:
     """`--frames -2-1` as `--frames=-2-1`: argparse takes a value starting with "-" (Blender's negative
-    frames) that is not a plain number for an option and refuses it."""
+    frames) that is not a plain number for an option and refuses it. So for the abbreviations argparse
+    takes (`--fr`, ..., `--frame`: `--f` is ambiguous with `--format`)."""
     joined, words = [], iter(argv)
     for word in words:
-        value = next(words, None) if word == "--frames" else None
+        value = next(words, None) if word.startswith("--fr") and "--frames".startswith(word) else None
         if value is not None and value[:1] == "-" and value[1:2].isdigit():
             joined.append(f"--frames={value}")
         else:
