@@ -9,7 +9,8 @@ name. Writes DIR/frame_0001.png... and DIR/report.json. Exit codes: 0 done, 1 a 
 scene, files or settings, 2 bad usage, 130 interrupted (Ctrl-C), 143 terminated (SIGTERM); the frames
 written are kept and report.json says an interrupted run is incomplete. With --dask ADDRESS or
 --local-workers N the frames render on a Dask cluster instead (farm/, docs/farm.md); this module only
-parses those options and hands the run over.
+parses those options and hands the run over. `compile` (compile_command.py) compiles every kernel and
+waits: 0 done, 1 failed, 130/143 stopped.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from types import SimpleNamespace
 
 import bpy
 
-from . import background, compile_command, corelib, demo_scene, properties
+from . import background, compile_command, corelib, demo_scene, kernel_warmup, properties
 from .config import DEFAULTS, OUTPUT_FORMATS, SETTING_NAMES, SettingsError, make_config, read_setting
 from .errors import Cancelled, PreviewError
 from .keyed_settings import keyed_settings_note, stored_setting_values
@@ -277,7 +278,7 @@ def interrupt_flag():
 
 def run(args) -> int:
     """Render args.frames of the chosen scene into args.out (in this process, or on a Dask cluster with
-    --dask / --local-workers); return the exit code."""
+    --dask / --local-workers), or compile the kernels (`compile`); return the exit code."""
     with interrupt_flag() as interrupted:
         if args.command == "compile":
             code = compile_command.run(args.prog, interrupted)
@@ -353,10 +354,10 @@ def _run(args, interrupted) -> int:
         print(f"KD Preview: scene '{scene.name}', {len(frames)} frame(s), mode {config.settings.mode}, "
               f"{config.settings.samples} samples, {config.resolution_percentage}% resolution -> {args.out}")
         if not corelib.cache_is_warm():  # else a first run looks hung for minutes
-            print("First run with these sources and this Python: compiling the kernels (first use) takes about two "
-                  "minutes on 2 idle cores (longer on a busy machine) before frame 1; its time is printed apart from "
+            print("First run with these sources and this Python: compiling the kernels (first use) takes a minute or "
+                  "two on 2 idle cores (longer on a busy machine) before frame 1; its time is printed apart from "
                   f"the frame's (kept in {corelib.numba_cache_dir()})", flush=True)
-        if not corelib.packed_version_cached():  # with the packet kernels (kernel_warmup.compile_both_stages)
+        if not kernel_warmup.second_stage_cached():  # the packet kernels (kernel_warmup.compile_both_stages)
             command = f"blender -b --command {COMMAND_ID}" if args.prog == COMMAND_ID else args.prog
             print(f"Note: camera rays go one by one and samples in small batches (the same images, slower) until "
                   f"`{command} compile` has compiled every kernel once", flush=True)

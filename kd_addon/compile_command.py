@@ -16,14 +16,13 @@ from . import corelib, kernel_warmup
 def run(prog: str, interrupted) -> int:
     """Compile both stages into this installation's cache; the exit code (0, 1 failed, 130 stopped)."""
     print(f"KD Preview: compiling every kernel into {corelib.numba_cache_dir()} (a few minutes on 2 idle cores; "
-          "what is cached already is skipped)", flush=True)
+          "what is cached already only loads)", flush=True)
     try:
         status = kernel_warmup.compile_both_stages(cancel=interrupted.is_set)
     except KeyboardInterrupt:
         status = kernel_warmup.WarmupStatus(kernel_warmup.NOT_STARTED)
     if status.state == kernel_warmup.READY:
-        done = f"compiled and cached in {status.elapsed:.0f} s" if status.elapsed else "cached already"
-        print(f"KD Preview: every kernel {done}: renders load them from now on")
+        print(f"KD Preview: every kernel compiled and cached ({status.elapsed:.0f} s): renders load them from now on")
         return 0
     if status.state == kernel_warmup.FAILED:
         print(f"{prog}: error: the kernels' compile failed: {status.message}", file=sys.stderr)

@@ -18,7 +18,8 @@ Once those kernels are cached, a second process of lower priority compiles the c
 packets' kernels, the sampling kernel's packed version (sample packets in batches of 8+ samples) and the
 denoiser (core/jit/first_frame.compile_second_stage), which no render waits for: renders trace in packets
 (pipeline.FrameJob) and step in batches that large (sampling_steps.py) only once they are cached, and a
-denoised frame before then compiles the denoiser itself.
+denoised frame before then compiles the denoiser itself. Background runs and KD_PREVIEW_WARMUP=0 start no
+second stage; `compile_both_stages` (`python -m kd_addon compile`) runs both and waits.
 
 API for the UI and a render engine: start(), status() -> WarmupStatus (state, elapsed seconds,
 message; `.text` is the line to show), wait(cancel=None, timeout=None).
@@ -151,13 +152,11 @@ def _spawn(errors, task=TASK, low_priority=False) -> subprocess.Popen:
 
 def _start_packed_stage() -> None:
     """Start the packed stage once the first frames' kernels are cached, unless it ran in this process
-    or the cache already holds what it compiles: the packets' kernels and the packed version, compiled
-    after them (corelib.packed_version_cached), and the denoiser, compiled last (a stage stopped part-way
-    runs again). Never raises: without it, renders trace camera rays singly and keep their batches under
+    or the cache already holds what it compiles (second_stage_cached: a stage stopped part-way runs
+    again). Never raises: without it, renders trace camera rays singly and keep their batches under
     8 samples (core PreviewRender's compile_packets and batch_without_compile)."""
     with _packed_lock:  # status() on the UI's timer and start() on a render's thread may both get here
-        cached = corelib.packed_version_cached() and corelib.cache_is_warm(corelib.DENOISE_KERNEL)
-        if _warmup.packed is not None or cached:
+        if _warmup.packed is not None or second_stage_cached():
             return
         try:
             _warmup.packed = _spawn_packed_stage()
@@ -207,30 +206,51 @@ def wait(cancel=None, timeout: float | None = None) -> WarmupStatus:
 def compile_both_stages(cancel=None) -> WarmupStatus:
     """Compile both stages now and wait for them (the command line's `compile`: a farm node's set-up, a
     batch job's first run), the second at normal priority: background renders, which start no second
-    stage, then take packets and packed batches from their first frame. READY, or FAILED with the failing
-    stage's message; NOT_STARTED when `cancel()` turned True (the running stage is ended: what it saved
-    stays valid). KD_PREVIEW_WARMUP does not apply: this compile is asked for. `elapsed` is 0 when the
-    cache held both stages already."""
-    started, ran = time.perf_counter(), False
-    for task, done in ((TASK, corelib.cache_is_warm),
-                       (PACKED_TASK, lambda: corelib.packed_version_cached() and
-                        corelib.cache_is_warm(corelib.DENOISE_KERNEL))):
-        if done():
-            continue
-        errors, ran = tempfile.TemporaryFile(), True
-        process = _spawn(errors, task)
-        try:
-            while process.poll() is None:
-                if cancel is not None and cancel():
-                    return WarmupStatus(NOT_STARTED, time.perf_counter() - started)
-                time.sleep(POLL_SECONDS)
-        finally:
-            if process.poll() is None:
-                process.kill()
-                process.wait()
-        if process.returncode != 0:
-            return WarmupStatus(FAILED, time.perf_counter() - started, _failure(process.returncode, errors))
-    return WarmupStatus(READY, time.perf_counter() - started if ran else 0.0)
+    stage, then take packets and packed batches from their first frame. The first stage always runs (a
+    kernel cached midway through an interrupted one does not say it finished; cached kernels only load);
+    the second unless second_stage_cached(). READY, or FAILED with the failing stage's message;
+    NOT_STARTED when `cancel()` turned True (the running stage is ended: what it saved stays valid).
+    KD_PREVIEW_WARMUP does not apply: this compile is asked for."""
+    started = time.perf_counter()
+    for task in (TASK, PACKED_TASK):
+        if task == PACKED_TASK and second_stage_cached():
+            break
+        with tempfile.TemporaryFile() as errors:
+            try:
+                code = _run_to_end(_spawn(errors, task), cancel)
+            except (OSError, ValueError, subprocess.SubprocessError) as error:
+                return WarmupStatus(FAILED, time.perf_counter() - started,
+                                    f"could not start the compile process: {error}")
+            if code is None:
+                return WarmupStatus(NOT_STARTED, time.perf_counter() - started)
+            if code != 0:
+                return WarmupStatus(FAILED, time.perf_counter() - started, _failure(code, errors))
+    return WarmupStatus(READY, time.perf_counter() - started)
+
+
+def _run_to_end(process: subprocess.Popen, cancel) -> int | None:
+    """Wait for `process`; its exit code, or None when `cancel()` turned True first. It never outlives
+    this call (ended on a cancel or an exception, e.g. Ctrl-C's KeyboardInterrupt)."""
+    try:
+        while process.poll() is None:
+            if cancel is not None and cancel():
+                return None
+            try:
+                process.wait(POLL_SECONDS)
+            except subprocess.TimeoutExpired:
+                pass
+        return process.returncode
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+
+
+def second_stage_cached() -> bool:
+    """Whether the cache holds what the second stage compiles: the packet kernels and the packed version,
+    compiled after them (corelib.packed_version_cached: only that stage compiles it for the add-on, whose
+    renders keep their batches under its size until then), and the denoiser, compiled last."""
+    return corelib.packed_version_cached() and corelib.cache_is_warm(corelib.DENOISE_KERNEL)
 
 
 def stop() -> None:

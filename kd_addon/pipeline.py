@@ -342,7 +342,7 @@ class FrameJob:
         # kernel while this one builds and then compiles the camera pass (core/jit/parallel_compile.py); the
         # block ends once both are done, and that end, all compiling, goes to compile_ms.
         t0 = _now()
-        alongside = (core.rendering_kernels_alongside(self.config.denoise) if self._first_run
+        alongside = (core.rendering_kernels_alongside(self.config.denoise, packets=False) if self._first_run
                      else contextlib.nullcontext())
         with alongside as helper:
             scene, report = self._build_placeable(core, instances, placed, origin, reuse, rays)

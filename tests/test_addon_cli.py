@@ -276,7 +276,7 @@ def test_report_that_cannot_be_written_is_not_blamed_on_a_frame(tmp_path, capsys
 def test_a_first_run_says_that_it_compiles(tmp_path, capsys, monkeypatch, warm):
     """A first run says it compiles: otherwise it prints the table header, then nothing for minutes,
     and looks hung."""
-    monkeypatch.setattr(corelib, "cache_is_warm", lambda: warm)
+    monkeypatch.setattr(corelib, "cache_is_warm", lambda kernel=corelib.WARM_KERNEL: warm)
     monkeypatch.setenv("KD_PREVIEW_WARMUP", "0")  # the cache is warm: no compile process for a pretended cold one
     assert cli.execute(["render", "--frames", "1", "--out", str(tmp_path), *SMALL]) == 0
     assert ("compiling the kernels (first use)" in capsys.readouterr().out) is not warm

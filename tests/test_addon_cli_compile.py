@@ -35,19 +35,26 @@ def stages(monkeypatch):
     return run
 
 
-def test_compile_runs_both_stages_in_turn_and_skips_what_is_cached(stages, capsys):
+def test_compile_runs_both_stages_in_turn_and_skips_a_cached_second_one(stages, capsys):
+    """The first stage always runs (what it cached only loads: a kernel cached midway through an
+    interrupted first stage does not say it finished); the second unless its kernels are cached."""
     assert cli.execute(["compile"]) == 0
     assert stages["spawned"] == [(kernel_warmup.TASK, False), (kernel_warmup.PACKED_TASK, False)]
     out = capsys.readouterr().out
-    assert str(corelib.numba_cache_dir()) in out and "every kernel compiled and cached in" in out
+    assert str(corelib.numba_cache_dir()) in out and "every kernel compiled and cached" in out
     stages["spawned"].clear()
-    stages["cached"].add("first")
+    stages["cached"].update(("first", "second"))
     assert cli.execute(["compile"]) == 0
-    assert stages["spawned"] == [(kernel_warmup.PACKED_TASK, False)]
-    stages["spawned"].clear()
-    stages["cached"].add("second")
-    assert cli.execute(["compile"]) == 0 and stages["spawned"] == []
-    assert "every kernel cached already" in capsys.readouterr().out
+    assert stages["spawned"] == [(kernel_warmup.TASK, False)]
+
+
+def test_a_compile_process_that_cannot_start_is_named(stages, capsys, monkeypatch):
+    def refuse(errors, task=kernel_warmup.TASK, low_priority=False):
+        raise PermissionError(13, "Permission denied", "/cache")
+    monkeypatch.setattr(kernel_warmup, "_spawn", refuse)
+    assert cli.execute(["compile"]) == 1
+    assert "error: the kernels' compile failed: could not start the compile process: [Errno 13]" in (
+        capsys.readouterr().err)
 
 
 def test_a_failed_stage_is_named_and_the_next_one_not_started(stages, capsys):
@@ -75,7 +82,7 @@ def test_an_interrupted_compile_ends_its_stage_and_says_what_is_kept(stages, cap
 def test_a_render_without_the_packet_kernels_says_how_to_compile_them(cached, tmp_path, capsys, monkeypatch):
     """A command-line render whose cache lacks the second stage's kernels says once that it runs without
     them and names the command that compiles them (as run: python -m kd_addon, or Blender's)."""
-    monkeypatch.setattr(corelib, "packed_version_cached", lambda: cached)
+    monkeypatch.setattr(kernel_warmup, "second_stage_cached", lambda: cached)
     for prog, command in (("python -m kd_addon", "python -m kd_addon compile"),
                           (cli.COMMAND_ID, f"blender -b --command {cli.COMMAND_ID} compile")):
         assert cli.execute(["render", "--demo", "--frames", "1", "--resolution", "5", "--out", str(tmp_path)],

@@ -448,7 +448,7 @@ def test_a_frame_takes_the_camera_packets_once_their_kernels_are_cached(addon, m
     real = render_module.trace_camera_packets
     monkeypatch.setattr(render_module, "trace_camera_packets", lambda *a: calls.append(1) or real(*a))
     for ready in (False, True):
-        monkeypatch.setattr(render_module, "packet_kernels_ready", lambda: ready)
+        monkeypatch.setattr(render_module, "_packet_kernels_ready", lambda: ready)
         tree_cache.clear()  # no kept image
         images.append(pipeline.render_frame(scene, bpy.context.evaluated_depsgraph_get(),
                                             make_config(scene.kd_preview)).image)

@@ -325,29 +325,37 @@ def compiled_versions() -> dict:
 
 
 @pytest.mark.slow
-def test_after_the_warm_up_the_factory_scenes_first_frame_compiles_nothing(monkeypatch):
-    """The warm-up's made-up frames (core/jit/first_frame.py, both stages) run every kernel, with every
-    argument type, that a first render of the factory scene (one cube, one point light, the default
-    settings) runs: after them, in this process, Render adds no compiled version to any kernel, so in
-    Blender the frame only loads kernels from the cache the warm-up filled. A denoised frame after it
-    compiles nothing either (the second stage runs the denoiser)."""
+@pytest.mark.parametrize("stages", ["first", "both"])
+def test_after_the_warm_up_the_factory_scenes_first_frame_compiles_nothing(monkeypatch, stages):
+    """The warm-up's made-up frames (core/jit/first_frame.py) run every kernel, with every argument type,
+    that a first render of the factory scene (one cube, one point light, the default settings) runs:
+    after them, in this process, Render adds no compiled version to any kernel, so in Blender the frame
+    only loads kernels from the cache the warm-up filled. After the first stage alone (the second's
+    kernels neither loaded nor cached: the render traces singly, in small batches), and after both
+    stages, when a denoised frame compiles nothing either (the second stage runs the denoiser)."""
     import bpy
 
     import kd_addon
     from core.jit import first_frame, parallel_compile
+    from core.render import preview_render
     from tests import bpy_scenes
 
     monkeypatch.setenv(parallel_compile.HELPER_SWITCH, "0")  # the helper's side runs here too
+    if stages == "first":  # what a render finds before the second stage has run
+        monkeypatch.setattr(preview_render, "_packet_kernels_ready", lambda: False)
+        monkeypatch.setattr(preview_render, "packed_version_ready", lambda: False)
     first_frame.compile_first_frames()
-    first_frame.compile_second_stage()  # packed samples (the batches a render steps in once cached), denoiser
+    if stages == "both":
+        first_frame.compile_second_stage()  # packets, packed samples (a render's larger batches), denoiser
     before = compiled_versions()
     bpy.ops.wm.read_homefile(use_factory_startup=True)
     kd_addon.register()
     try:
         bpy.context.scene.kd_preview.resolution_percentage = 5
         assert bpy.ops.kdpreview.render() == {"FINISHED"}
-        bpy.context.scene.kd_preview.denoise = True
-        assert bpy.ops.kdpreview.render() == {"FINISHED"}
+        if stages == "both":
+            bpy.context.scene.kd_preview.denoise = True
+            assert bpy.ops.kdpreview.render() == {"FINISHED"}
     finally:
         kd_addon.unregister()
         bpy_scenes.reset()

@@ -55,18 +55,20 @@ def compile_scene_wrapping() -> None:
     as_two_level(hand_made_tree())
 
 
-def _hand_made_render(render_class):
+def _hand_made_render(render_class, packets=True):
     """A 4 x 4 ao+shadow render of the hand-made tree seen from 3 above, two samples a pixel (modes,
-    sizes and sample counts are runtime values: one render compiles what every render uses)."""
+    sizes and sample counts are runtime values: one render compiles what every render uses); `packets`:
+    PreviewRender's compile_packets."""
     camera = Camera(np.array([[1.0, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 3], [0, 0, 0, 1]]), 0.9)
     return render_class(as_two_level(hand_made_tree()), camera, 4, 4, mode="ao+shadow", samples=2,
-                        lights=[Light.point((0.0, 0.0, 2.0))])
+                        lights=[Light.point((0.0, 0.0, 2.0))], compile_packets=packets)
 
 
-def compile_camera_pass() -> None:
+def compile_camera_pass(packets=True) -> None:
     """The camera pass, run here after the build: a PreviewRender's constructor traces the camera rays
+    (in packets unless `packets` is False and their kernels are not cached, as the render's own will be)
     and makes their hit frames (surface_frames: loaded if the helper saved it, else compiled here)."""
-    _hand_made_render(PreviewRender)
+    _hand_made_render(PreviewRender, packets)
 
 
 class _SamplingOnly(PreviewRender):
@@ -85,7 +87,7 @@ class _SamplingOnly(PreviewRender):
         surface_frames(self.scene.arrays, origins, directions, t, first, first.copy(), hit, points, normals, starts)
         return traced[hit], t[hit], points, normals, starts
 
-    def _occluded(self, directions, tmax, rays):  # made up too: the packet kernel compiles in the camera pass
+    def _occluded(self, directions, tmax, rays):  # made up too: the packet kernels are not the helper's
         return np.zeros(len(rays), bool)
 
 
@@ -102,13 +104,13 @@ HELPER_TIMEOUT = 900.0  # seconds: a guard against a helper that never ends, far
 
 
 @contextmanager
-def rendering_kernels_alongside(denoise=False, warmup=False):
+def rendering_kernels_alongside(denoise=False, warmup=False, packets=True):
     """Compile the rendering kernels in a helper process while the `with` block runs (a build), unless
     the cache holds the sampling kernel or HELPER_SWITCH is "0" (`denoise`: compile the denoiser too);
     yields the helper or None. On leaving, run the camera pass here, then wait for the helper (at most
     HELPER_TIMEOUT); if the block raised, end it at once. No helper runs afterwards. `warmup`: the
     kernel warm-up's made-up frame (first_frame.py), whose block makes its own camera pass: none runs
-    on leaving."""
+    on leaving. `packets`: the camera pass's compile_packets (PreviewRender), as the render's own."""
     helper = None
     if os.environ.get(HELPER_SWITCH, "1") != "0" and not rendering_kernels_cached():
         compile_scene_wrapping()
@@ -125,7 +127,7 @@ def rendering_kernels_alongside(denoise=False, warmup=False):
     if helper is not None:
         try:
             if not warmup:
-                compile_camera_pass()
+                compile_camera_pass(packets)
         finally:
             helper.wait(HELPER_TIMEOUT)
             helper.stop()
@@ -136,10 +138,9 @@ class RenderingKernelsHelper:
     this process's module name (in Blender `bl_ext.<repo>.<id>.core`: a kernel's pickled environment
     names its module), with parent packages stubbed so the add-on's bpy-importing `__init__` does not
     run; writes where this process reads (kernel_cache.CORE_CACHE_FOLDER_VARIABLE); runs one thread and
-    keeps its stderr for `outcome`. A failed helper costs only its time. `task`: helper_program.py's
-    TASK (None: the rendering kernels)."""
+    keeps its stderr for `outcome`. A failed helper costs only its time."""
 
-    def __init__(self, denoise=False, task=None):
+    def __init__(self, denoise=False):
         self._errors = tempfile.TemporaryFile()  # the helper's stderr: its last line names a failure
         self.stopped = False
         env = dict(os.environ, NUMBA_NUM_THREADS="1",
@@ -147,8 +148,7 @@ class RenderingKernelsHelper:
         env[CORE_CACHE_FOLDER_VARIABLE] = core_cache_folders()  # where this process reads
         env["KD_PREVIEW_HELPER_PARENT"] = str(os.getpid())  # the helper ends when this process is gone
         self.process = subprocess.Popen(
-            [sys.executable, "-c", _HELPER_CODE, CORE_PACKAGE, str(CORE_FOLDER), "1" if denoise else "0",
-             *([task] if task else [])], env=env,
+            [sys.executable, "-c", _HELPER_CODE, CORE_PACKAGE, str(CORE_FOLDER), "1" if denoise else "0"], env=env,
             stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=self._errors,
             creationflags=getattr(subprocess, "CREATE_NO_WINDOW", 0))  # Windows: no console window
 
@@ -183,6 +183,6 @@ class RenderingKernelsHelper:
         return f"failed (exit code {code}" + (f": {lines[-1]})" if lines else ")")
 
 
-# The helper's program (argv: core's module name, its folder, "1" for the denoiser, the task if not the
-# rendering kernels): helper_program.py.
+# The helper's program (argv: core's module name, its folder, "1" for the denoiser; its task the rendering
+# kernels): helper_program.py, which the kernel warm-up runs with tasks of its own.
 _HELPER_CODE = (Path(__file__).with_name("helper_program.py")).read_text(encoding="utf-8")

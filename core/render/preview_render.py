@@ -14,6 +14,7 @@ neighbourhood, Laplace's floor), checked at power-of-two sample counts so batchi
 import numpy as np
 
 from ..jit.compile_clock import clock
+from ..jit.kernel_cache import holds_version
 from .camera import Camera, tiled_packets, tiled_pixels
 from .convergence import checks, dependence_radius, is_check, near, next_check, sample_variances, standard_errors
 from .denoise import SOBOL_VARIANCE_DECAY, denoise_pixels
@@ -53,8 +54,9 @@ class PreviewRender:
     `pixels_reused` and `rays_reused` say what that saved. Anything else renders from scratch.
 
     compile_packets: False to trace the camera rays and hard shadows in packets (scene_packets.py) only
-    when their kernels run without a compile (packet_kernels_ready), else singly: the same hits and image,
-    without waiting for that compile (the add-on, whose warm-up compiles them last: kd_addon/kernel_warmup.py)."""
+    when their kernels run without a compile (_packet_kernels_ready), else singly: the same hits and image,
+    without waiting for that compile (the add-on, whose warm-up's second stage compiles them:
+    kd_addon/kernel_warmup.py)."""
 
     def __init__(self, tree, camera, width, height, options=None, *, previous=None, compile_packets=True,
                  **settings):
@@ -73,7 +75,7 @@ class PreviewRender:
         self.error_target, self.min_samples, self.ambient = o.error_target, int(o.min_samples), float(o.ambient)
         self.checks = checks(self.min_samples, self.target_samples) if o.error_target is not None else []
         self.threads = o.threads
-        self.packets = compile_packets or packet_kernels_ready()  # camera and hard-shadow packets
+        self.packets = compile_packets or _packet_kernels_ready()  # camera and hard-shadow packets
         self.samples_done = 0
         self.trace_ms = 0.0
         self.rays_saved = 0
@@ -412,3 +414,9 @@ def _check_frame(tree, camera, width, height):
     if not isinstance(camera, Camera):
         raise ValueError(f"camera must be a core.Camera, got {type(camera).__name__}")
     check_image_size(width, height)
+
+
+def _packet_kernels_ready():
+    """Whether the camera and hard-shadow packets run without a compile: the scene's packet kernels
+    (scene_packets.packet_kernels_ready) and the hard-shadow rays' set-up, which only they call."""
+    return packet_kernels_ready() and holds_version(hard_shadow_rays)

@@ -46,7 +46,7 @@ def packets_apply(scene, ray_mask):
 def packet_kernels_ready():
     """Whether the packets of trace_camera_packets and occluded_in_packets run without a compile: each
     kernel they call from Python holds a version, loaded or cached (kernel_cache.holds_version). A
-    renderer's packets call each with one set of argument types (tests/test_scene_packets.py), so a
+    renderer's packets call each with one set of argument types (tests/test_packets_once_cached.py), so a
     version held is theirs. Their first compile takes about half a minute, which a caller that must not
     wait skips with single rays (docs/choices.md#the-first-frames-compile-without-the-packet-kernels)."""
     return all(holds_version(kernel) for kernel in (trace_packets, _rays_to_object, *instance_packets.KERNELS))
