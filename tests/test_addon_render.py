@@ -456,6 +456,26 @@ def test_a_frame_takes_the_camera_packets_once_their_kernels_are_cached(addon, m
     np.testing.assert_array_equal(images[0], images[1])
 
 
+def test_a_first_frame_without_the_warm_up_compiles_the_add_ons_camera_pass(addon, monkeypatch):
+    """A process's first frame with the warm-up off compiles its kernels beside the build
+    (core.rendering_kernels_alongside), whose camera pass takes packets as the frame's own renderer does:
+    only once cached (packets=False), so it compiles no packet kernel the frame would not run."""
+    import contextlib
+
+    from kd_addon import corelib, kernel_warmup, tree_cache
+
+    core, asked = corelib.load_core(), []
+    monkeypatch.setattr(core, "rendering_kernels_alongside",
+                        lambda *a, **k: asked.append(k) or contextlib.nullcontext())
+    monkeypatch.setattr(pipeline, "_kernels_ready", False)
+    monkeypatch.setattr(kernel_warmup, "_warmup", kernel_warmup._Warmup())  # none ran in this process
+    monkeypatch.setenv(kernel_warmup.SWITCH, "0")
+    scene = half_plane_scene()
+    tree_cache.clear()
+    pipeline.render_frame(scene, bpy.context.evaluated_depsgraph_get(), make_config(scene.kd_preview))
+    assert asked and all(k.get("packets") is False for k in asked)
+
+
 @pytest.mark.parametrize("color", [(math.nan, 1.0, 1.0), (-math.inf, 0.0, 0.0)])
 def test_a_light_colour_that_is_not_a_number_is_named_not_called_black(color):
     """A NaN or infinite colour (a driver dividing by zero) is core's to refuse, naming the colour; before,
