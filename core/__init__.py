@@ -18,7 +18,7 @@ Public API:
     PlacementRangeError: a ValueError whose .instances lie beyond float32's range
     intersect_scene / occluded_scene(scene or tree, origins, directions, ...) -> SceneHits / (R,) bool
     CAMERA_RAYS, SHADOW_RAYS, ALL_RAYS, HOLDOUT: per-instance ray visibility bits (as Cycles applies them)
-    rendering_kernels_alongside(denoise=False): a `with` block in which a helper compiles the renderer
+    rendering_kernels_alongside(denoise=False, packets=True): a `with` block in which a helper compiles the renderer
     denoise_pixels(width, height, pixels, points, normals, sums, sq_sums, counts) -> (H, W, 4) float32
 """
 from .jit import kernel_cache  # first: kernels are keyed by all of core's sources when decorated

@@ -1,9 +1,9 @@
 """`python -m kd_addon compile` (`blender -b --command kdpreview compile`): compile every kernel now.
 
 Background renders (the command line, `blender -b`, farm workers) start no second warm-up stage, so
-until a Blender session with its UI has cached it they trace camera rays singly and keep their sampling
-batches under 8 samples (kernel_warmup.py). This command runs both stages and waits for them: a farm
-node's set-up, or a long batch job's first step, then takes packets from its first frame.
+until it is cached (by this command, or for the installed extension by a Blender session with its UI)
+they trace camera rays singly and keep their sampling batches under 8 samples (kernel_warmup.py). This
+command runs both stages and waits for them: a farm node's set-up, or a long batch job's first step.
 """
 
 from __future__ import annotations

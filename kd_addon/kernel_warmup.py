@@ -215,12 +215,16 @@ def compile_both_stages(cancel=None) -> WarmupStatus:
     for task in (TASK, PACKED_TASK):
         if task == PACKED_TASK and second_stage_cached():
             break
-        with tempfile.TemporaryFile() as errors:
-            try:
-                code = _run_to_end(_spawn(errors, task), cancel)
-            except (OSError, ValueError, subprocess.SubprocessError) as error:
-                return WarmupStatus(FAILED, time.perf_counter() - started,
-                                    f"could not start the compile process: {error}")
+        errors = None
+        try:
+            errors = tempfile.TemporaryFile()
+            process = _spawn(errors, task)
+        except (OSError, ValueError, subprocess.SubprocessError) as error:
+            if errors is not None:
+                errors.close()
+            return WarmupStatus(FAILED, time.perf_counter() - started, f"could not start the compile process: {error}")
+        with errors:
+            code = _run_to_end(process, cancel)
             if code is None:
                 return WarmupStatus(NOT_STARTED, time.perf_counter() - started)
             if code != 0:

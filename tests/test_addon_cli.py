@@ -497,7 +497,8 @@ def test_negative_frame_ranges_are_taken_as_blender_takes_them(tmp_path):
     assert cli._frames_joined(["--frames", "1-3", "--out", "-x"]) == ["--frames", "1-3", "--out", "-x"]
     assert cli._frames_joined(["--fr", "-2-1", "--fra", "-3", "--format", "-x"]) == [
         "--frames=-2-1", "--frames=-3", "--format", "-x"]
-    assert cli.build_parser().parse_args(cli._frames_joined(["render", "--out", "o", "--fram", "-2-1"])).frames == "-2-1"
+    parsed = cli.build_parser().parse_args(cli._frames_joined(["render", "--out", "o", "--fram", "-2-1"]))
+    assert parsed.frames == "-2-1"
 
 
 def test_a_saved_enum_number_that_names_no_item_is_named_by_the_command_line(tmp_path, capsys):

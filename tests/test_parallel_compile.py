@@ -257,6 +257,29 @@ def test_the_two_sides_compile_what_a_real_render_runs():
     assert {k: len(k.signatures) for k in kernels} == before
 
 
+@pytest.mark.parametrize("packets", [True, False])
+def test_the_camera_pass_beside_a_helper_takes_packets_as_asked(monkeypatch, packets):
+    """rendering_kernels_alongside(packets=...) runs its camera pass with that compile_packets (the add-on
+    passes False: its renders take packets only once cached, so the pass compiles none either)."""
+    from core.render import preview_render
+
+    class Helper:
+        def __init__(self, denoise=False):
+            pass
+        wait = stop = lambda self, timeout=None: True
+
+    made = []
+    original = preview_render.PreviewRender.__init__
+    monkeypatch.setattr(preview_render.PreviewRender, "__init__", lambda self, *a, **k: made.append(
+        k.get("compile_packets")) or original(self, *a, **k))
+    monkeypatch.setattr(parallel_compile, "rendering_kernels_cached", lambda: False)
+    monkeypatch.setattr(parallel_compile, "RenderingKernelsHelper", Helper)
+    monkeypatch.delenv(parallel_compile.HELPER_SWITCH, raising=False)
+    with parallel_compile.rendering_kernels_alongside(packets=packets) as helper:
+        assert isinstance(helper, Helper)
+    assert made == [packets]
+
+
 SIDES = """
 import sys
 sys.path.insert(0, {root!r})

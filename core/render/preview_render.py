@@ -418,5 +418,6 @@ def _check_frame(tree, camera, width, height):
 
 def _packet_kernels_ready():
     """Whether the camera and hard-shadow packets run without a compile: the scene's packet kernels
-    (scene_packets.packet_kernels_ready) and the hard-shadow rays' set-up, which only they call."""
+    (scene_packets.packet_kernels_ready) and the hard-shadow rays' set-up, which they call (a first
+    render's compile helper compiles it too: parallel_compile.compile_rendering_kernels)."""
     return packet_kernels_ready() and holds_version(hard_shadow_rays)
