@@ -1,8 +1,8 @@
 """`python -m kd_addon compile` (kd_addon/compile_command.py, kernel_warmup.compile_both_stages): both
 warm-up stages run in turn at normal priority and are waited for, a cached second stage is skipped, a
-failed stage or one that cannot start is named, and an interrupted one is ended and said so. The stages' processes are replaced by
-short Python processes (the real tasks are the warm-up's: tests/test_kernel_warmup.py,
-tests/test_packets_once_cached.py)."""
+failed stage or one that cannot start is named, and an interrupted one is ended and said so. The stages'
+processes are replaced by short Python processes (the real tasks are the warm-up's:
+tests/test_kernel_warmup.py, tests/test_packets_once_cached.py)."""
 
 from __future__ import annotations
 
