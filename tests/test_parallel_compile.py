@@ -215,14 +215,15 @@ def test_a_failing_block_ends_the_helper_at_once(monkeypatch):
 
 
 def test_the_two_sides_compile_what_a_real_render_runs():
-    """The helper's made-up camera hits and the camera pass run here must give the kernels the real
-    render's argument types: otherwise a first frame would compile its kernels again after the wait.
+    """The helper's made-up camera hits and top level, and the camera pass run here, must give the kernels
+    the real render's argument types: otherwise a first frame would compile its kernels again after the wait.
     After both sides ran in this process, the warm-up's packet frames (first_frame.py: real frames) add
     no version to a rendering kernel; after those, renders of a built tree, of a two-level scene and of
     one placed instance (raw and denoised, every mode) add no version to any kernel."""
     import numpy as np
 
     import core
+    from core.build import box_tree
     from core.jit import first_frame
     from core.render import camera as camera_module
     from core.render import denoise, render_kernels
@@ -232,10 +233,10 @@ def test_the_two_sides_compile_what_a_real_render_runs():
     parallel_compile.compile_rendering_kernels(denoise=True)
     parallel_compile.compile_camera_pass()
     kernels = [render_kernels.add_samples, render_kernels.surface_frames, render_kernels.assemble_image,
-               camera_module._pixel_rays, instance_traversal.trace_scene_rays]
+               camera_module._pixel_rays, instance_traversal.trace_scene_rays, box_tree.build_box_subtree]
     kernels += [k for k in vars(denoise).values() if hasattr(k, "signatures")]
     sides = {k: len(k.signatures) for k in kernels}
-    assert all(sides[k] > 0 for k in kernels[:5]), "a side did not run a rendering kernel"
+    assert all(sides[k] > 0 for k in kernels[:6]), "a side did not run a rendering kernel"
     first_frame.compile_packet_kernels()
     assert {k: len(k.signatures) for k in kernels} == sides, "the sides compiled another argument type"
     kernels += [packet_traversal.trace_packets, scene_packets._rays_to_object, *instance_packets.KERNELS]

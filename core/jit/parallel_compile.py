@@ -2,9 +2,10 @@
 Numba's on-disk cache while this process builds the tree (compiling the builder's kernels) and then
 makes the camera pass (compiling the camera rays' traversal; their hit frames load the helper's).
 
-The helper compiles surface_frames first, then the sampling kernel, the image and the denoiser if
-asked, into the shared cache (docs/choices.md#the-first-renders-compile-on-two-cores); a kernel needed here before it
-is saved is compiled here too. Pixel-reuse kernels compile on the first continued frame.
+The helper compiles the top level's box-tree builder first (this process's build loads it), then
+surface_frames, the sampling kernel, the image and the denoiser if asked, into the shared cache
+(docs/choices.md#the-first-renders-compile-on-two-cores); a kernel needed here before it is saved is
+compiled here too. Pixel-reuse kernels compile on the first continued frame.
 """
 import os
 import subprocess
@@ -23,7 +24,7 @@ from ..render.lights import Light
 from ..build.options import BuildOptions
 from ..render.preview_render import PreviewRender
 from ..render.render_kernels import add_samples, surface_frames
-from ..scene.two_level import as_two_level
+from ..scene.two_level import as_two_level, build_two_level
 
 CORE_PACKAGE = __package__.rpartition(".")[0]  # core's module name: "core", or bl_ext.<repo>.<id>.core
 
@@ -91,9 +92,21 @@ class _SamplingOnly(PreviewRender):
         return np.zeros(len(rays), bool)
 
 
+def compile_top_level() -> None:
+    """The top level's box-tree builder (box_tree.build_box_subtree, several seconds), which a scene of
+    several instances builds after its meshes' trees: compiled here first, while this process's parent
+    compiles the mesh builder, it is cached by the time the parent's build reaches it
+    (docs/choices.md#the-first-frames-compile-without-the-packet-kernels)."""
+    shifted = np.eye(4)
+    shifted[0, 3] = 3.0
+    build_two_level([hand_made_tree()], np.zeros(2, np.int32), np.stack([np.eye(4), shifted]), threads=1)
+
+
 def compile_rendering_kernels(denoise=False) -> None:
-    """What the helper runs: hit frames, AO and shadow samples (rays that hit and miss), the image and
-    the denoiser if asked; sizes, modes and sample counts are runtime values, so one render covers all."""
+    """What the helper runs: the top level's builder (compile_top_level), then hit frames, AO and shadow
+    samples (rays that hit and miss), the image and the denoiser if asked; sizes, modes and sample counts
+    are runtime values, so one render covers all."""
+    compile_top_level()
     render = _hand_made_render(_SamplingOnly)
     render.step(render.target_samples)
     render.image(denoise=denoise)
