@@ -11,6 +11,7 @@ import heapq
 import numpy as np
 from numba import njit, prange
 
+from ..trace.array_views import at
 from .options import BINNED, EXACT
 from .partition import BOTH, LEFT, RIGHT, new_split_scratch, side_of, split_reference
 from .sah import beats_leaf
@@ -180,27 +181,35 @@ def _classify_chunk(tris, prims, boxes, axis, pos, planar_left, clip, start, end
 
 @njit(cache=True)
 def _write_chunk(tris, prims, boxes, sides, axis, pos, clip, start, end, offsets, out):
-    """Second pass of partition_parallel: write one slice's references (straddlers clipped again, the
-    others copied element by element: slice assignments cost more than the copy) into
-    out = (left prims, left boxes, right prims, right boxes), from offsets = (first left, first right)."""
+    """Second pass of partition_parallel: write one slice's references into out = (left prims, left
+    boxes, right prims, right boxes), from offsets = (first left, first right). Straddlers are clipped
+    again, as in pass one; a one-sided reference's box is copied straight from its row, not through
+    the straddlers' scratch boxes, which the compiler must assume alias the outputs
+    (docs/choices.md#one-sided-references-of-the-top-levels-copied-straight)."""
     lp, lb, rp, rb = out
     w_left, w_right = offsets
     scratch = new_split_scratch()
-    box_l, box_r = scratch[3], scratch[4]
+    cut = np.empty((2, 6), np.float32)  # a straddler's boxes on the left and on the right
+    box_l, box_r = cut[0], cut[1]  # views made once: one a straddler would count references
     for i in range(start, end):
-        side = sides[i]
-        if boxes[i, axis] < pos < boxes[i, axis + 3]:  # a straddler: clip it again, as in pass one
+        side = sides[at(i)]
+        if boxes[at(i), at(axis)] < pos < boxes[at(i), at(axis + 3)]:
             split_reference(tris, prims[i], boxes, i, axis, pos, clip, scratch, box_l, box_r)
+            if side & LEFT:
+                w_left = _put(lp, lb, w_left, prims[at(i)], cut, 0)
+            if side & RIGHT:
+                w_right = _put(rp, rb, w_right, prims[at(i)], cut, 1)
+        elif side == LEFT:
+            w_left = _put(lp, lb, w_left, prims[at(i)], boxes, i)
         else:
-            for k in range(6):
-                box_l[k] = box_r[k] = boxes[i, k]
-        if side & LEFT:
-            lp[w_left] = prims[i]
-            for k in range(6):
-                lb[w_left, k] = box_l[k]
-            w_left += 1
-        if side & RIGHT:
-            rp[w_right] = prims[i]
-            for k in range(6):
-                rb[w_right, k] = box_r[k]
-            w_right += 1
+            w_right = _put(rp, rb, w_right, prims[at(i)], boxes, i)
+
+
+@njit(cache=True, inline="always")
+def _put(out_prims, out_boxes, w, prim, boxes, row):
+    """Reference (prim, boxes[row]) into row w of one side's arrays; the next row. The box is indexed,
+    not viewed: a row view would count references on the array's one counter from every thread."""
+    out_prims[at(w)] = prim
+    for k in range(6):
+        out_boxes[at(w), k] = boxes[at(row), k]
+    return w + 1
