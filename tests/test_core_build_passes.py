@@ -150,3 +150,48 @@ def test_the_top_levels_partition_compiles_once_for_every_builder():
         core.build_kdtree(tris, threads=2, **options)
     signatures = top_levels.partition_parallel.signatures
     assert len(signatures) == 1 and str(signatures[0][4]) == "float32", signatures
+
+
+@pytest.mark.parametrize("clip", [False, True])
+def test_the_top_levels_partition_keeps_one_sided_boxes_and_cuts_straddlers(clip):
+    """partition_parallel (the parallel top levels' split) against NumPy, in chunks of every size: each
+    side lists its references in order; one-sided references keep their box rows exactly, triangles lying
+    in the plane go to the side asked for, and a straddler's part on each side lies in its box cut at the
+    plane (exactly that box without clipping; clipped, each triangle reaches at least one side)."""
+    from core.build.top_levels import partition_parallel
+    from core.geometry import triangle_boxes
+
+    rng = np.random.default_rng(47)
+    n = 6000
+    tris = (rng.uniform(-1.0, 1.0, (n, 1, 3)) + rng.normal(0.0, 0.1, (n, 3, 3))).astype(np.float32)
+    axis, pos = 1, np.float32(0.125)
+    tris[::50, :, axis] = pos  # lying in the plane
+    boxes, _ = triangle_boxes(tris)
+    prims = np.arange(n, dtype=np.int32)
+    lo, hi = boxes[:, axis], boxes[:, axis + 3]
+    straddle, planar = (lo < pos) & (pos < hi), (lo == pos) & (hi == pos)
+    assert straddle.sum() > 300 and planar.sum() > 100
+    for planar_left in (True, False):
+        left_only = (hi <= pos) & ~planar | planar & planar_left
+        right_only = (lo >= pos) & ~planar | planar & (not planar_left)
+        results = [partition_parallel(tris, prims, boxes, axis, pos, planar_left, clip, chunks) for chunks in (1, 3, 8)]
+        for other in results[1:]:
+            for a, b in zip(results[0], other):
+                np.testing.assert_array_equal(a, b)
+        lp, lb, rp, rb = results[0]
+        for side_prims, side_boxes, one_sided, cut in ((lp, lb, left_only, axis + 3), (rp, rb, right_only, axis)):
+            assert np.all(np.diff(side_prims) > 0)  # in order, each once
+            listed = np.isin(prims, side_prims)
+            assert np.all(listed[one_sided]) and not np.any(listed[~(one_sided | straddle)])
+            rows = np.searchsorted(side_prims, prims[one_sided])
+            np.testing.assert_array_equal(side_boxes[rows], boxes[one_sided])
+            parts = np.searchsorted(side_prims, prims[straddle & listed])
+            cut_boxes = boxes[straddle & listed].copy()
+            cut_boxes[:, cut] = pos
+            if clip:
+                assert np.all(side_boxes[parts][:, :3] >= cut_boxes[:, :3])
+                assert np.all(side_boxes[parts][:, 3:] <= cut_boxes[:, 3:])
+            else:
+                np.testing.assert_array_equal(side_boxes[parts], cut_boxes)
+                assert np.all(listed[straddle])
+        assert np.all(np.isin(prims[straddle], np.union1d(lp, rp)))
