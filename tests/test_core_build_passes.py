@@ -1,6 +1,7 @@
-"""The per-node passes of the subtree build against independent references: the snapping passes
-(float32) against float64 NumPy, the clipped boxes' outward rounding against NumPy's nextafter, the
-partition of one-sided references against NumPy, and the subtree kernel's unowned views kept valid."""
+"""The per-node passes of the build against independent references: the snapping passes (float32)
+against float64 NumPy, the clipped boxes' outward rounding against NumPy's nextafter, the partitions of
+the subtree kernel and of the parallel top levels against NumPy, and the subtree kernel's unowned views
+kept valid."""
 import numpy as np
 import pytest
 from numba import njit
