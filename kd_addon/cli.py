@@ -28,7 +28,8 @@ from types import SimpleNamespace
 
 import bpy
 
-from . import background, compile_command, corelib, demo_scene, kernel_warmup, properties
+from . import background, compile_command, corelib, demo_scene, properties
+from .compile_command import COMMAND_ID
 from .config import DEFAULTS, OUTPUT_FORMATS, SETTING_NAMES, SettingsError, make_config, read_setting
 from .errors import Cancelled, PreviewError
 from .keyed_settings import keyed_settings_note, stored_setting_values
@@ -37,7 +38,6 @@ from .pipeline import claim, release, run_job
 from .render_visibility import render_view_layer
 from .sequence import SequenceJob, check_folder_path, parse_frames
 
-COMMAND_ID = "kdpreview"
 FORMAT_ALIASES = {"PNG": "PNG", "EXR": "OPEN_EXR", "OPEN_EXR": "OPEN_EXR"}
 TABLE = ("{:>6} {:>10} {:>8} {:>11} {:>10} {:>10} {:>10} {:>12} {:>8} {:>10} {:>12} {:>10} {:>10} {:>8} {:>7} {:>6}"
          " {:>8} {:>9}")
@@ -357,10 +357,10 @@ def _run(args, interrupted) -> int:
             print("First run with these sources and this Python: compiling the kernels (first use) takes a minute or "
                   "two on 2 idle cores (longer on a busy machine) before frame 1; its time is printed apart from "
                   f"the frame's (kept in {corelib.numba_cache_dir()})", flush=True)
-        if not kernel_warmup.second_stage_cached():  # the packet kernels (kernel_warmup.compile_both_stages)
-            command = f"blender -b --command {COMMAND_ID}" if args.prog == COMMAND_ID else args.prog
-            print(f"Note: camera rays go one by one and samples in small batches (the same images, slower) until "
-                  f"`{command} compile` has compiled every kernel once", flush=True)
+        note = compile_command.uncompiled_note(f"blender -b --command {COMMAND_ID}" if args.prog == COMMAND_ID
+                                               else args.prog)
+        if note:
+            print(f"Note: {note}", flush=True)
         print(HEADER, flush=True)  # piped, it would wait for the first frame: minutes on a first run
         _run_claimed(job, cancelled)
     except PreviewError as error:

@@ -12,6 +12,18 @@ import sys
 
 from . import corelib, kernel_warmup
 
+COMMAND_ID = "kdpreview"  # Blender's command-line command: blender -b --command kdpreview ...
+
+
+def uncompiled_note(command: str) -> str | None:
+    """What a background run (the command line, `blender -b`, a script on the bpy module) says when the
+    cache lacks the second stage, which such runs never start: its images are the same, only slower, until
+    `command compile` (this module) has run; None once it is cached."""
+    if kernel_warmup.second_stage_cached():
+        return None
+    return (f"camera rays go one by one and samples in small batches (the same images, slower) until `{command} "
+            "compile` has compiled every kernel once")
+
 
 def run(prog: str, interrupted) -> int:
     """Compile both stages into this installation's cache; the exit code (0, 1 failed, 130 stopped)."""

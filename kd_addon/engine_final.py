@@ -24,10 +24,10 @@ from typing import NamedTuple
 import bpy
 import numpy as np
 
+from . import compile_command, tree_cache
 from .config import make_config
 from .errors import Cancelled, NoLightError, PreviewError
 from .pipeline import FrameJob, FrameResult, FrameView, claim, release, waits_for_a_compile
-from . import tree_cache
 from .render_views import Eye, eye_camera, eye_of, final_lanes, lane_of, view_names
 from .scene_input import CameraInput, read_camera
 
@@ -135,6 +135,7 @@ class FinalRender:
         binary takes SIGINT itself) is reported as an error, so Blender writes nothing for the frame (it
         wrote an empty image over the output when the exception left render()) and the script's render
         call fails instead of going on."""
+        _note_uncompiled()
         try:
             config = make_config(self.scene.kd_preview)
             passes = requested_passes(self.depsgraph.view_layer)
@@ -308,3 +309,20 @@ def _say_compile_wait(status: str, said: str) -> str:
         return said
     print(f"KD Preview: {status} (once per installation)", flush=True)
     return kind
+
+
+_uncompiled_noted = False  # the note below is said once a process
+
+
+def _note_uncompiled() -> None:
+    """A background render (blender -b, a script on the bpy module) starts no second warm-up stage: say
+    once a process, while it is not cached, that its frames are slower until the compile command has run
+    (compile_command.py), named as this process's user runs it."""
+    global _uncompiled_noted
+    if not bpy.app.background or _uncompiled_noted:
+        return
+    _uncompiled_noted = True
+    command = f"blender -b --command {compile_command.COMMAND_ID}" if bpy.app.binary_path else "python -m kd_addon"
+    note = compile_command.uncompiled_note(command)
+    if note:
+        print(f"KD Preview: note: {note}", flush=True)

@@ -11,7 +11,7 @@ import bpy
 import numpy as np
 import pytest
 
-from kd_addon import engine_final, pipeline, tree_cache
+from kd_addon import engine_final, kernel_warmup, pipeline, tree_cache
 from tests import bpy_scenes as scenes
 from tests.addon_support import (add_quad, add_sun, check_half_plane_image, exr_channels, half_plane_scene,
                                  preview_pixels)
@@ -530,12 +530,31 @@ def test_a_background_render_says_once_that_it_waits_for_the_first_compile(addon
         return real_status.fget(job)
 
     monkeypatch.setattr(pipeline.FrameJob, "status", property(status))
+    monkeypatch.setattr(kernel_warmup, "second_stage_cached", lambda: True)  # no note of the second stage
     engine_scene(tmp_path)
     assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
     said = [line for line in capfd.readouterr().out.splitlines() if line.startswith("KD Preview: ")]
     assert len(seen) > 3 and said == [
         "KD Preview: compiling kernels (first use) 1s: the render starts when they are ready "
         "(once per installation)"]
+
+
+
+@pytest.mark.parametrize("cached", [False, True])
+def test_a_background_render_names_the_compile_command_once_until_it_has_run(addon, tmp_path, monkeypatch, capfd,
+                                                                            cached):
+    """A background render starts no second warm-up stage: until its kernels are cached, the process's
+    first frame says once that frames are slower until the compile command (the bpy module's form here)
+    has run; nothing once they are cached."""
+    monkeypatch.setattr(kernel_warmup, "second_stage_cached", lambda: cached)
+    monkeypatch.setattr(engine_final, "_uncompiled_noted", False)
+    engine_scene(tmp_path)
+    for _ in range(2):
+        assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
+    said = [line for line in capfd.readouterr().out.splitlines() if "compiled every kernel" in line]
+    assert said == ([] if cached else [
+        "KD Preview: note: camera rays go one by one and samples in small batches (the same images, slower) "
+        "until `python -m kd_addon compile` has compiled every kernel once"])
 
 
 @pytest.mark.parametrize("mode", ["ao", "auto"])
