@@ -357,8 +357,7 @@ def _run(args, interrupted) -> int:
             print("First run with these sources and this Python: compiling the kernels (first use) takes a minute or "
                   "two on 2 idle cores (longer on a busy machine) before frame 1; its time is printed apart from "
                   f"the frame's (kept in {corelib.numba_cache_dir()})", flush=True)
-        note = compile_command.uncompiled_note(f"blender -b --command {COMMAND_ID}" if args.prog == COMMAND_ID
-                                               else args.prog)
+        note = compile_command.uncompiled_note(args.prog)
         if note:
             print(f"Note: {note}", flush=True)
         print(HEADER, flush=True)  # piped, it would wait for the first frame: minutes on a first run

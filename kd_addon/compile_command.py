@@ -15,12 +15,14 @@ from . import corelib, kernel_warmup
 COMMAND_ID = "kdpreview"  # Blender's command-line command: blender -b --command kdpreview ...
 
 
-def uncompiled_note(command: str) -> str | None:
+def uncompiled_note(prog: str) -> str | None:
     """What a background run (the command line, `blender -b`, a script on the bpy module) says when the
     cache lacks the second stage, which such runs never start: its images are the same, only slower, until
-    `command compile` (this module) has run; None once it is cached."""
+    this module's command has run, named as `prog` runs it (COMMAND_ID: Blender's command line; else the
+    program, e.g. "python -m kd_addon"); None once it is cached."""
     if kernel_warmup.second_stage_cached():
         return None
+    command = f"blender -b --command {COMMAND_ID}" if prog == COMMAND_ID else prog
     return (f"camera rays go one by one and samples in small batches (the same images, slower) until `{command} "
             "compile` has compiled every kernel once")
 

@@ -317,12 +317,12 @@ _uncompiled_noted = False  # the note below is said once a process
 def _note_uncompiled() -> None:
     """A background render (blender -b, a script on the bpy module) starts no second warm-up stage: say
     once a process, while it is not cached, that its frames are slower until the compile command has run
-    (compile_command.py), named as this process's user runs it."""
+    (compile_command.py). Blender's binary has a binary_path; the bpy module's is empty (unless a script
+    sets it), and its command is the module's."""
     global _uncompiled_noted
     if not bpy.app.background or _uncompiled_noted:
         return
     _uncompiled_noted = True
-    command = f"blender -b --command {compile_command.COMMAND_ID}" if bpy.app.binary_path else "python -m kd_addon"
-    note = compile_command.uncompiled_note(command)
+    note = compile_command.uncompiled_note(compile_command.COMMAND_ID if bpy.app.binary_path else "python -m kd_addon")
     if note:
         print(f"KD Preview: note: {note}", flush=True)

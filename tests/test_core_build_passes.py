@@ -9,6 +9,8 @@ from numba import njit
 from core.build.clipping import round_down, round_up
 from core.build.partition import new_split_scratch, partition_in_place
 from core.build.split_binned import _nearest_boundaries
+from core.build.top_levels import partition_parallel
+from core.geometry import triangle_boxes
 from core.trace.array_views import keep_alive, unowned
 
 
@@ -153,25 +155,37 @@ def test_the_top_levels_partition_compiles_once_for_every_builder():
     assert len(signatures) == 1 and str(signatures[0][4]) == "float32", signatures
 
 
-@pytest.mark.parametrize("clip", [False, True])
-def test_the_top_levels_partition_keeps_one_sided_boxes_and_cuts_straddlers(clip):
-    """partition_parallel (the parallel top levels' split) against NumPy, in chunks of every size: each
-    side lists its references in order; one-sided references keep their box rows exactly, triangles lying
-    in the plane go to the side asked for, and a straddler's part on each side lies in its box cut at the
-    plane (exactly that box without clipping; clipped, each triangle reaches at least one side)."""
-    from core.build.top_levels import partition_parallel
-    from core.geometry import triangle_boxes
-
+def _partition_case(shrink):
+    """A soup of straddling, one-sided and planar triangles (every 50th lying in the plane y = 0.125), their
+    references numbered out of row order, as a child task's are; with `shrink`, boxes cut down on x and z
+    as an earlier clip leaves them, so that a clipped straddler can lie on one side of the plane only."""
     rng = np.random.default_rng(47)
     n = 6000
     tris = (rng.uniform(-1.0, 1.0, (n, 1, 3)) + rng.normal(0.0, 0.1, (n, 3, 3))).astype(np.float32)
     axis, pos = 1, np.float32(0.125)
-    tris[::50, :, axis] = pos  # lying in the plane
-    boxes, _ = triangle_boxes(tris)
-    prims = np.arange(n, dtype=np.int32)
+    tris[::50, :, axis] = pos
+    prims = rng.permutation(n).astype(np.int32)
+    boxes = triangle_boxes(tris)[0][prims]
+    if shrink:
+        for k in (0, 2):
+            lo, hi = boxes[:, k].copy(), boxes[:, k + 3].copy()
+            boxes[:, k] = lo + (hi - lo) * np.float32(0.45)
+            boxes[:, k + 3] = hi - (hi - lo) * np.float32(0.45)
+    return tris, prims, np.ascontiguousarray(boxes), axis, pos
+
+
+@pytest.mark.parametrize("clip, shrink", [(False, False), (True, False), (True, True)])
+def test_the_top_levels_partition_keeps_one_sided_boxes_and_cuts_straddlers(clip, shrink):
+    """partition_parallel (the parallel top levels' split) against NumPy, in chunks of every size: each
+    side lists its references in row order; one-sided references keep their prim and box row exactly,
+    triangles lying in the plane go to the side asked for, and a straddler's part on each side lies in its
+    box cut at the plane (exactly that box without clipping). Clipped, a straddler whose box is its
+    triangle's reaches both sides; with boxes cut down, some reach one side only, and none is lost."""
+    tris, prims, boxes, axis, pos = _partition_case(shrink)
     lo, hi = boxes[:, axis], boxes[:, axis + 3]
     straddle, planar = (lo < pos) & (pos < hi), (lo == pos) & (hi == pos)
     assert straddle.sum() > 300 and planar.sum() > 100
+    one_side_only = 0
     for planar_left in (True, False):
         left_only = (hi <= pos) & ~planar | planar & planar_left
         right_only = (lo >= pos) & ~planar | planar & (not planar_left)
@@ -180,19 +194,30 @@ def test_the_top_levels_partition_keeps_one_sided_boxes_and_cuts_straddlers(clip
             for a, b in zip(results[0], other):
                 np.testing.assert_array_equal(a, b)
         lp, lb, rp, rb = results[0]
+        sides = []
         for side_prims, side_boxes, one_sided, cut in ((lp, lb, left_only, axis + 3), (rp, rb, right_only, axis)):
-            assert np.all(np.diff(side_prims) > 0)  # in order, each once
+            rows = _rows_of(prims, side_prims)  # each listed prim's row of the input, in increasing order
+            assert np.all(np.diff(rows) > 0)
             listed = np.isin(prims, side_prims)
             assert np.all(listed[one_sided]) and not np.any(listed[~(one_sided | straddle)])
-            rows = np.searchsorted(side_prims, prims[one_sided])
-            np.testing.assert_array_equal(side_boxes[rows], boxes[one_sided])
-            parts = np.searchsorted(side_prims, prims[straddle & listed])
-            cut_boxes = boxes[straddle & listed].copy()
+            np.testing.assert_array_equal(side_boxes[one_sided[rows]], boxes[rows[one_sided[rows]]])
+            cut_boxes = boxes[rows[straddle[rows]]].copy()
             cut_boxes[:, cut] = pos
+            parts = side_boxes[straddle[rows]]
             if clip:
-                assert np.all(side_boxes[parts][:, :3] >= cut_boxes[:, :3])
-                assert np.all(side_boxes[parts][:, 3:] <= cut_boxes[:, 3:])
+                assert np.all(parts[:, :3] >= cut_boxes[:, :3]) and np.all(parts[:, 3:] <= cut_boxes[:, 3:])
             else:
-                np.testing.assert_array_equal(side_boxes[parts], cut_boxes)
-                assert np.all(listed[straddle])
-        assert np.all(np.isin(prims[straddle], np.union1d(lp, rp)))
+                np.testing.assert_array_equal(parts, cut_boxes)
+            sides.append(listed & straddle)
+        assert np.all(sides[0] | sides[1] | ~straddle)  # no straddler lost
+        one_side_only += int((sides[0] ^ sides[1]).sum())
+        if not shrink:  # a straddling triangle's own box: the triangle crosses the plane
+            assert np.all(sides[0][straddle] & sides[1][straddle])
+    assert (one_side_only > 20) == shrink
+
+
+def _rows_of(prims, listed):
+    """The input rows of the listed prims (prims holds each once)."""
+    row_of = np.empty(len(prims), np.int64)
+    row_of[prims] = np.arange(len(prims))
+    return row_of[listed]

@@ -539,7 +539,6 @@ def test_a_background_render_says_once_that_it_waits_for_the_first_compile(addon
         "(once per installation)"]
 
 
-
 @pytest.mark.parametrize("cached", [False, True])
 def test_a_background_render_names_the_compile_command_once_until_it_has_run(addon, tmp_path, monkeypatch, capfd,
                                                                             cached):

@@ -190,7 +190,7 @@ def _write_chunk(tris, prims, boxes, sides, axis, pos, clip, start, end, offsets
     w_left, w_right = offsets
     scratch = new_split_scratch()
     cut = np.empty((2, 6), np.float32)  # a straddler's boxes on the left and on the right
-    box_l, box_r = cut[0], cut[1]  # views made once: one a straddler would count references
+    box_l, box_r = cut[0], cut[1]  # views made once: views made per straddler would count references
     for i in range(start, end):
         side = sides[at(i)]
         if boxes[at(i), at(axis)] < pos < boxes[at(i), at(axis + 3)]:
