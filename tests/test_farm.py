@@ -18,6 +18,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 
@@ -26,7 +27,7 @@ from tests.addon_support import PYTHON, REPO, run_python
 import bpy  # noqa: E402
 import numpy as np  # noqa: E402
 
-from kd_addon import cli, demo_scene  # noqa: E402
+from kd_addon import cli, demo_scene, kernel_warmup  # noqa: E402
 from kd_addon.farm import client as farm_client  # noqa: E402
 from kd_addon.farm.progress import ProgressLine, format_seconds  # noqa: E402
 from kd_addon.sequence import summarize, write_report  # noqa: E402
@@ -37,6 +38,22 @@ WORKER_ENV = {"PYTHONPATH": str(REPO), "NUMBA_NUM_THREADS": "1"}
 
 
 # -- pieces, without a cluster -----------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("dask", [None, "tcp://a:1"])
+def test_a_run_on_local_workers_names_the_compile_command_while_the_cache_lacks_it(dask, capsys, monkeypatch):
+    """Local workers share this machine's cache, so a --local-workers run says, as a run in one process
+    does, that frames are slower until the compile command has run; a --dask run's workers may be other
+    machines with their own caches (docs/farm.md), so it says nothing."""
+    monkeypatch.setattr(kernel_warmup, "second_stage_cached", lambda: False)
+    run = SimpleNamespace(args=SimpleNamespace(dask=dask, prog="python -m kd_addon", out="out"), scene_name="Scene",
+                          config=SimpleNamespace(settings=SimpleNamespace(mode="ao", samples=2),
+                                                 resolution_percentage=5),
+                          frames=[1, 2], workers_at_start=2, chunks=[[1], [2]], chunk_size=1,
+                          prepared=SimpleNamespace(keyed_note=None))
+    farm_client.FarmRun._print_header(run)
+    said = "`python -m kd_addon compile` has compiled every kernel once" in capsys.readouterr().out
+    assert said == (dask is None)
 
 
 def test_a_chunk_of_one_frame_is_named_as_one_frame():

@@ -21,7 +21,7 @@ from types import SimpleNamespace
 
 import bpy
 
-from .. import cli, corelib, output
+from .. import cli, compile_command, corelib, output
 from ..errors import Cancelled, PreviewError
 from ..sequence import frame_filename, prepare_folder, remove_empty_folders, stop_reason, summarize, write_report
 from ..signals_held import signals_held
@@ -340,6 +340,9 @@ class FarmRun:
               f"{self.chunk_size} frames", flush=True)
         if self.prepared.keyed_note:  # known before any chunk runs; the report puts it on the run's first frame
             print(f"{self.args.prog}: warning: {self.prepared.keyed_note}", file=sys.stderr, flush=True)
+        note = None if self.args.dask else compile_command.uncompiled_note(self.args.prog)  # local workers: this cache
+        if note:
+            print(f"Note: {note}", flush=True)
         print(cli.HEADER, flush=True)
 
     def _print(self, line: str) -> None:
