@@ -6,7 +6,7 @@ from ..inputs import as_triangles
 from ..trace.kdtree import KdTree, empty_arrays
 from ..trace.layout import NodeArrays
 from .lazy import DeferredSubtrees
-from .leaf_triangles import BYTES_PER_REFERENCE as LEAF_COPY_BYTES, leaf_triangles
+from .leaf_triangles import BYTES_PER_REFERENCE as LEAF_COPY_BYTES, leaf_boxes, leaf_triangles
 from ..memory import MB, MemoryLimitError, check_build_memory, release_before_copy
 from .merge import merge_tree
 from .options import BuildOptions, make_options
@@ -46,9 +46,10 @@ def build_kdtree(triangles, **options):
         del prims, boxes  # the initial references; the leaf copy below may take their memory
         release_before_copy(LEAF_COPY_BYTES * len(arrays.leaf_prims), opts.memory_limit)
         leaf_tris = leaf_triangles(tris, arrays.leaf_prims)  # part of the build: the traversal reads it
+        leaf_copy = leaf_tris, leaf_boxes(leaf_tris)
     timings["compile"] = (compile_seconds() - compiled) * 1000.0  # not in build_ms or the steps' times
     return KdTree(tris, bounds, arrays, options=opts, build_ms=_ms_since(start), dropped=dropped,
-                  timings=timings, deferred=deferred, leaf_tris=leaf_tris)
+                  timings=timings, deferred=deferred, leaf_copy=leaf_copy)
 
 
 def _initial_references(tris):

@@ -42,7 +42,7 @@ def unowned_scene(s):
                        unowned(s.node_start), unowned(s.ref_start), unowned(s.tri_start), unowned(s.axis),
                        unowned(s.split), unowned(s.child), unowned(s.count), unowned(s.leaf_prims),
                        unowned(s.triangles), unowned(s.mesh_bounds), unowned(s.leaf_triangles),
-                       unowned(s.visibility), unowned(s.world_boxes))
+                       unowned(s.leaf_boxes), unowned(s.visibility), unowned(s.world_boxes))
 
 
 @njit(cache=True, inline="always")
@@ -54,7 +54,7 @@ def mesh_tree(scene, m):
     return TreeArrays(rows(scene.axis, n0, n1), rows(scene.split, n0, n1), rows(scene.child, n0, n1),
                       rows(scene.count, n0, n1), rows(scene.leaf_prims, ref_start[m], ref_start[m + 1]),
                       rows(scene.triangles, tri_start[m], tri_start[m + 1]), rows(scene.mesh_bounds, m, m + 1)[0],
-                      scene.leaf_triangles, ref_start[m])
+                      scene.leaf_triangles, scene.leaf_boxes, ref_start[m])
 
 
 @njit(cache=True, inline="always")

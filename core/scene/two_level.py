@@ -12,6 +12,7 @@ import numpy as np
 
 from ..jit.compile_clock import clock
 from ..build.box_tree import build_box_tree
+from ..build.leaf_triangles import leaf_boxes
 from ..geometry import half_area
 from ..trace.kdtree import KdTree, empty_arrays
 from ..trace.layout import LEAF
@@ -40,7 +41,8 @@ class SceneArrays(NamedTuple):
     `world_to_object` (I, 3, 4) float64, `mesh_of` (I,) int32, `visibility` (I,) uint8 ray_visibility
     bits. The mesh trees packed (pack_meshes): `node_start`, `ref_start`, `tri_start` ((M + 1,) int64
     offsets of each mesh's nodes, leaf references and triangles), `axis`, `split`, `child`, `count`,
-    `leaf_prims`, `triangles`, `mesh_bounds` (M, 6) float32 and `leaf_triangles` (9, R) float32.
+    `leaf_prims`, `triangles`, `mesh_bounds` (M, 6) float32, `leaf_triangles` (9, R) float32 and the
+    boxes of its column groups `leaf_boxes` (leaf_triangles.py).
     Last, `world_boxes` (I, 6) float32: each instance's world box, rounded outward (world_boxes()), which
     the traversal clips before entering an instance (docs/choices.md#instance-boxes-tested-before-entering).
     """
@@ -64,6 +66,7 @@ class SceneArrays(NamedTuple):
     triangles: np.ndarray
     mesh_bounds: np.ndarray
     leaf_triangles: np.ndarray
+    leaf_boxes: np.ndarray
     visibility: np.ndarray
     world_boxes: np.ndarray
 
@@ -287,25 +290,27 @@ def build_top_level(boxes, opts):
 
 def pack_meshes(meshes):
     """Every mesh tree's arrays concatenated, with offsets: (node_start, ref_start, tri_start, axis,
-    split, child, count, leaf_prims, triangles, mesh_bounds, leaf_triangles). Child indices and leaf
-    offsets stay local to their mesh, so `mesh_tree` hands trace_ray views that look like a stand-alone
-    tree; leaf_triangles, (9, R) with the meshes' columns side by side, is passed whole with the mesh's
-    first column (ref_start)."""
+    split, child, count, leaf_prims, triangles, mesh_bounds, leaf_triangles, leaf_boxes). Child indices
+    and leaf offsets stay local to their mesh, so `mesh_tree` hands trace_ray views that look like a
+    stand-alone tree; leaf_triangles, (9, R) with the meshes' columns side by side, is passed whole with
+    the mesh's first column (ref_start), and leaf_boxes are its column groups' (a group may take columns
+    of two meshes: its box then holds both, still around each one's triangles)."""
     if len(meshes) == 1:  # the common flat case: no copy
         m = meshes[0]
         starts = [np.array([0, len(a)], np.int64) for a in (m.axis, m.leaf_prims, m.triangles)]
         return (*starts, m.axis, m.split, m.child, m.count, m.leaf_prims, m.triangles, m.bounds[None].copy(),
-                m.leaf_triangles)
+                m.leaf_triangles, m.leaf_boxes)
     if not meshes:
         axis, split, child, count, prims = empty_arrays()
         zero = np.zeros(1, np.int64)
         return (zero, zero, zero, axis[:0], split[:0], child[:0], count[:0], prims,
-                np.zeros((0, 3, 3), np.float32), np.zeros((0, 6), np.float32), np.zeros((9, 0), np.float32))
+                np.zeros((0, 3, 3), np.float32), np.zeros((0, 6), np.float32), np.zeros((9, 0), np.float32),
+                np.zeros((0, 6), np.float32))
     starts = [_offsets([len(getattr(m, name)) for m in meshes]) for name in ("axis", "leaf_prims", "triangles")]
     parts = [np.concatenate([getattr(m, name) for m in meshes])
              for name in ("axis", "split", "child", "count", "leaf_prims", "triangles")]
-    return (*starts, *parts, np.stack([m.bounds for m in meshes]).astype(np.float32),
-            np.concatenate([m.leaf_triangles for m in meshes], axis=1))
+    copy = np.concatenate([m.leaf_triangles for m in meshes], axis=1)
+    return (*starts, *parts, np.stack([m.bounds for m in meshes]).astype(np.float32), copy, leaf_boxes(copy))
 
 
 def _offsets(sizes):

@@ -2,7 +2,7 @@
 import numpy as np
 
 from .layout import LEAF, NodeArrays, TreeArrays
-from ..build.leaf_triangles import leaf_triangles
+from ..build.leaf_triangles import kept_columns, leaf_boxes, leaf_triangles
 from .tree_stats import leaf_size_histogram, walk_stats
 
 
@@ -12,17 +12,21 @@ class KdTree:
     Attributes: `triangles` (N, 3, 3) float32; `bounds` (6,) float32 box of the triangles in the tree;
     `axis`, `split`, `child`, `count` (per node, layout.py) and `leaf_prims` (triangle indices), given
     as one NodeArrays;
-    `leaf_triangles` (9, R) float32, the triangles copied into leaf order (leaf_triangles.py);
+    `leaf_triangles` (9, R) float32, the triangles copied into leaf order, and `leaf_boxes`, the boxes of
+    their column groups (leaf_triangles.py);
     `options` (the BuildOptions used); `build_ms`; `dropped` (indices of zero-area triangles, which can
     never be hit and are left out); `deferred` (lazy builds: the subtrees not built yet, lazy.py; None
     for an eager tree). Queries on a lazy tree build what they need, so its node arrays grow."""
 
     def __init__(self, triangles, bounds, nodes, options, build_ms, dropped, timings=None, deferred=None,
-                 leaf_tris=None):
+                 leaf_copy=None):
         self.triangles = triangles
         self.bounds = bounds
         self.axis, self.split, self.child, self.count, self.leaf_prims = nodes
-        self.leaf_triangles = leaf_triangles(triangles, self.leaf_prims) if leaf_tris is None else leaf_tris
+        if leaf_copy is None:  # (leaf_triangles, leaf_boxes), made by the builder as part of the build
+            copy = leaf_triangles(triangles, self.leaf_prims)
+            leaf_copy = copy, leaf_boxes(copy)
+        self.leaf_triangles, self.leaf_boxes = leaf_copy
         self.options = options
         self.build_ms = build_ms
         self.dropped = dropped
@@ -34,7 +38,7 @@ class KdTree:
     def arrays(self):
         """The TreeArrays the traversal kernels take (traversal.trace_ray)."""
         return TreeArrays(self.axis, self.split, self.child, self.count, self.leaf_prims, self.triangles,
-                          self.bounds, self.leaf_triangles, 0)
+                          self.bounds, self.leaf_triangles, self.leaf_boxes, 0)
 
     @property
     def node_arrays(self):
@@ -45,6 +49,7 @@ class KdTree:
         previous = (self.leaf_prims, self.leaf_triangles)
         self.axis, self.split, self.child, self.count, self.leaf_prims = node_arrays
         self.leaf_triangles = leaf_triangles(self.triangles, self.leaf_prims, previous)
+        self.leaf_boxes = leaf_boxes(self.leaf_triangles, (self.leaf_boxes, kept_columns(previous[0], self.leaf_prims)))
         self._stats = None
 
     @property
@@ -69,7 +74,7 @@ class KdTree:
             self.axis, self.split, self.child, self.count, self.bounds, o.traversal_cost, o.intersection_cost)
         n = len(self.triangles)
         nbytes = sum(a.nbytes for a in (self.axis, self.split, self.child, self.count, self.leaf_prims,
-                                         self.leaf_triangles))
+                                         self.leaf_triangles, self.leaf_boxes))
         return {
             "triangles": n,
             "degenerate_dropped": len(self.dropped),

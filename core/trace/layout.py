@@ -41,8 +41,9 @@ class NodeArrays(NamedTuple):
 class TreeArrays(NamedTuple):
     """What the traversal kernels read of one tree (traversal.trace_ray), by name: the node arrays,
     the triangles (N, 3, 3) float32, the root box `bounds` (6,) float32, the leaf-ordered triangles
-    (9, R) float32 and `base`, where this tree's columns start in them (0 for a stand-alone tree; a
-    mesh's first column in a two-level scene's packed arrays)."""
+    (9, R) float32, the boxes of their column groups `leaf_boxes` (ceil(R / LEAF_GROUP), 6) float32
+    (leaf_triangles.py) and `base`, where this tree's columns start in them (0 for a stand-alone tree;
+    a mesh's first column in a two-level scene's packed arrays)."""
 
     axis: np.ndarray
     split: np.ndarray
@@ -52,6 +53,7 @@ class TreeArrays(NamedTuple):
     triangles: np.ndarray
     bounds: np.ndarray
     leaf_triangles: np.ndarray
+    leaf_boxes: np.ndarray
     base: int
 
 

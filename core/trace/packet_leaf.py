@@ -24,7 +24,9 @@ import numpy as np
 from numba import njit
 
 from . import simd as S
+from ..build.leaf_triangles import LEAF_GROUP
 from .array_views import at, rows
+from .packet_boxes import lanes_meeting_box
 from .traversal import leaf_hit
 from .triangle_test import GAMMA, intersect_leaf_triangle
 
@@ -40,42 +42,60 @@ ROWS = 8
 # shear axes that differ by lane (each lane picks its coordinates of the differences)
 LANE_BY_LANE, SAME_AXES, ONE_ORIGIN, ONE_ORIGIN_BY_LANE = 0, 1, 2, 3
 SCREENED_LANES = 2  # an any-hit leaf with at most this many active lanes is tested lane by lane, screened
+# a leaf of more triangles is tested a column group at a time, each behind its box; below, the box tests
+# cost more than they save (docs/choices.md#boxes-over-groups-of-a-large-leafs-triangles)
+GROUPED_LEAF = 32
 
 
 @njit(cache=True, inline="always")
-def leaf_test(leaf_tris, triangles, leaf_prims, column, end, first, m, sc, mode, any_hit):
+def leaf_test(copy, leaf_prims, column, end, first, m, sc, mode, any_hit):
     """Test the leaf's triangles (columns column..end-1 of the leaf-ordered copy, prims from
-    leaf_prims[first], vertices triangles[prim]) against the active lanes m, in leaf order; bits of lanes
-    whose best hit changed.
+    leaf_prims[first], vertices triangles[prim]; copy = (leaf_triangles, leaf_boxes, triangles)) against
+    the active lanes m, in leaf order; bits of lanes whose best hit changed.
+    A leaf of more than GROUPED_LEAF triangles is taken a column group at a time (leaf_triangles.leaf_boxes):
+    only the lanes that may meet the group's box (packet_boxes.lanes_meeting_box) test its triangles,
+    which changes no lane's result: a left-out lane could not hit them before its best hit.
     `mode` (above): lanes sharing shear axes or an origin are tested in vectors (_lanes_test); otherwise
     lane by lane. With `any_hit` a lane stops at its first hit, and a leaf with at most SCREENED_LANES
     active lanes takes the single-ray leaf test lane by lane (its screen runs over eight triangles at
     once, where the lanes' vector would run mostly empty)."""
+    leaf_tris, boxes, triangles = copy
     if any_hit and S.count_set_bits(m) <= SCREENED_LANES:
         return _screened_lanes(leaf_tris, leaf_prims, column - first, first, end - column + first, m, sc)
-    found = 0
-    for k in range(end - column):  # the lines of every triangle asked for at once, not one after another
-        row = leaf_prims[at(first + k)] * 9  # triangles[prim]'s first and last float
-        S.prefetch(triangles, row)
-        S.prefetch(triangles, row + 8)
     axes = sc.axes
     l0 = S.count_trailing_zeros(m)
     kx, ky, kz = axes[at(l0), 0], axes[at(l0), 1], axes[at(l0), 2]
-    for k in range(end - column):
-        j, prim = column + k, leaf_prims[at(first + k)]
+    grouped = end - column > GROUPED_LEAF
+    g0, g1 = (column // LEAF_GROUP, (end - 1) // LEAF_GROUP + 1) if grouped else (0, 1)
+    found = 0
+    for g in range(g0, g1):
         if any_hit:
             m &= ~found
             if m == 0:
                 break
-        if mode != LANE_BY_LANE:
-            found |= _lanes_test((leaf_tris, triangles), j, prim, m, sc, (kx, ky, kz), mode)
+        lanes = lanes_meeting_box(sc.lanes32, boxes, g, m, S.load(sc.rays, BEST * L)) if grouped else m
+        if lanes == 0:
             continue
-        candidates = m
-        while candidates != 0:
-            l = S.count_trailing_zeros(candidates)
-            candidates &= candidates - 1
-            if _test_lane(leaf_tris, j, prim, l, sc):
-                found |= 1 << l
+        j0, j1 = (max(column, g * LEAF_GROUP), min(end, g * LEAF_GROUP + LEAF_GROUP)) if grouped else (column, end)
+        for j in range(j0, j1):  # the lines of every triangle asked for at once, not one after another
+            row = leaf_prims[at(first + j - column)] * 9  # triangles[prim]'s first and last float
+            S.prefetch(triangles, row)
+            S.prefetch(triangles, row + 8)
+        for j in range(j0, j1):
+            prim = leaf_prims[at(first + j - column)]
+            if any_hit:
+                lanes &= ~found
+                if lanes == 0:
+                    break
+            if mode != LANE_BY_LANE:
+                found |= _lanes_test((leaf_tris, triangles), j, prim, lanes, sc, (kx, ky, kz), mode)
+                continue
+            candidates = lanes
+            while candidates != 0:
+                l = S.count_trailing_zeros(candidates)
+                candidates &= candidates - 1
+                if _test_lane(leaf_tris, j, prim, l, sc):
+                    found |= 1 << l
     return found
 
 

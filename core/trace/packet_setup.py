@@ -13,18 +13,13 @@ from numba import njit
 
 from . import simd as S
 from .array_views import at, rows
+from .packet_boxes import C32, E32, INV32, O32, SCALE, T0, T1, TINY, rounded_up
 from .packet_leaf import BEST, LANE_BY_LANE, O, ONE_ORIGIN, ONE_ORIGIN_BY_LANE, SAME_AXES, SX, SY, SZ, TMIN
 from .traversal import WIDEN
 from .triangle_test import ray_shear
 
 L = S.LANES
 OUTSIDE_FLOAT32 = 2.0 ** 60  # |o|, |d|, |1 / d| or the root box beyond: the lane goes to single rays
-SCALE = 2.0 ** -21  # c = SCALE |i'| (packet_traversal's docstring)
-TINY = 2.0 ** -126
-
-# rows of the float32 scratch `lanes32`: o' (3 rows), i' (3), c (3), e (3), and the root interval
-O32, INV32, C32, E32, T0, T1 = 0, 3, 6, 9, 12, 13
-ROWS32 = 14
 MIXED = 8  # signs: bit k + 3 set when an any-hit packet's lanes have both signs on axis k
 LANE_BITS = 9  # rows of the scratch `lane_bits`: d > 0 per axis (3), shear axis masks (6: _fill_axis_bits)
 
@@ -180,7 +175,7 @@ def _fill_rows32(lanes32, o, inv, t0, t1):
         S.store(lanes32, (E32 + k) * L, S.add(S.mul(c, S.add(S.vabs(o32), tiny)), tiny))
     low = S.to_f32(S.mul(t0, S.splat_f64(1.0 - 2.0 ** -22)))
     S.store(lanes32, T0 * L, S.select(S.gt(t0, S.splat_f64(2.0 * TINY)), low, S.splat_f32(0.0)))
-    S.store(lanes32, T1 * L, S.to_f32(S.add(S.mul(t1, S.splat_f64(1.0 + 2.0 ** -22)), S.splat_f64(2.0 * TINY))))
+    S.store(lanes32, T1 * L, rounded_up(t1))
 
 
 @njit(cache=True, inline="always")

@@ -35,13 +35,13 @@ from . import simd as S
 from .array_views import at, keep_alive, rows, unowned
 from ..inputs import as_ray_limits, as_rays, hits_as_float32
 from .kdtree import KdTree
-from .layout import LEAF, TreeArrays
+from .layout import LEAF
 from .queries import Hits, intersect
 from ..jit.threads import thread_count
 from .packet_leaf import BEST, ROWS, leaf_test
-from .packet_setup import (C32, E32, INV32, LANE_BITS, MIXED, O32, OUTSIDE_FLOAT32, ROWS32, T0, T1,
-                           leave_to_single_rays, setup_packet)
-from .traversal import STACK_SIZE, block_range, thread_shares, trace_rays
+from .packet_boxes import ROWS32, T0, T1, plane_bounds
+from .packet_setup import LANE_BITS, MIXED, OUTSIDE_FLOAT32, leave_to_single_rays, setup_packet
+from .traversal import STACK_SIZE, block_range, thread_shares, trace_rays, unowned_tree
 from .triangle_test import LEAF_CHUNK
 
 L = S.LANES
@@ -180,14 +180,6 @@ def _unowned_arguments(tree, rays_in, out):
 
 
 @njit(cache=True, inline="always")
-def unowned_tree(tree):
-    """TreeArrays as unowned views (array_views.py)."""
-    return TreeArrays(unowned(tree.axis), unowned(tree.split), unowned(tree.child), unowned(tree.count),
-                      unowned(tree.leaf_prims), unowned(tree.triangles), unowned(tree.bounds),
-                      unowned(tree.leaf_triangles), tree.base)
-
-
-@njit(cache=True, inline="always")
 def unowned_rays(rays_in):
     """PacketRays as unowned views (array_views.py)."""
     return PacketRays(unowned(rays_in.origins), unowned(rays_in.directions), unowned(rays_in.tmin),
@@ -285,8 +277,8 @@ def _traverse(tree, sc, mode, signs, bits, stack, any_hit):
         if a != LEAF:
             return True
         first = child[at(node)]
-        found = leaf_test(leaf_tris, tree.triangles, leaf_prims, base + first, base + first + count[at(node)], first, m,
-                          sc, mode, any_hit)
+        found = leaf_test((leaf_tris, tree.leaf_boxes, tree.triangles), leaf_prims, base + first,
+                          base + first + count[at(node)], first, m, sc, mode, any_hit)
         if any_hit:
             done |= found
         node, m, t0, t1, sp = _pop(sc.rays, stack_node, stack_bits, stack_t, sp, done)
@@ -299,7 +291,7 @@ def _node_step(lanes32, a, pos, left, signs, m, t0, t1, stack, sp):
     """One inner node for the active lanes m: (next node, its lanes, their t0 and t1, stack size).
     A lane's part of the first child is [t0, min(t1, hi)], of the second [max(t0, lo), t1], with
     [lo, hi] the widened plane distance (module docstring); lanes entering both push the second."""
-    lo, hi = _plane_bounds(lanes32, a, pos)
+    lo, hi = plane_bounds(lanes32, a, pos)
     in_first = m & S.mask_bits(S.le(t0, hi))
     in_second = m & S.mask_bits(S.le(lo, t1))
     first, second = (left, left + 1) if (signs >> a) & 1 else (left + 1, left)
@@ -312,21 +304,13 @@ def _node_step(lanes32, a, pos, left, signs, m, t0, t1, stack, sp):
 
 
 @njit(cache=True, inline="always")
-def _plane_bounds(lanes32, a, pos):
-    """Each lane's widened distance [lo, hi] to the plane at pos on axis a (module docstring)."""
-    ts = S.mul(S.sub(S.splat_f32(pos), S.load(lanes32, (O32 + a) * L)), S.load(lanes32, (INV32 + a) * L))
-    err = S.fma(S.load(lanes32, (C32 + a) * L), S.splat_f32(abs(pos)), S.load(lanes32, (E32 + a) * L))
-    return S.sub(ts, err), S.add(ts, err)
-
-
-@njit(cache=True, inline="always")
 def _mixed_node_step(lanes32, a, pos, left, up, m, t0, t1, stack, sp):
     """_node_step for an any-hit packet whose lanes have both signs on axis a (`up`: lanes with d[a] > 0):
     each lane's parts of the two children follow its own sign (the near part [t0, min(t1, hi)] is the
     left child's where d[a] > 0, the right child's otherwise). The children are taken in the order of
     the lowest lane entering both (with one origin, all such lanes start on its side of the plane); the
     order only decides which hit an any-hit lane meets first, never whether it meets one."""
-    lo, hi = _plane_bounds(lanes32, a, pos)
+    lo, hi = plane_bounds(lanes32, a, pos)
     near = m & S.mask_bits(S.le(t0, hi))
     far = m & S.mask_bits(S.le(lo, t1))
     in_left, in_right = (near & up) | (far & ~up), (far & up) | (near & ~up)

@@ -223,9 +223,7 @@ def _trace_block(tree, origins, directions, tmin, tmax, any_hit, start, stop, ou
     unowned views (array_views.py; docs/choices.md#unowned-array-views)."""
     stack_node, stack_t, inv = np.empty(STACK_SIZE, np.int32), np.empty((STACK_SIZE, 3)), np.empty(3)
     flags = np.empty(LEAF_CHUNK, np.uint8)
-    views = TreeArrays(unowned(tree.axis), unowned(tree.split), unowned(tree.child), unowned(tree.count),
-                       unowned(tree.leaf_prims), unowned(tree.triangles), unowned(tree.bounds),
-                       unowned(tree.leaf_triangles), tree.base)
+    views = unowned_tree(tree)
     scratch = (unowned(stack_node), unowned(stack_t), unowned(inv), unowned(flags))
     for r in range(start, stop):
         t, prim, u, v = trace_ray(views, rows(origins, r, r + 1)[0], rows(directions, r, r + 1)[0], tmin[r],
@@ -235,3 +233,11 @@ def _trace_block(tree, origins, directions, tmin, tmax, any_hit, start, stop, ou
         out_u[r] = u
         out_v[r] = v
     keep_alive((stack_node, stack_t, inv, flags))  # the owners of `scratch`
+
+
+@njit(cache=True, inline="always")
+def unowned_tree(tree):
+    """TreeArrays as unowned views (array_views.py)."""
+    return TreeArrays(unowned(tree.axis), unowned(tree.split), unowned(tree.child), unowned(tree.count),
+                      unowned(tree.leaf_prims), unowned(tree.triangles), unowned(tree.bounds),
+                      unowned(tree.leaf_triangles), unowned(tree.leaf_boxes), tree.base)

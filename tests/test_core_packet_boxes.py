@@ -1,0 +1,148 @@
+"""Boxes over groups of leaf columns (leaf_triangles.leaf_boxes) and the packets' test of them
+(packet_boxes.lanes_meeting_box), which lets a packet skip a large leaf's triangles group by group.
+
+The box test must keep every lane whose ray meets the box within its range (checked against exact
+rational arithmetic on rays aimed at faces, edges and corners, at extreme scales), and packets through
+leaves large enough to be grouped must give core.intersect's and core.occluded's answers exactly.
+"""
+from fractions import Fraction
+
+import numpy as np
+import pytest
+from numba import njit
+
+import core
+from core.build.leaf_triangles import LEAF_GROUP, leaf_boxes, leaf_triangles
+from core.trace import simd as S
+from core.trace.packet_boxes import ROWS32, lanes_meeting_box
+from core.trace.packet_leaf import GROUPED_LEAF
+from core.trace.packet_setup import _fill_rows32
+from tests.meshes import random_soup, subdivided_cube
+from tests.test_core_occlusion_packets import ao_rays, assert_same_as_single_rays
+from tests.test_core_packet_traversal import assert_same_as_intersect, grid_rays
+
+L = S.LANES
+
+
+def numpy_group_boxes(copy):
+    """Each LEAF_GROUP columns' box of a (9, R) copy, by NumPy."""
+    out = []
+    for g in range(0, copy.shape[1], LEAF_GROUP):
+        verts = copy[:, g:g + LEAF_GROUP].reshape(3, 3, -1)  # vertex, axis, column
+        out.append(np.concatenate([verts.min(axis=(0, 2)), verts.max(axis=(0, 2))]))
+    return np.array(out, np.float32).reshape(-1, 6)
+
+
+@pytest.mark.parametrize("columns", [1, LEAF_GROUP, 4 * LEAF_GROUP + 3])
+def test_leaf_boxes_hold_each_group_of_columns(columns):
+    rng = np.random.default_rng(columns)
+    tris = (rng.normal(size=(50, 3, 3)) * 10.0 ** rng.integers(-3, 4, (50, 1, 1))).astype(np.float32)
+    copy = leaf_triangles(tris, rng.integers(0, 50, columns).astype(np.int32))
+    np.testing.assert_array_equal(leaf_boxes(copy), numpy_group_boxes(copy))
+
+
+def test_leaf_boxes_keep_whole_unchanged_groups_and_redo_the_rest():
+    """After a lazy splice (new columns appended) whole groups of old columns are copied, and a group
+    the new columns reach is computed again: stale boxes given as `previous` show which."""
+    rng = np.random.default_rng(1)
+    tris = rng.normal(size=(40, 3, 3)).astype(np.float32)
+    old = leaf_triangles(tris, np.arange(2 * LEAF_GROUP + 1, dtype=np.int32))
+    new = leaf_triangles(tris, np.arange(4 * LEAF_GROUP, dtype=np.int32))
+    stale = np.full((3, 6), 7.0, np.float32)
+    got = leaf_boxes(new, (stale, old.shape[1]))
+    want = numpy_group_boxes(new)
+    np.testing.assert_array_equal(got[:2], stale[:2])  # the two whole old groups: kept, not recomputed
+    np.testing.assert_array_equal(got[2:], want[2:])
+
+
+@njit(cache=True)
+def _meeting(box, o, d, t0, t1, best):
+    """lanes_meeting_box for lanes with origins o, directions d (3, L), set up as packet_setup does."""
+    lanes32 = np.zeros(ROWS32 * L, np.float32)
+    ov = (S.load(o[0], 0), S.load(o[1], 0), S.load(o[2], 0))
+    inv = (S.reciprocal(S.load(d[0], 0)), S.reciprocal(S.load(d[1], 0)), S.reciprocal(S.load(d[2], 0)))
+    _fill_rows32(lanes32, ov, inv, S.load(t0, 0), S.load(t1, 0))
+    return lanes_meeting_box(lanes32, box, 0, (1 << L) - 1, S.load(best, 0))
+
+
+def exactly_meets(box, o, d, t0, best):
+    """Whether the ray o + t d meets the closed box for some t in [t0, best], in exact rationals."""
+    lo, hi = Fraction(float(t0)), Fraction(float(best)) if np.isfinite(best) else None
+    for k in range(3):
+        a = (Fraction(float(box[k])) - Fraction(float(o[k]))) / Fraction(float(d[k]))
+        b = (Fraction(float(box[k + 3])) - Fraction(float(o[k]))) / Fraction(float(d[k]))
+        lo = max(lo, min(a, b))
+        hi = max(a, b) if hi is None else min(hi, max(a, b))
+    return lo <= hi
+
+
+@pytest.mark.parametrize("scale, offset", [(1.0, 0.0), (1e-6, 0.0), (1e6, 0.0), (1.0, 1e5), (1e-3, 1e7)])
+def test_box_test_keeps_every_lane_that_meets_the_box(scale, offset):
+    """Rays aimed at points of the box's faces, edges and corners (and just beside them), from near and
+    far, with ranges ending at the aimed point: every lane exact arithmetic says meets the box within
+    [t0, best] is kept; most of the rays aimed clearly beside it are left out (the test is not vacuous)."""
+    rng = np.random.default_rng(int(scale * 1e6) % 1000 + int(offset) % 997)
+    kept_misses, misses = 0, 0
+    for _ in range(60):
+        lo = (rng.uniform(-1, 1, 3) * scale + offset).astype(np.float32)
+        box = np.concatenate([lo, (lo + rng.uniform(0, 1, 3) * scale * (rng.random(3) < 0.8)).astype(np.float32)])
+        box = box.reshape(1, 6)
+        corner = np.where(rng.random((L, 3)) < 0.5, box[0, :3], box[0, 3:]).astype(np.float64)
+        inside = box[0, :3] + rng.random((L, 3)) * (box[0, 3:] - box[0, :3])
+        targets = np.where(rng.random((L, 3)) < 0.6, corner, inside)  # on faces, edges and corners
+        beside = rng.random(L) < 0.3
+        step = 0.05 * scale + 2.0 ** -16 * offset  # beyond the float32 bounds' widening far out
+        targets[beside] += rng.choice([-1.0, 1.0], (beside.sum(), 3)) * step
+        o = targets + rng.normal(size=(L, 3)) * scale * 10.0 ** rng.uniform(-2, 2, (L, 1))
+        d = targets - o
+        d[d == 0.0] = scale * 1e-3
+        t0 = np.where(rng.random(L) < 0.5, 0.0, rng.uniform(0, 1, L))
+        best = np.where(rng.random(L) < 0.5, np.inf, 1.0)  # 1.0: the aimed point itself
+        got = _meeting(box, np.ascontiguousarray(o.T), np.ascontiguousarray(d.T), t0, np.full(L, np.inf), best)
+        for lane in range(L):
+            meets = exactly_meets(box[0], o[lane], d[lane], t0[lane], best[lane])
+            kept = bool((got >> lane) & 1)
+            assert kept or not meets, (box, o[lane], d[lane], t0[lane], best[lane])
+            if not meets and beside[lane]:
+                misses += 1
+                kept_misses += kept
+    assert misses > 20 and kept_misses < misses / 2
+
+
+def large_leaf_tree(tris):
+    """A tree whose leaves hold more than GROUPED_LEAF triangles, so packets test them group by group."""
+    tree = core.build_kdtree(tris, max_depth=4)
+    assert tree.count.max() > GROUPED_LEAF
+    return tree
+
+
+def test_camera_packets_through_large_leaves_equal_intersect():
+    rng = np.random.default_rng(5)
+    tree = large_leaf_tree(random_soup(rng, 3000))
+    for eye in ([2.5, -3.0, 1.5], [0.1, 0.2, -0.1]):
+        o, d = grid_rays(eye, [0.0, 0.0, 0.0], 64, 48, fov=1.2)
+        hits, _ = assert_same_as_intersect(tree, o, d, 64)
+        assert (hits.prim >= 0).mean() > 0.1
+        assert_same_as_intersect(tree, o, d, 64, 0.5, 2.0)  # ranges cut on both sides
+
+
+@pytest.mark.parametrize("offset", [0.0, 1e6])
+def test_large_leaves_through_exact_vertices_and_edges(offset):
+    """The subdivided cube from inside, far from the origin too: rays through exact vertices and edges,
+    each hitting once, as single rays do."""
+    tris = (subdivided_cube(16) + offset).astype(np.float32)
+    tree = large_leaf_tree(tris)
+    o, d = grid_rays(np.full(3, offset), np.array([1.0, 0.25, 0.5]) + offset, 32, 16, fov=1.0)
+    d = np.round(d * 64) / 64
+    d[~d.any(axis=1)] = 1.0
+    hits, _ = assert_same_as_intersect(tree, o, d, 32)
+    assert (hits.prim >= 0).all()
+
+
+def test_any_hit_packets_through_large_leaves_equal_single_rays():
+    rng = np.random.default_rng(6)
+    tris = random_soup(rng, 3000)
+    tree = large_leaf_tree(tris)
+    o, d = ao_rays(rng, rng.uniform(-1, 1, (200, 3)), zero_every=7)
+    got = assert_same_as_single_rays(tree, o, d, 0.0, 0.3)
+    assert 0.1 < got.mean() < 0.9
