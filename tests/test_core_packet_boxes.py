@@ -12,10 +12,10 @@ import pytest
 from numba import njit
 
 import core
-from core.build.leaf_triangles import LEAF_GROUP, leaf_boxes, leaf_triangles
+from core.build.leaf_triangles import GROUPED_LEAF, LEAF_GROUP, leaf_boxes
 from core.trace import simd as S
 from core.trace.packet_boxes import ROWS32, lanes_meeting_box
-from core.trace.packet_leaf import GROUPED_LEAF
+from core.trace.layout import LEAF
 from core.trace.packet_setup import _fill_rows32
 from tests.meshes import random_soup, subdivided_cube
 from tests.test_core_occlusion_packets import ao_rays, assert_same_as_single_rays
@@ -24,35 +24,52 @@ from tests.test_core_packet_traversal import assert_same_as_intersect, grid_rays
 L = S.LANES
 
 
-def numpy_group_boxes(copy):
-    """Each LEAF_GROUP columns' box of a (9, R) copy, by NumPy."""
-    out = []
-    for g in range(0, copy.shape[1], LEAF_GROUP):
-        verts = copy[:, g:g + LEAF_GROUP].reshape(3, 3, -1)  # vertex, axis, column
-        out.append(np.concatenate([verts.min(axis=(0, 2)), verts.max(axis=(0, 2))]))
-    return np.array(out, np.float32).reshape(-1, 6)
+def numpy_group_boxes(tree):
+    """leaf_boxes by NumPy: the box of each LEAF_GROUP columns of the tree's leaf-ordered copy where they
+    meet a leaf of more than GROUPED_LEAF triangles, the tree's box elsewhere."""
+    copy = tree.leaf_triangles
+    out = np.tile(tree.bounds, (-(-copy.shape[1] // LEAF_GROUP), 1)).astype(np.float32)
+    for leaf in np.flatnonzero((tree.axis == LEAF) & (tree.count > GROUPED_LEAF)):
+        first, count = tree.child[leaf], tree.count[leaf]
+        for g in range(first // LEAF_GROUP, (first + count - 1) // LEAF_GROUP + 1):
+            verts = copy[:, g * LEAF_GROUP:(g + 1) * LEAF_GROUP].reshape(3, 3, -1)  # vertex, axis, column
+            out[g] = np.concatenate([verts.min(axis=(0, 2)), verts.max(axis=(0, 2))])
+    return out
 
 
-@pytest.mark.parametrize("columns", [1, LEAF_GROUP, 4 * LEAF_GROUP + 3])
-def test_leaf_boxes_hold_each_group_of_columns(columns):
-    rng = np.random.default_rng(columns)
-    tris = (rng.normal(size=(50, 3, 3)) * 10.0 ** rng.integers(-3, 4, (50, 1, 1))).astype(np.float32)
-    copy = leaf_triangles(tris, rng.integers(0, 50, columns).astype(np.int32))
-    np.testing.assert_array_equal(leaf_boxes(copy), numpy_group_boxes(copy))
+@pytest.mark.parametrize("depth", [2, 5, 20])
+def test_leaf_boxes_hold_the_groups_of_large_leaves(depth):
+    """Groups meeting a large leaf hold their columns' box (a group across a leaf boundary holds the
+    neighbour's columns too); the rest hold the tree's box."""
+    rng = np.random.default_rng(depth)
+    tris = (random_soup(rng, 900) * 10.0 ** rng.integers(-3, 4, (900, 1, 1))).astype(np.float32)
+    tree = core.build_kdtree(tris, max_depth=depth)
+    np.testing.assert_array_equal(tree.leaf_boxes, numpy_group_boxes(tree))
+    if depth < 10:
+        assert (tree.count > GROUPED_LEAF).any()
 
 
 def test_leaf_boxes_keep_whole_unchanged_groups_and_redo_the_rest():
     """After a lazy splice (new columns appended) whole groups of old columns are copied, and a group
     the new columns reach is computed again: stale boxes given as `previous` show which."""
-    rng = np.random.default_rng(1)
-    tris = rng.normal(size=(40, 3, 3)).astype(np.float32)
-    old = leaf_triangles(tris, np.arange(2 * LEAF_GROUP + 1, dtype=np.int32))
-    new = leaf_triangles(tris, np.arange(4 * LEAF_GROUP, dtype=np.int32))
-    stale = np.full((3, 6), 7.0, np.float32)
-    got = leaf_boxes(new, (stale, old.shape[1]))
-    want = numpy_group_boxes(new)
-    np.testing.assert_array_equal(got[:2], stale[:2])  # the two whole old groups: kept, not recomputed
-    np.testing.assert_array_equal(got[2:], want[2:])
+    tree = core.build_kdtree(random_soup(np.random.default_rng(1), 900), max_depth=3)
+    n = tree.leaf_triangles.shape[1]
+    stale = np.full((len(tree.leaf_boxes), 6), 7.0, np.float32)
+    kept = 2 * LEAF_GROUP + 1  # columns unchanged: the first two groups are whole
+    got = leaf_boxes(tree.leaf_triangles, tree.node_arrays, tree.bounds, (stale, kept))
+    np.testing.assert_array_equal(got[:2], stale[:2])
+    np.testing.assert_array_equal(got[2:], numpy_group_boxes(tree)[2:])
+    assert n > 3 * LEAF_GROUP
+
+
+def test_lazy_tree_boxes_follow_its_growth():
+    """A lazy tree's boxes after rays built part of it equal a fresh computation over its grown arrays."""
+    rng = np.random.default_rng(2)
+    tree = core.build_kdtree(random_soup(rng, 3000), lazy=True, lazy_subtree_size=16, rays=5000)  # large leaves
+    before = tree.node_count
+    core.intersect(tree, np.zeros((1000, 3)), rng.normal(size=(1000, 3)))
+    assert tree.node_count > before and (tree.count > GROUPED_LEAF).any()
+    np.testing.assert_array_equal(tree.leaf_boxes, numpy_group_boxes(tree))
 
 
 @njit(cache=True)
@@ -146,3 +163,27 @@ def test_any_hit_packets_through_large_leaves_equal_single_rays():
     o, d = ao_rays(rng, rng.uniform(-1, 1, (200, 3)), zero_every=7)
     got = assert_same_as_single_rays(tree, o, d, 0.0, 0.3)
     assert 0.1 < got.mean() < 0.9
+
+
+def test_packets_through_two_meshes_with_large_leaves_equal_single_rays():
+    """Two meshes side by side in a two-level scene, each with large leaves: each mesh's packets read its
+    own column groups (the packed boxes' offsets), as the single-ray scene kernel's hits show."""
+    from core.render.camera import tiled_packets
+    from core.scene.ray_visibility import CAMERA_RAYS
+    from core.scene.scene_packets import trace_camera_packets
+    from core.scene.scene_queries import trace_valid_rays
+    from core.scene.two_level import build_two_level
+    from tests.test_scene_packets import camera_rays
+
+    rng = np.random.default_rng(7)
+    trees = [large_leaf_tree(random_soup(rng, n)) for n in (1001, 2003)]  # column counts not multiples of 4
+    matrices = np.stack([np.eye(4), np.eye(4)])
+    matrices[1, :3, 3] = [0.3, 0.2, 0.0]
+    scene = build_two_level(trees, [0, 1], matrices)
+    assert len(scene.arrays.leaf_boxes) == sum(len(t.leaf_boxes) for t in trees)
+    o, d, lo, hi = camera_rays([2.5, -3.0, 1.5], [0.0, 0.0, 0.0], 48, 40)
+    got = trace_camera_packets(scene, o, d, lo, hi, tiled_packets(48, 40), 2, CAMERA_RAYS)
+    want = trace_valid_rays(scene, o, d, lo, hi, False, 2, CAMERA_RAYS)
+    for name, a, b in zip(("t", "instance", "prim", "u", "v"), got, want):
+        np.testing.assert_array_equal(a, b, err_msg=name)
+    assert (got[1] == 1).sum() > 50 and (got[1] == 0).sum() > 50  # both meshes are hit

@@ -46,7 +46,7 @@ def build_kdtree(triangles, **options):
         del prims, boxes  # the initial references; the leaf copy below may take their memory
         release_before_copy(LEAF_COPY_BYTES * len(arrays.leaf_prims), opts.memory_limit)
         leaf_tris = leaf_triangles(tris, arrays.leaf_prims)  # part of the build: the traversal reads it
-        leaf_copy = leaf_tris, leaf_boxes(leaf_tris)
+        leaf_copy = leaf_tris, leaf_boxes(leaf_tris, arrays, bounds)
     timings["compile"] = (compile_seconds() - compiled) * 1000.0  # not in build_ms or the steps' times
     return KdTree(tris, bounds, arrays, options=opts, build_ms=_ms_since(start), dropped=dropped,
                   timings=timings, deferred=deferred, leaf_copy=leaf_copy)

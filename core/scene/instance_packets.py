@@ -104,7 +104,8 @@ def packed_mesh_tree(arrays, m):
     r0, r1 = arrays.ref_start[m], arrays.ref_start[m + 1]
     return TreeArrays(arrays.axis[n0:n1], arrays.split[n0:n1], arrays.child[n0:n1], arrays.count[n0:n1],
                       arrays.leaf_prims[r0:r1], arrays.triangles[arrays.tri_start[m]:arrays.tri_start[m + 1]],
-                      arrays.mesh_bounds[m], arrays.leaf_triangles, arrays.leaf_boxes, int(r0))
+                      arrays.mesh_bounds[m], arrays.leaf_triangles,
+                      arrays.leaf_boxes[arrays.box_start[m]:arrays.box_start[m + 1]], int(r0))
 
 
 def _open_lanes(batch, keep, state):

@@ -39,8 +39,8 @@ def unowned_scene(s):
     (array_views.py)."""
     return SceneArrays(unowned(s.top_axis), unowned(s.top_split), unowned(s.top_child), unowned(s.top_count),
                        unowned(s.top_items), unowned(s.top_bounds), unowned(s.world_to_object), unowned(s.mesh_of),
-                       unowned(s.node_start), unowned(s.ref_start), unowned(s.tri_start), unowned(s.axis),
-                       unowned(s.split), unowned(s.child), unowned(s.count), unowned(s.leaf_prims),
+                       unowned(s.node_start), unowned(s.ref_start), unowned(s.tri_start), unowned(s.box_start),
+                       unowned(s.axis), unowned(s.split), unowned(s.child), unowned(s.count), unowned(s.leaf_prims),
                        unowned(s.triangles), unowned(s.mesh_bounds), unowned(s.leaf_triangles),
                        unowned(s.leaf_boxes), unowned(s.visibility), unowned(s.world_boxes))
 
@@ -49,12 +49,12 @@ def unowned_scene(s):
 def mesh_tree(scene, m):
     """Mesh m's tree as the TreeArrays trace_ray takes: unowned views into the packed arrays
     (array_views.py says why not slices)."""
-    node_start, ref_start, tri_start = scene.node_start, scene.ref_start, scene.tri_start
+    node_start, ref_start, tri_start, box_start = scene.node_start, scene.ref_start, scene.tri_start, scene.box_start
     n0, n1 = node_start[m], node_start[m + 1]
     return TreeArrays(rows(scene.axis, n0, n1), rows(scene.split, n0, n1), rows(scene.child, n0, n1),
                       rows(scene.count, n0, n1), rows(scene.leaf_prims, ref_start[m], ref_start[m + 1]),
                       rows(scene.triangles, tri_start[m], tri_start[m + 1]), rows(scene.mesh_bounds, m, m + 1)[0],
-                      scene.leaf_triangles, scene.leaf_boxes, ref_start[m])
+                      scene.leaf_triangles, rows(scene.leaf_boxes, box_start[m], box_start[m + 1]), ref_start[m])
 
 
 @njit(cache=True, inline="always")

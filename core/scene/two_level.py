@@ -12,7 +12,6 @@ import numpy as np
 
 from ..jit.compile_clock import clock
 from ..build.box_tree import build_box_tree
-from ..build.leaf_triangles import leaf_boxes
 from ..geometry import half_area
 from ..trace.kdtree import KdTree, empty_arrays
 from ..trace.layout import LEAF
@@ -39,8 +38,8 @@ class SceneArrays(NamedTuple):
     The top-level tree over the instances (layout.py): `top_axis`, `top_split`, `top_child`,
     `top_count`, `top_items` (instance indices in leaf order), `top_bounds` (6,) float32. Per instance:
     `world_to_object` (I, 3, 4) float64, `mesh_of` (I,) int32, `visibility` (I,) uint8 ray_visibility
-    bits. The mesh trees packed (pack_meshes): `node_start`, `ref_start`, `tri_start` ((M + 1,) int64
-    offsets of each mesh's nodes, leaf references and triangles), `axis`, `split`, `child`, `count`,
+    bits. The mesh trees packed (pack_meshes): `node_start`, `ref_start`, `tri_start`, `box_start` ((M + 1,)
+    int64 offsets of each mesh's nodes, leaf references, triangles and leaf boxes), `axis`, `split`, `child`, `count`,
     `leaf_prims`, `triangles`, `mesh_bounds` (M, 6) float32, `leaf_triangles` (9, R) float32 and the
     boxes of its column groups `leaf_boxes` (leaf_triangles.py).
     Last, `world_boxes` (I, 6) float32: each instance's world box, rounded outward (world_boxes()), which
@@ -58,6 +57,7 @@ class SceneArrays(NamedTuple):
     node_start: np.ndarray
     ref_start: np.ndarray
     tri_start: np.ndarray
+    box_start: np.ndarray
     axis: np.ndarray
     split: np.ndarray
     child: np.ndarray
@@ -289,28 +289,28 @@ def build_top_level(boxes, opts):
 
 
 def pack_meshes(meshes):
-    """Every mesh tree's arrays concatenated, with offsets: (node_start, ref_start, tri_start, axis,
-    split, child, count, leaf_prims, triangles, mesh_bounds, leaf_triangles, leaf_boxes). Child indices
-    and leaf offsets stay local to their mesh, so `mesh_tree` hands trace_ray views that look like a
-    stand-alone tree; leaf_triangles, (9, R) with the meshes' columns side by side, is passed whole with
-    the mesh's first column (ref_start), and leaf_boxes are its column groups' (a group may take columns
-    of two meshes: its box then holds both, still around each one's triangles)."""
+    """Every mesh tree's arrays concatenated, with offsets: (node_start, ref_start, tri_start, box_start,
+    axis, split, child, count, leaf_prims, triangles, mesh_bounds, leaf_triangles, leaf_boxes). Child
+    indices, leaf offsets and column groups stay local to their mesh, so `mesh_tree` hands trace_ray views
+    that look like a stand-alone tree; leaf_triangles, (9, R) with the meshes' columns side by side, is
+    passed whole with the mesh's first column (ref_start)."""
     if len(meshes) == 1:  # the common flat case: no copy
         m = meshes[0]
-        starts = [np.array([0, len(a)], np.int64) for a in (m.axis, m.leaf_prims, m.triangles)]
+        starts = [np.array([0, len(a)], np.int64) for a in (m.axis, m.leaf_prims, m.triangles, m.leaf_boxes)]
         return (*starts, m.axis, m.split, m.child, m.count, m.leaf_prims, m.triangles, m.bounds[None].copy(),
                 m.leaf_triangles, m.leaf_boxes)
     if not meshes:
         axis, split, child, count, prims = empty_arrays()
         zero = np.zeros(1, np.int64)
-        return (zero, zero, zero, axis[:0], split[:0], child[:0], count[:0], prims,
+        return (zero, zero, zero, zero, axis[:0], split[:0], child[:0], count[:0], prims,
                 np.zeros((0, 3, 3), np.float32), np.zeros((0, 6), np.float32), np.zeros((9, 0), np.float32),
                 np.zeros((0, 6), np.float32))
-    starts = [_offsets([len(getattr(m, name)) for m in meshes]) for name in ("axis", "leaf_prims", "triangles")]
+    starts = [_offsets([len(getattr(m, name)) for m in meshes])
+              for name in ("axis", "leaf_prims", "triangles", "leaf_boxes")]
     parts = [np.concatenate([getattr(m, name) for m in meshes])
              for name in ("axis", "split", "child", "count", "leaf_prims", "triangles")]
-    copy = np.concatenate([m.leaf_triangles for m in meshes], axis=1)
-    return (*starts, *parts, np.stack([m.bounds for m in meshes]).astype(np.float32), copy, leaf_boxes(copy))
+    return (*starts, *parts, np.stack([m.bounds for m in meshes]).astype(np.float32),
+            np.concatenate([m.leaf_triangles for m in meshes], axis=1), np.concatenate([m.leaf_boxes for m in meshes]))
 
 
 def _offsets(sizes):

@@ -25,7 +25,7 @@ class KdTree:
         self.axis, self.split, self.child, self.count, self.leaf_prims = nodes
         if leaf_copy is None:  # (leaf_triangles, leaf_boxes), made by the builder as part of the build
             copy = leaf_triangles(triangles, self.leaf_prims)
-            leaf_copy = copy, leaf_boxes(copy)
+            leaf_copy = copy, leaf_boxes(copy, nodes, bounds)
         self.leaf_triangles, self.leaf_boxes = leaf_copy
         self.options = options
         self.build_ms = build_ms
@@ -49,7 +49,8 @@ class KdTree:
         previous = (self.leaf_prims, self.leaf_triangles)
         self.axis, self.split, self.child, self.count, self.leaf_prims = node_arrays
         self.leaf_triangles = leaf_triangles(self.triangles, self.leaf_prims, previous)
-        self.leaf_boxes = leaf_boxes(self.leaf_triangles, (self.leaf_boxes, kept_columns(previous[0], self.leaf_prims)))
+        kept = (self.leaf_boxes, kept_columns(previous[0], self.leaf_prims))
+        self.leaf_boxes = leaf_boxes(self.leaf_triangles, self.node_arrays, self.bounds, kept)
         self._stats = None
 
     @property

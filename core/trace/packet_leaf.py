@@ -24,7 +24,7 @@ import numpy as np
 from numba import njit
 
 from . import simd as S
-from ..build.leaf_triangles import LEAF_GROUP
+from ..build.leaf_triangles import GROUPED_LEAF, LEAF_GROUP
 from .array_views import at, rows
 from .packet_boxes import lanes_meeting_box
 from .traversal import leaf_hit
@@ -42,16 +42,14 @@ ROWS = 8
 # shear axes that differ by lane (each lane picks its coordinates of the differences)
 LANE_BY_LANE, SAME_AXES, ONE_ORIGIN, ONE_ORIGIN_BY_LANE = 0, 1, 2, 3
 SCREENED_LANES = 2  # an any-hit leaf with at most this many active lanes is tested lane by lane, screened
-# a leaf of more triangles is tested a column group at a time, each behind its box; below, the box tests
-# cost more than they save (docs/choices.md#boxes-over-groups-of-a-large-leafs-triangles)
-GROUPED_LEAF = 32
 
 
 @njit(cache=True, inline="always")
 def leaf_test(copy, leaf_prims, column, end, first, m, sc, mode, any_hit):
     """Test the leaf's triangles (columns column..end-1 of the leaf-ordered copy, prims from
     leaf_prims[first], vertices triangles[prim]; copy = (leaf_triangles, leaf_boxes, triangles)) against
-    the active lanes m, in leaf order; bits of lanes whose best hit changed.
+    the active lanes m, in leaf order; bits of lanes whose best hit changed. `first` is also the leaf's
+    first column within its tree, whose column groups leaf_boxes holds.
     A leaf of more than GROUPED_LEAF triangles is taken a column group at a time (leaf_triangles.leaf_boxes):
     only the lanes that may meet the group's box (packet_boxes.lanes_meeting_box) test its triangles,
     which changes no lane's result: a left-out lane could not hit them before its best hit.
@@ -66,7 +64,9 @@ def leaf_test(copy, leaf_prims, column, end, first, m, sc, mode, any_hit):
     l0 = S.count_trailing_zeros(m)
     kx, ky, kz = axes[at(l0), 0], axes[at(l0), 1], axes[at(l0), 2]
     grouped = end - column > GROUPED_LEAF
-    g0, g1 = (column // LEAF_GROUP, (end - 1) // LEAF_GROUP + 1) if grouped else (0, 1)
+    shift = column - first  # a column of the copy less the same column within the tree
+    last = first + end - column - 1
+    g0, g1 = (first // LEAF_GROUP, last // LEAF_GROUP + 1) if grouped else (0, 1)
     found = 0
     for g in range(g0, g1):
         if any_hit:
@@ -76,7 +76,8 @@ def leaf_test(copy, leaf_prims, column, end, first, m, sc, mode, any_hit):
         lanes = lanes_meeting_box(sc.lanes32, boxes, g, m, S.load(sc.rays, BEST * L)) if grouped else m
         if lanes == 0:
             continue
-        j0, j1 = (max(column, g * LEAF_GROUP), min(end, g * LEAF_GROUP + LEAF_GROUP)) if grouped else (column, end)
+        j0, j1 = (max(column, shift + g * LEAF_GROUP), min(end, shift + g * LEAF_GROUP + LEAF_GROUP)) if grouped \
+            else (column, end)
         for j in range(j0, j1):  # the lines of every triangle asked for at once, not one after another
             row = leaf_prims[at(first + j - column)] * 9  # triangles[prim]'s first and last float
             S.prefetch(triangles, row)
