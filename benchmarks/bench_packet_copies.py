@@ -23,6 +23,12 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 
 
+def copy_arrays(tree_arrays, arrays):
+    """This tree's arrays as a copy's TreeArrays, field by field: a copy from before a field was added
+    (leaf_boxes) takes the fields it knows."""
+    return tree_arrays(*[getattr(arrays, name) for name in tree_arrays._fields])
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("copies", nargs="+")
@@ -46,7 +52,7 @@ def main():
     for copy in args.copies:
         name = Path(copy).name
         packets = importlib.import_module(name + ".trace.packet_traversal")
-        arrays = importlib.import_module(name + ".trace.layout").TreeArrays(*tree.arrays)
+        arrays = copy_arrays(importlib.import_module(name + ".trace.layout").TreeArrays, tree.arrays)
         rays = packets.PacketRays(o, d, np.zeros(n), np.full(n, np.inf), packets.packet_order(640, 480))
 
         def run(packets=packets, arrays=arrays, rays=rays):

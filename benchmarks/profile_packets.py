@@ -36,6 +36,7 @@ def run(copy, seconds):
     from core.jit.threads import thread_count
     from scenes import load_scene
     from workload import camera_workload
+    from bench_packet_copies import copy_arrays
 
     scene = load_scene("suzanne-251k")
     o, d = camera_workload(scene, 640, 480)
@@ -43,7 +44,7 @@ def run(copy, seconds):
     tree = core.build_kdtree(scene.triangles)
     name = Path(copy).name
     packets = importlib.import_module(name + ".trace.packet_traversal")
-    arrays = importlib.import_module(name + ".trace.layout").TreeArrays(*tree.arrays)
+    arrays = copy_arrays(importlib.import_module(name + ".trace.layout").TreeArrays, tree.arrays)
     rays = packets.PacketRays(o, d, np.zeros(n), np.full(n, np.inf), packets.packet_order(640, 480))
     out = packets.PacketOutputs(np.empty(n), np.empty(n, np.int32), np.empty(n), np.empty(n), np.zeros(n, np.uint8))
     with thread_count(1):

@@ -16,6 +16,8 @@ from core.build.leaf_triangles import GROUPED_LEAF, LEAF_GROUP, leaf_boxes
 from core.trace import simd as S
 from core.trace.packet_boxes import ROWS32, lanes_meeting_box
 from core.trace.layout import LEAF
+from core.trace.traversal import trace_rays
+from core.trace.triangle_test import ray_shear
 from core.trace.packet_setup import _fill_rows32
 from tests.meshes import random_soup, subdivided_cube
 from tests.test_core_occlusion_packets import ao_rays, assert_same_as_single_rays
@@ -73,31 +75,33 @@ def test_lazy_tree_boxes_follow_its_growth():
 
 
 @njit(cache=True)
-def _meeting(box, o, d, t0, t1, best):
-    """lanes_meeting_box for lanes with origins o, directions d (3, L), set up as packet_setup does."""
+def _meeting(box, o, d, limits, kz):
+    """lanes_meeting_box for lanes with origins o, directions d (3, L), set up as packet_setup does, and
+    limits (tmin, best) (L,) each."""
     lanes32 = np.zeros(ROWS32 * L, np.float32)
     ov = (S.load(o[0], 0), S.load(o[1], 0), S.load(o[2], 0))
     inv = (S.reciprocal(S.load(d[0], 0)), S.reciprocal(S.load(d[1], 0)), S.reciprocal(S.load(d[2], 0)))
-    _fill_rows32(lanes32, ov, inv, S.load(t0, 0), S.load(t1, 0))
-    return lanes_meeting_box(lanes32, box, 0, (1 << L) - 1, S.load(best, 0))
+    tmin, best = S.load(limits[0], 0), S.load(limits[1], 0)
+    _fill_rows32(lanes32, ov, inv, tmin, best)
+    return lanes_meeting_box(lanes32, box, 0, (1 << L) - 1, kz, (tmin, best))
 
 
-def exactly_meets(box, o, d, t0, best):
-    """Whether the ray o + t d meets the closed box for some t in [t0, best], in exact rationals."""
-    lo, hi = Fraction(float(t0)), Fraction(float(best)) if np.isfinite(best) else None
+def line_meets(box, o, d):
+    """Whether the line o + t d (any t) meets the closed box, in exact rationals."""
+    lo = hi = None
     for k in range(3):
         a = (Fraction(float(box[k])) - Fraction(float(o[k]))) / Fraction(float(d[k]))
         b = (Fraction(float(box[k + 3])) - Fraction(float(o[k]))) / Fraction(float(d[k]))
-        lo = max(lo, min(a, b))
+        lo = min(a, b) if lo is None else max(lo, min(a, b))
         hi = max(a, b) if hi is None else min(hi, max(a, b))
     return lo <= hi
 
 
 @pytest.mark.parametrize("scale, offset", [(1.0, 0.0), (1e-6, 0.0), (1e6, 0.0), (1.0, 1e5), (1e-3, 1e7)])
-def test_box_test_keeps_every_lane_that_meets_the_box(scale, offset):
-    """Rays aimed at points of the box's faces, edges and corners (and just beside them), from near and
-    far, with ranges ending at the aimed point: every lane exact arithmetic says meets the box within
-    [t0, best] is kept; most of the rays aimed clearly beside it are left out (the test is not vacuous)."""
+def test_box_test_keeps_every_line_that_meets_the_box(scale, offset):
+    """Rays aimed at points of the box's faces, edges and corners (and beside them), from near and far:
+    every lane whose line meets the box in exact arithmetic is kept; most lines aimed clearly beside it
+    are left out (the test is not vacuous)."""
     rng = np.random.default_rng(int(scale * 1e6) % 1000 + int(offset) % 997)
     kept_misses, misses = 0, 0
     for _ in range(60):
@@ -113,17 +117,62 @@ def test_box_test_keeps_every_lane_that_meets_the_box(scale, offset):
         o = targets + rng.normal(size=(L, 3)) * scale * 10.0 ** rng.uniform(-2, 2, (L, 1))
         d = targets - o
         d[d == 0.0] = scale * 1e-3
-        t0 = np.where(rng.random(L) < 0.5, 0.0, rng.uniform(0, 1, L))
-        best = np.where(rng.random(L) < 0.5, np.inf, 1.0)  # 1.0: the aimed point itself
-        got = _meeting(box, np.ascontiguousarray(o.T), np.ascontiguousarray(d.T), t0, np.full(L, np.inf), best)
+        limits = (np.zeros(L), np.full(L, np.inf))
+        got = _meeting(box, np.ascontiguousarray(o.T), np.ascontiguousarray(d.T), limits, -1)
         for lane in range(L):
-            meets = exactly_meets(box[0], o[lane], d[lane], t0[lane], best[lane])
-            kept = bool((got >> lane) & 1)
-            assert kept or not meets, (box, o[lane], d[lane], t0[lane], best[lane])
+            meets, kept = line_meets(box[0], o[lane], d[lane]), bool((got >> lane) & 1)
+            assert kept or not meets, (box, o[lane], d[lane])
             if not meets and beside[lane]:
                 misses += 1
                 kept_misses += kept
     assert misses > 20 and kept_misses < misses / 2
+
+
+def _single_ray_hits(tris, o, d):
+    """(t float64, prim) of the single-ray kernel, closest hits over the triangles (one leaf)."""
+    tree = core.build_kdtree(tris, max_depth=0)
+    n = len(o)
+    out = [np.empty(n), np.empty(n, np.int32), np.empty(n), np.empty(n)]
+    trace_rays(tree.arrays, o, d, np.zeros(n), np.full(n, np.inf), False, *out)
+    return out[0], out[1]
+
+
+def _triangle_and_ray(rng, sliver):
+    """A triangle and a ray towards a point on it. A sliver is a few float32 ulps wide across y, long
+    along z, and the ray runs along z, grazing y: its computed t strays furthest from the exact one."""
+    if not sliver:
+        tri = rng.normal(size=(3, 3)).astype(np.float32)
+        direction = rng.normal(size=3)
+    else:
+        y0 = np.float32(rng.choice([1.0, 1e-3, 1e3]) * rng.uniform(0.5, 2))
+        ys = y0 + np.spacing(y0) * np.array([0, rng.integers(1, 4), rng.integers(-3, 4)])
+        zs = np.array([0.0, 1.0, rng.uniform(-1, 1)]) * 10.0 ** rng.uniform(-2, 6)
+        tri = np.stack([np.full(3, rng.choice([0.0, 1e-6, 1.0]) * rng.uniform(-2, 2)), ys, zs], 1).astype(np.float32)
+        direction = rng.normal(size=3)
+        direction[2] = rng.choice([-1, 1]) * rng.uniform(1, 2)
+        direction[1] *= 10.0 ** rng.uniform(-12, 0)
+    point = rng.dirichlet([1, 1, 1]) @ tri.astype(np.float64)
+    return tri, point - direction * 10.0 ** rng.uniform(-3, 3), direction
+
+
+@pytest.mark.parametrize("sliver", [False, True])
+def test_box_test_keeps_every_lane_whose_hit_the_triangle_test_accepts(sliver):
+    """With the range tested on the depth axis, a lane is kept whenever the triangle test accepts a t in
+    [tmin, best]: here tmin and best are the computed t's neighbouring doubles, and the triangles include
+    slivers seen edge on, whose computed t lies far (in float32 ulps) from the exact one."""
+    rng = np.random.default_rng(11 + sliver)
+    checked = 0
+    for _ in range(1500):
+        tri, o, d = _triangle_and_ray(rng, sliver)
+        t, prim = _single_ray_hits(tri[None], o[None], d[None])
+        if prim[0] < 0:
+            continue
+        box = np.concatenate([tri.min(axis=0), tri.max(axis=0)]).reshape(1, 6)
+        limits = (np.full(L, np.nextafter(t[0], 0.0)), np.full(L, np.nextafter(t[0], np.inf)))
+        got = _meeting(box, np.tile(o[:, None], L), np.tile(d[:, None], L), limits, int(ray_shear(d)[2]))
+        assert got == (1 << L) - 1, (tri, o, d, t[0])
+        checked += 1
+    assert checked > 1000
 
 
 def large_leaf_tree(tris):
@@ -187,3 +236,28 @@ def test_packets_through_two_meshes_with_large_leaves_equal_single_rays():
     for name, a, b in zip(("t", "instance", "prim", "u", "v"), got, want):
         np.testing.assert_array_equal(a, b, err_msg=name)
     assert (got[1] == 1).sum() > 50 and (got[1] == 0).sum() > 50  # both meshes are hit
+
+
+def test_a_sliver_hit_beyond_its_exact_distance_is_kept():
+    """A sliver seen edge on, whose computed t differs from its exact t by more than float32 bounds
+    widen, in a large leaf behind a triangle hit a hair further: packets find the sliver, as single
+    rays do, and so does an occlusion query whose range ends between the exact and the computed t."""
+    rng = np.random.default_rng(1)
+    sliver = np.array([[0.0015998355811461806, 0.0, 0.0], [0.0015998356975615025, 0.0, 1.3237656354904175],
+                       [0.001599835348315537, 0.0, -0.8730815052986145]], np.float32)
+    o1 = np.array([0.004624106853505547, 2.362459852578012e-10, 1.0076862251889713])
+    d1 = np.array([-0.48800599638147046, -3.8121401841543327e-08, -1.168728373756057])
+    p = o1 + 0.0061971 * d1
+    n = d1 / np.linalg.norm(d1)
+    u = np.cross(n, [0, 1.0, 0])
+    u /= np.linalg.norm(u)
+    v = np.cross(n, u)
+    behind = np.array([p + 0.01 * u, p - 0.005 * u + 0.01 * v, p - 0.005 * u - 0.01 * v], np.float32)
+    far = (rng.uniform(-2, 2, (36, 1, 3)) + rng.normal(size=(36, 3, 3)) * 1e-3).astype(np.float32)
+    tree = core.build_kdtree(np.concatenate([behind[None], far[:3], np.repeat(sliver[None], 4, axis=0), far[3:]]),
+                             max_depth=0)
+    assert tree.count[0] > GROUPED_LEAF
+    o, d = np.tile(o1, (L, 1)), np.tile(d1, (L, 1))
+    hits, _ = assert_same_as_intersect(tree, o, d, 4)
+    assert (hits.prim >= 4).all()  # the sliver, not the triangle behind it
+    np.testing.assert_array_equal(assert_same_as_single_rays(tree, o, d, 0.0, 0.00619697), True)

@@ -103,7 +103,7 @@ def _check_memory_limit(tree, subtrees):
     limit = tree.options.memory_limit
     if limit is None:
         return
-    held = sum(a.nbytes for a in tree.node_arrays) + tree.leaf_triangles.nbytes
+    held = sum(a.nbytes for a in tree.node_arrays) + tree.leaf_triangles.nbytes + tree.leaf_boxes.nbytes
     held += tree.deferred.prims.nbytes + tree.deferred.boxes.nbytes
     nodes = sum(len(s[0]) for s in subtrees)
     references = sum(len(s[4]) for s in subtrees)

@@ -6,8 +6,9 @@ i' = fl32(1 / d), c = SCALE |i'| and e = c (|o'| + TINY) + TINY per axis, and it
 rounded outward. For any float32 plane position p, [(p - o') i' - err, (p - o') i' + err] with
 err = c |p| + e holds the exact distance (p - o) / d (docs/choices.md#float32-node-arithmetic), so a
 box's slab entry and exit bound the exact ones, and a lane whose widened entry lies after its widened
-exit cannot meet anything inside the box.
+exit has a line that misses the box.
 """
+import numpy as np
 from numba import njit
 
 from . import simd as S
@@ -30,6 +31,13 @@ def rounded_up(t):
 
 
 @njit(cache=True, inline="always")
+def rounded_down(t):
+    """float64 lanes t >= 0 as float32 lanes no larger (0 below a tiny t), as rounded_up mirrored."""
+    return S.select(S.gt(t, S.splat_f64(2.0 * TINY)), S.to_f32(S.mul(t, S.splat_f64(1.0 - 2.0 ** -22))),
+                    S.splat_f32(0.0))
+
+
+@njit(cache=True, inline="always")
 def plane_bounds(lanes32, a, pos):
     """Each lane's widened distance [lo, hi] to the plane at pos on axis a (module docstring)."""
     ts = S.mul(S.sub(S.splat_f32(pos), S.load(lanes32, (O32 + a) * L)), S.load(lanes32, (INV32 + a) * L))
@@ -38,15 +46,27 @@ def plane_bounds(lanes32, a, pos):
 
 
 @njit(cache=True, inline="always")
-def lanes_meeting_box(lanes32, boxes, g, m, best):
-    """The lanes of m whose ray may meet box g of `boxes` (G, 6) float32 between its starting interval's
-    start and `best` (float64 lanes: the best hit's t so far), all bounds widened: a lane left out meets
-    no point of the box in that range. Lanes' directions have no zero component (packet_setup)."""
-    near = S.load(lanes32, T0 * L)
-    far = rounded_up(best)
+def lanes_meeting_box(lanes32, boxes, g, m, kz, limits):
+    """The lanes of m whose triangles' test may accept a triangle inside box g of `boxes` (G, 6) float32;
+    kz: the lanes' shared depth axis (triangle_test.ray_shear), or -1 when it differs by lane; limits:
+    (tmin, best) float64 lanes, the range a hit's computed t must fall in.
+    Two conditions, each kept by every such lane:
+    - the ray's line meets the box: a hit's exact point lies in the box, at its exact t, within each
+      slab's widened interval (module docstring);
+    - with kz given, the kz slab's widened interval meets [tmin, best]: the test's computed t is a convex
+      combination of the vertices' kz depths over d[kz] (Woop et al.), so it lies in that slab up to a
+      few float64 roundings. The exact t may differ from it by far more on a sliver seen edge on, so the
+      range is not tested against the other slabs."""
+    entry, leave = S.splat_f32(-np.inf), S.splat_f32(np.inf)
+    depth_entry, depth_leave = entry, leave
     for k in range(3):
         lo_a, hi_a = plane_bounds(lanes32, k, boxes[at(g), at(k)])
         lo_b, hi_b = plane_bounds(lanes32, k, boxes[at(g), at(k + 3)])
-        near = S.vmax(near, S.vmin(lo_a, lo_b))
-        far = S.vmin(far, S.vmax(hi_a, hi_b))
-    return m & S.mask_bits(S.le(near, far))
+        slab_entry, slab_leave = S.vmin(lo_a, lo_b), S.vmax(hi_a, hi_b)
+        entry, leave = S.vmax(entry, slab_entry), S.vmin(leave, slab_leave)
+        if k == kz:
+            depth_entry, depth_leave = slab_entry, slab_leave
+    tmin, best = limits
+    inside = S.mask_and(S.le(entry, leave), S.mask_and(S.le(depth_entry, rounded_up(best)),
+                                                       S.le(rounded_down(tmin), depth_leave)))
+    return m & S.mask_bits(inside)

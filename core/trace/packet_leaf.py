@@ -67,13 +67,15 @@ def leaf_test(copy, leaf_prims, column, end, first, m, sc, mode, any_hit):
     shift = column - first  # a column of the copy less the same column within the tree
     last = first + end - column - 1
     g0, g1 = (first // LEAF_GROUP, last // LEAF_GROUP + 1) if grouped else (0, 1)
+    depth_axis = kz if mode == SAME_AXES or mode == ONE_ORIGIN else -1  # lanes sharing their shear axes
     found = 0
     for g in range(g0, g1):
         if any_hit:
             m &= ~found
             if m == 0:
                 break
-        lanes = lanes_meeting_box(sc.lanes32, boxes, g, m, S.load(sc.rays, BEST * L)) if grouped else m
+        limits = (S.load(sc.rays, TMIN * L), S.load(sc.rays, BEST * L))
+        lanes = lanes_meeting_box(sc.lanes32, boxes, g, m, depth_axis, limits) if grouped else m
         if lanes == 0:
             continue
         j0, j1 = (max(column, shift + g * LEAF_GROUP), min(end, shift + g * LEAF_GROUP + LEAF_GROUP)) if grouped \

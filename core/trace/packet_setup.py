@@ -13,7 +13,7 @@ from numba import njit
 
 from . import simd as S
 from .array_views import at, rows
-from .packet_boxes import C32, E32, INV32, O32, SCALE, T0, T1, TINY, rounded_up
+from .packet_boxes import C32, E32, INV32, O32, SCALE, T0, T1, TINY, rounded_down, rounded_up
 from .packet_leaf import BEST, LANE_BY_LANE, O, ONE_ORIGIN, ONE_ORIGIN_BY_LANE, SAME_AXES, SX, SY, SZ, TMIN
 from .traversal import WIDEN
 from .triangle_test import ray_shear
@@ -173,8 +173,7 @@ def _fill_rows32(lanes32, o, inv, t0, t1):
         S.store(lanes32, (INV32 + k) * L, inv32)
         S.store(lanes32, (C32 + k) * L, c)
         S.store(lanes32, (E32 + k) * L, S.add(S.mul(c, S.add(S.vabs(o32), tiny)), tiny))
-    low = S.to_f32(S.mul(t0, S.splat_f64(1.0 - 2.0 ** -22)))
-    S.store(lanes32, T0 * L, S.select(S.gt(t0, S.splat_f64(2.0 * TINY)), low, S.splat_f32(0.0)))
+    S.store(lanes32, T0 * L, rounded_down(t0))
     S.store(lanes32, T1 * L, rounded_up(t1))
 
 
