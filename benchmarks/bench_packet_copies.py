@@ -1,13 +1,14 @@
 """The packet kernel of several copies of core in ONE process, by turns, against Embree: paired
 comparisons of revisions or of variants (a part done twice, a part left out) for profiling.
 
-Usage: python benchmarks/bench_packet_copies.py DIR/NAME [DIR/NAME ...] [--runs 41] [--threads 1]
+Usage: python benchmarks/bench_packet_copies.py DIR/NAME [DIR/NAME ...] [--runs 41] [--threads 1] [--rays N]
 
 Each DIR/NAME is a copy of `core/` under another package name, e.g.
 `mkdir -p /tmp/pv/base && git archive REV core | tar -x -C /tmp/pv/base --strip-components=1`
 (core imports itself only relatively, so the copies load side by side, each with its own Numba
 cache). Traces suzanne-251k's 640 x 480 camera rays with each copy's `trace_packets` on --threads
-threads and with embreex (one thread), after an untimed call each (which compiles), checks each copy's
+threads and with embreex (one thread), through the default tree or, with --rays, a tree told that many
+rays (seed 000's setting is 614400), after an untimed call each (which compiles), checks each copy's
 hits against core.intersect, then takes --runs rounds of all of them in turn and prints medians of the
 time per million rays (CPU time on one thread, wall time on more), the speed against Embree and the
 time against the first copy.
@@ -34,6 +35,7 @@ def main():
     ap.add_argument("copies", nargs="+")
     ap.add_argument("--runs", type=int, default=41)
     ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--rays", type=int, default=None, help="build the tree told this many rays")
     args = ap.parse_args()
     sys.path[:0] = [str(HERE), str(HERE.parent)] + [str(Path(c).resolve().parent) for c in args.copies]
     import core
@@ -45,7 +47,7 @@ def main():
     scene = load_scene("suzanne-251k")
     o, d = camera_workload(scene, 640, 480)
     n = len(o)
-    tree = core.build_kdtree(scene.triangles)
+    tree = core.build_kdtree(scene.triangles, **({} if args.rays is None else {"rays": args.rays}))
     embree = EmbreeTracer(scene.triangles)
     reference = core.intersect(tree, o, d)
     tracers = {}
