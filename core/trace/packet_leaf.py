@@ -75,7 +75,7 @@ def leaf_test(copy, leaf_prims, column, end, first, m, sc, mode, any_hit):
             if m == 0:
                 break
         lanes = m
-        if grouped:  # the limits' loads only here: on every leaf they cost the default tree ~3% (choices.md)
+        if grouped:  # the limits are loaded only here (docs/choices.md#boxes-over-groups-of-a-large-leafs-triangles)
             limits = (S.load(sc.rays, TMIN * L), S.load(sc.rays, BEST * L))
             lanes = lanes_meeting_box(sc.lanes32, boxes, g, m, depth_axis, limits)
         if lanes == 0:
