@@ -24,13 +24,13 @@ BYTES_PER_REFERENCE = 36 + 24 // LEAF_GROUP  # nine float32 a column, and its sh
 
 
 def leaf_triangles(triangles, leaf_prims, previous=None):
-    """(9, R) float32: the vertices of triangles[leaf_prims[j]] in column j. `previous`: (old
-    leaf_prims, old copy); where the new leaf_prims starts with the old ones (a lazy tree's splice
-    appends), those columns are copied instead of gathered again."""
+    """(9, R) float32: the vertices of triangles[leaf_prims[j]] in column j. `previous`: (how many
+    leading columns are unchanged (kept_columns), old copy); those columns are copied instead of
+    gathered again."""
     out = np.empty((9, len(leaf_prims)), np.float32)
     start = 0
     if previous is not None:
-        start = kept_columns(previous[0], leaf_prims)
+        start = previous[0]
         out[:, :start] = previous[1][:, :start]
     if start < len(leaf_prims):
         _gather(triangles, leaf_prims, start, out)

@@ -46,11 +46,11 @@ class KdTree:
 
     def replace_nodes(self, node_arrays):
         """Swap in grown node arrays (a lazy tree after building deferred subtrees)."""
-        previous = (self.leaf_prims, self.leaf_triangles)
+        old_prims = self.leaf_prims
         self.axis, self.split, self.child, self.count, self.leaf_prims = node_arrays
-        self.leaf_triangles = leaf_triangles(self.triangles, self.leaf_prims, previous)
-        kept = (self.leaf_boxes, kept_columns(previous[0], self.leaf_prims))
-        self.leaf_boxes = leaf_boxes(self.leaf_triangles, self.node_arrays, self.bounds, kept)
+        kept = kept_columns(old_prims, self.leaf_prims)  # a splice appends: the old columns stay
+        self.leaf_triangles = leaf_triangles(self.triangles, self.leaf_prims, (kept, self.leaf_triangles))
+        self.leaf_boxes = leaf_boxes(self.leaf_triangles, self.node_arrays, self.bounds, (self.leaf_boxes, kept))
         self._stats = None
 
     @property
