@@ -9,6 +9,8 @@ import os
 
 import numpy as np
 
+from . import buffer_pool
+
 MB = 1 << 20
 MARGIN = 1.25  # peaks vary by scene (references per triangle); the limit is a promise
 
@@ -128,5 +130,6 @@ def release_freed_memory():
     """Give the memory a build has freed back to the OS, where the C library can (glibc's
     malloc_trim). The subtree builds' pools are freed into their worker threads' malloc arenas, which
     keep it, and the tree's leaf copy, allocated afterwards, would add its whole size to the peak."""
+    buffer_pool.release()
     if _MALLOC_TRIM is not None:
         _MALLOC_TRIM(0)

@@ -4,6 +4,7 @@ import functools
 import numpy as np
 from numba import njit, prange
 
+from .. import buffer_pool
 from ..inputs import as_number, as_real_array, check_image_size, without_negligible_components
 from ..trace.packet_traversal import L, packet_order
 
@@ -81,9 +82,9 @@ class Camera:
         rot = np.ascontiguousarray(rot)  # one compiled _pixel_rays, whether or not the call above copied
         pixels = np.arange(width * height, dtype=np.int64) if pixels is None else _pixel_indices(pixels, width, height)
         n = len(pixels)
-        origins, directions = np.empty((n, 3)), np.empty((n, 3))
+        origins, directions = buffer_pool.empty((n, 3)), buffer_pool.empty((n, 3))
         _pixel_rays(x, y, rot, self.matrix_world[:3, 3].copy(), self.fov is not None, pixels, origins, directions)
-        return origins, directions, np.full(n, self.clip_start), np.full(n, self.clip_end)
+        return origins, directions, buffer_pool.full(n, self.clip_start), buffer_pool.full(n, self.clip_end)
 
     def image_plane(self, width, height):
         """(left, right, bottom, top) of the image in camera space: on the plane z = -1 (perspective) or

@@ -13,6 +13,7 @@ neighbourhood, Laplace's floor), checked at power-of-two sample counts so batchi
 
 import numpy as np
 
+from .. import buffer_pool
 from ..jit.compile_clock import clock
 from ..jit.kernel_cache import holds_version
 from .camera import Camera, tiled_packets, tiled_pixels
@@ -96,10 +97,11 @@ class PreviewRender:
         self.camera_rays = self.width * self.height
         packets = tiled_packets(self.width, self.height) if self.packets else None
         pixels, depths, points, normals, starts = self._camera_hits(tiled_pixels(self.width, self.height), packets)
-        zero = np.zeros(len(pixels), np.int64)
-        self._start(pixels, depths, points, normals, starts, np.zeros((len(pixels), 3)), np.zeros(len(pixels)), zero,
-                    zero.copy(), np.arange(len(pixels), dtype=np.int64), self._memo_rows(len(pixels)))
-        self.known, self.boxes = np.zeros(len(pixels), np.int64), np.zeros((0, 6))
+        n = len(pixels)
+        self._start(pixels, depths, points, normals, starts, buffer_pool.zeros((n, 3)), buffer_pool.zeros(n),
+                    buffer_pool.zeros(n, np.int64), buffer_pool.zeros(n, np.int64), np.arange(n, dtype=np.int64),
+                    self._memo_rows(n))
+        self.known, self.boxes = buffer_pool.zeros(n, np.int64), np.zeros((0, 6))
         self.checked = self._unchecked(len(pixels))
         self._hard_shadows_due = True
 
@@ -127,19 +129,20 @@ class PreviewRender:
         seen = prim >= 0
         if (self.scene.visibility & HOLDOUT).any():  # a holdout leaves its pixels empty
             seen[seen] = (self.scene.visibility[inst[seen]] & HOLDOUT) == 0
-        hit = np.flatnonzero(seen).astype(np.int64)
-        points, normals, starts = np.empty((len(hit), 3)), np.empty((len(hit), 3)), np.empty((len(hit), 3))
+        hit = np.flatnonzero(seen)
+        points, normals, starts = (buffer_pool.empty((len(hit), 3)), buffer_pool.empty((len(hit), 3)),
+                                   buffer_pool.empty((len(hit), 3)))
         with thread_count(self.threads):
             surface_frames(self.scene.arrays, origins, directions, t, inst, prim, hit, points, normals, starts)
-        return traced[hit], t[hit], points, normals, starts
+        return buffer_pool.take(traced, hit), buffer_pool.take(t, hit), points, normals, starts
 
     def _start(self, pixels, depths, points, normals, starts, sums, sq_sums, counts, ray_counts, active, memo):
         self.pixels, self.depths, self.points, self.normals, self.starts = pixels, depths, points, normals, starts
         self.sums, self.sq_sums, self.counts, self.ray_counts = sums, sq_sums, counts, ray_counts
         self.active, self.memo = active, memo
-        self.memo_reused = np.zeros(len(pixels), np.int64)
-        self.repeated = np.zeros(len(pixels), np.int64)  # rays of lights without extent (render_kernels.py)
-        self.alone = np.zeros(len(pixels), np.int64)  # rays the sample packets left to single rays (RayMemo)
+        self.memo_reused = buffer_pool.zeros(len(pixels), np.int64)
+        self.repeated = buffer_pool.zeros(len(pixels), np.int64)  # rays of lights without extent (render_kernels.py)
+        self.alone = buffer_pool.zeros(len(pixels), np.int64)  # rays the sample packets left singly (RayMemo)
         self.pretraced = np.full((len(pixels), len(self.lights)), -1, np.int8)
         self.pretraced_weights = np.empty((0, len(self.lights)))  # none made (RayMemo.weights)
         self._hard_shadows_due = False  # only a frame traced from scratch (_trace_camera)
@@ -283,7 +286,7 @@ class PreviewRender:
         packed = self._sample_packets(batch)
 
         def run(active):
-            status = np.empty(len(active), np.int64)
+            status = buffer_pool.empty(len(active), np.int64)
             add_samples(self.scene.arrays, PixelFrames(self.points, self.normals, self.starts, self.pixels), active,
                         SampleBatch(self.samples_done, batch, MODES[self.mode], self.ao_distance, self.ambient,
                                     self.sampler, self.seed, SOBOL_DIM1), self.lights,
@@ -314,8 +317,8 @@ class PreviewRender:
         if "shadow" not in self.mode or not len(hard) or not self.packets or not packets_apply(self.scene, SHADOW_RAYS):
             return
         frames = PixelFrames(self.points, self.normals, self.starts, self.pixels)
-        self.pretraced_weights = np.full((len(self.points), len(self.lights)), np.nan)
-        directions, tmax = np.empty_like(self.points), np.empty(len(self.points))
+        self.pretraced_weights = buffer_pool.full((len(self.points), len(self.lights)), np.nan)
+        directions, tmax = buffer_pool.empty(self.points.shape), buffer_pool.empty(len(self.points))
         for k in hard:
             with thread_count(self.threads):
                 hard_shadow_rays(frames, self.lights, int(k), SOBOL_DIM1, directions, tmax, self.pretraced_weights)
@@ -327,7 +330,7 @@ class PreviewRender:
         (0, tmax), traced in packets of consecutive listed rays. The packets read the rays where they are
         (no copies of the listed rows). The order is read-only, as the camera pass's (tiled_packets): the
         same compiled packet kernel."""
-        order = np.full(-(-len(rays) // L) * L, -1, np.int64)
+        order = buffer_pool.full(-(-len(rays) // L) * L, -1, np.int64)
         order[:len(rays)] = rays
         order.setflags(write=False)
         blocked = occluded_in_packets(self.scene, self.starts, directions, np.zeros(len(tmax)), tmax, order,

@@ -14,6 +14,7 @@ is one in (tmin, tmax), which is whether an any-hit query finds one.
 import numpy as np
 from numba import njit, prange
 
+from .. import buffer_pool
 from ..jit.kernel_cache import holds_version
 from ..jit.threads import thread_count
 from ..trace.layout import LEAF
@@ -82,13 +83,14 @@ def _trace_in_packets(scene, o, d, lo, hi, order, threads, ray_mask, any_hit):
     trace_valid_rays gives them."""
     s = scene.arrays
     n, inst = len(o), int(s.top_items[0])
-    t, u, v, prim = np.empty(n), np.empty(n), np.empty(n), np.empty(n, np.int32)
-    single = np.zeros(n, np.uint8)
+    t, u, v, prim = buffer_pool.empty(n), buffer_pool.empty(n), buffer_pool.empty(n), buffer_pool.empty(n, np.int32)
+    single = buffer_pool.zeros(n, np.uint8)
     with thread_count(threads):
         o_obj, d_obj = _in_object_space(s.world_to_object[inst], o, d)
         trace_packets(packed_mesh_tree(s, int(s.mesh_of[inst])), PacketRays(o_obj, d_obj, lo, hi, order),
                       PacketOutputs(t, prim, u, v, single), any_hit)
-        instance = np.where(prim >= 0, np.int32(inst), np.int32(-1))
+        instance = buffer_pool.full(n, inst, np.int32)
+        instance[prim < 0] = -1
         retrace(s, (o, d, lo, hi), np.flatnonzero(single.view(np.bool_)), any_hit, ray_mask, (t, instance, prim, u, v))
     return t, instance, prim, u, v
 
@@ -102,7 +104,7 @@ def _in_object_space(w2o, o, d):
     single rays, which take the world rays), so its rays are used as they are: no pass, no copies."""
     if np.array_equal(w2o, IDENTITY):
         return o, d
-    o_obj, d_obj = np.empty_like(o), np.empty_like(d)
+    o_obj, d_obj = buffer_pool.empty(o.shape), buffer_pool.empty(d.shape)
     _rays_to_object(w2o, o, d, o_obj, d_obj)
     return o_obj, d_obj
 
