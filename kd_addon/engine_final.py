@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import re
 import time
+import traceback
 from dataclasses import replace
 from typing import NamedTuple
 
@@ -134,7 +135,17 @@ class FinalRender:
         nothing. Ctrl-C in a script driving the bpy module (a KeyboardInterrupt here: Blender's own
         binary takes SIGINT itself) is reported as an error, so Blender writes nothing for the frame (it
         wrote an empty image over the output when the exception left render()) and the script's render
-        call fails instead of going on."""
+        call fails instead of going on. Any other exception (a fault of the add-on's, or of the machine's)
+        is reported the same way with its traceback printed: left to leave render(), it made the bpy
+        module crash while writing a multilayer EXR's passes."""
+        try:
+            self._run()
+        except Exception as error:  # noqa: BLE001 (the last guard before Blender's own render call)
+            traceback.print_exc()
+            self._report_error(f"the frame failed: {type(error).__name__}: {error} (traceback in the console); "
+                               "nothing written for this frame")
+
+    def _run(self) -> None:
         _note_uncompiled()
         try:
             config = make_config(self.scene.kd_preview)
@@ -318,11 +329,16 @@ def _note_uncompiled() -> None:
     """A background render (blender -b, a script on the bpy module) starts no second warm-up stage: say
     once a process, while it is not cached, that its frames are slower until the compile command has run
     (compile_command.py). Blender's binary has a binary_path; the bpy module's is empty (unless a script
-    sets it), and its command is the module's."""
+    sets it), and its command is the module's. Advice only: a cache folder it cannot read says nothing, and
+    the render goes on."""
     global _uncompiled_noted
     if not bpy.app.background or _uncompiled_noted:
         return
     _uncompiled_noted = True
-    note = compile_command.uncompiled_note(compile_command.COMMAND_ID if bpy.app.binary_path else "python -m kd_addon")
+    try:
+        note = compile_command.uncompiled_note(compile_command.COMMAND_ID if bpy.app.binary_path
+                                               else "python -m kd_addon")
+    except OSError:
+        return
     if note:
         print(f"KD Preview: note: {note}", flush=True)
