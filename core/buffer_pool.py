@@ -9,9 +9,13 @@ zeroed page by page by the kernel: about a tenth of a preview's render time
 `empty(shape, dtype)` hands out a view of a kept block. A block is handed out again only once nothing
 refers to it: every array made from a view (a slice, a reshape, Numba's boxed results) holds the block
 itself as its base, so the block's reference count says whether any is alive, and an array from here
-may be kept or returned to a caller like any other. A free block not handed out during the last
-STALE_AFTER pooled requests is let go, so the pool holds about one frame's arrays; `release()` lets go of
-every free block (memory.release_freed_memory calls it).
+may be kept or returned to a caller like any other. Where that count does not behave so (checked once,
+at import), arrays come from NumPy as before.
+
+What is kept: `new_frame()` (PreviewRender calls it before each frame) lets go of the free blocks the
+frame before did not use, so the pool holds about the last frame's arrays, whatever sizes came before;
+a free block unused for STALE_AFTER pooled requests goes too; `release()` lets go of every free block
+(memory.release_freed_memory, and the add-on under a memory limit, call it).
 """
 import sys
 import threading
@@ -21,21 +25,31 @@ import numpy as np
 MIN_POOLED_BYTES = 1 << 20  # smaller arrays come from NumPy: the C library keeps and reuses them itself
 HEADROOM = 1.0625  # a new block's size over the request, so a frame with a few more hits reuses it
 LARGEST_OVER_REQUEST = 1.25  # a free block serves requests down to 1 / this of its size
-STALE_AFTER = 64  # pooled requests a free block may go unused before it is let go (a frame makes ~30)
+STALE_AFTER = 256  # pooled requests a free block may go unused outside frames (a frame makes about 30)
 PAGE = 4096
 
-_lock = threading.Lock()
+_lock = threading.RLock()  # reentrant: a garbage collection inside np.empty may free pooled arrays
 _blocks = []  # the kept blocks, uint8 arrays
 _last_use = []  # the request count at each block's last hand-out
-_requests = [0]
+_counts = {"requests": 0, "frame_start": 0, "made": 0}
 
 
 def _references(blocks, i):
     return sys.getrefcount(blocks[i])
 
 
-# A block no array refers to, counted the way _free counts: the list's reference and the call's own.
-_UNREFERENCED = _references([np.empty(1, np.uint8)], 0)
+def _counting_works():
+    """The baseline count of a block nothing refers to, measured as _free measures it, or None when a
+    view of a block does not raise its count (then nothing is pooled)."""
+    blocks = [np.empty(16, np.uint8)]
+    alone = _references(blocks, 0)
+    view = blocks[0][4:8].view(np.int32)
+    viewed = _references(blocks, 0)
+    del view
+    return alone if viewed > alone and _references(blocks, 0) == alone else None
+
+
+_UNREFERENCED = _counting_works()
 
 
 def empty(shape, dtype=np.float64):
@@ -43,7 +57,7 @@ def empty(shape, dtype=np.float64):
     dtype = np.dtype(dtype)
     shape = (shape,) if np.ndim(shape) == 0 else tuple(shape)
     n_bytes = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
-    if n_bytes < MIN_POOLED_BYTES:
+    if n_bytes < MIN_POOLED_BYTES or _UNREFERENCED is None:
         return np.empty(shape, dtype)
     with _lock:
         block = _block_for(n_bytes)
@@ -65,10 +79,19 @@ def full(shape, value, dtype=np.float64):
 
 
 def take(array, indices):
-    """array[indices] for integer indices along the first axis, into a pooled array."""
+    """array[indices] for valid integer indices along the first axis, into a pooled array (mode "clip":
+    NumPy's default mode writes to a temporary copy of `out` first)."""
     out = empty((len(indices), *array.shape[1:]), array.dtype)
-    np.take(array, indices, axis=0, out=out)
+    np.take(array, indices, axis=0, out=out, mode="clip")
     return out
+
+
+def new_frame():
+    """A frame starts: let go of the free blocks not handed out since the last frame started."""
+    with _lock:
+        start = _counts["frame_start"]
+        _drop(lambda i: _last_use[i] <= start)
+        _counts["frame_start"] = _counts["requests"]
 
 
 def release():
@@ -77,12 +100,14 @@ def release():
         _drop(lambda i: True)
 
 
-def held_bytes():
-    """(bytes of every kept block, bytes of the free ones)."""
+def stats():
+    """{"held": bytes of every kept block, "free": bytes of the free ones, "blocks": how many are kept,
+    "made": how many were ever made}."""
     with _lock:
         free = [_free(i) for i in range(len(_blocks))]  # before any name holds a block
         sizes = [b.nbytes for b in _blocks]
-    return sum(sizes), sum(size for size, is_free in zip(sizes, free) if is_free)
+        return {"held": sum(sizes), "free": sum(s for s, is_free in zip(sizes, free) if is_free),
+                "blocks": len(sizes), "made": _counts["made"]}
 
 
 def _free(i):
@@ -93,8 +118,8 @@ def _free(i):
 def _block_for(n_bytes):
     """The smallest free block of n_bytes up to LARGEST_OVER_REQUEST times that, else a new one; stale
     free blocks are let go first."""
-    _requests[0] += 1
-    now = _requests[0]
+    _counts["requests"] += 1
+    now = _counts["requests"]
     _drop(lambda i: now - _last_use[i] > STALE_AFTER)
     best, best_size = -1, 0
     for i in range(len(_blocks)):
@@ -104,6 +129,7 @@ def _block_for(n_bytes):
     if best < 0:
         _blocks.append(np.empty(-(-int(n_bytes * HEADROOM) // PAGE) * PAGE, np.uint8))
         _last_use.append(now)
+        _counts["made"] += 1
         best = len(_blocks) - 1
     _last_use[best] = now
     return _blocks[best]

@@ -34,11 +34,14 @@ def check_frame(n_triangles: int, width: int, height: int, config, keeps_previou
     views' and passes' kept images hold meanwhile, tree_cache.held_bytes). With no limit set,
     only the pixel buffers are checked, against the machine's physical memory: their estimate is
     close, while the geometry's covers the worst scene and would refuse typical ones that fit
-    (docs/choices.md#without-a-memory-limit-only-the-pixel-buffers-are-checked)."""
+    (docs/choices.md#without-a-memory-limit-only-the-pixel-buffers-are-checked). With a limit, the
+    renderer's kept blocks from earlier frames are let go first (core/buffer_pool.py)."""
     geometry, pixels = frame_bytes(n_triangles, width, height, config.settings.builder, keeps_previous)
     pixels += held
     kept = f", of which {held / MIB:,.0f} MiB other views' and passes' kept pixels" if held else ""
     limit = config.memory_limit
+    if limit is not None:  # the estimate is what the frame adds: earlier frames' kept blocks go first
+        corelib.load_core().buffer_pool.release()
     if limit is None:
         machine = corelib.load_core().memory.physical_memory()
         if machine is not None and pixels > machine:

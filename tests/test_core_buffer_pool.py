@@ -32,7 +32,7 @@ def test_a_freed_arrays_block_is_handed_out_again():
     del a
     b = buffer_pool.empty((BIG - 10, 3), np.float64)  # a little smaller: the same block
     assert address(b) == where
-    assert buffer_pool.held_bytes()[1] == 0
+    assert buffer_pool.stats()["free"] == 0
 
 
 @njit
@@ -84,15 +84,35 @@ def test_a_block_goes_stale_and_release_keeps_held_arrays():
     held = buffer_pool.full(BIG, 5.0)
     gone = buffer_pool.empty(BIG * 4)
     del gone
-    assert buffer_pool.held_bytes()[1] >= BIG * 4 * 8
+    assert buffer_pool.stats()["free"] >= BIG * 4 * 8
     for _ in range(buffer_pool.STALE_AFTER + 1):
         buffer_pool.empty(BIG // 2)  # other sizes: the big block is never asked for
-    total, free = buffer_pool.held_bytes()
-    assert total < BIG * 4 * 8 + 3 * BIG * 8
+    assert buffer_pool.stats()["held"] < BIG * 4 * 8 + 3 * BIG * 8
     buffer_pool.release()
-    total, free = buffer_pool.held_bytes()
-    assert free == 0 and total >= held.nbytes  # the held array's block stays, with its values
+    kept = buffer_pool.stats()
+    assert kept["free"] == 0 and kept["held"] >= held.nbytes  # the held array's block stays, with its values
     assert np.all(held == 5.0)
+
+
+def test_a_new_frame_lets_go_of_blocks_the_last_frame_did_not_use():
+    """Frames of changing sizes (a viewport resized): after each frame starts, the free blocks are those
+    of the frame before it, not of every size seen."""
+    frames = [BIG, 2 * BIG, 4 * BIG, BIG, BIG]
+    for k, size in enumerate(frames):
+        buffer_pool.new_frame()
+        arrays = [buffer_pool.empty(size) for _ in range(3)]
+        in_use = buffer_pool.stats()
+        if k > 0:
+            assert in_use["free"] <= 3 * frames[k - 1] * 8 * buffer_pool.HEADROOM + 3 * buffer_pool.PAGE
+        del arrays
+    assert buffer_pool.stats()["held"] <= 3 * BIG * 8 * buffer_pool.HEADROOM + 3 * buffer_pool.PAGE
+
+
+def test_reference_counts_are_checked_once_and_pooling_stops_without_them(monkeypatch):
+    assert buffer_pool._counting_works() == buffer_pool._UNREFERENCED is not None  # this Python counts views
+    monkeypatch.setattr(buffer_pool, "_UNREFERENCED", None)
+    a = buffer_pool.empty((BIG, 3))
+    assert a.flags.owndata and buffer_pool.stats()["blocks"] == 0
 
 
 def test_threads_never_share_a_live_block():
@@ -123,17 +143,31 @@ def test_a_second_frame_takes_the_first_frames_blocks_with_the_same_image():
     render = core.PreviewRender(tree, camera, 512, 512, samples=2, mode="shadow", lights=lights)
     render.step(2)
     first = render.image()
-    held_after_first = buffer_pool.held_bytes()[0]
-    assert held_after_first > 10 * buffer_pool.MIN_POOLED_BYTES
+    assert buffer_pool.stats()["held"] > 10 * buffer_pool.MIN_POOLED_BYTES
     state = render.pixel_state()
     kept = [np.array(a, copy=True) for a in state if isinstance(a, np.ndarray)]
     del render
     second = core.render_preview(tree, camera, 512, 512, samples=2, mode="shadow", lights=lights)
-    held_after_second = buffer_pool.held_bytes()[0]
+    made = buffer_pool.stats()["made"]
     np.testing.assert_array_equal(first, second)
     for before, now in zip(kept, [a for a in state if isinstance(a, np.ndarray)]):
         np.testing.assert_array_equal(before, now)
     del state
     third = core.render_preview(tree, camera, 512, 512, samples=2, mode="shadow", lights=lights)
     np.testing.assert_array_equal(first, third)
-    assert buffer_pool.held_bytes()[0] <= held_after_second  # no block added
+    assert buffer_pool.stats()["made"] == made  # no block added
+
+
+@pytest.mark.parametrize("limit_mb, kept", [(4096, False), (0, True)])  # 0: no limit
+def test_the_addon_lets_go_of_kept_blocks_before_a_frame_under_a_memory_limit(limit_mb, kept):
+    """Under a memory limit the frame's estimate must be all it adds: the add-on's frame check lets go of
+    earlier frames' free blocks first; without a limit they stay for the frame to reuse."""
+    from types import SimpleNamespace
+
+    from kd_addon import memory_limit
+    from kd_addon.config import make_config
+
+    buffer_pool.empty((BIG, 3))  # freed at once: a free block
+    assert buffer_pool.stats()["free"] > 0
+    memory_limit.check_frame(100, 64, 48, make_config(SimpleNamespace(memory_limit_mb=limit_mb)))
+    assert (buffer_pool.stats()["free"] > 0) == kept

@@ -85,6 +85,7 @@ class PreviewRender:
                                      self.lights, self.seed, self.sampler, o.error_target, self.min_samples,
                                      self.ambient)
         start = clock()
+        buffer_pool.new_frame()  # the kept blocks: about the last frame's arrays
         boxes = self._changed_boxes(previous)
         if boxes is None:
             self._trace_camera()
