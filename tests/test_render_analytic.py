@@ -4,6 +4,7 @@ import pytest
 
 import core
 from core.render.camera import tiled_pixels
+from core.trace.packet_traversal import L, TILE_SHAPE
 from tests.render_scenes import floor, hit_mask, look_at, look_down, quad, render
 
 
@@ -82,8 +83,16 @@ def test_tiled_pixel_order_covers_every_pixel_once_tile_by_tile(width, height):
     rows, cols = order // width, order % width
     tile = (rows // 8) * ((width + 7) // 8) + cols // 8
     assert (np.diff(tile) >= 0).all()  # tile by tile
-    within = np.diff(rows * width + cols)[np.diff(tile) == 0]
-    assert (within > 0).all()  # row-major inside a tile
+    bw, bh = TILE_SHAPE
+    block = tile * 64 + ((rows % 8) // bh) * (8 // bw) + (cols % 8) // bw
+    assert (np.diff(block) >= 0).all()  # packet block by packet block inside a tile, row-major
+    within = np.diff(rows * width + cols)[np.diff(block) == 0]
+    assert (within > 0).all()  # row-major inside a block
+    for first in np.flatnonzero(np.r_[True, np.diff(block) != 0]):  # a whole block's pixels are L in a row
+        whole = (rows[first] // 8 * 8 + 8 <= height) and (cols[first] // 8 * 8 + 8 <= width)
+        if whole:
+            x, y = cols[first:first + L], rows[first:first + L]
+            assert x.max() - x.min() == bw - 1 and y.max() - y.min() == bh - 1
     camera = look_at((1.0, -2.0, 1.5), (0.0, 0.0, 0.0))
     everything = camera.rays(width, height)
     for full, subset in zip(everything, camera.rays(width, height, order)):

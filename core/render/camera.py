@@ -6,7 +6,7 @@ from numba import njit, prange
 
 from .. import buffer_pool
 from ..inputs import as_number, as_real_array, check_image_size, without_negligible_components
-from ..trace.packet_traversal import L, packet_order
+from ..trace.packet_traversal import L, TILE_SHAPE, packet_order
 
 TILE = 8  # tiled_pixels: 8 x 8 = 64 rays, one traversal task (traversal.RAYS_PER_TASK)
 
@@ -122,13 +122,19 @@ def _pixel_indices(pixels, width, height):
 
 @functools.lru_cache(maxsize=8)
 def tiled_pixels(width, height, tile=TILE):
-    """Every row-major pixel index once, tile by tile (tile x tile squares, row-major within a tile and
-    across tiles; edge tiles are cut short). Read-only and kept per size: every frame asks for the same
+    """Every row-major pixel index once, tile by tile (tile x tile squares, row-major across tiles; edge
+    tiles are cut short), and inside a tile packet block by packet block (TILE_SHAPE, a packet's pixels:
+    row-major across blocks and within one). Read-only and kept per size: every frame asks for the same
     order. Rays in this order are coherent within each traversal task (one 8 x 8 tile), so they walk
-    the same nodes while those are in cache (docs/choices.md#pixels-traced-in-8-x-8-tiles)."""
-    tiles_across = (width + tile - 1) // tile
-    tile_of_pixel = (np.arange(height) // tile)[:, None] * tiles_across + (np.arange(width) // tile)[None, :]
-    order = np.argsort(tile_of_pixel.ravel(), kind="stable")  # stable: row-major within a tile
+    the same nodes while those are in cache (docs/choices.md#pixels-traced-in-8-x-8-tiles), and the hits'
+    later rays taken L at a time in this order leave a packet's compact block of pixels, not two rows
+    (docs/choices.md#hits-listed-packet-block-by-packet-block)."""
+    bw, bh = TILE_SHAPE
+    ys, xs = np.divmod(np.arange(width * height, dtype=np.int64), width)
+    tile_index = (ys // tile) * -(-width // tile) + xs // tile
+    block = ((ys % tile) // bh) * -(-tile // bw) + (xs % tile) // bw
+    key = (tile_index * (-(-tile // bw) * -(-tile // bh)) + block) * (bw * bh) + (ys % bh) * bw + xs % bw
+    order = np.argsort(key, kind="stable")
     order.setflags(write=False)
     return order
 
