@@ -2,9 +2,9 @@
 
 A frame's camera rays, hits, hit frames and shadow rays are tens of MB. Allocated afresh, the C library
 hands the freed blocks back to the OS at the end of the frame and the next frame faults them in again,
-zeroed page by page by the kernel: about a tenth of a preview's render time
-(docs/choices.md#a-frames-large-arrays-from-kept-blocks). The build keeps its own pools for the same reason
-(seed 000 section 3.5; memory.release_before_copy).
+zeroed page by page by the kernel, a cost every frame paid
+(docs/choices.md#a-frames-large-arrays-from-kept-blocks). The build keeps its own pools for the same
+reason (seed 000 section 3.5; memory.release_before_copy).
 
 `empty(shape, dtype)` hands out a view of a kept block. A block is handed out again only once nothing
 refers to it: every array made from a view (a slice, a reshape, Numba's boxed results) holds the block

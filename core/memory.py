@@ -129,7 +129,8 @@ def release_before_copy(copy_bytes, memory_limit):
 def release_freed_memory():
     """Give the memory a build has freed back to the OS, where the C library can (glibc's
     malloc_trim). The subtree builds' pools are freed into their worker threads' malloc arenas, which
-    keep it, and the tree's leaf copy, allocated afterwards, would add its whole size to the peak."""
+    keep it, and the tree's leaf copy, allocated afterwards, would add its whole size to the peak. The
+    renderer's kept blocks (buffer_pool.py) go first."""
     buffer_pool.release()
     if _MALLOC_TRIM is not None:
         _MALLOC_TRIM(0)

@@ -136,8 +136,8 @@ class FinalRender:
         binary takes SIGINT itself) is reported as an error, so Blender writes nothing for the frame (it
         wrote an empty image over the output when the exception left render()) and the script's render
         call fails instead of going on. Any other exception (a fault of the add-on's, or of the machine's)
-        is reported the same way with its traceback printed: left to leave render(), it made the bpy
-        module crash while writing a multilayer EXR's passes."""
+        is reported the same way, its traceback printed, and never leaves render()
+        (docs/choices.md#a-final-renders-unexpected-failures-reported-not-raised)."""
         try:
             self._run()
         except Exception as error:  # noqa: BLE001 (the last guard before Blender's own render call)

@@ -132,8 +132,9 @@ def tiled_pixels(width, height, tile=TILE):
     bw, bh = TILE_SHAPE
     ys, xs = np.divmod(np.arange(width * height, dtype=np.int64), width)
     tile_index = (ys // tile) * -(-width // tile) + xs // tile
-    block = ((ys % tile) // bh) * -(-tile // bw) + (xs % tile) // bw
-    key = (tile_index * (-(-tile // bw) * -(-tile // bh)) + block) * (bw * bh) + (ys % bh) * bw + xs % bw
+    y, x = ys % tile, xs % tile  # inside the tile
+    block = (y // bh) * -(-tile // bw) + x // bw
+    key = (tile_index * (-(-tile // bw) * -(-tile // bh)) + block) * (bw * bh) + (y % bh) * bw + x % bw
     order = np.argsort(key, kind="stable")
     order.setflags(write=False)
     return order
