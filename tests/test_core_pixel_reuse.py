@@ -362,8 +362,7 @@ def test_surface_ray_test_covers_every_sampled_ray(light):
     n, found = np.array([0.0, 0.0, 1.0]), 0
     for _ in range(120):
         p = rng.uniform(-4, 4, 3) * (1, 1, 0)
-        o, d = np.empty(3), np.empty(3)
-        offset_origin(p, n, 10.0, o)
+        o, d = np.array(offset_origin(p, n, 10.0)), np.empty(3)
         dist, mask = sample_light(lights[0], o, *rng.random(2), d)
         along = rng.uniform(0.1, 0.9) * min(dist, 8.0)
         centre = o + along * d + rng.normal(0, 0.3, 3)

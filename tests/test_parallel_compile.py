@@ -226,13 +226,13 @@ def test_the_two_sides_compile_what_a_real_render_runs():
     from core.build import box_tree
     from core.jit import first_frame
     from core.render import camera as camera_module
-    from core.render import denoise, render_kernels
+    from core.render import denoise, hit_frames, render_kernels
     from core.scene import instance_packets, instance_traversal, scene_packets
     from core.trace import packet_traversal
 
     parallel_compile.compile_rendering_kernels(denoise=True)
     parallel_compile.compile_camera_pass()
-    kernels = [render_kernels.add_samples, render_kernels.surface_frames, render_kernels.assemble_image,
+    kernels = [render_kernels.add_samples, hit_frames.surface_frames, render_kernels.assemble_image,
                camera_module._pixel_rays, instance_traversal.trace_scene_rays, box_tree.build_box_subtree]
     kernels += [k for k in vars(denoise).values() if hasattr(k, "signatures")]
     sides = {k: len(k.signatures) for k in kernels}
@@ -285,11 +285,11 @@ SIDES = """
 import sys
 sys.path.insert(0, {root!r})
 from core.jit import parallel_compile
-from core.render import render_kernels
+from core.render import hit_frames, render_kernels
 from core.scene import instance_traversal
 parallel_compile.compile_scene_wrapping()
 getattr(parallel_compile, sys.argv[1])()
-print(*(len(k.signatures) for k in (render_kernels.add_samples, render_kernels.surface_frames,
+print(*(len(k.signatures) for k in (render_kernels.add_samples, hit_frames.surface_frames,
                                      instance_traversal.trace_scene_rays)))
 """
 

@@ -23,7 +23,8 @@ from ..trace.layout import LEAF, NodeArrays
 from ..render.lights import Light
 from ..build.options import BuildOptions
 from ..render.preview_render import PreviewRender
-from ..render.render_kernels import add_samples, surface_frames
+from ..render.hit_frames import surface_frames
+from ..render.render_kernels import add_samples
 from ..scene.two_level import as_two_level, build_two_level
 
 CORE_PACKAGE = __package__.rpartition(".")[0]  # core's module name: "core", or bl_ext.<repo>.<id>.core

@@ -92,7 +92,7 @@ def segment_meets_any(o, d, t0, t1, boxes):
 @njit(cache=True, parallel=True)
 def surface_rays_touch(starts, ao_radius, lights, boxes):
     """(P,) bool: some AO ray (ao_radius > 0: within that distance) or shadow ray to one of the lights
-    (packed rows, lights.py) from the pixels' ray starts (render_kernels.surface_frames) can meet one
+    (packed rows, lights.py) from the pixels' ray starts (hit_frames.surface_frames) can meet one
     of the boxes."""
     out = np.zeros(starts.shape[0], np.bool_)
     for p in prange(starts.shape[0]):

@@ -28,8 +28,9 @@ from ..memory import check_render_memory
 from .pixel_reuse import PixelState, prepared_boxes, segments_touch, settings_key, surface_rays_touch
 from ..scene.ray_visibility import CAMERA_RAYS, HOLDOUT, SHADOW_RAYS
 from .sample_rays import MODES
+from .hit_frames import surface_frames
 from .render_kernels import (MEMO_BITS, PACKED_BATCH, PixelFrames, PixelSums, RayMemo, SampleBatch, add_samples,
-                             assemble_image, hard_shadow_rays, packed_version_ready, surface_frames)
+                             assemble_image, hard_shadow_rays, packed_version_ready)
 from .render_options import RenderOptions, check_mode_and_samples, packed_lights
 from .sampling import SAMPLERS, SOBOL_DIM1
 from ..scene.scene_packets import occluded_in_packets, packet_kernels_ready, packets_apply, trace_camera_packets

@@ -18,8 +18,7 @@ from numba import njit, prange, types
 
 from ..jit.kernel_cache import holds_version
 from ..trace.array_views import keep_alive, rows, unowned
-from ..scene.instance_traversal import (hit_surface, new_scratch, onto_triangle_plane, surface_error_scale, trace_scene,
-                                 unowned_scene, world_normal)
+from ..scene.instance_traversal import new_scratch, trace_scene, unowned_scene
 from ..trace.layout import NO_HIT
 from .lights import COLOR, DELTA, NO_SHADOW
 from .sample_packets import CHUNK, answer_chunk, chunk_work_for, in_chunk, in_packets
@@ -27,7 +26,6 @@ from .sample_rays import AO_SHADOW, SHADOW, USE_AO, ray_of_use, uses_of_mode
 from .ray_memo import TRACE, RayMemo, keep_memo_bit, keep_traced, memo_bit, reused_visibility, unowned_memo
 from ..scene.ray_visibility import SHADOW_RAYS
 from .sampling import pixel_seed, use_seeds
-from .shading import offset_origin
 from ..trace.traversal import block_range, thread_shares
 
 PIXELS_PER_TASK = 64  # pixels a parallel task samples with one set of scratch buffers
@@ -38,7 +36,7 @@ MEMO_BITS = 512  # most visibility bits kept per pixel (64 bytes): 16 samples x 
 class PixelFrames(NamedTuple):
     """The hit pixels, one row each: `points`, `normals` (M, 3) float64, the hit points and their
     geometric normals facing the camera; `starts` (M, 3) float64, the AO and shadow rays' origin, the
-    point offset off its surface (surface_frames); `pixels` (M,) int64, their flat image indices."""
+    point offset off its surface (hit_frames.surface_frames); `pixels` (M,) int64, their flat image indices."""
 
     points: np.ndarray
     normals: np.ndarray
@@ -300,39 +298,6 @@ def _hard_shadow_block(frames, lights, k, dim1, out, start, stop):
         tmax[i], weights[i, k] = ray_of_use(USE_AO + 1 + k, lights, rows(points, i, i + 1)[0],
                                             rows(normals, i, i + 1)[0], 0.0, 0, 0, (0, 0, 0, 0), 0, dim1,
                                             rows(directions, i, i + 1)[0])
-
-
-@njit(cache=True, parallel=True)
-def surface_frames(scene, origins, directions, t, inst, prim, hit_index, points, normals, starts):
-    """Hit points, world-space geometric normals (turned to face the incoming ray) and the start of
-    the AO and shadow rays (the point offset off its surface, shading.offset_origin) of the camera hits."""
-    n = hit_index.shape[0]
-    for b in prange((n + PIXELS_PER_TASK - 1) // PIXELS_PER_TASK):
-        first = np.int64(b) * PIXELS_PER_TASK  # int64, as in hard_shadow_rays
-        _surface_block(scene, (origins, directions, t, inst, prim), hit_index, (points, normals, starts), first,
-                       min(n, first + PIXELS_PER_TASK))
-
-
-@njit(cache=True)
-def _surface_block(scene, hits, hit_index, frames, start, stop):
-    """surface_frames for hits start..stop-1, with unowned views (as _hard_shadow_block)."""
-    scene = unowned_scene(scene)
-    origins, directions, t, inst, prim = hits
-    origins, directions = unowned(origins), unowned(directions)
-    points, normals, starts = unowned(frames[0]), unowned(frames[1]), unowned(frames[2])
-    for a in range(start, stop):
-        r = hit_index[a]
-        point, normal = rows(points, a, a + 1)[0], rows(normals, a, a + 1)[0]
-        for k in range(3):
-            point[k] = origins[r, k] + t[r] * directions[r, k]
-        surface = hit_surface(scene, inst[r], prim[r])
-        moved = onto_triangle_plane(surface, point)
-        world_normal(surface, normal)
-        facing = normal[0] * directions[r, 0] + normal[1] * directions[r, 1] + normal[2] * directions[r, 2]
-        if facing > 0.0:
-            for k in range(3):
-                normal[k] = -normal[k]
-        offset_origin(point, normal, surface_error_scale(surface, point, normal, moved), rows(starts, a, a + 1)[0])
 
 
 @njit(cache=True, parallel=True)

@@ -11,16 +11,15 @@ OFFSET_RELATIVE = 2.0 ** -40  # ray start offset / the hit point's error scale: 
 
 
 @njit(cache=True, inline="always")
-def offset_origin(p, n, error_scale, out):
-    """Move a hit point off its surface along the normal by OFFSET_RELATIVE times its error scale
-    (instance_traversal.surface_error_scale), after Wachter and Binder, "A Fast and Robust Method for
+def offset_origin(p, n, error_scale):
+    """A hit point p moved off its surface along the normal n by OFFSET_RELATIVE times its error scale
+    (hit_frames._error_scale), as a tuple, after Wachter and Binder, "A Fast and Robust Method for
     Avoiding Self-Intersection" (Ray Tracing Gems, ch. 6): the offset scales with the point's error.
     Their 2^-15 bounds a float32 hit point; ours is float64 on float32 vertices, where that carried rays
     through thin roofs. 2^-40 clears the surface by 8192 float64 roundings at any magnitude; an absolute
     floor biased AO at small scales, and a bound from max |p_k| alone failed far from the origin."""
     step = error_scale * OFFSET_RELATIVE
-    for k in range(3):
-        out[k] = p[k] + n[k] * step
+    return p[0] + n[0] * step, p[1] + n[1] * step, p[2] + n[2] * step
 
 
 LIGHT_END_RELATIVE = 2.0 ** -32  # how far short of a sampled light point a shadow ray ends, relative
