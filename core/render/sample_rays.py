@@ -4,6 +4,7 @@ so every path traces the same ray and images do not depend on which one traced i
 import numpy as np
 from numba import njit
 
+from ..jit.opaque import opaque
 from ..trace.array_views import rows
 from .lights import DELTA
 from .sampling import sample_2d, seeded_sample_2d
@@ -37,8 +38,8 @@ def ray_of_use(use, lights, point, normal, ao_distance, sampler, ps, ao_seeds, s
     USE_AO: cosine-weighted about the normal within ao_distance, weight 1. Light k (use 1 + k): toward a
     sampled light point, tmax a step short of it (shading.short_of_light), weight max(0, N.L) * mask;
     weight 0 needs no ray."""
-    if use == USE_AO:
-        ao_direction(sampler, ao_seeds, s, dim1, normal, direction)
+    if use == USE_AO:  # opaque: the AO sample is made here only, not ahead of the branch (opaque.py)
+        ao_direction(sampler, ao_seeds, opaque(s), dim1, normal, direction)
         return ao_distance, 1.0
     light = rows(lights, use - 1, use)[0]
     # A light without extent ignores its sample numbers (lights.DELTA), so none are drawn: Owen-scrambled

@@ -28,8 +28,12 @@ def _element_pointer(typingctx, array_type, index_type):
 
 @njit(cache=True, inline="always")
 def rows(array, start, stop):
-    """array[start:stop] (along the first axis of a C-contiguous array) as an unowned view."""
-    inner = array.size // max(array.shape[0], 1)
+    """array[start:stop] (along the first axis of a C-contiguous array) as an unowned view. A row's
+    length is the product of the other extents (unrolled: ndim is a constant), not size // rows: an
+    integer division per view (docs/choices.md#row-views-without-a-division)."""
+    inner = 1
+    for k in range(1, array.ndim):
+        inner *= array.shape[k]
     return carray(_element_pointer(array, start * inner), (stop - start,) + array.shape[1:])
 
 
