@@ -8,19 +8,24 @@ the arrays they hand to per-ray inlined code once per block of rays.
 """
 import numpy as np
 from numba import carray, njit, types
+from numba.core import cgutils
 from numba.extending import intrinsic
 
 
 @intrinsic
-def _element_pointer(typingctx, array_type, index_type):
-    """Pointer to element `index` of a C-contiguous array's flat data."""
-    if not isinstance(array_type, types.Array) or array_type.layout != "C" or not isinstance(index_type, types.Integer):
+def _row_pointer(typingctx, array_type, row_type):
+    """Pointer to the first element of row `row` of a C-contiguous array: the row times the product of
+    the other extents, multiplied out at code generation (no loop for Numba to compile at each inlined
+    call, and no integer division at run time: docs/choices.md#row-views-without-a-division)."""
+    if not isinstance(array_type, types.Array) or array_type.layout != "C" or not isinstance(row_type, types.Integer):
         return None  # a typing error: a view of a non-C-contiguous array would read the wrong memory
-    sig = types.CPointer(array_type.dtype)(array_type, index_type)
+    sig = types.CPointer(array_type.dtype)(array_type, row_type)
 
     def codegen(context, builder, signature, args):
         ary = context.make_array(signature.args[0])(context, builder, args[0])
         index = context.cast(builder, args[1], signature.args[1], types.intp)
+        for extent in cgutils.unpack_tuple(builder, ary.shape, signature.args[0].ndim)[1:]:
+            index = builder.mul(index, extent)
         return builder.gep(ary.data, [index])
 
     return sig, codegen
@@ -28,13 +33,8 @@ def _element_pointer(typingctx, array_type, index_type):
 
 @njit(cache=True, inline="always")
 def rows(array, start, stop):
-    """array[start:stop] (along the first axis of a C-contiguous array) as an unowned view. A row's
-    length is the product of the other extents (unrolled: ndim is a constant), not size // rows: an
-    integer division per view (docs/choices.md#row-views-without-a-division)."""
-    inner = 1
-    for k in range(1, array.ndim):
-        inner *= array.shape[k]
-    return carray(_element_pointer(array, start * inner), (stop - start,) + array.shape[1:])
+    """array[start:stop] (along the first axis of a C-contiguous array) as an unowned view."""
+    return carray(_row_pointer(array, start), (stop - start,) + array.shape[1:])
 
 
 @njit(cache=True, inline="always")
