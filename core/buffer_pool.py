@@ -17,6 +17,8 @@ frame before did not use, so the pool holds about the last frame's arrays, whate
 a free block unused for STALE_AFTER pooled requests goes too; `release()` lets go of every free block
 (memory.release_freed_memory, and the add-on under a memory limit, call it).
 """
+import math
+import operator
 import sys
 import threading
 
@@ -55,8 +57,8 @@ _UNREFERENCED = _counting_works()
 def empty(shape, dtype=np.float64):
     """An uninitialised C-contiguous array, as np.empty, on a kept block when it has MIN_POOLED_BYTES or more."""
     dtype = np.dtype(dtype)
-    shape = (shape,) if np.ndim(shape) == 0 else tuple(shape)
-    n_bytes = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
+    shape = (operator.index(shape),) if isinstance(shape, (int, np.integer)) else tuple(map(operator.index, shape))
+    n_bytes = math.prod(shape) * dtype.itemsize  # math.prod: np.prod would make an array of the tuple first
     if n_bytes < MIN_POOLED_BYTES or _UNREFERENCED is None:
         return np.empty(shape, dtype)
     with _lock:
