@@ -25,6 +25,13 @@ def test_rows_equal_slices(shape):
             assert view.shape == array[start:stop].shape and np.array_equal(view, array[start:stop])
 
 
+@pytest.mark.parametrize("index", [np.int32, np.uint32, np.uint64, np.int64])
+def test_rows_take_any_integer_index_type(index):
+    """Kernels pass int32 instance and triangle indices and uint64 ones (array_views.at)."""
+    array = np.arange(60.0).reshape(5, 3, 4)
+    assert np.array_equal(_rows_copy(array, index(2), index(4)), array[2:4])
+
+
 @pytest.mark.parametrize("dtype", [np.int32, np.float32, np.uint8])
 def test_a_row_view_writes_into_its_parent(dtype):
     array = np.zeros((6, 5), dtype)

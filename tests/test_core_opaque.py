@@ -37,6 +37,15 @@ def test_opaque_in_a_branch_computes_what_the_plain_code_does():
     assert [int(_sum_in_branch(50, first)) % 2 ** 64 for first in (0, 1)] == [e % 2 ** 64 for e in expected]
 
 
+@njit
+def _literal():
+    return opaque(7) + opaque(np.uint8(3))
+
+
+def test_opaque_of_a_literal_is_its_value():
+    assert _literal() == 10
+
+
 def test_opaque_takes_integers_only():
     with pytest.raises(TypingError):
         _through(1.5)

@@ -65,7 +65,7 @@ def test_a_thin_gap_under_a_rotated_scaled_instance_stays_closed():
 def test_a_lone_convex_object_has_ao_one_under_random_transforms(seed):
     """Nothing can occlude a convex object's own surface: AO exactly 1 on every hit pixel of a sphere
     and a box under random instance matrices (rotation, scales 1e-2 to 1e3 per axis, 1 to 3e6 from
-    the origin), in both layouts, with the ray starts offset by surface_error_scale."""
+    the origin), in both layouts, with the ray starts offset by their error scale (hit_frames._error_scale)."""
     rng = np.random.default_rng(seed)
     sphere = mesh_triangles(*icosphere(3))
     cube = box((0, 0, 0), (1, 1, 1)).reshape(-1, 3, 3) - 0.5

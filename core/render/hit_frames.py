@@ -8,7 +8,8 @@ A block of hits goes through three loops (docs/choices.md#hit-frames-in-lanes):
 3. scatter: the lanes into the (M, 3) outputs.
 Each lane's operations are the ones a per-hit loop would do, in the same order: the same bits.
 The kernels use NumPy's error model: Python's check for a division by zero is a branch out of the loop,
-which stops the vectoriser; every divisor here is nonzero or its lane's quotient is selected away.
+which stops the vectoriser. Every divisor is nonzero for a hit the triangle test reports; a degenerate
+triangle's lane (never reported) keeps its point, its normal and start come out NaN.
 """
 import numpy as np
 from numba import njit, prange
@@ -152,7 +153,7 @@ def _onto_triangle_plane(a, v0, n, p):
     ray offset on long thin triangles (AO rays starting under the face). The distance to the plane,
     (q - v0) . n, errs by only eps sum |n_k| |q_k - v0_k|, as a point rebuilt from barycentrics (pbrt-v3
     §3.9), which _error_scale's object-space term carries. Done in object space, where the triangle is.
-    A degenerate triangle (n = 0) is never hit; its lane keeps p."""
+    A degenerate triangle (n = 0) is never hit; its lane keeps p (the quotients are discarded)."""
     qx, qy, qz = _object_point(a, p)
     nn = n[0] * n[0] + n[1] * n[1] + n[2] * n[2]
     above = ((qx - v0[0]) * n[0] + (qy - v0[1]) * n[1] + (qz - v0[2]) * n[2]) / nn
