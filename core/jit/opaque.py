@@ -5,9 +5,9 @@ loop rarely or never takes, since integer arithmetic is safe to run speculativel
 AO branch is such a case: the first scramble of an AO sample depends on the sample number only, so it
 left the per-use loop and ran for every sample of a shadow-only render
 (docs/choices.md#the-ao-sample-kept-in-its-branch). `opaque(x)` returns x through an empty inline
-assembly statement marked as having side effects: no instruction is emitted, but nothing computed from
-its result can move above it (nor can a load or store cross it: LLVM treats it as a call that may
-touch memory).
+assembly statement: no instruction is emitted, and LLVM never runs an inline assembly call
+speculatively (it has no callee to call speculatable), so nothing computed from its result moves ahead
+of the branch it sits in. It reads and writes no memory, so loads and stores around it move freely.
 """
 from llvmlite import ir
 from numba.core import types
@@ -23,6 +23,9 @@ def opaque(typingctx, x):
 
     def codegen(context, builder, signature, args):
         llvm_type = context.get_value_type(signature.args[0])
-        return builder.asm(ir.FunctionType(llvm_type, [llvm_type]), "", "=r,0", [args[0]], True)
+        value = builder.asm(ir.FunctionType(llvm_type, [llvm_type]), "", "=r,0", [args[0]], False)
+        value.attributes.add("readnone")  # touches no memory: loads and stores may still move across it
+        value.attributes.add("nounwind")
+        return value
 
     return x(x), codegen
