@@ -33,7 +33,7 @@ from bench_two_level import sphere  # noqa: E402
 from camera import camera_rays  # noqa: E402
 from core.scene import two_level  # noqa: E402
 from core.scene.instance_traversal import _to_object, mesh_tree, new_scratch, unowned_scene  # noqa: E402
-from core.trace.array_views import rows  # noqa: E402
+from core.trace.array_views import keep_alive, rows  # noqa: E402
 from core.trace.layout import LEAF  # noqa: E402
 from core.trace.traversal import _descend, _pop, clip_to_box  # noqa: E402
 from core.trace.triangle_test import intersect_leaf_triangle, ray_shear  # noqa: E402
@@ -96,10 +96,11 @@ def _walk_block(scene, origins, directions, tmax, mode, counts, start, stop):
     """Rays start..stop-1 with one scratch: a call of its own, as instance_traversal._trace_block, so each
     thread allocates its own scratch."""
     views = unowned_scene(scene)
-    scratch = new_scratch()
+    scratch, owners = new_scratch()
     met = 0.0
     for r in range(start, stop):
         met += _walk(views, origins[r], directions[r], tmax[r], mode, scratch, counts[r])
+    keep_alive(owners)
     return met
 
 
@@ -107,7 +108,7 @@ def _walk_block(scene, origins, directions, tmax, mode, counts, start, stop):
 def count_mesh_steps(scene, origins, directions, tmax, inst_of, counts):
     """The mesh tree's inner steps and triangle tests of each ray in the instance it hit (a counting
     copy of traversal.trace_ray without the leaf screen): counts[:, 4] and counts[:, 5]."""
-    scratch = new_scratch()
+    scratch, owners = new_scratch()
     stack_node, stack_t, inv, o_obj, d_obj = scratch[3], scratch[4], scratch[5], scratch[6], scratch[7]
     for r in range(origins.shape[0]):
         inst = inst_of[r]
@@ -133,6 +134,7 @@ def count_mesh_steps(scene, origins, directions, tmax, inst_of, counts):
             node, t0, t1, t_exit, sp = _pop(stack_node, stack_t, sp, best, True)
             if node < 0:
                 break
+    keep_alive(owners)
 
 
 def ao_rays(origins, directions, t, rng):

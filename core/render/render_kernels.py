@@ -105,17 +105,19 @@ def _sample_pixels(scene, frames, active, blocks, batch, lights, acc, status, me
                          unowned(frames.pixels))
     lights = unowned(lights)
     acc = PixelSums(unowned(acc.sums), unowned(acc.sq_sums), unowned(acc.counts), unowned(acc.rays))
-    scratch = new_scratch()
-    direction = np.empty(3)
+    b = batch  # its Sobol tables as a view too: an owned array counts references where the rays use it
+    batch = SampleBatch(b.first, b.count, b.mode, b.ao_distance, b.ambient, b.sampler, b.seed, unowned(b.dim1))
+    scratch, scratch_owners = new_scratch()
     packets, answers, weights, owners = chunk_work_for(scene, lights.shape[0] + 1, packed)
     answers, weights = unowned(answers), unowned(weights)
     first, end, per_band, run, n = blocks
     for it in range(first, end):
         start, stop = block_range(it, per_band, run, n, PIXELS_PER_TASK)
         for a in range(start, stop):
-            status[a] = _sample_pixel(scene, frames, active[a], batch, lights, acc, (scratch, direction), memo,
+            # the scratch's spare 3-vector holds each ray's direction
+            status[a] = _sample_pixel(scene, frames, active[a], batch, lights, acc, (scratch, scratch[-1]), memo,
                                       (packets, answers, weights))
-    keep_alive(owners)
+    keep_alive((owners, scratch_owners))
 
 
 @njit(cache=True, inline="always")

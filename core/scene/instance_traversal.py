@@ -11,7 +11,7 @@ trace_scene is inlined into its callers (docs/choices.md#inline-the-scene-traver
 import numpy as np
 from numba import njit, prange
 
-from ..trace.array_views import at, rows, unowned
+from ..trace.array_views import at, keep_alive, rows, unowned
 from ..trace.layout import LEAF, NO_HIT, TreeArrays
 from ..trace.traversal import (RAYS_PER_TASK, STACK_SIZE, _descend, _pop, block_range, clip_to_box,
                         interleaved_blocks, trace_ray)
@@ -21,16 +21,19 @@ from .two_level import SceneArrays
 
 @njit(cache=True)
 def new_scratch():
-    """Per-thread buffers: the top level's stack and inverse direction, the mesh traversal's stack and
-    inverse direction, the object-space ray, and the mesh traversal's leaf flags: four allocations cut
-    into unowned views, followed by the four owners that keep them alive."""
+    """(views, owners): per-thread buffers, the top level's stack and inverse direction, the mesh
+    traversal's stack and inverse direction, the object-space ray, the mesh traversal's leaf flags and
+    one spare 3-vector, as unowned views of four allocations, and those four owners, which the caller
+    keeps alive (array_views.keep_alive) and passes nowhere else: a tuple holding an owned array counts
+    references on it wherever the tuple goes (docs/choices.md#scratch-views-without-their-owners)."""
     nodes = np.empty(2 * STACK_SIZE, np.int32)
     intervals = np.empty((2 * STACK_SIZE, 3))
-    vectors = np.empty(12)
+    vectors = np.empty(15)
     flags = np.empty(LEAF_CHUNK, np.uint8)
-    return (rows(nodes, 0, STACK_SIZE), rows(intervals, 0, STACK_SIZE), rows(vectors, 0, 3),
-            rows(nodes, STACK_SIZE, 2 * STACK_SIZE), rows(intervals, STACK_SIZE, 2 * STACK_SIZE), rows(vectors, 3, 6),
-            rows(vectors, 6, 9), rows(vectors, 9, 12), rows(flags, 0, LEAF_CHUNK), nodes, intervals, vectors, flags)
+    return ((rows(nodes, 0, STACK_SIZE), rows(intervals, 0, STACK_SIZE), rows(vectors, 0, 3),
+             rows(nodes, STACK_SIZE, 2 * STACK_SIZE), rows(intervals, STACK_SIZE, 2 * STACK_SIZE),
+             rows(vectors, 3, 6), rows(vectors, 6, 9), rows(vectors, 9, 12), rows(flags, 0, LEAF_CHUNK),
+             rows(vectors, 12, 15)), (nodes, intervals, vectors, flags))
 
 
 @njit(cache=True, inline="always")
@@ -153,7 +156,7 @@ def _trace_block(scene, origins, directions, tmin, tmax, any_hit, ray_mask, star
     """Rays start..stop-1 with one scratch and the scene as unowned views; out: the five output arrays
     of trace_scene_rays, in its order."""
     out_t, out_inst, out_prim, out_u, out_v = out
-    scratch = new_scratch()
+    scratch, owners = new_scratch()
     views = unowned_scene(scene)
     for r in range(start, stop):
         t, inst, prim, u, v = trace_scene(views, rows(origins, r, r + 1)[0], rows(directions, r, r + 1)[0], tmin[r],
@@ -163,3 +166,4 @@ def _trace_block(scene, origins, directions, tmin, tmax, any_hit, ray_mask, star
         out_prim[r] = prim
         out_u[r] = u
         out_v[r] = v
+    keep_alive(owners)
