@@ -341,6 +341,24 @@ def test_degenerate_inputs():
         core.build_two_level([tree], np.array([0]), np.full((1, 4, 4), np.nan))
 
 
+@pytest.mark.parametrize("triangles", ["blob", "far", "zero_area", "none"])
+def test_a_flat_tree_as_a_scene_equals_its_identity_instance(triangles):
+    """as_two_level's shortcut for a flat tree gives build_two_level's arrays for the identity instance,
+    its checks and matrix algebra included: dtypes, shapes and values."""
+    from core.scene.two_level import as_two_level
+    rng = np.random.default_rng(3)
+    tris = {"blob": _blob(rng, 60), "far": _blob(rng, 60) * 3.0 + np.float32(-2e5),
+            "zero_area": np.zeros((4, 3, 3), np.float32), "none": np.zeros((0, 3, 3), np.float32)}[triangles]
+    tree = core.build_kdtree(tris)
+    fast = as_two_level(tree)
+    full = core.build_two_level([tree], np.zeros(1, np.int32), np.eye(4)[None], threads=1)
+    for name, a, b in zip(fast.arrays._fields, fast.arrays, full.arrays):
+        assert a.dtype == b.dtype and a.shape == b.shape and np.array_equal(a, b), name
+    for name in ("mesh_of", "object_to_world", "world_to_object", "world_boxes", "visibility"):
+        a, b = getattr(fast, name), getattr(full, name)
+        assert a.dtype == b.dtype and a.shape == b.shape and np.array_equal(a, b), name
+
+
 @pytest.mark.parametrize("layout", ["two_level", "auto"])
 def test_instance_boxes_on_one_line_build_one_leaf(layout):
     """Ten instances of a triangle scaled by 1e-17 along a line: in float64 their boxes have no extent

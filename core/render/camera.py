@@ -81,6 +81,8 @@ class Camera:
         rot = without_negligible_components(rot.T).T  # per axis, as for query rays (inputs.py says why)
         rot = np.ascontiguousarray(rot)  # one compiled _pixel_rays, whether or not the call above copied
         pixels = np.arange(width * height, dtype=np.int64) if pixels is None else _pixel_indices(pixels, width, height)
+        pixels = pixels.view()
+        pixels.setflags(write=False)  # as tiled_pixels' order, which comes uncopied: one compiled _pixel_rays
         n = len(pixels)
         origins, directions = buffer_pool.empty((n, 3)), buffer_pool.empty((n, 3))
         _pixel_rays(x, y, rot, self.matrix_world[:3, 3].copy(), self.fov is not None, pixels, origins, directions)
@@ -117,7 +119,7 @@ def _pixel_indices(pixels, width, height):
     if given.size and (given.min() < 0 or given.max() >= width * height):
         raise ValueError(f"camera pixels must lie in [0, {width * height}) for {width} x {height}, "
                          f"got {given.min()} .. {given.max()}")
-    return given.astype(np.int64)
+    return np.ascontiguousarray(given, np.int64)  # no copy of an int64 order such as tiled_pixels
 
 
 @functools.lru_cache(maxsize=8)

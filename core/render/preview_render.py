@@ -324,20 +324,19 @@ class PreviewRender:
         for k in hard:
             with thread_count(self.threads):
                 hard_shadow_rays(frames, self.lights, int(k), SOBOL_DIM1, directions, tmax, self.pretraced_weights)
-            rays = np.flatnonzero(self.pretraced_weights[:, k] > 0.0)  # pixels facing the light: a ray each
-            self.pretraced[rays, k] = self._occluded(directions, tmax, rays)
+            lit = self.pretraced_weights[:, k] > 0.0  # pixels facing the light: a ray each
+            self.pretraced[:, k] = np.where(lit, self._occluded(directions, tmax, np.flatnonzero(lit)), -1)
 
     def _occluded(self, directions, tmax, rays):
-        """Whether each shadow ray listed in `rays` (from `starts` along `directions`) meets something in
-        (0, tmax), traced in packets of consecutive listed rays. The packets read the rays where they are
-        (no copies of the listed rows). The order is read-only, as the camera pass's (tiled_packets): the
-        same compiled packet kernel."""
+        """(M,) bool: whether each shadow ray listed in `rays` (from `starts` along `directions`) meets
+        something in (0, tmax), traced in packets of consecutive listed rays; the rows not listed are not
+        traced and hold no answer. The packets read the rays where they are (no copies of the listed rows).
+        The order is read-only, as the camera pass's (tiled_packets): the same compiled packet kernel."""
         order = buffer_pool.full(-(-len(rays) // L) * L, -1, np.int64)
         order[:len(rays)] = rays
         order.setflags(write=False)
-        blocked = occluded_in_packets(self.scene, self.starts, directions, np.zeros(len(tmax)), tmax, order,
-                                      self.threads, SHADOW_RAYS)
-        return blocked[rays]
+        return occluded_in_packets(self.scene, self.starts, directions, buffer_pool.zeros(len(tmax)), tmax, order,
+                                   self.threads, SHADOW_RAYS)
 
     def _retire_converged(self):
         """Stop sampling pixels whose estimated standard error is below the target (convergence.py). Every

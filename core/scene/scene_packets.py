@@ -89,8 +89,9 @@ def _trace_in_packets(scene, o, d, lo, hi, order, threads, ray_mask, any_hit):
         o_obj, d_obj = _in_object_space(s.world_to_object[inst], o, d)
         trace_packets(packed_mesh_tree(s, int(s.mesh_of[inst])), PacketRays(o_obj, d_obj, lo, hi, order),
                       PacketOutputs(t, prim, u, v, single), any_hit)
-        instance = buffer_pool.full(n, inst, np.int32)
-        instance[prim < 0] = -1
+        instance = buffer_pool.empty(n, np.int32)
+        np.right_shift(prim, 31, out=instance)  # -1 where prim is -1 (a miss), else 0: two passes, no mask
+        np.bitwise_or(instance, inst, out=instance)
         retrace(s, (o, d, lo, hi), np.flatnonzero(single.view(np.bool_)), any_hit, ray_mask, (t, instance, prim, u, v))
     return t, instance, prim, u, v
 

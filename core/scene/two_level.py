@@ -174,7 +174,19 @@ def as_two_level(tree):
         return tree
     if not isinstance(tree, KdTree):
         raise ValueError(f"expected a core.KdTree or core.TwoLevelScene, got {type(tree).__name__}")
-    return build_two_level([tree], np.zeros(1, np.int32), np.eye(4)[None], threads=1)
+    return _identity_instance(tree)
+
+
+def _identity_instance(tree):
+    """build_two_level([tree], [0], [identity]) without the placement checks and the matrix algebra, which
+    the identity passes and leaves as they are: its inverse is itself and the tree's float32 box is its
+    own world box (mesh_bounds is already inverted for a mesh with nothing to hit). A frame renders a
+    flat tree through this (docs/choices.md#the-python-between-a-frames-passes)."""
+    start = clock()
+    boxes = mesh_bounds([tree])
+    top = build_top_level(boxes, make_options({"threads": 1}))
+    return TwoLevelScene([tree], np.zeros(1, np.int32), np.eye(4)[None], np.eye(3, 4)[None], boxes, top,
+                         (clock() - start) * 1e3, as_visibility(None, 1))
 
 
 def _check_instances(meshes, mesh_of, matrices):
