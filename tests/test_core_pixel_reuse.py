@@ -362,8 +362,9 @@ def test_surface_ray_test_covers_every_sampled_ray(light):
     n, found = np.array([0.0, 0.0, 1.0]), 0
     for _ in range(120):
         p = rng.uniform(-4, 4, 3) * (1, 1, 0)
-        o, d = np.array(offset_origin(p, n, 10.0)), np.empty(3)
-        dist, mask = sample_light(lights[0], o, *rng.random(2), d)
+        o = np.array(offset_origin(p, n, 10.0))
+        d, dist, mask = sample_light(lights[0], tuple(o), *rng.random(2))
+        d = np.array(d)
         along = rng.uniform(0.1, 0.9) * min(dist, 8.0)
         centre = o + along * d + rng.normal(0, 0.3, 3)
         box = np.concatenate([centre - 0.15, centre + 0.15])[None]
@@ -371,7 +372,7 @@ def test_surface_ray_test_covers_every_sampled_ray(light):
         flagged = surface_rays_touch(o[None], ao_distance, lights, box)[0]
         dirs, lengths, lit = np.empty((80, 3)), np.empty(80), np.empty(80, bool)
         for k, (u1, u2) in enumerate(rng.random((80, 2))):
-            dist, mask = sample_light(lights[0], o, u1, u2, dirs[k])
+            dirs[k], dist, mask = sample_light(lights[0], tuple(o), u1, u2)
             lengths[k], lit[k] = min(dist, 40.0), mask > 0
         hit_light = _segments_meet_box(o, dirs, lengths, box[0]) & lit
         for k, (u1, u2) in enumerate(rng.random((80, 2))):

@@ -45,7 +45,9 @@ def ray_of_use(use, lights, point, normal, ao_distance, sampler, ps, ao_seeds, s
     # A light without extent ignores its sample numbers (lights.DELTA), so none are drawn: Owen-scrambled
     # Sobol costs three nested scrambles a ray (docs/choices.md#no-samples-for-delta-lights).
     u1, u2 = (0.0, 0.0) if light[DELTA] != 0.0 else sample_2d(sampler, ps, s, use, dim1)
-    dist, mask = sample_light(light, point, u1, u2, direction)
+    to_light, dist, mask = sample_light(light, (point[0], point[1], point[2]), u1, u2)
+    for k in range(3):
+        direction[k] = to_light[k]
     cos_nl = normal[0] * direction[0] + normal[1] * direction[1] + normal[2] * direction[2]
     if mask <= 0.0 or cos_nl <= 0.0:
         return dist, 0.0

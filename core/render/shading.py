@@ -62,29 +62,21 @@ def cosine_direction(n, u1, u2, out):
 
 
 @njit(cache=True)
-def sample_light(light, p, u1, u2, out_dir):
-    """Direction (into out_dir, unit) and distance from p to a sampled point of the light, and the
-    light's mask there (spot cone, area light's front side): returns (distance, mask)."""
+def sample_light(light, p, u1, u2):
+    """(direction, distance, mask) from p to a sampled point of the light: the unit direction as a
+    tuple, and the light's mask there (spot cone, area light's front side). The point p comes and the
+    direction goes as tuples of floats: array arguments of a call pass seven words each and count
+    references (docs/choices.md#the-light-sampler-on-tuples)."""
     kind = int(light[0])
     if kind == SUN:
-        _cone_direction(light, u1, u2, out_dir)
-        return np.inf, 1.0
-    # The sampled point goes into out_dir first and becomes the direction in place: no array is
-    # allocated per shadow ray.
-    if kind == AREA:
-        _area_point(light, u1, u2, out_dir)
-    else:
-        _disk_point(light, p, u1, u2, out_dir)
-    dist = 0.0
-    for k in range(3):
-        out_dir[k] = out_dir[k] - p[k]
-        dist += out_dir[k] * out_dir[k]
-    dist = np.sqrt(dist)
+        return _cone_direction(light, u1, u2), np.inf, 1.0
+    q = _area_point(light, u1, u2) if kind == AREA else _disk_point(light, p, u1, u2)
+    dx, dy, dz = q[0] - p[0], q[1] - p[1], q[2] - p[2]
+    dist = np.sqrt(dx * dx + dy * dy + dz * dz)
     if dist == 0.0:
-        return 0.0, 0.0
-    for k in range(3):
-        out_dir[k] /= dist
-    return dist, _light_mask(light, kind, out_dir)
+        return (dx, dy, dz), 0.0, 0.0
+    to_light = (dx / dist, dy / dist, dz / dist)
+    return to_light, dist, _light_mask(light, kind, to_light)
 
 
 @njit(cache=True, inline="always")
@@ -126,7 +118,7 @@ def _spread_mask(cos_a, tan_half_spread):
 
 
 @njit(cache=True, inline="always")
-def _cone_direction(light, u1, u2, out):
+def _cone_direction(light, u1, u2):
     """Towards the sun: uniform in the cone of half-angle angle/2 around minus its direction."""
     cos_max = light[8]
     cos_t = 1.0 - u1 * (1.0 - cos_max)
@@ -134,31 +126,33 @@ def _cone_direction(light, u1, u2, out):
     phi = TWO_PI * u2
     axis = (-light[4], -light[5], -light[6])
     t, b = tangent_frame(axis)
-    for k in range(3):
-        out[k] = sin_t * np.cos(phi) * t[k] + sin_t * np.sin(phi) * b[k] + cos_t * axis[k]
+    c, s = np.cos(phi), np.sin(phi)
+    return (sin_t * c * t[0] + sin_t * s * b[0] + cos_t * axis[0],
+            sin_t * c * t[1] + sin_t * s * b[1] + cos_t * axis[1],
+            sin_t * c * t[2] + sin_t * s * b[2] + cos_t * axis[2])
 
 
 @njit(cache=True, inline="always")
-def _disk_point(light, p, u1, u2, out):
+def _disk_point(light, p, u1, u2):
     """A point on the disk of the light's radius facing p (a sphere light seen from p)."""
     radius = light[7]
-    for k in range(3):
-        out[k] = light[1 + k]
+    centre = (light[1], light[2], light[3])
     if radius <= 0.0:
-        return
+        return centre
     ax, ay, az = p[0] - light[1], p[1] - light[2], p[2] - light[3]
     norm = np.sqrt(ax * ax + ay * ay + az * az)
     if norm == 0.0:
-        return
+        return centre
     t, b = tangent_frame((ax / norm, ay / norm, az / norm))
     r = radius * np.sqrt(u1)
     phi = TWO_PI * u2
-    for k in range(3):
-        out[k] += r * (np.cos(phi) * t[k] + np.sin(phi) * b[k])
+    c, s = np.cos(phi), np.sin(phi)
+    return (centre[0] + r * (c * t[0] + s * b[0]), centre[1] + r * (c * t[1] + s * b[1]),
+            centre[2] + r * (c * t[2] + s * b[2]))
 
 
 @njit(cache=True, inline="always")
-def _area_point(light, u1, u2, out):
+def _area_point(light, u1, u2):
     """A uniformly distributed point on the area light's square, rectangle, disk or ellipse."""
     if light[20] >= 2:  # disk or ellipse: concentric-free polar mapping, uniform in area
         r = np.sqrt(u1)
@@ -166,5 +160,5 @@ def _area_point(light, u1, u2, out):
         su, sv = r * np.cos(phi), r * np.sin(phi)
     else:
         su, sv = 2.0 * u1 - 1.0, 2.0 * u2 - 1.0
-    for k in range(3):
-        out[k] = light[1 + k] + su * light[11 + k] + sv * light[14 + k]
+    return (light[1] + su * light[11] + sv * light[14], light[2] + su * light[12] + sv * light[15],
+            light[3] + su * light[13] + sv * light[16])
