@@ -341,22 +341,22 @@ def test_degenerate_inputs():
         core.build_two_level([tree], np.array([0]), np.full((1, 4, 4), np.nan))
 
 
-@pytest.mark.parametrize("triangles", ["blob", "far", "zero_area", "none"])
+@pytest.mark.parametrize("triangles", ["blob", "far", "negative_zero", "zero_area", "none"])
 def test_a_flat_tree_as_a_scene_equals_its_identity_instance(triangles):
     """as_two_level's shortcut for a flat tree gives build_two_level's arrays for the identity instance,
-    its checks and matrix algebra included: dtypes, shapes and values."""
+    its checks and matrix algebra included: dtypes, shapes and bytes."""
     from core.scene.two_level import as_two_level
     rng = np.random.default_rng(3)
-    tris = {"blob": _blob(rng, 60), "far": _blob(rng, 60) * 3.0 + np.float32(-2e5),
+    negative_zero = np.array([[[-0.0, -0.0, -0.0], [1, 2, 0.5], [2, 0.5, 1]]], np.float32)  # a box from -0.0
+    tris = {"blob": _blob(rng, 60), "far": _blob(rng, 60) * 3.0 + np.float32(-2e5), "negative_zero": negative_zero,
             "zero_area": np.zeros((4, 3, 3), np.float32), "none": np.zeros((0, 3, 3), np.float32)}[triangles]
     tree = core.build_kdtree(tris)
     fast = as_two_level(tree)
     full = core.build_two_level([tree], np.zeros(1, np.int32), np.eye(4)[None], threads=1)
-    for name, a, b in zip(fast.arrays._fields, fast.arrays, full.arrays):
-        assert a.dtype == b.dtype and a.shape == b.shape and np.array_equal(a, b), name
-    for name in ("mesh_of", "object_to_world", "world_to_object", "world_boxes", "visibility"):
-        a, b = getattr(fast, name), getattr(full, name)
-        assert a.dtype == b.dtype and a.shape == b.shape and np.array_equal(a, b), name
+    pairs = [(name, getattr(fast, name), getattr(full, name))
+             for name in ("mesh_of", "object_to_world", "world_to_object", "world_boxes", "visibility")]
+    for name, a, b in [*zip(fast.arrays._fields, fast.arrays, full.arrays), *pairs]:
+        assert a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes(), name  # signs of zero too
 
 
 @pytest.mark.parametrize("layout", ["two_level", "auto"])

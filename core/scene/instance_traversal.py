@@ -93,7 +93,7 @@ def trace_scene(scene, o, d, tmin, tmax, any_hit, ray_mask, scratch):
     the instances whose visibility shares a bit with `ray_mask` (the ray's kind, ray_visibility.py);
     instance and prim are -1 on a miss. A ray that reaches an unbuilt subtree of a lazy mesh tree stops
     there: prim is then trace_ray's suspended value (< NO_HIT) and instance the one it stopped in.
-    `scratch` comes from new_scratch() and is reused across rays. A flat tree (one instance in a
+    `scratch` is new_scratch()'s views, reused across rays. A flat tree (one instance in a
     one-leaf top) goes through the same leaf loop, without the top's clip."""
     axis, split, child, count = scene.top_axis, scene.top_split, scene.top_child, scene.top_count
     items, root_box, visibility = scene.top_items, scene.top_bounds, scene.visibility

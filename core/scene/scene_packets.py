@@ -90,7 +90,7 @@ def _trace_in_packets(scene, o, d, lo, hi, order, threads, ray_mask, any_hit):
         trace_packets(packed_mesh_tree(s, int(s.mesh_of[inst])), PacketRays(o_obj, d_obj, lo, hi, order),
                       PacketOutputs(t, prim, u, v, single), any_hit)
         instance = buffer_pool.empty(n, np.int32)
-        np.right_shift(prim, 31, out=instance)  # -1 where prim is -1 (a miss), else 0: two passes, no mask
+        np.right_shift(prim, 31, out=instance)  # -1 where prim < 0 (a miss), else 0: two passes, no mask
         np.bitwise_or(instance, inst, out=instance)
         retrace(s, (o, d, lo, hi), np.flatnonzero(single.view(np.bool_)), any_hit, ray_mask, (t, instance, prim, u, v))
     return t, instance, prim, u, v

@@ -179,13 +179,17 @@ def as_two_level(tree):
 
 def _identity_instance(tree):
     """build_two_level([tree], [0], [identity]) without the placement checks and the matrix algebra, which
-    the identity passes and leaves as they are: its inverse is itself and the tree's float32 box is its
-    own world box (mesh_bounds is already inverted for a mesh with nothing to hit). A frame renders a
-    flat tree through this (docs/choices.md#the-python-between-a-frames-passes)."""
+    the identity passes and leaves as they are, signs of zero included: its inverse is itself with a
+    translation of -0.0 (affine_inverses negates a sum of zeros), and the tree's float32 box is its own
+    world box with -0.0 made +0.0 (world_boxes adds each coordinate to 0.0; mesh_bounds is already
+    inverted for a mesh with nothing to hit). A frame renders a flat tree through this
+    (docs/choices.md#the-python-between-a-frames-passes)."""
     start = clock()
-    boxes = mesh_bounds([tree])
+    boxes = mesh_bounds([tree]) + np.float32(0.0)
     top = build_top_level(boxes, make_options({"threads": 1}))
-    return TwoLevelScene([tree], np.zeros(1, np.int32), np.eye(4)[None], np.eye(3, 4)[None], boxes, top,
+    inverse = np.eye(3, 4)
+    inverse[:, 3] = -0.0
+    return TwoLevelScene([tree], np.zeros(1, np.int32), np.eye(4)[None], inverse[None], boxes, top,
                          (clock() - start) * 1e3, as_visibility(None, 1))
 
 
