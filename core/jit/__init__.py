@@ -3,6 +3,5 @@ sources (kernel_cache.py, sources_digest.py), a faster copy in Numba's inliner (
 one translation of each inlined callee per compile (inline_memo.py), a
 helper process that compiles the rendering kernels during a first build (parallel_compile.py), thread
 counts set and restored around kernels (threads.py), a clock that leaves compiles out of timings
-(compile_clock.py), a value the optimiser cannot move work ahead of (opaque.py), and named tuples of
-arrays typed faster at each kernel call (tuple_types.py). Nothing here traces a ray.
+(compile_clock.py), and a value the optimiser cannot move work ahead of (opaque.py). Nothing here traces a ray.
 """

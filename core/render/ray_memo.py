@@ -11,7 +11,6 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ..jit.tuple_types import typed_by_fields
 from ..trace.layout import NO_HIT
 from ..trace.array_views import unowned
 from .pixel_reuse import segment_meets_any
@@ -19,7 +18,6 @@ from .pixel_reuse import segment_meets_any
 TRACE = 1 << 62  # an answer no ray has (prims are >= -1 or suspended, < -1): the ray must be traced
 
 
-@typed_by_fields  # typed faster at each kernel call (tuple_types.py)
 class RayMemo(NamedTuple):
     """The ray memo (module docstring): `bits` (M, B) uint8, `known` (M,) int64, `boxes` (K, 6) the
     changed boxes, `reused` (M,) int64 rays whose bit was taken from last frame, `repeated` (M,) int64

@@ -17,7 +17,6 @@ import numpy as np
 from numba import njit, prange, types
 
 from ..jit.kernel_cache import holds_version
-from ..jit.tuple_types import typed_by_fields
 from ..trace.array_views import keep_alive, rows, unowned
 from ..scene.instance_traversal import new_scratch, trace_scene, unowned_scene
 from ..trace.layout import NO_HIT
@@ -34,7 +33,6 @@ PACKED_BATCH = 8  # fewest samples a batch traces its rays in packets with (a pr
 MEMO_BITS = 512  # most visibility bits kept per pixel (64 bytes): 16 samples x 32 uses, 512 AO samples
 
 
-@typed_by_fields  # typed faster at each kernel call (tuple_types.py)
 class PixelFrames(NamedTuple):
     """The hit pixels, one row each: `points`, `normals` (M, 3) float64, the hit points and their
     geometric normals facing the camera; `starts` (M, 3) float64, the AO and shadow rays' origin, the
@@ -46,7 +44,6 @@ class PixelFrames(NamedTuple):
     pixels: np.ndarray
 
 
-@typed_by_fields  # typed faster at each kernel call (tuple_types.py)
 class SampleBatch(NamedTuple):
     """Which samples add_samples adds and how: samples `first` .. first+count-1, `mode` (AO, SHADOW or
     AO_SHADOW), `ao_distance`, `ambient`, `sampler` (an index into sampling.SAMPLERS), `seed` and
@@ -62,7 +59,6 @@ class SampleBatch(NamedTuple):
     dim1: np.ndarray
 
 
-@typed_by_fields  # typed faster at each kernel call (tuple_types.py)
 class PixelSums(NamedTuple):
     """Per-pixel accumulators: `sums` (M, 3) and `sq_sums` (M,) (of the sample's grey value) float64,
     `counts` (M,) int64 samples taken, `rays` (M,) int64 rays traced for them."""

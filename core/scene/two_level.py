@@ -11,7 +11,6 @@ from typing import NamedTuple
 import numpy as np
 
 from ..jit.compile_clock import clock
-from ..jit.tuple_types import typed_by_fields
 from ..build.box_tree import build_box_tree
 from ..geometry import half_area
 from ..trace.kdtree import KdTree, empty_arrays
@@ -33,7 +32,6 @@ TOP_LEVEL_DUPLICATION = 3.0
 SINGULAR = 1e-12  # |det| of the linear part below this times its column norms' product: not invertible
 
 
-@typed_by_fields  # typed faster at each kernel call (tuple_types.py)
 class SceneArrays(NamedTuple):
     """What the scene kernels read of a two-level scene (instance_traversal.trace_scene), by name.
 

@@ -22,14 +22,11 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ..jit.tuple_types import typed_by_fields
-
 LEAF = 3
 UNBUILT = 4
 NO_HIT = -1
 
 
-@typed_by_fields  # typed faster at each kernel call (tuple_types.py)
 class NodeArrays(NamedTuple):
     """A tree's nodes as the builder makes them (the arrays above): per node `axis` (int8), `split` (float32),
     `child` (int32) and `count` (int32), and `leaf_prims` (int32 triangle indices in leaf order)."""
@@ -41,7 +38,6 @@ class NodeArrays(NamedTuple):
     leaf_prims: np.ndarray
 
 
-@typed_by_fields  # typed faster at each kernel call (tuple_types.py)
 class TreeArrays(NamedTuple):
     """What the traversal kernels read of one tree (traversal.trace_ray), by name: the node arrays,
     the triangles (N, 3, 3) float32, the root box `bounds` (6,) float32, the leaf-ordered triangles

@@ -38,7 +38,6 @@ from .kdtree import KdTree
 from .layout import LEAF
 from .queries import Hits, intersect
 from ..jit.threads import thread_count
-from ..jit.tuple_types import typed_by_fields
 from .packet_leaf import BEST, ROWS, leaf_test
 from .packet_boxes import ROWS32, T0, T1, plane_bounds
 from .packet_setup import LANE_BITS, MIXED, OUTSIDE_FLOAT32, leave_to_single_rays, setup_packet
@@ -50,7 +49,6 @@ TILE_SHAPE = (4, 2) if L == 8 else (4, 4)  # a packet: neighbouring pixels (widt
 PACKETS_PER_TASK = 8  # packets of one block of interleaved_blocks
 
 
-@typed_by_fields  # typed faster at each kernel call (tuple_types.py)
 class PacketRays(NamedTuple):
     """The rays of a trace_packets call: origins, directions (R, 3), tmin, tmax (R,), and `order`, L ray
     indices a packet (packet_order)."""
@@ -62,7 +60,6 @@ class PacketRays(NamedTuple):
     order: np.ndarray
 
 
-@typed_by_fields  # typed faster at each kernel call (tuple_types.py)
 class PacketOutputs(NamedTuple):
     """Per-ray results: t, prim, u, v (R,), and single (R,) uint8, set for rays left to single rays."""
 
