@@ -40,6 +40,7 @@ def surface_frames(scene, origins, directions, t, inst, prim, hit_index, points,
 
 @njit(cache=True, error_model="numpy")
 def _frames_block(scene, hits, hit_index, frames, start, stop):
+    """surface_frames for hits start..stop-1 (at most BLOCK): gather, arithmetic in lanes, scatter."""
     lanes = np.empty((ROWS, BLOCK))
     count = stop - start
     _gather(scene, hits, hit_index, start, count, lanes)

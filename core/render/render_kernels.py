@@ -114,18 +114,17 @@ def _sample_pixels(scene, frames, active, blocks, batch, lights, acc, status, me
     for it in range(first, end):
         start, stop = block_range(it, per_band, run, n, PIXELS_PER_TASK)
         for a in range(start, stop):
-            # the scratch's spare 3-vector holds each ray's direction
-            status[a] = _sample_pixel(scene, frames, active[a], batch, lights, acc, (scratch, scratch[-1]), memo,
+            status[a] = _sample_pixel(scene, frames, active[a], batch, lights, acc, scratch, memo,
                                       (packets, answers, weights))
     keep_alive((owners, scratch_owners))
 
 
 @njit(cache=True, inline="always")
-def _sample_pixel(scene, frames, i, batch, lights, acc, buffers, memo, chunk_packets):
+def _sample_pixel(scene, frames, i, batch, lights, acc, scratch, memo, chunk_packets):
     """All of one pixel's new samples. Returns NO_HIT, or the suspended prim of a ray that reached an
-    unbuilt subtree, after restoring the pixel's sums. buffers: (single-ray scratch, a direction);
-    chunk_packets: (packets, answers, weights) of sample_packets.chunk_work_for (packets None in the
-    kernel without them).
+    unbuilt subtree, after restoring the pixel's sums. scratch: new_scratch()'s views, whose spare
+    3-vector holds each ray's direction; chunk_packets: (packets, answers, weights) of
+    sample_packets.chunk_work_for (packets None in the kernel without them).
 
     Every ray a sample needs (its AO ray, then one per light) that nothing answers beforehand is traced
     at one place in the loop, the one inlined traversal; the pixel's point, normal, ray start and light
@@ -134,7 +133,7 @@ def _sample_pixel(scene, frames, i, batch, lights, acc, buffers, memo, chunk_pac
     packets left."""
     first, count, mode, seed = batch.first, batch.count, batch.mode, batch.seed
     sums, sq_sums, counts, rays = acc.sums, acc.sq_sums, acc.counts, acc.rays
-    scratch, direction = buffers
+    direction = scratch[-1]
     packets, answers, weights = chunk_packets
     point, normal = rows(frames.points, i, i + 1)[0], rows(frames.normals, i, i + 1)[0]
     origin = rows(frames.starts, i, i + 1)[0]
